@@ -1,0 +1,78 @@
+# lumigraph — build, test, demo and bench.
+#
+#   make demo    set up .venv, render the synthetic scenes, run every stage
+#                through files into out/, print where the results are
+#   make test    the full test suite (what CI runs)
+#   make bench   the speed-against-error report in out/bench/
+#
+# Stage targets chain through real files in out/, so make redoes only what
+# changed and `make -j2` is safe. Each stage adds its demo steps in
+# <stage>/demo.mk (included below) and appends its final files to DEMO_OUTPUTS.
+
+SHELL      := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+.DELETE_ON_ERROR:
+.SUFFIXES:
+
+PYTHON     ?= python3
+VENV       := .venv
+PY         := $(VENV)/bin/python
+LUMI       := $(VENV)/bin/lumigraph
+STAMP      := $(VENV)/.installed
+OUT        := out
+SHARED     ?= $(abspath ../shared)
+SYSTOOLS   := pfshdrcalibrate exrheader tiffinfo
+APT_PKGS   := pfstools openexr libtiff-tools
+PYTEST_ARGS ?=
+
+.PHONY: all venv sysdeps test demo bench clean lint
+all: demo
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(VENV)/bin/pip install --quiet --upgrade pip
+	$(VENV)/bin/pip install --quiet -e '.[dev]'
+	touch $@
+
+# System tools used as peers and independent readers (pfstools, OpenEXR's
+# exrheader, libtiff). Installed when missing and we are root; otherwise the
+# tests that need them say which package to install.
+sysdeps:
+	@missing=""; for t in $(SYSTOOLS); do command -v $$t >/dev/null || missing="$$missing $$t"; done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing system tools ($(APT_PKGS)) for:$$missing"; \
+	    DEBIAN_FRONTEND=noninteractive apt-get update -qq && \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $(APT_PKGS) >/dev/null; \
+	  else echo "note: missing$$missing; install Debian packages: $(APT_PKGS)"; fi; \
+	fi
+
+test: $(STAMP) sysdeps
+	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+
+bench: $(STAMP) sysdeps
+	$(LUMI) bench --out $(OUT)/bench
+
+clean:
+	rm -rf $(OUT) .pytest_cache
+
+# ---------------------------------------------------------------- demo chain
+DEMO_OUTPUTS :=
+
+$(OUT)/sample/ramp.exr: $(STAMP)
+	$(LUMI) render sample --out $(OUT)/sample --quiet
+
+DEMO_OUTPUTS += $(OUT)/sample/ramp.exr
+
+-include capture/demo.mk calib/demo.mk hdr/demo.mk stereo/demo.mk lightfield/demo.mk separation/demo.mk
+
+demo: $(STAMP) $(DEMO_OUTPUTS)
+	@echo
+	@echo "demo outputs (each with its .meta.json beside it):"
+	@for f in $(DEMO_OUTPUTS); do echo "  $$f"; done
+	@echo "open out/ to look at them; 'make bench' writes out/bench/report.md"

@@ -1,0 +1,2 @@
+"""Camera calibration: camera model, target detection, intrinsics and
+distortion (Zhang), stereo rigs, rectification and undistortion."""

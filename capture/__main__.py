@@ -1,0 +1,3 @@
+from capture.command import main
+
+raise SystemExit(main())

@@ -1,0 +1,174 @@
+"""Atomic artifact writes and the ``<output>.meta.json`` sidecar (DESIGN §4).
+
+Every file a stage produces is written to a temporary file in the same folder
+and moved into place with ``os.replace``, sidecar first and primary last, so an
+interrupted run never leaves a half-written artifact for ``make`` to trust.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> d = pathlib.Path(tempfile.mkdtemp())
+>>> write_artifact(d / "x.txt", lambda p: p.write_text("hi"),
+...                meta=make_meta("demo.text", params={"n": 1}))
+>>> sorted(f.name for f in d.iterdir())
+['x.txt', 'x.txt.meta.json']
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
+
+import numpy as np
+
+META_SCHEMA_VERSION = 1
+_VERSIONED = ("numpy", "scipy", "cv2", "OpenEXR", "rawpy", "skimage", "torch", "kornia",
+              "pycolmap", "mitsuba", "PIL", "colour_hdri")
+
+
+def meta_path(path: str | os.PathLike) -> Path:
+    """The sidecar path of an artifact: ``<output>.meta.json``."""
+    p = Path(path)
+    return p.with_name(p.name + ".meta.json")
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path`` (same suffix, so writers that
+    choose the format from the extension still work); on success it replaces
+    ``path``, on any exception it is removed and ``path`` is left untouched."""
+    final = Path(path)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".tmp{final.suffix}",
+                               dir=final.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, final)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON-serialisable: {type(obj).__name__}")
+
+
+def _finite(obj):
+    """JSON has no NaN/inf: write them as null so every reader accepts the file."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def dumps_json(obj) -> str:
+    """Canonical JSON text: sorted keys, float64 round-trip precision (Python's
+    ``repr``), NaN/inf as ``null``, newline-terminated."""
+    plain = json.loads(json.dumps(obj, default=_json_default))
+    return json.dumps(_finite(plain), indent=2, sort_keys=True, allow_nan=False) + "\n"
+
+
+def write_json(path: str | os.PathLike, obj) -> None:
+    """Write ``obj`` as canonical JSON, atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(dumps_json(obj))
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def library_versions() -> dict[str, str]:
+    """Versions of the libraries this process has imported (no new imports)."""
+    out = {"python": sys.version.split()[0]}
+    for name in _VERSIONED:
+        mod = sys.modules.get(name)
+        if mod is not None:
+            out[name] = str(getattr(mod, "__version__", "unknown"))
+    from capture import __version__
+    out["lumigraph"] = __version__
+    return out
+
+
+def make_meta(schema: str, *, inputs: Iterable[str | os.PathLike] = (), params: dict | None = None,
+              model: dict | None = None, quality: dict | None = None,
+              timings_s: dict | None = None, warnings: Iterable[str] = (),
+              command: list[str] | None = None, extra: dict | None = None) -> dict:
+    """Build the sidecar dictionary (DESIGN §4).
+
+    Parameters
+    ----------
+    schema : str
+        What the primary artifact is, e.g. ``"lumigraph.response"``.
+    inputs : iterable of paths
+        Input files; each is recorded with its SHA-256.
+    params, model, quality, timings_s, extra : dict, optional
+        Parameters used; the chosen model and why (candidates' scores);
+        quality figures (RMS, residuals); wall times in seconds.
+    warnings : iterable of str
+        Anything the user should know about the result.
+    command : list of str, optional
+        The command line; defaults to ``sys.argv``.
+    """
+    ins = []
+    for p in inputs:
+        p = Path(p)
+        ins.append({"path": str(p), "sha256": file_sha256(p) if p.is_file() else None})
+    meta = {
+        "schema": schema,
+        "schema_version": META_SCHEMA_VERSION,
+        "command": list(sys.argv if command is None else command),
+        "created_unix_s": time.time(),
+        "inputs": ins,
+        "params": params or {},
+        "model": model or {},
+        "quality": quality or {},
+        "timings_s": timings_s or {},
+        "warnings": list(warnings),
+        "versions": library_versions(),
+    }
+    if extra:
+        meta.update(extra)
+    return meta
+
+
+def write_artifact(path: str | os.PathLike, write: Callable[[Path], object], *, meta: dict) -> Path:
+    """Write a primary artifact and its sidecar atomically.
+
+    ``write(tmp_path)`` writes the primary file to the temporary path it is
+    given. The sidecar is moved into place first and the primary last, so the
+    primary's presence (what ``make`` checks) implies both are complete.
+    """
+    final = Path(path)
+    with atomic_path(final) as tmp_primary:
+        write(tmp_primary)
+        if not tmp_primary.exists():
+            raise RuntimeError(f"writer produced no file for {final}")
+        meta = dict(meta)
+        meta.setdefault("output", {})
+        meta["output"] = {"path": str(final), "sha256": file_sha256(tmp_primary)}
+        write_json(meta_path(final), meta)
+    return final

@@ -1,0 +1,240 @@
+"""The ``lumigraph`` command and the helpers every stage's ``cli.py`` uses.
+
+``lumigraph <stage> …`` imports only the chosen stage's ``cli`` module, so a
+``make`` step pays for the libraries it uses and no more. Each stage module
+provides ``main(argv=None, prog=...) -> int`` built with :func:`make_parser`
+and :func:`run`.
+
+Exit status (DESIGN §5): 0 success; 2 bad input or usage, with one line
+``error: <file>: <problem>`` on stderr (traceback only with ``--debug``);
+1 an internal fault.
+
+Examples
+--------
+>>> main(["--version"])  # doctest: +ELLIPSIS
+lumigraph ...
+0
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import traceback
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
+
+from capture.errors import EstimationError, InputError
+
+# stage name -> (module with main(), one-line summary). The summaries live here
+# so that `lumigraph --help` imports nothing heavy.
+STAGES: dict[str, tuple[str, str]] = {
+    "render": ("capture.cli", "render synthetic scenes with exact ground truth"),
+    "calib": ("calib.cli", "camera calibration, stereo rigs, undistortion, rectification"),
+    "hdr": ("hdr.cli", "camera response, radiance merge, alignment, tone mapping, HDR files"),
+    "flow": ("stereo.flow_cli", "optical flow and Sand-Teller video matching"),
+    "stereo": ("stereo.cli", "block-matching stereo, triangulation, depth, SfM"),
+    "lightfield": ("lightfield.cli", "light fields: import, lenslet decode, refocus, render"),
+    "separate": ("separation.cli", "direct/global separation with projected patterns"),
+    "bench": ("capture.bench_cli", "speed against error, ours beside the peers"),
+    "inspect": ("capture.inspect_cli", "describe and validate images, stacks and artifacts"),
+}
+
+EXIT_OK, EXIT_INTERNAL, EXIT_USAGE = 0, 1, 2
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's one-line error and exit status 2."""
+
+    def error(self, message):  # noqa: D401 - argparse API
+        sys.stderr.write(f"error: {self.prog}: {message} (see '{self.prog} --help')\n")
+        raise SystemExit(EXIT_USAGE)
+
+
+def make_parser(prog: str, description: str, *, epilog: str | None = None) -> argparse.ArgumentParser:
+    """An ArgumentParser with the shared options ``--quiet`` and ``--debug``.
+
+    ``description`` and ``epilog`` keep their line breaks, so a stage's
+    ``--help`` can teach with examples.
+    """
+    p = _Parser(prog=prog, description=description, epilog=epilog,
+                formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_common(p)
+    return p
+
+
+def add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", "-q", action="store_true", help="no progress output")
+    p.add_argument("--debug", action="store_true", help="show tracebacks for errors")
+
+
+def subparsers(p: argparse.ArgumentParser, *, title: str = "verbs"):
+    """A verbs sub-parser group whose parsers share the project's parser class."""
+    sp = p.add_subparsers(title=title, dest="verb", metavar="VERB", parser_class=_Parser)
+    sp.required = True
+    return sp
+
+
+def add_verb(sp, name: str, help: str, *, description: str | None = None,
+             epilog: str | None = None) -> argparse.ArgumentParser:
+    """Add a verb with the shared options and the project's help formatting."""
+    v = sp.add_parser(name, help=help, description=description or help, epilog=epilog,
+                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_common(v)
+    return v
+
+
+def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
+        allow_extra: bool = False) -> int:
+    """Parse ``argv`` and call ``args.func(args)`` under the error convention.
+
+    With ``allow_extra`` unknown ``--name VALUE`` pairs are kept, unparsed, in
+    ``args.extra`` (for options only known once a positional is, such as a
+    scene's own options).
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        if allow_extra:
+            args, extra = parser.parse_known_args(argv)
+            args.extra = extra
+        else:
+            args = parser.parse_args(argv)
+    except SystemExit as e:
+        return int(e.code or 0)
+    debug = getattr(args, "debug", False) or "--debug" in argv
+    try:
+        rc = args.func(args)
+        return EXIT_OK if rc is None else int(rc)
+    except (InputError, EstimationError) as e:
+        if debug:
+            traceback.print_exc()
+        sys.stderr.write(f"error: {e.where}: {e.problem}\n")
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        sys.stderr.write("error: interrupted; nothing half-written was left behind\n")
+        return 130
+    except Exception as e:  # an internal fault: say so, and how to see more
+        if debug:
+            traceback.print_exc()
+        else:
+            sys.stderr.write(f"error: internal: {type(e).__name__}: {e} "
+                             "(rerun with --debug for the traceback, and report it)\n")
+        return EXIT_INTERNAL
+
+
+def parse_floats(text: str, *, name: str) -> list[float]:
+    """``"1/30,0.1,2"`` -> floats; fractions allowed (exposure times)."""
+    out = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "/" in part:
+                a, b = part.split("/")
+                out.append(float(a) / float(b))
+            else:
+                out.append(float(part))
+        except (ValueError, ZeroDivisionError):
+            raise InputError(name, f"cannot read {part!r} as a number") from None
+    return out
+
+
+def parse_size(text: str, *, name: str = "--size") -> tuple[int, int]:
+    """``"640x480"`` -> ``(640, 480)`` (width, height)."""
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise InputError(name, f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
+    if w < 8 or h < 8 or w > 20000 or h > 20000:
+        raise InputError(name, f"impossible size {w}x{h}; each side must be 8..20000 pixels")
+    return w, h
+
+
+def show_progress(quiet: bool) -> bool:
+    """Progress bars only on a terminal, and never with ``--quiet``."""
+    return not quiet and sys.stderr.isatty()
+
+
+def progress(items: Iterable, *, total: int | None = None, description: str = "",
+             quiet: bool = False) -> Iterable:
+    """Iterate ``items`` with a rich progress bar on a terminal, silently otherwise."""
+    if not show_progress(quiet):
+        yield from items
+        return
+    from rich.progress import Progress
+
+    with Progress(transient=True) as bar:
+        task = bar.add_task(description, total=total)
+        for item in items:
+            yield item
+            bar.advance(task)
+
+
+def say(args, message: str) -> None:
+    """An informational line on stderr, unless ``--quiet``."""
+    if not getattr(args, "quiet", False):
+        sys.stderr.write(message + "\n")
+
+
+def warn(message: str) -> None:
+    """A warning line on stderr (always shown)."""
+    sys.stderr.write(f"warning: {message}\n")
+
+
+def check_output_path(out: str | os.PathLike, *, suffixes: Iterable[str] | None = None) -> Path:
+    """Validate an ``--out`` path before any work is done."""
+    p = Path(out)
+    if suffixes is not None:
+        suffixes = tuple(suffixes)
+        if p.suffix.lower() not in suffixes:
+            raise InputError("--out", f"{p}: expected a file ending in {' or '.join(suffixes)}")
+    if p.exists() and p.is_dir() and suffixes is not None:
+        raise InputError("--out", f"{p} is a folder, expected a file name")
+    return p
+
+
+def _load_stage(name: str) -> Callable[..., int]:
+    module, _ = STAGES[name]
+    return importlib.import_module(module).main
+
+
+def _top_help() -> str:
+    lines = ["usage: lumigraph [--version] STAGE [VERB] ...", "",
+             "Image-based capture and reconstruction: calibration, HDR, flow and stereo,",
+             "light fields and direct/global separation, as commands that read and",
+             "write ordinary files (EXR, PFM, .flo, PLY, JSON).", "", "stages:"]
+    lines += [f"  {n:<11} {s}" for n, (_, s) in STAGES.items()]
+    lines += ["", "Each stage explains itself: lumigraph STAGE --help",
+              "Also runnable as python -m <package> (python -m hdr ...).",
+              "Exit status: 0 ok, 2 bad input or usage (one line on stderr), 1 internal fault."]
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``lumigraph`` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_top_help())
+        return EXIT_OK if argv else EXIT_USAGE
+    if argv[0] == "--version":
+        from capture import __version__
+
+        print(f"lumigraph {__version__}")
+        return EXIT_OK
+    stage = argv[0]
+    if stage not in STAGES:
+        sys.stderr.write(f"error: lumigraph: unknown stage {stage!r}; choose from "
+                         f"{', '.join(STAGES)} (see 'lumigraph --help')\n")
+        return EXIT_USAGE
+    try:
+        stage_main = _load_stage(stage)
+    except ModuleNotFoundError as e:
+        sys.stderr.write(f"error: lumigraph {stage}: this installation lacks {e.name} "
+                         "(reinstall lumigraph)\n")
+        return EXIT_INTERNAL
+    return stage_main(argv[1:], prog=f"lumigraph {stage}")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

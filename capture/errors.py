@@ -1,0 +1,44 @@
+"""Exceptions that carry a user-facing reason.
+
+The command line turns :class:`InputError` and :class:`EstimationError` into
+exit status 2 and one line ``error: <file>: <problem>``; anything else is an
+internal fault (exit 1). Both are ``ValueError`` subclasses, so library callers
+can catch them the ordinary way.
+"""
+
+from __future__ import annotations
+
+import os
+
+
+class InputError(ValueError):
+    """Bad input or bad usage: a file that is missing, unreadable, truncated, of
+    the wrong kind or inconsistent with the others, or an option out of range.
+
+    Parameters
+    ----------
+    where : str or os.PathLike
+        The file (or, for an option, ``--name``) the problem is about.
+    problem : str
+        What is wrong and, where there is one, what to do about it.
+
+    Examples
+    --------
+    >>> str(InputError("a.png", "not found"))
+    'a.png: not found'
+    """
+
+    def __init__(self, where: str | os.PathLike, problem: str):
+        self.where = os.fspath(where)
+        self.problem = problem
+        super().__init__(f"{self.where}: {problem}")
+
+
+class EstimationError(ValueError):
+    """A fit or reconstruction that the data cannot support (degenerate views,
+    too few valid pixels, no convergence). ``where`` names the input."""
+
+    def __init__(self, where: str | os.PathLike, problem: str):
+        self.where = os.fspath(where)
+        self.problem = problem
+        super().__init__(f"{self.where}: {problem}")

@@ -1,0 +1,661 @@
+"""Image and artifact file formats: the one place lumigraph touches pixels on disk.
+
+Every reader validates what it reads and raises :class:`capture.errors.InputError`
+naming the file and the problem (missing, truncated, wrong kind, NaN/inf where
+finite values are required). Every writer is atomic (see ``capture.artifact``).
+
+Conventions (DESIGN §3): images are ``H×W`` or ``H×W×C`` in **RGB** order;
+captured code values stay integers (``uint8``/``uint16``) with their true bit
+depth recorded; linear data are ``float32``. OpenCV's BGR order is converted
+here and nowhere else.
+
+==========  ================================  ======================================
+format      reader / writer                   notes
+==========  ================================  ======================================
+PNG, TIFF   read_image / write_image           8/16-bit; PNG ``sBIT`` keeps bit depth
+JPEG        read_image, read_exif              EXIF exposure time, f-number, ISO
+RAW         read_raw                           rawpy, linear 16-bit, levels applied
+OpenEXR     read_exr / write_exr               float32 or half, ZIP, deterministic
+PFM         read_pfm / write_pfm               NaN in memory <-> inf in the file
+.flo        read_flo / write_flo               Middlebury; NaN <-> 1e10 (unknown)
+PLY         read_ply / write_ply               binary little-endian, float64 xyz, rgb
+stack       read_stack / write_stack_json      file list or folder with stack.json
+==========  ================================  ======================================
+
+Examples
+--------
+>>> import numpy as np, tempfile, os
+>>> d = tempfile.mkdtemp()
+>>> flow = np.zeros((4, 6, 2), np.float32); flow[1, 2] = np.nan
+>>> write_flo(os.path.join(d, "f.flo"), flow)
+>>> back = read_flo(os.path.join(d, "f.flo"))
+>>> back.shape, bool(np.isnan(back[1, 2]).all())
+((4, 6, 2), True)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import zlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from capture.artifact import atomic_path, dumps_json
+from capture.errors import InputError
+
+LDR_EXTS = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm"}
+RAW_EXTS = {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}
+EXR_EXTS = {".exr"}
+FLOAT_EXTS = EXR_EXTS | {".pfm", ".hdr"}
+STACK_SCHEMA = "lumigraph.stack"
+
+
+def _cv2():
+    # OpenCV's own stderr warnings would break the one-line error convention;
+    # our readers report every problem themselves.
+    os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
+    import cv2  # imported lazily: `import capture` must stay cheap
+
+    return cv2
+
+
+def _existing(path) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise InputError(p, "file not found")
+    if p.is_dir():
+        raise InputError(p, "is a folder, expected a file")
+    if p.stat().st_size == 0:
+        raise InputError(p, "file is empty")
+    return p
+
+
+# --------------------------------------------------------------------- PNG sBIT
+def _png_chunks(data: bytes):
+    pos = 8
+    while pos + 8 <= len(data):
+        (length,) = struct.unpack(">I", data[pos:pos + 4])
+        kind = data[pos + 4:pos + 8]
+        yield kind, pos, data[pos + 8:pos + 8 + length]
+        pos += 12 + length
+
+
+def png_significant_bits(path) -> int | None:
+    """The true bit depth a PNG declares in its ``sBIT`` chunk, or ``None``."""
+    data = Path(path).read_bytes()
+    if not data.startswith(b"\x89PNG\r\n\x1a\n"):
+        return None
+    for kind, _, body in _png_chunks(data):
+        if kind == b"sBIT" and body:
+            return max(body[:3]) if len(body) >= 3 else body[0]
+        if kind == b"IDAT":
+            return None
+    return None
+
+
+def _png_with_sbit(data: bytes, bits: int, channels: int) -> bytes:
+    """Insert an ``sBIT`` chunk after IHDR so a 16-bit container carrying 10/12-bit
+    data says so (readers such as libpng and ours then know the true depth)."""
+    n = {1: 1, 2: 2, 3: 3, 4: 4}[channels]
+    body = bytes([bits] * n)
+    chunk = struct.pack(">I", len(body)) + b"sBIT" + body
+    chunk += struct.pack(">I", zlib.crc32(b"sBIT" + body) & 0xFFFFFFFF)
+    ihdr_end = 8 + 12 + 13
+    return data[:ihdr_end] + chunk + data[ihdr_end:]
+
+
+# ------------------------------------------------------------------ LDR images
+def read_image(path) -> np.ndarray:
+    """Read an image as captured, RGB order.
+
+    Parameters
+    ----------
+    path : path-like
+        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM, Radiance ``.hdr`` or a RAW file.
+
+    Returns
+    -------
+    ndarray
+        ``(H, W)`` or ``(H, W, 3|4)``; ``uint8``/``uint16`` code values for LDR
+        and RAW files (RAW: linear 16-bit, see :func:`read_raw`), ``float32``
+        linear values for EXR/PFM/HDR.
+
+    Raises
+    ------
+    InputError
+        Missing, empty, truncated or undecodable file, unknown extension, or
+        NaN/inf in a float image.
+    """
+    p = _existing(path)
+    ext = p.suffix.lower()
+    if ext in EXR_EXTS | {".pfm"}:
+        img = read_exr(p) if ext in EXR_EXTS else read_pfm(p)
+        check_finite(img, p)  # an image must be finite; masks travel separately
+        return img
+    if ext in RAW_EXTS:
+        return read_raw(p).codes
+    if ext not in LDR_EXTS | {".hdr"}:
+        raise InputError(p, f"unsupported image extension {p.suffix!r}; expected one of "
+                            + ", ".join(sorted(LDR_EXTS | FLOAT_EXTS | RAW_EXTS)))
+    if ext in {".jpg", ".jpeg"}:
+        img = _read_jpeg(p)
+    else:
+        cv2 = _cv2()
+        buf = np.fromfile(p, np.uint8)
+        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise InputError(p, "cannot decode image (truncated or corrupt file?)")
+        if ext == ".png" and not _png_complete(buf):
+            raise InputError(p, "PNG is truncated (no IEND chunk)")
+        if img.ndim == 3:
+            img = img[..., ::-1] if img.shape[2] == 3 else img[..., [2, 1, 0, 3]]
+        img = np.ascontiguousarray(img)
+    if img.dtype.kind == "f":
+        img = img.astype(np.float32, copy=False)
+        check_finite(img, p)
+    return img
+
+
+def _png_complete(buf: np.ndarray) -> bool:
+    return bytes(buf[-12:]).find(b"IEND") >= 0
+
+
+def _read_jpeg(p: Path) -> np.ndarray:
+    from PIL import Image
+
+    try:
+        with Image.open(p) as im:
+            im.load()  # Pillow raises on truncated JPEG data; OpenCV would not
+            if im.mode not in ("L", "RGB"):
+                im = im.convert("RGB")
+            return np.asarray(im).copy()
+    except OSError as e:
+        raise InputError(p, f"cannot decode JPEG ({e})") from None
+
+
+def write_image(path, img: np.ndarray, *, bit_depth: int | None = None) -> None:
+    """Write 8/16-bit code values to PNG or TIFF (RGB order in memory).
+
+    Parameters
+    ----------
+    img : ndarray, uint8 or uint16, ``(H, W)`` or ``(H, W, 3|4)``
+    bit_depth : int, optional
+        True bit depth of uint16 data (e.g. 12). Recorded in the PNG's ``sBIT``
+        chunk; values must fit in it.
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in {".png", ".tif", ".tiff"}:
+        raise InputError(p, "write_image writes PNG or TIFF; use write_exr for linear float data")
+    if img.dtype not in (np.uint8, np.uint16):
+        raise TypeError(f"img: expected uint8 or uint16 code values, got {img.dtype}")
+    if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
+        raise ValueError(f"img: expected (H, W) or (H, W, 1|3|4), got {img.shape}")
+    container = 8 * img.dtype.itemsize
+    if bit_depth is not None:
+        if not 1 <= bit_depth <= container:
+            raise ValueError(f"bit_depth: expected 1..{container} for {img.dtype}, got {bit_depth}")
+        if img.size and int(img.max()) >= 2 ** bit_depth:
+            raise ValueError(f"img: values up to {int(img.max())} do not fit in {bit_depth} bits")
+    cv2 = _cv2()
+    arr = img
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if arr.ndim == 3:
+        arr = arr[..., ::-1] if arr.shape[2] == 3 else arr[..., [2, 1, 0, 3]]
+    params = [cv2.IMWRITE_PNG_COMPRESSION, 6] if ext == ".png" else []
+    ok, enc = cv2.imencode(ext, np.ascontiguousarray(arr), params)
+    if not ok:
+        raise RuntimeError(f"OpenCV could not encode {p}")
+    data = enc.tobytes()
+    if ext == ".png" and bit_depth is not None and bit_depth != container:
+        data = _png_with_sbit(data, bit_depth, 1 if arr.ndim == 2 else arr.shape[2])
+    with atomic_path(p) as tmp:
+        tmp.write_bytes(data)
+
+
+def check_finite(arr: np.ndarray, where) -> None:
+    """Raise InputError if a float array holds NaN or inf."""
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
+        bad = int((~np.isfinite(arr)).sum())
+        raise InputError(where, f"contains {bad} NaN/inf values; expected finite linear values")
+
+
+# ------------------------------------------------------------------------ EXIF
+@dataclass(frozen=True)
+class Exif:
+    """Exposure settings read from EXIF (``None`` where absent)."""
+
+    exposure_time_s: float | None
+    f_number: float | None
+    iso: float | None
+
+
+def _rational(v) -> float | None:
+    if v is None:
+        return None
+    if isinstance(v, tuple) and len(v) == 2:
+        return float(Fraction(int(v[0]), int(v[1]))) if v[1] else None
+    try:
+        return float(v)
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+
+
+def read_exif(path) -> Exif:
+    """Exposure time (s), f-number and ISO from a JPEG/TIFF/RAW file's EXIF."""
+    p = _existing(path)
+    if p.suffix.lower() in RAW_EXTS:
+        import exifread
+
+        with open(p, "rb") as f:
+            tags = exifread.process_file(f, details=False)
+
+        def tag(name):
+            t = tags.get(name)
+            if t is None:
+                return None
+            v = t.values[0] if t.values else None
+            return float(v.num) / float(v.den) if hasattr(v, "num") and v.den else _rational(v)
+
+        return Exif(tag("EXIF ExposureTime"), tag("EXIF FNumber"), tag("EXIF ISOSpeedRatings"))
+    from PIL import Image
+
+    try:
+        with Image.open(p) as im:
+            exif = im.getexif()
+            sub = exif.get_ifd(0x8769)
+    except OSError as e:
+        raise InputError(p, f"cannot read EXIF ({e})") from None
+    iso = sub.get(0x8827)
+    if isinstance(iso, tuple):
+        iso = iso[0]
+    return Exif(_rational(sub.get(0x829A)), _rational(sub.get(0x829D)), _rational(iso))
+
+
+# ------------------------------------------------------------------------- RAW
+@dataclass(frozen=True)
+class RawImage:
+    """A RAW file developed linearly: ``codes`` uint16 ``(H, W, 3)`` with the black
+    level subtracted and the white level mapped to ``2**bit_depth - 1``."""
+
+    codes: np.ndarray
+    bit_depth: int
+    black_level: float
+    white_level: float
+    exif: Exif
+
+
+def read_raw(path) -> RawImage:
+    """Develop a RAW file without gamma or auto-brightening (rawpy defaults to both).
+
+    Camera white balance is applied, output colour space is linear sRGB
+    primaries, 16-bit output; ``bit_depth`` is that of the sensor data, taken
+    from its white level.
+    """
+    p = _existing(path)
+    import rawpy
+
+    try:
+        with rawpy.imread(str(p)) as raw:
+            white = float(raw.white_level)
+            black = float(np.mean(raw.black_level_per_channel))
+            rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16,
+                                  use_camera_wb=True, user_flip=0)
+    except Exception as e:  # rawpy raises a family of LibRaw errors
+        raise InputError(p, f"cannot decode RAW file ({type(e).__name__}: {e})") from None
+    bit_depth = max(8, int(np.ceil(np.log2(max(white - black, 2.0) + 1))))
+    # postprocess maps the white level to 65535; return codes in the sensor's range.
+    scale = (2 ** bit_depth - 1) / 65535.0
+    codes = np.round(rgb.astype(np.float64) * scale).astype(np.uint16)
+    return RawImage(codes, bit_depth, black, white, read_exif(p))
+
+
+# ------------------------------------------------------------------------- EXR
+def read_exr(path) -> np.ndarray:
+    """Read an OpenEXR file as float32, ``(H, W)`` for one channel, ``(H, W, 3)``
+    for RGB, ``(H, W, 4)`` for RGBA; other channel sets in sorted name order."""
+    p = _existing(path)
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(p), separate_channels=True) as f:
+            chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+    except Exception as e:
+        raise InputError(p, f"cannot read OpenEXR file ({e})") from None
+    if not chans:
+        raise InputError(p, "OpenEXR file has no channels")
+    order = [c for c in ("R", "G", "B", "A") if c in chans]
+    if len(order) != len(chans):
+        order = sorted(chans)
+    if order == ["A"] or len(order) == 1:
+        out = chans[order[0]].astype(np.float32)
+    else:
+        out = np.stack([chans[c] for c in order], axis=-1).astype(np.float32)
+    return np.ascontiguousarray(out)
+
+
+def write_exr(path, img: np.ndarray, *, half: bool = False,
+              channels: Sequence[str] | None = None) -> None:
+    """Write linear float data to OpenEXR (ZIP compression, deterministic bytes).
+
+    Parameters
+    ----------
+    img : ndarray, float, ``(H, W)`` or ``(H, W, C)``
+        NaN/inf are written as they are (masks travel in separate files).
+    half : bool
+        Store as 16-bit half floats (range ±65504, 11-bit mantissa).
+    channels : sequence of str, optional
+        Channel names; default ``Y`` for one channel, ``RGB``/``RGBA`` for 3/4.
+    """
+    import OpenEXR
+
+    arr = np.asarray(img)
+    if arr.dtype.kind != "f":
+        raise TypeError(f"img: expected a float array of linear values, got {arr.dtype}")
+    if arr.ndim == 2:
+        arr = arr[..., None]
+    if arr.ndim != 3:
+        raise ValueError(f"img: expected (H, W) or (H, W, C), got {np.asarray(img).shape}")
+    c = arr.shape[2]
+    names = list(channels) if channels is not None else (
+        ["Y"] if c == 1 else list("RGBA"[:c]) if c in (3, 4) else [f"C{i}" for i in range(c)])
+    if len(names) != c:
+        raise ValueError(f"channels: {len(names)} names for {c} channels")
+    dtype = np.float16 if half else np.float32
+    data = {n: np.ascontiguousarray(arr[..., i].astype(dtype)) for i, n in enumerate(names)}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path) as tmp, OpenEXR.File(header, data) as f:
+        f.write(str(tmp))
+
+
+# ------------------------------------------------------------------------- PFM
+def read_pfm(path) -> np.ndarray:
+    """Read a PFM file top-row-first as float32; ``inf`` (unknown) becomes NaN."""
+    p = _existing(path)
+    with open(p, "rb") as f:
+        kind = f.readline().strip()
+        if kind not in (b"PF", b"Pf"):
+            raise InputError(p, "not a PFM file (header must start with PF or Pf)")
+        try:
+            dims = f.readline().split()
+            w, h = int(dims[0]), int(dims[1])
+            scale = float(f.readline().strip())
+        except (ValueError, IndexError):
+            raise InputError(p, "malformed PFM header") from None
+        c = 3 if kind == b"PF" else 1
+        endian = "<" if scale < 0 else ">"
+        raw = f.read()
+    need = w * h * c * 4
+    if len(raw) < need:
+        raise InputError(p, f"PFM is truncated: {len(raw)} of {need} data bytes")
+    arr = np.frombuffer(raw[:need], dtype=endian + "f4").reshape(h, w, c)
+    arr = np.flipud(arr).astype(np.float32)
+    if c == 1:
+        arr = arr[..., 0]
+    arr = np.ascontiguousarray(arr)
+    arr[np.isinf(arr)] = np.nan
+    return arr
+
+
+def write_pfm(path, img: np.ndarray) -> None:
+    """Write float data as little-endian PFM; NaN (unknown) is stored as ``inf``
+    (the Middlebury convention)."""
+    arr = np.asarray(img, dtype=np.float32)
+    if arr.ndim == 3 and arr.shape[2] == 1:
+        arr = arr[..., 0]
+    if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] != 3):
+        raise ValueError(f"img: expected (H, W) or (H, W, 3), got {np.asarray(img).shape}")
+    h, w = arr.shape[:2]
+    kind = b"Pf" if arr.ndim == 2 else b"PF"
+    out = np.where(np.isnan(arr), np.float32(np.inf), arr)
+    body = np.flipud(out).astype("<f4").tobytes()
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(kind + b"\n" + f"{w} {h}\n".encode() + b"-1.0\n" + body)
+
+
+# ------------------------------------------------------------------------ .flo
+FLO_MAGIC = 202021.25
+FLO_UNKNOWN = 1e10  # Middlebury: components above 1e9 mean unknown
+
+
+def read_flo(path) -> np.ndarray:
+    """Read Middlebury ``.flo`` as ``(H, W, 2)`` float32 ``(dx, dy)``; unknown -> NaN."""
+    p = _existing(path)
+    raw = p.read_bytes()
+    if len(raw) < 12 or struct.unpack("<f", raw[:4])[0] != FLO_MAGIC:
+        raise InputError(p, "not a Middlebury .flo file (bad magic number)")
+    w, h = struct.unpack("<ii", raw[4:12])
+    if w <= 0 or h <= 0 or w > 1 << 16 or h > 1 << 16:
+        raise InputError(p, f"implausible .flo size {w}x{h}")
+    need = w * h * 2 * 4
+    if len(raw) - 12 < need:
+        raise InputError(p, f".flo is truncated: {len(raw) - 12} of {need} data bytes")
+    flow = np.frombuffer(raw[12:12 + need], "<f4").reshape(h, w, 2).astype(np.float32)
+    unknown = (np.abs(flow) > 1e9).any(axis=2) | ~np.isfinite(flow).all(axis=2)
+    flow[unknown] = np.nan
+    return flow
+
+
+def write_flo(path, flow: np.ndarray) -> None:
+    """Write ``(H, W, 2)`` forward flow; NaN (unknown) becomes 1e10 in the file."""
+    arr = np.asarray(flow, dtype=np.float32)
+    if arr.ndim != 3 or arr.shape[2] != 2:
+        raise ValueError(f"flow: expected (H, W, 2), got {np.asarray(flow).shape}")
+    h, w = arr.shape[:2]
+    unknown = ~np.isfinite(arr).all(axis=2)
+    out = arr.copy()
+    out[unknown] = FLO_UNKNOWN
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(struct.pack("<fii", FLO_MAGIC, w, h) + out.astype("<f4").tobytes())
+
+
+# ------------------------------------------------------------------------- PLY
+def write_ply(path, points: np.ndarray, colors: np.ndarray | None = None) -> None:
+    """Write a binary little-endian PLY point cloud.
+
+    Parameters
+    ----------
+    points : ndarray, ``(N, 3)`` float, world units
+        Stored as ``double x, y, z`` (geometry keeps float64).
+    colors : ndarray, ``(N, 3)`` uint8, optional
+        Stored as ``uchar red, green, blue``.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f"points: expected (N, 3), got {np.asarray(points).shape}")
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    if colors is not None:
+        col = np.asarray(colors)
+        if col.shape != pts.shape or col.dtype != np.uint8:
+            raise ValueError(f"colors: expected (N, 3) uint8, got {col.shape} {col.dtype}")
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    rec = np.empty(len(pts), dtype=fields)
+    rec["x"], rec["y"], rec["z"] = pts.T
+    if colors is not None:
+        rec["red"], rec["green"], rec["blue"] = np.asarray(colors).T
+    names = {"<f8": "double", "u1": "uchar"}
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(pts)}"]
+    header += [f"property {names[t]} {n}" for n, t in fields]
+    header += ["end_header"]
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(("\n".join(header) + "\n").encode("ascii") + rec.tobytes())
+
+
+_PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "<i2", "ushort": "<u2", "int": "<i4",
+              "uint": "<u4", "float": "<f4", "double": "<f8", "int8": "i1", "uint8": "u1",
+              "int16": "<i2", "uint16": "<u2", "int32": "<i4", "uint32": "<u4",
+              "float32": "<f4", "float64": "<f8"}
+
+
+def read_ply(path) -> tuple[np.ndarray, np.ndarray | None]:
+    """Read a binary little-endian PLY vertex element: ``(points (N,3) float64,
+    colors (N,3) uint8 or None)``."""
+    p = _existing(path)
+    raw = p.read_bytes()
+    end = raw.find(b"end_header\n")
+    if not raw.startswith(b"ply\n") or end < 0:
+        raise InputError(p, "not a PLY file (missing 'ply' magic or end_header)")
+    lines = raw[:end].decode("ascii", "replace").splitlines()
+    if "format binary_little_endian 1.0" not in lines:
+        raise InputError(p, "only binary_little_endian PLY is supported")
+    n, fields, in_vertex = 0, [], False
+    for line in lines:
+        parts = line.split()
+        if parts[:1] == ["element"]:
+            in_vertex = parts[1] == "vertex"
+            if in_vertex:
+                n = int(parts[2])
+        elif parts[:1] == ["property"] and in_vertex:
+            if parts[1] == "list" or parts[1] not in _PLY_TYPES:
+                raise InputError(p, f"unsupported PLY property: {line}")
+            fields.append((parts[2], _PLY_TYPES[parts[1]]))
+    dtype = np.dtype(fields)
+    body = raw[end + len(b"end_header\n"):]
+    if len(body) < n * dtype.itemsize:
+        raise InputError(p, f"PLY is truncated: {len(body)} of {n * dtype.itemsize} bytes")
+    rec = np.frombuffer(body[:n * dtype.itemsize], dtype=dtype)
+    pts = np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
+    cols = None
+    if {"red", "green", "blue"} <= set(dtype.names):
+        cols = np.stack([rec["red"], rec["green"], rec["blue"]], axis=1).astype(np.uint8)
+    return pts, cols
+
+
+# ----------------------------------------------------------------------- stacks
+@dataclass(frozen=True)
+class Stack:
+    """A set of images of one scene, as captured.
+
+    Attributes
+    ----------
+    images : ndarray, ``(N, H, W, C)``
+        Integer code values as captured (LDR/RAW) or float32 linear values.
+    paths : tuple of str
+        Source files, in stack order.
+    bit_depth : int or None
+        True bit depth of integer codes (``None`` for float data).
+    exposure_times_s : tuple of float or None
+        Per-image exposure times (EXIF, stack.json or ``--times``), or ``None``.
+    linear : bool
+        True for RAW-developed or float data (no response curve needed).
+    info : dict
+        Everything else ``stack.json`` carried (scene-specific keys).
+    """
+
+    images: np.ndarray
+    paths: tuple[str, ...]
+    bit_depth: int | None
+    exposure_times_s: tuple[float, ...] | None = None
+    linear: bool = False
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.images.ndim != 4:
+            raise ValueError(f"images: expected (N, H, W, C), got {self.images.shape}")
+        if len(self.paths) != len(self.images):
+            raise ValueError(f"paths: {len(self.paths)} paths for {len(self.images)} images")
+        if self.exposure_times_s is not None and len(self.exposure_times_s) != len(self.images):
+            raise ValueError("exposure_times_s: one time per image expected")
+
+
+def _stack_files(inputs: Sequence[str | os.PathLike]) -> tuple[list[Path], dict, Path | None]:
+    inputs = [Path(i) for i in inputs]
+    if not inputs:
+        raise InputError("<inputs>", "no input images given")
+    if len(inputs) == 1 and (inputs[0].is_dir() or inputs[0].name == "stack.json"):
+        folder = inputs[0] if inputs[0].is_dir() else inputs[0].parent
+        sj = folder / "stack.json"
+        if not sj.exists():
+            raise InputError(folder, "folder has no stack.json; pass the image files instead")
+        try:
+            info = json.loads(sj.read_text())
+        except json.JSONDecodeError as e:
+            raise InputError(sj, f"invalid JSON ({e})") from None
+        if not isinstance(info, dict) or not isinstance(info.get("images"), list) or not info["images"]:
+            raise InputError(sj, "expected an object with a non-empty 'images' list")
+        return [folder / f for f in info["images"]], info, sj
+    return inputs, {}, None
+
+
+def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | None = None,
+               need_times: bool = False) -> Stack:
+    """Read an image stack from a list of files or a folder holding ``stack.json``.
+
+    Parameters
+    ----------
+    inputs : sequence of path-like
+        Image files in stack order, or a single folder (or its ``stack.json``).
+    times : sequence of float, optional
+        Exposure times in seconds; override EXIF and stack.json.
+    need_times : bool
+        Raise InputError (naming the file) when an exposure time is missing.
+
+    Raises
+    ------
+    InputError
+        Missing/unreadable files, mixed sizes, channels or dtypes, missing or
+        non-positive exposure times.
+    """
+    files, info, sj = _stack_files(inputs)
+    imgs, bit_depths, linear = [], [], False
+    for f in files:
+        ext = f.suffix.lower()
+        if ext in RAW_EXTS:
+            raw = read_raw(f)
+            img, bd, linear = raw.codes, raw.bit_depth, True
+        else:
+            img = read_image(f)
+            if img.dtype.kind == "f":
+                bd, linear = None, True
+            else:
+                bd = (png_significant_bits(f) if ext == ".png" else None) or 8 * img.dtype.itemsize
+        if img.ndim == 2:
+            img = img[..., None]
+        if imgs and (img.shape != imgs[0].shape or img.dtype != imgs[0].dtype):
+            raise InputError(f, f"is {img.shape[1]}x{img.shape[0]}x{img.shape[2]} {img.dtype}, "
+                                f"but {files[0].name} is {imgs[0].shape[1]}x{imgs[0].shape[0]}x"
+                                f"{imgs[0].shape[2]} {imgs[0].dtype}; a stack needs one size and type")
+        imgs.append(img)
+        bit_depths.append(bd)
+    bit_depth = info.get("bit_depth", None if bit_depths[0] is None else max(bit_depths))
+    if times is not None:
+        if len(times) != len(files):
+            raise InputError("--times", f"{len(times)} times given for {len(files)} images")
+        t = tuple(float(x) for x in times)
+    elif "exposure_times_s" in info:
+        t = tuple(float(x) for x in info["exposure_times_s"])
+        if len(t) != len(files):
+            raise InputError(sj, f"{len(t)} exposure_times_s for {len(files)} images")
+    else:
+        found = []
+        for f in files:
+            et = read_exif(f).exposure_time_s if f.suffix.lower() in {".jpg", ".jpeg", ".tif",
+                                                                      ".tiff"} | RAW_EXTS else None
+            if et is None and need_times:
+                raise InputError(f, "no EXIF exposure time; give --times T1,T2,... "
+                                    "or a folder with stack.json")
+            found.append(et)
+        t = tuple(found) if all(x is not None for x in found) else None
+    if t is not None:
+        for f, x in zip(files, t, strict=True):
+            if not np.isfinite(x) or x <= 0:
+                raise InputError(f, f"exposure time must be positive and finite, got {x}")
+    return Stack(np.stack(imgs), tuple(str(f) for f in files), bit_depth, t,
+                 bool(info.get("linear", linear)), info)
+
+
+def write_stack_json(folder, images: Sequence[str], **info) -> Path:
+    """Write ``folder/stack.json`` naming ``images`` (relative file names) plus
+    any stack-wide facts (``bit_depth``, ``exposure_times_s``, ``linear``, …)."""
+    body = {"schema": STACK_SCHEMA, "schema_version": 1, "images": list(images), **info}
+    path = Path(folder) / "stack.json"
+    with atomic_path(path) as tmp:
+        tmp.write_text(dumps_json(body))
+    return path

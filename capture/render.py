@@ -1,0 +1,299 @@
+"""Synthetic scenes with exact ground truth: the registry, the result type, the cache.
+
+A scene is a function ``render_fn(*, size, seed, rng, **options) -> RenderedScene``
+in a module of ``capture.scenes``; the module lists its scenes in a
+``SCENES: dict[str, SceneSpec]``. :func:`render` validates the options against
+the spec, seeds the generator, and caches results by (scene, options, size,
+seed, scene version), in memory and on disk (``$LUMIGRAPH_CACHE``, default
+``~/.cache/lumigraph``), so tests can build their inputs on the fly.
+
+A rendered folder holds the captured images exactly as a camera would deliver
+them (integer code values), a ``stack.json`` that every stage command accepts
+as input, ``gt.json`` describing the ground truth, and ``gt/<name>.npy`` arrays
+(float64/float32, exact; ``.npy`` because it loses nothing).
+
+Examples
+--------
+>>> s = render("sample", size=(32, 16), seed=1, cache=False)
+>>> s.images[0].shape, s.images[0].dtype.name, sorted(s.gt_arrays)
+((16, 32, 3), 'uint16', ['radiance'])
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+import json
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from capture.artifact import dumps_json, write_json
+from capture.errors import InputError
+
+# Modules that contribute scenes (each defines SCENES). A stage that needs a new
+# kind of input adds a module here.
+SCENE_MODULES = (
+    "capture.scenes.sample",
+    "capture.scenes.boards",
+    "capture.scenes.brackets",
+    "capture.scenes.motion",
+    "capture.scenes.lightfield",
+    "capture.scenes.projector",
+)
+GT_SCHEMA = "lumigraph.gt"
+
+
+@dataclass(frozen=True)
+class Option:
+    """One scene option: ``--name VALUE`` on the command line.
+
+    ``kind`` is ``int``, ``float``, ``str`` or ``bool``; ``choices`` restricts
+    values; ``low``/``high`` bound numbers (``open_low``/``open_high`` make a
+    bound exclusive, e.g. α ∈ (0, 1)).
+    """
+
+    name: str
+    kind: type
+    default: Any
+    help: str
+    choices: tuple | None = None
+    low: float | None = None
+    high: float | None = None
+    open_low: bool = False
+    open_high: bool = False
+
+    def parse(self, value: Any) -> Any:
+        flag = "--" + self.name.replace("_", "-")
+        try:
+            if self.kind is bool and isinstance(value, str):
+                if value.lower() not in ("1", "0", "true", "false", "yes", "no"):
+                    raise ValueError
+                v = value.lower() in ("1", "true", "yes")
+            elif self.kind is tuple:
+                v = tuple(float(x) for x in value.split(",")) if isinstance(value, str) else tuple(value)
+            else:
+                v = self.kind(value)
+        except (TypeError, ValueError):
+            raise InputError(flag, f"expected {self.kind.__name__}, got {value!r}") from None
+        if self.choices is not None and v not in self.choices:
+            raise InputError(flag, f"{v!r} is not one of {', '.join(map(str, self.choices))}")
+        if self.kind in (int, float):
+            if self.low is not None and (v < self.low or (self.open_low and v == self.low)):
+                raise InputError(flag, f"{v} is out of range: {self._range()}")
+            if self.high is not None and (v > self.high or (self.open_high and v == self.high)):
+                raise InputError(flag, f"{v} is out of range: {self._range()}")
+        return v
+
+    def _range(self) -> str:
+        lo = "-inf" if self.low is None else f"{self.low:g}"
+        hi = "inf" if self.high is None else f"{self.high:g}"
+        return f"{'(' if self.open_low else '['}{lo}, {hi}{')' if self.open_high else ']'}"
+
+    def describe(self) -> str:
+        extra = ""
+        if self.choices:
+            extra = f" one of {{{', '.join(map(str, self.choices))}}}"
+        elif self.low is not None or self.high is not None:
+            extra = f" in {self._range()}"
+        return f"--{self.name.replace('_', '-')} ({self.kind.__name__}{extra}, default {self.default!r}): {self.help}"
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """A registered scene: its renderer, default size, options and description."""
+
+    name: str
+    summary: str
+    render_fn: Callable[..., RenderedScene]
+    default_size: tuple[int, int]
+    options: tuple[Option, ...] = ()
+    version: int = 1  # bump when the renderer's output changes (invalidates caches)
+    min_size: tuple[int, int] = (16, 16)
+
+    def parse_options(self, given: dict[str, Any]) -> dict[str, Any]:
+        known = {o.name: o for o in self.options}
+        out = {o.name: o.default for o in self.options}
+        for k, v in given.items():
+            key = k.replace("-", "_")
+            if key not in known:
+                names = ", ".join("--" + n.replace("_", "-") for n in known) or "none"
+                raise InputError("--" + key.replace("_", "-"),
+                                 f"scene {self.name!r} has no such option (its options: {names})")
+            out[key] = known[key].parse(v)
+        return out
+
+
+@dataclass(frozen=True)
+class RenderedScene:
+    """Captured images plus exact ground truth.
+
+    Attributes
+    ----------
+    scene : str
+        Registered scene name.
+    params : dict
+        Options, size and seed it was rendered with.
+    images : tuple of ndarray
+        Captured images, ``(H, W)`` or ``(H, W, C)``, integer code values as a
+        camera delivers them (uint8/uint16), RGB.
+    image_names : tuple of str
+        File names for ``images`` (``.png``; 16-bit PNG for bit depths > 8).
+    stack : dict
+        Stack-wide facts written to ``stack.json`` (``bit_depth``,
+        ``exposure_times_s``, …).
+    gt : dict
+        JSON-able ground truth (K, poses, response, times, …) -> ``gt.json``.
+    gt_arrays : dict of str -> ndarray
+        Dense ground truth (radiance, disparity, flow, depth, …) -> ``gt/*.npy``.
+    """
+
+    scene: str
+    params: dict
+    images: tuple[np.ndarray, ...]
+    image_names: tuple[str, ...]
+    stack: dict = field(default_factory=dict)
+    gt: dict = field(default_factory=dict)
+    gt_arrays: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if len(self.images) != len(self.image_names):
+            raise ValueError("image_names: one name per image expected")
+        for im in self.images:
+            if im.dtype not in (np.uint8, np.uint16):
+                raise TypeError(f"images: captured images must be uint8/uint16, got {im.dtype}")
+
+    @property
+    def bit_depth(self) -> int:
+        return int(self.stack.get("bit_depth", 8 * self.images[0].dtype.itemsize))
+
+    def save(self, folder: str | os.PathLike) -> Path:
+        """Write images, ``stack.json``, ``gt.json`` and ``gt/*.npy`` into ``folder``.
+
+        ``stack.json`` is written last: its presence means the folder is complete.
+        """
+        from capture.io import write_image, write_stack_json
+
+        folder = Path(folder)
+        (folder / "gt").mkdir(parents=True, exist_ok=True)
+        for im, name in zip(self.images, self.image_names, strict=True):
+            bd = self.bit_depth if im.dtype == np.uint16 else None
+            write_image(folder / name, im, bit_depth=bd)
+        for name, arr in self.gt_arrays.items():
+            tmp = folder / "gt" / f".{name}.tmp.npy"
+            np.save(tmp, np.asarray(arr), allow_pickle=False)
+            os.replace(tmp, folder / "gt" / f"{name}.npy")
+        write_json(folder / "gt.json", {"schema": GT_SCHEMA, "schema_version": 1,
+                                        "scene": self.scene, "params": self.params,
+                                        "arrays": sorted(self.gt_arrays), **self.gt})
+        write_stack_json(folder, list(self.image_names), scene=self.scene, **self.stack)
+        return folder
+
+    @classmethod
+    def load(cls, folder: str | os.PathLike) -> RenderedScene:
+        """Load a folder written by :meth:`save` (images exactly as saved)."""
+        from capture.io import read_image
+
+        folder = Path(folder)
+        if not (folder / "stack.json").exists():
+            raise InputError(folder, "not a rendered scene folder (no stack.json)")
+        stack = json.loads((folder / "stack.json").read_text())
+        gt = json.loads((folder / "gt.json").read_text())
+        names = tuple(stack.pop("images"))
+        scene = gt.pop("scene")
+        params = gt.pop("params")
+        arrays = {n: np.load(folder / "gt" / f"{n}.npy") for n in gt.pop("arrays")}
+        for k in ("schema", "schema_version"):
+            stack.pop(k, None)
+            gt.pop(k, None)
+        stack.pop("scene", None)
+        images = tuple(read_image(folder / n) for n in names)
+        return cls(scene, params, images, names, stack, gt, arrays)
+
+
+def scenes() -> dict[str, SceneSpec]:
+    """All registered scenes, by name."""
+    out: dict[str, SceneSpec] = {}
+    for mod_name in SCENE_MODULES:
+        try:
+            mod = importlib.import_module(mod_name)
+        except ModuleNotFoundError as e:
+            if e.name == mod_name:  # a stage's scene module not written yet
+                continue
+            raise
+        out.update(mod.SCENES)
+    return out
+
+
+def get_scene(name: str) -> SceneSpec:
+    all_scenes = scenes()
+    if name not in all_scenes:
+        raise InputError(name, f"unknown scene; choose from {', '.join(sorted(all_scenes))} "
+                               "(see 'lumigraph render --list')")
+    return all_scenes[name]
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("LUMIGRAPH_CACHE", Path.home() / ".cache" / "lumigraph")) / "scenes"
+
+
+_MEMORY: dict[str, RenderedScene] = {}
+
+
+def _key(spec: SceneSpec, opts: dict, size: tuple[int, int], seed: int) -> str:
+    text = dumps_json({"scene": spec.name, "v": spec.version, "opts": opts,
+                       "size": list(size), "seed": seed})
+    return hashlib.sha256(text.encode()).hexdigest()[:20]
+
+
+def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
+           cache: bool = True, **options) -> RenderedScene:
+    """Render (or fetch from the cache) a registered scene.
+
+    Parameters
+    ----------
+    name : str
+        Scene name (``lumigraph render --list``).
+    size : (width, height), optional
+        Image size; the scene's default test size when omitted.
+    seed : int
+        Seeds every random choice (noise, textures, poses): same seed, same bytes.
+    cache : bool
+        Reuse an earlier render with identical arguments (memory, then disk).
+    **options
+        Scene options, validated against its spec.
+    """
+    spec = get_scene(name)
+    opts = spec.parse_options(options)
+    w, h = size if size is not None else spec.default_size
+    if w < spec.min_size[0] or h < spec.min_size[1] or w > 20000 or h > 20000:
+        raise InputError("--size", f"impossible size {w}x{h} for scene {name!r} "
+                                   f"(at least {spec.min_size[0]}x{spec.min_size[1]})")
+    if not isinstance(seed, int) or seed < 0:
+        raise InputError("--seed", f"expected a non-negative integer, got {seed!r}")
+    key = _key(spec, opts, (w, h), seed)
+    if cache and key in _MEMORY:
+        return _MEMORY[key]
+    disk = cache_dir() / f"{name}-{key}"
+    if cache and (disk / "stack.json").exists():
+        try:
+            result = RenderedScene.load(disk)
+            _MEMORY[key] = result
+            return result
+        except Exception:  # a damaged cache entry is re-rendered, never trusted
+            pass
+    rng = np.random.default_rng(seed)
+    result = spec.render_fn(size=(w, h), seed=seed, rng=rng, **opts)
+    result = RenderedScene(result.scene, {"size": [w, h], "seed": seed, **opts}, result.images,
+                           result.image_names, result.stack, result.gt, result.gt_arrays)
+    if cache:
+        _MEMORY[key] = result
+        try:
+            result.save(disk)
+        except OSError:
+            pass  # a read-only cache only costs speed
+    return result

@@ -1,0 +1,2 @@
+"""HDR imaging: camera-response recovery (one module per method), radiance
+merge, exposure alignment, tone mapping and HDR file formats."""
