@@ -8,8 +8,8 @@ Examples
 --------
 >>> import tempfile, pathlib
 >>> d = pathlib.Path(tempfile.mkdtemp())
->>> write_artifact(d / "x.txt", lambda p: p.write_text("hi"),
-...                meta=make_meta("demo.text", params={"n": 1}))
+>>> path = write_artifact(d / "x.txt", lambda p: p.write_text("hi"),
+...                       meta=make_meta("demo.text", params={"n": 1}))
 >>> sorted(f.name for f in d.iterdir())
 ['x.txt', 'x.txt.meta.json']
 """

@@ -41,7 +41,8 @@ SCENE_MODULES = (
     "capture.scenes.sample",
     "capture.scenes.boards",
     "capture.scenes.brackets",
-    "capture.scenes.motion",
+    "capture.scenes.flow",
+    "capture.scenes.stereo",
     "capture.scenes.lightfield",
     "capture.scenes.projector",
 )

@@ -6,7 +6,8 @@ module                 scenes
 ``sample``             a linear radiance ramp (smoke test of the plumbing)
 ``boards``             checkerboard/ChArUco calibration views, stereo rigs
 ``brackets``           HDR exposure brackets through known responses, HDR video
-``motion``             stereo pairs and flow sequences with exact disparity/flow
+``flow``               2-frame and N-frame sequences with exact forward flow
+``stereo``             rectified/unrectified pairs and multi-view sets with exact geometry
 ``lightfield``         camera arrays, thin-lens refocus truth, lenslet raws
 ``projector``          projector-lit stacks with direct/global truth (Mitsuba)
 =====================  ==========================================================
