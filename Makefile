@@ -72,7 +72,7 @@ $(OUT)/sample/ramp.exr: $(STAMP)
 
 DEMO_OUTPUTS += $(OUT)/sample/ramp.exr
 
--include capture/demo.mk calib/demo.mk hdr/demo.mk stereo/demo.mk lightfield/demo.mk separation/demo.mk
+-include capture/demo.mk calib/demo.mk hdr/demo.mk stereo/flow.mk stereo/demo.mk lightfield/demo.mk separation/demo.mk
 
 demo: $(STAMP) $(DEMO_OUTPUTS)
 	@echo
