@@ -67,10 +67,14 @@ clean:
 # ---------------------------------------------------------------- demo chain
 DEMO_OUTPUTS :=
 
-$(OUT)/sample/ramp.exr: $(STAMP)
-	$(LUMI) render sample --out $(OUT)/sample --quiet
+# The plumbing's own smoke test: a rendered scene, described by `inspect`.
+$(OUT)/scenes/sample/stack.json: $(STAMP)
+	$(LUMI) render sample --out $(@D) --noise 2 --quiet
 
-DEMO_OUTPUTS += $(OUT)/sample/ramp.exr
+$(OUT)/sample/summary.json: $(OUT)/scenes/sample/stack.json
+	$(LUMI) inspect $(<D) --out $@ --quiet
+
+DEMO_OUTPUTS += $(OUT)/sample/summary.json
 
 -include capture/demo.mk calib/demo.mk hdr/demo.mk stereo/flow.mk stereo/demo.mk lightfield/demo.mk separation/demo.mk
 

@@ -292,22 +292,37 @@ class RawImage:
     exif: Exif
 
 
-def read_raw(path) -> RawImage:
+def read_raw(path, *, color: str = "srgb") -> RawImage:
     """Develop a RAW file without gamma or auto-brightening (rawpy defaults to both).
 
-    Camera white balance is applied, output colour space is linear sRGB
-    primaries, 16-bit output; ``bit_depth`` is that of the sensor data, taken
-    from its white level.
+    Parameters
+    ----------
+    path : path-like
+        DNG, CR2, NEF, ARW, … (anything LibRaw reads).
+    color : {"srgb", "raw"}
+        Output primaries: linear sRGB through the camera's colour matrix, or
+        the camera's own RGB (no channel mixing: exactly proportional to the
+        sensor values, which is what response recovery and merging need).
+
+    Returns
+    -------
+    RawImage
+        ``codes`` uint16 ``(H, W, 3)``, demosaicked, black level subtracted,
+        camera white balance applied, white level mapped to
+        ``2**bit_depth - 1``; ``bit_depth`` is the sensor's, from its levels.
     """
     p = _existing(path)
+    if color not in ("srgb", "raw"):
+        raise ValueError(f"color: expected 'srgb' or 'raw', got {color!r}")
     import rawpy
 
     try:
         with rawpy.imread(str(p)) as raw:
             white = float(raw.white_level)
             black = float(np.mean(raw.black_level_per_channel))
+            space = rawpy.ColorSpace.sRGB if color == "srgb" else rawpy.ColorSpace.raw
             rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16,
-                                  use_camera_wb=True, user_flip=0)
+                                  use_camera_wb=True, user_flip=0, output_color=space)
     except Exception as e:  # rawpy raises a family of LibRaw errors
         raise InputError(p, f"cannot decode RAW file ({type(e).__name__}: {e})") from None
     bit_depth = max(8, int(np.ceil(np.log2(max(white - black, 2.0) + 1))))
