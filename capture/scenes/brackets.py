@@ -1,0 +1,316 @@
+"""``bracket`` and ``bracket_video``: exposure brackets of a high-dynamic-range scene.
+
+The scene is analytic, so its linear radiance is exact ground truth: a room
+textured with scikit-image's ``coffee`` photograph (sRGB-decoded to linear
+albedo) under a smooth light gradient, a deep shadow on the left, a window on
+the upper right showing ``rocket`` in daylight, Gaussian specular highlights
+and three small emitters. In-frame dynamic range is about 10⁷ : 1.
+
+Camera model (reference ch. 6, eq. 6.1-6.2): relative exposure
+``X = k · L · e`` with ``e = Δt · (N_ref / N)²`` (time, and f-number ``N`` for
+aperture brackets) and ``k`` per second (``gt.json``: ``exposure_scale``);
+``X = 1`` fills the well. Noise is added in electrons before the response:
+shot noise (Gaussian with variance equal to the count, the Poisson limit) and
+read noise, ``X_noisy = (n_e + N(0, sqrt(n_e + σ_read²))) / full_well``;
+then the response ``f`` maps ``clip(X_noisy, 0, 1)`` to codes
+``round(f(·) · (2**bit_depth − 1))``.
+
+Responses (``--response``): ``film`` — a per-channel Naka–Rushton S-curve
+``f(X) = X^γ/(X^γ + s^γ) · (1 + s^γ)`` with different ``γ, s`` per channel
+(an H&D-like sigmoid in log exposure with a toe and a shoulder); ``gamma`` —
+``X^(1/2.2)``; ``linear`` — ``X``. ``gt/g.npy`` is the exact
+``ln f⁻¹(z / z_max)`` table (``(3, 2**bit_depth)``; code 0 evaluated at half
+a code); ``gt/radiance.npy`` the radiance ``(H, W, 3)`` float32.
+
+Exposure times: nominal ``Δt_j = t_min · 2^(stops·j)`` (a camera's dial); the
+exact ones differ from them by up to ``--time-error`` (uniform, seeded) as a
+real shutter does. ``gt.json`` holds both; ``stack.json`` carries
+``--stack-times exact|nominal``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from capture.errors import InputError
+from capture.render import Option, RenderedScene, SceneSpec
+
+# Per-channel film curve parameters (gamma, s): the channels differ, as dye
+# layers of a colour film do.
+FILM = ((1.35, 0.16), (1.15, 0.20), (0.95, 0.26))
+GAMMA = 2.2
+
+
+# ---------------------------------------------------------------- responses
+def response_forward(x: np.ndarray, kind: str, channel: int) -> np.ndarray:
+    """``f(X)`` in [0, 1] for exposure ``X >= 0`` (clipped at 1 above saturation).
+
+    Examples
+    --------
+    >>> float(response_forward(np.array(1.0), "film", 0))
+    1.0
+    """
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    if kind == "linear":
+        return x
+    if kind == "gamma":
+        return x ** (1.0 / GAMMA)
+    if kind == "film":
+        gam, s = FILM[channel]
+        xg = x ** gam
+        return np.minimum(xg / (xg + s ** gam) * (1.0 + s ** gam), 1.0)
+    raise ValueError(f"kind: expected film, gamma or linear, got {kind!r}")
+
+
+def response_inverse(y: np.ndarray, kind: str, channel: int) -> np.ndarray:
+    """``f⁻¹(y)`` for normalised code ``y`` in [0, 1] (exact inverse of
+    :func:`response_forward`).
+
+    Examples
+    --------
+    >>> y = response_forward(np.array([0.01, 0.3]), "film", 2)
+    >>> np.allclose(response_inverse(y, "film", 2), [0.01, 0.3])
+    True
+    """
+    y = np.clip(np.asarray(y, dtype=np.float64), 0.0, 1.0)
+    if kind == "linear":
+        return y
+    if kind == "gamma":
+        return y ** GAMMA
+    if kind == "film":
+        gam, s = FILM[channel]
+        u = y / (1.0 + s ** gam)
+        with np.errstate(divide="ignore"):
+            return s * (u / (1.0 - u)) ** (1.0 / gam)
+    raise ValueError(f"kind: expected film, gamma or linear, got {kind!r}")
+
+
+def gt_log_inverse(kind: str, bit_depth: int) -> np.ndarray:
+    """The exact table ``g[c, z] = ln f⁻¹(z / z_max)``, ``(3, 2**bit_depth)`` float64
+    (code 0 evaluated at half a code so the table is finite)."""
+    zmax = 2 ** bit_depth - 1
+    z = np.arange(zmax + 1, dtype=np.float64)
+    z[0] = 0.5
+    return np.stack([np.log(response_inverse(z / zmax, kind, c)) for c in range(3)])
+
+
+# -------------------------------------------------------------------- scene
+def _srgb_to_linear(img: np.ndarray) -> np.ndarray:
+    v = img.astype(np.float64) / 255.0
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def _texture(name: str, w: int, h: int, shift=(0.0, 0.0), pad: int = 0) -> np.ndarray:
+    import cv2
+    import skimage.data
+
+    img = _srgb_to_linear(getattr(skimage.data, name)())
+    th, tw = img.shape[:2]
+    scale = max((w + 2 * pad) / tw, (h + 2 * pad) / th)
+    # Affine: output pixel (x, y) samples the texture at ((x + pad - dx)/scale, …).
+    m = np.array([[scale, 0, shift[0] - pad * 0], [0, scale, shift[1]]], np.float64)
+    out = cv2.warpAffine(img.astype(np.float32), m, (w, h), flags=cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REFLECT)
+    return out.astype(np.float64)
+
+
+def scene_radiance(w: int, h: int, *, shift=(0.0, 0.0), emitter_shift=(0.0, 0.0)) -> np.ndarray:
+    """The exact linear radiance ``(H, W, 3)`` float64 of the HDR room.
+
+    ``shift`` translates the whole scene (camera pan, pixels), ``emitter_shift``
+    moves the brightest emitter further (an independently moving light).
+
+    Examples
+    --------
+    >>> r = scene_radiance(64, 48)
+    >>> r.shape, bool(r.max() / r.min() > 1e4)
+    ((48, 64, 3), True)
+    """
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    xs = (xs - shift[0]) / max(w - 1, 1)
+    ys = (ys - shift[1]) / max(h - 1, 1)
+    albedo = 0.03 + 0.9 * _texture("coffee", w, h, shift=shift)
+    light = 0.35 * np.exp(1.2 * (1.0 - ys))[..., None] * np.ones(3)
+    shadow = 1.0 / (1.0 + np.exp(-(xs - 0.28) / 0.02))  # 0 in the left shadow, 1 outside
+    light = light * (0.008 + 0.992 * shadow)[..., None]
+    rad = albedo * light
+    window = (xs > 0.62) & (xs < 0.95) & (ys > 0.08) & (ys < 0.5)
+    outdoor = 0.05 + _texture("rocket", w, h, shift=shift)
+    rad = np.where(window[..., None], 60.0 * outdoor * np.array([0.95, 1.0, 1.08]), rad)
+    # Specular highlights: peaked, smooth (so every code level between the
+    # surface and the peak is visited).
+    for cx, cy, sig, peak in ((0.35, 0.7, 0.025, 40.0), (0.5, 0.82, 0.015, 120.0)):
+        d2 = (xs - cx) ** 2 + ((ys - cy) * h / w) ** 2
+        rad = rad + peak * np.exp(-d2 / (2 * sig ** 2))[..., None] * np.array([1.0, 0.97, 0.9])
+    emitters = ((0.15, 0.2, 0.022, 3000.0, (1.0, 0.85, 0.6)),
+                (0.52, 0.3, 0.03, 400.0, (0.8, 0.9, 1.0)),
+                (0.8, 0.75, 0.02, 150.0, (1.0, 0.6, 0.5)))
+    for i, (cx, cy, r, val, col) in enumerate(emitters):
+        ex = cx + (emitter_shift[0] / max(w - 1, 1) if i == 0 else 0.0)
+        ey = cy + (emitter_shift[1] / max(h - 1, 1) if i == 0 else 0.0)
+        d = np.sqrt((xs - ex) ** 2 + ((ys - ey) * h / w) ** 2)
+        disk = np.clip((r - d) * w + 0.5, 0.0, 1.0)  # anti-aliased edge, one pixel wide
+        rad = rad * (1 - disk[..., None]) + disk[..., None] * val * np.array(col)
+    return rad
+
+
+def expose(radiance: np.ndarray, e: float, *, response: str, bit_depth: int, rng,
+           noise: float, full_well: float, read_noise: float,
+           exposure_scale: float) -> np.ndarray:
+    """Codes a camera delivers for ``radiance`` at relative exposure ``e``
+    (seconds · (N_ref/N)²); see the module docstring for the model."""
+    x = exposure_scale * radiance * e
+    if noise > 0:
+        electrons = np.minimum(x, 4.0) * full_well
+        sigma = noise * np.sqrt(electrons + read_noise ** 2)
+        x = (electrons + rng.normal(0.0, 1.0, x.shape) * sigma) / full_well
+    zmax = 2 ** bit_depth - 1
+    y = np.stack([response_forward(x[..., c], response, c) for c in range(3)], axis=-1)
+    codes = np.clip(np.round(y * zmax), 0, zmax)
+    return codes.astype(np.uint8 if bit_depth <= 8 else np.uint16)
+
+
+def _common(bit_depth, exposures, stops, min_time, response, noise, full_well, read_noise,
+            time_error, stack_times, rng):
+    nominal = min_time * 2.0 ** (stops * np.arange(exposures))
+    exact = nominal * (1.0 + rng.uniform(-time_error, time_error, exposures))
+    gt = {"response": response, "film_params": [list(p) for p in FILM] if response == "film" else None,
+          "gamma": GAMMA if response == "gamma" else None,
+          "exposure_times_exact_s": exact.tolist(), "exposure_times_nominal_s": nominal.tolist(),
+          "full_well_e": full_well, "read_noise_e": read_noise, "noise_scale": noise,
+          "stack_times": stack_times, "model": "X = exposure_scale * L * t * (N_ref/N)^2; "
+                                              "codes = round(f(clip(X_noisy,0,1)) * (2^b-1))"}
+    return nominal, exact, gt
+
+
+def render_bracket(*, size, seed, rng, bit_depth=8, exposures=7, stops=1.5, min_time=1 / 1000,
+                   response="film", noise=1.0, full_well=20000.0, read_noise=4.0,
+                   time_error=0.03, stack_times="exact", vary="time", exposure_scale=10.0):
+    """A static exposure bracket with exact radiance, response and times.
+
+    Examples
+    --------
+    >>> s = render_bracket(size=(32, 24), seed=0, rng=np.random.default_rng(0), exposures=3)
+    >>> len(s.images), s.images[0].dtype.name, s.gt_arrays["g"].shape
+    (3, 'uint8', (3, 256))
+    """
+    w, h = size
+    nominal, exact, gt = _common(bit_depth, exposures, stops, min_time, response, noise,
+                                 full_well, read_noise, time_error, stack_times, rng)
+    rad = scene_radiance(w, h)
+    stack = {"bit_depth": bit_depth, "linear": response == "linear"}
+    if vary == "aperture":
+        # Fixed shutter; the f-number closes by stops/2 per frame from f/22 down.
+        n_ref = 2.0
+        f_exact = n_ref / np.sqrt(exact / exact[-1]) * 1.0
+        f_nominal = n_ref / np.sqrt(nominal / nominal[-1])
+        t_fixed = float(nominal[-1])
+        e_exact = t_fixed * (n_ref / f_exact) ** 2
+        gt.update({"f_numbers_exact": f_exact.tolist(), "f_numbers_nominal": f_nominal.tolist(),
+                   "shutter_s": t_fixed, "f_number_ref": n_ref,
+                   "relative_exposure_exact": e_exact.tolist()})
+        stack["f_numbers"] = (f_exact if stack_times == "exact" else f_nominal).tolist()
+        stack["f_number_ref"] = n_ref
+        stack["exposure_times_s"] = [t_fixed] * exposures
+        es = e_exact
+    else:
+        stack["exposure_times_s"] = (exact if stack_times == "exact" else nominal).tolist()
+        es = exact
+    images = tuple(expose(rad, float(e), response=response, bit_depth=bit_depth, rng=rng,
+                          noise=noise, full_well=full_well, read_noise=read_noise,
+                          exposure_scale=exposure_scale) for e in es)
+    gt["exposure_scale"] = exposure_scale
+    gt["vary"] = vary
+    gt["dynamic_range"] = float(rad.max() / rad.min())
+    names = tuple(f"exposure_{j:02d}.png" for j in range(exposures))
+    return RenderedScene("bracket", {}, images, names, stack=stack, gt=gt,
+                         gt_arrays={"radiance": rad.astype(np.float32),
+                                    "g": gt_log_inverse(response, bit_depth)})
+
+
+def render_bracket_video(*, size, seed, rng, bit_depth=8, frames=8, stops=3.0, min_time=1 / 500,
+                         response="film", noise=1.0, full_well=20000.0, read_noise=4.0,
+                         pan=1.5, light_speed=2.0, exposure_scale=10.0):
+    """HDR video: frames alternate short and long exposures (``stops`` apart)
+    while the camera pans ``pan`` px/frame to the right and the brightest
+    light moves another ``light_speed`` px/frame down. Ground truth: radiance
+    per frame ``(F, H, W, 3)`` and the per-frame scene shift.
+
+    Examples
+    --------
+    >>> s = render_bracket_video(size=(32, 24), seed=0, rng=np.random.default_rng(0), frames=2)
+    >>> s.gt_arrays["radiance"].shape, s.stack["exposure_times_s"][1] / s.stack["exposure_times_s"][0]
+    ((2, 24, 32, 3), 8.0)
+    """
+    w, h = size
+    times = np.array([min_time * (2.0 ** stops if f % 2 else 1.0) for f in range(frames)])
+    rads, shifts, images = [], [], []
+    for f in range(frames):
+        shift = (pan * f, 0.0)
+        rad = scene_radiance(w, h, shift=shift, emitter_shift=(0.0, light_speed * f))
+        rads.append(rad.astype(np.float32))
+        shifts.append(list(shift))
+        images.append(expose(rad, float(times[f]), response=response, bit_depth=bit_depth,
+                             rng=rng, noise=noise, full_well=full_well, read_noise=read_noise,
+                             exposure_scale=exposure_scale))
+    gt = {"response": response, "exposure_times_exact_s": times.tolist(),
+          "scene_shift_px": shifts, "light_speed_px": light_speed, "pan_px": pan,
+          "full_well_e": full_well, "read_noise_e": read_noise, "noise_scale": noise,
+          "exposure_scale": exposure_scale,
+          "flow_note": "background flow from frame f to f+1 is (+pan, 0) px; the brightest "
+                       "emitter moves (pan, light_speed) px"}
+    names = tuple(f"frame_{f:03d}.png" for f in range(frames))
+    return RenderedScene("bracket_video", {}, tuple(images), names,
+                         stack={"bit_depth": bit_depth, "exposure_times_s": times.tolist(),
+                                "video": True, "linear": response == "linear"},
+                         gt=gt, gt_arrays={"radiance": np.stack(rads),
+                                           "g": gt_log_inverse(response, bit_depth)})
+
+
+def _positive_finite(name, v):
+    if not math.isfinite(v) or v <= 0:
+        raise InputError(name, f"expected a positive exposure, got {v}")
+
+
+_CAMERA_OPTIONS = (
+    Option("bit_depth", int, 8, "sensor bit depth (8..16; 10/12/16 are written as 16-bit PNG "
+                                "with sBIT)", low=8, high=16),
+    Option("response", str, "film", "camera response", choices=("film", "gamma", "linear")),
+    Option("noise", float, 1.0, "noise scale (0 = noise-free, 1 = shot + read noise)", low=0.0),
+    Option("full_well", float, 20000.0, "electrons at saturation (shot noise)", low=1.0),
+    Option("read_noise", float, 4.0, "read noise, electrons RMS", low=0.0),
+    Option("exposure_scale", float, 10.0, "X = scale * radiance * time (X = 1 saturates)",
+           low=0.0, open_low=True),
+)
+
+SCENES = {
+    "bracket": SceneSpec(
+        "bracket", "HDR room (>= 1e4:1) bracketed through a known response, exact radiance",
+        render_bracket, (160, 120),
+        _CAMERA_OPTIONS + (
+            Option("exposures", int, 7, "number of exposures P", low=1, high=32),
+            Option("stops", float, 1.5, "spacing between exposures, in stops", low=0.0,
+                   open_low=True, high=8.0),
+            Option("min_time", float, 1 / 1000, "shortest nominal exposure, seconds", low=0.0,
+                   open_low=True),
+            Option("time_error", float, 0.03, "exact times differ from nominal by up to this "
+                                              "fraction", low=0.0, high=0.5),
+            Option("stack_times", str, "exact", "times written to stack.json",
+                   choices=("exact", "nominal")),
+            Option("vary", str, "time", "bracket by shutter time or by aperture",
+                   choices=("time", "aperture")),
+        ), version=1),
+    "bracket_video": SceneSpec(
+        "bracket_video", "HDR video: alternating short/long exposures, camera pan and a moving "
+                         "light; radiance per frame", render_bracket_video, (160, 120),
+        _CAMERA_OPTIONS + (
+            Option("frames", int, 8, "number of frames", low=2, high=240),
+            Option("stops", float, 3.0, "long/short exposure ratio, in stops", low=0.0,
+                   open_low=True, high=8.0),
+            Option("min_time", float, 1 / 500, "short exposure, seconds", low=0.0, open_low=True),
+            Option("pan", float, 1.5, "camera pan, pixels per frame (right)"),
+            Option("light_speed", float, 2.0, "extra motion of the brightest light, px/frame"),
+        ), version=1),
+}
