@@ -1,0 +1,148 @@
+"""Choosing the pixels a response fit uses, and checking a bracket's inputs.
+
+Response methods need a few hundred pixels whose codes trace the curve over
+the whole code range. :func:`sample_pixels` picks them on principle, not at
+random: pixels in smooth regions (small local gradient, so a sub-pixel
+misregistration or blur does not mix radiances), spread evenly over radiance
+(stratified by the sum of codes across the bracket, which rises with
+radiance whatever the response is) and over the image, and seen unclipped in
+at least two exposures.
+
+Examples
+--------
+>>> rng = np.random.default_rng(0)
+>>> e = np.exp(rng.uniform(-4, 1, (20, 30, 1)))
+>>> stack = np.stack([np.clip(e * t * 255, 0, 255).astype(np.uint8) for t in (0.2, 1.0)])
+>>> idx = sample_pixels(stack, n=50, bit_depth=8, rng=rng)
+>>> idx.shape, bool(np.unique(idx).size == idx.size)
+((50,), True)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from capture.errors import InputError
+
+
+def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
+                where: str = "images") -> tuple[np.ndarray, np.ndarray, int]:
+    """Validate a bracket: ``(P, H, W, C)`` integer codes and ``P`` times.
+
+    Returns the stack (as given, with a channel axis), the times as float64
+    and the bit depth (inferred from the dtype when ``None``).
+
+    Raises
+    ------
+    TypeError
+        Non-integer codes.
+    InputError
+        Wrong shape, times not one per image, not positive, or duplicated.
+    """
+    z = np.asarray(images)
+    if z.ndim == 3:
+        z = z[..., None]
+    if z.ndim != 4:
+        raise InputError(where, f"expected a stack (P, H, W, C), got shape {z.shape}")
+    if z.dtype.kind not in "ui":
+        raise TypeError(f"images: expected integer code values, got {z.dtype}")
+    bd = int(bit_depth) if bit_depth is not None else 8 * z.dtype.itemsize
+    if not 1 <= bd <= 16:
+        raise InputError(where, f"bit depth must be 1..16, got {bd}")
+    if z.size and int(z.max()) >= 2 ** bd:
+        raise InputError(where, f"codes up to {int(z.max())} exceed bit depth {bd}")
+    if exposure_times_s is None:
+        raise InputError("--times", "exposure times are needed (EXIF, stack.json or --times)")
+    t = np.asarray(exposure_times_s, dtype=np.float64).ravel()
+    if t.size != z.shape[0]:
+        raise InputError("--times", f"{t.size} exposure times for {z.shape[0]} images")
+    if not np.all(np.isfinite(t)) or np.any(t <= 0):
+        raise InputError("--times", f"exposure times must be positive and finite, got {t.tolist()}")
+    if np.unique(t).size != t.size:
+        dup = sorted({float(x) for x in t if np.sum(t == x) > 1})
+        raise InputError("--times", f"duplicated exposure times {dup}: each image of a bracket "
+                                    "needs its own exposure (drop the duplicate frames)")
+    return z, t, bd
+
+
+def hat_weight(z: np.ndarray, bit_depth: int) -> np.ndarray:
+    """Debevec–Malik's triangle weight ω(z) (reference ch. 6, after eq. 6.5),
+    normalised to peak 1, zero at codes 0 and ``z_max``.
+
+    Examples
+    --------
+    >>> hat_weight(np.array([0, 64, 127, 128, 255]), 8).round(3).tolist()
+    [0.0, 0.504, 1.0, 1.0, 0.0]
+    """
+    zmax = 2 ** bit_depth - 1
+    z = np.asarray(z, dtype=np.float64)
+    half = zmax / 2.0
+    return np.clip(np.minimum(z, zmax - z) / np.floor(half), 0.0, 1.0)
+
+
+def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.Generator,
+                  margin: float = 0.02) -> np.ndarray:
+    """Flat pixel indices (into ``H·W``) of ``n`` pixels for a response fit.
+
+    Parameters
+    ----------
+    images : ndarray, ``(P, H, W, C)`` integer codes
+    n : int
+        Pixels wanted (fewer are returned only if fewer qualify).
+    bit_depth : int
+    rng : numpy.random.Generator
+        Breaks ties within a radiance stratum (deterministic under a seed).
+    margin : float
+        Codes within ``margin·z_max`` of 0 or ``z_max`` count as clipped.
+
+    Returns
+    -------
+    ndarray of int64, ``(m,)``, ``m <= n``, unique, sorted by radiance.
+
+    Raises
+    ------
+    InputError
+        When fewer than 8 pixels are unclipped in two exposures.
+    """
+    p, h, w, c = images.shape
+    zmax = 2 ** bit_depth - 1
+    z = images.reshape(p, h * w, c)
+    lo, hi = margin * zmax, (1 - margin) * zmax
+    ok = ((z > lo) & (z < hi)).all(axis=2).sum(axis=0)  # exposures with every channel in range
+    import scipy.ndimage as ndi
+
+    mid = images[p // 2].astype(np.float32).mean(axis=2) / zmax
+    gy, gx = ndi.sobel(mid, 0), ndi.sobel(mid, 1)
+    grad = ndi.maximum_filter(np.hypot(gx, gy), size=3).ravel()
+    cand = np.flatnonzero(ok >= min(2, p))
+    if cand.size < 8:
+        raise InputError("images", f"only {cand.size} pixels are unclipped in two exposures; "
+                                   "the bracket does not constrain a response (add exposures "
+                                   "between the ones given)")
+    # Prefer smooth pixels: keep the smoother half of each radiance stratum.
+    s = z[:, cand].astype(np.float64).mean(axis=2).sum(axis=0)
+    nbins = max(8, min(n, 64))
+    edges = np.linspace(s.min(), s.max() + 1e-9, nbins + 1)
+    b = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, nbins - 1)
+    g = grad[cand]
+    # Rank within a stratum by gradient (jittered so ties spread spatially).
+    key = g * (1.0 + 0.25 * rng.random(cand.size))
+    order = np.lexsort((key, b))
+    bs = b[order]
+    start = np.searchsorted(bs, np.arange(nbins))
+    rank = np.arange(order.size) - start[bs]
+    counts = np.bincount(bs, minlength=nbins)
+    # Equal quota per non-empty stratum; spare quota goes to the next ranks.
+    quota = int(np.ceil(n / max(np.count_nonzero(counts), 1)))
+    for _ in range(4):
+        take = order[rank < quota]
+        if take.size >= n or quota >= counts.max():
+            break
+        quota = int(np.ceil(quota * n / max(take.size, 1))) + 1
+    sel = rank < quota
+    take = order[sel]
+    if take.size > n:
+        # Trim the highest-gradient picks first (largest rank), keeping every stratum.
+        take = take[np.argsort(rank[sel], kind="stable")[:n]]
+    picked = cand[np.sort(take)]
+    return picked[np.argsort(s[np.searchsorted(cand, picked)], kind="stable")].astype(np.int64)
