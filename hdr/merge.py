@@ -1,0 +1,261 @@
+"""Merging an exposure bracket into a radiance map, with weights that know
+about noise and saturation.
+
+Each exposure ``j`` gives an estimate of relative radiance ``X̂_j =
+f⁻¹(Z_j) / Δt_j`` (reference ch. 6, eq. 6.4); the merge is their weighted
+mean. The default weights are the variance-optimal ones (Granados et al.
+2010, doi:10.1109/CVPR.2010.5540208; Hanji et al. 2020,
+doi:10.1007/978-3-030-58542-6_23): ``w_j = 1 / Var(X̂_j)`` with
+
+``Var(X̂_j) = (X/n_sat + (σ_read/n_sat)² + (dX/dz)²/12) / Δt_j²``
+
+for a sensor whose well holds ``n_sat`` electrons at ``X = f⁻¹(z_max)``
+(shot noise, read noise and quantisation through the response's slope).
+``weights="hat"`` gives Debevec–Malik's triangle instead.
+
+Units are consistent whatever the bit depth: every response here maps the
+middle code to ``z_mid / z_max`` (:func:`hdr.response.normalise_g`), so a
+linear 8-bit and a linear 16-bit capture of one scene merge to the same
+numbers. Codes within ``clip_margin`` of 0 or ``z_max`` get no weight (the
+noise there is truncated). A pixel clipped in every exposure is set to the
+lower bound the shortest exposure gives (``f⁻¹(z_hi)/Δt_min``) and flagged
+:data:`CLIPPED`; one black in every exposure gets the upper bound from the
+longest exposure and :data:`BLACK` — never a silent 0 or mid-grey.
+
+The work runs in row blocks on a thread pool (numpy releases the GIL), so
+peak memory is the inputs, the float32 output, its mask and a few blocks.
+
+Examples
+--------
+>>> from hdr.response import ResponseCurve
+>>> x = np.array([[[20 / 255], [100 / 255], [5.0]]])  # (1, 3, 1) radiance
+>>> t = [0.5, 2.0]
+>>> z = np.stack([np.clip(np.round(x * ti * 255), 0, 255) for ti in t]).astype(np.uint8)
+>>> m = merge(z, t, ResponseCurve.linear(8, 1))
+>>> [round(float(v), 3) for v in m.radiance[0, :, 0]], m.flags[0, :, 0].tolist()
+([0.078, 0.392, 1.953], [0, 0, 1])
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from capture.errors import InputError
+from hdr.response import ResponseCurve
+from hdr.samples import check_stack, hat_weight
+
+CLIPPED = 1  # saturated in every exposure: the value is a lower bound
+BLACK = 2  # black in every exposure: the value is an upper bound
+GHOST = 4  # an exposure disagreed with the reference and was left out
+
+
+@dataclass(frozen=True)
+class RadianceMap:
+    """A merged radiance map.
+
+    Attributes
+    ----------
+    radiance : ndarray, ``(H, W, C)`` float32
+        Relative linear radiance (exposure per second, ``f⁻¹`` units).
+    flags : ndarray, ``(H, W, C)`` uint8
+        Bit flags per channel: :data:`CLIPPED`, :data:`BLACK`, :data:`GHOST`.
+    exposure_times_s : tuple of float
+    weights : str
+    warnings : tuple of str
+    """
+
+    radiance: np.ndarray
+    flags: np.ndarray
+    exposure_times_s: tuple[float, ...]
+    weights: str = "variance"
+    warnings: tuple[str, ...] = ()
+    stats: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.radiance.dtype != np.float32 or self.radiance.ndim != 3:
+            raise TypeError(f"radiance: expected (H, W, C) float32, got {self.radiance.shape} "
+                            f"{self.radiance.dtype}")
+        if self.flags.shape != self.radiance.shape or self.flags.dtype != np.uint8:
+            raise ValueError(f"flags: expected {self.radiance.shape} uint8, got "
+                             f"{self.flags.shape} {self.flags.dtype}")
+
+    @property
+    def mask(self) -> np.ndarray:
+        """``(H, W)`` bool: True where some channel is clipped or black everywhere."""
+        return (self.flags & (CLIPPED | BLACK)).any(axis=2)
+
+
+def variance_weight_table(exposure_table: np.ndarray, *, full_well_e: float = 10000.0,
+                          read_noise_e: float = 5.0, clip_margin: float = 0.02) -> np.ndarray:
+    """``1 / Var(f⁻¹(z))`` per channel and code (before the ``Δt²`` factor).
+
+    Parameters
+    ----------
+    exposure_table : ndarray, ``(C, 2**bit_depth)``
+        ``f⁻¹(z)`` (:meth:`ResponseCurve.exposure_table`).
+
+    Returns
+    -------
+    ndarray, ``(C, 2**bit_depth)`` float64, zero at clipped codes. Noise model
+    in the module docstring; ``X`` is taken relative to ``f⁻¹(z_max)``.
+
+    Examples
+    --------
+    >>> w = variance_weight_table(ResponseCurve.linear(8, 1).exposure_table())
+    >>> bool(w[0, 50] > w[0, 200] > 0), float(w[0, 255])  # shot noise grows with X
+    (True, 0.0)
+    """
+    x = np.asarray(exposure_table, dtype=np.float64)
+    zmax = x.shape[1] - 1
+    sat = x[:, -1:]
+    xs = x / sat
+    slope = np.gradient(xs, axis=1)
+    var = xs / full_well_e + (read_noise_e / full_well_e) ** 2 + slope ** 2 / 12.0
+    w = 1.0 / (np.maximum(var, 1e-30) * sat ** 2)
+    z = np.arange(zmax + 1)
+    w[:, (z < clip_margin * zmax) | (z > (1 - clip_margin) * zmax) | (z == 0) | (z == zmax)] = 0.0
+    return w
+
+
+def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
+          weights: str = "variance", full_well_e: float = 10000.0, read_noise_e: float = 5.0,
+          clip_margin: float = 0.02, deghost: bool = False, deghost_sigma: float = 4.0,
+          reference: int | None = None, block_rows: int = 128,
+          workers: int | None = None) -> RadianceMap:
+    """Merge a bracket into relative radiance.
+
+    Parameters
+    ----------
+    images : ndarray, ``(P, H, W, C)`` uint8/uint16 codes
+    exposure_times_s : sequence of float, ``(P,)``
+        Exposure times (or relative exposures), seconds.
+    response : ResponseCurve
+        Its bit depth is the codes'; one channel or ``C``.
+    weights : {"variance", "hat"}
+        Variance-optimal (noise- and saturation-aware) or Debevec's hat.
+    full_well_e, read_noise_e : float
+        Noise model of the variance weights (electrons at saturation, read
+        noise RMS); only their ratio to each other and the response matter.
+    clip_margin : float
+        Fraction of the code range at each end that counts as clipped.
+    deghost : bool
+        Leave out, per pixel and channel, exposures whose estimate differs
+        from the reference exposure's by more than ``deghost_sigma`` standard
+        deviations (moving content); flagged :data:`GHOST`.
+    reference : int, optional
+        Reference exposure for deghosting (default: the one with the most
+        well-exposed pixels).
+    block_rows, workers : int
+        Row-block size and thread count (default: CPU count, at most 4).
+
+    Returns
+    -------
+    RadianceMap
+    """
+    z, t, bd = check_stack(images, exposure_times_s, bit_depth=response.bit_depth)
+    if weights not in ("variance", "hat"):
+        raise ValueError(f"weights: expected 'variance' or 'hat', got {weights!r}")
+    p, h, w, c = z.shape
+    if response.channels not in (1, c):
+        raise InputError("--response", f"curve has {response.channels} channels, images have {c}")
+    x_tab = response.exposure_table()
+    if response.channels == 1:
+        x_tab = np.repeat(x_tab, c, axis=0)
+    zmax = response.code_max
+    codes = np.arange(zmax + 1)
+    if weights == "variance":
+        w_tab = variance_weight_table(x_tab, full_well_e=full_well_e, read_noise_e=read_noise_e,
+                                      clip_margin=clip_margin)
+        var_tab = np.where(w_tab > 0, 1.0 / np.maximum(w_tab, 1e-300), np.inf)
+    else:
+        w_tab = np.tile(hat_weight(codes, bd), (c, 1))
+        w_tab[:, (codes < clip_margin * zmax) | (codes > (1 - clip_margin) * zmax)] = 0.0
+        var_tab = None
+    # Per exposure: LUTs of w and w·X̂ (float32: the accumulation is float32 too).
+    wl = np.empty((p, c, zmax + 1), np.float32)
+    wxl = np.empty((p, c, zmax + 1), np.float32)
+    xl = np.empty((p, c, zmax + 1), np.float32)
+    for j in range(p):
+        wj = w_tab * (t[j] ** 2 if weights == "variance" else 1.0)
+        xl[j] = x_tab / t[j]
+        wl[j] = wj
+        wxl[j] = wj * x_tab / t[j]
+    lo_code = int(math.ceil(clip_margin * zmax))
+    hi_code = int(math.floor((1 - clip_margin) * zmax))
+    j_short, j_long = int(np.argmin(t)), int(np.argmax(t))
+    bound_hi = (x_tab[:, min(hi_code, zmax)] / t[j_short]).astype(np.float32)
+    bound_lo = (x_tab[:, max(lo_code, 0)] / t[j_long]).astype(np.float32)
+    if deghost:
+        if reference is None:
+            good = [np.count_nonzero((z[j] > lo_code) & (z[j] < hi_code)) for j in range(p)]
+            reference = int(np.argmax(good))
+        if not 0 <= reference < p:
+            raise ValueError(f"reference: expected 0..{p - 1}, got {reference}")
+        if var_tab is None:
+            var_tab = np.where(w_tab > 0, 1.0, np.inf)  # hat: a flat noise guess
+        vl = np.stack([(var_tab / (t[j] ** 2 if weights == "variance" else 1.0))
+                       .astype(np.float32) for j in range(p)])
+    out = np.empty((h, w, c), np.float32)
+    flags = np.zeros((h, w, c), np.uint8)
+
+    def do_block(r0):
+        r1 = min(r0 + block_rows, h)
+        for ch in range(c):
+            num = np.zeros((r1 - r0, w), np.float32)
+            den = np.zeros((r1 - r0, w), np.float32)
+            if deghost:
+                zr = z[reference, r0:r1, :, ch]
+                xr = xl[reference, ch][zr]
+                vr = vl[reference, ch][zr]
+                ref_ok = np.isfinite(vr)
+                ghost = np.zeros((r1 - r0, w), bool)
+            for j in range(p):
+                zj = z[j, r0:r1, :, ch]
+                wj = wl[j, ch][zj]
+                if deghost and j != reference:
+                    d2 = (xl[j, ch][zj] - xr) ** 2
+                    bad = ref_ok & (wj > 0) & (d2 > deghost_sigma ** 2 * (vl[j, ch][zj] + vr))
+                    wj = np.where(bad, np.float32(0), wj)
+                    ghost |= bad
+                    num += np.where(bad, np.float32(0), wxl[j, ch][zj])
+                else:
+                    num += wxl[j, ch][zj]
+                den += wj
+            empty = den <= 0
+            np.divide(num, den, out=num, where=~empty)
+            if empty.any():
+                sat = z[j_short, r0:r1, :, ch] > hi_code
+                num[empty & sat] = bound_hi[ch]
+                num[empty & ~sat] = bound_lo[ch]
+                flags[r0:r1, :, ch][empty & sat] |= CLIPPED
+                flags[r0:r1, :, ch][empty & ~sat] |= BLACK
+            if deghost:
+                flags[r0:r1, :, ch][ghost] |= GHOST
+            out[r0:r1, :, ch] = num
+
+    starts = range(0, h, block_rows)
+    n_workers = workers or min(4, os.cpu_count() or 1)
+    if n_workers > 1 and h > block_rows:
+        with ThreadPoolExecutor(n_workers) as ex:
+            list(ex.map(do_block, starts))
+    else:
+        for r0 in starts:
+            do_block(r0)
+    warnings = []
+    n_clip = int(np.count_nonzero(flags & CLIPPED))
+    n_black = int(np.count_nonzero(flags & BLACK))
+    if n_clip:
+        warnings.append(f"{n_clip} pixel-channels are clipped in every exposure: set to the lower "
+                        "bound from the shortest exposure and flagged (add a shorter exposure)")
+    if n_black:
+        warnings.append(f"{n_black} pixel-channels are black in every exposure: set to the upper "
+                        "bound from the longest exposure and flagged (add a longer exposure)")
+    stats = {"clipped_everywhere": n_clip, "black_everywhere": n_black,
+             "ghost": int(np.count_nonzero(flags & GHOST)) if deghost else 0,
+             "reference": reference}
+    return RadianceMap(out, flags, tuple(float(x) for x in t), weights, tuple(warnings), stats)
