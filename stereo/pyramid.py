@@ -1,0 +1,242 @@
+"""Image pyramids and the shared machinery of coarse-to-fine correspondence.
+
+The pyramid of reference §5.1.3 (Fig. 5.5): each level halves the resolution,
+every pixel the average of a 2x2 block of the level below ("much like the
+construction of a mip map"). A flow field found at level l is carried to level
+l-1 by doubling its vectors and resampling it (pixel centres follow OpenCV's
+half-pixel rule, which is what 2x2 averaging implies), then refined there.
+
+Also here: warping an image by a flow, the forward-backward consistency test,
+a fast noise estimate, and the choice of pyramid depth from the largest
+expected motion (``levels="auto"``).
+
+Examples
+--------
+>>> import numpy as np
+>>> img = np.random.default_rng(0).random((48, 64)).astype(np.float32)
+>>> [p.shape for p in build_pyramid(img, 3)]
+[(48, 64), (24, 32), (12, 16)]
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MIN_LEVEL_SIDE = 12  # no pyramid level is made smaller than this (pixels)
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """Float32 luminance-like gray in [0, 1] from uint8/uint16/float images.
+
+    Integer codes are scaled by their container's maximum; RGB is averaged
+    with Rec. 601 weights (only relative intensities matter to matching).
+
+    Examples
+    --------
+    >>> to_gray(np.full((2, 2, 3), 255, np.uint8)).max()
+    np.float32(1.0)
+    """
+    a = np.asarray(image)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[..., 0]
+    if a.ndim == 3:
+        if a.shape[2] < 3:
+            raise ValueError(f"image: expected (H, W) or (H, W, 3|4), got {a.shape}")
+        a = a[..., 0] * 0.299 + a[..., 1] * 0.587 + a[..., 2] * 0.114
+    elif a.ndim != 2:
+        raise ValueError(f"image: expected (H, W) or (H, W, 3|4), got {a.shape}")
+    a = np.asarray(a, np.float32)
+    img_dtype = np.asarray(image).dtype
+    if img_dtype.kind in "ui":
+        a = a / float(np.iinfo(img_dtype).max)
+    return np.ascontiguousarray(a, np.float32)
+
+
+def build_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
+    """Levels 0 (full size) .. levels-1, each the 2x2 block average of the one below.
+
+    Parameters
+    ----------
+    image : ndarray, float32, ``(H, W)`` or ``(H, W, C)``
+    levels : int
+        Number of levels, >= 1. Odd sizes round up (area averaging).
+
+    Returns
+    -------
+    list of ndarray
+        Level l has shape ``ceil(H / 2**l), ceil(W / 2**l)``.
+    """
+    import cv2
+
+    if levels < 1:
+        raise ValueError(f"levels: expected >= 1, got {levels}")
+    out = [np.ascontiguousarray(image, np.float32)]
+    for _ in range(levels - 1):
+        h, w = out[-1].shape[:2]
+        out.append(cv2.resize(out[-1], ((w + 1) // 2, (h + 1) // 2), interpolation=cv2.INTER_AREA))
+    return out
+
+
+def upsample_flow(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """Carry a flow field one level down: resample to ``shape`` (H, W) and
+    scale the vectors by the size ratio (2 for a pyramid step)."""
+    import cv2
+
+    h, w = shape
+    sy, sx = h / flow.shape[0], w / flow.shape[1]
+    up = cv2.resize(flow, (w, h), interpolation=cv2.INTER_LINEAR)
+    up[..., 0] *= sx
+    up[..., 1] *= sy
+    return up
+
+
+def grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel-centre coordinates ``(X, Y)``, float32, for an ``(H, W)`` image."""
+    h, w = shape
+    return np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+
+
+def warp(image: np.ndarray, flow: np.ndarray, *, border: str = "replicate",
+         cubic: bool = True) -> np.ndarray:
+    """Sample ``image`` at ``x + flow(x)`` (bicubic, or bilinear with
+    ``cubic=False``): with forward flow 0 -> 1,
+    ``warp(I1, flow)`` is frame 1 pulled back onto frame 0."""
+    import cv2
+
+    X, Y = grid(flow.shape[:2])
+    mode = {"replicate": cv2.BORDER_REPLICATE, "constant": cv2.BORDER_CONSTANT}[border]
+    # Bicubic: bilinear interpolation smooths by a sub-pixel-phase dependent
+    # amount, which biases the matching minimum toward whole pixels.
+    interp = cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR
+    return cv2.remap(np.ascontiguousarray(image, np.float32), X + flow[..., 0], Y + flow[..., 1],
+                     interp, borderMode=mode, borderValue=np.nan)
+
+
+def forward_backward(forward: np.ndarray, backward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Forward-backward consistency: the round trip ``x -> x + f(x) -> + b(.)``
+    should come back to ``x``.
+
+    Flagged inconsistent (occluded or wrong) where the round-trip error
+    exceeds ``0.01 (|f|^2 + |b|^2) + 0.5`` px^2 (Sundaram, Brox, Keutzer 2010,
+    doi:10.1007/978-3-642-15549-9_32), or the target leaves the frame.
+
+    Returns
+    -------
+    inconsistent : ndarray, bool, ``(H, W)``
+    round_trip_px : ndarray, float32, ``(H, W)``
+    """
+    h, w = forward.shape[:2]
+    bw = warp(backward, forward, border="constant", cubic=False)
+    X, Y = grid((h, w))
+    tx, ty = X + forward[..., 0], Y + forward[..., 1]
+    outside = (tx < -0.5) | (tx > w - 0.5) | (ty < -0.5) | (ty > h - 0.5)
+    s = forward + bw
+    err2 = s[..., 0] ** 2 + s[..., 1] ** 2
+    bound = 0.01 * ((forward ** 2).sum(-1) + (bw ** 2).sum(-1)) + 0.5
+    bad = outside | ~np.isfinite(err2) | (err2 > bound)
+    return bad, np.sqrt(np.where(np.isfinite(err2), err2, np.inf)).astype(np.float32)
+
+
+def noise_sigma(gray: np.ndarray) -> float:
+    """Standard deviation of white noise in an image, from the mean absolute
+    response to a Laplacian difference mask that cancels smooth structure
+    (Immerkaer 1996, doi:10.1006/cviu.1996.0060, eq. 2)."""
+    import cv2
+
+    m = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
+    r = cv2.filter2D(np.asarray(gray, np.float32), -1, m)[1:-1, 1:-1]
+    h, w = gray.shape[:2]
+    return float(math.sqrt(math.pi / 2) / (6 * (w - 2) * (h - 2)) * np.abs(r).sum())
+
+
+@dataclass(frozen=True)
+class LevelChoice:
+    """The pyramid depth chosen, and why (every candidate with its score).
+
+    ``score`` of a candidate depth L is the largest motion left at its top
+    level, ``max_motion / 2**(L-1)``, divided by what one level can resolve
+    (``reach_px``); the choice is the fewest levels with score <= 1.
+    """
+
+    levels: int
+    max_motion_px: float
+    source: str
+    reach_px: float
+    candidates: tuple = field(default_factory=tuple)
+
+    def to_dict(self) -> dict:
+        return {"levels": self.levels, "max_motion_px": self.max_motion_px, "source": self.source,
+                "reach_px": self.reach_px, "candidates": [dict(c) for c in self.candidates]}
+
+
+def estimate_max_motion(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, list[dict]]:
+    """Largest motion between two gray images, px, from phase correlation of
+    the whole frame and of 3x3 overlapping half-size tiles (each reaches a
+    quarter of the frame). Peaks with a weak response are ignored.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> import cv2
+    >>> a = cv2.GaussianBlur(rng.random((96, 128)).astype(np.float32), (0, 0), 1.5)
+    >>> b = np.roll(a, (5, -12), axis=(0, 1))
+    >>> round(estimate_max_motion(a, b)[0])
+    13
+    """
+    import cv2
+
+    h, w = gray0.shape
+    f = 1
+    while max(h, w) / f > 256:  # half resolution and below keep this cheap
+        f *= 2
+    a = cv2.resize(gray0, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else gray0
+    b = cv2.resize(gray1, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else gray1
+    hh, ww = a.shape
+    tiles = [(0, 0, hh, ww)]
+    th, tw = hh // 2, ww // 2
+    for iy in range(3):
+        for ix in range(3):
+            tiles.append((iy * th // 2, ix * tw // 2, th, tw))
+    found = []
+    best = 0.0
+    for y0, x0, th_, tw_ in tiles:
+        pa = np.ascontiguousarray(a[y0:y0 + th_, x0:x0 + tw_], np.float64)
+        pb = np.ascontiguousarray(b[y0:y0 + th_, x0:x0 + tw_], np.float64)
+        if min(pa.shape) < 8:
+            continue
+        win = cv2.createHanningWindow((pa.shape[1], pa.shape[0]), cv2.CV_64F)
+        (dx, dy), resp = cv2.phaseCorrelate(pa, pb, win)
+        mag = float(math.hypot(dx, dy) * f)
+        found.append({"tile": [x0 * f, y0 * f, tw_ * f, th_ * f], "shift_px": [dx * f, dy * f],
+                      "response": float(resp)})
+        if resp > 0.1:  # a clear peak; noise-only correlation stays near 0.01-0.05
+            best = max(best, mag)
+    return best, found
+
+
+def choose_levels(shape: tuple[int, int], *, max_motion_px: float, reach_px: float,
+                  source: str = "given", limit: int = 10) -> LevelChoice:
+    """Fewest levels whose top level leaves at most ``reach_px`` of motion,
+    bounded so the top level keeps sides >= ``MIN_LEVEL_SIDE``.
+
+    Examples
+    --------
+    >>> choose_levels((240, 320), max_motion_px=45.0, reach_px=3.0).levels
+    5
+    """
+    h, w = shape
+    most = 1
+    while most < limit and min(h, w) / 2 ** most >= MIN_LEVEL_SIDE:
+        most += 1
+    cands, chosen = [], None
+    for L in range(1, most + 1):
+        score = max_motion_px / 2 ** (L - 1) / reach_px
+        cands.append({"levels": L, "top_size": [math.ceil(w / 2 ** (L - 1)),
+                                                math.ceil(h / 2 ** (L - 1))],
+                      "top_motion_px": max_motion_px / 2 ** (L - 1), "score": score})
+        if chosen is None and score <= 1.0:
+            chosen = L
+    return LevelChoice(chosen or most, float(max_motion_px), source, float(reach_px), tuple(cands))
