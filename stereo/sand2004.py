@@ -52,6 +52,14 @@ from stereo.pyramid_flow import FlowResult
 # contrast (the images are normalised), summed over channels; a mean excess of
 # 0.1 contrast units over the secondary's 3x3 range is a doubtful match.
 MATCH_SCALE = 0.1
+SUPPORT_HALF = 2.0
+
+
+def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
+    v, w = values.ravel(), weights.ravel()
+    order = np.argsort(v)
+    cw = np.cumsum(w[order])
+    return float(v[order][np.searchsorted(cw, 0.5 * cw[-1])])
 
 
 def _as_float(image: np.ndarray) -> np.ndarray:
@@ -214,7 +222,7 @@ def _match(n0, mx1, mn1, field, *, radius, region, prior_px):
 
 def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | str = "auto",
                    max_motion_px: float | None = None, region: int = 5,
-                   regression_sigma: float = 6.0, max_iterations: int = 6, tol_px: float = 0.02,
+                   regression_sigma: float = 9.0, max_iterations: int = 6, tol_px: float = 0.02,
                    radius: int = 2) -> FlowResult:
     """Sand-Teller correspondence field from ``primary`` to ``secondary``.
 
@@ -243,6 +251,8 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         secondary), ``confidence`` the per-pixel matching probability of that
         field in [0, 1], ``occluded`` where it is below 0.5.
     """
+    import cv2
+
     t0 = time.perf_counter()
     a, b = np.asarray(primary), np.asarray(secondary)
     if a.shape != b.shape:
@@ -290,7 +300,22 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
             # the other candidates; features only.
             distinct = np.clip(1 - best / np.maximum(mean, 1e-6), 0, 1)
             prob = np.exp(-best / MATCH_SCALE) * distinct * feat
-            new = weighted_regression(matched, prob, sigma=max(2.0, regression_sigma / 2 ** lvl))
+            sig = max(2.0, regression_sigma / 2 ** lvl)
+            fit = weighted_regression(matched, prob, sigma=sig)
+            if top and it == 0:
+                # No coarser level to inherit from: start flat areas at the
+                # dominant (probability-weighted median) offset.
+                wsum = prob.sum()
+                base = (np.float32([_weighted_median(matched[..., c], prob) for c in (0, 1)])
+                        if wsum > 0 else np.zeros(2, np.float32))
+                field = np.broadcast_to(base, field.shape).astype(np.float32)
+            # Where the kernel holds little matching evidence (flat areas),
+            # keep the field inherited from the coarser level: support is the
+            # kernel-weighted probability mass, SUPPORT_HALF the mass (about
+            # two confident matches) at which fit and inherited field weigh equally.
+            support = cv2.GaussianBlur(prob.astype(np.float32), (0, 0), sig) * (2 * np.pi * sig * sig)
+            wfit = (support / (support + SUPPORT_HALF))[..., None]
+            new = (wfit * fit + (1 - wfit) * field).astype(np.float32)
             change = float(np.mean(np.hypot(*(new - field).transpose(2, 0, 1))))
             field = new
             history.append({"level": lvl, "iteration": it, "radius": r,

@@ -1,0 +1,17 @@
+# Flow demo: render a 2-frame sequence with exact flow, estimate the flow
+# (pyramid) and a Sand-Teller video match, with Middlebury-coloured pictures.
+
+$(OUT)/scenes/flow/stack.json: $(STAMP)
+	$(LUMI) render flow --out $(@D) --quiet
+
+$(OUT)/scenes/flow-video/stack.json: $(STAMP)
+	$(LUMI) render flow-video --out $(@D) --quiet
+
+$(OUT)/flow/flow.flo: $(OUT)/scenes/flow/stack.json
+	$(LUMI) flow $(<D)/frame00.png $(<D)/frame01.png --out $@ --viz $(@D)/flow.png --quiet
+
+$(OUT)/flow/video-match.flo: $(OUT)/scenes/flow-video/stack.json
+	$(LUMI) flow $(<D)/frame00.png $(<D)/frame01.png --method video-matching \
+	  --out $@ --viz $(@D)/video-match.png --quiet
+
+DEMO_OUTPUTS += $(OUT)/flow/flow.flo $(OUT)/flow/video-match.flo
