@@ -1,0 +1,397 @@
+"""Camera calibration you can trust: automatic distortion-model choice by
+held-out error, parameter uncertainties, outlier views, degeneracy warnings,
+and stereo rigs.
+
+Model choice (``model="auto"``, DESIGN §9)
+    Every candidate of :data:`calib.zhang2000.MODELS` (simple to rich) is fitted
+    to all views, and scored by **leave-views-out** cross-validation: the views
+    are split into ``min(4, V)`` folds (view k in fold k mod 4); for each fold the candidate is refitted
+    on the other views and each held-out view's pose alone is fitted
+    (``solvePnP``) with those intrinsics; the held-out error of a view is its
+    mean squared corner residual. The rule: with ``best`` the candidate of
+    lowest mean held-out error, choose the simplest candidate that is **not
+    significantly worse** than ``best`` by a one-sided paired t-test over the
+    held-out views at the 5 % level: ``mean(d) <= t(0.95, V-1) · sd(d)/sqrt(V)``
+    with ``d_v = e_candidate(v) - e_best(v)``. (We compare with the best rather
+    than blindly with the richest so an over-fitted rich model, whose held-out
+    error is inflated, cannot make a too-simple one look acceptable; normally
+    the best is the richest or ties with it.) Every candidate's training RMS,
+    held-out RMS, mean difference, its standard error and the verdict go to
+    ``camera.json["candidates"]``.
+
+Outlier views
+    A view whose RMS under the k1k2p1p2k3 fit exceeds 3× the median view RMS
+    (per-view RMS of iid corner noise over ~50 corners varies by ~10 %, so 3×
+    is never chance) is dropped, named in ``views`` with ``used: false``, and
+    the fit repeated (twice at most; at least 3 views always remain).
+
+Degeneracy checks (warnings in ``camera.json["warnings"]`` and on stderr; with
+``strict=True`` they refuse with EstimationError)
+    * fewer than 6 views;
+    * corners covering less than half of an 8 × 6 grid of image cells (the
+      distortion is then extrapolated toward the edges);
+    * all boards within 10° of fronto-parallel, or all board normals within 5°
+      of each other: Zhang's constraints degenerate for parallel planes and the
+      focal length and principal point become poorly determined (Zhang 2000,
+      §3.3 "degenerate configurations");
+    * a parameter whose one-standard-deviation change moves the farthest image
+      corner by more than 1 px (``fx``: σ·|x_n|max, ``cx``: σ, ``k_i``:
+      f σ r^(2i+1), ``p_i``: 3 f σ r², rational terms like the radial ones),
+      or a focal length with relative σ above 0.5 %. Each such parameter is
+      named.
+
+Units: translations are in the board's square unit (``--board …:SQUARE``).
+
+Examples
+--------
+>>> from capture.render import render
+>>> from calib.detect import BoardSpec, detect
+>>> s = render("boards", size=(240, 180), seed=2, views=6, cache=False)
+>>> board = BoardSpec.parse(s.stack["board"])
+>>> cam = calibrate([detect(im, board) for im in s.images], model="k1k2")
+>>> abs(cam.K[0, 0] / s.gt["camera"]["K"][0][0] - 1) < 0.01
+True
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from calib.camera import Camera
+from calib.detect import Detection
+from calib.zhang2000 import FREE, MODELS, ZhangFit, calibrate_fixed
+from capture.errors import EstimationError, InputError
+
+MIN_VIEWS = 3
+OUTLIER_FACTOR = 3.0
+SIGNIFICANCE = 0.05
+FOLDS = 4
+
+
+def _split(detections: Sequence[Detection], names):
+    names = list(names) if names is not None else [f"view {k}" for k in range(len(detections))]
+    if len(names) != len(detections):
+        raise ValueError(f"names: expected {len(detections)} names, got {len(names)}")
+    used = [(n, d) for n, d in zip(names, detections, strict=True) if len(d) >= 6]
+    skipped = [n for n, d in zip(names, detections, strict=True) if len(d) < 6]
+    sizes = {d.image_size for _, d in used}
+    if len(sizes) > 1:
+        raise InputError("images", f"mixed image sizes {sorted(sizes)}; calibrate one camera "
+                                   "(one image size) at a time")
+    return used, skipped
+
+
+def _heldout(fits_full: ZhangFit, obj, img, size, folds) -> np.ndarray:
+    """Mean squared held-out residual per view (px²) for one candidate model."""
+    import cv2
+
+    V = len(obj)
+    err = np.full(V, np.inf)
+    for f in range(folds):
+        test = [v for v in range(V) if v % folds == f]
+        train = [v for v in range(V) if v % folds != f]
+        if len(train) < 2:
+            continue
+        try:
+            fit = calibrate_fixed([obj[v] for v in train], [img[v] for v in train], size,
+                                  model=fits_full.model, K0=fits_full.K, dist0=fits_full.dist,
+                                  uncertainties=False)
+        except EstimationError:
+            continue
+        for v in test:
+            ok, rv, tv = cv2.solvePnP(obj[v].astype(np.float64), img[v].astype(np.float64), fit.K,
+                                      fit.dist, flags=cv2.SOLVEPNP_ITERATIVE)
+            if not ok:
+                continue
+            proj, _ = cv2.projectPoints(obj[v].astype(np.float64), rv, tv, fit.K, fit.dist)
+            err[v] = float(np.mean(np.sum((proj.reshape(-1, 2) - img[v]) ** 2, axis=1)))
+    return err
+
+
+def select_model(fits: dict[str, ZhangFit], obj, img, size) -> tuple[str, list[dict]]:
+    """The simplest candidate not significantly worse than the best on held-out
+    views (rule in the module docstring); returns the choice and every score."""
+    from scipy.special import stdtrit  # scipy.stats costs a second to import
+
+    V = len(obj)
+    folds = min(FOLDS, V)
+    errs = {m: _heldout(fit, obj, img, size, folds) for m, fit in fits.items()}
+    finite = {m: e for m, e in errs.items() if np.all(np.isfinite(e))}
+    if not finite:
+        raise EstimationError("calibration", "no distortion model could be cross-validated; "
+                                             "add views with the whole board visible")
+    best = min(finite, key=lambda m: finite[m].mean())
+    tcrit = float(stdtrit(V - 1, 1 - SIGNIFICANCE))
+    rows, chosen = [], None
+    for m in fits:
+        e = errs[m]
+        row = {"model": m, "n_params": fits[m].n_params, "rms_px": fits[m].rms_px,
+               "heldout_rms_px": float(np.sqrt(e.mean())) if np.all(np.isfinite(e)) else None}
+        if m in finite:
+            d = finite[m] - finite[best]
+            se = float(d.std(ddof=1) / np.sqrt(V)) if V > 1 else 0.0
+            worse = bool(d.mean() > tcrit * se and d.mean() > 0)
+            row.update(mean_diff_px2=float(d.mean()), se_px2=se, significantly_worse=worse)
+            if chosen is None and not worse:
+                chosen = m
+        else:
+            row.update(significantly_worse=True, note="cross-validation fit failed")
+        rows.append(row)
+    for r in rows:
+        r["chosen"] = r["model"] == chosen
+        r["best_heldout"] = r["model"] == best
+    return chosen, rows
+
+
+def _tilts(fit: ZhangFit) -> tuple[np.ndarray, float]:
+    import cv2
+
+    normals = np.array([cv2.Rodrigues(r)[0][:, 2] for r in fit.rvecs])
+    tilt = np.degrees(np.arccos(np.clip(np.abs(normals[:, 2]), 0, 1)))
+    cosines = np.clip(np.abs(normals @ normals.T), 0, 1)
+    spread = float(np.degrees(np.arccos(cosines.min())))
+    return tilt, spread
+
+
+def _sensitivity(fit: ZhangFit, size) -> dict[str, float]:
+    """Pixel displacement of the farthest image corner for a one-sigma change of each parameter."""
+    w, h = size
+    K = fit.K
+    xn = max(abs(0 - K[0, 2]), abs(w - 1 - K[0, 2])) / K[0, 0]
+    yn = max(abs(0 - K[1, 2]), abs(h - 1 - K[1, 2])) / K[1, 1]
+    r = float(np.hypot(xn, yn))
+    f = float(max(K[0, 0], K[1, 1]))
+    power = {"k1": 3, "k2": 5, "k3": 7, "k4": 3, "k5": 5, "k6": 7}
+    out = {}
+    for name, s in fit.std.items():
+        if name == "fx":
+            out[name] = s * xn
+        elif name == "fy":
+            out[name] = s * yn
+        elif name in ("cx", "cy"):
+            out[name] = s
+        elif name in power:
+            out[name] = f * s * r ** power[name]
+        else:  # p1, p2
+            out[name] = 3 * f * s * r * r
+    return out
+
+
+def degeneracy_warnings(fit: ZhangFit, img, size) -> tuple[list[str], list[str]]:
+    """Warnings about the view set and the poorly determined parameters (names)."""
+    warnings, poor = [], []
+    V = len(img)
+    if V < 6:
+        warnings.append(f"only {V} usable views (6 or more with varied tilts are recommended)")
+    w, h = size
+    occ = np.zeros((6, 8), bool)
+    for p in img:
+        gx = np.clip((p[:, 0] / w * 8).astype(int), 0, 7)
+        gy = np.clip((p[:, 1] / h * 6).astype(int), 0, 5)
+        occ[gy, gx] = True
+    cover = float(occ.mean())
+    if cover < 0.5:
+        warnings.append(f"poor image coverage: corners fall in {cover:.0%} of an 8x6 grid of image "
+                        "cells; distortion is extrapolated toward the uncovered edges")
+    tilt, spread = _tilts(fit)
+    if tilt.max() < 10.0:
+        warnings.append(f"all views nearly fronto-parallel (largest tilt {tilt.max():.1f} deg < 10): "
+                        "focal length and principal point are poorly determined; tilt the board "
+                        "20-45 deg in several directions")
+    elif spread < 5.0:
+        warnings.append(f"all board normals within {spread:.1f} deg of each other (parallel planes): "
+                        "focal length and principal point are poorly determined")
+    sens = _sensitivity(fit, size)
+    for name, px in sens.items():
+        rel = fit.std[name] / fit.K[0, 0] if name == "fx" else (
+            fit.std[name] / fit.K[1, 1] if name == "fy" else 0.0)
+        if px > 1.0 or rel > 0.005:
+            poor.append(name)
+    if poor:
+        warnings.append("poorly determined parameters: " + ", ".join(
+            f"{n} (1 sigma moves the image corner {sens[n]:.2f} px)" for n in poor))
+    return warnings, poor
+
+
+def _reject_outliers(obj, img, names, size, first: ZhangFit | None = None):
+    """Drop outlier views in place; returns their report rows and whether any went."""
+    rejected = []
+    for it in range(2):
+        fit = first if (it == 0 and first is not None) else calibrate_fixed(obj, img, size,
+                                                                             model="k1k2p1p2k3")
+        med = float(np.median(fit.view_rms_px))
+        bad = [v for v in range(len(obj)) if fit.view_rms_px[v] > OUTLIER_FACTOR * med]
+        if not bad or len(obj) - len(bad) < MIN_VIEWS:
+            break
+        for v in sorted(bad, reverse=True):
+            rejected.append({"name": names[v], "used": False, "rms_px": float(fit.view_rms_px[v]),
+                             "reason": f"outlier: view RMS {fit.view_rms_px[v]:.3f} px > "
+                                       f"{OUTLIER_FACTOR:g} x median {med:.3f} px"})
+            del obj[v], img[v], names[v]
+    return rejected
+
+
+def calibrate(detections: Sequence[Detection], *, model: str = "auto",
+              names: Sequence[str] | None = None, candidates: Sequence[str] = MODELS,
+              reject_outliers: bool = True, strict: bool = False) -> Camera:
+    """Calibrate one camera from board detections (Zhang 2000, see module docstring).
+
+    Parameters
+    ----------
+    detections : sequence of Detection
+        One per image; empty ones (no board) are skipped and named in
+        ``extra["skipped"]``.
+    model : str, keyword-only
+        ``"auto"`` (default) or one of :data:`calib.zhang2000.MODELS`.
+    names : sequence of str, optional
+        Image names for the report.
+    candidates : sequence of str
+        Candidate models for ``auto``, simple to rich.
+    reject_outliers : bool
+        Drop views whose RMS is over 3× the median.
+    strict : bool
+        Refuse (EstimationError) instead of warning on a degenerate set.
+
+    Returns
+    -------
+    Camera
+        With ``extra``: ``rms_px``, ``std``, ``views`` (name, used, RMS,
+        ``cam_from_world``), ``candidates``, ``model_selection``, ``warnings``,
+        ``poorly_determined``, ``skipped``, ``n_points``.
+
+    Raises
+    ------
+    InputError
+        No board found, fewer than 3 usable views, mixed image sizes.
+    EstimationError
+        The optimiser failed, or ``strict`` and the set is degenerate.
+    """
+    import cv2
+
+    if model != "auto" and model not in MODELS:
+        raise ValueError(f"model: expected 'auto' or one of {', '.join(MODELS)}, got {model!r}")
+    used, skipped = _split(detections, names)
+    if not used:
+        raise InputError("images", "no calibration board found in any image; check --board "
+                                   "(COLSxROWS counts squares) and the photos")
+    if len(used) < MIN_VIEWS:
+        raise InputError("images", f"only {len(used)} usable view(s) with the board found; at least "
+                                   f"{MIN_VIEWS} are needed (skipped: {', '.join(skipped) or 'none'})")
+    size = used[0][1].image_size
+    vnames = [n for n, _ in used]
+    obj = [d.object_points for _, d in used]
+    img = [d.image_points for _, d in used]
+    def fit_all(models):
+        out = {}
+        for m in models:
+            try:
+                out[m] = calibrate_fixed(obj, img, size, model=m)
+            except EstimationError:
+                continue
+        return out
+
+    rejected = []
+    if model == "auto":
+        fits = fit_all(candidates)
+        if reject_outliers:  # the k1k2p1p2k3 candidate doubles as the outlier screen
+            rejected = _reject_outliers(obj, img, vnames, size, fits.get("k1k2p1p2k3"))
+            if rejected:
+                fits = fit_all(candidates)
+        if not fits:
+            raise EstimationError("calibration", "every candidate model failed to converge")
+        chosen, rows = select_model(fits, obj, img, size)
+        fit = fits[chosen]
+        selection = {"rule": "simplest candidate whose held-out (leave-views-out, "
+                             f"{min(FOLDS, len(obj))}-fold) error is not significantly worse than the "
+                             f"best candidate's: one-sided paired t-test over views at {SIGNIFICANCE:g}",
+                     "chosen": chosen, "best_heldout": next(r["model"] for r in rows if r["best_heldout"])}
+    else:
+        if reject_outliers:
+            rejected = _reject_outliers(obj, img, vnames, size)
+        fit = calibrate_fixed(obj, img, size, model=model)
+        rows = [{"model": model, "n_params": fit.n_params, "rms_px": fit.rms_px, "chosen": True}]
+        selection = {"rule": "fixed by the caller", "chosen": model}
+    warnings, poor = degeneracy_warnings(fit, img, size)
+    if strict and warnings:
+        raise EstimationError("calibration", "refused (strict): " + "; ".join(warnings))
+    views = []
+    for v, n in enumerate(vnames):
+        R = cv2.Rodrigues(fit.rvecs[v])[0]
+        views.append({"name": n, "used": True, "rms_px": float(fit.view_rms_px[v]),
+                      "n_corners": int(len(img[v])),
+                      "cam_from_world": {"R": R.tolist(), "t": fit.tvecs[v].tolist()}})
+    extra = {"rms_px": fit.rms_px, "std": fit.std, "views": views + rejected,
+             "candidates": rows, "model_selection": selection, "warnings": warnings,
+             "poorly_determined": poor, "skipped": list(skipped), "n_points": fit.n_points,
+             "n_params": fit.n_params}
+    return Camera(fit.K, fit.dist, size, fit.model, extra)
+
+
+def view_points(detections: Sequence[Detection]):
+    """``(object_points, image_points)`` lists of the non-empty detections."""
+    return ([d.object_points for d in detections if len(d)],
+            [d.image_points for d in detections if len(d)])
+
+
+def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, model: str = "auto",
+                     names: Sequence[str] | None = None, left_camera: Camera | None = None,
+                     right_camera: Camera | None = None, strict: bool = False):
+    """Calibrate a stereo rig: each camera alone (:func:`calibrate`), then the
+    right-from-left pose by OpenCV ``stereoCalibrate`` with the intrinsics fixed,
+    on the pairs where both images show the board (common corners).
+
+    Parameters
+    ----------
+    left, right : sequence of Detection
+        Simultaneous views, pairwise.
+    left_camera, right_camera : Camera, optional
+        Known intrinsics (skip the single-camera calibrations).
+
+    Returns
+    -------
+    Rig
+        ``x_right = R x_left + T`` (T in board units); ``extra`` holds
+        ``rms_px``, per-pair RMS, the pair names and both cameras' warnings.
+    """
+    import cv2
+
+    from calib.rig import Rig
+
+    if len(left) != len(right):
+        raise InputError("--right", f"expected as many right images as left ({len(left)}), got {len(right)}")
+    names = list(names) if names is not None else [f"pair {k}" for k in range(len(left))]
+    lcam = left_camera or calibrate(left, model=model, names=[f"{n} (left)" for n in names], strict=strict)
+    rcam = right_camera or calibrate(right, model=model, names=[f"{n} (right)" for n in names],
+                                     strict=strict)
+    obj, il, ir, pairs = [], [], [], []
+    for n, a, b in zip(names, left, right, strict=True):
+        common, ia, ib = np.intersect1d(a.ids, b.ids, return_indices=True)
+        if len(common) >= 6:
+            obj.append(a.object_points[ia].astype(np.float32).reshape(-1, 1, 3))
+            il.append(a.image_points[ia].astype(np.float32).reshape(-1, 1, 2))
+            ir.append(b.image_points[ib].astype(np.float32).reshape(-1, 1, 2))
+            pairs.append(n)
+    if len(pairs) < MIN_VIEWS:
+        raise InputError("images", f"only {len(pairs)} pair(s) show the board in both cameras; "
+                                   f"at least {MIN_VIEWS} are needed")
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    try:
+        out = cv2.stereoCalibrateExtended(
+            obj, il, ir, lcam.K, lcam.dist, rcam.K, rcam.dist, lcam.image_size, None, None,
+            flags=cv2.CALIB_FIX_INTRINSIC, criteria=criteria)
+    except cv2.error as e:
+        raise EstimationError("stereo", f"OpenCV stereoCalibrate failed ({str(e).strip().splitlines()[-1]})") from None
+    rms, R, T, per_view = out[0], out[5], out[6], out[-1]
+    per_view = np.asarray(per_view, np.float64).reshape(len(pairs), -1)
+    warnings = [f"left: {w}" for w in lcam.extra.get("warnings", [])] + \
+               [f"right: {w}" for w in rcam.extra.get("warnings", [])]
+    T = np.asarray(T, np.float64).ravel()
+    return Rig.from_pose(lcam, rcam, np.asarray(R, np.float64), T, rms_px=float(rms),
+                         pairs=[{"name": n, "rms_px_left": float(e[0]), "rms_px_right": float(e[1])}
+                                for n, e in zip(pairs, per_view, strict=True)],
+                         warnings=warnings, n_pairs=len(pairs))
+
+
+__all__ = ["calibrate", "calibrate_stereo", "select_model", "degeneracy_warnings", "FREE", "MODELS"]

@@ -1,0 +1,264 @@
+"""Calibration targets: the board description and corner detection.
+
+Boards are given as the ``--board`` strings of ``lumigraph calib``:
+
+* ``checker:COLSxROWS:SQUARE`` — a checkerboard of COLS × ROWS **squares**
+  (so (COLS−1) × (ROWS−1) inner corners: OpenCV's 9×6 pattern is
+  ``checker:10x7:…``), squares of side SQUARE (any length unit, e.g. mm;
+  it becomes the unit of every translation);
+* ``charuco:COLSxROWS:SQUARE:MARKER:DICT`` — a ChArUco board (``cv2.aruco``)
+  with markers of side MARKER from dictionary DICT (``DICT_4X4_250`` or
+  ``4X4_250``).
+
+Board frame (both kinds, OpenCV's ``CharucoBoard`` convention): origin at the
+top-left outer corner of the squares, x along columns, y along rows, z = 0 on
+the board; square ``(0, 0)`` is black; inner corner ``k = j (COLS−1) + i`` sits
+at ``((i+1) s, (j+1) s, 0)``.
+
+Detection uses OpenCV (``findChessboardCorners`` then ``cornerSubPix`` for
+checkerboards, ``aruco.CharucoDetector`` for ChArUco). For large images the
+checkerboard search runs on a 2× reduced copy and only the sub-pixel refinement
+on the full image; checkerboards whose 180° rotation differs in colour (COLS +
+ROWS odd) are put in the board's own orientation (square (0, 0) black), so the
+corner order of a left and a right view agree.
+
+Examples
+--------
+>>> b = BoardSpec.parse("checker:10x7:25")
+>>> b.pattern_size, b.n_corners, b.object_points[1].tolist()
+((9, 6), 54, [50.0, 25.0, 0.0])
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from capture.errors import InputError
+
+_CHECKER = re.compile(r"^checker:(\d+)x(\d+):([0-9.eE+-]+)$")
+_CHARUCO = re.compile(r"^charuco:(\d+)x(\d+):([0-9.eE+-]+):([0-9.eE+-]+):(?:DICT_)?([A-Za-z0-9_]+)$")
+
+
+@dataclass(frozen=True)
+class BoardSpec:
+    """A planar calibration target.
+
+    Attributes
+    ----------
+    kind : {"checker", "charuco"}
+    cols, rows : int
+        Squares across and down (>= 3 each).
+    square : float
+        Square side, in the user's length unit.
+    marker : float
+        ChArUco marker side (0 for checkerboards).
+    dictionary : str
+        ``cv2.aruco`` dictionary name, e.g. ``"DICT_4X4_250"`` (ChArUco only).
+    """
+
+    kind: str
+    cols: int
+    rows: int
+    square: float
+    marker: float = 0.0
+    dictionary: str = ""
+
+    def __post_init__(self):
+        if self.kind not in ("checker", "charuco"):
+            raise ValueError(f"kind: expected 'checker' or 'charuco', got {self.kind!r}")
+        if self.cols < 3 or self.rows < 3:
+            raise ValueError(f"cols, rows: expected at least 3 squares each, got {self.cols}x{self.rows}")
+        if not self.square > 0 or not np.isfinite(self.square):
+            raise ValueError(f"square: expected a positive size, got {self.square}")
+        if self.kind == "charuco":
+            if not 0 < self.marker < self.square:
+                raise ValueError(f"marker: expected 0 < marker < square ({self.square}), got {self.marker}")
+            import cv2
+
+            if not hasattr(cv2.aruco, self.dictionary):
+                raise ValueError(f"dictionary: unknown cv2.aruco dictionary {self.dictionary!r}")
+
+    @classmethod
+    def parse(cls, text: str, *, where: str = "--board") -> BoardSpec:
+        """Parse a ``--board`` string (see the module docstring); InputError if it does not."""
+        t = text.strip()
+        m = _CHECKER.match(t)
+        try:
+            if m:
+                return cls("checker", int(m[1]), int(m[2]), float(m[3]))
+            m = _CHARUCO.match(t)
+            if m:
+                return cls("charuco", int(m[1]), int(m[2]), float(m[3]), float(m[4]), "DICT_" + m[5].upper())
+        except ValueError as e:
+            raise InputError(where, f"{text!r}: {e}") from None
+        raise InputError(where, f"cannot parse {text!r}; expected checker:COLSxROWS:SQUARE or "
+                                "charuco:COLSxROWS:SQUARE:MARKER:DICT (COLS, ROWS count squares), "
+                                "e.g. checker:10x7:25")
+
+    @property
+    def spec(self) -> str:
+        if self.kind == "checker":
+            return f"checker:{self.cols}x{self.rows}:{self.square:g}"
+        return f"charuco:{self.cols}x{self.rows}:{self.square:g}:{self.marker:g}:{self.dictionary}"
+
+    @property
+    def pattern_size(self) -> tuple[int, int]:
+        """Inner corners ``(per row, per column)``, OpenCV's ``patternSize``."""
+        return self.cols - 1, self.rows - 1
+
+    @property
+    def n_corners(self) -> int:
+        return (self.cols - 1) * (self.rows - 1)
+
+    @property
+    def object_points(self) -> np.ndarray:
+        """``(n_corners, 3)`` float64 inner corners in the board frame, row-major."""
+        j, i = np.mgrid[1:self.rows, 1:self.cols]
+        return np.column_stack([i.ravel() * self.square, j.ravel() * self.square,
+                                np.zeros(i.size)]).astype(np.float64)
+
+    def to_dict(self) -> dict:
+        d = {"kind": self.kind, "cols": self.cols, "rows": self.rows, "square": self.square,
+             "spec": self.spec}
+        if self.kind == "charuco":
+            d.update(marker=self.marker, dictionary=self.dictionary)
+        return d
+
+    def _charuco(self):
+        import cv2
+
+        d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
+        return cv2.aruco.CharucoBoard((self.cols, self.rows), self.square, self.marker, d)
+
+
+@dataclass(frozen=True)
+class Detection:
+    """Board corners found in one image.
+
+    Attributes
+    ----------
+    ids : ndarray, (N,) int64
+        Inner-corner indices into ``BoardSpec.object_points``.
+    image_points : ndarray, (N, 2) float64
+        Sub-pixel corner positions ``(x, y)``, distorted pixels.
+    object_points : ndarray, (N, 3) float64
+        The same corners in the board frame.
+    image_size : (int, int)
+        ``(w, h)`` of the image they were found in.
+    """
+
+    ids: np.ndarray
+    image_points: np.ndarray
+    object_points: np.ndarray
+    image_size: tuple[int, int]
+
+    def __post_init__(self):
+        n = len(self.ids)
+        if np.asarray(self.image_points).shape != (n, 2) or np.asarray(self.object_points).shape != (n, 3):
+            raise ValueError(f"image_points, object_points: expected (N, 2) and (N, 3) with N = {n}")
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+def to_gray8(image: np.ndarray) -> np.ndarray:
+    """An ``(H, W)`` uint8 view of an 8/16-bit gray or RGB image (for detection only)."""
+    a = np.asarray(image)
+    if a.ndim == 3:
+        a = a[..., :3].mean(axis=2) if a.shape[2] >= 3 else a[..., 0]
+    if a.ndim != 2:
+        raise ValueError(f"image: expected (H, W) or (H, W, C), got shape {np.asarray(image).shape}")
+    if a.dtype == np.uint8:
+        return a
+    a = a.astype(np.float64)
+    top = 65535.0 if np.asarray(image).dtype == np.uint16 else max(float(a.max()), 1e-12)
+    return np.clip(np.round(a * 255.0 / top), 0, 255).astype(np.uint8)
+
+
+_SUBPIX_CRITERIA = (3, 40, 1e-3)  # cv2.TERM_CRITERIA_EPS | COUNT, 40 iterations, 1e-3 px
+
+
+def subpix_window(points: np.ndarray, pattern_size: tuple[int, int]) -> int:
+    """Half-width of the ``cornerSubPix`` window: 40 % of the smallest corner
+    spacing (so the window never reaches a neighbouring corner), 2..10 px."""
+    g = points.reshape(pattern_size[1], pattern_size[0], 2)
+    dx = np.linalg.norm(np.diff(g, axis=1), axis=2).min()
+    dy = np.linalg.norm(np.diff(g, axis=0), axis=2).min()
+    return int(np.clip(np.floor(0.4 * min(dx, dy)), 2, 10))
+
+
+def _orient(gray: np.ndarray, pts: np.ndarray, board: BoardSpec) -> np.ndarray:
+    """Reverse the corner order when OpenCV returned the board rotated by 180°
+    (square (0, 0) must be the dark one); only defined when COLS + ROWS is odd."""
+    if (board.cols + board.rows) % 2 == 0:
+        return pts
+    import cv2
+
+    nc = board.cols - 1
+    c0, ec, er = pts[0], pts[1] - pts[0], pts[nc] - pts[0]
+    probe = np.array([c0 - 0.5 * (ec + er), c0 + 0.5 * (ec - er)], np.float32)
+    vals = cv2.remap(gray, probe[:, 0:1], probe[:, 1:2], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_REPLICATE).ravel()
+    return pts[::-1].copy() if vals[0] > vals[1] else pts
+
+
+def _empty(size) -> Detection:
+    return Detection(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), size)
+
+
+def detect(image: np.ndarray, board: BoardSpec) -> Detection:
+    """Find the board's inner corners in one image.
+
+    Parameters
+    ----------
+    image : ndarray, (H, W) or (H, W, C), uint8/uint16
+    board : BoardSpec
+
+    Returns
+    -------
+    Detection
+        Empty (``len(d) == 0``) when the board is not in the image: an image
+        without a board is an expected case that callers skip and name.
+    """
+    import cv2
+
+    gray = to_gray8(image)
+    h, w = gray.shape
+    if board.kind == "charuco":
+        det = cv2.aruco.CharucoDetector(board._charuco())
+        corners, ids, _, _ = det.detectBoard(gray)
+        if ids is None or len(ids) < 6:
+            return _empty((w, h))
+        ids = ids.ravel().astype(np.int64)
+        pts = corners.reshape(-1, 2).astype(np.float32)
+        # the detector's refinement errs by up to ~0.4 px: refine with a window that stays
+        # in the marker-free margin around each corner ((square - marker) / 2 of the
+        # typical corner spacing), or markers pull the corners
+        dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
+        np.fill_diagonal(dist, np.inf)
+        margin = 0.5 * (board.square - board.marker) / board.square
+        win = int(np.clip(np.floor(margin * np.median(dist.min(axis=1))), 2, 10))
+        pts = cv2.cornerSubPix(gray, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
+                               _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+        return Detection(ids, pts, board.object_points[ids], (w, h))
+    flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
+    found, pts = False, None
+    if max(w, h) > 1000:  # search on a 2x-reduced copy; refine on the full image
+        small = cv2.resize(gray, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+        found, pts = cv2.findChessboardCorners(small, board.pattern_size, flags=flags)
+        if found:
+            pts = pts.reshape(-1, 2) * 2.0 + 0.5
+    if not found:
+        found, pts = cv2.findChessboardCorners(gray, board.pattern_size, flags=flags)
+        if not found:
+            return _empty((w, h))
+    pts = pts.reshape(-1, 2).astype(np.float32)
+    win = subpix_window(pts, board.pattern_size)
+    pts = cv2.cornerSubPix(gray, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
+                           _SUBPIX_CRITERIA).reshape(-1, 2)
+    pts = _orient(gray, pts.astype(np.float64), board)
+    ids = np.arange(board.n_corners, dtype=np.int64)
+    return Detection(ids, pts, board.object_points, (w, h))
