@@ -1,1 +1,21 @@
-"""Direct/global separation with high-frequency illumination (Nayar et al. 2006)."""
+"""Direct/global separation with high-frequency illumination (Nayar et al. 2006).
+
+``separation.separate(images, method=...)`` returns a :class:`Separation`
+(direct, global, mask) from linear images under projected patterns; the
+methods live in :mod:`separation.nayar2006` and are listed in :data:`METHODS`
+(the CLI's ``--method`` choices come from here).
+
+========== ================================================== ==============
+method     input                                              images
+========== ================================================== ==============
+checker    shifted checkerboards, then their complements       >= 2
+sinusoid   three phase-shifted sinusoids                       3
+single     one high-frequency stripe image                     1
+occluder   a shadow sweep (thin occluder moved across)         >= 3
+========== ================================================== ==============
+"""
+
+from separation.result import Separation
+from separation.separate import METHODS, MIN_IMAGES, separate
+
+__all__ = ["METHODS", "MIN_IMAGES", "Separation", "separate"]

@@ -1,0 +1,220 @@
+"""``lumigraph separate``: direct/global separation of projector-lit captures.
+
+Thin layer: parse, load and linearise the captures, call
+:func:`separation.separate`, write ``direct.exr``, ``global.exr``, ``mask.png``
+(each with ``.meta.json``). ``lumigraph separate patterns`` writes the projector
+patterns the methods expect.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from capture.command import add_common, make_parser, parse_size, run, say, warn
+from capture.errors import InputError
+
+EPILOG = """\
+examples:
+  lumigraph render projector --out out/scenes/projector
+  lumigraph separate out/scenes/projector --method checker --out out/separation
+  lumigraph separate cap/checker_*.png --method checker --b 0.1 --out sep/
+  lumigraph separate cap/s0.png cap/s1.png cap/s2.png --method sinusoid --out sep/
+  lumigraph separate raw8/*.png --method checker --response response.json --out sep/
+  lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 3 --out pat/
+
+Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
+or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
+stack.json from 'lumigraph render projector' supplies the method's images,
+the all-black/all-white frames and the pattern layout. Checker images are
+the shifted boards then their complements in the same order (the order of
+'separate patterns'). Without --b the black level is measured from
+--black/--white frames when given, else taken as 0.
+
+mask.png: 0 trusted; otherwise 1 never lit, 2 saturated, 4 L+ - L- within noise.
+"""
+
+
+def _linear(stack, response, where):
+    """Captures as float32 linear values, the quantisation step and the clip level."""
+    import numpy as np
+
+    imgs = stack.images
+    if imgs.dtype.kind == "f":
+        return imgs.astype(np.float32), 0.0, None
+    bd = int(stack.bit_depth or 8 * imgs.dtype.itemsize)
+    if response is not None:
+        if response.bit_depth != bd:
+            raise InputError("--response", f"curve is for {response.bit_depth}-bit codes, "
+                                           f"the images are {bd}-bit")
+        c = imgs.shape[-1]
+        if response.channels not in (1, c):
+            raise InputError("--response", f"curve has {response.channels} channels, "
+                                           f"the images have {c}")
+        lin = response.linearize(imgs).astype(np.float32)
+        top = float(np.max(response.exposure_table()))
+        return lin, top / (2 ** bd - 1), top * 0.999
+    if imgs.dtype == np.uint8:
+        raise InputError(where, "8-bit captures are not linear; give --response response.json "
+                                "(from 'lumigraph hdr response')")
+    top = 2 ** bd - 1
+    return (imgs.astype(np.float32) / top), 1.0 / top, 1.0
+
+
+def _load(args):
+    import json
+
+    from capture.io import read_stack
+
+    inputs = [Path(p) for p in args.images]
+    black = white = None
+    complement_of = None
+    alpha = args.alpha
+    folder = inputs[0] if len(inputs) == 1 and inputs[0].is_dir() else None
+    if folder is not None and (folder / "stack.json").exists():
+        info = json.loads((folder / "stack.json").read_text())
+        sets = info.get("sets")
+        if sets:
+            if args.method not in sets:
+                raise InputError(folder / "stack.json", f"no image set for method {args.method!r} "
+                                                        f"(has {', '.join(sorted(sets))})")
+            inputs = [folder / n for n in sets[args.method]]
+            flat = sets.get("flat")
+            if flat and args.black is None and args.white is None and args.b is None:
+                black, white = folder / flat[0], folder / flat[1]
+            pat = info.get("patterns", {}).get(args.method, {})
+            if args.method == "checker" and pat.get("complement_of"):
+                complement_of = pat["complement_of"]
+            if alpha is None and pat.get("lit_fraction") and args.method in ("checker", "occluder"):
+                alpha = float(pat["lit_fraction"][0])
+    stack = read_stack(inputs)
+    files = list(stack.paths)
+    extra = {}
+    for name, p in (("black", args.black or black), ("white", args.white or white)):
+        if p is not None:
+            s = read_stack([p])
+            if s.images.shape[1:] != stack.images.shape[1:]:
+                raise InputError(p, f"is {s.images.shape[2]}x{s.images.shape[1]}, the captures are "
+                                    f"{stack.images.shape[2]}x{stack.images.shape[1]}")
+            extra[name] = s
+            files.append(str(p))
+    return stack, extra, files, complement_of, alpha
+
+
+def _separate(args) -> int:
+    from capture.artifact import make_meta
+    from separation import separate
+
+    if args.alpha is not None and not 0.0 < args.alpha < 1.0:
+        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {args.alpha}")
+    if args.b is not None and not 0.0 <= args.b < 1.0:
+        raise InputError("--b", f"black level must lie in [0, 1), got {args.b}")
+    if args.tile < 2:
+        raise InputError("--tile", f"expected at least 2 pixels, got {args.tile}")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder")
+    response = None
+    if args.response:
+        from hdr.response import ResponseCurve
+
+        response = ResponseCurve.load(args.response)
+    t0 = time.perf_counter()
+    stack, extra, files, complement_of, alpha = _load(args)
+    where = stack.paths[0]
+    images, quant, sat = _linear(stack, response, where)
+    bw = {k: _linear(v, response, v.paths[0])[0][0] for k, v in extra.items()}
+    if args.saturation is not None:
+        sat = args.saturation
+    t1 = time.perf_counter()
+    sep = separate(images, method=args.method, alpha=alpha, b=args.b, black=bw.get("black"),
+                   white=bw.get("white"), complement_of=complement_of, estimator=args.estimator,
+                   noise_sigma=args.noise, quant_step=quant, saturation=sat, tile=args.tile,
+                   names=stack.paths)
+    t2 = time.perf_counter()
+    meta = make_meta("lumigraph.separation", inputs=files,
+                     params={"method": args.method, "alpha": alpha, "b_given": args.b,
+                             "estimator": args.estimator, "response": args.response,
+                             "noise": args.noise, "saturation": sat, "tile": args.tile,
+                             "images": len(images)},
+                     timings_s={"load": t1 - t0, "separate": t2 - t1})
+    sep.save(out, meta=meta)
+    for w in sep.warnings:
+        warn(w)
+    q = sep.quality["mask_counts"]
+    say(args, f"separated {len(images)} image(s) with {args.method}: "
+              f"{q['valid']}/{q['total']} pixels trusted -> {out}/direct.exr, global.exr, mask.png")
+    return 0
+
+
+def _patterns(args) -> int:
+    from capture import patterns as pt
+
+    size = parse_size(args.size)
+    kinds = ["checker", "sinusoid", "stripe", "occluder", "flat"] if args.kind == "all" else [args.kind]
+    if args.alpha is not None and not 0.0 < args.alpha < 1.0:
+        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {args.alpha}")
+    out = Path(args.out)
+    try:
+        sets = []
+        for k in kinds:
+            if k == "checker":
+                sets.append(pt.checker_set(size, square=args.square, shifts=args.shifts))
+            elif k == "block":
+                sets.append(pt.block_set(size, alpha=0.5 if args.alpha is None else args.alpha,
+                                         tile=args.tile_cells, cell=args.square))
+            elif k == "sinusoid":
+                sets.append(pt.sinusoid_set(size, period=args.period))
+            elif k == "stripe":
+                sets.append(pt.stripe_set(size, period=args.period))
+            elif k == "occluder":
+                sets.append(pt.occluder_set(size, period=args.period, width=args.width))
+            else:
+                sets.append(pt.flat_set(size))
+    except ValueError as e:
+        raise InputError("--" + ("square" if "square" in str(e) else "period"), str(e)) from None
+    for ps in sets:
+        dest = out / ps.kind if len(sets) > 1 else out
+        ps.save(dest)
+        say(args, f"wrote {len(ps)} {ps.kind} pattern(s) at {size[0]}x{size[1]} -> {dest}")
+    return 0
+
+
+def main(argv=None, prog="lumigraph separate") -> int:
+    import sys
+
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "patterns":
+        p = make_parser(f"{prog} patterns", "Write projector patterns (PNG, projector resolution) "
+                        "and a stack.json, in the order the separation expects.", epilog=EPILOG)
+        p.add_argument("--kind", default="checker",
+                       choices=["checker", "block", "sinusoid", "stripe", "occluder", "flat", "all"])
+        p.add_argument("--size", default="1024x768", help="projector resolution WxH")
+        p.add_argument("--square", type=int, default=8, help="checker square (px) / block cell (px)")
+        p.add_argument("--shifts", type=int, default=3, help="checker shift steps per axis")
+        p.add_argument("--period", type=int, default=16, help="sinusoid/stripe/occluder period (px)")
+        p.add_argument("--width", type=int, default=2, help="occluder bar width (px)")
+        p.add_argument("--alpha", type=float, default=None, help="lit fraction of 'block' patterns")
+        p.add_argument("--tile-cells", type=int, default=4, help="block tile size in cells")
+        p.add_argument("--out", required=True, help="output folder")
+        p.set_defaults(func=_patterns)
+        return run(p, argv[1:])
+    from separation.separate import METHODS
+
+    p = make_parser(prog, "Separate direct and global light from captures under high-frequency "
+                    "projector patterns (Nayar et al. 2006).", epilog=EPILOG)
+    p.add_argument("images", nargs="+", help="captures (files, or a folder with stack.json)")
+    p.add_argument("--method", default="checker", choices=sorted(METHODS))
+    p.add_argument("--alpha", type=float, default=None, help="lit fraction of the patterns (default 0.5)")
+    p.add_argument("--b", type=float, default=None, help="projector black level in [0, 1)")
+    p.add_argument("--black", help="capture under an all-black projector frame (to measure b)")
+    p.add_argument("--white", help="capture under an all-white projector frame (to measure b)")
+    p.add_argument("--response", help="response.json for 8-bit (non-linear) captures")
+    p.add_argument("--estimator", default="pairs", choices=["pairs", "maxmin"],
+                   help="checker: noise-robust pairs (default) or the textbook max/min")
+    p.add_argument("--noise", type=float, default=0.0, help="known noise std per capture (linear)")
+    p.add_argument("--saturation", type=float, default=None, help="linear clip level")
+    p.add_argument("--tile", type=int, default=16, help="tile size for --method single (px)")
+    p.add_argument("--out", required=True, help="output folder")
+    p.set_defaults(func=_separate)
+    return run(p, argv)

@@ -1,0 +1,404 @@
+"""Fast separation of direct and global light with high-frequency illumination.
+
+Nayar, Krishnan, Grossberg and Raskar, "Fast Separation of Direct and Global
+Components of a Scene using High Frequency Illumination", ACM SIGGRAPH 2006,
+doi:10.1145/1141911.1141977 (reference ch. 8, §8.3.3–8.3.4, Fig. 8.43,
+eqs. 8.12–8.14).
+
+Model. A projector pattern lights a fraction α of its pixels; off pixels leak a
+fraction ``b`` (the black level) of the on level. A scene point that is lit
+directly sees its direct light ``L_d`` (``b·L_d`` when unlit), and, because
+global transport averages a high-frequency pattern (eq. 8.12), a global part
+``a·L_g`` with ``a = b + (1 − b)·α`` for an image whose lit fraction is α.
+With ``L⁺`` taken from an image in which the pixel is lit (lit fraction α⁺) and
+``L⁻`` from one where it is not (lit fraction α⁻):
+
+    L⁺ = L_d + a⁺·L_g,      a⁺ = b + (1 − b)·α⁺
+    L⁻ = b·L_d + a⁻·L_g,    a⁻ = b + (1 − b)·α⁻
+
+whose solution (the **b-corrected pair**) is
+
+    L_d = (a⁻·L⁺ − a⁺·L⁻) / (a⁻ − b·a⁺),      L_g = (L⁻ − b·L⁺) / (a⁻ − b·a⁺).
+
+For a pattern and its complement (α⁻ = 1 − α⁺ = 1 − α) and ``b = 0`` this is
+eqs. 8.13–8.14 (``L_g = L⁻/(1 − α)``, ``L_d = L⁺ − α·L_g``); for α = ½ it is the
+book's pair ``L_d = (L⁺ − L⁻)/(1 − b)``, ``L_g = 2(L⁻ − b·L⁺)/(1 − b²)``.
+When both extremes come from shifts of one pattern (α⁺ = α⁻ = α) it reduces to
+``L_d = (L⁺ − L⁻)/(1 − b)``, ``L_g = (L⁻ − b·L⁺)/((1 − b)·a)``.
+
+Methods (all take linear images ``(N, H, W, C)`` float32):
+
+- :func:`checker` — shifted checkerboards and complements; ``estimator="maxmin"``
+  is the textbook ``L⁺ = max``, ``L⁻ = min`` over the set (Fig. 8.43);
+  ``estimator="pairs"`` (default) classifies each pixel lit/unlit in every
+  complementary pair and averages the decisive pairs, which removes the
+  noise bias of max/min (the max of many noisy images is biased up, the min
+  down) and divides the noise by √(pairs);
+- :func:`sinusoid` — three phase-shifted sinusoids, solved exactly per pixel
+  (offset and amplitude of a three-step phase shift);
+- :func:`single` — one stripe image, ``L±`` per tile, interpolated back;
+- :func:`occluder` — a shadow sweep: ``L⁺`` the median (mostly unshadowed),
+  ``L⁻`` the minimum (in the shadow).
+
+Examples
+--------
+>>> rng = np.random.default_rng(0)
+>>> d, g = rng.uniform(0.2, 1, (4, 5, 1)), rng.uniform(0.1, 0.5, (4, 5, 1))
+>>> lp, lm = d + 0.5 * g, 0.5 * g                    # alpha = 0.5, b = 0
+>>> sd, sg = solve(lp, lm, alpha=0.5, b=0.0)
+>>> bool(np.allclose(sd, d) and np.allclose(sg, g))
+True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from capture.errors import EstimationError
+
+MASK_NEVER_LIT, MASK_SATURATED, MASK_LOW_CONTRAST = 1, 2, 4
+
+
+def _coefficients(alpha_plus: float, alpha_minus: float, b: float) -> tuple[float, float, float]:
+    if not 0.0 < alpha_plus < 1.0 or not 0.0 < alpha_minus < 1.0:
+        raise ValueError(f"alpha: expected lit fractions in (0, 1), got {alpha_plus}, {alpha_minus}")
+    if not 0.0 <= b < 1.0:
+        raise ValueError(f"b: expected 0 <= b < 1, got {b}")
+    ap = b + (1.0 - b) * alpha_plus
+    am = b + (1.0 - b) * alpha_minus
+    det = am - b * ap
+    return ap, am, det
+
+
+def solve(l_plus: np.ndarray, l_minus: np.ndarray, *, alpha: float = 0.5, b: float = 0.0,
+          alpha_minus: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Direct and global light from ``L⁺``/``L⁻`` (eqs. 8.13–8.14, b-corrected).
+
+    Parameters
+    ----------
+    l_plus, l_minus : ndarray, float, same shape
+        Linear radiance with the pixel lit / unlit.
+    alpha : float in (0, 1)
+        Lit fraction α⁺ of the image giving ``L⁺``.
+    b : float in [0, 1)
+        Projector black level.
+    alpha_minus : float, optional
+        Lit fraction α⁻ of the image giving ``L⁻``; default ``1 − alpha`` (the
+        complement, as in eq. 8.14).
+
+    Returns
+    -------
+    direct, global : ndarray, float32
+        ``L_d = (a⁻L⁺ − a⁺L⁻)/(a⁻ − b a⁺)``, ``L_g = (L⁻ − b L⁺)/(a⁻ − b a⁺)``
+        with ``a± = b + (1 − b) α±`` (see the module docstring).
+
+    Examples
+    --------
+    >>> d, g, b = np.array([1.0]), np.array([0.4]), 0.15
+    >>> lp, lm = d + (1 + b) / 2 * g, b * d + (1 + b) / 2 * g   # the book's pair
+    >>> [round(float(v[0]), 6) for v in solve(lp, lm, b=b)]
+    [1.0, 0.4]
+    """
+    am_frac = 1.0 - alpha if alpha_minus is None else alpha_minus
+    ap, am, det = _coefficients(alpha, am_frac, b)
+    lp = np.asarray(l_plus, np.float32)
+    lm = np.asarray(l_minus, np.float32)
+    direct = (am * lp - ap * lm) / det
+    glob = (lm - b * lp) / det
+    return direct.astype(np.float32), glob.astype(np.float32)
+
+
+def extremes(images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The textbook ``L⁺ = max``, ``L⁻ = min`` over a shifted set (Fig. 8.43).
+
+    Examples
+    --------
+    >>> lp, lm = extremes(np.array([[1.0, 5.0], [3.0, 2.0]]))
+    >>> lp.tolist(), lm.tolist()
+    ([3.0, 5.0], [1.0, 2.0])
+    """
+    a = np.asarray(images)
+    return a.max(axis=0).astype(np.float32), a.min(axis=0).astype(np.float32)
+
+
+def pair_extremes(images: np.ndarray, complement_of, *, keep: float = 0.75):
+    """``L±`` from complementary pairs: every pair votes lit/unlit, decisive pairs average.
+
+    In each pair (a pattern and its complement) the pixel is lit in one image
+    and unlit in the other, so ``hi = max``, ``lo = min`` of the *pair* are one
+    lit and one unlit observation. Pairs whose contrast ``hi − lo`` reaches
+    ``keep`` times the mean contrast of the better half of the pairs are decisive
+    (pairs where the pixel straddles a square edge are not); ``L⁺``/``L⁻`` are
+    the means of ``hi``/``lo`` over decisive pairs. Unlike max/min over all
+    images this is unbiased under noise once the contrast exceeds the noise, and
+    its noise falls as 1/√(decisive pairs).
+
+    Parameters
+    ----------
+    images : ndarray, ``(N, ...)``
+        Linear images.
+    complement_of : sequence of int
+        Index of each image's complement (``-1`` for none).
+
+    Returns
+    -------
+    l_plus, l_minus : ndarray, float32, ``images.shape[1:]``
+    pairs_used : ndarray, int16, ``images.shape[1:]``
+
+    Examples
+    --------
+    >>> im = np.array([[4.0], [1.0], [1.2], [3.8]])   # two pairs: (0,1), (2,3)
+    >>> lp, lm, n = pair_extremes(im, [1, 0, 3, 2])
+    >>> round(float(lp[0]), 3), round(float(lm[0]), 3), int(n[0])
+    (3.9, 1.1, 2)
+    """
+    a = np.asarray(images, np.float32)
+    pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(complement_of) if j >= 0 and j != i})
+    if not pairs:
+        raise ValueError("complement_of: no complementary pairs in the set")
+    i0 = [p[0] for p in pairs]
+    i1 = [p[1] for p in pairs]
+    hi = np.maximum(a[i0], a[i1])
+    lo = np.minimum(a[i0], a[i1])
+    c = hi - lo
+    srt = np.sort(c, axis=0)
+    top = srt[len(pairs) // 2:].mean(axis=0)
+    use = c >= keep * top
+    n = use.sum(axis=0)
+    n_safe = np.maximum(n, 1)
+    lp = (hi * use).sum(axis=0) / n_safe
+    lm = (lo * use).sum(axis=0) / n_safe
+    return lp.astype(np.float32), lm.astype(np.float32), n.astype(np.int16)
+
+
+def noise_from_pairs(images: np.ndarray, complement_of) -> tuple[float, float]:
+    """Fit ``σ²(I) = s0 + s1·I`` to the spread of pattern+complement sums.
+
+    Every pair sums to the same all-on image (``(1 + b)·white``), so the
+    per-pixel variance of the pair sums across pairs is ``2σ²`` of one capture;
+    a straight line in the mean level captures read and shot noise.
+
+    Returns
+    -------
+    s0, s1 : float
+        Variance at zero and its slope in the linear units of ``images``.
+    """
+    a = np.asarray(images, np.float32)
+    pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(complement_of) if j >= 0 and j != i})
+    if len(pairs) < 2:
+        return 0.0, 0.0
+    sums = np.stack([a[i] + a[j] for i, j in pairs])
+    var = sums.var(axis=0, ddof=1).ravel() / 2.0
+    level = (sums.mean(axis=0) / 2.0).ravel()
+    step = max(1, level.size // 20000)
+    x, y = level[::step].astype(np.float64), var[::step].astype(np.float64)
+    A = np.stack([np.ones_like(x), x], axis=1)
+    s0, s1 = np.linalg.lstsq(A, y, rcond=None)[0]
+    return max(float(s0), 0.0), max(float(s1), 0.0)
+
+
+def validate_stack(images: np.ndarray, *, need: int, method: str) -> np.ndarray:
+    """Check a linear stack ``(N, H, W, C)`` for a method; return float32."""
+    a = np.asarray(images)
+    if a.ndim == 3:
+        a = a[..., None]
+    if a.ndim != 4:
+        raise ValueError(f"images: expected (N, H, W, C) linear images, got shape {np.shape(images)}")
+    if len(a) < need:
+        raise EstimationError("<images>", f"method {method!r} needs at least {need} images, got {len(a)}")
+    if a.dtype.kind != "f":
+        raise TypeError(f"images: expected float linear values, got {a.dtype}")
+    return a.astype(np.float32, copy=False)
+
+
+def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complement_of=None,
+            estimator: str = "pairs") -> tuple[np.ndarray, np.ndarray, dict]:
+    """Separate a shifted-checkerboard (or shifted binary pattern) stack.
+
+    Parameters
+    ----------
+    images : ndarray, ``(N, H, W, C)`` float32, linear
+        The shifted patterns then their complements (``capture.patterns.checker_set``
+        order), or shifts of one pattern without complements.
+    alpha : float in (0, 1)
+        Lit fraction of the patterns.
+    b : float in [0, 1)
+        Projector black level.
+    complement_of : sequence of int, optional
+        Complement index per image; default: the second half complements the
+        first when N is even and ``alpha == 0.5``, otherwise none.
+    estimator : {"pairs", "maxmin"}
+        ``pairs``: :func:`pair_extremes` (noise-robust); ``maxmin``: the
+        textbook max/min over all images (Fig. 8.43).
+
+    Returns
+    -------
+    direct, global : ndarray, ``(H, W, C)`` float32
+    info : dict
+        ``l_plus``, ``l_minus`` arrays and the lit fractions used.
+
+    Examples
+    --------
+    >>> from capture.patterns import checker_set
+    >>> ps = checker_set((8, 8), square=2, shifts=2)
+    >>> d = np.full((8, 8), 0.6); g = np.full((8, 8), 0.2)
+    >>> stack = np.stack([d * p + 0.5 * g for p in ps.images])[..., None]
+    >>> sd, sg, _ = checker(stack, complement_of=ps.complement_of)
+    >>> bool(np.allclose(sd, 0.6, atol=1e-6) and np.allclose(sg, 0.2, atol=1e-6))
+    True
+    """
+    a = validate_stack(images, need=2, method="checker")
+    n = len(a)
+    if complement_of is None:
+        complement_of = ([*range(n // 2, n), *range(n // 2)]
+                         if n % 2 == 0 and abs(alpha - 0.5) < 1e-9 else [-1] * n)
+    complement_of = list(complement_of)
+    if len(complement_of) != n:
+        raise ValueError(f"complement_of: expected {n} entries, got {len(complement_of)}")
+    has_pairs = any(j >= 0 for j in complement_of)
+    if estimator == "pairs" and has_pairs:
+        lp, lm, npairs = pair_extremes(a, complement_of)
+        alpha_minus = 1.0 - alpha
+    elif estimator in ("pairs", "maxmin"):
+        lp, lm = extremes(a)
+        npairs = None
+        # max/min over shifts of one pattern: both extremes from images of lit fraction α;
+        # over a set with complements (α = ½ in practice) the minimum comes from a complement.
+        alpha_minus = 1.0 - alpha if has_pairs else alpha
+    else:
+        raise ValueError(f"estimator: expected 'pairs' or 'maxmin', got {estimator!r}")
+    direct, glob = solve(lp, lm, alpha=alpha, b=b, alpha_minus=alpha_minus)
+    info = {"l_plus": lp, "l_minus": lm, "alpha_plus": alpha, "alpha_minus": alpha_minus,
+            "estimator": estimator if has_pairs else "maxmin"}
+    if npairs is not None:
+        info["pairs_used"] = npairs
+    return direct, glob, info
+
+
+def sinusoid(images: np.ndarray, *, b: float = 0.0,
+             phases=(0.0, 2 * np.pi / 3, 4 * np.pi / 3)) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Separate three phase-shifted sinusoids ``0.5 + 0.5 cos(θ + φ_k)`` (§8.3.4).
+
+    A lit point sees ``I_k = L_d·(b + (1 − b)(½ + ½cos(θ + φ_k))) + L_g·(1 + b)/2``
+    (the global part sees the pattern's mean). The three-step phase shift gives
+    the offset ``m = mean_k I_k`` and amplitude ``A = (2/3)|Σ_k I_k e^{iφ_k}|``
+    exactly, so ``L_d = 2A/(1 − b)`` and ``L_g = 2m/(1 + b) − L_d`` — no max/min.
+
+    Examples
+    --------
+    >>> th = np.linspace(0, 6, 7)[:, None]
+    >>> ims = np.stack([0.8 * (0.5 + 0.5 * np.cos(th + p)) + 0.3 * 0.5
+    ...                 for p in (0, 2 * np.pi / 3, 4 * np.pi / 3)])
+    >>> d, g, _ = sinusoid(ims[..., None])
+    >>> bool(np.allclose(d, 0.8, atol=1e-5) and np.allclose(g, 0.3, atol=1e-5))
+    True
+    """
+    a = validate_stack(images, need=3, method="sinusoid")
+    if len(a) != len(phases):
+        raise EstimationError("<images>", f"method 'sinusoid' takes exactly {len(phases)} images "
+                                          f"(one per phase), got {len(a)}")
+    if not 0.0 <= b < 1.0:
+        raise ValueError(f"b: expected 0 <= b < 1, got {b}")
+    ph = np.asarray(phases, np.float64)
+    cos = np.tensordot(np.cos(ph).astype(np.float32), a, axes=1)
+    sin = np.tensordot(np.sin(ph).astype(np.float32), a, axes=1)
+    amp = (2.0 / len(ph)) * np.sqrt(cos * cos + sin * sin)
+    mean = a.mean(axis=0)
+    direct = amp / (0.5 * (1.0 - b))
+    glob = 2.0 * mean / (1.0 + b) - direct
+    lp, lm = extremes(a)
+    return (direct.astype(np.float32), glob.astype(np.float32),
+            {"l_plus": lp, "l_minus": lm, "amplitude": amp, "offset": mean})
+
+
+def single(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, tile: int = 16,
+           fraction: float = 0.2) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Separate one image under a high-frequency stripe pattern (§8.3.4, Fig. 8.47).
+
+    The image is cut into ``tile×tile`` tiles, each spanning at least one stripe
+    period; in each tile ``L⁺`` is the mean of the brightest ``fraction`` of the
+    pixels and ``L⁻`` the mean of the darkest (robust max/min), then both are
+    interpolated bilinearly from the tile centres back to every pixel and
+    solved with α⁺ = α⁻ = ``alpha`` (both extremes see the same image). Assumes
+    the scene varies slowly within a tile: detail finer than a tile is lost.
+
+    Examples
+    --------
+    >>> x = np.arange(32)
+    >>> stripe = (x % 4 < 2).astype(float)
+    >>> img = np.broadcast_to(0.6 * stripe + 0.5 * 0.2, (32, 32))[None, ..., None]
+    >>> d, g, _ = single(img, tile=8)
+    >>> round(float(d.mean()), 4), round(float(g.mean()), 4)
+    (0.6, 0.2)
+    """
+    a = validate_stack(images, need=1, method="single")
+    if len(a) != 1:
+        raise EstimationError("<images>", f"method 'single' takes exactly one image, got {len(a)}")
+    if tile < 2:
+        raise ValueError(f"tile: expected >= 2 pixels, got {tile}")
+    import cv2
+
+    img = a[0]
+    h, w, c = img.shape
+    th, tw = max(1, -(-h // tile)), max(1, -(-w // tile))
+    pad = np.pad(img, ((0, th * tile - h), (0, tw * tile - w), (0, 0)), mode="reflect")
+    blocks = pad.reshape(th, tile, tw, tile, c).transpose(0, 2, 4, 1, 3).reshape(th, tw, c, -1)
+    srt = np.sort(blocks, axis=-1)
+    k = max(1, int(round(fraction * srt.shape[-1])))
+    lp_t = srt[..., -k:].mean(axis=-1)
+    lm_t = srt[..., :k].mean(axis=-1)
+
+    def up(t):
+        # tile centres sit at (i + 0.5)·tile − 0.5; resize of the padded grid maps them there
+        big = cv2.resize(t.astype(np.float32), (tw * tile, th * tile), interpolation=cv2.INTER_LINEAR)
+        return big[:h, :w].reshape(h, w, c)
+
+    lp, lm = up(lp_t), up(lm_t)
+    direct, glob = solve(lp, lm, alpha=alpha, b=b, alpha_minus=alpha)
+    return direct, glob, {"l_plus": lp, "l_minus": lm, "tile": tile}
+
+
+def occluder(images: np.ndarray, *, alpha: float | None = None,
+             b: float = 0.0) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Separate a shadow sweep: a thin occluder moved across the scene (§8.3.4, Fig. 8.46).
+
+    Each pixel is in the shadow in few frames and lit in most, so ``L⁺`` is the
+    per-pixel median (robust to the shadow frames and to noise) and ``L⁻`` the
+    minimum (in the umbra). Both frames have the same lit fraction
+    ``alpha`` (default ``1 − 1/N``: one bar width per ``N`` steps).
+
+    Examples
+    --------
+    >>> frames = np.full((4, 3, 1), 0.7 + 0.75 * 0.2)   # lit: d + (3/4) g
+    >>> frames[1] = 0.75 * 0.2                           # pixel in shadow
+    >>> d, g, _ = occluder(frames[:, :, None, :], alpha=0.75)
+    >>> round(float(d.mean()), 5), round(float(g.mean()), 5)
+    (0.7, 0.2)
+    """
+    a = validate_stack(images, need=3, method="occluder")
+    alpha = 1.0 - 1.0 / len(a) if alpha is None else alpha
+    lp = np.median(a, axis=0).astype(np.float32)
+    lm = a.min(axis=0)
+    direct, glob = solve(lp, lm, alpha=alpha, b=b, alpha_minus=alpha)
+    return direct, glob, {"l_plus": lp, "l_minus": lm, "alpha": alpha}
+
+
+def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:
+    """Projector black level ``b`` from all-black and all-white frames.
+
+    Every light path scales with the projector's output, so ``black = b·white``
+    pixel by pixel; ``b`` is the median ratio over pixels whose white value is
+    well above ``floor`` (the noise).
+
+    Examples
+    --------
+    >>> w = np.linspace(0.2, 1.0, 50)
+    >>> round(black_level(0.15 * w, w, floor=0.01), 6)
+    0.15
+    """
+    bl = np.asarray(black, np.float64)
+    wh = np.asarray(white, np.float64)
+    ok = wh > max(10.0 * floor, 0.05 * float(np.percentile(wh, 99)))
+    if ok.sum() < 16:
+        raise EstimationError("--white", "the all-white frame is too dark to measure the black level")
+    return float(np.median(bl[ok] / wh[ok]))

@@ -1,0 +1,165 @@
+"""One call from linear captures to a :class:`Separation`: method, black level, mask, residue.
+
+Examples
+--------
+>>> import numpy as np
+>>> from capture.patterns import checker_set
+>>> ps = checker_set((16, 16), square=4, shifts=2)
+>>> d = np.full((16, 16), 0.5); g = np.full((16, 16), 0.2)
+>>> ims = np.stack([d * p + 0.5 * g for p in ps.images])[..., None].astype(np.float32)
+>>> s = separate(ims, method="checker", complement_of=ps.complement_of)
+>>> round(float(s.direct.mean()), 4), round(float(s.global_.mean()), 4), int(s.mask.max())
+(0.5, 0.2, 0)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from capture.errors import EstimationError, InputError
+from separation import nayar2006
+from separation.result import Separation
+
+METHODS = {
+    "checker": nayar2006.checker,
+    "sinusoid": nayar2006.sinusoid,
+    "single": nayar2006.single,
+    "occluder": nayar2006.occluder,
+}
+MIN_IMAGES = {"checker": 2, "sinusoid": 3, "single": 1, "occluder": 3}
+EXACT_IMAGES = {"sinusoid": 3, "single": 1}
+RESIDUE_WARN_FRACTION = 0.10
+
+
+def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None = None,
+             b: float | None = None, black: np.ndarray | None = None,
+             white: np.ndarray | None = None, complement_of=None, estimator: str = "pairs",
+             noise_sigma: float = 0.0, quant_step: float = 0.0, saturation: float | None = None,
+             tile: int = 16, names=None) -> Separation:
+    """Separate linear captures into direct and global light.
+
+    Parameters
+    ----------
+    images : ndarray, ``(N, H, W, C)`` float32
+        Linear captures under the method's patterns, in the order of
+        ``capture.patterns``.
+    method : {"checker", "sinusoid", "single", "occluder"}
+    alpha : float in (0, 1), optional
+        Lit fraction of the patterns (default ½; occluder ``1 − 1/N``).
+    b : float in [0, 1), optional
+        Projector black level; measured from ``black``/``white`` when those are
+        given and ``b`` is not, else 0.
+    black, white : ndarray, ``(H, W, C)``, optional
+        Captures under all-black and all-white projector frames.
+    complement_of : sequence of int, optional
+        Complement index per checker image (see :func:`nayar2006.checker`).
+    estimator : {"pairs", "maxmin"}
+        Checker estimator (noise-robust pairs, or the textbook max/min).
+    noise_sigma : float
+        Known per-capture noise standard deviation (linear units), added to the
+        quantisation noise ``quant_step/√12`` and, for checker pairs, to the
+        noise measured from pattern+complement sums.
+    saturation : float, optional
+        Linear value at and above which a capture is clipped.
+    tile : int
+        Tile size in pixels for ``single``.
+    names : sequence of str, optional
+        Image names for error messages.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method: expected one of {sorted(METHODS)}, got {method!r}")
+    a = nayar2006.validate_stack(images, need=MIN_IMAGES[method], method=method)
+    if method in EXACT_IMAGES and len(a) != EXACT_IMAGES[method]:
+        raise EstimationError("<images>", f"method {method!r} takes exactly {EXACT_IMAGES[method]} "
+                                          f"image(s), got {len(a)}")
+    names = list(names) if names is not None else [f"image {i}" for i in range(len(a))]
+    if alpha is not None and not 0.0 < alpha < 1.0:
+        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {alpha}")
+    if b is not None and not 0.0 <= b < 1.0:
+        raise InputError("--b", f"black level must lie in [0, 1), got {b}")
+    quant = quant_step / np.sqrt(12.0)
+    floor = 3.0 * np.hypot(noise_sigma, quant) + 1e-7
+    peak = a.reshape(len(a), -1).max(axis=1)
+    for i, p in enumerate(peak):
+        if p <= floor:
+            raise InputError(names[i], f"all-dark frame (brightest value {p:.3g} is within the "
+                                       "noise); check the projector and the exposure")
+    params: dict = {"method": method}
+    if b is None and black is not None and white is not None:
+        b = nayar2006.black_level(black, white, floor=floor)
+        params["b_source"] = "measured from the all-black/all-white frames"
+        if not 0.0 <= b < 1.0:
+            raise EstimationError("--black", f"measured black level {b:.3f} is not in [0, 1)")
+    elif b is None:
+        b = 0.0
+        params["b_source"] = "assumed 0 (no --b and no black/white frames)"
+    else:
+        params["b_source"] = "given"
+    params["b"] = float(b)
+    fn = METHODS[method]
+    if method == "checker":
+        alpha = 0.5 if alpha is None else alpha
+        direct, glob, info = fn(a, alpha=alpha, b=b, complement_of=complement_of, estimator=estimator)
+        params.update(estimator=info["estimator"], alpha=alpha, alpha_minus=info["alpha_minus"])
+    elif method == "sinusoid":
+        direct, glob, info = fn(a, b=b)
+    elif method == "single":
+        alpha = 0.5 if alpha is None else alpha
+        direct, glob, info = fn(a, alpha=alpha, b=b, tile=tile)
+        params.update(alpha=alpha, tile=tile)
+    else:
+        direct, glob, info = fn(a, alpha=alpha, b=b)
+        params["alpha"] = info["alpha"]
+    lp, lm = info["l_plus"], info["l_minus"]
+
+    # Noise model: quantisation + given + (checker pairs) measured from pair sums.
+    var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
+    comp = None
+    if method == "checker":
+        n = len(a)
+        comp = list(complement_of) if complement_of is not None else (
+            [*range(n // 2, n), *range(n // 2)] if n % 2 == 0 and abs(alpha - 0.5) < 1e-9 else [-1] * n)
+        s0, s1 = nayar2006.noise_from_pairs(a, comp)
+        var0, var1 = var0 + s0, s1
+    sigma = np.sqrt(var0 + var1 * np.clip(lp, 0, None)).astype(np.float32)
+    n_obs = info.get("pairs_used")
+    n_obs = np.maximum(n_obs, 1)[..., None] if n_obs is not None and n_obs.ndim == 2 else (
+        np.maximum(n_obs, 1) if n_obs is not None else 1)
+    sigma_c = np.sqrt(2.0) * sigma / np.sqrt(n_obs)
+
+    mask = np.zeros(a.shape[1:3], np.uint8)
+    never = (lp <= 3.0 * sigma).all(axis=-1)
+    mask[never] |= nayar2006.MASK_NEVER_LIT
+    if saturation is not None:
+        mask[(a >= saturation).any(axis=0).any(axis=-1)] |= nayar2006.MASK_SATURATED
+    low = ((lp - lm) <= 3.0 * sigma_c).all(axis=-1) & ~never
+    mask[low] |= nayar2006.MASK_LOW_CONTRAST
+    valid = mask == 0
+
+    warnings = []
+    quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
+               "mask_counts": {"never_lit": int(never.sum()),
+                               "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
+                               "low_contrast": int(low.sum()), "valid": int(valid.sum()),
+                               "total": int(mask.size)}}
+    if comp is not None and any(j >= 0 for j in comp):
+        frac, _ = _residue_pairs(a, comp, b=b, alpha=alpha, sigma=sigma, valid=valid)
+        quality["residue"] = {"check": "per-pair global disagreement", "fraction": frac}
+    else:
+        from separation.residue import spatial_residue
+
+        frac, _ = spatial_residue(glob, a.mean(axis=0), window=max(5, tile // 2 * 2 + 1), valid=valid)
+        quality["residue"] = {"check": "spatial pattern-scale contrast", "fraction": frac}
+    quality["residue"]["warn_above"] = RESIDUE_WARN_FRACTION
+    if frac > RESIDUE_WARN_FRACTION:
+        warnings.append(f"high-frequency residue: the pattern survives into the global image in "
+                        f"{100 * frac:.1f}% of the trusted pixels (a mirror-like surface, or a "
+                        "pattern too coarse for the scene); the split is unreliable there")
+    return Separation(direct.astype(np.float32), glob.astype(np.float32), mask, method, params,
+                      quality, tuple(warnings))
+
+
+def _residue_pairs(a, comp, **kw):
+    from separation.residue import pair_residue
+
+    return pair_residue(a, comp, **kw)
