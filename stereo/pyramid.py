@@ -20,6 +20,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -93,10 +94,18 @@ def upsample_flow(flow: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     return up
 
 
+@functools.lru_cache(maxsize=16)
+def _grid(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    X, Y = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    X.flags.writeable = False
+    Y.flags.writeable = False
+    return X, Y
+
+
 def grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel-centre coordinates ``(X, Y)``, float32, for an ``(H, W)`` image."""
-    h, w = shape
-    return np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    """Pixel-centre coordinates ``(X, Y)``, float32 (read-only, cached), for
+    an ``(H, W)`` image."""
+    return _grid(int(shape[0]), int(shape[1]))
 
 
 def warp(image: np.ndarray, flow: np.ndarray, *, border: str = "replicate",

@@ -129,16 +129,17 @@ def _hypotheses(i0, i1, flow, *, window):
 
     s = window // 2 + 1
     h, w = flow.shape[:2]
-    best = flow
-    cost = _box((warp(i1, flow) - i0) ** 2, 5)
+    best = flow.copy()
+    # Bilinear is enough to rank hypotheses that differ by pixels.
+    cost = _box((warp(i1, flow, cubic=False) - i0) ** 2, 5)
     for dx, dy in ((s, 0), (-s, 0), (0, s), (0, -s)):
         M = np.float32([[1, 0, dx], [0, 1, dy]])
         cand = cv2.warpAffine(flow, M, (w, h), flags=cv2.INTER_NEAREST,
                               borderMode=cv2.BORDER_REPLICATE)
-        c = _box((warp(i1, cand) - i0) ** 2, 5)
+        c = _box((warp(i1, cand, cubic=False) - i0) ** 2, 5)
         better = c < cost
-        best = np.where(better[..., None], cand, best)
-        cost = np.where(better, c, cost)
+        best[better] = cand[better]
+        cost[better] = c[better]
     return best
 
 
