@@ -29,7 +29,7 @@ Examples
 ...           ((0.1, -0.35, -0.1), (-90, -70, 580))]]
 >>> img = [cam.project_world(obj, R, t) for R, t in poses]
 >>> fit = calibrate_fixed([obj] * 3, img, (320, 240), model="none")
->>> bool(np.allclose(fit.K, cam.K, atol=1e-4)), fit.rms_px < 1e-6
+>>> bool(np.allclose(fit.K, cam.K, atol=1e-3)), fit.rms_px < 1e-4  # float32 points: ~1e-5 px
 (True, True)
 """
 

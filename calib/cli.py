@@ -1,0 +1,319 @@
+"""``lumigraph calib``: calibrate, undistort, stereo, rectify.
+
+A thin layer: parse, load images, call :mod:`calib.calibrate` /
+:mod:`calib.undistort` / :mod:`calib.rectify`, save artifacts atomically with
+their ``.meta.json`` sidecars. Every input is checked before anything is
+written, so a bad input leaves no output behind.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from capture.command import add_verb, check_output_path, make_parser, progress, run, say, subparsers, warn
+from capture.errors import InputError
+
+MODEL_CHOICES = ("auto", "none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
+
+EPILOG = """\
+examples:
+  lumigraph calib calibrate shots/*.png --board checker:10x7:25 --out camera.json
+  lumigraph calib calibrate out/scenes/boards --out camera.json   (board from stack.json)
+  lumigraph calib undistort --camera camera.json shots/*.png --out undistorted/
+  lumigraph calib stereo --left L*.jpg --right R*.jpg --board checker:10x7:1 --out rig.json
+  lumigraph calib rectify --rig rig.json left.png right.png --out rectified/
+
+Boards: checker:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT, where
+COLS x ROWS counts SQUARES (OpenCV's 9x6-corner pattern is checker:10x7:...) and
+SQUARE is in any length unit (it becomes the unit of translations).
+--model auto (default) fits none, k1, k1k2, k1k2p1p2, k1k2p1p2k3 and rational and
+keeps the simplest whose held-out (leave-views-out) error is not significantly
+worse than the best; every candidate's score is in camera.json.
+"""
+
+
+def _expand(inputs: list[str], where: str) -> tuple[list[Path], dict]:
+    """Image files from a list, or from a folder's stack.json (with its extra info)."""
+    if not inputs:
+        raise InputError(where, "no input images given")
+    paths = [Path(p) for p in inputs]
+    if len(paths) == 1 and (paths[0].is_dir() or paths[0].name == "stack.json"):
+        folder = paths[0] if paths[0].is_dir() else paths[0].parent
+        sj = folder / "stack.json"
+        if not sj.is_file():
+            raise InputError(folder, "folder has no stack.json; pass the image files instead")
+        try:
+            info = json.loads(sj.read_text())
+            return [folder / n for n in info["images"]], info
+        except (json.JSONDecodeError, KeyError, TypeError) as e:
+            raise InputError(sj, f"not a stack description ({e})") from None
+    for p in paths:
+        if not p.is_file():
+            raise InputError(p, "file not found")
+    return paths, {}
+
+
+def _read_all(paths: list[Path], args, what: str):
+    from capture.io import read_image
+
+    images = []
+    for p in progress(paths, total=len(paths), description=f"reading {what}", quiet=args.quiet):
+        images.append(read_image(p))
+    return images
+
+
+def _check_sizes(paths, images):
+    first = images[0].shape[1::-1]
+    for p, im in zip(paths, images, strict=True):
+        if im.shape[1::-1] != first:
+            raise InputError(p, f"is {im.shape[1]}x{im.shape[0]} but {paths[0].name} is "
+                                f"{first[0]}x{first[1]}; calibrate one image size at a time")
+    return tuple(int(v) for v in first)
+
+
+def _board(args, info):
+    from calib.detect import BoardSpec
+
+    text = args.board or info.get("board")
+    if not text:
+        raise InputError("--board", "missing; give e.g. --board checker:10x7:25 (COLSxROWS squares)")
+    return BoardSpec.parse(text)
+
+
+def _detect_all(paths, images, board, args, what="images"):
+    from calib.detect import detect
+
+    dets = []
+    for im in progress(images, total=len(images), description=f"finding {board.kind} corners in {what}",
+                       quiet=args.quiet):
+        dets.append(detect(im, board))
+    found = sum(len(d) > 0 for d in dets)
+    if found == 0:
+        hint = (f"is the board {board.cols}x{board.rows} squares "
+                f"({board.cols - 1}x{board.rows - 1} inner corners)? COLSxROWS counts squares")
+        raise InputError(paths[0].parent if len(paths) > 1 else paths[0],
+                         f"no {board.spec} board found in any of the {len(paths)} {what}; {hint}")
+    for p, d in zip(paths, dets, strict=True):
+        if len(d) == 0:
+            warn(f"{p}: no board found; skipped")
+    return dets
+
+
+def _exports(args, camera=None, rig=None):
+    from calib.export import colmap_cameras, opencv_yaml
+    from capture.artifact import atomic_path
+
+    if args.yaml:
+        with atomic_path(args.yaml) as tmp:
+            tmp.write_text(opencv_yaml(camera or rig.left, rig=rig))
+    if args.colmap:
+        with atomic_path(args.colmap) as tmp:
+            tmp.write_text(colmap_cameras([camera] if rig is None else [rig.left, rig.right]))
+
+
+def _calibrate(args) -> int:
+    from calib.calibrate import calibrate
+    from capture.artifact import make_meta
+
+    out = check_output_path(args.out, suffixes=(".json",))
+    paths, info = _expand(args.images, "IMAGES")
+    board = _board(args, info)
+    t0 = time.perf_counter()
+    images = _read_all(paths, args, "images")
+    _check_sizes(paths, images)
+    t1 = time.perf_counter()
+    dets = _detect_all(paths, images, board, args)
+    t2 = time.perf_counter()
+    cam = calibrate(dets, model=args.model, names=[p.name for p in paths], strict=args.strict)
+    t3 = time.perf_counter()
+    extra = dict(cam.extra, board=board.to_dict(),
+                 units=f"translations in the board's square unit (square = {board.square:g})")
+    cam = type(cam)(cam.K, cam.dist, cam.image_size, cam.model, extra)
+    for w in cam.extra["warnings"]:
+        warn(w)
+    meta = make_meta("lumigraph.camera", inputs=paths,
+                     params={"board": board.spec, "model": args.model, "strict": args.strict},
+                     model=cam.extra["model_selection"] | {"candidates": cam.extra["candidates"]},
+                     quality={"rms_px": cam.extra["rms_px"], "n_views": sum(v["used"] for v in cam.extra["views"]),
+                              "n_points": cam.extra["n_points"]},
+                     timings_s={"read": t1 - t0, "detect": t2 - t1, "calibrate": t3 - t2},
+                     warnings=cam.extra["warnings"])
+    cam.save(out, meta=meta)
+    _exports(args, camera=cam)
+    fx, fy = cam.focal_px
+    say(args, f"{out}: model {cam.model}, RMS {cam.extra['rms_px']:.3f} px, fx {fx:.2f} fy {fy:.2f} "
+              f"cx {cam.K[0, 2]:.2f} cy {cam.K[1, 2]:.2f}")
+    return 0
+
+
+def _undistort(args) -> int:
+    from calib.camera import Camera
+    from calib.undistort import undistorter
+    from capture.artifact import atomic_path, make_meta, write_json
+    from capture.io import write_image
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder")
+    cam = Camera.load(args.camera)
+    paths, _ = _expand(args.images, "IMAGES")
+    images = _read_all(paths, args, "images")
+    for p, im in zip(paths, images, strict=True):
+        if im.shape[1::-1] != tuple(cam.image_size):
+            raise InputError(p, f"is {im.shape[1]}x{im.shape[0]} but {args.camera} was calibrated for "
+                                f"{cam.image_size[0]}x{cam.image_size[1]}; use that camera's images")
+    u = undistorter(cam, keep_all=args.keep_all)
+    out.mkdir(parents=True, exist_ok=True)
+    names = []
+    for p, im in progress(list(zip(paths, images, strict=True)), total=len(paths),
+                          description="undistorting", quiet=args.quiet):
+        name = p.stem + ".png"
+        bd = None
+        if im.dtype.kind == "u" and im.dtype.itemsize == 2:
+            from capture.io import png_significant_bits
+            bd = png_significant_bits(p) if p.suffix.lower() == ".png" else 16
+        with atomic_path(out / name) as tmp:
+            write_image(tmp, u.apply(im), bit_depth=bd)
+        names.append(name)
+    meta = make_meta("lumigraph.camera", inputs=[Path(args.camera), *paths],
+                     params={"keep_all": args.keep_all})
+    u.camera.save(out / "camera.json", meta=meta)
+    write_json(out / "undistorted.json", {"schema": "lumigraph.undistorted", "schema_version": 1,
+                                          "images": names, "camera": "camera.json"})
+    say(args, f"{out}: {len(names)} undistorted image(s) and camera.json (no distortion)")
+    return 0
+
+
+def _stereo(args) -> int:
+    from calib.calibrate import calibrate_stereo
+    from capture.artifact import make_meta
+
+    out = check_output_path(args.out, suffixes=(".json",))
+    lp, linfo = _expand(args.left, "--left")
+    rp, _ = _expand(args.right, "--right")
+    if len(lp) != len(rp):
+        raise InputError("--right", f"expected as many right images as left ({len(lp)}), got {len(rp)}")
+    board = _board(args, linfo)
+    li = _read_all(lp, args, "left images")
+    ri = _read_all(rp, args, "right images")
+    lsize = _check_sizes(lp, li)
+    rsize = _check_sizes(rp, ri)
+    if lsize != rsize:
+        raise InputError(rp[0], f"is {rsize[0]}x{rsize[1]} but the left images are {lsize[0]}x{lsize[1]}")
+    t0 = time.perf_counter()
+    ld = _detect_all(lp, li, board, args, "left images")
+    rd = _detect_all(rp, ri, board, args, "right images")
+    rig = calibrate_stereo(ld, rd, model=args.model, names=[f"{a.name}|{b.name}" for a, b in zip(lp, rp, strict=True)],
+                           strict=args.strict)
+    t1 = time.perf_counter()
+    for w in rig.extra["warnings"]:
+        warn(w)
+    rig = type(rig)(rig.left, rig.right, rig.R, rig.T, rig.E, rig.F,
+                    dict(rig.extra, board=board.to_dict(),
+                         units=f"T in the board's square unit (square = {board.square:g})"))
+    meta = make_meta("lumigraph.rig", inputs=[*lp, *rp], params={"board": board.spec, "model": args.model},
+                     model={"left": rig.left.model, "right": rig.right.model},
+                     quality={"rms_px": rig.extra["rms_px"], "baseline": rig.baseline,
+                              "rms_px_left": rig.left.extra["rms_px"], "rms_px_right": rig.right.extra["rms_px"]},
+                     timings_s={"detect_and_calibrate": t1 - t0}, warnings=rig.extra["warnings"])
+    rig.save(out, meta=meta)
+    _exports(args, rig=rig)
+    say(args, f"{out}: stereo RMS {rig.extra['rms_px']:.3f} px, baseline {rig.baseline:.4g} "
+              f"(board units), {rig.extra['n_pairs']} pairs")
+    return 0
+
+
+def _rectify(args) -> int:
+    from calib.rectify import rectify
+    from calib.rig import Rig
+    from capture.artifact import atomic_path, make_meta
+    from capture.io import read_image, write_image
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder")
+    if not 0.0 <= args.alpha <= 1.0:
+        raise InputError("--alpha", f"expected a value in [0, 1], got {args.alpha}")
+    rig = Rig.load(args.rig)
+    left, right = read_image(args.left), read_image(args.right)
+    for p, im, cam in ((args.left, left, rig.left), (args.right, right, rig.right)):
+        if im.shape[1::-1] != tuple(cam.image_size):
+            raise InputError(p, f"is {im.shape[1]}x{im.shape[0]} but the rig's camera is "
+                                f"{cam.image_size[0]}x{cam.image_size[1]}")
+    try:
+        rect = rectify(rig, alpha=args.alpha)
+    except ValueError as e:
+        raise InputError(args.rig, str(e)) from None
+    lr, rr = rect.apply(left, right)
+    lx, ly, rx, ry = rect.maps()
+    out.mkdir(parents=True, exist_ok=True)
+    import numpy as np
+
+    for name, im in (("left.png", lr), ("right.png", rr)):
+        with atomic_path(out / name) as tmp:
+            write_image(tmp, im)
+    for name, m in (("maps_left.npy", np.stack([lx, ly], axis=-1)), ("maps_right.npy", np.stack([rx, ry], axis=-1))):
+        with atomic_path(out / name) as tmp:
+            np.save(tmp, m, allow_pickle=False)
+    meta = make_meta("lumigraph.rectification", inputs=[Path(args.rig), Path(args.left), Path(args.right)],
+                     params={"alpha": args.alpha},
+                     quality={"focal_px": rect.focal_px, "baseline": rect.baseline})
+    rect.save(out / "rectification.json", meta=meta)
+    say(args, f"{out}: rectified left.png/right.png, maps_*.npy ((H, W, 2) float32 source x, y), "
+              f"rectification.json (f = {rect.focal_px:.2f} px, B = {rect.baseline:.4g})")
+    return 0
+
+
+def build_parser(prog: str = "lumigraph calib"):
+    p = make_parser(prog, "Camera calibration, stereo rigs, undistortion and rectification.", epilog=EPILOG)
+    sp = subparsers(p)
+
+    c = add_verb(sp, "calibrate", "calibrate one camera from photos of a board",
+                 epilog="example:\n  lumigraph calib calibrate shots/*.png --board checker:10x7:25 --out camera.json")
+    c.add_argument("images", nargs="+", help="image files, or a folder with stack.json")
+    c.add_argument("--board", help="checker:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+                                   "(COLSxROWS = squares); default: the stack.json 'board'")
+    c.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model (default auto)")
+    c.add_argument("--strict", action="store_true", help="refuse (exit 2) instead of warning on a degenerate view set")
+    c.add_argument("--yaml", help="also write an OpenCV FileStorage YAML file")
+    c.add_argument("--colmap", help="also write a COLMAP cameras.txt")
+    c.add_argument("--out", required=True, help="camera.json to write")
+    c.set_defaults(func=_calibrate)
+
+    u = add_verb(sp, "undistort", "remove lens distortion from images",
+                 epilog="example:\n  lumigraph calib undistort --camera camera.json shots/*.png --out undistorted/")
+    u.add_argument("images", nargs="+", help="image files, or a folder with stack.json")
+    u.add_argument("--camera", required=True, help="camera.json of the camera that took the images")
+    u.add_argument("--keep-all", action="store_true", help="keep every source pixel (black corners) "
+                                                            "instead of cropping to valid pixels")
+    u.add_argument("--out", required=True, help="output folder (undistorted PNGs + camera.json)")
+    u.set_defaults(func=_undistort)
+
+    s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",
+                 epilog="example:\n  lumigraph calib stereo --left L*.jpg --right R*.jpg --board checker:10x7:1 --out rig.json")
+    s.add_argument("--left", nargs="+", required=True, help="left images (pairwise with --right)")
+    s.add_argument("--right", nargs="+", required=True, help="right images")
+    s.add_argument("--board", help="board spec (see calibrate)")
+    s.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model of both cameras")
+    s.add_argument("--strict", action="store_true", help="refuse instead of warning on degenerate views")
+    s.add_argument("--yaml", help="also write OpenCV YAML (K1 D1 K2 D2 R T E F)")
+    s.add_argument("--colmap", help="also write a COLMAP cameras.txt (camera 1 left, 2 right)")
+    s.add_argument("--out", required=True, help="rig.json to write")
+    s.set_defaults(func=_stereo)
+
+    r = add_verb(sp, "rectify", "rectify a stereo pair so epipolar lines are rows",
+                 epilog="example:\n  lumigraph calib rectify --rig rig.json left.png right.png --out rectified/")
+    r.add_argument("left", help="left image")
+    r.add_argument("right", help="right image")
+    r.add_argument("--rig", required=True, help="rig.json")
+    r.add_argument("--alpha", type=float, default=0.0, help="0 crops to valid pixels (default), 1 keeps all")
+    r.add_argument("--out", required=True, help="output folder: left.png, right.png, maps_left/right.npy, "
+                                                "rectification.json")
+    r.set_defaults(func=_rectify)
+    return p
+
+
+def main(argv=None, prog: str = "lumigraph calib") -> int:
+    return run(build_parser(prog), argv)
