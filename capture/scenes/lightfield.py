@@ -315,7 +315,7 @@ def _codes(radiance: np.ndarray, bits: int, noise: float, rng) -> np.ndarray:
 
 def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
                  disparity_far=0.2, spacing=1.0, texel_px=1.5, focus=(), thin_lens=True,
-                 noise=0.0):
+                 novel=(0.5, 0.5, 0.0), noise=0.0):
     """A U x V camera-array light field of textured planes, with exact truth.
 
     Views are 16-bit linear PNGs ``view-UU-VV.png`` (row-major); ``stack.json``
@@ -323,7 +323,9 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
     (U, V, H, W, 3) float32 radiance, ``depth`` and ``disparity`` (H, W) of the
     centre view (nearest surface at each pixel centre; the centre view of an
     even grid is the virtual camera at the grid centre), ``synthetic_aperture``
-    and (with ``thin_lens``) ``thin_lens`` (n, H, W, 3) at ``focus_slopes``.
+    and (with ``thin_lens``) ``thin_lens`` (n, H, W, 3) at ``focus_slopes``;
+    ``novel_view`` (H, W, 3): a pinhole at ``novel`` (view steps, relative to
+    the grid centre; same intrinsics).
     """
     u, v = parse_grid(grid)
     w, h = size
@@ -339,7 +341,10 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
         {float(x) for x in np.round(np.concatenate([disp, (disp[:-1] + disp[1:]) / 2]), 6)})
     sa = np.stack([synthetic_aperture(scene, u, v, spacing, s, w, h) for s in slopes])
     depth = scene.depth_at(xs, ys)
-    gt_arrays = {"views": views.astype(np.float32), "depth": depth.astype(np.float32),
+    nx_, ny_, nz_ = (float(t) * spacing for t in novel)
+    novel_view = scene.render(nx_, xs, ny_, ys, cam_z=nz_)
+    gt_arrays = {"novel_view": novel_view.astype(np.float32), "views": views.astype(np.float32),
+                 "depth": depth.astype(np.float32),
                  "disparity": (f * spacing / depth).astype(np.float32),
                  "synthetic_aperture": sa.astype(np.float32)}
     if thin_lens:
@@ -357,7 +362,8 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
         gt={**lf, "code_scale": 65535, "noise_sigma_codes": noise,
             "planes": [{"depth": p.depth, "disparity": f * spacing / p.depth,
                         "rect": list(p.rect) if p.rect else None} for p in scene.planes],
-            "focus_slopes": slopes, "thin_lens_aperture": [u * spacing, v * spacing],
+            "focus_slopes": slopes, "novel_position": [nx_, ny_, nz_],
+            "thin_lens_aperture": [u * spacing, v * spacing],
             "thin_lens_samples_per_axis": THIN_LENS_SAMPLES,
             "slope_convention": "view (u, v) sees a point of disparity d at "
                                 "x - d (v - vc), y - d (u - uc)"},
@@ -479,6 +485,7 @@ def _array_options(**defaults):
         Option("focus", tuple, (), "refocus slopes for the GT refocus images (comma list); "
                                    "default: the plane disparities and midpoints"),
         Option("thin_lens", bool, d["thin_lens"], "also render thin-lens refocus truth"),
+        Option("novel", tuple, (0.5, 0.5, 0.0), "novel-view truth position X,Y,Z (view steps)"),
         Option("noise", float, d["noise"], "Gaussian noise in 16-bit code values", low=0.0),
     )
 

@@ -1,0 +1,3 @@
+from lightfield.cli import main
+
+raise SystemExit(main(prog="python -m lightfield"))

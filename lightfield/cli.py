@@ -1,0 +1,324 @@
+"""``lumigraph lightfield``: import, decode, refocus, render and depth (thin layer:
+parse, load, call the library, save)."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+from capture.command import add_verb, make_parser, run, say, subparsers, warn
+from capture.errors import InputError
+
+EPILOG = """\
+examples:
+  lumigraph lightfield import views/*.png --grid 5x5 --spacing 0.05 --focal-px 800 --out lf
+  lumigraph lightfield import out/scenes/lightfield-array --out lf     (rendered folder)
+  lumigraph lightfield decode raw.png --white white.png --views 5 --out lf
+  lumigraph lightfield refocus lf --slope 0.5 --out focus.exr
+  lumigraph lightfield refocus lf --depth 2 3 4 5 6 7 8 9 10 12 --method auto --out stack/
+  lumigraph lightfield render lf --position 0.5 0.5 0 --focus-slope 0.4 --out view.exr
+  lumigraph lightfield depth lf --slopes -1,1,41 --out disparity.pfm
+
+A light field folder holds view-UU-VV.exr (linear float32, row-major, U = row)
+and lightfield.json (grid, spacing, focal_px). Refocus by --slope (px per view
+step: a point of that disparity comes out sharp), --depth (units of --spacing:
+slope = focal_px * spacing / depth) or --alpha (Ng's virtual sensor position:
+slope = alpha_scale * (1 - 1/alpha)).
+"""
+
+
+def _values(texts, name):
+    out = []
+    for t in texts:
+        for part in str(t).split(","):
+            if part.strip():
+                try:
+                    out.append(float(part))
+                except ValueError:
+                    raise InputError(name, f"cannot read {part!r} as a number") from None
+    if not out:
+        raise InputError(name, "give at least one value")
+    return out
+
+
+# ---------------------------------------------------------------------- import
+def _import(args) -> int:
+    from capture.artifact import make_meta
+    from capture.io import read_image
+    from capture.scenes.lightfield import parse_grid
+    from lightfield.field import from_images
+
+    inputs = [Path(p) for p in args.images]
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder")
+    info, linear, bit_depth = {}, args.linear, None
+    if len(inputs) == 1 and inputs[0].is_dir():
+        sj = inputs[0] / "stack.json"
+        if not sj.exists():
+            raise InputError(inputs[0], "folder has no stack.json; pass the view files instead")
+        stack = json.loads(sj.read_text())
+        info = stack.get("lightfield", {})
+        files = [inputs[0] / n for n in stack.get("images", [])]
+        linear = linear or bool(stack.get("linear", False))
+        bit_depth = stack.get("bit_depth")
+    else:
+        files = inputs
+    grid_text = args.grid or ("x".join(map(str, info["grid"])) if "grid" in info else None)
+    if grid_text is None:
+        raise InputError("--grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
+    grid = parse_grid(grid_text)
+    spacing = args.spacing if args.spacing is not None else info.get("spacing")
+    if spacing is None:
+        raise InputError("--spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
+    if not spacing > 0:
+        raise InputError("--spacing", f"must be positive, got {spacing}")
+    focal = args.focal_px if args.focal_px is not None else info.get("focal_px")
+    if focal is not None and not focal > 0:
+        raise InputError("--focal-px", f"must be positive, got {focal}")
+    if len(files) != grid[0] * grid[1]:
+        raise InputError("--grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
+                                   f"images, got {len(files)}")
+    images = [read_image(f) for f in files]
+    lf = from_images(images, grid=grid, spacing=spacing, focal_px=focal, linear=linear,
+                     bit_depth=bit_depth, names=[str(f) for f in files])
+    lf = type(lf)(lf.data, spacing=lf.spacing, focal_px=lf.focal_px,
+                  info={"source": [str(f) for f in files], "decoded": "linear" if linear
+                        else "sRGB -> linear"})
+    lf.save(out, meta=make_meta("lumigraph.lightfield", inputs=files,
+                                params={"grid": list(grid), "spacing": spacing, "focal_px": focal,
+                                        "linear": linear}))
+    say(args, f"wrote {grid[0]}x{grid[1]} views of {lf.size[0]}x{lf.size[1]} to {out}")
+    return 0
+
+
+# ---------------------------------------------------------------------- decode
+def _decode(args) -> int:
+    from capture.artifact import make_meta
+    from capture.io import read_image
+    from lightfield.lenslet import decode
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder")
+    raw, white = read_image(args.raw), read_image(args.white)
+    if raw.shape[:2] != white.shape[:2]:
+        raise InputError(args.white, f"is {white.shape[1]}x{white.shape[0]} but the raw is "
+                                     f"{raw.shape[1]}x{raw.shape[0]}; use the white image of "
+                                     "the same camera")
+    views = args.views
+    sj = Path(args.raw).parent / "stack.json"
+    if views is None and sj.exists():
+        lens = json.loads(sj.read_text()).get("lenslet", {})
+        views = lens.get("views", [None])[0]
+    t0 = time.perf_counter()
+    result = decode(raw, white, views=views, lattice=args.lattice)
+    g = result.grid
+    result.lightfield.save(out, meta=make_meta(
+        "lumigraph.lightfield", inputs=[args.raw, args.white],
+        params={"views": views, "lattice": args.lattice}, model={"grid": g.to_dict()},
+        quality={"lattice_rms_residual_px": g.residual_px},
+        timings_s={"decode": time.perf_counter() - t0}))
+    say(args, f"{g.lattice} grid: pitch {g.pitch_px:.3f} px, rotation {g.rotation_deg:.3f} deg, "
+              f"{g.rows}x{g.cols} lenslets; wrote {out}")
+    return 0
+
+
+# --------------------------------------------------------------------- refocus
+def _refocus(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta, write_artifact, write_json
+    from capture.io import write_exr
+    from lightfield import ng2005
+    from lightfield.field import LightField
+    from lightfield.refocus import check_refocus_range, choose_method, shift_and_add
+
+    lf = LightField.load(args.lightfield)
+    if args.alpha is not None:
+        given, kind = _values(args.alpha, "--alpha"), "alpha"
+        slopes = [lf.slope_from_alpha(a) for a in given]
+    elif args.depth is not None:
+        given, kind = _values(args.depth, "--depth"), "depth"
+        slopes = [lf.slope_from_depth(z) for z in given]
+    else:
+        given, kind = _values(args.slope, "--slope"), "slope"
+        slopes = list(given)
+    out = Path(args.out)
+    single = len(slopes) == 1
+    if single and out.suffix.lower() != ".exr":
+        raise InputError("--out", f"{out}: one value writes one image; name it .exr")
+    if not single and out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder (several values write a "
+                                  "folder of refocus-NNN.exr)")
+    warnings = check_refocus_range(lf, slopes)
+    for w in warnings:
+        warn(w)
+    method = args.method
+    reason = "requested"
+    if method == "auto":
+        method = choose_method(lf, len(slopes))
+        reason = (f"auto: {len(slopes)} value(s); Fourier slice pays its one-time 4-D FFT "
+                  f"back from about 6 values")
+    t0 = time.perf_counter()
+    if method == "fourier":
+        spec = ng2005.prepare(lf, max_slope=max(abs(s) for s in slopes))
+        t_fft = time.perf_counter() - t0
+        images = [ng2005.refocus(spec, s) for s in slopes]
+    else:
+        t_fft = 0.0
+        images = [shift_and_add(lf, s, kernel=args.kernel) for s in slopes]
+    timing = {"total": time.perf_counter() - t0, "fft": t_fft}
+    meta = make_meta("lumigraph.refocus", inputs=[Path(args.lightfield) / "lightfield.json"],
+                     params={kind: given, "slopes": slopes, "kernel": args.kernel},
+                     model={"method": method, "why": reason}, timings_s=timing,
+                     warnings=warnings)
+    if single:
+        img = images[0]
+        write_artifact(out, lambda p: write_exr(p, img[..., 0] if img.shape[2] == 1 else img),
+                       meta=meta)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        index = {}
+        for k, (img, s, g) in enumerate(zip(images, slopes, given, strict=True)):
+            name = f"refocus-{k:03d}.exr"
+            write_exr(out / name, img[..., 0] if img.shape[2] == 1 else np.asarray(img))
+            index[name] = {kind: g, "slope": s}
+        write_artifact(out / "index.json", lambda p: write_json(p, index), meta=meta)
+    say(args, f"refocused {len(slopes)} value(s) by {method} in {timing['total']:.2f} s -> {out}")
+    return 0
+
+
+# ---------------------------------------------------------------------- render
+def _render(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta, write_artifact
+    from capture.io import write_exr
+    from lightfield.field import LightField
+    from lightfield.levoy1996 import render_view
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".exr":
+        raise InputError("--out", f"{out}: the view is written as OpenEXR; name it .exr")
+    lf = LightField.load(args.lightfield)
+    if args.focus_depth is not None:
+        slope = lf.slope_from_depth(args.focus_depth)
+    else:
+        slope = args.focus_slope
+    if args.position[2] != 0 and lf.focal_px is None:
+        raise InputError("--position", "Z != 0 needs the light field's focal_px (import with "
+                                       "--focal-px)")
+    view = render_view(lf, args.position, focus_slope=slope, interpolation=args.interpolation)
+    frac = float(view.valid.mean())
+    if frac == 0:
+        raise InputError("--position", f"{tuple(args.position)}: every ray leaves the light "
+                                       "slab; put the pinhole over the camera grid")
+    rgba = np.concatenate([view.image if view.image.shape[2] == 3 else
+                           np.repeat(view.image[..., :1], 3, -1),
+                           view.valid[..., None].astype(np.float32)], -1)
+    warnings = [] if frac == 1 else [f"{100 * (1 - frac):.1f}% of rays leave the slab "
+                                     "(alpha = 0 there)"]
+    for w in warnings:
+        warn(w)
+    write_artifact(out, lambda p: write_exr(p, rgba), meta=make_meta(
+        "lumigraph.novel-view", inputs=[Path(args.lightfield) / "lightfield.json"],
+        params={"position": list(args.position), "focus_slope": slope,
+                "interpolation": args.interpolation},
+        quality={"valid_fraction": frac}, warnings=warnings))
+    say(args, f"wrote {out} (alpha = valid rays, {100 * frac:.1f}%)")
+    return 0
+
+
+# ----------------------------------------------------------------------- depth
+def _depth(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta, write_artifact
+    from capture.command import parse_floats
+    from capture.io import write_exr, write_pfm
+    from lightfield.field import LightField
+    from lightfield.refocus import all_in_focus, estimate_disparity, focal_stack
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".pfm":
+        raise InputError("--out", f"{out}: the disparity map is written as PFM; name it .pfm")
+    lo, hi, n = parse_floats(args.slopes, name="--slopes")
+    if not (hi > lo and n >= 3):
+        raise InputError("--slopes", "expected MIN,MAX,N with MAX > MIN and N >= 3")
+    lf = LightField.load(args.lightfield)
+    slopes = np.linspace(lo, hi, int(n))
+    est = estimate_disparity(lf, slopes, window=args.window)
+    write_artifact(out, lambda p: write_pfm(p, est.disparity), meta=make_meta(
+        "lumigraph.disparity", inputs=[Path(args.lightfield) / "lightfield.json"],
+        params={"slopes": [lo, hi, int(n)], "window": args.window},
+        quality={"median_confidence": float(np.median(est.confidence))}))
+    if args.all_in_focus:
+        stack = focal_stack(lf, slopes, method="auto")
+        aif = all_in_focus(stack, slopes, est.disparity)
+        write_artifact(args.all_in_focus, lambda p: write_exr(p, aif), meta=make_meta(
+            "lumigraph.all-in-focus", inputs=[Path(args.lightfield) / "lightfield.json"],
+            params={"slopes": [lo, hi, int(n)]}))
+    say(args, f"wrote {out}")
+    return 0
+
+
+def main(argv=None, prog="lumigraph lightfield") -> int:
+    p = make_parser(prog, "Light fields: import camera arrays, decode lenslet raws, refocus "
+                          "(shift-and-add, Fourier slice), render novel views, estimate depth.",
+                    epilog=EPILOG)
+    sp = subparsers(p)
+
+    v = add_verb(sp, "import", "build a light-field folder from row-major views")
+    v.add_argument("images", nargs="+", help="view images (row-major), or a rendered folder")
+    v.add_argument("--grid", help="ROWSxCOLS, e.g. 5x5")
+    v.add_argument("--spacing", type=float, help="camera spacing (world units)")
+    v.add_argument("--focal-px", type=float, help="focal length of the views in pixels")
+    v.add_argument("--linear", action="store_true",
+                   help="integer views are linear codes (default: sRGB, decoded to linear)")
+    v.add_argument("--out", required=True, help="light-field folder")
+    v.set_defaults(func=_import)
+
+    v = add_verb(sp, "decode", "decode a lenslet raw into sub-aperture views")
+    v.add_argument("raw", help="lenslet raw image (linear)")
+    v.add_argument("--white", required=True, help="white image of the same camera")
+    v.add_argument("--views", type=int, help="views per microimage side "
+                                             "(default: stack.json beside RAW, else 1 per px)")
+    v.add_argument("--lattice", choices=("auto", "square", "hex"), default="auto")
+    v.add_argument("--out", required=True, help="light-field folder")
+    v.set_defaults(func=_decode)
+
+    v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)")
+    v.add_argument("lightfield", help="light-field folder")
+    g = v.add_mutually_exclusive_group(required=True)
+    g.add_argument("--alpha", nargs="+", help="Ng's alpha values")
+    g.add_argument("--depth", nargs="+", help="focal depths (units of spacing)")
+    g.add_argument("--slope", nargs="+", help="slopes, px per view step")
+    v.add_argument("--method", choices=("shift-add", "fourier", "auto"), default="auto")
+    v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",
+                   help="shift-and-add interpolation (default lanczos3)")
+    v.add_argument("--out", required=True, help="OUT.exr for one value, a folder for several")
+    v.set_defaults(func=_refocus)
+
+    v = add_verb(sp, "render", "render a novel pinhole view from the light slab")
+    v.add_argument("lightfield", help="light-field folder")
+    v.add_argument("--position", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
+                   help="pinhole position (world units, relative to the grid centre)")
+    fg = v.add_mutually_exclusive_group()
+    fg.add_argument("--focus-slope", type=float, default=0.0,
+                    help="disparity of the slab's (s, t) plane (default 0: infinity)")
+    fg.add_argument("--focus-depth", type=float, help="depth of the (s, t) plane")
+    v.add_argument("--interpolation", choices=("quadrilinear", "uv-bilinear"),
+                   default="quadrilinear")
+    v.add_argument("--out", required=True, help="view.exr (RGBA, A = valid ray)")
+    v.set_defaults(func=_render)
+
+    v = add_verb(sp, "depth", "disparity (and all-in-focus image) from the light field")
+    v.add_argument("lightfield", help="light-field folder")
+    v.add_argument("--slopes", default="-2,2,41", help="MIN,MAX,N candidate disparities")
+    v.add_argument("--window", type=int, default=7, help="cost aggregation window")
+    v.add_argument("--all-in-focus", help="also write the all-in-focus image (EXR)")
+    v.add_argument("--out", required=True, help="disparity.pfm")
+    v.set_defaults(func=_depth)
+    return run(p, argv)
