@@ -1,0 +1,519 @@
+"""HDR exchange formats: Radiance RGBE ``.hdr`` (with RLE) and LogLuv TIFF
+(32-bit ``SGILOG`` and 24-bit ``SGILOG24``), encoded and decoded here.
+
+Reference ch. 6.2 (RGBE: three 8-bit mantissas sharing an 8-bit exponent,
+bias 128; LogLuv 32: sign, 15-bit ``Le = ⌊256 (log2 Y + 64)⌋``, 8-bit
+``⌊410 u′⌋`` and ``⌊410 v′⌋``; LogLuv 24: 10-bit ``Le = ⌊64 (log2 Y + 12)⌋``
+and a 14-bit index into Ward's table of ``u′v′`` cells of side 0.0035).
+G. Ward Larson, "LogLuv encoding for full-gamut, high-dynamic range images",
+J. Graphics Tools 3(1), 1998, doi:10.1080/10867651.1998.10487485.
+
+Precision (relative, per pixel): RGBE ≤ 2⁻⁸ of the brightest channel;
+LogLuv 32 ≈ 0.27 % steps in luminance (2^(1/256)); LogLuv 24 ≈ 1.1 %
+(2^(1/64)) and a coarser chromaticity.
+
+Colour: images are linear Rec. 709/sRGB primaries (D65) in memory; LogLuv
+stores CIE XYZ, converted with the sRGB matrices. The 24-bit table's row
+starts and lengths (``UV_USTART``, ``UV_NUS``) are the format's definition
+(Ward's 1997 table as shipped with libtiff), kept as data.
+
+Examples
+--------
+>>> import tempfile, os
+>>> rng = np.random.default_rng(0)
+>>> img = np.exp(rng.uniform(-8, 8, (5, 9, 3))).astype(np.float32)
+>>> d = tempfile.mkdtemp()
+>>> write_rgbe(os.path.join(d, "a.hdr"), img)
+>>> back = read_rgbe(os.path.join(d, "a.hdr"))
+>>> bool(np.all(np.abs(back - img) <= img.max(axis=2, keepdims=True) * 2.0 ** -8))
+True
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from capture.artifact import atomic_path
+from capture.errors import InputError
+
+# ------------------------------------------------------------------ colour
+RGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
+                       [0.2126729, 0.7151522, 0.0721750],
+                       [0.0193339, 0.1191920, 0.9503041]])
+XYZ_TO_RGB = np.linalg.inv(RGB_TO_XYZ)
+
+
+def _as_rgb(img, where) -> np.ndarray:
+    a = np.asarray(img)
+    if a.dtype.kind != "f":
+        raise TypeError(f"img: expected float linear radiance, got {a.dtype}")
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise ValueError(f"img: expected (H, W) or (H, W, 3), got {np.shape(img)}")
+    if not np.isfinite(a).all():
+        raise ValueError(f"img: {where} cannot store NaN/inf")
+    return a.astype(np.float64)
+
+
+# -------------------------------------------------------------------- RGBE
+def float_to_rgbe(img: np.ndarray) -> np.ndarray:
+    """``(H, W, 3)`` float -> ``(H, W, 4)`` uint8 RGBE (negative values become 0).
+
+    Examples
+    --------
+    >>> float_to_rgbe(np.array([[[1.0, 0.5, 0.0]]])).tolist()
+    [[[128, 64, 0, 129]]]
+    """
+    a = np.maximum(np.asarray(img, dtype=np.float64), 0.0)
+    m = a.max(axis=2)
+    mant, ex = np.frexp(m)
+    out = np.zeros(a.shape[:2] + (4,), np.uint8)
+    ok = m > 1e-38
+    scale = np.where(ok, mant * 256.0 / np.where(ok, m, 1.0), 0.0)
+    out[..., :3] = np.clip(np.floor(a * scale[..., None]), 0, 255).astype(np.uint8)
+    out[..., 3] = np.where(ok, ex + 128, 0).astype(np.uint8)
+    return out
+
+
+def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
+    """``(H, W, 4)`` uint8 -> ``(H, W, 3)`` float32; mantissas decode at their
+    centres (``(m + 0.5)·2^(e−136)``), as Radiance does."""
+    e = rgbe[..., 3].astype(np.int32)
+    f = np.where(e > 0, np.ldexp(1.0, e - 136), 0.0)
+    return ((rgbe[..., :3].astype(np.float64) + 0.5) * f[..., None]).astype(np.float32)
+
+
+def _rle_bytes(row: np.ndarray) -> bytes:
+    """Radiance's new RLE for one component of one scanline: runs (``128 + n``,
+    value; ``n`` ≤ 127) for 3+ repeats, literal dumps (``n`` ≤ 128) otherwise."""
+    out = bytearray()
+    n = row.size
+    change = np.flatnonzero(np.diff(row.astype(np.int16))) + 1
+    starts = np.concatenate([[0], change])
+    lens = np.diff(np.concatenate([starts, [n]]))
+    lit = bytearray()
+
+    def flush():
+        for k in range(0, len(lit), 128):
+            chunk = lit[k:k + 128]
+            out.append(len(chunk))
+            out.extend(chunk)
+        lit.clear()
+
+    for s, ln in zip(starts.tolist(), lens.tolist(), strict=True):
+        v = int(row[s])
+        if ln >= 3:
+            flush()
+            while ln > 0:
+                k = min(ln, 127)
+                if k < 3:
+                    lit.extend([v] * k)
+                else:
+                    out.extend((128 + k, v))
+                ln -= k
+        else:
+            lit.extend([v] * ln)
+    flush()
+    return bytes(out)
+
+
+def write_rgbe(path, img: np.ndarray) -> None:
+    """Write Radiance RGBE (``-Y H +X W``, top row first, new-style RLE).
+
+    Parameters
+    ----------
+    img : ndarray, ``(H, W, 3)`` or ``(H, W)`` float, linear, finite.
+    """
+    a = _as_rgb(img, "RGBE")
+    h, w = a.shape[:2]
+    rgbe = float_to_rgbe(a)
+    parts = [b"#?RADIANCE\n# lumigraph\nFORMAT=32-bit_rle_rgbe\n\n", f"-Y {h} +X {w}\n".encode()]
+    if 8 <= w <= 0x7FFF:
+        head = bytes([2, 2, w >> 8, w & 0xFF])
+        for y in range(h):
+            parts.append(head)
+            for c in range(4):
+                parts.append(_rle_bytes(rgbe[y, :, c]))
+    else:  # flat scanlines: RLE is only defined for widths 8..32767
+        parts.append(rgbe.tobytes())
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(b"".join(parts))
+
+
+def read_rgbe(path) -> np.ndarray:
+    """Read Radiance RGBE (flat or RLE scanlines) as ``(H, W, 3)`` float32,
+    top row first. Tolerates header lines before ``#?RADIANCE`` (some files,
+    such as Debevec's ``memorial.hdr``, start with ``VIEW=``)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "file not found")
+    data = p.read_bytes()
+    m = re.search(rb"\n\n([-+][YX]) (\d+) ([-+][YX]) (\d+)\n", data[:65536])
+    head = data[:m.start()] if m else b""
+    if m is None or not (b"#?RADIANCE" in head or b"#?RGBE" in head or b"FORMAT=" in head):
+        raise InputError(p, "not a Radiance RGBE file (no header with a resolution line)")
+    if b"FORMAT=" in head and b"32-bit_rle_rgbe" not in head:
+        raise InputError(p, "only FORMAT=32-bit_rle_rgbe is supported (not XYZE)")
+    if (m.group(1), m.group(3)) != (b"-Y", b"+X"):
+        raise InputError(p, f"unsupported orientation {m.group(0).strip().decode()}; expected -Y H +X W")
+    h, w = int(m.group(2)), int(m.group(4))
+    pos = m.end()
+    out = np.empty((h, w, 4), np.uint8)
+    buf = np.frombuffer(data, np.uint8)
+    try:
+        for y in range(h):
+            if 8 <= w <= 0x7FFF and buf[pos] == 2 and buf[pos + 1] == 2 and buf[pos + 2] < 128:
+                if (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) != w:
+                    raise InputError(p, f"scanline {y}: width mismatch in RLE header")
+                pos += 4
+                for c in range(4):
+                    x = 0
+                    while x < w:
+                        n = int(buf[pos])
+                        if n > 128:
+                            n -= 128
+                            if x + n > w:
+                                raise InputError(p, f"scanline {y}: run overflows the line")
+                            out[y, x:x + n, c] = buf[pos + 1]
+                            pos += 2
+                        else:
+                            if n == 0 or x + n > w:
+                                raise InputError(p, f"scanline {y}: bad literal count {n}")
+                            out[y, x:x + n, c] = buf[pos + 1:pos + 1 + n]
+                            pos += 1 + n
+                        x += n
+            else:
+                seg = buf[pos:pos + 4 * w]
+                if seg.size < 4 * w:
+                    raise InputError(p, f"truncated at scanline {y} of {h}")
+                out[y] = seg.reshape(w, 4)
+                pos += 4 * w
+    except IndexError:
+        raise InputError(p, f"truncated RGBE data (height {h})") from None
+    return rgbe_to_float(out)
+
+
+# ------------------------------------------------------------------ LogLuv
+UV_SQSIZ = 0.0035
+UV_VSTART = 0.016940
+UV_USTART = np.array([
+    0.247663, 0.243779, 0.241684, 0.237874, 0.235906, 0.232153, 0.228352, 0.226259, 0.222371,
+    0.220410, 0.214710, 0.212714, 0.210721, 0.204976, 0.202986, 0.199245, 0.195525, 0.193560,
+    0.189878, 0.186216, 0.186216, 0.182592, 0.179003, 0.175466, 0.172001, 0.172001, 0.168612,
+    0.168612, 0.163575, 0.158642, 0.158642, 0.158642, 0.153815, 0.153815, 0.149097, 0.149097,
+    0.142746, 0.142746, 0.142746, 0.138270, 0.138270, 0.138270, 0.132166, 0.132166, 0.126204,
+    0.126204, 0.126204, 0.120381, 0.120381, 0.120381, 0.120381, 0.112962, 0.112962, 0.112962,
+    0.107450, 0.107450, 0.107450, 0.107450, 0.100343, 0.100343, 0.100343, 0.095126, 0.095126,
+    0.095126, 0.095126, 0.088276, 0.088276, 0.088276, 0.088276, 0.081523, 0.081523, 0.081523,
+    0.081523, 0.074861, 0.074861, 0.074861, 0.074861, 0.068290, 0.068290, 0.068290, 0.068290,
+    0.063573, 0.063573, 0.063573, 0.063573, 0.057219, 0.057219, 0.057219, 0.057219, 0.050985,
+    0.050985, 0.050985, 0.050985, 0.050985, 0.044859, 0.044859, 0.044859, 0.044859, 0.040571,
+    0.040571, 0.040571, 0.040571, 0.036339, 0.036339, 0.036339, 0.036339, 0.032139, 0.032139,
+    0.032139, 0.032139, 0.027947, 0.027947, 0.027947, 0.023739, 0.023739, 0.023739, 0.023739,
+    0.019504, 0.019504, 0.019504, 0.016976, 0.016976, 0.016976, 0.016976, 0.012639, 0.012639,
+    0.012639, 0.009991, 0.009991, 0.009991, 0.009016, 0.009016, 0.009016, 0.006217, 0.006217,
+    0.005097, 0.005097, 0.005097, 0.003909, 0.003909, 0.002340, 0.002389, 0.001068, 0.001653,
+    0.000717, 0.001614, 0.000270, 0.000484, 0.001103, 0.001242, 0.001188, 0.001011, 0.000709,
+    0.000301, 0.002416, 0.003251, 0.003246, 0.004141, 0.005963, 0.008839, 0.010490, 0.016994,
+    0.023659])
+UV_NUS = np.array([
+    4, 6, 7, 9, 10, 12, 14, 15, 17, 18, 21, 22, 23, 26, 27, 29, 31, 32, 34, 36, 36, 38, 40, 42,
+    44, 44, 46, 46, 49, 52, 52, 52, 55, 55, 58, 58, 62, 62, 62, 65, 65, 65, 69, 69, 73, 73, 73,
+    77, 77, 77, 77, 82, 82, 82, 86, 86, 86, 86, 91, 91, 91, 95, 95, 95, 95, 100, 100, 100, 100,
+    105, 105, 105, 105, 110, 110, 110, 110, 115, 115, 115, 115, 119, 119, 119, 119, 124, 124,
+    124, 124, 129, 129, 129, 129, 129, 134, 134, 134, 134, 138, 138, 138, 138, 142, 142, 142,
+    142, 146, 146, 146, 146, 150, 150, 150, 154, 154, 154, 154, 158, 158, 158, 161, 161, 161,
+    161, 165, 165, 165, 168, 168, 168, 170, 170, 170, 173, 173, 175, 175, 175, 177, 177, 177,
+    170, 164, 157, 150, 143, 136, 129, 123, 115, 109, 103, 97, 89, 82, 76, 69, 62, 55, 47, 40,
+    31, 21])
+UV_NCUM = np.concatenate([[0], np.cumsum(UV_NUS)[:-1]])
+UV_NDIVS = int(UV_NUS.sum())
+U_NEU, V_NEU = 0.210526316, 0.473684211
+TAG_PHOTOMETRIC_LOGLUV = 32845
+COMPRESSION_SGILOG, COMPRESSION_SGILOG24 = 34676, 34677
+
+
+def _xyz_uv(xyz):
+    s = xyz[..., 0] + 15.0 * xyz[..., 1] + 3.0 * xyz[..., 2]
+    ok = s > 0
+    sd = np.where(ok, s, 1.0)
+    u = np.where(ok, 4.0 * xyz[..., 0] / sd, U_NEU)
+    v = np.where(ok, 9.0 * xyz[..., 1] / sd, V_NEU)
+    return u, v
+
+
+def _uv_to_xyz(y, u, v):
+    s = 6.0 * u - 16.0 * v + 12.0
+    x = 9.0 * u / s
+    yy = 4.0 * v / s
+    with np.errstate(divide="ignore", invalid="ignore"):
+        big_x = np.where(yy > 0, x / yy * y, 0.0)
+        big_z = np.where(yy > 0, (1.0 - x - yy) / yy * y, 0.0)
+    return np.stack([big_x, y, big_z], axis=-1)
+
+
+def uv_index(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """The 14-bit ``u′v′`` cell index of LogLuv 24 (out-of-gamut values go
+    to the nearest cell of their row/column).
+
+    Examples
+    --------
+    >>> int(uv_index(np.array(U_NEU), np.array(V_NEU))) < UV_NDIVS
+    True
+    """
+    vi = np.clip(np.floor((np.asarray(v) - UV_VSTART) / UV_SQSIZ), 0, UV_USTART.size - 1)
+    vi = vi.astype(np.int64)
+    ui = np.floor((np.asarray(u) - UV_USTART[vi]) / UV_SQSIZ)
+    ui = np.clip(ui, 0, UV_NUS[vi] - 1).astype(np.int64)
+    return UV_NCUM[vi] + ui
+
+
+def uv_from_index(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cell centres ``(u′, v′)`` of LogLuv 24 indices."""
+    c = np.asarray(c, dtype=np.int64)
+    vi = np.searchsorted(UV_NCUM, c, side="right") - 1
+    ui = c - UV_NCUM[vi]
+    return UV_USTART[vi] + (ui + 0.5) * UV_SQSIZ, UV_VSTART + (vi + 0.5) * UV_SQSIZ
+
+
+def encode_logluv32(rgb: np.ndarray) -> np.ndarray:
+    """Linear RGB ``(H, W, 3)`` -> LogLuv 32 words ``(H, W)`` uint32."""
+    xyz = _as_rgb(rgb, "LogLuv") @ RGB_TO_XYZ.T
+    y = xyz[..., 1]
+    with np.errstate(divide="ignore"):
+        le = np.floor(256.0 * (np.log2(np.abs(y)) + 64.0))
+    le = np.where(np.abs(y) > 5.4136769e-20, np.clip(le, 0, 0x7FFF), 0).astype(np.uint32)
+    sign = (y < 0).astype(np.uint32) << 15
+    u, v = _xyz_uv(np.abs(xyz))
+    ue = np.clip(np.floor(410.0 * u), 0, 255).astype(np.uint32)
+    ve = np.clip(np.floor(410.0 * v), 0, 255).astype(np.uint32)
+    return ((sign | le) << 16) | (ue << 8) | ve
+
+
+def decode_logluv32(words: np.ndarray) -> np.ndarray:
+    """LogLuv 32 words -> linear RGB float32."""
+    w = np.asarray(words, dtype=np.uint32)
+    le = (w >> 16) & 0x7FFF
+    y = np.where(le > 0, np.exp2((le + 0.5) / 256.0 - 64.0), 0.0)
+    y = np.where((w >> 31) & 1, -y, y)
+    u = (((w >> 8) & 0xFF) + 0.5) / 410.0
+    v = ((w & 0xFF) + 0.5) / 410.0
+    return (_uv_to_xyz(y, u, v) @ XYZ_TO_RGB.T).astype(np.float32)
+
+
+def encode_logluv24(rgb: np.ndarray) -> np.ndarray:
+    """Linear RGB -> LogLuv 24 words ``(H, W)`` uint32 (low 24 bits)."""
+    xyz = np.maximum(_as_rgb(rgb, "LogLuv") @ RGB_TO_XYZ.T, 0.0)
+    y = xyz[..., 1]
+    with np.errstate(divide="ignore"):
+        le = np.floor(64.0 * (np.log2(y) + 12.0))
+    le = np.where(y >= 15.742, 0x3FF, np.where(y <= 0.00024283, 0, np.clip(le, 0, 0x3FF)))
+    u, v = _xyz_uv(xyz)
+    return (le.astype(np.uint32) << 14) | uv_index(u, v).astype(np.uint32)
+
+
+def decode_logluv24(words: np.ndarray) -> np.ndarray:
+    """LogLuv 24 words -> linear RGB float32."""
+    w = np.asarray(words, dtype=np.uint32)
+    le = (w >> 14) & 0x3FF
+    y = np.where(le > 0, np.exp2((le + 0.5) / 64.0 - 12.0), 0.0)
+    c = np.minimum(w & 0x3FFF, UV_NDIVS - 1)
+    u, v = uv_from_index(c)
+    return (_uv_to_xyz(y, u, v) @ XYZ_TO_RGB.T).astype(np.float32)
+
+
+def _rle32_row(words: np.ndarray) -> bytes:
+    """SGILOG byte-plane run-length coding of one row: for each byte plane
+    (most significant first) runs ``(126 + n, byte)`` with ``n`` in 2..129 for
+    4+ repeats, literals ``(n ≤ 127, bytes…)`` otherwise."""
+    out = bytearray()
+    for shift in (24, 16, 8, 0):
+        plane = ((words >> shift) & 0xFF).astype(np.uint8)
+        n = plane.size
+        change = np.flatnonzero(np.diff(plane.astype(np.int16))) + 1
+        starts = np.concatenate([[0], change]).tolist()
+        lens = np.diff(np.concatenate([starts, [n]])).tolist()
+        lit = bytearray()
+
+        def flush(lit=lit):
+            for k in range(0, len(lit), 127):
+                chunk = lit[k:k + 127]
+                out.append(len(chunk))
+                out.extend(chunk)
+            lit.clear()
+
+        for s, ln in zip(starts, lens, strict=True):
+            b = int(plane[s])
+            while ln >= 4:
+                k = min(ln, 129)
+                if ln - k in (1, 2, 3) and k > 4:
+                    k -= 4 - (ln - k) if ln - k < 4 else 0
+                flush()
+                out.extend((126 + k, b))
+                ln -= k
+            lit.extend([b] * ln)
+        flush()
+    return bytes(out)
+
+
+def _unrle32_row(buf: np.ndarray, pos: int, w: int, where) -> tuple[np.ndarray, int]:
+    words = np.zeros(w, np.uint32)
+    for shift in (24, 16, 8, 0):
+        x = 0
+        while x < w:
+            if pos >= buf.size:
+                raise InputError(where, "truncated SGILOG data")
+            n = int(buf[pos])
+            if n >= 128:
+                n -= 126
+                words[x:x + n] |= np.uint32(int(buf[pos + 1]) << shift)
+                pos += 2
+            else:
+                seg = buf[pos + 1:pos + 1 + n].astype(np.uint32)
+                if n == 0 or seg.size < n:
+                    raise InputError(where, "corrupt SGILOG literal")
+                words[x:x + n] |= seg[:max(0, min(n, w - x))] << np.uint32(shift)
+                pos += 1 + n
+            x += n
+    return words, pos
+
+
+def write_logluv_tiff(path, img: np.ndarray, *, bits: int = 32) -> None:
+    """Write a LogLuv TIFF (Photometric 32845), 32-bit (``SGILOG``, RLE) or
+    24-bit (``SGILOG24``), one strip, little-endian.
+
+    BitsPerSample 32 with SampleFormat IEEEFP tells libtiff the data are XYZ
+    floats, so ``tiffcp``/``tiff2rgba`` decode it.
+    """
+    if bits not in (24, 32):
+        raise ValueError(f"bits: expected 24 or 32, got {bits}")
+    a = _as_rgb(img, "LogLuv")
+    h, w = a.shape[:2]
+    if bits == 32:
+        words = encode_logluv32(a)
+        body = b"".join(_rle32_row(words[y]) for y in range(h))
+        comp = COMPRESSION_SGILOG
+    else:
+        words = encode_logluv24(a)
+        b3 = np.stack([(words >> 16) & 0xFF, (words >> 8) & 0xFF, words & 0xFF], axis=-1)
+        body = b3.astype(np.uint8).tobytes()
+        comp = COMPRESSION_SGILOG24
+    n_tags = 11
+    ifd_off = 8
+    ifd_size = 2 + 12 * n_tags + 4
+    extra_off = ifd_off + ifd_size
+    bps_off, sf_off = extra_off, extra_off + 6
+    data_off = extra_off + 12
+    tags = [(256, 4, 1, w), (257, 4, 1, h), (258, 3, 3, bps_off), (259, 3, 1, comp),
+            (262, 3, 1, TAG_PHOTOMETRIC_LOGLUV), (273, 4, 1, data_off), (277, 3, 1, 3),
+            (278, 4, 1, h), (279, 4, 1, len(body)), (284, 3, 1, 1), (339, 3, 3, sf_off)]
+    ifd = struct.pack("<H", n_tags)
+    for tag, typ, cnt, val in tags:
+        if typ == 3 and cnt == 1:
+            ifd += struct.pack("<HHIHH", tag, typ, cnt, val, 0)
+        else:
+            ifd += struct.pack("<HHII", tag, typ, cnt, val)
+    ifd += struct.pack("<I", 0)
+    extra = struct.pack("<3H", 32, 32, 32) + struct.pack("<3H", 3, 3, 3)
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(b"II*\x00" + struct.pack("<I", ifd_off) + ifd + extra + body)
+
+
+def _tiff_tags(data: bytes, where) -> tuple[dict, str]:
+    if data[:4] not in (b"II*\x00", b"MM\x00*"):
+        raise InputError(where, "not a TIFF file")
+    e = "<" if data[:2] == b"II" else ">"
+    (off,) = struct.unpack(e + "I", data[4:8])
+    (n,) = struct.unpack(e + "H", data[off:off + 2])
+    sizes = {1: 1, 3: 2, 4: 4, 16: 8}
+    fmt = {1: "B", 3: "H", 4: "I", 16: "Q"}
+    tags = {}
+    for k in range(n):
+        tag, typ, cnt = struct.unpack(e + "HHI", data[off + 2 + 12 * k:off + 10 + 12 * k])
+        if typ not in sizes:
+            continue
+        size = sizes[typ] * cnt
+        vo = off + 10 + 12 * k
+        if size > 4:
+            (vo,) = struct.unpack(e + "I", data[vo:vo + 4])
+        tags[tag] = list(struct.unpack(e + fmt[typ] * cnt, data[vo:vo + size]))
+    return tags, e
+
+
+def read_logluv_tiff(path) -> np.ndarray:
+    """Read a LogLuv TIFF (``SGILOG`` or ``SGILOG24``, strips, contiguous) as
+    linear RGB ``(H, W, 3)`` float32."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "file not found")
+    data = p.read_bytes()
+    tags, _ = _tiff_tags(data, p)
+    if tags.get(262, [None])[0] != TAG_PHOTOMETRIC_LOGLUV:
+        raise InputError(p, "not a LogLuv TIFF (Photometric is not 32845)")
+    comp = tags.get(259, [1])[0]
+    if comp not in (COMPRESSION_SGILOG, COMPRESSION_SGILOG24):
+        raise InputError(p, f"LogLuv compression {comp} unsupported (expected SGILOG 34676 or "
+                            "SGILOG24 34677)")
+    if 322 in tags:
+        raise InputError(p, "tiled LogLuv TIFF is not supported; convert with tiffcp -s")
+    w, h = tags[256][0], tags[257][0]
+    body = b"".join(data[o:o + c] for o, c in zip(tags[273], tags[279], strict=True))
+    buf = np.frombuffer(body, np.uint8)
+    if comp == COMPRESSION_SGILOG24:
+        if buf.size < 3 * w * h:
+            raise InputError(p, f"truncated SGILOG24 data: {buf.size} of {3 * w * h} bytes")
+        b3 = buf[:3 * w * h].reshape(h, w, 3).astype(np.uint32)
+        return decode_logluv24((b3[..., 0] << 16) | (b3[..., 1] << 8) | b3[..., 2])
+    words = np.empty((h, w), np.uint32)
+    pos = 0
+    for y in range(h):
+        words[y], pos = _unrle32_row(buf, pos, w, p)
+    return decode_logluv32(words)
+
+
+# ------------------------------------------------------------------ dispatch
+HDR_EXTS = (".exr", ".hdr", ".pic", ".tif", ".tiff", ".pfm")
+
+
+def read_hdr_image(path) -> np.ndarray:
+    """Read linear radiance from EXR, RGBE ``.hdr``, LogLuv ``.tif`` or PFM."""
+    from capture.io import read_exr, read_pfm
+
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext == ".exr":
+        return read_exr(p) if p.is_file() else _missing(p)
+    if ext in (".hdr", ".pic"):
+        return read_rgbe(p)
+    if ext in (".tif", ".tiff"):
+        return read_logluv_tiff(p)
+    if ext == ".pfm":
+        return read_pfm(p) if p.is_file() else _missing(p)
+    raise InputError(p, f"unknown HDR extension {p.suffix!r}; expected one of {', '.join(HDR_EXTS)}")
+
+
+def _missing(p):
+    raise InputError(p, "file not found")
+
+
+def write_hdr_image(path, img: np.ndarray, *, logluv_bits: int = 32, half: bool = False) -> None:
+    """Write linear radiance by extension: ``.exr``, ``.hdr``, ``.tif`` (LogLuv), ``.pfm``."""
+    from capture.io import write_exr, write_pfm
+
+    ext = os.path.splitext(str(path))[1].lower()
+    if ext == ".exr":
+        write_exr(path, np.asarray(img, np.float32), half=half)
+    elif ext in (".hdr", ".pic"):
+        write_rgbe(path, img)
+    elif ext in (".tif", ".tiff"):
+        write_logluv_tiff(path, img, bits=logluv_bits)
+    elif ext == ".pfm":
+        write_pfm(path, img)
+    else:
+        raise InputError(path, f"unknown HDR extension; expected one of {', '.join(HDR_EXTS)}")
