@@ -192,8 +192,8 @@ def estimate_max_motion(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, li
     >>> import cv2
     >>> a = cv2.GaussianBlur(rng.random((96, 128)).astype(np.float32), (0, 0), 1.5)
     >>> b = np.roll(a, (5, -12), axis=(0, 1))
-    >>> round(estimate_max_motion(a, b)[0])
-    13
+    >>> bool(abs(estimate_max_motion(a, b)[0] - 13.0) < 1.0)      # |(-12, 5)| = 13
+    True
     """
     import cv2
 

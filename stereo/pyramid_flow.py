@@ -25,7 +25,7 @@ Examples
 >>> a = cv2.GaussianBlur(rng.random((64, 80)).astype(np.float32), (0, 0), 2)
 >>> b = np.roll(a, (1, 3), axis=(0, 1))          # frame 1 = frame 0 moved by (3, 1)
 >>> r = pyramid_flow(a, b, levels="auto")
->>> np.round(np.median(r.flow[8:-8, 8:-8], axis=(0, 1)), 2).tolist(), r.levels
+>>> np.round(np.median(r.flow[8:-8, 8:-8], axis=(0, 1)), 1).tolist(), r.levels
 ([3.0, 1.0], 2)
 """
 

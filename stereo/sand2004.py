@@ -132,7 +132,7 @@ def _features(gray: np.ndarray, *, window: int = 5) -> np.ndarray:
 
 
 def weighted_regression(offsets: np.ndarray, weights: np.ndarray, *, sigma: float,
-                        ridge: float = 1e-3) -> np.ndarray:
+                        ridge: float = 1e-4) -> np.ndarray:
     """Locally weighted linear regression of an offset field.
 
     At every pixel ``x0`` fits ``d(x) = a + B (x - x0)`` to all offsets, each

@@ -1,0 +1,87 @@
+"""``lumigraph flow`` through the command line: outputs, sidecars, bad input."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import assert_clean_error, lumigraph
+
+from capture import io
+from capture.render import render
+
+
+@pytest.fixture(scope="module")
+def pair(tmp_path_factory):
+    d = tmp_path_factory.mktemp("pair")
+    render("flow", size=(96, 72), seed=2).save(d)
+    return d
+
+
+def test_flow_writes_flo_probability_picture_and_meta(pair, tmp_path):
+    out = tmp_path / "f.flo"
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out,
+                  "--viz", tmp_path / "f.png", "-q")
+    assert r.returncode == 0, r.stderr
+    flow = io.read_flo(out)
+    assert flow.shape == (72, 96, 2)
+    prob = io.read_exr(tmp_path / "f.prob.exr")
+    assert prob.shape == (72, 96) and 0 <= prob.min() and prob.max() <= 1
+    meta = json.loads((tmp_path / "f.flo.meta.json").read_text())
+    assert meta["model"]["levels"] >= 1 and meta["model"]["level_choice"]["candidates"]
+    assert io.read_image(tmp_path / "f.png").shape == (72, 96, 3)
+
+
+def test_video_matching_method(pair, tmp_path):
+    out = tmp_path / "m.flo"
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out,
+                  "--method", "video-matching", "--levels", "2", "-q")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "m.flo.meta.json").read_text())["model"]["levels"] == 2
+    assert (tmp_path / "m.prob.exr").exists()
+
+
+def _nothing_written(d):
+    return not any(p.name.startswith("out") for p in d.iterdir())
+
+
+def test_different_sizes(pair, tmp_path):
+    small = tmp_path / "small.png"
+    io.write_image(small, np.zeros((40, 50, 3), np.uint8))
+    r = lumigraph("flow", pair / "frame00.png", small, "--out", tmp_path / "out.flo")
+    assert_clean_error(r, "small.png", "50x40")
+    assert _nothing_written(tmp_path)
+
+
+def test_empty_image(pair, tmp_path):
+    empty = tmp_path / "empty.png"
+    empty.write_bytes(b"")
+    r = lumigraph("flow", empty, pair / "frame01.png", "--out", tmp_path / "out.flo")
+    assert_clean_error(r, "empty.png")
+    assert _nothing_written(tmp_path)
+
+
+def test_missing_file(pair, tmp_path):
+    r = lumigraph("flow", pair / "frame00.png", tmp_path / "nope.png", "--out", tmp_path / "out.flo")
+    assert_clean_error(r, "nope.png")
+    assert _nothing_written(tmp_path)
+
+
+def test_bad_levels_and_out(pair, tmp_path):
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out",
+                  tmp_path / "out.flo", "--levels", "zero")
+    assert_clean_error(r, "--levels")
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", tmp_path / "out.png")
+    assert_clean_error(r, "--out")
+    assert _nothing_written(tmp_path)
+
+
+def test_bench_flow_quick(tmp_path):
+    r = lumigraph("bench", "flow", "--out", tmp_path, "--quick", "-q")
+    assert r.returncode == 0, r.stderr
+    js = json.loads((tmp_path / "report.json").read_text())
+    rows = js["stages"]["flow"]["rows"]
+    methods = {x["method"] for x in rows}
+    assert {"pyramid (ours)", "Farneback", "DIS medium", "video matching (ours)"} <= methods
+    assert all(x["status"] == "ok" or x["status"].startswith("unavailable") for x in rows)
+    assert js["stages"]["flow"]["checks"]
+    assert (tmp_path / "flow.png").read_bytes().startswith(b"\x89PNG")
