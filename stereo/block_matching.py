@@ -117,24 +117,40 @@ def noise_sigma(gray: np.ndarray) -> float:
     """Robust estimate of the sensor noise σ (code values) of one image.
 
     The 3×3 mask ``[[1,-2,1],[-2,4,-2],[1,-2,1]]`` cancels smooth image content
-    and passes white noise with gain 6 (Immerkær 1996); the median absolute
-    response (× 1.4826 for a Gaussian) is robust to the edges a scene has.
+    and passes white noise with gain 6 (Immerkær 1996). Its mean absolute
+    response is taken over 8×8 blocks and the 10th percentile of the blocks
+    kept: the smoothest parts of a scene show the noise alone, where a global
+    average would count texture and edges as noise.
 
     Examples
     --------
-    >>> g = np.full((64, 64), 100.0, np.float32) + np.random.default_rng(1).normal(0, 2, (64, 64))
+    >>> g = np.full((64, 64), 100.0) + np.random.default_rng(1).normal(0, 2, (64, 64))
     >>> round(noise_sigma(g.astype(np.float32)), 1)
     2.0
     """
     import cv2
 
     k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    r = cv2.filter2D(gray, cv2.CV_32F, k)[1:-1, 1:-1]
-    return float(1.4826 * np.median(np.abs(r)) / 6.0)
+    r = np.abs(cv2.filter2D(gray, cv2.CV_32F, k)[1:-1, 1:-1])
+    h, w = (r.shape[0] // 8) * 8, (r.shape[1] // 8) * 8
+    if h == 0 or w == 0:
+        return float(np.sqrt(np.pi / 2) * r.mean() / 6.0)
+    blocks = r[:h, :w].reshape(h // 8, 8, w // 8, 8).mean(axis=(1, 3))
+    # blocks near black or white are clipped (less noise than the sensor's):
+    # leave them out
+    level = gray[1:h + 1, 1:w + 1].reshape(h // 8, 8, w // 8, 8).mean(axis=(1, 3))
+    lo, hi = float(gray.min()), float(gray.max())
+    ok = (level > lo + 0.04 * (hi - lo)) & (level < hi - 0.04 * (hi - lo))
+    if ok.sum() >= 10:
+        blocks = blocks[ok]
+    # mean |N(0, s)| = s·sqrt(2/π); the 10th percentile of 8×8 block means of
+    # pure noise sits at 0.785 of their mean (measured; the mask's responses
+    # are correlated), hence 1/0.785
+    return float(np.sqrt(np.pi / 2) * np.percentile(blocks, 10) / 6.0 / 0.785)
 
 
 def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_tolerance,
-          subpixel):
+          subpixel, distinct, noise_var):
     """Match rows ``y0:y1``; ``left``/``right`` carry a margin of rows so box
     filters see real neighbours. Returns per-pixel arrays for the band."""
     import cv2
@@ -223,13 +239,19 @@ def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_
 
     # uniqueness: best outside d-1..d+1 (after the left-right check: this
     # overwrites the volume)
-    if uniqueness > 0:
+    if uniqueness > 0 or distinct > 0:
         for off in (-1, 0, 1):
             idx = np.clip(dbest + off, 0, D - 1)[None]
             np.put_along_axis(vol, idx, _INT_MAX, 0)
         second = vol.min(axis=0)
         secondc = (second & ~low).view(np.float32)
-        unique = (second == _INT_MAX) | (secondc > bestc * (1 + uniqueness))
+        # ratio test, plus an absolute margin: on a flat (textureless) window
+        # every disparity costs 2σ² ± σ²·sqrt(8/n) (noise only), so a winner
+        # by less than `distinct` such deviations is chance, not a match
+        nwin = np.asarray(windows, np.float32)[np.minimum(pick, len(windows) - 1)] ** 2
+        margin = distinct * noise_var * np.sqrt(8.0 / nwin)
+        unique = (second == _INT_MAX) | ((secondc > bestc * (1 + uniqueness))
+                                         & (secondc - bestc > margin))
     else:
         unique = np.ones((h, w), bool)
 
@@ -246,8 +268,9 @@ def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_
 
 
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
-          texture_snr: float = 1.0, uniqueness: float = 0.05, lr_tolerance: int = 1,
-          subpixel: bool = True, threads: int | None = None) -> DisparityMap:
+          texture_snr: float = 0.5, uniqueness: float = 0.02, lr_tolerance: int = 2,
+          distinct: float = 0.3, subpixel: bool = True,
+          threads: int | None = None) -> DisparityMap:
     """Dense disparity of a rectified pair by SSD block matching (eq. 5.1).
 
     Parameters
@@ -261,11 +284,15 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         Odd window side (3..63), or ``"auto"``: per pixel the smallest of
         ``AUTO_WINDOWS`` = (5, 9, 15) whose texture passes the test.
     texture_snr : float
-        A window must have intensity standard deviation ≥ ``texture_snr · σ``,
-        ``σ`` the noise estimated from the left image (0 disables the test).
+        A window must have an intensity standard deviation ≥ ``texture_snr ·
+        σ``, ``σ`` the noise estimated from the left image (0 disables).
     uniqueness : float
         Keep a match only if every disparity outside ``d ± 1`` costs more than
         ``(1 + uniqueness)`` times the best (0 disables).
+    distinct : float
+        The runner-up must also cost at least ``distinct · σ² · sqrt(8/n)``
+        more than the best (``n`` window pixels): the spread of costs that
+        noise alone produces on a flat window (0 disables).
     lr_tolerance : int
         Largest left–right disagreement in pixels (−1 disables the check).
     subpixel : bool
@@ -303,14 +330,18 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     if texture_snr < 0 or uniqueness < 0:
         raise ValueError("texture_snr, uniqueness: expected values >= 0")
     sigma = noise_sigma(L)
-    # texture threshold: window variance >= (snr·σ)², with σ floored at half a
-    # code value (quantisation alone gives σ ≈ 0.29)
+    # texture threshold: window variance >= (snr·σ)², σ floored at half a code
+    # value (quantisation alone gives σ ≈ 0.29). The noise estimate reads high
+    # on finely textured images, so the default snr is modest; flat areas
+    # that pass on noise alone are caught by the uniqueness and left-right
+    # tests (their cost curve is flat and random).
     thr = (texture_snr * max(sigma, 0.5)) ** 2
     thresholds = tuple(thr for _ in windows)
     n_threads = threads or min(4, os.cpu_count() or 1)
     n_bands = max(1, min(n_threads, h // 32))
     edges = np.linspace(0, h, n_bands + 1).astype(int)
-    kw = dict(max_disp=max_disp, windows=windows, thresholds=thresholds,
+    kw = dict(max_disp=max_disp, windows=windows, thresholds=thresholds, distinct=distinct,
+              noise_var=max(sigma, 0.5) ** 2,
               uniqueness=uniqueness, lr_tolerance=lr_tolerance, subpixel=subpixel)
     old = cv2.getNumThreads()
     try:
@@ -332,7 +363,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     picks = sum(p[4] for p in parts)
     n = h * w
     info = {"method": "ssd-block-matching", "max_disp": max_disp, "window": window,
-            "texture_snr": texture_snr, "uniqueness": uniqueness, "lr_tolerance": lr_tolerance,
+            "texture_snr": texture_snr, "uniqueness": uniqueness, "distinct": distinct, "lr_tolerance": lr_tolerance,
             "subpixel": subpixel, "noise_sigma_estimate": sigma, "texture_threshold_var": thr,
             "rejected_fraction": {k: v / n for k, v in counts.items()},
             "valid_fraction": float(np.isfinite(disp).mean())}

@@ -1,0 +1,278 @@
+"""Bench stage ``stereo``: block matching against OpenCV, triangulation, SfM.
+
+Stereo cases: our rendered pairs (``stereo-pair`` plain, and with a
+textureless card and thin occluders) and the four Middlebury pairs in
+``../shared/data/stereo-real`` (GT scale 16/8/4/4, 0 = unknown). Methods: our
+SSD block matching (knob: window side, and ``auto``), OpenCV StereoBM (same
+windows) and StereoSGBM (block size). Error: **bad-2.0**, the share of pixels
+with ground truth whose estimate is missing or off by more than 2 px (a
+method gains nothing by leaving pixels unknown); the share among estimated
+pixels and the density are recorded beside it.
+
+Triangulation case: 4000 points seen by two asymmetric cameras with lens
+distortion, 0.5 px Gaussian noise (knob: noise σ, 0 and 0.5); error: RMS 3-D
+error relative to the point distance; extras: the first-order predicted RMS
+error and how many rays under 0.5° were flagged. SfM case: the
+``stereo-views`` scene through pycolmap (knob: fixed intrinsics or not);
+error: largest camera-centre error after similarity alignment, relative to
+the diameter of the camera path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from capture.bench import Case, Check, Method, Results, Stage
+
+REAL = {"tsukuba": ("im3.png", "im4.png", "disp3.pgm", 16),
+        "venus": ("im2.png", "im6.png", "disp2.pgm", 8),
+        "teddy": ("im2.png", "im6.png", "disp2.png", 4),
+        "cones": ("im2.png", "im6.png", "disp2.png", 4)}
+WINDOWS = (5, 9, 15)
+
+
+def _shared():
+    from pathlib import Path
+    import os
+
+    return Path(os.environ.get("LUMIGRAPH_SHARED", Path(__file__).resolve().parents[2] / "shared"))
+
+
+def _real(name):
+    from capture.io import read_image
+
+    a, b, g, scale = REAL[name]
+    base = _shared() / "data" / "stereo-real" / name
+    gt = read_image(base / g).astype(np.float64)
+    if gt.ndim == 3:
+        gt = gt[..., 0]
+    gt = np.where(gt > 0, gt / scale, np.nan)
+    max_disp = int(16 * np.ceil((np.nanmax(gt) + 2) / 16)) - 1
+    return {"kind": "stereo", "left": read_image(base / a), "right": read_image(base / b), "gt": gt,
+            "max_disp": max_disp}
+
+
+def _pair(size, **opts):
+    from capture.render import render
+
+    s = render("stereo-pair", size=size, **opts)
+    gt = s.gt_arrays["disparity"].astype(np.float64)
+    return {"kind": "stereo", "left": s.images[0], "right": s.images[1], "gt": gt,
+            "max_disp": int(s.gt["suggested_max_disp"]) - 1}
+
+
+def _gray(im):
+    import cv2
+
+    return cv2.cvtColor(im, cv2.COLOR_RGB2GRAY) if im.ndim == 3 else im
+
+
+def _ours(data, window):
+    from stereo.block_matching import match
+
+    return match(data["left"], data["right"], max_disp=data["max_disp"], window=window).disparity
+
+
+def _bm_prepare(data):
+    return {**data, "gl": _gray(data["left"]), "gr": _gray(data["right"])}
+
+
+def _bm(data, window):
+    import cv2
+
+    bm = cv2.StereoBM_create(numDisparities=data["max_disp"] + 1, blockSize=window)
+    d = bm.compute(data["gl"], data["gr"]).astype(np.float32) / 16.0
+    d[d < 0] = np.nan
+    return d
+
+
+def _sgbm(data, window):
+    import cv2
+
+    c = 1 if data["left"].ndim == 2 else 3
+    sg = cv2.StereoSGBM_create(0, data["max_disp"] + 1, window, P1=8 * c * window ** 2,
+                               P2=32 * c * window ** 2, disp12MaxDiff=1, uniquenessRatio=10,
+                               mode=cv2.STEREO_SGBM_MODE_SGBM)
+    d = sg.compute(data["left"], data["right"]).astype(np.float32) / 16.0
+    d[d < 0] = np.nan
+    return d
+
+
+def _tri_case(n=4000):
+    from calib.camera import Camera
+
+    rng = np.random.default_rng(11)
+    cam_l = Camera(np.array([[610., 0, 331], [0, 598, 236], [0, 0, 1]]),
+                   np.array([-0.12, 0.03, 1e-3, -5e-4, 0.0]), (640, 480))
+    cam_r = Camera(np.array([[590., 0, 318], [0, 585, 244], [0, 0, 1]]),
+                   np.array([-0.08, 0.01, -4e-4, 6e-4, 0.0]), (640, 480))
+    a, b = np.radians(-7.0), np.radians(2.0)
+    R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]]) @ \
+        np.array([[1, 0, 0], [0, np.cos(b), -np.sin(b)], [0, np.sin(b), np.cos(b)]])
+    poses = [(np.eye(3), np.zeros(3)), (R, np.array([-0.45, 0.02, 0.04]))]
+    X = np.column_stack([rng.uniform(-1.2, 1.2, n), rng.uniform(-0.9, 0.9, n), rng.uniform(3, 7, n)])
+    px = np.stack([c.project_world(X, *p) for c, p in zip((cam_l, cam_r), poses, strict=True)])
+    noise = rng.normal(0, 1, px.shape)
+    # near-parallel probes: far points (angle < 0.5 deg) and moderate ones just above
+    far = np.column_stack([rng.uniform(-20, 20, 200), rng.uniform(-10, 10, 200), rng.uniform(60, 400, 200)])
+    pfar = np.stack([c.project_world(far, *p) for c, p in zip((cam_l, cam_r), poses, strict=True)])
+    return {"kind": "tri", "cams": (cam_l, cam_r), "poses": poses, "X": X, "px": px, "noise": noise,
+            "far": far, "pfar": pfar}
+
+
+def _tri(method):
+    def run(data, sigma):
+        from stereo.triangulate import triangulate
+
+        s = sigma if sigma > 0 else 0.5
+        main = triangulate(data["px"] + sigma * data["noise"], list(data["cams"]), data["poses"],
+                           method=method, pixel_sigma=s)
+        far = triangulate(data["pfar"], list(data["cams"]), data["poses"], method=method, pixel_sigma=s)
+        return main, far
+
+    return run
+
+
+def _views():
+    from capture.render import render
+
+    s = render("stereo-views")
+    return {"kind": "sfm", "scene": s}
+
+
+def _sfm(data, fixed):
+    from calib.camera import Camera
+    from stereo.sfm import reconstruct
+
+    s = data["scene"]
+    cam = Camera.from_dict(s.gt["camera"]) if fixed else None
+    return reconstruct(s.images, s.image_names, camera=cam)
+
+
+def _error(data, out):
+    if data["kind"] == "stereo":
+        gt = data["gt"]
+        known = np.isfinite(gt)
+        e = np.abs(out[known] - gt[known])
+        est = np.isfinite(e)
+        return {"error": float(np.mean(~(e <= 2.0))),
+                "bad2_of_estimated": float(np.mean(e[est] > 2.0)) if est.any() else None,
+                "density": float(est.mean()),
+                "mean_abs_error_px": float(e[est].mean()) if est.any() else None}
+    if data["kind"] == "tri":
+        main, far = out
+        X = data["X"]
+        err = np.linalg.norm(main.points - X, axis=1)
+        rel = err / np.linalg.norm(X, axis=1)
+        ang_true = _true_angle(data)
+        return {"error": float(np.sqrt(np.mean(rel ** 2))),
+                "max_rel_error": float(rel.max()),
+                "rms_error": float(np.sqrt(np.mean(err ** 2))),
+                "rms_predicted": float(np.sqrt(np.mean(main.sigma ** 2))),
+                "far_below_0.5deg": int((ang_true < 0.5).sum()),
+                "far_flagged": int(far.near_parallel[ang_true < 0.5].sum()),
+                "main_flagged": int(main.near_parallel.sum())}
+    from stereo.sfm import centre_error
+
+    s = data["scene"]
+    ce = centre_error(out, np.array(s.gt["centres"]))
+    return {"error": ce["max"] / s.gt["scene_size_m"], "rms_rel": ce["rms"] / s.gt["scene_size_m"],
+            "registered": out.info["registered"], "points": out.info["points"]}
+
+
+def _true_angle(data):
+    c = [-R.T @ t for R, t in data["poses"]]
+    a = data["far"] - c[0]
+    b = data["far"] - c[1]
+    cosang = np.einsum("ij,ij->i", a, b) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+    return np.degrees(np.arccos(np.clip(cosang, -1, 1)))
+
+
+def _checks(res: Results, ctx) -> list[Check]:
+    out = []
+    stereo_cases = [c for c in ctx["stereo_cases"] if res.of(c, "ssd (ours)")]
+    for case in stereo_cases:
+        ratios, tratios, worst = [], [], ""
+        for w in WINDOWS:
+            try:
+                o, b = res.get(case, "ssd (ours)", w), res.get(case, "StereoBM", w)
+            except KeyError:
+                continue
+            if o.status != "ok" or b.status != "ok":
+                continue
+            ratios.append(o.error / b.error)
+            tratios.append(o.time_s / b.time_s)
+            worst += f"w{w}: {o.error:.3f} vs {b.error:.3f}; "
+        if ratios:
+            out.append(Check(f"{case}: bad-2.0 ours <= StereoBM's at the same window (worst ratio)",
+                             max(ratios), 1.0, max(ratios) <= 1.0, worst.strip()))
+            out.append(Check(f"{case}: wall time ours / StereoBM at the same window <= 3 (median)",
+                             float(np.median(tratios)), 3.0, float(np.median(tratios)) <= 3.0,
+                             "ratios " + ", ".join(f"{r:.1f}" for r in tratios)))
+        try:
+            sg = res.best(case, "StereoSGBM")
+            ours = res.best(case, "ssd (ours)")
+            out.append(Check(f"{case}: StereoSGBM beside (best bad-2.0, informational)", sg.error,
+                             ours.error, True, f"SGBM {sg.error:.3f} at {sg.value}, ours best "
+                                               f"{ours.error:.3f} at {ours.value}"))
+        except KeyError:
+            pass
+    if res.of("triangulation", "refined (ours)"):
+        r0 = res.get("triangulation", "refined (ours)", 0.0)
+        out.append(Check("triangulation: noise-free max relative 3-D error < 1e-6",
+                         r0.extra["max_rel_error"], 1e-6, r0.extra["max_rel_error"] < 1e-6))
+        r5 = res.get("triangulation", "refined (ours)", 0.5)
+        ratio = r5.extra["rms_error"] / r5.extra["rms_predicted"]
+        out.append(Check("triangulation: 0.5 px noise, RMS error / predicted within 10 %", ratio, 1.0,
+                         abs(ratio - 1) <= 0.10,
+                         f"measured {r5.extra['rms_error']:.4g}, predicted {r5.extra['rms_predicted']:.4g} "
+                         "(4000 points)"))
+        out.append(Check("triangulation: rays < 0.5 deg flagged (flagged / such rays)",
+                         r0.extra["far_flagged"] / max(1, r0.extra["far_below_0.5deg"]), 1.0,
+                         r0.extra["far_flagged"] == r0.extra["far_below_0.5deg"]
+                         and r0.extra["main_flagged"] == 0,
+                         f"{r0.extra['far_flagged']} of {r0.extra['far_below_0.5deg']}; "
+                         f"{r0.extra['main_flagged']} false flags among 4000 well-conditioned points"))
+    if res.of("sfm", "pycolmap SfM"):
+        r = res.best("sfm", "pycolmap SfM")
+        worst = max(x.error for x in res.of("sfm", "pycolmap SfM"))
+        out.append(Check("SfM: camera centres within 1 % of the scene size (worst knob)", worst, 0.01,
+                         worst <= 0.01, f"best {r.error:.4%} (fixed intrinsics={r.value})"))
+    return out
+
+
+def stage(*, quick: bool = False) -> Stage:
+    shared_ok = (_shared() / "data" / "stereo-real").is_dir()
+    if quick:
+        cases = [Case("pair", lambda: _pair((240, 180)), "stereo-pair 240x180")]
+        if shared_ok:
+            cases.append(Case("tsukuba", lambda: _real("tsukuba"), "Middlebury Tsukuba"))
+        windows = (9,)
+        cases.append(Case("triangulation", lambda: _tri_case(1000), "1000 points, 2 distorted cameras"))
+    else:
+        cases = [Case("pair", lambda: _pair((320, 240)), "stereo-pair 320x240, noise 1"),
+                 Case("pair-hard", lambda: _pair((320, 240), textureless=True, occluders=2),
+                      "stereo-pair with a textureless card and two thin occluders")]
+        if shared_ok:
+            cases += [Case(n, (lambda n=n: _real(n)), f"Middlebury {n}") for n in REAL]
+        windows = WINDOWS
+        cases.append(Case("triangulation", _tri_case, "4000 points, 2 distorted cameras, asymmetric K"))
+        cases.append(Case("sfm", _views, "stereo-views: 10 views 320x240 on a 70 deg arc"))
+    stereo_names = tuple(c.name for c in cases if c.name not in ("triangulation", "sfm"))
+    methods = [
+        Method("ssd (ours)", _ours, "window", (*windows, "auto"), cases=stereo_names),
+        Method("StereoBM", _bm, "window", windows, peer="opencv", cases=stereo_names,
+               prepare=_bm_prepare),
+        Method("StereoSGBM", _sgbm, "window", (3, 5) if not quick else (5,), peer="opencv",
+               cases=stereo_names),
+        Method("refined (ours)", _tri("refined"), "noise px", (0.0, 0.5), cases=("triangulation",)),
+        Method("dlt (ours)", _tri("dlt"), "noise px", (0.0, 0.5), cases=("triangulation",)),
+        Method("midpoint (ours)", _tri("midpoint"), "noise px", (0.0, 0.5), cases=("triangulation",)),
+    ]
+    if not quick:
+        methods.append(Method("pycolmap SfM", _sfm, "fixed intrinsics", (True, False), peer=None,
+                              cases=("sfm",)))
+    return Stage("stereo", tuple(cases), tuple(methods), _error,
+                 "bad-2.0 (stereo) / relative 3-D error (triangulation, SfM)",
+                 checks=lambda res, ctx: _checks(res, {"stereo_cases": stereo_names}),
+                 description=__doc__.split("\n\n", 1)[1].strip())

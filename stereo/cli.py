@@ -1,0 +1,421 @@
+"""``lumigraph stereo``: block-matching stereo, depth, triangulation and SfM, file to file.
+
+Parses, loads, calls :mod:`stereo.block_matching`, :mod:`stereo.triangulate`,
+:mod:`stereo.sfm` and :mod:`calib.rectify`, and saves. Rig and camera files
+may be a ``rig.json``/``camera.json`` or a rendered scene's ``gt.json`` (its
+``rig``/``camera`` entry).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from capture.command import add_verb, check_output_path, make_parser, run, say, subparsers, warn
+from capture.errors import EstimationError, InputError
+
+EPILOG = """\
+examples:
+  lumigraph render stereo-pair --out out/pair
+  lumigraph stereo match out/pair/left.png out/pair/right.png --max-disp 48 --out out/disparity.pfm
+  lumigraph stereo match L.png R.png --rig rig.json --max-disp 64 --out d.pfm   (rectifies first)
+  lumigraph stereo depth out/disparity.pfm --rig out/pair/gt.json --image out/pair/left.png --out out/points.ply
+  lumigraph stereo triangulate tracks.json --out points.json
+  lumigraph stereo sfm out/views/*.png --camera out/views/gt.json --out out/sfm
+
+Disparity: left image is the reference, x_right = x_left - d, unknown = inf in the PFM.
+"""
+
+TRIANGULATE_EPILOG = """\
+correspondence files:
+  tracks.json (any number of views):
+    {"views": [{"camera": <camera.json contents>, "cam_from_world": {"R": 3x3, "t": [3]}}, ...],
+     "tracks": [[[x, y] or null for each view], ...],
+     "pixel_sigma": 0.5}                       (optional; --pixel-sigma overrides)
+  matches.txt with --rig rig.json (two views): one match per line, "x_left y_left x_right y_right",
+    '#' starts a comment; the world frame is the left camera's.
+Pixels are distorted image coordinates, pixel centres at integers.
+Output: .ply (finite points) or .json (every point with covariance, ray angle,
+reprojection RMS and flags). Rays closer than --min-angle degrees to parallel
+are flagged (a warning is printed); parallel rays give points at infinity,
+written as directions in the .json and left out of the .ply.
+"""
+
+
+# ----------------------------------------------------------------- loading
+def _read_json(path) -> dict:
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "file not found")
+    try:
+        return json.loads(p.read_text())
+    except json.JSONDecodeError as e:
+        raise InputError(p, f"invalid JSON ({e})") from None
+
+
+def load_rig(path):
+    """A ``rig.json``, or a scene's ``gt.json`` holding one under ``rig``."""
+    from calib.camera import Camera
+    from calib.rig import Rig
+
+    d = _read_json(path)
+    if "left" not in d and isinstance(d.get("rig"), dict):
+        d = d["rig"]
+    try:
+        left = Camera.from_dict(d["left"], where=f"{path}:left")
+        right = Camera.from_dict(d["right"], where=f"{path}:right")
+        return Rig.from_pose(left, right, np.array(d["R"], float), np.array(d["T"], float))
+    except InputError:
+        raise
+    except (KeyError, TypeError, ValueError) as e:
+        raise InputError(path, f"not a rig description ({e}); expected rig.json "
+                               "(left, right, R, T) or a gt.json with a 'rig' entry") from None
+
+
+def load_camera(path):
+    """A ``camera.json``, or a scene's ``gt.json`` holding one under ``camera``."""
+    from calib.camera import Camera
+
+    d = _read_json(path)
+    if "K" not in d and isinstance(d.get("camera"), dict):
+        d = d["camera"]
+    return Camera.from_dict(d, where=str(path))
+
+
+def _read(path):
+    from capture.io import read_image
+
+    img = read_image(path)
+    if img.size == 0 or min(img.shape[:2]) == 0:
+        raise InputError(path, "empty image")
+    return img
+
+
+def _rectify(rig, where):
+    from calib.rectify import rectify
+
+    try:
+        return rectify(rig)
+    except ValueError as e:
+        raise InputError(where, str(e)) from None
+
+
+# ------------------------------------------------------- rectification check
+def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
+    """Matched-feature offsets of a pair: median |Δy| and median Δx (px).
+
+    ORB features matched with a cross-check and Lowe's ratio; a rectified
+    pair has |Δy| ≈ 0 and Δx = d > 0.
+    """
+    import cv2
+
+    from stereo.block_matching import to_gray
+
+    def u8(a):
+        g = to_gray(a)
+        lo, hi = float(g.min()), float(g.max())
+        return np.clip((g - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
+
+    orb = cv2.ORB_create(max_features)
+    k1, d1 = orb.detectAndCompute(u8(left), None)
+    k2, d2 = orb.detectAndCompute(u8(right), None)
+    if d1 is None or d2 is None or len(k1) < 2 or len(k2) < 2:
+        return {"matches": 0}
+    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
+    good = []
+    for pair in bf.knnMatch(d1, d2, k=2):
+        if len(pair) == 2 and pair[0].distance < 0.75 * pair[1].distance:
+            good.append(pair[0])
+    if len(good) < 8:
+        return {"matches": len(good)}
+    p1 = np.array([k1[m.queryIdx].pt for m in good])
+    p2 = np.array([k2[m.trainIdx].pt for m in good])
+    # keep matches consistent with one fundamental matrix (drops repeats)
+    if len(good) >= 12:
+        _, inl = cv2.findFundamentalMat(p1, p2, cv2.FM_RANSAC, 1.5, 0.999)
+        if inl is not None and inl.sum() >= 8:
+            keep = inl.ravel().astype(bool)
+            p1, p2 = p1[keep], p2[keep]
+    dy = p1[:, 1] - p2[:, 1]
+    dx = p1[:, 0] - p2[:, 0]
+    return {"matches": len(p1), "median_abs_dy": float(np.median(np.abs(dy))),
+            "p90_abs_dy": float(np.percentile(np.abs(dy), 90)), "median_dx": float(np.median(dx))}
+
+
+# ------------------------------------------------------------------ verbs
+def _match(args) -> int:
+    from capture.artifact import make_meta
+    from stereo.block_matching import match
+
+    out = check_output_path(args.out, suffixes=(".pfm",))
+    left, right = _read(args.left), _read(args.right)
+    if left.shape[:2] != right.shape[:2]:
+        raise InputError(args.right, f"size {right.shape[1]}x{right.shape[0]} differs from the left "
+                                     f"image's {left.shape[1]}x{left.shape[0]}")
+    window = args.window
+    if window != "auto":
+        try:
+            window = int(window)
+        except ValueError:
+            raise InputError("--window", f"expected 'auto' or an odd integer, got {window!r}") from None
+        if window % 2 == 0 or not 3 <= window <= 63:
+            raise InputError("--window", f"expected an odd integer in [3, 63], got {window}")
+    if not 1 <= args.max_disp < left.shape[1]:
+        raise InputError("--max-disp", f"expected 1..{left.shape[1] - 1} (image width "
+                                       f"{left.shape[1]}), got {args.max_disp}")
+    t0 = time.perf_counter()
+    params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
+              "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance}
+    model: dict = {}
+    inputs = [args.left, args.right]
+    if args.rig:
+        rig = load_rig(args.rig)
+        inputs.append(args.rig)
+        if tuple(rig.left.image_size) != (left.shape[1], left.shape[0]):
+            raise InputError(args.rig, f"rig is for {rig.left.image_size[0]}x{rig.left.image_size[1]} "
+                                       f"images, the pair is {left.shape[1]}x{left.shape[0]}")
+        rect = _rectify(rig, args.rig)
+        left, right = rect.apply(left, right)
+        model["rectification"] = {"R1": rect.R1, "P1": rect.P1, "P2": rect.P2, "Q": rect.Q,
+                                  "focal_px": rect.focal_px, "baseline": rect.baseline}
+        say(args, f"rectified with {args.rig} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
+    else:
+        off = vertical_offsets(left, right)
+        model["rectification_check"] = off
+        if off["matches"] >= 12:
+            if off["median_abs_dy"] > 1.0:
+                raise InputError(args.right, "the pair is not rectified: matched features are offset "
+                                             f"vertically by {off['median_abs_dy']:.1f} px (median "
+                                             f"over {off['matches']}); give the rig with --rig rig.json")
+            if off["median_dx"] < -0.5:
+                raise InputError(args.right, "matched features lie to the right in the right image "
+                                             f"(median x_left - x_right = {off['median_dx']:.1f} px): "
+                                             "are left and right swapped?")
+        else:
+            warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
+    res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
+                uniqueness=args.uniqueness, lr_tolerance=args.lr_tolerance)
+    model["block_matching"] = res.info
+    dt = time.perf_counter() - t0
+    meta = make_meta("lumigraph.disparity", inputs=inputs, params=params, model=model,
+                     quality={"valid_fraction": res.valid_fraction,
+                              "median_disparity": float(np.nanmedian(res.disparity))
+                              if res.valid_fraction > 0 else None},
+                     timings_s={"total": dt},
+                     extra={"convention": "left reference, x_right = x_left - d, unknown = inf"})
+    res.save(out, meta=meta)
+    say(args, f"wrote {out} ({100 * res.valid_fraction:.0f}% of pixels matched)")
+    return 0
+
+
+def _depth(args) -> int:
+    import cv2
+
+    from capture.artifact import make_meta, write_artifact
+    from capture.io import read_pfm, write_ply
+
+    out = check_output_path(args.out, suffixes=(".ply",))
+    disp = read_pfm(args.disparity)
+    if disp.ndim != 2:
+        raise InputError(args.disparity, f"expected a one-channel disparity PFM, got shape {disp.shape}")
+    rig = load_rig(args.rig)
+    rect = _rectify(rig, args.rig)
+    if disp.shape[::-1] != tuple(rect.image_size):
+        raise InputError(args.disparity, f"size {disp.shape[1]}x{disp.shape[0]} differs from the "
+                                         f"rectified size {rect.image_size[0]}x{rect.image_size[1]}")
+    pts = rect.reproject(disp).astype(np.float64)
+    frame = "rectified left camera"
+    if args.frame == "left":
+        pts = pts @ rect.R1  # rect_from_cam = R1, so cam = R1^T rect (row vectors)
+        frame = "original left camera"
+    ok = np.isfinite(pts).all(axis=2)
+    if args.max_depth:
+        ok &= pts[..., 2] <= args.max_depth
+    colors = None
+    if args.image:
+        img = _read(args.image)
+        if img.shape[1::-1] != tuple(rig.left.image_size):
+            raise InputError(args.image, f"size {img.shape[1]}x{img.shape[0]} differs from the rig's "
+                                         f"{rig.left.image_size[0]}x{rig.left.image_size[1]}")
+        lx, ly, _, _ = rect.maps()
+        img = cv2.remap(np.ascontiguousarray(img), lx, ly, cv2.INTER_LINEAR)
+        if img.dtype == np.uint16:
+            img = (img / 257.0).round().astype(np.uint8)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=2)
+        colors = img[..., :3][ok].astype(np.uint8)
+    if not ok.any():
+        raise EstimationError(args.disparity, "no valid disparity: nothing to reproject")
+    meta = make_meta("lumigraph.points", inputs=[args.disparity, args.rig] + ([args.image] if args.image else []),
+                     params={"frame": frame, "max_depth": args.max_depth},
+                     quality={"points": int(ok.sum()), "of_pixels": int(disp.size)},
+                     extra={"focal_px": rect.focal_px, "baseline": rect.baseline})
+    write_artifact(out, lambda tmp: write_ply(tmp, pts[ok], colors), meta=meta)
+    say(args, f"wrote {int(ok.sum())} points to {out} ({frame} frame)")
+    return 0
+
+
+def _load_tracks(args):
+    from calib.camera import Camera
+
+    p = Path(args.correspondences)
+    if p.suffix.lower() == ".json":
+        d = _read_json(p)
+        try:
+            cams, poses = [], []
+            for i, v in enumerate(d["views"]):
+                cams.append(Camera.from_dict(v["camera"], where=f"{p}:views[{i}].camera"))
+                pose = v.get("cam_from_world", {"R": np.eye(3).tolist(), "t": [0, 0, 0]})
+                R = np.array(pose["R"], float)
+                if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
+                    raise ValueError(f"views[{i}].cam_from_world.R is not a rotation")
+                poses.append((R, np.array(pose["t"], float).reshape(3)))
+            tracks = d["tracks"]
+            V = len(cams)
+            px = np.full((V, len(tracks), 2), np.nan)
+            for j, tr in enumerate(tracks):
+                if len(tr) != V:
+                    raise ValueError(f"tracks[{j}] has {len(tr)} entries for {V} views")
+                for v, xy in enumerate(tr):
+                    if xy is not None:
+                        px[v, j] = xy
+        except InputError:
+            raise
+        except (KeyError, TypeError, ValueError) as e:
+            raise InputError(p, f"not a tracks file ({e}); see 'lumigraph stereo triangulate --help'") from None
+        sigma = d.get("pixel_sigma")
+        return cams, poses, px, sigma
+    if not args.rig:
+        raise InputError(p, "a text file of matches needs --rig rig.json (or give a tracks .json)")
+    if not p.is_file():
+        raise InputError(p, "file not found")
+    try:
+        rows = np.loadtxt(p, comments="#", ndmin=2)
+    except ValueError as e:
+        raise InputError(p, f"cannot read matches ({e}); expected 'x_left y_left x_right y_right' per line") from None
+    if rows.shape[1] != 4 or len(rows) == 0:
+        raise InputError(p, f"expected 4 columns per line and at least one line, got shape {rows.shape}")
+    rig = load_rig(args.rig)
+    px = np.stack([rows[:, :2], rows[:, 2:]])
+    return [rig.left, rig.right], [(np.eye(3), np.zeros(3)), (rig.R, rig.T)], px, None
+
+
+def _triangulate(args) -> int:
+    from capture.artifact import dumps_json, make_meta, write_artifact
+    from capture.io import write_ply
+    from stereo.triangulate import triangulate
+
+    out = check_output_path(args.out, suffixes=(".ply", ".json"))
+    cams, poses, px, sigma = _load_tracks(args)
+    sigma = args.pixel_sigma or sigma or 0.5
+    try:
+        tri = triangulate(px, cams, poses, method=args.method, pixel_sigma=float(sigma),
+                          min_angle_deg=args.min_angle)
+    except ValueError as e:
+        raise InputError(args.correspondences, str(e)) from None
+    for w in tri.warnings:
+        warn(w)
+    meta = make_meta("lumigraph.points", inputs=[args.correspondences] + ([args.rig] if args.rig else []),
+                     params={"method": args.method, "pixel_sigma": sigma, "min_angle_deg": args.min_angle},
+                     quality={"points": len(tri.points),
+                              "median_reprojection_rms_px": float(np.nanmedian(tri.reprojection_rms))
+                              if np.isfinite(tri.reprojection_rms).any() else None,
+                              "median_sigma": float(np.nanmedian(tri.sigma))
+                              if np.isfinite(tri.sigma).any() else None},
+                     warnings=tri.warnings, model=tri.info)
+    if out.suffix.lower() == ".ply":
+        fin = ~tri.at_infinity
+        write_artifact(out, lambda tmp: write_ply(tmp, tri.points[fin]), meta=meta)
+    else:
+        doc = {"schema": "lumigraph.triangulation", "schema_version": 1, "info": tri.info,
+               "points": [{"xyz": None if tri.at_infinity[i] else tri.points[i].tolist(),
+                           "direction": tri.points_h[i, :3].tolist() if tri.at_infinity[i] else None,
+                           "covariance": None if tri.at_infinity[i] else tri.covariance[i].tolist(),
+                           "sigma": None if tri.at_infinity[i] else float(tri.sigma[i]),
+                           "angle_deg": float(tri.angle_deg[i]),
+                           "reprojection_rms_px": float(tri.reprojection_rms[i]),
+                           "near_parallel": bool(tri.near_parallel[i]),
+                           "at_infinity": bool(tri.at_infinity[i])} for i in range(len(tri.points))]}
+        write_artifact(out, lambda tmp: tmp.write_text(dumps_json(doc)), meta=meta)
+    say(args, f"wrote {len(tri.points)} points to {out}")
+    return 0
+
+
+def _sfm(args) -> int:
+    from capture.artifact import make_meta
+    from stereo.sfm import reconstruct
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "exists and is not a folder")
+    images = [_read(p) for p in args.images]
+    camera = load_camera(args.camera) if args.camera else None
+    say(args, f"structure from motion on {len(images)} images (pycolmap)")
+    rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
+    meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
+                     params={"seed": args.seed, "fixed_intrinsics": camera is not None},
+                     quality={k: rec.info[k] for k in ("registered", "images", "points",
+                                                       "mean_reprojection_error_px")},
+                     timings_s=rec.info["timings_s"], model=rec.info,
+                     warnings=[f"{(~rec.registered).sum()} images not registered"]
+                     if not rec.registered.all() else [])
+    rec.save(out, meta=meta)
+    say(args, f"registered {rec.info['registered']}/{len(images)} views, {rec.info['points']} points "
+              f"-> {out}/cameras.json, {out}/points.ply")
+    return 0
+
+
+def main(argv=None, prog: str = "lumigraph stereo") -> int:
+    p = make_parser(prog, "Block-matching stereo, depth from disparity, triangulation and "
+                          "structure from motion.", epilog=EPILOG)
+    sp = subparsers(p)
+
+    v = add_verb(sp, "match", "dense disparity of a stereo pair (SSD block matching, eq. 5.1)",
+                 epilog="A pair without --rig must already be rectified (checked from matched "
+                        "features: vertical offsets > 1 px are refused).\n"
+                        "--window auto picks per pixel the smallest of 5, 9, 15 whose texture "
+                        "passes --texture-snr; the choice is recorded in the .meta.json.")
+    v.add_argument("left")
+    v.add_argument("right")
+    v.add_argument("--rig", help="rig.json (or a scene gt.json): rectify the pair first")
+    v.add_argument("--max-disp", type=int, required=True, help="largest disparity searched (px)")
+    v.add_argument("--window", default="auto", help="odd window side, or auto (default)")
+    v.add_argument("--texture-snr", type=float, default=0.5,
+                   help="minimum window signal std in units of the noise sigma (default 0.5)")
+    v.add_argument("--uniqueness", type=float, default=0.02,
+                   help="second-best must cost (1+u) times the best (default 0.02)")
+    v.add_argument("--lr-tolerance", type=int, default=2,
+                   help="left-right check tolerance in px, -1 disables (default 2)")
+    v.add_argument("--out", required=True, help="disparity .pfm (unknown stored as inf)")
+    v.set_defaults(func=_match)
+
+    v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)")
+    v.add_argument("disparity", help="disparity .pfm from 'stereo match'")
+    v.add_argument("--rig", required=True, help="the rig the pair was rectified with (rig.json or gt.json)")
+    v.add_argument("--image", help="the ORIGINAL left image, for point colours")
+    v.add_argument("--frame", choices=("left", "rectified"), default="left",
+                   help="points in the original left camera frame (default) or the rectified one")
+    v.add_argument("--max-depth", type=float, help="drop points farther than this (rig units)")
+    v.add_argument("--out", required=True, help="points .ply")
+    v.set_defaults(func=_depth)
+
+    v = add_verb(sp, "triangulate", "3-D points with uncertainty from correspondences",
+                 epilog=TRIANGULATE_EPILOG)
+    v.add_argument("correspondences", help="tracks .json, or a matches text file with --rig")
+    v.add_argument("--rig", help="rig.json for a two-view matches text file")
+    v.add_argument("--method", choices=("refined", "dlt", "midpoint"), default="refined")
+    v.add_argument("--pixel-sigma", type=float, help="pixel noise std for the covariance (default 0.5)")
+    v.add_argument("--min-angle", type=float, default=0.5, help="flag rays closer to parallel (deg)")
+    v.add_argument("--out", required=True, help="points .ply or .json")
+    v.set_defaults(func=_triangulate)
+
+    v = add_verb(sp, "sfm", "unordered multi-view reconstruction (pycolmap)")
+    v.add_argument("images", nargs="+")
+    v.add_argument("--camera", help="camera.json (or a scene gt.json): known, fixed intrinsics")
+    v.add_argument("--seed", type=int, default=0)
+    v.add_argument("--out", required=True, help="folder for cameras.json and points.ply")
+    v.set_defaults(func=_sfm)
+    return run(p, argv)

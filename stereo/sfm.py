@@ -1,0 +1,319 @@
+"""Unordered multi-view reconstruction (structure from motion) through pycolmap.
+
+SIFT features, exhaustive matching with geometric verification, incremental
+mapping and bundle adjustment are COLMAP's (the field's standard, wrapped by
+pycolmap 4.x); this module feeds it our images and, when given, our
+``camera.json`` as fixed intrinsics, and turns its reconstruction into our
+conventions: ``cam_from_world`` poses, pixel centres at integer coordinates
+(COLMAP puts the first pixel's centre at 0.5), points with colours.
+
+Input problems are caught before COLMAP runs: fewer than two images, images of
+different sizes, an empty image, and duplicate views (identical images: zero
+baseline, nothing to triangulate) raise :class:`capture.errors.InputError`;
+a scene COLMAP cannot register raises :class:`capture.errors.EstimationError`.
+
+COLMAP reads images from files, so :func:`reconstruct` writes the arrays into
+a private temporary folder and removes it afterwards.
+
+Reference: J. L. Schönberger and J.-M. Frahm, "Structure-from-Motion
+Revisited", CVPR 2016, doi:10.1109/CVPR.2016.445 (reference ch. 5, §5.1.5:
+reconstruction from many views). Similarity alignment: S. Umeyama, "Least-
+squares estimation of transformation parameters between two point patterns",
+IEEE TPAMI 13(4), 1991, doi:10.1109/34.88573.
+
+Examples
+--------
+>>> rng = np.random.default_rng(0)
+>>> src = rng.normal(size=(6, 3))
+>>> R = np.array([[0., -1, 0], [1, 0, 0], [0, 0, 1]])
+>>> s, R_est, t_est = align_similarity(src, 2.5 * src @ R.T + [1, 2, 3])
+>>> round(s, 9), bool(np.allclose(R_est, R))
+(2.5, True)
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from capture.errors import EstimationError, InputError
+
+
+@dataclass(frozen=True)
+class Reconstruction:
+    """Cameras and points recovered from an unordered image set.
+
+    Attributes
+    ----------
+    image_names : tuple of str
+        One per input image, in input order.
+    registered : ndarray, (N,) bool
+        Whether each image's pose was recovered.
+    cam_from_world_R : ndarray, (N, 3, 3) float64
+    cam_from_world_t : ndarray, (N, 3) float64
+        ``x_cam = R x_world + t`` (NaN for unregistered images). The world
+        frame and scale are COLMAP's (arbitrary similarity).
+    camera : calib.camera.Camera
+        The shared camera (fixed when given, else as estimated).
+    points : ndarray, (P, 3) float64
+    colors : ndarray, (P, 3) uint8
+    track_length : ndarray, (P,) int
+    info : dict
+        Counts, mean reprojection error (px), options, timings.
+    """
+
+    image_names: tuple[str, ...]
+    registered: np.ndarray
+    cam_from_world_R: np.ndarray
+    cam_from_world_t: np.ndarray
+    camera: object
+    points: np.ndarray
+    colors: np.ndarray
+    track_length: np.ndarray
+    info: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        n = len(self.image_names)
+        if self.cam_from_world_R.shape != (n, 3, 3) or self.cam_from_world_t.shape != (n, 3):
+            raise ValueError("cam_from_world_R, cam_from_world_t: expected (N, 3, 3) and (N, 3)")
+        if self.points.shape != (len(self.colors), 3):
+            raise ValueError("points, colors: expected (P, 3) each")
+
+    @property
+    def centres(self) -> np.ndarray:
+        """Camera centres ``(N, 3)`` in the world frame, ``-Rᵀ t`` (NaN if unregistered)."""
+        return -np.einsum("nji,nj->ni", self.cam_from_world_R, self.cam_from_world_t)
+
+    def cameras_dict(self) -> dict:
+        """Our ``cameras.json`` layout: the shared camera and one pose per image."""
+        cam = self.camera.to_dict()
+        views = []
+        for i, name in enumerate(self.image_names):
+            v = {"image": name, "registered": bool(self.registered[i])}
+            if self.registered[i]:
+                v["cam_from_world"] = {"R": self.cam_from_world_R[i].tolist(),
+                                       "t": self.cam_from_world_t[i].tolist()}
+            views.append(v)
+        return {"schema": "lumigraph.cameras", "schema_version": 1, "camera": cam, "views": views}
+
+    def save(self, folder, *, meta: dict) -> None:
+        """Write ``points.ply`` and ``cameras.json`` (each with its sidecar) into ``folder``."""
+        from pathlib import Path
+
+        from capture.artifact import dumps_json, write_artifact
+        from capture.io import write_ply
+
+        folder = Path(folder)
+        folder.mkdir(parents=True, exist_ok=True)
+        write_artifact(folder / "cameras.json",
+                       lambda tmp: tmp.write_text(dumps_json(self.cameras_dict())), meta=meta)
+        write_artifact(folder / "points.ply", lambda tmp: write_ply(tmp, self.points, self.colors),
+                       meta=meta)
+
+
+def align_similarity(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Least-squares similarity ``dst ≈ s R src + t`` (Umeyama 1991).
+
+    Parameters
+    ----------
+    src, dst : ndarray, (N, 3), N >= 3 and not collinear
+
+    Returns
+    -------
+    s : float
+    R : ndarray, (3, 3) rotation (det +1)
+    t : ndarray, (3,)
+    """
+    src = np.asarray(src, np.float64)
+    dst = np.asarray(dst, np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 3:
+        raise ValueError(f"src, dst: expected two (N >= 3, 3) arrays, got {src.shape} and {dst.shape}")
+    ms, md = src.mean(0), dst.mean(0)
+    a, b = src - ms, dst - md
+    U, S, Vt = np.linalg.svd(b.T @ a / len(src))
+    E = np.eye(3)
+    E[2, 2] = np.sign(np.linalg.det(U @ Vt)) or 1.0
+    R = U @ E @ Vt
+    var = (a ** 2).sum() / len(src)
+    if var <= 0:
+        raise ValueError("src: all points coincide")
+    s = float(np.trace(np.diag(S) @ E) / var)
+    return s, R, md - s * R @ ms
+
+
+def check_views(images, names) -> None:
+    """Refuse inputs COLMAP would fail on obscurely (see the module docstring)."""
+    if len(images) < 2:
+        raise InputError("IMAGES", f"structure from motion needs at least 2 images, got {len(images)}")
+    shape0 = images[0].shape[:2]
+    for im, n in zip(images, names, strict=True):
+        if im.size == 0:
+            raise InputError(n, "empty image")
+        if im.shape[:2] != shape0:
+            raise InputError(n, f"size {im.shape[1]}x{im.shape[0]} differs from {names[0]}'s "
+                                f"{shape0[1]}x{shape0[0]}; give images of one camera")
+        if float(np.ptp(im)) == 0:
+            raise InputError(n, "image is blank (one value everywhere): nothing to match")
+    # duplicate views: identical content up to noise (mean |difference| below
+    # one code value) means zero baseline
+    small = [np.asarray(im, np.float32)[::4, ::4] for im in images]
+    for i in range(len(small)):
+        for j in range(i + 1, len(small)):
+            if float(np.mean(np.abs(small[i] - small[j]))) < 1.0:
+                raise InputError(names[j], f"duplicate view of {names[i]} (the images are the same): "
+                                           "a second view must move the camera; drop one")
+
+
+def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
+                max_features: int = 4096) -> Reconstruction:
+    """Reconstruct cameras and sparse points from an unordered image set.
+
+    Parameters
+    ----------
+    images : sequence of ndarray, (H, W) or (H, W, 3) uint8/uint16
+        The views (one camera, so one size).
+    names : sequence of str
+        One file name per image (kept in the result).
+    camera : calib.camera.Camera, optional
+        Known intrinsics: held fixed in bundle adjustment. Without it COLMAP
+        estimates a SIMPLE_RADIAL camera from a focal guess.
+    seed : int
+        COLMAP's random seed (RANSAC, initial pair).
+    threads : int
+        CPU threads for extraction, matching and mapping.
+    max_features : int
+        SIFT features per image.
+
+    Returns
+    -------
+    Reconstruction
+        The largest model COLMAP found.
+
+    Raises
+    ------
+    InputError
+        See :func:`check_views`; a camera whose size differs from the images.
+    EstimationError
+        Fewer than two images registered.
+    """
+    import tempfile
+    import time
+    from pathlib import Path
+
+    import cv2
+    import pycolmap
+
+    from calib.camera import Camera
+
+    names = [os.path.basename(str(n)) for n in names]
+    if len(set(names)) != len(names):
+        raise InputError("IMAGES", "two images share a file name; rename one")
+    check_views(images, names)
+    h, w = images[0].shape[:2]
+    if camera is not None and tuple(camera.image_size) != (w, h):
+        raise InputError("--camera", f"camera is for {camera.image_size[0]}x{camera.image_size[1]} "
+                                     f"images, the views are {w}x{h}")
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="lumigraph-sfm-") as tmp:
+        tmp = Path(tmp)
+        img_dir = tmp / "images"
+        img_dir.mkdir()
+        for im, n in zip(images, names, strict=True):
+            a = np.asarray(im)
+            if a.dtype == np.uint16:
+                a = (a / 257.0).round().astype(np.uint8)
+            if a.ndim == 3:
+                a = a[..., :3][..., ::-1]
+            cv2.imwrite(str(img_dir / (Path(n).stem + ".png")), np.ascontiguousarray(a))
+        files = [Path(n).stem + ".png" for n in names]
+        ro = pycolmap.ImageReaderOptions()
+        if camera is not None:
+            K, dist = camera.K, camera.dist
+            # COLMAP's pixel centres sit at +0.5
+            fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2] + 0.5, K[1, 2] + 0.5
+            ro.camera_model = "FULL_OPENCV" if dist.size == 8 else "OPENCV"
+            params = [fx, fy, cx, cy, *dist[:4]] + ([dist[4], *dist[5:8]] if dist.size == 8 else [])
+            if dist.size != 8 and dist.size > 4 and dist[4] != 0:
+                ro.camera_model = "FULL_OPENCV"
+                params = [fx, fy, cx, cy, *dist[:5], 0.0, 0.0, 0.0]
+            ro.camera_params = ",".join(repr(float(p)) for p in params)
+        eo = pycolmap.FeatureExtractionOptions()
+        eo.num_threads = threads
+        eo.sift.max_num_features = max_features
+        pycolmap.set_random_seed(seed)
+        db = tmp / "database.db"
+        pycolmap.extract_features(db, img_dir, image_names=files, camera_mode=pycolmap.CameraMode.SINGLE,
+                                  reader_options=ro, extraction_options=eo, device=pycolmap.Device.cpu)
+        t_feat = time.perf_counter()
+        mo = pycolmap.FeatureMatchingOptions()
+        mo.num_threads = threads
+        pycolmap.match_exhaustive(db, matching_options=mo, device=pycolmap.Device.cpu)
+        t_match = time.perf_counter()
+        opts = pycolmap.IncrementalPipelineOptions()
+        opts.random_seed = seed
+        opts.num_threads = threads
+        if camera is not None:
+            opts.ba_refine_focal_length = False
+            opts.ba_refine_principal_point = False
+            opts.ba_refine_extra_params = False
+        (tmp / "sparse").mkdir()
+        models = pycolmap.incremental_mapping(db, img_dir, tmp / "sparse", options=opts)
+        t_map = time.perf_counter()
+    if not models:
+        raise EstimationError("IMAGES", "COLMAP registered no image pair: too little overlap or "
+                                        "texture between the views")
+    rec = max(models.values(), key=lambda r: r.num_reg_images())
+    if rec.num_reg_images() < 2:
+        raise EstimationError("IMAGES", "fewer than two views could be registered")
+    n = len(names)
+    Rs = np.full((n, 3, 3), np.nan)
+    ts = np.full((n, 3), np.nan)
+    reg = np.zeros(n, bool)
+    index = {f: i for i, f in enumerate(files)}
+    for im in rec.images.values():
+        if not im.has_pose:
+            continue
+        i = index[im.name]
+        cw = im.cam_from_world()
+        Rs[i] = cw.rotation.matrix()
+        ts[i] = cw.translation
+        reg[i] = True
+    cam = next(iter(rec.cameras.values()))
+    if camera is None:
+        f, cx, cy = cam.params[:3]
+        k1 = cam.params[3] if len(cam.params) > 3 else 0.0
+        est = Camera(np.array([[f, 0, cx - 0.5], [0, f, cy - 0.5], [0, 0, 1]]), [k1, 0, 0, 0, 0],
+                     (w, h), "k1", {"source": f"COLMAP {cam.model.name}"})
+    else:
+        est = camera
+    pts = rec.points3D.values()
+    P = np.array([p.xyz for p in pts]).reshape(-1, 3)
+    C = np.array([p.color for p in pts], np.uint8).reshape(-1, 3)
+    L = np.array([p.track.length() for p in pts], int)
+    info = {"method": "pycolmap incremental SfM", "pycolmap": pycolmap.__version__,
+            "registered": int(reg.sum()), "images": n, "points": len(P),
+            "models_found": len(models),
+            "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
+            "fixed_intrinsics": camera is not None, "seed": seed,
+            "timings_s": {"features": t_feat - t0, "matching": t_match - t_feat,
+                          "mapping": t_map - t_match}}
+    return Reconstruction(tuple(names), reg, Rs, ts, est, P, C, L, info)
+
+
+def centre_error(rec: Reconstruction, gt_centres: np.ndarray) -> dict:
+    """Camera-centre error after the best similarity alignment to ground truth.
+
+    Returns ``{"max", "rms"}`` (GT units) over registered views, the fitted
+    ``scale`` and the count of views used.
+    """
+    gt = np.asarray(gt_centres, np.float64)
+    c = rec.centres
+    ok = rec.registered
+    if ok.sum() < 3:
+        raise EstimationError("reconstruction", "fewer than 3 registered views: cannot align")
+    s, R, t = align_similarity(c[ok], gt[ok])
+    e = np.linalg.norm((s * c[ok] @ R.T + t) - gt[ok], axis=1)
+    return {"max": float(e.max()), "rms": float(np.sqrt(np.mean(e ** 2))), "scale": s,
+            "aligned_views": int(ok.sum())}
