@@ -1,2 +1,32 @@
 """HDR imaging: camera-response recovery (one module per method), radiance
-merge, exposure alignment, tone mapping and HDR file formats."""
+merge, exposure alignment, tone mapping and HDR file formats.
+
+``from hdr import debevec, mitsunaga_nayar, merge, tonemap, ResponseCurve``
+works; the names load their modules on first use so ``import hdr`` stays cheap.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "ResponseCurve": "hdr.response",
+    "debevec": "hdr.debevec1997",
+    "mitsunaga_nayar": "hdr.mitsunaga1999",
+    "merge": "hdr.merge",
+    "RadianceMap": "hdr.merge",
+    "tonemap": "hdr.reinhard2002",
+    "align": "hdr.ward2003",
+    "mtb_shift": "hdr.ward2003",
+    "read_rgbe": "hdr.formats",
+    "write_rgbe": "hdr.formats",
+    "read_logluv_tiff": "hdr.formats",
+    "write_logluv_tiff": "hdr.formats",
+}
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'hdr' has no attribute {name!r}")

@@ -1,0 +1,286 @@
+"""``lumigraph hdr``: response curves, radiance merge, alignment, tone mapping,
+HDR file conversion. Parses, loads, calls the library, saves."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from capture.command import (add_verb, check_output_path, make_parser, parse_floats, run, say,
+                             subparsers, warn)
+from capture.errors import InputError
+from hdr.methods import RESPONSE_METHODS, TONEMAP_METHODS
+
+EPILOG = """\
+examples:
+  lumigraph render bracket --out out/bracket
+  lumigraph hdr response out/bracket --method debevec --out out/hdr/response.json --plot out/hdr/curve.png
+  lumigraph hdr merge out/bracket --response out/hdr/response.json --out out/hdr/radiance.exr
+  lumigraph hdr tonemap out/hdr/radiance.exr --method reinhard-local --out out/hdr/tonemapped.png
+  lumigraph hdr align IMG_*.jpeg --out aligned/
+  lumigraph hdr convert out/hdr/radiance.exr out/hdr/radiance.hdr
+
+Inputs are image files in bracket order or a folder with stack.json; exposure
+times come from EXIF or stack.json unless --times gives them (fractions such
+as 1/250 are fine). Every output gets a <output>.meta.json sidecar.
+"""
+
+
+def _times(args):
+    return parse_floats(args.times, name="--times") if args.times else None
+
+
+def _load(args, *, need_times=True):
+    import numpy as np
+
+    from capture.io import read_stack
+
+    stack = read_stack(args.images, times=_times(args), need_times=need_times)
+    if stack.images.dtype.kind == "f":
+        raise InputError(stack.paths[0], "float images are already linear; merge needs code values "
+                                         "(integer PNG/TIFF/JPEG/RAW)")
+    times = stack.exposure_times_s
+    if times is not None and "f_numbers" in stack.info and not args.times:
+        # Aperture bracket: relative exposure t · (N_ref / N)².
+        fn = np.asarray(stack.info["f_numbers"], dtype=np.float64)
+        ref = float(stack.info.get("f_number_ref", fn.min()))
+        times = tuple(float(t) * (ref / n) ** 2 for t, n in zip(times, fn, strict=True))
+    return stack, times
+
+
+def _response(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta
+    from hdr.methods import resolve
+
+    out = check_output_path(args.out, suffixes=(".json",))
+    if args.plot:
+        check_output_path(args.plot, suffixes=(".png",))
+    stack, times = _load(args, need_times=args.method != "linear" and not args.linear)
+    method = "linear" if (args.linear or stack.linear) else args.method
+    if method == "linear" and args.method != "linear":
+        say(args, "input is linear (RAW, float or declared linear in stack.json): no response "
+                  "curve is needed; writing the identity response")
+    opts = {"bit_depth": stack.bit_depth}
+    if method == "debevec":
+        opts["smoothness"] = "auto" if args.smoothness == "auto" else _num(args.smoothness,
+                                                                            "--smoothness")
+        opts["samples"] = args.samples
+    elif method == "mitsunaga-nayar":
+        opts["order"] = "auto" if args.order == "auto" else int(_num(args.order, "--order"))
+        opts["samples"] = args.samples
+    if method != "linear":
+        opts["rng"] = np.random.default_rng(args.seed)
+    fn = resolve(RESPONSE_METHODS, method)
+    t0 = time.perf_counter()
+    curve = fn(stack.images, times, **opts)
+    dt = time.perf_counter() - t0
+    for w in curve.warnings:
+        warn(w)
+    meta = make_meta("lumigraph.response", inputs=stack.paths,
+                     params={"method": method, "times_s": times, "samples": args.samples,
+                             "seed": args.seed, "bit_depth": stack.bit_depth},
+                     model={"method": curve.method, "selection": curve.selection},
+                     quality=curve.fit, timings_s={"fit": dt}, warnings=curve.warnings)
+    curve.save(out, meta=meta)
+    if args.plot:
+        plot_curve(curve, args.plot)
+    say(args, f"wrote {out} ({curve.method}, {curve.bit_depth}-bit, {dt:.2f} s)")
+    return 0
+
+
+def _num(text, name):
+    try:
+        return float(text)
+    except ValueError:
+        raise InputError(name, f"expected a number or 'auto', got {text!r}") from None
+
+
+def plot_curve(curve, path) -> None:
+    """Plot ``ln f⁻¹(z)`` per channel against the code value to a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from capture.artifact import atomic_path
+
+    z = np.arange(curve.code_max + 1)
+    fig, ax = plt.subplots(figsize=(5, 4))
+    for ch, col in zip(range(curve.channels), ("tab:red", "tab:green", "tab:blue"), strict=False):
+        ax.plot(curve.g[ch], z, color=col, lw=1.2, label=f"channel {ch}")
+    ax.set_xlabel("ln exposure  g(z) = ln f⁻¹(z)")
+    ax.set_ylabel("code value z")
+    ax.set_title(f"response: {curve.method}")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=100)
+    plt.close(fig)
+
+
+def _merge(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta, write_artifact
+    from capture.io import write_exr, write_image
+    from hdr.merge import merge
+    from hdr.response import ResponseCurve
+
+    out = check_output_path(args.out, suffixes=(".exr", ".hdr", ".tif", ".tiff", ".pfm"))
+    curve = ResponseCurve.load(args.response)
+    stack, times = _load(args)
+    if stack.bit_depth is not None and stack.bit_depth != curve.bit_depth:
+        raise InputError(args.response, f"curve is {curve.bit_depth}-bit but the images are "
+                                        f"{stack.bit_depth}-bit; recover a curve from this bracket")
+    if curve.channels not in (1, stack.images.shape[-1]):
+        raise InputError(args.response, f"curve has {curve.channels} channels, the images "
+                                        f"{stack.images.shape[-1]}")
+    t0 = time.perf_counter()
+    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost)
+    dt = time.perf_counter() - t0
+    for w in m.warnings:
+        warn(w)
+    meta = make_meta("lumigraph.radiance", inputs=[*stack.paths, args.response],
+                     params={"weights": args.weights, "deghost": args.deghost, "times_s": times,
+                             "response_method": curve.method},
+                     quality=m.stats, timings_s={"merge": dt}, warnings=m.warnings,
+                     extra={"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
+                            "mask": "flags PNG beside the output: 1 clipped everywhere (lower "
+                                    "bound), 2 black everywhere (upper bound), 4 ghost"})
+    mask_path = out.with_name(out.stem + ".mask.png")
+    flags = np.bitwise_or.reduce(m.flags, axis=2).astype(np.uint8)
+    write_artifact(mask_path, lambda p: write_image(p, flags),
+                   meta=make_meta("lumigraph.radiance_mask", inputs=stack.paths))
+    if out.suffix.lower() == ".exr":
+        write_artifact(out, lambda p: write_exr(p, m.radiance), meta=meta)
+    else:
+        from hdr.formats import write_hdr_image
+
+        write_artifact(out, lambda p: write_hdr_image(p, m.radiance), meta=meta)
+    say(args, f"wrote {out} and {mask_path.name} ({dt:.2f} s)")
+    return 0
+
+
+def _align(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta, write_json
+    from capture.io import read_stack, write_image, write_stack_json
+    from hdr.ward2003 import align
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("--out", f"{out} exists and is not a folder")
+    stack = read_stack(args.images, times=_times(args))
+    if stack.images.dtype.kind == "f":
+        raise InputError(stack.paths[0], "align works on code values (PNG/TIFF/JPEG)")
+    aligned, shifts = align(stack.images, reference=args.reference, levels=args.levels)
+    out.mkdir(parents=True, exist_ok=True)
+    names = []
+    for img, src in zip(aligned, stack.paths, strict=True):
+        name = Path(src).stem + ".png"
+        write_image(out / name, img if img.shape[-1] > 1 else img[..., 0],
+                    bit_depth=stack.bit_depth if img.dtype == np.uint16 else None)
+        names.append(name)
+    info = {k: v for k, v in stack.info.items() if k not in ("images", "schema", "schema_version")}
+    if stack.exposure_times_s is not None:
+        info["exposure_times_s"] = list(stack.exposure_times_s)
+    info["bit_depth"] = stack.bit_depth
+    info["mtb_shifts_px"] = [list(s) for s in shifts]
+    write_json(out / "stack.json.meta.json",
+               make_meta("lumigraph.aligned_stack", inputs=stack.paths,
+                         params={"levels": args.levels, "reference": args.reference},
+                         quality={"shifts_px": shifts}))
+    write_stack_json(out, names, **info)
+    say(args, f"aligned {len(names)} images into {out}; shifts (dx, dy): {shifts}")
+    return 0
+
+
+def _tonemap(args) -> int:
+    from capture.artifact import make_meta, write_artifact
+    from capture.io import write_image
+    from hdr.formats import read_hdr_image
+    from hdr.methods import resolve
+
+    out = check_output_path(args.out, suffixes=(".png", ".tif", ".tiff"))
+    img = read_hdr_image(args.input)
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[..., :3]
+    import numpy as np
+
+    if not np.isfinite(img).all():
+        raise InputError(args.input, "contains NaN/inf; tone mapping needs finite radiance")
+    fn = resolve(TONEMAP_METHODS, args.method)
+    ldr = fn(img, method=args.method, key=args.key, bit_depth=args.bit_depth)
+    meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
+                     params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth})
+    write_artifact(out, lambda p: write_image(p, ldr), meta=meta)
+    say(args, f"wrote {out}")
+    return 0
+
+
+def _convert(args) -> int:
+    from capture.artifact import make_meta, write_artifact
+    from hdr.formats import HDR_EXTS, read_hdr_image, write_hdr_image
+
+    out = check_output_path(args.output, suffixes=HDR_EXTS)
+    img = read_hdr_image(args.input)
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = img[..., :3]
+    meta = make_meta("lumigraph.hdr_image", inputs=[args.input],
+                     params={"logluv_bits": args.logluv_bits, "half": args.half})
+    write_artifact(out, lambda p: write_hdr_image(p, img, logluv_bits=args.logluv_bits,
+                                                  half=args.half), meta=meta)
+    say(args, f"wrote {out}")
+    return 0
+
+
+def main(argv=None, prog="lumigraph hdr") -> int:
+    p = make_parser(prog, "HDR imaging: response curves, radiance maps, alignment, tone mapping.",
+                    epilog=EPILOG)
+    sp = subparsers(p)
+    v = add_verb(sp, "response", "recover the camera response from a bracket")
+    v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
+    v.add_argument("--method", choices=sorted(RESPONSE_METHODS), default="debevec")
+    v.add_argument("--times", help="exposure times T1,T2,... (seconds; default EXIF/stack.json)")
+    v.add_argument("--out", required=True, help="response.json")
+    v.add_argument("--plot", help="also plot the curve to this PNG")
+    v.add_argument("--linear", action="store_true", help="the data are linear: identity response")
+    v.add_argument("--smoothness", default="auto", help="Debevec λ, or auto (held-out prediction)")
+    v.add_argument("--order", default="auto", help="Mitsunaga-Nayar order 1..10, or auto")
+    v.add_argument("--samples", type=int, default=600, help="pixels sampled (default 600)")
+    v.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling")
+    v.set_defaults(func=_response)
+    v = add_verb(sp, "merge", "merge a bracket into a radiance map")
+    v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
+    v.add_argument("--response", required=True, help="response.json from 'hdr response'")
+    v.add_argument("--times", help="exposure times T1,T2,... (seconds)")
+    v.add_argument("--out", required=True, help="radiance.exr (or .hdr, .tif LogLuv, .pfm)")
+    v.add_argument("--weights", choices=("variance", "hat"), default="variance")
+    v.add_argument("--deghost", action="store_true", help="leave out moving content")
+    v.set_defaults(func=_merge)
+    v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)")
+    v.add_argument("images", nargs="+")
+    v.add_argument("--out", required=True, help="output folder (aligned PNGs + stack.json)")
+    v.add_argument("--times", help="exposure times T1,T2,... to record in stack.json")
+    v.add_argument("--reference", type=int, default=None, help="reference image index")
+    v.add_argument("--levels", type=int, default=6, help="pyramid levels (shift <= 2**levels)")
+    v.set_defaults(func=_align)
+    v = add_verb(sp, "tonemap", "tone-map a radiance map to an sRGB image")
+    v.add_argument("input", help="radiance (.exr, .hdr, LogLuv .tif, .pfm)")
+    v.add_argument("--method", choices=sorted(TONEMAP_METHODS), default="reinhard")
+    v.add_argument("--key", type=float, default=0.18, help="scene key (0.18 middle grey)")
+    v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
+    v.add_argument("--out", required=True, help="image.png")
+    v.set_defaults(func=_tonemap)
+    v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
+    v.add_argument("input")
+    v.add_argument("output")
+    v.add_argument("--logluv-bits", type=int, choices=(24, 32), default=32)
+    v.add_argument("--half", action="store_true", help="EXR: half floats")
+    v.set_defaults(func=_convert)
+    return run(p, argv)
