@@ -286,7 +286,7 @@ def emitted(pattern: np.ndarray, *, b: float = 0.0) -> np.ndarray:
 
     Examples
     --------
-    >>> emitted(np.array([0.0, 1.0]), b=0.1).tolist()
+    >>> [round(float(v), 6) for v in emitted(np.array([0.0, 1.0]), b=0.1)]
     [0.1, 1.0]
     """
     if not 0.0 <= b < 1.0:

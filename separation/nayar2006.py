@@ -57,6 +57,7 @@ import numpy as np
 from capture.errors import EstimationError
 
 MASK_NEVER_LIT, MASK_SATURATED, MASK_LOW_CONTRAST = 1, 2, 4
+DEBIAS = 1.0
 
 
 def _coefficients(alpha_plus: float, alpha_minus: float, b: float) -> tuple[float, float, float]:
@@ -121,17 +122,23 @@ def extremes(images: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a.max(axis=0).astype(np.float32), a.min(axis=0).astype(np.float32)
 
 
-def pair_extremes(images: np.ndarray, complement_of, *, keep: float = 0.75):
+def pair_extremes(images: np.ndarray, complement_of, *, keep: float = 0.75, sigma=None):
     """``L±`` from complementary pairs: every pair votes lit/unlit, decisive pairs average.
 
     In each pair (a pattern and its complement) the pixel is lit in one image
-    and unlit in the other, so ``hi = max``, ``lo = min`` of the *pair* are one
-    lit and one unlit observation. Pairs whose contrast ``hi − lo`` reaches
-    ``keep`` times the mean contrast of the better half of the pairs are decisive
-    (pairs where the pixel straddles a square edge are not); ``L⁺``/``L⁻`` are
-    the means of ``hi``/``lo`` over decisive pairs. Unlike max/min over all
-    images this is unbiased under noise once the contrast exceeds the noise, and
-    its noise falls as 1/√(decisive pairs).
+    and unlit in the other, so the pair's difference ``t = I_P − I_P̄`` is
+    ``±(L⁺ − L⁻)`` plus noise and its sum ``I_P + I_P̄ = L⁺ + L⁻`` plus noise.
+    Pairs whose contrast ``|t|`` reaches ``keep`` times the mean contrast of the
+    better half of the pairs are decisive (pairs where the pixel straddles a
+    square edge are not); when even the best contrast is within 3 noise
+    standard deviations every pair is used (the pixel may simply be unlit).
+    Then, the sum over all pairs and the contrast over the decisive ones,
+
+        L⁺ + L⁻ = mean(I_P + I_P̄),     L⁺ − L⁻ = sqrt(max(mean(t²) − σ_t², 0)),
+
+    with ``σ_t² = 2σ²`` the noise variance of ``t``: both are unbiased under
+    noise (max/min over all images is biased, the max up and the min down), and
+    their noise falls as 1/√(decisive pairs).
 
     Parameters
     ----------
@@ -139,6 +146,9 @@ def pair_extremes(images: np.ndarray, complement_of, *, keep: float = 0.75):
         Linear images.
     complement_of : sequence of int
         Index of each image's complement (``-1`` for none).
+    sigma : ndarray or float, optional
+        Noise standard deviation of one capture (``images.shape[1:]`` or
+        scalar); 0 when omitted.
 
     Returns
     -------
@@ -147,10 +157,10 @@ def pair_extremes(images: np.ndarray, complement_of, *, keep: float = 0.75):
 
     Examples
     --------
-    >>> im = np.array([[4.0], [1.0], [1.2], [3.8]])   # two pairs: (0,1), (2,3)
+    >>> im = np.array([[4.0], [1.0], [1.1], [4.1]])   # two pairs: (0,1), (2,3)
     >>> lp, lm, n = pair_extremes(im, [1, 0, 3, 2])
     >>> round(float(lp[0]), 3), round(float(lm[0]), 3), int(n[0])
-    (3.9, 1.1, 2)
+    (4.05, 1.05, 2)
     """
     a = np.asarray(images, np.float32)
     pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(complement_of) if j >= 0 and j != i})
@@ -158,16 +168,19 @@ def pair_extremes(images: np.ndarray, complement_of, *, keep: float = 0.75):
         raise ValueError("complement_of: no complementary pairs in the set")
     i0 = [p[0] for p in pairs]
     i1 = [p[1] for p in pairs]
-    hi = np.maximum(a[i0], a[i1])
-    lo = np.minimum(a[i0], a[i1])
-    c = hi - lo
-    srt = np.sort(c, axis=0)
-    top = srt[len(pairs) // 2:].mean(axis=0)
-    use = c >= keep * top
+    t = a[i0] - a[i1]
+    ssum = a[i0] + a[i1]
+    c = np.abs(t)
+    var_t = 2.0 * np.square(np.asarray(0.0 if sigma is None else sigma, np.float32))
+    top = np.sort(c, axis=0)[len(pairs) // 2:].mean(axis=0)
+    use = (c >= keep * top) | (top <= 3.0 * np.sqrt(var_t))
     n = use.sum(axis=0)
     n_safe = np.maximum(n, 1)
-    lp = (hi * use).sum(axis=0) / n_safe
-    lm = (lo * use).sum(axis=0) / n_safe
+    mean_sum = (ssum * use).sum(axis=0) / n_safe
+    ms = (t * t * use).sum(axis=0) / n_safe
+    contrast = np.sqrt(np.maximum(ms - DEBIAS * var_t, 0.0))
+    lp = 0.5 * (mean_sum + contrast)
+    lm = 0.5 * (mean_sum - contrast)
     return lp.astype(np.float32), lm.astype(np.float32), n.astype(np.int16)
 
 
@@ -212,7 +225,7 @@ def validate_stack(images: np.ndarray, *, need: int, method: str) -> np.ndarray:
 
 
 def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complement_of=None,
-            estimator: str = "pairs") -> tuple[np.ndarray, np.ndarray, dict]:
+            estimator: str = "pairs", sigma=None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Separate a shifted-checkerboard (or shifted binary pattern) stack.
 
     Parameters
@@ -230,6 +243,9 @@ def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complemen
     estimator : {"pairs", "maxmin"}
         ``pairs``: :func:`pair_extremes` (noise-robust); ``maxmin``: the
         textbook max/min over all images (Fig. 8.43).
+    sigma : ndarray or float, optional
+        Noise standard deviation of one capture, for the ``pairs`` estimator's
+        debiasing (default: estimated from the pattern+complement sums).
 
     Returns
     -------
@@ -257,7 +273,10 @@ def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complemen
         raise ValueError(f"complement_of: expected {n} entries, got {len(complement_of)}")
     has_pairs = any(j >= 0 for j in complement_of)
     if estimator == "pairs" and has_pairs:
-        lp, lm, npairs = pair_extremes(a, complement_of)
+        if sigma is None:
+            s0, s1 = noise_from_pairs(a, complement_of)
+            sigma = np.sqrt(s0 + s1 * np.clip(a.mean(axis=0), 0, None))
+        lp, lm, npairs = pair_extremes(a, complement_of, sigma=sigma)
         alpha_minus = 1.0 - alpha
     elif estimator in ("pairs", "maxmin"):
         lp, lm = extremes(a)

@@ -97,9 +97,20 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         params["b_source"] = "given"
     params["b"] = float(b)
     fn = METHODS[method]
+    # Noise model: quantisation + given + (checker pairs) measured from pair sums.
+    var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
+    comp = None
     if method == "checker":
         alpha = 0.5 if alpha is None else alpha
-        direct, glob, info = fn(a, alpha=alpha, b=b, complement_of=complement_of, estimator=estimator)
+        n = len(a)
+        comp = list(complement_of) if complement_of is not None else (
+            [*range(n // 2, n), *range(n // 2)] if n % 2 == 0 and abs(alpha - 0.5) < 1e-9 else [-1] * n)
+        s0, s1 = nayar2006.noise_from_pairs(a, comp)
+        var0, var1 = var0 + s0, s1
+    sigma_mean = np.sqrt(var0 + var1 * np.clip(a.mean(axis=0), 0, None)).astype(np.float32)
+    if method == "checker":
+        direct, glob, info = fn(a, alpha=alpha, b=b, complement_of=comp, estimator=estimator,
+                                sigma=sigma_mean)
         params.update(estimator=info["estimator"], alpha=alpha, alpha_minus=info["alpha_minus"])
     elif method == "sinusoid":
         direct, glob, info = fn(a, b=b)
@@ -112,15 +123,6 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         params["alpha"] = info["alpha"]
     lp, lm = info["l_plus"], info["l_minus"]
 
-    # Noise model: quantisation + given + (checker pairs) measured from pair sums.
-    var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
-    comp = None
-    if method == "checker":
-        n = len(a)
-        comp = list(complement_of) if complement_of is not None else (
-            [*range(n // 2, n), *range(n // 2)] if n % 2 == 0 and abs(alpha - 0.5) < 1e-9 else [-1] * n)
-        s0, s1 = nayar2006.noise_from_pairs(a, comp)
-        var0, var1 = var0 + s0, s1
     sigma = np.sqrt(var0 + var1 * np.clip(lp, 0, None)).astype(np.float32)
     n_obs = info.get("pairs_used")
     n_obs = np.maximum(n_obs, 1)[..., None] if n_obs is not None and n_obs.ndim == 2 else (

@@ -110,6 +110,15 @@ def _render(size, tex, *, depth, spp, mirror, seed):
     return np.array(mi.render(scene, seed=int(seed)), dtype=np.float64)
 
 
+def white_render(size, *, depth=-1, spp=32, seed=7, mirror=False):
+    """An independent render under the all-white projector (first channel,
+    unit emission, same units as :func:`class_renders` before ``gain``), for
+    checking the class composition against Mitsuba directly."""
+    cx, cy = projector_cells(size)
+    tex = np.ones((cy, cx, 3), np.float32)
+    return _render(size, tex, depth=depth, spp=spp, mirror=mirror, seed=seed)[..., 0]
+
+
 def projector_cells(size) -> tuple[int, int]:
     """Projector resolution in cells for a camera of ``size``: about 4 camera
     pixels per cell at the walls, a whole number of ``N_CLASS``-cell periods."""
@@ -220,7 +229,7 @@ def compose(direct, glob, pattern, *, b):
 
 
 def render_projector(*, size, seed, rng, alpha=0.5, b=0.0, mirror=False, bit_depth=16,
-                     full_well=0.0, read_noise=0.0, spp=128):
+                     full_well=0.0, read_noise=0.0, spp=128, repeats=1):
     """Render every pattern stack of the projector scene plus exact direct/global truth.
 
     Parameters
@@ -242,6 +251,9 @@ def render_projector(*, size, seed, rng, alpha=0.5, b=0.0, mirror=False, bit_dep
         Gaussian read noise, standard deviation in codes (0 = none).
     spp : int
         Samples per pixel of the (low-resolution) global renders.
+    repeats : int
+        Frames captured per checker pattern (independent camera noise), as a
+        video camera delivers; the checker set is repeated in its own order.
     """
     w, h = size
     direct_c, glob_c = class_renders(size, mirror=mirror, spp_global=spp, seed=seed)
@@ -254,9 +266,21 @@ def render_projector(*, size, seed, rng, alpha=0.5, b=0.0, mirror=False, bit_dep
     sets = pattern_sets(cells, alpha=alpha)
     top = 2 ** bit_depth - 1
     images, names, set_names = [], [], {}
+    described = {m: ps.describe() for m, ps in sets.items()}
+    if repeats > 1:
+        ck = described["checker"]
+        n_ck = len(ck["names"])
+        ck["complement_of"] = [r * n_ck + j if j >= 0 else -1
+                               for r in range(repeats) for j in ck["complement_of"]]
+        ck["lit_fraction"] = ck["lit_fraction"] * repeats
+        ck["names"] = [f"{nm}_r{r}" for r in range(repeats) for nm in ck["names"]]
+        ck["repeats"] = repeats
     for method, ps in sets.items():
         set_names[method] = []
-        for name, pat in zip(ps.names, ps.images, strict=True):
+        reps = repeats if method == "checker" else 1
+        frames = [(nm if reps == 1 else f"{nm}_r{r}", im)
+                  for r in range(reps) for nm, im in zip(ps.names, ps.images, strict=True)]
+        for name, pat in frames:
             value = gain * compose(direct_c, glob_c, pat, b=b)
             codes = value * top
             if full_well > 0:
@@ -285,12 +309,12 @@ def render_projector(*, size, seed, rng, alpha=0.5, b=0.0, mirror=False, bit_dep
         "mc_noise": mc,
         "camera_noise": {"full_well_e": full_well, "read_noise_codes": sigma_codes,
                          "quantisation_codes": 1.0 / np.sqrt(12.0)},
-        "patterns": {m: ps.describe() for m, ps in sets.items()},
+        "patterns": described,
     }
     stack = {"bit_depth": bit_depth, "linear": True, "exposure_times_s": [1.0] * len(images),
              "sets": set_names, "black_level_b": b, "alpha": gt["alpha"],
              "projector_cells": list(cells),
-             "patterns": {m: ps.describe() for m, ps in sets.items()}}
+             "patterns": described}
     arrays = {"direct": (gain * gt_direct).astype(np.float32),
               "global": (gain * gt_global).astype(np.float32),
               "full": (gain * gt_full).astype(np.float32)}
@@ -341,6 +365,7 @@ SCENES = {
          Option("bit_depth", int, 16, "camera bit depth", low=8, high=16),
          Option("full_well", float, 0.0, "electrons at full scale for shot noise (0 = off)", low=0.0),
          Option("read_noise", float, 0.0, "Gaussian read noise in codes", low=0.0),
-         Option("spp", int, 128, "samples per pixel of the global renders", low=4, high=4096)),
+         Option("spp", int, 128, "samples per pixel of the global renders", low=4, high=4096),
+         Option("repeats", int, 1, "frames per checker pattern (independent noise)", low=1, high=16)),
         version=VERSION, min_size=(32, 24)),
 }
