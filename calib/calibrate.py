@@ -20,7 +20,8 @@ Model choice (``model="auto"``, DESIGN §9)
     ``camera.json["candidates"]``.
 
 Outlier views
-    A view whose RMS under the k1k2p1p2k3 fit exceeds 3× the median view RMS
+    A view whose RMS under the k1k2p1p2k3 fit (the fixed model's own fit when
+    ``model`` is given) exceeds 3× the median view RMS
     (per-view RMS of iid corner noise over ~50 corners varies by ~10 %, so 3×
     is never chance) is dropped, named in ``views`` with ``used: false``, and
     the fit repeated (twice at most; at least 3 views always remain).
@@ -215,12 +216,11 @@ def degeneracy_warnings(fit: ZhangFit, img, size) -> tuple[list[str], list[str]]
     return warnings, poor
 
 
-def _reject_outliers(obj, img, names, size, first: ZhangFit | None = None):
-    """Drop outlier views in place; returns their report rows and whether any went."""
+def _reject_outliers(obj, img, names, size, first: ZhangFit):
+    """Drop outlier views in place (screened with ``first``'s model); returns their report rows."""
     rejected = []
     for it in range(2):
-        fit = first if (it == 0 and first is not None) else calibrate_fixed(obj, img, size,
-                                                                             model="k1k2p1p2k3")
+        fit = first if it == 0 else calibrate_fixed(obj, img, size, model=first.model)
         med = float(np.median(fit.view_rms_px))
         bad = [v for v in range(len(obj)) if fit.view_rms_px[v] > OUTLIER_FACTOR * med]
         if not bad or len(obj) - len(bad) < MIN_VIEWS:
@@ -296,7 +296,8 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
     if model == "auto":
         fits = fit_all(candidates)
         if reject_outliers:  # the k1k2p1p2k3 candidate doubles as the outlier screen
-            rejected = _reject_outliers(obj, img, vnames, size, fits.get("k1k2p1p2k3"))
+            screen = fits.get("k1k2p1p2k3") or next(iter(fits.values()), None)
+            rejected = _reject_outliers(obj, img, vnames, size, screen) if screen else []
             if rejected:
                 fits = fit_all(candidates)
         if not fits:
@@ -308,9 +309,11 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
                              f"best candidate's: one-sided paired t-test over views at {SIGNIFICANCE:g}",
                      "chosen": chosen, "best_heldout": next(r["model"] for r in rows if r["best_heldout"])}
     else:
-        if reject_outliers:
-            rejected = _reject_outliers(obj, img, vnames, size)
         fit = calibrate_fixed(obj, img, size, model=model)
+        if reject_outliers:
+            rejected = _reject_outliers(obj, img, vnames, size, fit)
+            if rejected:
+                fit = calibrate_fixed(obj, img, size, model=model)
         rows = [{"model": model, "n_params": fit.n_params, "rms_px": fit.rms_px, "chosen": True}]
         selection = {"rule": "fixed by the caller", "chosen": model}
     warnings, poor = degeneracy_warnings(fit, img, size)
