@@ -32,8 +32,8 @@ WINDOWS = (5, 9, 15)
 
 
 def _shared():
-    from pathlib import Path
     import os
+    from pathlib import Path
 
     return Path(os.environ.get("LUMIGRAPH_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 

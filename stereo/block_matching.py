@@ -250,6 +250,12 @@ def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_
         # by less than `distinct` such deviations is chance, not a match
         nwin = np.asarray(windows, np.float32)[np.minimum(pick, len(windows) - 1)] ** 2
         margin = distinct * noise_var * np.sqrt(8.0 / nwin)
+        # windows holding little more than noise (variance < 2σ²) must win by
+        # three times the margin: chance minima are what they mostly offer
+        vpick = var[0].copy()
+        for k in range(1, len(windows)):
+            np.copyto(vpick, var[k], where=pick == k)
+        margin = np.where(vpick < 2 * noise_var, 3 * margin, margin)
         unique = (second == _INT_MAX) | ((secondc > bestc * (1 + uniqueness))
                                          & (secondc - bestc > margin))
     else:
@@ -269,7 +275,7 @@ def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_
 
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
           texture_snr: float = 0.5, uniqueness: float = 0.02, lr_tolerance: int = 2,
-          distinct: float = 0.3, subpixel: bool = True,
+          distinct: float = 0.2, subpixel: bool = True,
           threads: int | None = None) -> DisparityMap:
     """Dense disparity of a rectified pair by SSD block matching (eq. 5.1).
 

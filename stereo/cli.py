@@ -353,7 +353,6 @@ def _sfm(args) -> int:
         raise InputError(out, "exists and is not a folder")
     images = [_read(p) for p in args.images]
     camera = load_camera(args.camera) if args.camera else None
-    say(args, f"structure from motion on {len(images)} images (pycolmap)")
     rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
     meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
                      params={"seed": args.seed, "fixed_intrinsics": camera is not None},

@@ -1,0 +1,84 @@
+"""SSD block matching against exact ground truth."""
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter
+
+from capture.render import render
+from stereo.block_matching import match, noise_sigma
+
+
+def test_rendered_pair_accuracy_bounded_on_both_sides():
+    s = render("stereo-pair", size=(240, 180))
+    gt = s.gt_arrays["disparity"]
+    res = match(s.images[0], s.images[1], max_disp=s.gt["suggested_max_disp"] - 1, window=9)
+    known = np.isfinite(gt)
+    e = np.abs(res.disparity - gt)[known]
+    est = np.isfinite(e)
+    # non-occluded textured scene: most pixels matched, sub-pixel accurate
+    assert est.mean() > 0.8
+    assert 0 < np.median(e[est]) < 0.25
+    # gross errors only where the 9x9 window straddles a depth edge (radius 4)
+    from scipy import ndimage
+
+    Z = np.nan_to_num(s.gt_arrays["depth"], nan=99)
+    edge = (ndimage.maximum_filter(Z, 3) - ndimage.minimum_filter(Z, 3)) > 0.05
+    interior = (ndimage.distance_transform_edt(~edge) > 5)[known]
+    assert np.mean(e[est & interior] > 2) < 0.01
+    # occluded pixels (GT NaN inside the image) are mostly refused by the LR check
+    occl = ~known
+    occl[:, : int(gt[known].max()) + 2] = False  # the left band has no partner at all
+    assert np.isnan(res.disparity[occl]).mean() > 0.6
+
+
+def test_subpixel_shift_recovered():
+    rng = np.random.default_rng(3)
+    base = gaussian_filter(rng.uniform(0, 255, (60, 200)), 2.0)
+    x = np.arange(200)
+    shift = 7.3
+    right = base
+    left = np.stack([np.interp(x - shift, x, row) for row in base])  # left(x) = right(x - d)
+    res = match(left.astype(np.float32), right.astype(np.float32), max_disp=16, window=9)
+    d = res.disparity[10:-10, 30:-10]
+    assert np.isfinite(d).mean() > 0.9
+    # parabola fits of SSD have a known bias of up to ~0.1 px towards integers
+    assert 0.0 < abs(np.nanmedian(d) - shift) < 0.12
+
+
+def test_auto_window_recorded_and_noise_estimate():
+    s = render("stereo-pair", size=(160, 120), textureless=True)
+    res = match(s.images[0], s.images[1], max_disp=31, window="auto")
+    auto = res.info["auto"]
+    assert auto["candidates"] == [5, 9, 15]
+    shares = list(auto["share_of_pixels"].values()) + [auto["no_window_textured"]]
+    assert abs(sum(shares) - 1) < 1e-9
+    assert set(np.unique(res.window)) <= {0, 5, 9, 15}
+
+
+def test_noise_estimate_on_known_noise():
+    # flat and smoothly shaded areas with sigma 3 noise: within 10 %
+    rng = np.random.default_rng(4)
+    y, x = np.mgrid[0:120, 0:160]
+    img = 80 + 0.3 * x + 40 * (y > 60) + rng.normal(0, 3, (120, 160))
+    assert 2.7 < noise_sigma(img.astype(np.float32)) < 3.3
+
+
+@pytest.mark.parametrize("kwargs, fragment", [
+    (dict(max_disp=0), "max_disp"), (dict(max_disp=8, window=4), "window"),
+    (dict(max_disp=8, window="big"), "window")])
+def test_bad_arguments(kwargs, fragment):
+    a = np.zeros((20, 30), np.float32)
+    with pytest.raises(ValueError, match=fragment):
+        match(a, a, **kwargs)
+
+
+def test_shape_mismatch():
+    with pytest.raises(ValueError, match="right"):
+        match(np.zeros((20, 30)), np.zeros((20, 31)), max_disp=4)
+
+
+def test_inputs_not_mutated():
+    s = render("stereo-pair", size=(96, 72))
+    a, b = s.images[0].copy(), s.images[1].copy()
+    match(a, b, max_disp=16)
+    assert np.array_equal(a, s.images[0]) and np.array_equal(b, s.images[1])

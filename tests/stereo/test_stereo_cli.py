@@ -1,0 +1,141 @@
+"""``lumigraph stereo`` end to end: files in, files out, clean errors."""
+
+import json
+
+import numpy as np
+import pytest
+from conftest import assert_clean_error, lumigraph
+
+from capture import io
+from capture.render import render
+
+
+@pytest.fixture(scope="module")
+def pairs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("pairs")
+    out = {}
+    for layout in ("rectified", "unrectified"):
+        s = render("stereo-pair", size=(200, 150), layout=layout)
+        out[layout] = (s.save(root / layout), s)
+    return out
+
+
+def test_match_rectified_and_depth(pairs, tmp_path):
+    folder, s = pairs["rectified"]
+    d = tmp_path / "d.pfm"
+    r = lumigraph("stereo", "match", folder / "left.png", folder / "right.png", "--max-disp", "40",
+                  "--out", d, "-q")
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((tmp_path / "d.pfm.meta.json").read_text())
+    assert "auto" in meta["model"]["block_matching"]
+    disp = io.read_pfm(d)
+    gt = s.gt_arrays["disparity"]
+    e = np.abs(disp - gt)[np.isfinite(gt)]
+    assert 0 < np.nanmedian(e) < 0.3
+    ply = tmp_path / "p.ply"
+    r = lumigraph("stereo", "depth", d, "--rig", folder / "gt.json", "--image", folder / "left.png",
+                  "--out", ply, "-q")
+    assert r.returncode == 0, r.stderr
+    pts, cols = io.read_ply(ply)
+    assert cols is not None and len(pts) == (disp > 0).sum()  # d = 0 is at infinity
+
+
+def test_unrectified_needs_rig_then_depth_matches_gt(pairs, tmp_path):
+    folder, s = pairs["unrectified"]
+    d = tmp_path / "d.pfm"
+    r = lumigraph("stereo", "match", folder / "left.png", folder / "right.png", "--max-disp", "40",
+                  "--out", d)
+    assert_clean_error(r, "right.png", "not rectified", "--rig")
+    assert not d.exists()
+    r = lumigraph("stereo", "match", folder / "left.png", folder / "right.png", "--rig",
+                  folder / "gt.json", "--max-disp", "40", "--out", d, "-q")
+    assert r.returncode == 0, r.stderr
+    ply = tmp_path / "p.ply"
+    r = lumigraph("stereo", "depth", d, "--rig", folder / "gt.json", "--out", ply, "-q")
+    assert r.returncode == 0, r.stderr
+    pts, _ = io.read_ply(ply)
+    # points are in the original left camera frame: project and compare depth
+    K = np.array(s.gt["rig"]["left"]["K"])
+    uv = pts @ K.T
+    uv = np.round(uv[:, :2] / uv[:, 2:]).astype(int)
+    h, w = s.gt_arrays["depth"].shape
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    Z = s.gt_arrays["depth"][uv[ok, 1], uv[ok, 0]]
+    rel = np.abs(pts[ok, 2] - Z) / Z
+    # disparity error ~0.2 px at d ~ 10-30 px -> ~1 % depth error; rounding
+    # the pixel adds up to half a pixel of position along slanted surfaces
+    assert 0 < np.nanmedian(rel) < 0.02
+
+
+def test_match_bad_input(pairs, tmp_path):
+    folder, _ = pairs["rectified"]
+    small = tmp_path / "small.png"
+    io.write_image(small, np.zeros((50, 60, 3), np.uint8))
+    out = tmp_path / "d.pfm"
+    assert_clean_error(lumigraph("stereo", "match", folder / "left.png", small, "--max-disp", "16",
+                                 "--out", out), "small.png", "differs")
+    empty = tmp_path / "empty.png"
+    empty.write_bytes(b"")
+    assert_clean_error(lumigraph("stereo", "match", empty, folder / "right.png", "--max-disp", "16",
+                                 "--out", out), "empty.png")
+    assert_clean_error(lumigraph("stereo", "match", folder / "left.png", folder / "right.png",
+                                 "--max-disp", "16", "--window", "4", "--out", out), "--window")
+    assert not out.exists()
+
+
+def test_triangulate_json_and_text(pairs, tmp_path):
+    folder, s = pairs["unrectified"]
+    rig = s.gt["rig"]
+    P = s.gt_arrays["points"]
+    xy = s.gt_arrays["right_xy"]
+    ys, xs = np.mgrid[0:150, 0:200]
+    ok = np.isfinite(xy).all(axis=2)
+    idx = np.flatnonzero(ok.ravel())[::500]
+    left = np.column_stack([xs.ravel()[idx], ys.ravel()[idx]]).astype(float)
+    right = xy.reshape(-1, 2)[idx]
+    txt = tmp_path / "m.txt"
+    np.savetxt(txt, np.hstack([left, right]), header="x_left y_left x_right y_right")
+    out = tmp_path / "pts.ply"
+    r = lumigraph("stereo", "triangulate", txt, "--rig", folder / "gt.json", "--out", out, "-q")
+    assert r.returncode == 0, r.stderr
+    pts, _ = io.read_ply(out)
+    assert np.allclose(pts, P.reshape(-1, 3)[idx], rtol=1e-6)
+    tracks = {"views": [{"camera": rig["left"]},
+                        {"camera": rig["right"], "cam_from_world": {"R": rig["R"], "t": rig["T"]}}],
+              "tracks": [[l.tolist(), r_.tolist()] for l, r_ in zip(left, right, strict=True)]}
+    js = tmp_path / "t.json"
+    js.write_text(json.dumps(tracks))
+    r = lumigraph("stereo", "triangulate", js, "--out", tmp_path / "t_out.json", "-q")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads((tmp_path / "t_out.json").read_text())
+    assert np.allclose([p["xyz"] for p in doc["points"]], P.reshape(-1, 3)[idx], rtol=1e-6)
+    assert all(p["sigma"] > 0 for p in doc["points"])
+    assert_clean_error(lumigraph("stereo", "triangulate", txt, "--out", tmp_path / "x.ply"), "--rig")
+
+
+def test_sfm_cli_recovers_camera_centres(tmp_path):
+    from stereo.sfm import align_similarity
+
+    s = render("stereo-views")
+    folder = s.save(tmp_path / "views")
+    out = tmp_path / "sfm"
+    r = lumigraph("stereo", "sfm", *[folder / n for n in s.image_names], "--camera", folder / "gt.json",
+                  "--out", out, "-q")
+    assert r.returncode == 0, r.stderr
+    cams = json.loads((out / "cameras.json").read_text())
+    assert all(v["registered"] for v in cams["views"])
+    C = np.array([-np.array(v["cam_from_world"]["R"]).T @ v["cam_from_world"]["t"] for v in cams["views"]])
+    gt = np.array(s.gt["centres"])
+    sc, R, t = align_similarity(C, gt)
+    err = np.linalg.norm(sc * C @ R.T + t - gt, axis=1).max() / s.gt["scene_size_m"]
+    # issue target: within 1 % of the scene size; > 0 since SIFT positions are noisy
+    assert 0 < err < 0.01
+    pts, cols = io.read_ply(out / "points.ply")
+    assert len(pts) > 100 and cols is not None
+
+
+def test_bench_quick_through_cli(tmp_path):
+    r = lumigraph("bench", "stereo", "--quick", "--out", tmp_path / "b", "-q")
+    assert r.returncode == 0, r.stderr
+    rep = (tmp_path / "b" / "report.md").read_text()
+    assert "StereoBM" in rep and "triangulation" in rep
