@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from capture.command import add_common, make_parser, parse_size, run, say, warn
+from capture.command import make_parser, parse_size, run, say, warn
 from capture.errors import InputError
 
 EPILOG = """\
@@ -21,7 +21,7 @@ examples:
   lumigraph separate cap/checker_*.png --method checker --b 0.1 --out sep/
   lumigraph separate cap/s0.png cap/s1.png cap/s2.png --method sinusoid --out sep/
   lumigraph separate raw8/*.png --method checker --response response.json --out sep/
-  lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 3 --out pat/
+  lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
@@ -191,7 +191,7 @@ def main(argv=None, prog="lumigraph separate") -> int:
                        choices=["checker", "block", "sinusoid", "stripe", "occluder", "flat", "all"])
         p.add_argument("--size", default="1024x768", help="projector resolution WxH")
         p.add_argument("--square", type=int, default=8, help="checker square (px) / block cell (px)")
-        p.add_argument("--shifts", type=int, default=3, help="checker shift steps per axis")
+        p.add_argument("--shifts", type=int, default=4, help="checker shift steps per axis (divides --square)")
         p.add_argument("--period", type=int, default=16, help="sinusoid/stripe/occluder period (px)")
         p.add_argument("--width", type=int, default=2, help="occluder bar width (px)")
         p.add_argument("--alpha", type=float, default=None, help="lit fraction of 'block' patterns")
