@@ -100,7 +100,7 @@ def _opencv(data, model):
     from calib.zhang2000 import model_flags
 
     board = data["board"]
-    obj, img, ids = [], [], []
+    obj, img = [], []
     for k, im in enumerate(data["images"]):
         g = to_gray8(im)
         ok, c = cv2.findChessboardCorners(g, board.pattern_size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH

@@ -68,7 +68,14 @@ def test_stereo_variant_gt_is_consistent():
         np.testing.assert_allclose(R @ np.array(pl["t"]) + T, np.array(pr["t"]), atol=1e-9)
     assert T[0] < 0  # right camera to the right
     assert s.gt_arrays["corners_left"].shape == s.gt_arrays["corners_right"].shape == (3, 54, 2)
-    assert isinstance(Rig.from_pose, object)
+    # the GT corners of both images obey the epipolar constraint of the GT rig
+    from calib.camera import Camera
+
+    left, right = Camera.from_dict(rig_d["left"]), Camera.from_dict(rig_d["right"])
+    rig = Rig.from_pose(left, right, R, T)
+    rl = left.unproject(s.gt_arrays["corners_left"].reshape(-1, 2))
+    rr = right.unproject(s.gt_arrays["corners_right"].reshape(-1, 2))
+    assert np.abs(np.einsum("ni,ij,nj->n", rr, rig.E, rl)).max() < 1e-6 * np.abs(T).max()
 
 
 @pytest.mark.parametrize("opts", [{"distortion": "strong"}, {"poses": "fronto"}])

@@ -14,7 +14,7 @@ from capture.render import render
 @pytest.fixture(scope="module")
 def boards(tmp_path_factory):
     d = tmp_path_factory.mktemp("boards")
-    render("boards", size=(240, 180), seed=7, views=6).save(d)
+    render("boards", size=(320, 240), seed=7, views=6).save(d)
     return d
 
 
@@ -28,14 +28,14 @@ def test_calibrate_undistort_through_files(boards, tmp_path):
                   "--colmap", tmp_path / "cameras.txt", "--quiet")
     assert r.returncode == 0, r.stderr
     cam = json.loads(out.read_text())
-    assert cam["image_size"] == [240, 180] and len(cam["candidates"]) == 6
+    assert cam["image_size"] == [320, 240] and len(cam["candidates"]) == 6
     meta = json.loads((tmp_path / "camera.json.meta.json").read_text())
     assert meta["model"]["chosen"] == cam["model"] and meta["quality"]["rms_px"] == cam["rms_px"]
     assert (tmp_path / "cameras.txt").read_text().count("\n1 ") == 1
     und = tmp_path / "und"
     r = lumigraph("calib", "undistort", "--camera", out, boards / "view_00.png", "--out", und, "--quiet")
     assert r.returncode == 0, r.stderr
-    assert io.read_image(und / "view_00.png").shape == (180, 240)
+    assert io.read_image(und / "view_00.png").shape == (240, 320)
     assert json.loads((und / "camera.json").read_text())["model"] == "none"
 
 
@@ -84,16 +84,16 @@ def test_undistort_with_camera_of_another_size(boards, tmp_path):
     from calib.camera import Camera
 
     cam = tmp_path / "camera.json"
-    Camera(np.array([[300.0, 0, 160], [0, 300, 120], [0, 0, 1]]), np.zeros(5), (320, 240)).save(cam)
+    Camera(np.array([[300.0, 0, 160], [0, 300, 120], [0, 0, 1]]), np.zeros(5), (640, 480)).save(cam)
     out = tmp_path / "und"
     assert_clean_error(lumigraph("calib", "undistort", "--camera", cam, boards / "view_00.png", "--out", out),
-                       "view_00.png", "320x240")
+                       "view_00.png", "640x480")
     assert not out.exists()
 
 
 def test_stereo_and_rectify_through_files(tmp_path):
     s = tmp_path / "s"
-    render("boards-stereo", size=(240, 180), seed=8, views=6).save(s)
+    render("boards-stereo", size=(320, 240), seed=8, views=6).save(s)
     rig = tmp_path / "rig.json"
     left = sorted(s.glob("left_*.png"))
     right = sorted(s.glob("right_*.png"))
@@ -105,6 +105,6 @@ def test_stereo_and_rectify_through_files(tmp_path):
     out = tmp_path / "rect"
     r = lumigraph("calib", "rectify", "--rig", rig, left[0], right[0], "--out", out, "--quiet")
     assert r.returncode == 0, r.stderr
-    assert io.read_image(out / "left.png").shape == (180, 240)
-    assert np.load(out / "maps_left.npy").shape == (180, 240, 2)
+    assert io.read_image(out / "left.png").shape == (240, 320)
+    assert np.load(out / "maps_left.npy").shape == (240, 320, 2)
     assert json.loads((out / "rectification.json").read_text())["focal_px"] > 0
