@@ -88,7 +88,8 @@ def spatial_residue(global_, mean_image, *, window: int = 9, rel: float = 0.3,
         x = np.asarray(x, np.float32)
         sm = cv2.blur(x, (window, window), borderType=cv2.BORDER_REFLECT)
         sm = sm.reshape(x.shape)
-        return np.abs(x - sm) / np.maximum(np.abs(sm), 1e-6 + 0.02 * float(np.percentile(np.abs(sm), 99)))
+        ref = 0.02 * float(np.percentile(np.abs(sm[::4, ::4]), 99))  # subsampled: cheap at 1 MP
+        return np.abs(x - sm) / np.maximum(np.abs(sm), 1e-6 + ref)
 
     rg = contrast(global_)
     rm = contrast(mean_image)

@@ -119,3 +119,16 @@ def test_bench_quick_through_the_cli(tmp_path):
     assert r.returncode == 0, r.stderr
     rep = (tmp_path / "b" / "report.md").read_text()
     assert "checker pairs (ours)" in rep and "textbook" in rep and (tmp_path / "b" / "separation.png").exists()
+
+
+def test_linear_exr_input(scene_dir, tmp_path):
+    st = json.loads((scene_dir / "stack.json").read_text())
+    files = []
+    for n in st["sets"]["sinusoid"]:
+        p = tmp_path / n.replace(".png", ".exr")
+        io.write_exr(p, io.read_image(scene_dir / n).astype(np.float32) / 65535.0)
+        files.append(p)
+    r = lumigraph("separate", *files, "--method", "sinusoid", "--out", tmp_path / "s", "-q")
+    assert r.returncode == 0, r.stderr
+    ed, eg = _err(tmp_path / "s", scene_dir)
+    assert 0 < ed < 0.35 and 0 < eg < 0.35
