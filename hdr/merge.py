@@ -125,7 +125,7 @@ def variance_weight_table(exposure_table: np.ndarray, *, full_well_e: float = 10
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           weights: str = "variance", full_well_e: float = 10000.0, read_noise_e: float = 5.0,
           clip_margin: float = 0.02, deghost: bool = False, deghost_sigma: float = 4.0,
-          reference: int | None = None, block_rows: int = 128,
+          reference: int | None = None, block_rows: int = 32,
           workers: int | None = None) -> RadianceMap:
     """Merge a bracket into relative radiance.
 
@@ -203,40 +203,55 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     out = np.empty((h, w, c), np.float32)
     flags = np.zeros((h, w, c), np.uint8)
 
+    # Channel-interleaved LUTs: one gather per exposure covers every channel of a
+    # contiguous row block (index = code + channel * 2**bit_depth).
+    n_codes = zmax + 1
+    ch_off = (np.arange(c) * n_codes).astype(np.int32)
+    wl_f, wxl_f, xl_f = wl.reshape(p, -1), wxl.reshape(p, -1), xl.reshape(p, -1)
+    if deghost:
+        vl_f = vl.reshape(p, -1)
+
     def do_block(r0):
         r1 = min(r0 + block_rows, h)
-        for ch in range(c):
-            num = np.zeros((r1 - r0, w), np.float32)
-            den = np.zeros((r1 - r0, w), np.float32)
-            if deghost:
-                zr = z[reference, r0:r1, :, ch]
-                xr = xl[reference, ch][zr]
-                vr = vl[reference, ch][zr]
-                ref_ok = np.isfinite(vr)
-                ghost = np.zeros((r1 - r0, w), bool)
-            for j in range(p):
-                zj = z[j, r0:r1, :, ch]
-                wj = wl[j, ch][zj]
-                if deghost and j != reference:
-                    d2 = (xl[j, ch][zj] - xr) ** 2
-                    bad = ref_ok & (wj > 0) & (d2 > deghost_sigma ** 2 * (vl[j, ch][zj] + vr))
-                    wj = np.where(bad, np.float32(0), wj)
-                    ghost |= bad
-                    num += np.where(bad, np.float32(0), wxl[j, ch][zj])
-                else:
-                    num += wxl[j, ch][zj]
-                den += wj
-            empty = den <= 0
-            np.divide(num, den, out=num, where=~empty)
-            if empty.any():
-                sat = z[j_short, r0:r1, :, ch] > hi_code
-                num[empty & sat] = bound_hi[ch]
-                num[empty & ~sat] = bound_lo[ch]
-                flags[r0:r1, :, ch][empty & sat] |= CLIPPED
-                flags[r0:r1, :, ch][empty & ~sat] |= BLACK
-            if deghost:
-                flags[r0:r1, :, ch][ghost] |= GHOST
-            out[r0:r1, :, ch] = num
+        num = np.zeros((r1 - r0, w, c), np.float32)
+        den = np.zeros((r1 - r0, w, c), np.float32)
+        if deghost:
+            ir = z[reference, r0:r1].astype(np.int32) + ch_off
+            xr, vr = xl_f[reference][ir], vl_f[reference][ir]
+            ref_ok = np.isfinite(vr)
+            ghost = np.zeros((r1 - r0, w, c), bool)
+        ij = np.empty((r1 - r0, w, c), np.int32)
+        tmp = np.empty((r1 - r0, w, c), np.float32)
+        for j in range(p):
+            np.add(z[j, r0:r1], ch_off, out=ij)
+            if not deghost:
+                num += np.take(wxl_f[j], ij, out=tmp)
+                den += np.take(wl_f[j], ij, out=tmp)
+                continue
+            wj = wl_f[j][ij]
+            if j != reference:
+                d2 = (xl_f[j][ij] - xr) ** 2
+                bad = ref_ok & (wj > 0) & (d2 > deghost_sigma ** 2 * (vl_f[j][ij] + vr))
+                wj[bad] = 0.0
+                ghost |= bad
+                wx = wxl_f[j][ij]
+                wx[bad] = 0.0
+                num += wx
+            else:
+                num += wxl_f[j][ij]
+            den += wj
+        empty = den <= 0
+        np.divide(num, den, out=num, where=~empty)
+        if empty.any():
+            sat = z[j_short, r0:r1] > hi_code
+            num[empty & sat] = np.broadcast_to(bound_hi, num.shape)[empty & sat]
+            num[empty & ~sat] = np.broadcast_to(bound_lo, num.shape)[empty & ~sat]
+            fb = flags[r0:r1]
+            fb[empty & sat] |= CLIPPED
+            fb[empty & ~sat] |= BLACK
+        if deghost:
+            flags[r0:r1][ghost] |= GHOST
+        out[r0:r1] = num
 
     starts = range(0, h, block_rows)
     n_workers = workers or min(4, os.cpu_count() or 1)

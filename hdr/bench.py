@@ -1,0 +1,375 @@
+"""Bench stage ``hdr``: response recovery and merging beside OpenCV, colour-hdri
+and pfstools, on ``bracket`` renders with exact ground truth, in one run.
+
+Cases
+-----
+- ``8-bit``: the default film-response bracket (7 exposures, 1.5 stops,
+  shot + read noise); ``12-bit`` and ``16-bit``: the same scene deeper;
+- ``8-bit, times ±10 %``: the stack carries nominal times off by up to 10 %
+  (Mitsunaga–Nayar refines them; Debevec gets the exact times as the yardstick);
+- ``merge``: radiance from each method's own curve;
+- ``merge 12 MP``: 9 exposures tiled up to 4000×3000 (quick: 1 MP), wall
+  time and tracemalloc peak of the merge alone.
+
+Error: ln-response RMS over the well-exposed codes (5–95 % of the range)
+after removing each channel's free offset; for merges, relative RMS radiance
+error over pixels well exposed in at least one image after one global
+scale.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import subprocess
+import tempfile
+import tracemalloc
+
+import numpy as np
+
+from capture.bench import Case, Check, Method, Results, Stage
+
+SIZE = (320, 240)
+
+
+# ------------------------------------------------------------------- metrics
+def ln_response_rms(g: np.ndarray, g_true: np.ndarray, bit_depth: int) -> float:
+    """RMS of ``g − g_true`` over codes 5–95 % of the range, each channel's
+    mean difference removed (``g`` is defined up to a constant per channel).
+
+    Examples
+    --------
+    >>> g = np.log(np.arange(1, 257, dtype=float))[None].repeat(3, 0)
+    >>> ln_response_rms(g + [[1.0], [2.0], [3.0]], g, 8)
+    0.0
+    """
+    zmax = 2 ** bit_depth - 1
+    m = slice(int(math.ceil(0.05 * zmax)), int(0.95 * zmax) + 1)
+    d = np.asarray(g, np.float64)[:, m] - np.asarray(g_true, np.float64)[:, m]
+    d = d - d.mean(axis=1, keepdims=True)
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def radiance_rel_rms(est: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> float:
+    """Relative RMS error over ``mask`` after the least-squares global scale."""
+    e = est[mask].astype(np.float64)
+    t = truth[mask].astype(np.float64)
+    ok = np.isfinite(e)
+    e, t = e[ok], t[ok]
+    s = float(np.sum(e * t / t ** 2) / np.sum(e * e / t ** 2))
+    return float(np.sqrt(np.mean(((s * e - t) / t) ** 2)))
+
+
+# --------------------------------------------------------------------- cases
+def _bracket(bit_depth=8, **opts):
+    from capture.render import render
+
+    s = render("bracket", size=SIZE, bit_depth=bit_depth, seed=3, **opts)
+    z = np.stack(s.images)
+    if z.ndim == 3:
+        z = z[..., None]
+    return {"z": z, "times": np.array(s.stack["exposure_times_s"]),
+            "exact": np.array(s.gt["exposure_times_exact_s"]), "g_true": s.gt_arrays["g"],
+            "bit_depth": bit_depth,
+            "radiance": s.gt_arrays["radiance"].astype(np.float64) * s.gt["exposure_scale"]}
+
+
+def _big(quick):
+    from capture.render import render
+
+    s = render("bracket", size=(400, 300), exposures=9, stops=1.0, seed=4)
+    reps = (2, 2) if quick else (10, 10)  # 0.48 MP or 12 MP
+    z = np.stack([np.tile(im, reps + (1,)) for im in s.images])
+    return {"z": z, "times": np.array(s.stack["exposure_times_s"])}
+
+
+# ------------------------------------------------------------------ methods
+def _ours_debevec(d, samples):
+    from hdr.debevec1997 import debevec
+
+    t = d["exact"] if "exact_only" in d else d["times"]
+    return debevec(d["z"], t, bit_depth=d["bit_depth"], samples=samples).g
+
+
+def _ours_debevec_exact(d, samples):
+    from hdr.debevec1997 import debevec
+
+    return debevec(d["z"], d["exact"], bit_depth=d["bit_depth"], samples=samples).g
+
+
+def _ours_mn(d, order):
+    from hdr.mitsunaga1999 import mitsunaga_nayar
+
+    r = mitsunaga_nayar(d["z"], d["times"], bit_depth=d["bit_depth"], order=order)
+    return r.g, np.array(r.exposure_times_s)
+
+
+def _bgr(d):
+    return [np.ascontiguousarray(im[..., ::-1]) for im in d["z"]]
+
+
+def _cv_debevec(d, samples):
+    import cv2
+
+    cal = cv2.createCalibrateDebevec(samples=samples)
+    crv = cal.process(_bgr(d), d["times"].astype(np.float32))
+    return np.log(np.maximum(crv[:, 0, ::-1].T.astype(np.float64), 1e-12))
+
+
+def _cv_robertson(d, _k):
+    import cv2
+
+    crv = cv2.createCalibrateRobertson().process(_bgr(d), d["times"].astype(np.float32))
+    return np.log(np.maximum(crv[:, 0, ::-1].T.astype(np.float64), 1e-12))
+
+
+def _colour_debevec(d, samples):
+    import colour_hdri
+
+    stack = colour_hdri.ImageStack()
+    top = 2 ** d["bit_depth"] - 1
+    for im, t in zip(d["z"], d["times"], strict=True):
+        stack.append(colour_hdri.Image(data=im.astype(np.float64) / top,
+                                       metadata=colour_hdri.Metadata(8.0, float(t), 100.0)))
+    crf = colour_hdri.camera_response_functions_Debevec1997(
+        stack, sampling_function_kwargs={"samples": samples}, n=top + 1)
+    return np.log(np.maximum(np.asarray(crf, np.float64).T, 1e-12))
+
+
+def _pfs_unavailable():
+    return None if shutil.which("pfshdrcalibrate") and shutil.which("pfsinhdrgen") else \
+        "pfstools not installed (Debian package pfstools)"
+
+
+def _pfs(method):
+    def run(d, _k):
+        from capture.io import write_image
+
+        with tempfile.TemporaryDirectory() as tmp:
+            lines = []
+            for j, (im, t) in enumerate(zip(d["z"], d["times"], strict=True)):
+                p = os.path.join(tmp, f"e{j}.png")
+                write_image(p, im)
+                lines.append(f"{p} {1.0 / float(t)!r} 8 100 0")
+            script = os.path.join(tmp, "s.hdrgen")
+            with open(script, "w") as f:
+                f.write("\n".join(lines) + "\n")
+            resp = os.path.join(tmp, "r.m")
+            gen = subprocess.Popen(["pfsinhdrgen", script], stdout=subprocess.PIPE)
+            subprocess.run(["pfshdrcalibrate", "-c", method, "-s", resp, "-b",
+                            str(d["bit_depth"])], stdin=gen.stdout, stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL, check=True)
+            gen.wait()
+            return _read_pfs_response(resp)
+
+    return run
+
+
+def _read_pfs_response(path) -> np.ndarray:
+    chans, cur = [], None
+    for line in open(path):
+        if line.startswith("# name:"):
+            cur = []
+            chans.append(cur)
+        elif not line.startswith("#") and len(line.split()) == 3 and cur is not None:
+            cur.append(float(line.split()[2]))
+    resp = np.array(chans[:3], np.float64)
+    return np.log(np.maximum(resp, resp[resp > 0].min() if (resp > 0).any() else 1e-12))
+
+
+# ------------------------------------------------------------------ merges
+def _merge_prepare(d):
+    import cv2
+
+    from hdr.debevec1997 import debevec
+
+    out = dict(d)
+    out["curve"] = debevec(d["z"], d["times"], bit_depth=d["bit_depth"])
+    out["cv_curve"] = cv2.createCalibrateDebevec().process(_bgr(d), d["times"].astype(np.float32))
+    out["bgr"] = _bgr(d)
+    return out
+
+
+def _merge_ours(d, _k):
+    from hdr.merge import merge
+
+    return merge(d["z"], d["times"], d["curve"]).radiance
+
+
+def _merge_cv(d, _k):
+    import cv2
+
+    return cv2.createMergeDebevec().process(d["bgr"], d["times"].astype(np.float32),
+                                            d["cv_curve"])[..., ::-1]
+
+
+def _big_prepare_ours(d):
+    from hdr.response import ResponseCurve
+
+    from capture.render import render
+
+    s = render("bracket", size=(400, 300), exposures=9, stops=1.0, seed=4)
+    return {**d, "curve": ResponseCurve("gt", 8, s.gt_arrays["g"])}
+
+
+def _big_ours(d, _k):
+    from hdr.merge import merge
+
+    tracemalloc.start()
+    try:
+        m = merge(d["z"], d["times"], d["curve"])
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    return {"peak": peak, "out_bytes": m.radiance.nbytes, "shape": m.radiance.shape}
+
+
+def _big_prepare_cv(d):
+    import cv2
+
+    from capture.render import render
+
+    s = render("bracket", size=(400, 300), exposures=9, stops=1.0, seed=4)
+    crv = np.exp(s.gt_arrays["g"]).T[:, None, ::-1].astype(np.float32).copy()
+    return {**d, "bgr": _bgr(d), "cv_curve": crv, "cv2": cv2}
+
+
+def _big_cv(d, _k):
+    m = d["cv2"].createMergeDebevec().process(d["bgr"], d["times"].astype(np.float32),
+                                              d["cv_curve"])
+    return {"peak": math.nan, "out_bytes": m.nbytes, "shape": m.shape}
+
+
+# ------------------------------------------------------------------- errors
+def _error(d, out):
+    if isinstance(out, dict):  # the 12 MP timing case
+        return {"error": out["peak"] / out["out_bytes"] if math.isfinite(out["peak"]) else math.nan,
+                "peak_bytes": out["peak"], "out_bytes": out["out_bytes"]}
+    if isinstance(out, tuple):  # Mitsunaga-Nayar: (g, refined times)
+        g, times = out
+        tr = np.exp(np.diff(np.log(np.sort(d["exact"]))))
+        rr = np.exp(np.diff(np.log(np.sort(times))))
+        return {"error": ln_response_rms(g, d["g_true"], d["bit_depth"]),
+                "ratio_error_max": float(np.max(np.abs(rr / tr - 1)))}
+    if out.ndim == 3:  # a radiance map
+        well = ((d["z"] > 0.05 * 255) & (d["z"] < 0.95 * 255)).any(axis=0)
+        return radiance_rel_rms(out, d["radiance"], well)
+    return ln_response_rms(out, d["g_true"], d["bit_depth"])
+
+
+def _checks(res: Results, ctx) -> list[Check]:
+    out = []
+
+    def best(case, m):
+        try:
+            return res.best(case, m)
+        except KeyError:
+            return None
+
+    ours, cv = best("8-bit", "debevec (ours)"), best("8-bit", "CalibrateDebevec (OpenCV)")
+    cv_default = None
+    try:
+        cv_default = res.get("8-bit", "CalibrateDebevec (OpenCV)", 70)
+    except KeyError:
+        pass
+    ours_default = None
+    try:
+        ours_default = res.get("8-bit", "debevec (ours)", 600)
+    except KeyError:
+        pass
+    if ours_default and cv_default:
+        r = ours_default.error / cv_default.error
+        out.append(Check("8-bit ln-response RMS / OpenCV CalibrateDebevec (defaults) <= 0.5",
+                         r, 0.5, r <= 0.5, f"ours {ours_default.error:.4g}, OpenCV "
+                                           f"{cv_default.error:.4g}"))
+    if ours and cv:
+        r = ours.error / cv.error
+        out.append(Check("8-bit ln-response RMS, best of each sweep / OpenCV <= 0.5", r, 0.5,
+                         r <= 0.5, f"ours {ours.error:.4g}, OpenCV {cv.error:.4g}"))
+    for bd in ("12-bit", "16-bit"):
+        o = best(bd, "debevec (ours)")
+        if o:
+            # Correct: within 2x of the 8-bit error (deeper data are at least as informative).
+            ref = ours_default.error if ours_default else math.nan
+            out.append(Check(f"{bd} ln-response RMS correct (<= 2x ours at 8 bit)", o.error,
+                             2 * ref, o.error <= 2 * ref, "OpenCV cannot run on > 8-bit input"))
+    try:
+        mo, mc = res.get("merge", "merge (ours, own curve)"), \
+            res.get("merge", "MergeDebevec (OpenCV, own curve)")
+        out.append(Check("merged radiance rel. RMS <= OpenCV MergeDebevec with its curve",
+                         mo.error / mc.error, 1.0, mo.error <= mc.error,
+                         f"ours {mo.error:.4g}, OpenCV {mc.error:.4g}"))
+    except KeyError:
+        pass
+    mn = best("8-bit, times ±10 %", "mitsunaga-nayar (ours)")
+    de = best("8-bit, times ±10 %", "debevec (ours, exact times)")
+    pm = best("8-bit, times ±10 %", "Mitsunaga-Nayar (pfstools)")
+    try:
+        mn_auto = res.get("8-bit, times ±10 %", "mitsunaga-nayar (ours)", "auto")
+    except KeyError:
+        mn_auto = None
+    if mn_auto is not None and mn_auto.status == "ok":
+        rerr = mn_auto.extra.get("ratio_error_max", math.nan)
+        out.append(Check("MN refined ratios within 1 % of the truth", rerr, 0.01, rerr <= 0.01,
+                         "times given off by up to ±10 %"))
+        if de:
+            r = mn_auto.error / de.error
+            out.append(Check("MN response error / Debevec with exact times <= 1.5", r, 1.5,
+                             r <= 1.5, f"MN {mn_auto.error:.4g}, Debevec {de.error:.4g}"))
+        if pm:
+            out.append(Check("MN response error <= pfstools MN", mn_auto.error / pm.error, 1.0,
+                             mn_auto.error <= pm.error, f"pfstools {pm.error:.4g}"))
+    try:
+        bo = res.get("merge 12 MP", "merge (ours)")
+        bc = res.get("merge 12 MP", "MergeDebevec (OpenCV)")
+        r = bo.time_s / bc.time_s
+        out.append(Check("merge 9 exposures wall time / OpenCV MergeDebevec <= 1.0", r, 1.0,
+                         r <= 1.0, f"ours {bo.time_s:.3g} s, OpenCV {bc.time_s:.3g} s"))
+        peak = bo.extra.get("peak_bytes", math.nan) / bo.extra.get("out_bytes", math.nan)
+        out.append(Check("merge peak memory beyond inputs / one float32 output <= 3", peak, 3.0,
+                         peak <= 3.0, "tracemalloc peak during merge"))
+    except KeyError:
+        pass
+    return out
+
+
+def stage(*, quick: bool = False) -> Stage:
+    samples = (600,) if quick else (200, 600, 1500)
+    cv_samples = (70,) if quick else (70, 200, 500)
+    orders = ("auto",) if quick else ("auto", 3, 6)
+    cases = [Case("8-bit", lambda: _bracket(8), "film response, 7 exposures 1.5 stops apart")]
+    if not quick:
+        cases += [Case("12-bit", lambda: _bracket(12)), Case("16-bit", lambda: _bracket(16))]
+    cases += [Case("8-bit, times ±10 %",
+                   lambda: _bracket(8, time_error=0.10, stack_times="nominal"),
+                   "stack times are nominal, off by up to ±10 %"),
+              Case("merge", lambda: _bracket(8), "each method with its own curve"),
+              Case("merge 12 MP", lambda: _big(quick),
+                   "9 exposures tiled to 12 MP (quick: 0.48 MP); error column = tracemalloc "
+                   "peak / output bytes")]
+    resp_cases = ("8-bit", "12-bit", "16-bit")
+    methods = (
+        Method("debevec (ours)", _ours_debevec, "samples", samples, cases=resp_cases),
+        Method("mitsunaga-nayar (ours)", _ours_mn, "order", orders,
+               cases=("8-bit", "8-bit, times ±10 %")),
+        Method("debevec (ours, exact times)", _ours_debevec_exact, "samples", (600,),
+               cases=("8-bit, times ±10 %",)),
+        Method("CalibrateDebevec (OpenCV)", _cv_debevec, "samples", cv_samples, peer="opencv",
+               cases=("8-bit",)),
+        Method("CalibrateRobertson (OpenCV)", _cv_robertson, peer="opencv", cases=("8-bit",)),
+        Method("Debevec1997 (colour-hdri)", _colour_debevec, "samples",
+               (100,) if quick else (100, 300), peer="colour-hdri", cases=("8-bit",)),
+        Method("Robertson (pfstools)", _pfs("robertson"), peer="pfstools",
+               unavailable=_pfs_unavailable, cases=("8-bit",)),
+        Method("Mitsunaga-Nayar (pfstools)", _pfs("mitsunaga"), peer="pfstools",
+               unavailable=_pfs_unavailable, cases=("8-bit", "8-bit, times ±10 %")),
+        Method("merge (ours, own curve)", _merge_ours, prepare=_merge_prepare, cases=("merge",)),
+        Method("MergeDebevec (OpenCV, own curve)", _merge_cv, peer="opencv",
+               prepare=_merge_prepare, cases=("merge",)),
+        Method("merge (ours)", _big_ours, prepare=_big_prepare_ours, cases=("merge 12 MP",)),
+        Method("MergeDebevec (OpenCV)", _big_cv, peer="opencv", prepare=_big_prepare_cv,
+               cases=("merge 12 MP",)),
+    )
+    return Stage("hdr", tuple(cases), methods, _error, "ln-response RMS / radiance rel. RMS",
+                 checks=_checks, description=__doc__.split("\n\n")[0], repeats=3)
