@@ -198,14 +198,10 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
     EstimationError
         Fewer than two images registered.
     """
-    import tempfile
     import time
-    from pathlib import Path
 
-    import cv2
     import pycolmap
 
-    from calib.camera import Camera
 
     names = [os.path.basename(str(n)) for n in names]
     if len(set(names)) != len(names):
@@ -216,6 +212,26 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
         raise InputError("--camera", f"camera is for {camera.image_size[0]}x{camera.image_size[1]} "
                                      f"images, the views are {w}x{h}")
     t0 = time.perf_counter()
+    # COLMAP logs every step to stderr; a pipeline stage keeps stderr for
+    # warnings and errors
+    old_level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 2
+    try:
+        models, files, tmarks = _run_colmap(images, names, camera, seed, threads, max_features, t0)
+    finally:
+        pycolmap.logging.minloglevel = old_level
+    t_feat, t_match, t_map = tmarks
+    return _result(models, files, names, camera, (w, h), seed, (t0, t_feat, t_match, t_map))
+
+
+def _run_colmap(images, names, camera, seed, threads, max_features, t0):
+    import tempfile
+    import time
+    from pathlib import Path
+
+    import cv2
+    import pycolmap
+
     with tempfile.TemporaryDirectory(prefix="lumigraph-sfm-") as tmp:
         tmp = Path(tmp)
         img_dir = tmp / "images"
@@ -261,6 +277,16 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
         (tmp / "sparse").mkdir()
         models = pycolmap.incremental_mapping(db, img_dir, tmp / "sparse", options=opts)
         t_map = time.perf_counter()
+    return models, files, (t_feat, t_match, t_map)
+
+
+def _result(models, files, names, camera, size, seed, marks):
+    import pycolmap
+
+    from calib.camera import Camera
+
+    w, h = size
+    t0, t_feat, t_match, t_map = marks
     if not models:
         raise EstimationError("IMAGES", "COLMAP registered no image pair: too little overlap or "
                                         "texture between the views")
