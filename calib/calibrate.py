@@ -47,7 +47,7 @@ Examples
 --------
 >>> from capture.render import render
 >>> from calib.detect import BoardSpec, detect
->>> s = render("boards", size=(240, 180), seed=2, views=6, cache=False)
+>>> s = render("boards", size=(320, 240), seed=2, views=6, cache=False)
 >>> board = BoardSpec.parse(s.stack["board"])
 >>> cam = calibrate([detect(im, board) for im in s.images], model="k1k2")
 >>> bool(abs(cam.K[0, 0] / s.gt["camera"]["K"][0][0] - 1) < 0.01)

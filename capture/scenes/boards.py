@@ -7,7 +7,7 @@ Two scenes:
     One camera, ``--views`` poses of a ``--board checker`` or ``charuco``
     target. ``--distortion`` picks the lens (``none``, ``normal``: moderate
     radial k1–k3 plus tangential, ``strong``: k1 = −0.3); ``--poses varied``
-    (tilts 30–55° about random in-plane axes, positions spread over the
+    (tilts 25–50° about random in-plane axes, positions spread over the
     image) or ``fronto`` (a near-degenerate set: every board within 3° of
     fronto-parallel).
 ``boards-stereo``
@@ -155,7 +155,7 @@ def _sample_poses(rng, cams, spec, views, poses):
                 # strong tilts and large boards pin down the focal length and the
                 # principal point (Zhang 2000, sec. 3.3: constraints come from the
                 # planes' differing orientations)
-                tilt = np.deg2rad(rng.uniform(30, 55))
+                tilt = np.deg2rad(rng.uniform(25, 50))
                 frac = rng.uniform(0.5, 0.7)
             else:
                 tilt = np.deg2rad(rng.uniform(0.5, 3.0))
@@ -375,9 +375,9 @@ SCENES = {
             Option("views", int, 15, "number of board poses", low=1, high=60),
             Option("distortion", str, "normal", "lens: none, normal (k1..k3 + tangential) or "
                    "strong (k1 = -0.3)", choices=("none", "normal", "strong")),
-            Option("poses", str, "varied", "varied tilts (30-55 deg) or a near-degenerate "
+            Option("poses", str, "varied", "varied tilts (25-50 deg) or a near-degenerate "
                    "fronto-parallel set (< 3 deg)", choices=("varied", "fronto"))),
-        min_size=(96, 72), version=2),
+        min_size=(96, 72), version=3),
     "boards-stereo": SceneSpec(
         "boards-stereo", "a stereo rig (two cameras, known R, T) viewing calibration boards",
         render_boards_stereo, (320, 240),
@@ -386,5 +386,5 @@ SCENES = {
             Option("baseline", float, 120.0, "baseline, in board units", low=0.0, open_low=True),
             Option("distortion", str, "normal", "lens of both cameras",
                    choices=("none", "normal", "strong"))),
-        min_size=(96, 72), version=2),
+        min_size=(96, 72), version=3),
 }

@@ -118,8 +118,10 @@ def test_undistort_straightens_the_board(clean):
         return float(np.sqrt(np.mean(np.sum((proj - points) ** 2, axis=1))))
 
     raw, und = [], []
-    for img in clean.images[:6]:
+    for img in clean.images[:8]:
         d0, d1 = detect(img, board), detect(u.apply(img), board)
+        if len(d0) == 0:  # a steeply tilted view the detector misses
+            continue
         assert len(d1) == 54
         raw.append(off_plane(d0.image_points, d0.object_points))
         und.append(off_plane(d1.image_points, d1.object_points))
