@@ -233,29 +233,41 @@ def hex_to_rect(views: np.ndarray, grid: LensletGrid) -> np.ndarray:
     """Resample hexagonally sampled views onto a square grid of unit spacing.
 
     Row i of a hex view holds samples at ``x = j + odd_shift (i mod 2)``,
-    ``y = i sqrt(3)/2``; the output holds ``x = j``, ``y = k`` for
-    ``k = 0 .. floor((rows - 1) sqrt(3)/2)``. (N, N, Hr, cols, C) float32.
+    ``y = i sqrt(3)/2``. The output holds ``x = j + max(odd_shift, 0)`` for
+    ``j < cols - 1`` and ``y = k`` for ``k <= (rows - 1) sqrt(3)/2``: inside
+    the samples of every row, so nothing is extrapolated. Cubic B-spline
+    interpolation along rows (half-lenslet shift), then along columns.
+    (N, N, Hr, cols - 1, C) float32.
     """
-    from scipy.ndimage import map_coordinates
+    from scipy.ndimage import map_coordinates, spline_filter1d
 
     n1, n2, rows, cols, c = views.shape
     hr = int(math.floor((rows - 1) * SQRT3_2)) + 1
-    aligned = views.astype(np.float64).copy()
-    xs = np.arange(cols) - grid.odd_shift
-    for i in range(1, rows, 2):
-        for a in range(n1):
-            for b in range(n2):
-                for k in range(c):
-                    aligned[a, b, i, :, k] = map_coordinates(
-                        views[a, b, i, :, k].astype(np.float64), [xs], order=3, mode="mirror")
-    yy, xx = np.meshgrid(np.arange(hr) / SQRT3_2, np.arange(cols), indexing="ij")
-    out = np.empty((n1, n2, hr, cols, c))
-    for a in range(n1):
-        for b in range(n2):
-            for k in range(c):
-                out[a, b, ..., k] = map_coordinates(aligned[a, b, ..., k], [yy, xx], order=3,
-                                                    mode="mirror")
+    x_out = np.arange(cols - 1) + max(grid.odd_shift, 0.0)
+    v = spline_filter1d(views.astype(np.float64), 3, axis=3, mode="reflect")
+    aligned = np.empty((n1, n2, rows, cols - 1, c))
+    for i in range(rows):
+        pos = x_out - grid.odd_shift * (i % 2)          # sample index within row i
+        aligned[:, :, i] = _spline_rows(v[:, :, i], pos)
+    a = spline_filter1d(aligned, 3, axis=2, mode="reflect")
+    out = _spline_rows(a, np.arange(hr) / SQRT3_2)
     return out.astype(np.float32)
+
+
+def _spline_rows(coef: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Evaluate cubic B-spline coefficients along axis 2 of (N, N, L, ...) at
+    ``pos`` (mirror-extended coefficients); returns (N, N, len(pos), ...)."""
+    n = coef.shape[2]
+    base = np.floor(pos).astype(int)
+    t = pos - base
+    out = 0.0
+    for k in range(-1, 3):
+        d = np.abs(k - t)
+        w = np.where(d < 1, 2 / 3 - d ** 2 + d ** 3 / 2, np.where(d < 2, (2 - d) ** 3 / 6, 0.0))
+        idx = base + k
+        idx = np.where(idx < 0, -idx - 1, np.where(idx >= n, 2 * n - idx - 1, idx))
+        out = out + coef[:, :, idx] * w.reshape((1, 1, -1) + (1,) * (coef.ndim - 3))
+    return out
 
 
 @dataclass(frozen=True)

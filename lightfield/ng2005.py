@@ -12,8 +12,8 @@ spatial frequency ``(ky, kx)`` lies at angular frequency ``(s ky, s kx)``
 
     E_s^(ky, kx) = 1/(UV) sum_{u,v} L^(u, v, ky, kx) exp(-2 pi i s (ky (u - uc) + kx (v - vc))).
 
-The angular axes are zero-padded by ``oversample`` and the slice interpolated
-with a Kaiser-Bessel kernel of ``kernel_width`` taps; the views are first
+The angular axes are zero-padded by ``oversample`` (1.5) and the slice interpolated
+with a Kaiser-Bessel kernel of ``kernel_width`` (4) taps (relative error < 1e-3); the views are first
 divided by the kernel's Fourier transform (Ng's pre-multiplication /
 roll-off correction), so the only residual is the kernel's aliasing, far below
 the shift-and-add interpolation error. The spatial axes are mirror-padded by
@@ -64,7 +64,7 @@ class FourierLightField:
 
     Attributes
     ----------
-    spectrum : ndarray, (Hp, Wp//2 + 1, Nu, Nv, C) complex64
+    spectrum : ndarray, (Nu, Nv, Hp, Wp//2 + 1, C) complex64
         FFT over (y, x) (real along x) and over the zero-padded angular axes.
     grid : (U, V); size : (W, H) of the views; pad : (py, px) spatial padding.
     shape_p : (Hp, Wp) padded spatial size.
@@ -87,7 +87,7 @@ class FourierLightField:
         return int(self.spectrum.nbytes)
 
 
-def prepare(lf: LightField, *, max_slope: float = 1.5, oversample: float = 2.0,
+def prepare(lf: LightField, *, max_slope: float = 1.5, oversample: float = 1.5,
             kernel_width: int = 4) -> FourierLightField:
     """The one-time 4-D FFT (after padding and the kernel pre-filter).
 
@@ -123,15 +123,25 @@ def prepare(lf: LightField, *, max_slope: float = 1.5, oversample: float = 2.0,
     rolloff_v = _kb_hat(pv / nv, kernel_width, beta)
     weight = (1.0 / (rolloff_u[:, None] * rolloff_v[None, :])).astype(np.float32)
 
-    spec = np.zeros((hp, wp // 2 + 1, nu, nv, c), np.complex64)
+    views = np.empty((u, v, hp, wp // 2 + 1, c), np.complex64)
     for i in range(u):
         for j in range(v):
-            img = lf.data[i, j]
-            padded = np.pad(img, ((py, hp - h - py), (px, wp - w - px), (0, 0)),
+            padded = np.pad(lf.data[i, j], ((py, hp - h - py), (px, wp - w - px), (0, 0)),
                             mode="symmetric" if pad < min(h, w) else "edge")
-            f = sfft.rfft2(padded * weight[i, j], axes=(0, 1))
-            spec[:, :, pu[i] % nu, pv[j] % nv, :] = f
-    spec = sfft.fft2(spec, axes=(2, 3), overwrite_x=True)
+            views[i, j] = sfft.rfft2(padded * weight[i, j], axes=(0, 1))
+    # The angular transform of the zero-padded grid has only U x V non-zero
+    # inputs: two small DFT matrices (BLAS) instead of an FFT over mostly
+    # zeros, and the result comes out with the angular axes outermost, the
+    # layout whose slices stream through memory (see refocus()).
+    fu = np.exp(-2j * np.pi * np.outer(np.arange(nu), pu) / nu).astype(np.complex64)
+    fv = np.exp(-2j * np.pi * np.outer(np.arange(nv), pv) / nv).astype(np.complex64)
+    rest = hp * (wp // 2 + 1) * c
+    half = (fu @ views.reshape(u, v * rest)).reshape(nu, v, rest)
+    del views
+    spec = np.empty((nu, nv, rest), np.complex64)
+    for m in range(nu):
+        spec[m] = fv @ half[m]
+    spec = spec.reshape(nu, nv, hp, wp // 2 + 1, c)
     return FourierLightField(spec.astype(np.complex64, copy=False), (u, v), (w, h), (py, px),
                              (hp, wp), kernel_width, float(beta),
                              ((u - 1) / 2 - cu, (v - 1) / 2 - cv), float(abs(max_slope)))
@@ -159,25 +169,26 @@ def refocus(spec: FourierLightField, slope: float) -> np.ndarray:
     if abs(slope) > spec.max_slope + 1e-9:
         raise ValueError(f"slope: {slope} exceeds the max_slope {spec.max_slope} the spectrum "
                          "was padded for; prepare() again with a larger max_slope")
-    hp, wr, nu, nv, c = spec.spectrum.shape
+    nu, nv, hp, wr, c = spec.spectrum.shape
     hp_, wp = spec.shape_p
     ky = sfft.fftfreq(hp_)
     kx = sfft.rfftfreq(wp)
     iu, wu = _axis_taps(ky, slope, nu, spec.kernel_width, spec.beta)
     iv, wv = _axis_taps(kx, slope, nv, spec.kernel_width, spec.beta)
+    wu, wv = wu.astype(np.float32), wv.astype(np.float32)
     phase_u = np.exp(2j * np.pi * slope * ky * spec.delta[0])
     phase_v = np.exp(2j * np.pi * slope * kx * spec.delta[1])
-    flat = spec.spectrum.reshape(hp * wr * nu * nv, c)
-    base = (np.arange(hp)[:, None] * wr + np.arange(wr)[None, :]) * (nu * nv)
-    out = np.zeros((hp, wr, c), np.complex64)
+    flat = spec.spectrum.reshape(nu * nv * hp * wr, c)
     k = spec.kernel_width
+    pix = (np.arange(hp)[:, None] * wr + np.arange(wr)[None, :]).astype(np.intp)
+    out = np.zeros((hp, wr, c), np.complex64)
+    vals = np.empty((hp, wr, c), np.complex64)
     for a in range(k):
-        rows = base + (iu[:, a] * nv)[:, None]
-        acc = np.zeros((hp, wr, c), np.complex64)
+        rows = pix + (iu[:, a] * (nv * hp * wr))[:, None]
         for b in range(k):
-            vals = np.take(flat, rows + iv[None, :, b], axis=0)
-            acc += vals * wv[None, :, b, None].astype(np.float32)
-        out += acc * wu[:, a, None, None].astype(np.float32)
+            np.take(flat, rows + (iv[:, b] * (hp * wr))[None, :], axis=0, out=vals)
+            vals *= (wu[:, a, None] * wv[None, :, b])[..., None]
+            out += vals
     out *= (phase_u[:, None] * phase_v[None, :]).astype(np.complex64)[..., None]
     img = sfft.irfft2(out, s=(hp_, wp), axes=(0, 1))
     u, v = spec.grid

@@ -40,7 +40,7 @@ import numpy as np
 from capture.errors import InputError
 from lightfield.field import LightField
 
-KERNELS = ("linear", "cubic", "lanczos3")
+KERNELS = ("linear", "cubic", "lanczos3", "bspline3")
 
 
 def _taps(kernel: str, frac: float) -> tuple[int, np.ndarray]:
@@ -54,6 +54,10 @@ def _taps(kernel: str, frac: float) -> tuple[int, np.ndarray]:
         w = np.where(x <= 1, (a + 2) * x ** 3 - (a + 3) * x ** 2 + 1,
                      np.where(x < 2, a * x ** 3 - 5 * a * x ** 2 + 8 * a * x - 4 * a, 0.0))
         return -1, w
+    if kernel == "bspline3":  # on prefiltered coefficients (Unser 1999)
+        t = np.abs(np.arange(-1, 3) - frac)
+        w = np.where(t < 1, 2 / 3 - t ** 2 + t ** 3 / 2, np.where(t < 2, (2 - t) ** 3 / 6, 0.0))
+        return -1, w
     if kernel == "lanczos3":
         t = np.arange(-2, 4) - frac
         w = np.sinc(t) * np.sinc(t / 3.0)
@@ -66,7 +70,7 @@ def _shift_axis(img: np.ndarray, shift: float, axis: int, kernel: str, pad: int)
     n = img.shape[axis] - 2 * pad
     base = math.floor(shift)
     frac = shift - base
-    if frac < 1e-9:
+    if frac < 1e-9 and kernel != "bspline3":
         sl = [slice(None)] * img.ndim
         sl[axis] = slice(pad + base, pad + base + n)
         return img[tuple(sl)]
@@ -90,12 +94,22 @@ def shift_view(view: np.ndarray, dx: float, dy: float, *, kernel: str = "lanczos
     """
     pad = int(math.ceil(max(abs(dx), abs(dy)))) + 4
     h, w = view.shape[:2]
+    if kernel == "bspline3":
+        view = spline_coefficients(view)
     if pad >= min(h, w):
         padded = np.pad(view, ((pad, pad), (pad, pad), (0, 0)), mode="edge")
     else:
         padded = np.pad(view, ((pad, pad), (pad, pad), (0, 0)), mode="symmetric")
     tmp = _shift_axis(padded, dx, 1, kernel, pad)
     return np.ascontiguousarray(_shift_axis(tmp, dy, 0, kernel, pad))
+
+
+def spline_coefficients(view: np.ndarray) -> np.ndarray:
+    """Cubic B-spline coefficients of a view along y and x (mirror boundary), float32."""
+    from scipy.ndimage import spline_filter1d
+
+    c = spline_filter1d(view.astype(np.float64), 3, axis=0, mode="reflect")
+    return spline_filter1d(c, 3, axis=1, mode="reflect").astype(np.float32)
 
 
 def shift_and_add(lf: LightField, slope: float, *, kernel: str = "lanczos3") -> np.ndarray:

@@ -188,8 +188,12 @@ class PlaneScene:
                         continue
                     ny, nx, _ = plane.coef.shape
                     tmp = (by @ plane.coef.reshape(ny, nx * 3)).reshape(-1, nx, 3)
-                    term = np.stack([(bx @ tmp[:, :, c].T).T for c in range(3)], axis=-1)
-                    out += term if r % 2 == 0 else -term
+                    tmp = np.ascontiguousarray(tmp.transpose(1, 0, 2)).reshape(nx, -1)
+                    term = (bx @ tmp).reshape(xs.shape[1], -1, 3).transpose(1, 0, 2)
+                    if r % 2 == 0:
+                        out += term
+                    else:
+                        out -= term
         return out
 
     def _mean_weights(self, plane, zrel, cams, ps, pp, rects, axis, cam_z):
@@ -391,8 +395,9 @@ def render_lenslet(*, size, seed, rng, lattice="square", views=5, pitch=22.4, ro
     ``size`` is the number of microlenses (columns, rows) = the view size. GT:
     ``centers`` (rows, cols, 2) sensor px of the microlens centres (x, y);
     ``views`` (N, N, rows, cols, 3) radiance at the lattice positions; for hex
-    also ``views_rect`` (N, N, Hr, cols, 3) on the rectangular grid of unit
-    spacing a decoder resamples to.
+    also ``views_rect`` (N, N, Hr, cols - 1, 3) on the square grid of unit
+    spacing inside every row's samples (``x = j + 1/2``, ``y = k``) that a
+    decoder resamples to.
     """
     cols, rows = size
     n = views
@@ -422,7 +427,8 @@ def render_lenslet(*, size, seed, rng, lattice="square", views=5, pitch=22.4, ro
         odd = render_views(scene, n, n, spacing, xs_even + 0.5, ys)
         gt_views[:, :, 1::2] = odd[:, :, 1::2]
         hr = int(math.floor((rows - 1) * SQRT3_2)) + 1
-        views_rect = render_views(scene, n, n, spacing, xs_even, np.arange(hr, dtype=float))
+        views_rect = render_views(scene, n, n, spacing, xs_even[:-1] + 0.5,
+                                  np.arange(hr, dtype=float))
     gt_views = np.clip(gt_views, 0.0, None)
 
     # Which microlens and which cell each sensor pixel sees.
@@ -520,5 +526,5 @@ SCENES = {
     "lightfield-lenslet-hex": SceneSpec(
         "lightfield-lenslet-hex", "plenoptic raw + white image, hexagonal microlens grid rotated "
         "1.5 deg; GT centres, views at lattice positions and on the rectangular grid",
-        render_lenslet, (40, 40), _lenslet_options("hex"), version=1, min_size=(8, 8)),
+        render_lenslet, (40, 40), _lenslet_options("hex"), version=2, min_size=(8, 8)),
 }

@@ -1,0 +1,58 @@
+"""Hard cases for lightfield/: out-of-range refocus, degenerate and non-square
+grids, rotated hexagonal lenslets, bad input."""
+
+import numpy as np
+import pytest
+from conftest import assert_clean_error, lumigraph
+
+from capture.errors import InputError
+from capture.render import render
+from lightfield import ng2005
+from lightfield.field import LightField
+from lightfield.lenslet import decode
+from lightfield.refocus import check_refocus_range, shift_and_add
+
+
+def _psnr(a, b):
+    return 10 * np.log10(1.0 / np.mean((a.astype(np.float64) - b) ** 2))
+
+
+@pytest.mark.parametrize("grid", ["2x2", "1x5", "3x1", "2x5"])
+def test_small_and_non_square_grids_refocus_to_truth(grid):
+    s = render("lightfield-array", size=(48, 40), grid=grid, thin_lens=False, focus=(0.3, 0.9))
+    lf = LightField(s.gt_arrays["views"], spacing=1.0, focal_px=48.0)
+    spec = ng2005.prepare(lf, max_slope=0.9)
+    for k, slope in enumerate((0.3, 0.9)):
+        gt = s.gt_arrays["synthetic_aperture"][k]
+        sa, base = shift_and_add(lf, slope), shift_and_add(lf, slope, kernel="linear")
+        # Even grids have half-integer offsets (2x2: shifts of +-slope/2), so
+        # every view is interpolated; the same bounds as the 5x5 case hold.
+        assert _psnr(sa, gt) > max(_psnr(base, gt), 38), grid
+        assert _psnr(ng2005.refocus(spec, slope), gt) > _psnr(sa, gt) - 1.5, grid
+
+
+def test_alpha_outside_refocusable_range_warns_with_the_bound():
+    lf = LightField(np.zeros((9, 9, 4, 4, 1)), spacing=1.0, focal_px=4.0)
+    assert check_refocus_range(lf, [lf.slope_from_alpha(1.1)]) == []
+    (w,) = check_refocus_range(lf, [lf.slope_from_alpha(0.5)])
+    assert "alpha 0.5" in w and "|1 - 1/alpha| <= dx/du = 0.1111" in w
+
+
+def test_rotated_hexagonal_lenslets_meet_the_bounds():
+    s = render("lightfield-lenslet-hex", size=(24, 24), rotation_deg=-7.0, pitch=25.3,
+               view_step_px=3.2)
+    d = decode(*s.images, views=5)
+    err = np.linalg.norm(d.grid.centers() - s.gt_arrays["centers"], axis=-1)
+    assert d.grid.lattice == "hex" and err.max() < 0.1
+    truth = s.gt_arrays["views_rect"]
+    assert 35 < 10 * np.log10(truth.max() ** 2 / np.mean((d.lightfield.data - truth) ** 2))
+
+
+def test_impossible_grids_and_options_are_refused(tmp_path):
+    with pytest.raises(InputError, match="--grid"):
+        render("lightfield-array", grid="1x1", cache=False)
+    with pytest.raises(InputError, match="--view-step-px"):
+        render("lightfield-lenslet", size=(10, 10), view_step_px=5.0, cache=False)
+    r = lumigraph("render", "lightfield-array", "--out", tmp_path / "x", "--grid", "0x3")
+    assert_clean_error(r, "--grid")
+    assert not (tmp_path / "x" / "stack.json").exists()
