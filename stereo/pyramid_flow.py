@@ -26,7 +26,7 @@ Examples
 >>> b = np.roll(a, (1, 3), axis=(0, 1))          # frame 1 = frame 0 moved by (3, 1)
 >>> r = pyramid_flow(a, b, levels="auto")
 >>> np.round(np.median(r.flow[8:-8, 8:-8], axis=(0, 1)), 1).tolist(), r.levels
-([3.0, 1.0], 2)
+([3.0, 1.0], 3)
 """
 
 from __future__ import annotations
@@ -40,6 +40,13 @@ from stereo.pyramid import (build_pyramid, choose_levels, estimate_max_motion, f
                             noise_sigma, to_gray, upsample_flow, warp)
 
 METHODS = ("local", "dense")
+# Range sigma (uint8 guide levels) of the weighted median: neighbours differing
+# by more than ~2 sigma in colour get little weight.
+WMF_SIGMA = 25.5
+# Motion a level's Gauss-Newton steps are trusted to resolve (px): "auto"
+# adds levels until the top is left with at most this, which also keeps the
+# exhaustive top-level search small (its cost grows with radius^2 x area).
+REACH_PX = 1.5
 
 
 @dataclass(frozen=True)
@@ -118,6 +125,19 @@ def _box(a: np.ndarray, window: int) -> np.ndarray:
     return cv2.boxFilter(a, -1, (window, window), normalize=True, borderType=cv2.BORDER_REFLECT)
 
 
+def _shifted(a: np.ndarray, dx: int, dy: int) -> np.ndarray:
+    """``a`` sampled at ``(x + dx, y + dy)`` with replicated borders (an
+    integer shift by slicing: no interpolation, no resampling cost)."""
+    h, w = a.shape[:2]
+    r = max(abs(dx), abs(dy))
+    if r == 0:
+        return a
+    import cv2
+
+    pad = cv2.copyMakeBorder(a, r, r, r, r, cv2.BORDER_REPLICATE)
+    return pad[r + dy:r + dy + h, r + dx:r + dx + w]
+
+
 def _hypotheses(i0, i1, flow, *, window):
     """Per pixel, keep the best of its own vector and those of the pixels
     ``window // 2 + 1`` away in the four axis directions, by the windowed SSD
@@ -130,17 +150,26 @@ def _hypotheses(i0, i1, flow, *, window):
     s = window // 2 + 1
     h, w = flow.shape[:2]
     best = flow.copy()
-    # Bilinear is enough to rank hypotheses that differ by pixels.
-    cost = _box((warp(i1, flow, cubic=False) - i0) ** 2, 5)
+    # Bilinear is enough to rank hypotheses that differ by pixels. cv2's
+    # element-wise ops: this runs at every level, including the full-size one.
+    cost = _ssd(warp(i1, flow, cubic=False), i0, 5)
+    pad = cv2.copyMakeBorder(flow, s, s, s, s, cv2.BORDER_REPLICATE)
     for dx, dy in ((s, 0), (-s, 0), (0, s), (0, -s)):
-        M = np.float32([[1, 0, dx], [0, 1, dy]])
-        cand = cv2.warpAffine(flow, M, (w, h), flags=cv2.INTER_NEAREST,
-                              borderMode=cv2.BORDER_REPLICATE)
-        c = _box((warp(i1, cand, cubic=False) - i0) ** 2, 5)
-        better = c < cost
-        best[better] = cand[better]
-        cost[better] = c[better]
+        cand = pad[s + dy:s + dy + h, s + dx:s + dx + w]
+        c = _ssd(warp(i1, cand, cubic=False), i0, 5)
+        better = cv2.compare(c, cost, cv2.CMP_LT)
+        best = cv2.copyTo(np.ascontiguousarray(cand), better, best)
+        cv2.min(cost, c, dst=cost)
     return best
+
+
+def _ssd(a, b, window):
+    """Windowed mean of ``(a - b)^2`` (eq. 5.1), in place on one temporary."""
+    import cv2
+
+    d = cv2.subtract(a, b)
+    cv2.multiply(d, d, dst=d)
+    return cv2.boxFilter(d, -1, (window, window), dst=d, borderType=cv2.BORDER_REFLECT)
 
 
 def _search_top(i0, i1, *, radius, window):
@@ -152,20 +181,38 @@ def _search_top(i0, i1, *, radius, window):
     h, w = i0.shape
     best = np.zeros((h, w, 2), np.float32)
     cost = np.full((h, w), np.inf, np.float32)
+    pad = cv2.copyMakeBorder(i1, radius, radius, radius, radius, cv2.BORDER_REPLICATE)
     for dy in range(-radius, radius + 1):
         for dx in range(-radius, radius + 1):
-            M = np.float32([[1, 0, -dx], [0, 1, -dy]])
-            moved = cv2.warpAffine(i1, M, (w, h), flags=cv2.INTER_NEAREST,
-                                   borderMode=cv2.BORDER_REPLICATE)
+            moved = pad[radius + dy:radius + dy + h, radius + dx:radius + dx + w]
             # A tiny penalty on the offset's length breaks ties toward no motion in flat areas.
-            c = _box((moved - i0) ** 2, window) + 1e-7 * (dx * dx + dy * dy)
-            better = c < cost
-            best[better] = (dx, dy)
-            cost = np.where(better, c, cost)
+            c = cv2.add(_ssd(moved, i0, window), 1e-7 * (dx * dx + dy * dy))
+            better = cv2.compare(c, cost, cv2.CMP_LT)
+            best[better.astype(bool)] = (dx, dy)
+            cv2.min(cost, c, dst=cost)
     return best
 
 
-def _refine_level(i0, i1, flow, *, window, iterations, alpha, sweeps, reg):
+def _median(flow, guide, radius):
+    """Outlier removal after a warp (Sun, Roth, Black 2010,
+    doi:10.1109/CVPR.2010.5539939): a 3x3 median, or with ``radius > 0`` their
+    boundary-aware weighted median, each neighbour weighted by its colour
+    similarity to the centre in ``guide`` (uint8), so a window straddling a
+    motion boundary takes the median of the centre's own surface. The
+    weighted median is cv2.ximgproc's constant-time joint-histogram filter
+    (Zhang, Xu, Jia 2014, doi:10.1109/CVPR.2014.362)."""
+    import cv2
+
+    flow = np.ascontiguousarray(flow, np.float32)
+    if radius <= 0 or guide is None:
+        return cv2.medianBlur(flow, 3)
+    three = np.dstack([flow, np.zeros(flow.shape[:2], np.float32)])
+    return np.ascontiguousarray(cv2.ximgproc.weightedMedianFilter(
+        guide, three, radius, sigma=WMF_SIGMA)[..., :2])
+
+
+def _refine_level(i0, i1, flow, *, window, iterations, alpha, sweeps, reg, guide=None,
+                  median_radius=0):
     """Warped Gauss-Newton steps at one level; returns the refined flow and the
     structure tensor's smallest eigenvalue (for the confidence)."""
     import cv2
@@ -173,60 +220,90 @@ def _refine_level(i0, i1, flow, *, window, iterations, alpha, sweeps, reg):
     g0x, g0y = _gradients(i0)
     cross = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], np.float32)
     lam_min = None
-    for _ in range(iterations):
+    for k in range(iterations):
         i1w = warp(i1, flow)
         g1x, g1y = _gradients(i1w)
-        # Averaged gradients: the symmetric linearisation converges in fewer steps.
-        gx, gy = 0.5 * (g0x + g1x), 0.5 * (g0y + g1y)
-        it = i1w - i0
-        jxx, jxy, jyy = _box(gx * gx, window), _box(gx * gy, window), _box(gy * gy, window)
-        bx, by = _box(gx * it, window), _box(gy * it, window)
+        # Averaged gradients: the symmetric linearisation converges in fewer
+        # steps. cv2 element-wise ops (SIMD, threaded) as everywhere per warp.
+        gx = cv2.addWeighted(g0x, 0.5, g1x, 0.5, 0.0)
+        gy = cv2.addWeighted(g0y, 0.5, g1y, 0.5, 0.0)
+        it = cv2.subtract(i1w, i0)
+        jxx, jxy, jyy = (_box(cv2.multiply(p, q), window) for p, q in ((gx, gx), (gx, gy), (gy, gy)))
+        bx, by = _box(cv2.multiply(gx, it), window), _box(cv2.multiply(gy, it), window)
         if alpha <= 0:
-            a11, a22 = jxx + reg, jyy + reg
-            det = a11 * a22 - jxy * jxy
-            du = (-a22 * bx + jxy * by) / det
-            dv = (jxy * bx - a11 * by) / det
+            a11, a22 = cv2.add(jxx, reg), cv2.add(jyy, reg)
+            det = cv2.subtract(cv2.multiply(a11, a22), cv2.multiply(jxy, jxy))
+            du = cv2.divide(cv2.subtract(cv2.multiply(jxy, by), cv2.multiply(a22, bx)), det)
+            dv = cv2.divide(cv2.subtract(cv2.multiply(jxy, bx), cv2.multiply(a11, by)), det)
         else:
             # Jacobi sweeps for (J + 4 alpha) d = alpha (S(u + d) - 4u) - b, S the 4-neighbour sum.
-            a11, a22 = jxx + 4 * alpha + reg, jyy + 4 * alpha + reg
+            al = np.float32(alpha)
+            a11, a22 = jxx + (4 * al + np.float32(reg)), jyy + (4 * al + np.float32(reg))
             det = a11 * a22 - jxy * jxy
             u0, v0 = flow[..., 0], flow[..., 1]
             lap_u = cv2.filter2D(u0, -1, cross, borderType=cv2.BORDER_REPLICATE) - 4 * u0
             lap_v = cv2.filter2D(v0, -1, cross, borderType=cv2.BORDER_REPLICATE) - 4 * v0
+            cu, cv_ = al * lap_u - bx, al * lap_v - by
             du = np.zeros_like(u0)
             dv = np.zeros_like(v0)
             for _s in range(sweeps):
-                ru = alpha * (lap_u + cv2.filter2D(du, -1, cross, borderType=cv2.BORDER_REPLICATE)) - bx
-                rv = alpha * (lap_v + cv2.filter2D(dv, -1, cross, borderType=cv2.BORDER_REPLICATE)) - by
+                ru = cu + al * cv2.filter2D(du, -1, cross, borderType=cv2.BORDER_REPLICATE)
+                rv = cv_ + al * cv2.filter2D(dv, -1, cross, borderType=cv2.BORDER_REPLICATE)
                 du = (a22 * ru - jxy * rv) / det
                 dv = (a11 * rv - jxy * ru) / det
-        flow = flow + np.stack([du, dv], axis=-1)
-        # A 3x3 median after each warp removes isolated outliers (Sun, Roth, Black 2010).
-        flow = cv2.medianBlur(np.ascontiguousarray(flow, np.float32), 3)
-        tr, d2 = jxx + jyy, np.sqrt(np.maximum((jxx - jyy) ** 2 + 4 * jxy * jxy, 0))
-        lam_min = 0.5 * (tr - d2)
+        flow = cv2.add(flow, cv2.merge([du, dv]))
+        # The weighted median is costly: once per level, after its last warp.
+        flow = _median(flow, guide, median_radius if k == iterations - 1 else 0)
+        if k == iterations - 1:
+            tr, d2 = jxx + jyy, np.sqrt(np.maximum((jxx - jyy) ** 2 + 4 * jxy * jxy, 0))
+            lam_min = 0.5 * (tr - d2)
     return flow, lam_min
 
 
-def _one_way(g0, g1, *, levels, window, iterations, alpha, sweeps, radius):
+def _one_way(g0, g1, *, levels, window, iterations, alpha, sweeps, radius, finest_iterations,
+             finest_level=0, guide=None, median_radius=0):
     p0, p1 = build_pyramid(g0, levels), build_pyramid(g1, levels)
+    guides = _guide_pyramid(guide, levels) if median_radius > 0 else [None] * levels
     flow = _search_top(p0[-1], p1[-1], radius=radius, window=min(window, 5))
     lam = None
     # Tikhonov term on the local solve: keeps a flat window's step small
     # instead of dividing noise by noise; far below any textured J.
     reg = 1e-5
-    for lvl in range(levels - 1, -1, -1):
+    for lvl in range(levels - 1, min(finest_level, levels - 1) - 1, -1):
         if lvl < levels - 1:
             flow = upsample_flow(flow, p0[lvl].shape)
             flow = _hypotheses(p0[lvl], p1[lvl], flow, window=window)
-        flow, lam = _refine_level(p0[lvl], p1[lvl], flow, window=window, iterations=iterations,
-                                  alpha=alpha, sweeps=sweeps, reg=reg)
+        n_it = finest_iterations if lvl == finest_level else iterations
+        flow, lam = _refine_level(p0[lvl], p1[lvl], flow, window=window, iterations=n_it,
+                                  alpha=alpha, sweeps=sweeps, reg=reg, guide=guides[lvl],
+                                  median_radius=max(1, round(median_radius / 2 ** lvl))
+                                  if median_radius > 0 else 0)
+    if flow.shape[:2] != g0.shape:
+        # Stopped early (DIS's "finest scale"): bilinear upsampling to full
+        # size; the texture confidence then comes from frame 0's own
+        # structure tensor at full size (gradients not averaged: noise
+        # enters J twice as strongly, hence the factor 2 for lam_noise).
+        flow = upsample_flow(flow, g0.shape)
+        gx, gy = _gradients(g0)
+        jxx, jxy, jyy = (_box(p * q, window) for p, q in ((gx, gx), (gx, gy), (gy, gy)))
+        lam = 0.5 * (jxx + jyy - np.sqrt(np.maximum((jxx - jyy) ** 2 + 4 * jxy * jxy, 0))) / 2
     return flow.astype(np.float32), lam
+
+
+def _guide_pyramid(image, levels):
+    """uint8 guide images (colour where given) for the weighted median."""
+    a = np.asarray(image)
+    f = a.astype(np.float32) / (float(np.iinfo(a.dtype).max) if a.dtype.kind in "ui" else 1.0)
+    if f.ndim == 3:
+        f = np.ascontiguousarray(f[..., :3])
+    return [np.clip(np.rint(p * 255), 0, 255).astype(np.uint8) for p in build_pyramid(f, levels)]
 
 
 def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = "auto",
                  max_motion_px: float | None = None, method: str = "local", window: int = 9,
-                 iterations: int = 3, alpha: float = 2e-3, sweeps: int = 20,
+                 iterations: int = 3, finest_iterations: int | None = None,
+                 finest_level: int = 0, alpha: float = 2e-3, sweeps: int = 20,
+                 median_radius: int = 0,
                  consistency: bool = True) -> FlowResult:
     """Forward optical flow from ``image0`` to ``image1`` by coarse-to-fine warping.
 
@@ -248,10 +325,23 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
         Odd side of the square window of eq. 5.1 (pixels, at every level).
     iterations : int
         Warps per level.
+    finest_iterations : int, optional
+        Warps at the finest (full-size) level, where each costs 4x the level
+        above; default ``iterations``. One is usually enough there, the
+        coarser levels having done the large steps.
+    finest_level : int
+        Pyramid level at which refinement stops (0: full size). At 1 the
+        flow is solved at half size and upsampled, for about a quarter of the
+        cost (the "finest scale" of DIS, Kroeger et al. 2016).
     alpha : float
         Smoothness weight of ``"dense"`` (intensities in [0, 1]).
     sweeps : int
         Jacobi sweeps per warp for ``"dense"``.
+    median_radius : int
+        0: a 3x3 median after each warp. > 0: after each level's last warp,
+        the colour-guided weighted median of Sun, Roth & Black (radius in
+        full-size pixels, halved per level), which pulls vectors smeared
+        across a motion boundary back to their own surface; slower.
     consistency : bool
         Also compute the backward flow and mark forward-backward inconsistent
         pixels as occluded (doubles the cost).
@@ -277,10 +367,18 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
         raise ValueError(f"window: expected an odd size >= 3, got {window}")
     if iterations < 1:
         raise ValueError(f"iterations: expected >= 1, got {iterations}")
+    if finest_iterations is None:
+        finest_iterations = iterations
+    if finest_iterations < 1:
+        raise ValueError(f"finest_iterations: expected >= 1, got {finest_iterations}")
+    if finest_level < 0:
+        raise ValueError(f"finest_level: expected >= 0, got {finest_level}")
+    if median_radius < 0:
+        raise ValueError(f"median_radius: expected >= 0, got {median_radius}")
     g0, g1 = to_gray(a), to_gray(b)
     if a.dtype.kind == "f":  # float input is taken as already in [0, 1]
         g0, g1 = g0.astype(np.float32), g1.astype(np.float32)
-    reach = max(1.0, window / 4)
+    reach = REACH_PX
     if levels == "auto":
         if max_motion_px is None:
             est, tiles = estimate_max_motion(g0, g1)
@@ -300,8 +398,10 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
     radius = int(min(6, max(1, np.ceil(top_motion) + 1)))
     choice_d["top_search_radius_px"] = radius
     opts = dict(levels=n_levels, window=window, iterations=iterations,
-                alpha=alpha if method == "dense" else 0.0, sweeps=sweeps, radius=radius)
-    fwd, lam = _one_way(g0, g1, **opts)
+                alpha=alpha if method == "dense" else 0.0, sweeps=sweeps, radius=radius,
+                finest_iterations=finest_iterations, finest_level=finest_level,
+                median_radius=median_radius)
+    fwd, lam = _one_way(g0, g1, guide=a, **opts)
     t_fwd = time.perf_counter() - t0
     # Texture confidence: lambda_min of J against that of pure noise. With
     # central differences a noise of sigma gives E[Ix^2] = sigma^2 / 2 per
@@ -311,16 +411,18 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
     tex = (lam / (lam + 25 * lam_noise)).astype(np.float32)
     occluded = np.zeros(g0.shape, bool)
     info = {"method": method, "level_choice": choice_d, "window": window,
-            "iterations": iterations, "noise_sigma": sigma}
+            "iterations": iterations, "finest_iterations": finest_iterations,
+            "finest_level": finest_level, "median_radius": median_radius,
+            "noise_sigma": sigma}
     if method == "dense":
         info.update(alpha=alpha, sweeps=sweeps)
     if consistency:
-        bwd, _ = _one_way(g1, g0, **opts)
+        bwd, _ = _one_way(g1, g0, guide=b, **opts)
         occluded, rt = forward_backward(fwd, bwd)
         info["occluded_fraction"] = float(occluded.mean())
         info["median_round_trip_px"] = float(np.median(rt[np.isfinite(rt)])) if np.isfinite(rt).any() else None
     conf = np.where(occluded, 0.0, tex).astype(np.float32)
-    resid = np.abs(warp(g1, fwd) - g0)
+    resid = np.abs(warp(g1, fwd, cubic=False) - g0)
     info["quality"] = {"mean_abs_residual": float(resid[~occluded].mean()) if (~occluded).any()
                        else None, "mean_confidence": float(conf.mean())}
     info["timings_s"] = {"forward": t_fwd, "total": time.perf_counter() - t0}
