@@ -111,9 +111,12 @@ def prepare(lf: LightField, *, max_slope: float = 1.5, oversample: float = 1.5,
     _, _, h, w, c = lf.data.shape
     reach = abs(max_slope) * max((u - 1) / 2, (v - 1) / 2)
     pad = int(math.ceil(reach)) + 2
-    hp, wp = sfft.next_fast_len(h + 2 * pad, real=True), sfft.next_fast_len(w + 2 * pad, real=True)
+    hp, wp = _odd_fast_len(h + 2 * pad), _odd_fast_len(w + 2 * pad)
     py, px = pad, pad
-    nu, nv = int(math.ceil(oversample * u)), int(math.ceil(oversample * v))
+    # Small grids (2 views) need more than 1.5x: the kernel's passband must
+    # cover the occupied bins with margin, so at least 4 empty bins per axis.
+    nu = max(int(math.ceil(oversample * u)), u + 4)
+    nv = max(int(math.ceil(oversample * v)), v + 4)
     # Beatty et al. (2005) choice of beta for a given width and oversampling.
     osr = min(nu / u, nv / v)
     beta = math.pi * math.sqrt(max((kernel_width / osr) ** 2 * (osr - 0.5) ** 2 - 0.8, 1.0))
@@ -145,6 +148,17 @@ def prepare(lf: LightField, *, max_slope: float = 1.5, oversample: float = 1.5,
     return FourierLightField(spec.astype(np.complex64, copy=False), (u, v), (w, h), (py, px),
                              (hp, wp), kernel_width, float(beta),
                              ((u - 1) / 2 - cu, (v - 1) / 2 - cv), float(abs(max_slope)))
+
+
+def _odd_fast_len(n: int) -> int:
+    """Smallest odd FFT-friendly length >= n. Odd lengths have no Nyquist bin,
+    whose phase a fractional shift leaves ambiguous (a +-1 alternating error)."""
+    import scipy.fft as sfft
+
+    m = n
+    while m % 2 == 0 or sfft.next_fast_len(m, real=True) != m:
+        m += 1
+    return m
 
 
 def _axis_taps(freq: np.ndarray, slope: float, n: int, width: int, beta: float):

@@ -1,0 +1,32 @@
+# lightfield/: camera-array light field -> refocus (one + focal stack) -> novel
+# view -> depth; lenslet raw -> decoded sub-aperture views. Included by the Makefile.
+
+$(OUT)/scenes/lightfield-array/stack.json: $(STAMP)
+	$(LUMI) render lightfield-array --out $(@D) --size 160x120 --quiet
+
+$(OUT)/scenes/lightfield-lenslet-hex/stack.json: $(STAMP)
+	$(LUMI) render lightfield-lenslet-hex --out $(@D) --quiet
+
+$(OUT)/lightfield/array/lightfield.json: $(OUT)/scenes/lightfield-array/stack.json
+	$(LUMI) lightfield import $(<D) --out $(@D) --quiet
+
+$(OUT)/lightfield/refocus-near.exr: $(OUT)/lightfield/array/lightfield.json
+	$(LUMI) lightfield refocus $(<D) --slope 1.0 --method shift-add --out $@ --quiet
+
+$(OUT)/lightfield/focal-stack/index.json: $(OUT)/lightfield/array/lightfield.json
+	$(LUMI) lightfield refocus $(<D) --slope 0,0.1,0.2,0.3,0.4,0.5,0.6,0.7,0.8,0.9,1.0 \
+	  --method auto --out $(@D) --quiet
+
+$(OUT)/lightfield/novel-view.exr: $(OUT)/lightfield/array/lightfield.json
+	$(LUMI) lightfield render $(<D) --position 0.5 0.5 0 --focus-slope 0.6 --out $@ --quiet
+
+$(OUT)/lightfield/disparity.pfm: $(OUT)/lightfield/array/lightfield.json
+	$(LUMI) lightfield depth $(<D) --slopes 0,1.2,25 --all-in-focus $(@D)/all-in-focus.exr \
+	  --out $@ --quiet
+
+$(OUT)/lightfield/lenslet/lightfield.json: $(OUT)/scenes/lightfield-lenslet-hex/stack.json
+	$(LUMI) lightfield decode $(<D)/raw.png --white $(<D)/white.png --out $(@D) --quiet
+
+DEMO_OUTPUTS += $(OUT)/lightfield/refocus-near.exr $(OUT)/lightfield/focal-stack/index.json \
+  $(OUT)/lightfield/novel-view.exr $(OUT)/lightfield/disparity.pfm \
+  $(OUT)/lightfield/lenslet/lightfield.json
