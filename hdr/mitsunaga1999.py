@@ -18,7 +18,8 @@ order at 3 and skips the ratio update):
   ambiguity below the objective is flat, so more iterations only drift;
 - every exposure pair, not only neighbours; saturated and black codes masked;
 - a numerically stable basis: shifted Chebyshev polynomials ``T_n(2M − 1)``
-  on normalised codes, solved by ``numpy.linalg.lstsq`` (QR/SVD), never the
+  on normalised codes, solved by QR with column pivoting
+  (``scipy.linalg.lstsq``, LAPACK ``gelsy``), never the
   normal equations of a raw Vandermonde matrix; the constraint ``f(1) = 1`` is
   built into the basis (``f = 1 + Σ a_n (T_n(2M−1) − 1)``);
 - equations reweighted each iteration so residuals are relative (≈ ln
@@ -39,7 +40,7 @@ Examples
 >>> e = np.exp(rng.uniform(-5, 0, (40, 40, 1)))
 >>> t = np.array([0.1, 0.3, 0.9, 2.7])
 >>> z = np.stack([np.round(255 * np.clip(e * ti, 0, 1) ** 0.5) for ti in t]).astype(np.uint8)
->>> r = mitsunaga_nayar(z, t * [1.0, 1.08, 0.95, 1.0], rng=rng)
+>>> r = mitsunaga_nayar(z, t * [1.0, 1.08, 0.95, 1.0], samples=300, rng=rng)
 >>> x = r.exposure_table()[0]
 >>> bool(abs(x[200] / x[100] - 4.0) < 0.1)
 True
@@ -50,6 +51,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import scipy.linalg
 
 from hdr.response import ResponseCurve, normalise_g
 from hdr.samples import check_stack, sample_pixels
@@ -113,8 +115,9 @@ def _fit(chans, ln_e0, orders, iters=10, tol=1e-8):
         for k, (qa, qb, ba, bb, fa_prev, fb_prev) in enumerate(data):
             r = np.exp(ln_e[qa] - ln_e[qb])
             s = 1.0 / (fa_prev + r * fb_prev)  # relative residuals
-            a_new, *_ = np.linalg.lstsq((ba - r[:, None] * bb) * s[:, None], -(1.0 - r) * s,
-                                        rcond=None)
+            # QR with column pivoting (LAPACK gelsy): stable, and far cheaper than SVD.
+            a_new = scipy.linalg.lstsq((ba - r[:, None] * bb) * s[:, None], -(1.0 - r) * s,
+                                       lapack_driver="gelsy", check_finite=False)[0]
             fa, fb = 1.0 + ba @ a_new, 1.0 + bb @ a_new
             pos = (fa > 1e-6) & (fb > 1e-6)
             d = np.log(fa[pos]) - np.log(fb[pos])

@@ -1,0 +1,86 @@
+"""``lumigraph hdr`` end to end, bad input, and the quick bench."""
+
+import json
+import shutil
+
+import numpy as np
+from conftest import assert_clean_error, lumigraph
+
+from capture.io import read_exr
+from capture.render import render
+
+
+def _bracket_folder(tmp_path, **kw):
+    d = tmp_path / "bracket"
+    render("bracket", **kw).save(d)
+    return d
+
+
+def test_response_merge_tonemap_convert_chain(tmp_path):
+    d = _bracket_folder(tmp_path)
+    r = lumigraph("hdr", "response", d, "--out", tmp_path / "r.json", "--plot", tmp_path / "c.png",
+                  "-q")
+    assert r.returncode == 0, r.stderr
+    body = json.loads((tmp_path / "r.json").read_text())
+    assert {"method", "bit_depth", "g", "exposure_times", "selection", "warnings"} <= set(body)
+    assert len(body["g"]) == 3 and len(body["g"][0]) == 256
+    r = lumigraph("hdr", "merge", d, "--response", tmp_path / "r.json", "--out",
+                  tmp_path / "rad.exr", "-q")
+    assert r.returncode == 0, r.stderr
+    assert "clipped in every exposure" in r.stderr  # the emitters: said, not silent
+    rad = read_exr(tmp_path / "rad.exr")
+    assert rad.shape == (120, 160, 3) and np.isfinite(rad).all()
+    assert (tmp_path / "rad.mask.png").exists() and (tmp_path / "rad.exr.meta.json").exists()
+    r = lumigraph("hdr", "tonemap", tmp_path / "rad.exr", "--method", "reinhard-local",
+                  "--out", tmp_path / "t.png", "-q")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph("hdr", "convert", tmp_path / "rad.exr", tmp_path / "rad.tif", "-q")
+    assert r.returncode == 0, r.stderr
+
+
+def test_linear_input_needs_no_curve(tmp_path):
+    d = _bracket_folder(tmp_path, response="linear", bit_depth=12)
+    r = lumigraph("hdr", "response", d, "--out", tmp_path / "r.json")
+    assert r.returncode == 0, r.stderr
+    assert "no response curve is needed" in r.stderr
+    assert json.loads((tmp_path / "r.json").read_text())["method"] == "linear"
+
+
+def test_bad_inputs_exit_2_and_write_nothing(tmp_path):
+    d = _bracket_folder(tmp_path, exposures=3)
+    imgs = sorted(str(p) for p in d.glob("*.png"))
+    out = tmp_path / "r.json"
+    r = lumigraph("hdr", "response", *imgs, "--times", "0.01,0.01,0.1", "--out", out)
+    assert_clean_error(r, "--times", "duplicated")
+    r = lumigraph("hdr", "response", *imgs, "--out", out)
+    assert_clean_error(r, "exposure time")
+    r = lumigraph("hdr", "response", *imgs, "--times", "0.01,-1,0.1", "--out", out)
+    assert_clean_error(r, "positive")
+    other = tmp_path / "other"
+    render("bracket", size=(80, 60), exposures=1).save(other)
+    shutil.copy(other / "exposure_00.png", tmp_path / "small.png")
+    r = lumigraph("hdr", "response", imgs[0], imgs[1], tmp_path / "small.png", "--times",
+                  "1,2,3", "--out", out)
+    assert_clean_error(r, "small.png")
+    (tmp_path / "bad.json").write_text("{}")
+    r = lumigraph("hdr", "merge", d, "--response", tmp_path / "bad.json", "--out",
+                  tmp_path / "x.exr")
+    assert_clean_error(r, "bad.json")
+    assert not out.exists() and not (tmp_path / "x.exr").exists()
+
+
+def test_python_dash_m_hdr_works():
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-m", "hdr", "--help"], capture_output=True, text=True)
+    assert r.returncode == 0 and "response" in r.stdout
+
+
+def test_quick_bench_through_cli(tmp_path):
+    r = lumigraph("bench", "hdr", "--quick", "--out", tmp_path, "-q")
+    assert r.returncode == 0, r.stderr
+    js = json.loads((tmp_path / "report.json").read_text())
+    names = {row["method"] for row in js["stages"]["hdr"]["rows"]}
+    assert {"debevec (ours)", "CalibrateDebevec (OpenCV)", "merge (ours)"} <= names
+    assert js["stages"]["hdr"]["checks"]
