@@ -27,6 +27,16 @@ $(OUT)/lightfield/disparity.pfm: $(OUT)/lightfield/array/lightfield.json
 $(OUT)/lightfield/lenslet/lightfield.json: $(OUT)/scenes/lightfield-lenslet-hex/stack.json
 	$(LUMI) lightfield decode $(<D)/raw.png --white $(<D)/white.png --out $(@D) --quiet
 
+# Real data: the HCI "antinous" 5x5 views (sRGB PNG, row-major by file name).
+HCI_VIEWS := $(sort $(wildcard $(SHARED)/data/lightfield-real/hci_antinous_5x5/input_Cam*.png))
+
+$(OUT)/lightfield/hci/lightfield.json: $(STAMP) $(HCI_VIEWS)
+	$(LUMI) lightfield import $(HCI_VIEWS) --grid 5x5 --spacing 1 --out $(@D) --quiet
+
+$(OUT)/lightfield/hci-refocus/index.json: $(OUT)/lightfield/hci/lightfield.json
+	$(LUMI) lightfield refocus $(<D) --slope -1.5,0,1.5 --method shift-add --out $(@D) --quiet
+
+DEMO_OUTPUTS += $(if $(HCI_VIEWS),$(OUT)/lightfield/hci-refocus/index.json)
 DEMO_OUTPUTS += $(OUT)/lightfield/refocus-near.exr $(OUT)/lightfield/focal-stack/index.json \
   $(OUT)/lightfield/novel-view.exr $(OUT)/lightfield/disparity.pfm \
   $(OUT)/lightfield/lenslet/lightfield.json
