@@ -18,7 +18,8 @@ examples:
   lumigraph lightfield refocus lf --slope 0.5 --out focus.exr
   lumigraph lightfield refocus lf --depth 2 3 4 5 6 7 8 9 10 12 --method auto --out stack/
   lumigraph lightfield render lf --position 0.5 0.5 0 --focus-slope 0.4 --out view.exr
-  lumigraph lightfield depth lf --slopes -1,1,41 --out disparity.pfm
+  lumigraph lightfield depth lf --slopes=-1,1,41 --out disparity.pfm
+  (negative values: write --slope=-0.5,0.5 so they are not read as options)
 
 A light field folder holds view-UU-VV.exr (linear float32, row-major, U = row)
 and lightfield.json (grid, spacing, focal_px). Refocus by --slope (px per view

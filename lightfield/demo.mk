@@ -34,7 +34,7 @@ $(OUT)/lightfield/hci/lightfield.json: $(STAMP) $(HCI_VIEWS)
 	$(LUMI) lightfield import $(HCI_VIEWS) --grid 5x5 --spacing 1 --out $(@D) --quiet
 
 $(OUT)/lightfield/hci-refocus/index.json: $(OUT)/lightfield/hci/lightfield.json
-	$(LUMI) lightfield refocus $(<D) --slope -1.5,0,1.5 --method shift-add --out $(@D) --quiet
+	$(LUMI) lightfield refocus $(<D) --slope=-1.5,0,1.5 --method shift-add --out $(@D) --quiet
 
 DEMO_OUTPUTS += $(if $(HCI_VIEWS),$(OUT)/lightfield/hci-refocus/index.json)
 DEMO_OUTPUTS += $(OUT)/lightfield/refocus-near.exr $(OUT)/lightfield/focal-stack/index.json \
