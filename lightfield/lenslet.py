@@ -239,7 +239,7 @@ def hex_to_rect(views: np.ndarray, grid: LensletGrid) -> np.ndarray:
     interpolation along rows (half-lenslet shift), then along columns.
     (N, N, Hr, cols - 1, C) float32.
     """
-    from scipy.ndimage import map_coordinates, spline_filter1d
+    from scipy.ndimage import spline_filter1d
 
     n1, n2, rows, cols, c = views.shape
     hr = int(math.floor((rows - 1) * SQRT3_2)) + 1

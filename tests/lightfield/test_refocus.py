@@ -7,8 +7,13 @@ from conftest import need_shared
 from capture.render import render
 from lightfield import ng2005
 from lightfield.field import LightField, from_images
-from lightfield.refocus import (all_in_focus, check_refocus_range, estimate_disparity,
-                                focal_stack, shift_and_add)
+from lightfield.refocus import (
+    all_in_focus,
+    check_refocus_range,
+    estimate_disparity,
+    focal_stack,
+    shift_and_add,
+)
 
 
 def _psnr(a, b):

@@ -3,8 +3,7 @@
 import numpy as np
 
 from capture.render import render
-from capture.scenes.lightfield import (build_scene, synthetic_aperture, thin_lens_image,
-                                       view_offsets)
+from capture.scenes.lightfield import build_scene, synthetic_aperture, thin_lens_image, view_offsets
 from lightfield.lenslet import LensletGrid, devignette, slice_views
 
 
