@@ -12,7 +12,16 @@ import json
 import time
 from pathlib import Path
 
-from capture.command import add_verb, check_output_path, make_parser, progress, run, say, subparsers, warn
+from capture.command import (
+    add_verb,
+    check_output_path,
+    make_parser,
+    progress,
+    run,
+    say,
+    subparsers,
+    warn,
+)
 from capture.errors import InputError
 
 MODEL_CHOICES = ("auto", "none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
