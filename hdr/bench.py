@@ -41,7 +41,7 @@ def ln_response_rms(g: np.ndarray, g_true: np.ndarray, bit_depth: int) -> float:
     Examples
     --------
     >>> g = np.log(np.arange(1, 257, dtype=float))[None].repeat(3, 0)
-    >>> ln_response_rms(g + [[1.0], [2.0], [3.0]], g, 8)
+    >>> round(ln_response_rms(g + [[1.0], [2.0], [3.0]], g, 8), 12)
     0.0
     """
     zmax = 2 ** bit_depth - 1

@@ -282,7 +282,7 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
     fold = np.arange(idx.size) % 2  # alternate along radiance: both folds span the range
     g_out = np.empty((c, 2 ** bd))
     scores: dict[str, list] = {}
-    chosen, fit_rms, monotone_fix = [], [], []
+    chosen, fit_rms, monotone_fix, linked_px = [], [], [], []
     all_codes = np.arange(2 ** bd)
     for ch in range(c):
         zc = zs[..., ch].T.astype(np.int64)  # (N, P)
@@ -326,6 +326,21 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
                                             "(too few distinct codes; use a larger λ)") from None
         resid = (_g_at(gk, zc, n_knots, bd) - lne[:, None] - lnt[None]) * (wc > 0)
         fit_rms.append(float(np.sqrt((resid ** 2).sum() / max((wc > 0).sum(), 1))))
+        # Only pixels seen well exposed in two exposures link codes to each other;
+        # where few knots are linked, the smoothness prior draws the curve.
+        lo, hi = int(0.05 * (n_knots - 1)), int(0.95 * (n_knots - 1))
+        linked = np.zeros(n_knots, bool)
+        linked[knot_basis(zc[wc > 0], n_knots, bd)[0]] = True
+        coverage = float(linked[lo:hi + 1].mean())
+        linked_px.append(int(zc.shape[0]))
+        if coverage < 0.6 or zc.shape[0] < 50:
+            warnings.append(f"channel {ch}: only {zc.shape[0]} pixels are well exposed in two "
+                            f"exposures, covering {100 * coverage:.0f} % of the code range: the "
+                            "curve is poorly constrained (exposures too far apart or too few)")
+        if fit_rms[-1] > 0.1:
+            warnings.append(f"channel {ch}: heavy noise ({fit_rms[-1]:.2f} ln units per "
+                            "observation): expect response errors of several percent; average "
+                            "frames or add exposures")
         k0, _ = knot_basis(zc[wc > 0], n_knots, bd)
         counts = np.bincount(k0, minlength=n_knots).astype(np.float64)
         gm = _monotone(gk, counts)
@@ -340,7 +355,7 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
     sel = {"parameter": "lambda", "chosen": chosen, "rule": "given" if lam_given else
            "largest λ within one standard error of the best held-out exposure prediction",
            "candidates": scores, "knots": n_knots}
-    fit = {"samples": int(idx.size), "residual_rms_ln": fit_rms,
+    fit = {"samples": int(idx.size), "residual_rms_ln": fit_rms, "linked_pixels": linked_px,
            "monotone_max_change_ln": monotone_fix}
     times = tuple(float(x) for x in np.asarray(exposure_times_s, dtype=np.float64))
     return ResponseCurve("debevec", bd, normalise_g(g_out), times, sel, tuple(warnings), fit)

@@ -18,7 +18,7 @@ middle code to ``z_mid / z_max`` (:func:`hdr.response.normalise_g`), so a
 linear 8-bit and a linear 16-bit capture of one scene merge to the same
 numbers. Codes within ``clip_margin`` of 0 or ``z_max`` get no weight (the
 noise there is truncated). A pixel clipped in every exposure is set to the
-lower bound the shortest exposure gives (``f⁻¹(z_hi)/Δt_min``) and flagged
+lower bound the shortest saturated exposure gives (``f⁻¹(z_hi)/Δt``) and flagged
 :data:`CLIPPED`; one black in every exposure gets the upper bound from the
 longest exposure and :data:`BLACK` — never a silent 0 or mid-grey.
 
@@ -188,7 +188,6 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     lo_code = int(math.ceil(clip_margin * zmax))
     hi_code = int(math.floor((1 - clip_margin) * zmax))
     j_short, j_long = int(np.argmin(t)), int(np.argmax(t))
-    bound_hi = (x_tab[:, min(hi_code, zmax)] / t[j_short]).astype(np.float32)
     bound_lo = (x_tab[:, max(lo_code, 0)] / t[j_long]).astype(np.float32)
     if deghost:
         if reference is None:
@@ -243,12 +242,20 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         empty = den <= 0
         np.divide(num, den, out=num, where=~empty)
         if empty.any():
-            sat = z[j_short, r0:r1] > hi_code
-            num[empty & sat] = np.broadcast_to(bound_hi, num.shape)[empty & sat]
-            num[empty & ~sat] = np.broadcast_to(bound_lo, num.shape)[empty & ~sat]
+            # Saturated in some exposure: the shortest such gives the tightest lower
+            # bound f^-1(z_hi)/t. Otherwise dark everywhere: the longest exposure
+            # gives the tightest upper bound f^-1(z_lo)/t.
+            ii = np.nonzero(empty)
+            val = np.full(ii[0].size, np.nan, np.float32)
+            for j in np.argsort(t)[::-1]:  # longest first, so the shortest wins
+                sj = z[j, r0:r1][ii] > hi_code
+                val[sj] = x_tab[ii[2][sj], min(hi_code, zmax)] / t[j]
+            sat = np.isfinite(val)
+            val[~sat] = bound_lo[ii[2][~sat]]
+            num[ii] = val
             fb = flags[r0:r1]
-            fb[empty & sat] |= CLIPPED
-            fb[empty & ~sat] |= BLACK
+            fb[ii[0][sat], ii[1][sat], ii[2][sat]] |= CLIPPED
+            fb[ii[0][~sat], ii[1][~sat], ii[2][~sat]] |= BLACK
         if deghost:
             flags[r0:r1][ghost] |= GHOST
         out[r0:r1] = num
@@ -266,7 +273,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     n_black = int(np.count_nonzero(flags & BLACK))
     if n_clip:
         warnings.append(f"{n_clip} pixel-channels are clipped in every exposure: set to the lower "
-                        "bound from the shortest exposure and flagged (add a shorter exposure)")
+                        "bound from the shortest saturated exposure and flagged (add a shorter exposure)")
     if n_black:
         warnings.append(f"{n_black} pixel-channels are black in every exposure: set to the upper "
                         "bound from the longest exposure and flagged (add a longer exposure)")

@@ -222,7 +222,9 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
     idx = sample_pixels(z, n=samples, bit_depth=bd, rng=rng)
     zmax = 2 ** bd - 1
     zs = z.reshape(p, h * w_, c)[:, idx].astype(np.float64) / zmax  # (P, N, C)
-    orders = list(range(1, MAX_ORDER + 1)) if order == "auto" else [int(order)]
+    # A given order is still compared with the others by held-out error, so an
+    # order the data cannot support is reported, not silently used.
+    orders = list(range(1, MAX_ORDER + 1))
     fold = np.arange(idx.size) % 2
     g = np.empty((c, zmax + 1))
     warnings: list[str] = []
@@ -232,9 +234,6 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
         valid = (mz >= clip_margin) & (mz <= 1 - clip_margin)
         cand = []
         for n in orders:
-            if len(orders) == 1:
-                cand.append((n, math.nan, math.nan))
-                continue
             errs, ses = [], []
             for f in (0, 1):
                 try:
@@ -245,13 +244,17 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
                 errs.append(e)
                 ses.append(se)
             cand.append((n, float(np.mean(errs)), float(np.sqrt(np.sum(np.square(ses))) / 2)))
-        if len(orders) > 1:
-            best = min(cand, key=lambda x: x[1])
-            if not math.isfinite(best[1]):
-                raise EstimationError("images", f"channel {ch}: no polynomial order could be fitted")
-            n_ch = min(x[0] for x in cand if x[1] <= best[1] + best[2])
-        else:
-            n_ch = orders[0]
+        best = min(cand, key=lambda x: x[1])
+        if not math.isfinite(best[1]):
+            raise EstimationError("images", f"channel {ch}: no polynomial order could be fitted")
+        n_ch = min(x[0] for x in cand if x[1] <= best[1] + best[2])
+        if order != "auto":
+            given = next(x for x in cand if x[0] == int(order))
+            if not given[1] <= best[1] + 2 * best[2]:
+                warnings.append(f"channel {ch}: order {int(order)} does not fit held-out pixels "
+                                f"(error {given[1]:.3g} against {best[1]:.3g} at order {best[0]}): "
+                                "it follows the noise; use --order auto")
+            n_ch = int(order)
         sel_scores[str(ch)] = [{"order": n, "held_out_mse": e, "se": s} for n, e, s in cand]
         chosen.append(n_ch)
         chans.append((mz, valid))
@@ -271,7 +274,7 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
     refined[perm] = np.exp(ln_e)
     ratios = np.exp(np.diff(ln_e))  # e_{q+1}/e_q in ascending exposure order
     sel = {"parameter": "order", "chosen": chosen, "candidates": sel_scores,
-           "rule": "given" if len(orders) == 1 else
+           "rule": "given" if order != "auto" else
            "lowest order within one standard error of the best held-out error"}
     fit = {"basis": "shifted Chebyshev T_n(2M-1) - 1, f = 1 + sum a_n (...)",
            "coefficients": [a.tolist() for a in coeffs], "power_gamma": gam,
