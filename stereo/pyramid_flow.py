@@ -13,6 +13,12 @@ Schnörr 2005, doi:10.1023/B:VISI.0000045324.43199.43), solved per warp by
 Jacobi sweeps: textureless areas get the flow of their surroundings instead of
 an unconstrained local solve.
 
+After each warp a 3x3 median removes isolated outliers; with
+``median_radius > 0`` each level ends with the colour-guided weighted median
+of Sun, Roth & Black 2010 (doi:10.1109/CVPR.2010.5539939), which keeps motion
+boundaries where the image has them. ``finest_level`` stops the refinement
+above full size for speed.
+
 Both run forward and (with ``consistency=True``) backward; the
 forward-backward round trip gives the occlusion mask, and the smallest
 eigenvalue of ``J`` against the image's own noise gives the texture

@@ -26,6 +26,14 @@ in added or removed objects and by a small camera shift:
    (matches far from it are down-weighted) and the regression redone, until
    the field stops changing. Coarse-to-fine over a pyramid for reach.
 
+Two additions (``init="pyramid"``, the default; ``init="none"`` is the
+plain method above): the field starts from a brightness-invariant pyramid
+flow (:func:`invariant_pyramid_flow`) instead of zero, which reaches an
+independently moving object that has too few feature points to pull the
+coarse regression its way; and after the iterations every pixel keeps the
+regressed field or the start, whichever has the lower matching cost, so the
+regression kernel no longer blends the two sides of a motion boundary.
+
 Examples
 --------
 >>> import cv2
@@ -53,6 +61,7 @@ from stereo.pyramid_flow import FlowResult
 # 0.1 contrast units over the secondary's 3x3 range is a doubtful match.
 MATCH_SCALE = 0.1
 SUPPORT_HALF = 2.0
+SELECT_REGION = 9
 
 
 def _weighted_median(values: np.ndarray, weights: np.ndarray) -> float:
@@ -72,6 +81,32 @@ def _as_float(image: np.ndarray) -> np.ndarray:
     if a.dtype.kind in "ui":
         out /= float(np.iinfo(a.dtype).max)
     return np.ascontiguousarray(out)
+
+
+INITS = ("pyramid", "none")
+
+
+def invariant_pyramid_flow(primary: np.ndarray, secondary: np.ndarray, *,
+                           levels: int | str = "auto", max_motion_px: float | None = None):
+    """A brightness-invariant start for the matching: coarse-to-fine pyramid
+    flow (:func:`stereo.pyramid_flow.pyramid_flow`, with its colour-guided
+    weighted median, radius 10) on the locally contrast-normalised gray
+    images, so gain, offset and smooth shading do not break brightness
+    constancy. Normalised values (contrast units, mostly within +-4) are
+    mapped to [0, 1] as ``0.5 + n / 8``.
+
+    Returns
+    -------
+    FlowResult
+        Of :func:`stereo.pyramid_flow.pyramid_flow` (``levels`` and the
+        level choice as there).
+    """
+    from stereo.pyramid_flow import pyramid_flow
+
+    n = [np.clip(0.5 + normalise_contrast(to_gray(x)[..., None])[..., 0] / 8, 0, 1)
+         .astype(np.float32) for x in (primary, secondary)]
+    return pyramid_flow(n[0], n[1], levels=levels, max_motion_px=max_motion_px, median_radius=10,
+                        consistency=False)
 
 
 def normalise_contrast(image: np.ndarray, *, sigma: float = 3.0, eps: float = 0.01) -> np.ndarray:
@@ -223,7 +258,8 @@ def _match(n0, mx1, mn1, field, *, radius, region, prior_px):
 def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | str = "auto",
                    max_motion_px: float | None = None, region: int = 5,
                    regression_sigma: float = 9.0, max_iterations: int = 6, tol_px: float = 0.02,
-                   radius: int = 2) -> FlowResult:
+                   radius: int = 2, init: str = "pyramid",
+                   initial_flow: np.ndarray | None = None) -> FlowResult:
     """Sand-Teller correspondence field from ``primary`` to ``secondary``.
 
     Parameters
@@ -243,6 +279,16 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         field's mean change is below ``tol_px``.
     radius : int
         Search radius around the current field at each level below the top.
+    init : {"pyramid", "none"}
+        Start of the field. ``"pyramid"`` (default):
+        :func:`invariant_pyramid_flow`, then matching and regression at full
+        size only, and finally every pixel keeps whichever of the regressed
+        field and the start has the lower matching cost (a per-pixel
+        refinement against the cost: the regression kernel blends the two
+        sides of a motion boundary). ``"none"``: the paper's coarse-to-fine
+        start from zero offsets.
+    initial_flow : ndarray, ``(H, W, 2)``, optional
+        A start field given by the caller (overrides ``init``).
 
     Returns
     -------
@@ -263,8 +309,17 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         raise ValueError(f"region: expected an odd size >= 1, got {region}")
     if regression_sigma <= 0:
         raise ValueError(f"regression_sigma: expected > 0, got {regression_sigma}")
+    if init not in INITS:
+        raise ValueError(f"init: expected one of {INITS}, got {init!r}")
     fa, fb = _as_float(a), _as_float(b)
     g0 = to_gray(fa)
+    start_result = None
+    if init == "pyramid" and initial_flow is None:
+        start_result = invariant_pyramid_flow(fa, fb, levels=levels, max_motion_px=max_motion_px)
+        initial_flow = start_result.flow
+    if initial_flow is not None:
+        # The start already spans the large motions: match at full size only.
+        levels = 1
     if levels == "auto":
         if max_motion_px is None:
             est, _tiles = estimate_max_motion(g0, to_gray(fb))
@@ -280,6 +335,12 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         raise ValueError(f"levels: expected 'auto' or an integer >= 1, got {levels!r}")
     p0, p1 = build_pyramid(fa, n_levels), build_pyramid(fb, n_levels)
     field = np.zeros(p0[-1].shape[:2] + (2,), np.float32)
+    start = None
+    if initial_flow is not None:
+        start = np.asarray(initial_flow, np.float32)
+        if start.shape != fa.shape[:2] + (2,):
+            raise ValueError(f"initial_flow: expected {fa.shape[:2] + (2,)}, got {start.shape}")
+        field = upsample_flow(start, p0[-1].shape[:2])
     history = []
     for lvl in range(n_levels - 1, -1, -1):
         if lvl < n_levels - 1:
@@ -302,7 +363,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
             prob = np.exp(-best / MATCH_SCALE) * distinct * feat
             sig = max(2.0, regression_sigma / 2 ** lvl)
             fit = weighted_regression(matched, prob, sigma=sig)
-            if top and it == 0:
+            if top and it == 0 and initial_flow is None:
                 # No coarser level to inherit from: start flat areas at the
                 # dominant (probability-weighted median) offset.
                 wsum = prob.sum()
@@ -328,12 +389,29 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
     # cost at the field itself against the typical feature cost.
     n0 = normalise_contrast(fa)
     mx1, mn1 = _minmax(normalise_contrast(fb))
+    if start is not None:
+        # Final per-pixel refinement against the matching cost: the regression
+        # blends the two sides of a motion boundary within its kernel; where
+        # the starting field matches better (the Sand-Teller cost over a 9x9
+        # region, robust to the lighting change), that pixel keeps it.
+        cands = np.stack([field, start])
+        costs = np.stack([_cost(n0, mx1, mn1, f, region=SELECT_REGION) for f in cands])
+        keep = np.argmin(costs, 0)
+        field = np.take_along_axis(cands, keep[None, ..., None], 0)[0]
+        info_select = {"start_kept_fraction": float(keep.mean())}
+    else:
+        info_select = {}
     c = _cost(n0, mx1, mn1, field, region=region)
     tau = max(float(np.median(c)), 1e-3)
     prob = np.exp(-np.log(2) * (c / (2 * tau)) ** 2).astype(np.float32)  # 0.5 at twice typical
     info = {"method": "sand2004", "level_choice": choice_d, "region": region,
-            "regression_sigma": regression_sigma, "iterations": history,
+            "regression_sigma": regression_sigma, "init": init, "iterations": history,
+            **info_select,
             "quality": {"mean_probability": float(prob.mean()),
                         "unmatched_fraction": float((prob < 0.5).mean())},
             "timings_s": {"total": time.perf_counter() - t0}}
+    if start_result is not None:
+        # The pyramid that reached the large motions is the start's.
+        n_levels = start_result.levels
+        info["level_choice"] = start_result.info["level_choice"]
     return FlowResult(field.astype(np.float32), prob, prob < 0.5, n_levels, info)

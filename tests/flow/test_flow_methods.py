@@ -78,13 +78,38 @@ def test_video_matching_on_a_second_take():
     r = video_matching(s.images[0], s.images[1])
     e = _epe(r.flow, g["flow"], vis)
     # Lighting differs by 30-45 % between the takes and an object was added;
-    # half a pixel is what a smooth (regressed) field of a near-translation
-    # must reach; > 0.01 px: not an exact copy of the truth.
-    assert 0.01 < e < 0.5, e
+    # a quarter pixel: the matching cost is flat within the secondary's 3x3
+    # max/min range (half a pixel each way), and the regression plus the
+    # brightness-invariant start average that down over many matches;
+    # > 0.01 px: not an exact copy of the truth.
+    assert 0.01 < e < 0.25, e
     # The added box has no match: low probability there, high elsewhere.
     assert r.confidence[g["occluded"]].mean() < 0.2
     assert r.confidence[vis].mean() > 0.5
     assert len(r.info["iterations"]) >= 2
+
+
+def test_weighted_median_sharpens_motion_boundaries(flow_scene):
+    s, g, vis = flow_scene
+    plain = _epe(pyramid_flow(s.images[0], s.images[1], consistency=False).flow, g["flow"], vis)
+    wm = pyramid_flow(s.images[0], s.images[1], consistency=False, median_radius=10)
+    e = _epe(wm.flow, g["flow"], vis)
+    # The colour-guided median pulls vectors smeared across the ellipse's
+    # boundary back to their surface: strictly better than the 3x3 median,
+    # and still above the noise floor (ground truth not leaked).
+    assert 0.02 < e < plain, (e, plain)
+    assert wm.info["median_radius"] == 10
+
+
+def test_stopping_at_half_size_is_coarser_but_bounded(flow_scene):
+    s, g, vis = flow_scene
+    r = pyramid_flow(s.images[0], s.images[1], consistency=False, iterations=1, finest_level=1)
+    assert r.flow.shape == (SIZE[1], SIZE[0], 2) and r.confidence.shape == (SIZE[1], SIZE[0])
+    # Half size: one level-1 pixel is 2 px, so sub-pixel accuracy there is
+    # ~1 px here; still well under Farneback's 1.7 px on this scene.
+    assert 0.02 < _epe(r.flow, g["flow"], vis) < 1.5
+    with pytest.raises(ValueError, match="finest_level"):
+        pyramid_flow(s.images[0], s.images[1], finest_level=-1)
 
 
 def test_weighted_regression_reproduces_affine_fields_and_ignores_zero_weights():

@@ -37,7 +37,7 @@ def test_occlusion_borders_are_flagged_and_the_rest_is_accurate():
     # visible image: the occlusion border does not leak wrong vectors in.
     trusted = ~r.occluded & ~g["occluded"]
     e = _err(r.flow, g["flow"])
-    assert e[trusted].mean() < 0.6
+    assert e[trusted].mean() < 0.4
 
 
 def test_motion_beyond_40_px():
@@ -59,4 +59,7 @@ def test_brightness_change_needs_video_matching():
     vm = video_matching(s.images[0], s.images[1])
     robust = _err(vm.flow, g["flow"])[vis].mean()
     assert plain > 5.0  # brightness constancy broken: the plain flow fails
-    assert robust < 0.5 * plain and robust < 2.0
+    # Gain 0.6, offset and a 35 % shading ramp: the contrast-normalised
+    # matching removes them, leaving sub-pixel error (DIS-medium's is ~0.95 px
+    # on this scene at 320x240, bench).
+    assert robust < 0.5 * plain and robust < 0.6
