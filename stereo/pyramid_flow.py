@@ -42,8 +42,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stereo.pyramid import (build_pyramid, choose_levels, estimate_max_motion, forward_backward,
-                            noise_sigma, to_gray, upsample_flow, warp)
+from stereo.pyramid import (
+    build_pyramid,
+    choose_levels,
+    estimate_max_motion,
+    forward_backward,
+    noise_sigma,
+    to_gray,
+    upsample_flow,
+    warp,
+)
 
 METHODS = ("local", "dense")
 # Range sigma (uint8 guide levels) of the weighted median: neighbours differing

@@ -51,10 +51,15 @@ import time
 
 import numpy as np
 
-from stereo.pyramid import (build_pyramid, choose_levels, estimate_max_motion, noise_sigma,
-                            to_gray, upsample_flow)
+from stereo.pyramid import (
+    build_pyramid,
+    choose_levels,
+    estimate_max_motion,
+    noise_sigma,
+    to_gray,
+    upsample_flow,
+)
 from stereo.pyramid_flow import FlowResult
-
 
 # Cost scale of the matching probability: the cost is in units of local
 # contrast (the images are normalised), summed over channels; a mean excess of
