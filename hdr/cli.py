@@ -6,8 +6,16 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from capture.command import (add_verb, check_output_path, make_parser, parse_floats, run, say,
-                             subparsers, warn)
+from capture.command import (
+    add_verb,
+    check_output_path,
+    make_parser,
+    parse_floats,
+    run,
+    say,
+    subparsers,
+    warn,
+)
 from capture.errors import InputError
 from hdr.methods import RESPONSE_METHODS, TONEMAP_METHODS
 

@@ -125,7 +125,7 @@ def variance_weight_table(exposure_table: np.ndarray, *, full_well_e: float = 10
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           weights: str = "variance", full_well_e: float = 10000.0, read_noise_e: float = 5.0,
           clip_margin: float = 0.02, deghost: bool = False, deghost_sigma: float = 4.0,
-          reference: int | None = None, block_rows: int = 32,
+          reference: int | None = None, block_rows: int = 8,
           workers: int | None = None) -> RadianceMap:
     """Merge a bracket into relative radiance.
 
@@ -187,7 +187,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         wxl[j] = wj * x_tab / t[j]
     lo_code = int(math.ceil(clip_margin * zmax))
     hi_code = int(math.floor((1 - clip_margin) * zmax))
-    j_short, j_long = int(np.argmin(t)), int(np.argmax(t))
+    j_long = int(np.argmax(t))
     bound_lo = (x_tab[:, max(lo_code, 0)] / t[j_long]).astype(np.float32)
     if deghost:
         if reference is None:
