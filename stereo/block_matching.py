@@ -45,11 +45,13 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 
 AUTO_WINDOWS = (5, 9, 15)
+BAND_ROWS = 64
 _INT_MAX = np.iinfo(np.int32).max
 
 
@@ -82,7 +84,7 @@ class DisparityMap:
         d = np.asarray(self.disparity)
         if d.ndim != 2 or d.dtype != np.float32:
             raise ValueError(f"disparity: expected (H, W) float32, got {d.shape} {d.dtype}")
-        if np.any(d[np.isfinite(d)] < 0):
+        if (d < 0).any():  # NaN compares False
             raise ValueError("disparity: values must be >= 0 (x_right = x_left - d)")
         for name in ("cost", "window"):
             if np.asarray(getattr(self, name)).shape != d.shape:
@@ -103,9 +105,11 @@ class DisparityMap:
 # ------------------------------------------------------------------- helpers
 def to_gray(image: np.ndarray) -> np.ndarray:
     """Luma ``(H, W)`` float32 in the image's own code units (Rec. 601 weights)."""
+    import cv2
+
     a = np.asarray(image)
     if a.ndim == 3 and a.shape[2] in (3, 4):
-        a = a[..., :3].astype(np.float32) @ np.array([0.299, 0.587, 0.114], np.float32)
+        a = cv2.cvtColor(np.ascontiguousarray(a[..., :3], dtype=np.float32), cv2.COLOR_RGB2GRAY)
     elif a.ndim == 3 and a.shape[2] == 1:
         a = a[..., 0]
     elif a.ndim != 2:
@@ -135,10 +139,12 @@ def noise_sigma(gray: np.ndarray) -> float:
     h, w = (r.shape[0] // 8) * 8, (r.shape[1] // 8) * 8
     if h == 0 or w == 0:
         return float(np.sqrt(np.pi / 2) * r.mean() / 6.0)
-    blocks = r[:h, :w].reshape(h // 8, 8, w // 8, 8).mean(axis=(1, 3))
+    # 8x8 block means (area resampling by exactly 1/8 is the block mean)
+    blocks = cv2.resize(r[:h, :w], (w // 8, h // 8), interpolation=cv2.INTER_AREA)
     # blocks near black or white are clipped (less noise than the sensor's):
     # leave them out
-    level = gray[1:h + 1, 1:w + 1].reshape(h // 8, 8, w // 8, 8).mean(axis=(1, 3))
+    level = cv2.resize(np.ascontiguousarray(gray[1:h + 1, 1:w + 1]), (w // 8, h // 8),
+                       interpolation=cv2.INTER_AREA)
     lo, hi = float(gray.min()), float(gray.max())
     ok = (level > lo + 0.04 * (hi - lo)) & (level < hi - 0.04 * (hi - lo))
     if ok.sum() >= 10:
@@ -149,112 +155,185 @@ def noise_sigma(gray: np.ndarray) -> float:
     return float(np.sqrt(np.pi / 2) * np.percentile(blocks, 10) / 6.0 / 0.785)
 
 
-def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_tolerance,
-          subpixel, distinct, noise_var):
-    """Match rows ``y0:y1``; ``left``/``right`` carry a margin of rows so box
-    filters see real neighbours. Returns per-pixel arrays for the band."""
+_SCRATCH = threading.local()
+
+
+def _scratch() -> dict:
+    """This thread's scratch buffers for the cost volume. Kept between calls:
+    fresh memory costs a page fault per 4 KiB on first write, which for a
+    volume of tens of MB takes longer than filling it."""
+    if not hasattr(_SCRATCH, "buffers"):
+        _SCRATCH.buffers = {}
+    return _SCRATCH.buffers
+
+
+def _match_images(left, right):
+    """The images block matching compares, and the float luma for the texture
+    and noise estimates. 8-bit inputs are matched on luma in quarter code
+    values as uint16 (exact integer SSD; whole code values would add the
+    rounding noise of the luma weights, which costs accuracy on colour
+    pairs); other inputs on float32 luma."""
+    L, R = to_gray(left), to_gray(right)
+    if np.asarray(left).dtype == np.uint8 and np.asarray(right).dtype == np.uint8:
+        return (np.rint(L * 4).astype(np.uint16), np.rint(R * 4).astype(np.uint16), L)
+    return L, R, L
+
+
+def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds, uniqueness,
+          lr_tolerance, subpixel, distinct, noise_var, span, scratch):
+    """Match rows ``y0:y1``. ``left`` is the whole matching image with ``D = max_disp + 1``
+    reflected columns on its right, ``right_padded`` the right one with ``D - 1`` replicated
+    columns on its left and ``D`` on its right (so every disparity's view is a plain slice
+    of width ``W + D``), ``texture`` the float luma of the left (unpadded). One pass over
+    the disparities writes an encoded cost volume into ``scratch`` while keeping the best
+    cost of every left and every right pixel; the runner-up and the parabola's neighbours
+    are then read from the volume. Returns per-pixel arrays for the band."""
     import cv2
 
     margin = max(windows) // 2
     a0, a1 = max(0, y0 - margin), min(left.shape[0], y1 + margin)
-    L = left[a0:a1]
-    h, w = L.shape
+    L, Rp, T = left[a0:a1], right_padded[a0:a1], texture[a0:a1]
+    h, w = T.shape
     D = max_disp + 1
     nb = max(1, math.ceil(math.log2(D)))
     low = np.int32((1 << nb) - 1)
-    # Right image padded on the left by replicating its first column, so that
-    # the shifted view for disparity d is a plain slice (cost for x < d is
-    # invalidated below: those pixels have no partner inside the right image).
-    Rp = cv2.copyMakeBorder(right[a0:a1], 0, 0, D - 1, 0, cv2.BORDER_REPLICATE)
+    integer = L.dtype == np.uint16
+    reflect = cv2.BORDER_REFLECT
 
     # texture: window variance of the left image, per candidate window
     var = []
     for win in windows:
-        m = cv2.boxFilter(L, -1, (win, win), borderType=cv2.BORDER_REFLECT)
-        m2 = cv2.sqrBoxFilter(L, cv2.CV_32F, (win, win), borderType=cv2.BORDER_REFLECT)
+        m = cv2.boxFilter(T, -1, (win, win), borderType=reflect)
+        m2 = cv2.sqrBoxFilter(T, cv2.CV_32F, (win, win), borderType=reflect)
         var.append(m2 - m * m)
-    textured = [v >= t for v, t in zip(var, thresholds, strict=True)]
     # smallest textured window per pixel; index len(windows) = none
     pick = np.full((h, w), len(windows), np.uint8)
     for k in range(len(windows) - 1, -1, -1):
-        pick[textured[k]] = k
-    masks = [(pick == k).astype(np.uint8) for k in range(len(windows))]
+        pick[var[k] >= thresholds[k]] = k
+    used = [k for k in range(len(windows)) if (pick == k).any()] or [0]
+    if len(windows) == 1 or len(used) == 1:
+        fixed = windows[used[0]]
+    else:
+        fixed = None
+        masks = {k: np.pad(pick == k, ((0, 0), (0, D))).astype(np.uint8) for k in used}
+        merged = np.empty((h, w + D), np.int32 if integer else np.float32)
+    n = (fixed or 1) ** 2
+    # integer units per code value² of mean cost, so that a cost shifted left
+    # by nb bits stays below 2^30: 8-bit inputs are matched in quarter code
+    # values (squares <= 1020², 20 bits), summed over n pixels (fixed window)
+    # or averaged (auto); float inputs map the largest possible cost, span²
+    if integer:
+        bits = math.ceil(math.log2(n * 1020 ** 2 + 1))
+        shift = 30 - nb - bits  # > 0: spare bits (auto), < 0: drop low bits
+        if fixed:
+            shift = min(shift, 0)  # sums are used as they come unless too wide
+        unit = 16.0 * (n if fixed else 1) * 2.0 ** shift
+    else:
+        shift, unit = 0, 2.0 ** (30 - nb) / span ** 2
 
-    # Cost volume, int32-encoded: the bit pattern of a non-negative float32 is
-    # monotone in its value, so (bits & ~low) | d sorts by cost and carries its
-    # disparity in the low bits: one integer min gives the argmin (relative
-    # cost resolution 2^-(23-nb), far below the noise).
-    costs = np.empty((D, h, w), np.float32)
+    sq = np.empty((h, w + D), np.int32 if integer else np.float32)
+
+    def cost_into(v, diff):
+        """Window SSD for one disparity from the absolute differences, written
+        into ``v`` as integers: ``unit`` per code value² of mean cost (window
+        sums, or means under ``auto``)."""
+        if integer:
+            np.square(diff, out=sq, dtype=np.int32)
+            if fixed:
+                cv2.boxFilter(sq, -1, (fixed, fixed), dst=v, normalize=False, borderType=reflect)
+                if shift < 0:
+                    np.right_shift(v, -shift, out=v)
+                return
+            for k in used:
+                mk = cv2.boxFilter(sq, -1, (windows[k], windows[k]), borderType=reflect)
+                cv2.copyTo(mk, masks[k], merged)
+            if shift >= 0:
+                np.left_shift(merged, shift, out=v)
+            else:
+                np.right_shift(merged, -shift, out=v)
+        elif fixed:
+            cv2.sqrBoxFilter(diff, cv2.CV_32F, (fixed, fixed), dst=sq, normalize=False,
+                             borderType=reflect)
+            np.multiply(sq, unit / n, out=v, casting="unsafe")
+        else:
+            cv2.multiply(diff, diff, dst=sq)
+            for k in used:
+                mk = cv2.boxFilter(sq, -1, (windows[k], windows[k]), borderType=reflect)
+                cv2.copyTo(mk, masks[k], merged)
+            np.multiply(merged, unit, out=v, casting="unsafe")
+
+    # Cost volume, int32-encoded as (cost << nb) | d so that one integer min
+    # carries its disparity. Columns x < d have no partner in the right
+    # image, and D columns of padding on the right let the right view's
+    # volume (x_r = x - d) be a flat slice: both hold INT_MAX, never chosen.
+    wp = w + D
+    # the volume lives in this thread's scratch buffer (see _scratch)
+    buf = scratch.get("vol")
+    if buf is None or buf.shape[0] != D or buf.shape[1] < h or buf.shape[2] != wp:
+        rows = max(h, BAND_ROWS + 2 * margin + 2)  # room for any band of this image
+        buf = scratch["vol"] = np.empty((D, rows, wp), np.int32)
+    vol = buf[:, :h]
+    slab = buf.shape[1] * wp  # flat distance between disparities
+    best = np.full((h, wp), _INT_MAX, np.int32)
+    best_r = np.full(h * wp, _INT_MAX, np.int32)
+    diff = np.empty((h, wp), L.dtype)
     for d in range(D):
-        diff = cv2.subtract(L, Rp[:, D - 1 - d: D - 1 - d + w])
-        cv2.sqrBoxFilter(diff, cv2.CV_32F, (windows[-1], windows[-1]), dst=costs[d],
-                         borderType=cv2.BORDER_REFLECT)
-        for k in range(len(windows) - 1):
-            ck = cv2.sqrBoxFilter(diff, cv2.CV_32F, (windows[k], windows[k]),
-                                  borderType=cv2.BORDER_REFLECT)
-            cv2.copyTo(ck, masks[k], costs[d])
-    # Extra INT_MAX columns let the right view's sheared volume (x_r + d) be a
-    # strided view of the same memory.
-    full = np.empty((D, h, w + D), np.int32)
-    full[:, :, w:] = _INT_MAX
-    vol = full[:, :, :w]
-    np.bitwise_and(costs.view(np.int32), ~low, out=vol)
-    # code[d, x] = d where the right image has a partner pixel (x >= d), else
-    # all ones (OR gives INT_MAX: never chosen)
-    dd = np.arange(D)[:, None]
-    code = np.where(np.arange(w)[None, :] >= dd, dd, _INT_MAX).astype(np.int32)[:, None, :]
-    np.bitwise_or(vol, code, out=vol)
-    del costs
-    best = vol.min(axis=0)
-    dbest = (best & low).astype(np.int64)
+        cur = vol[d]
+        cv2.absdiff(L, Rp[:, D - 1 - d: D - 1 - d + wp], dst=diff)
+        cost_into(cur, diff)
+        np.left_shift(cur, nb, out=cur)
+        np.bitwise_or(cur, d, out=cur)
+        cur[:, :d] = _INT_MAX
+        cur[:, w:] = _INT_MAX
+        np.minimum(best, cur, out=best)
+        if lr_tolerance >= 0:
+            # the right pixel x - d sees this cost at disparity d
+            np.minimum(best_r[:best_r.size - d], cur.reshape(-1)[d:], out=best_r[:best_r.size - d])
+    best = best[:, :w]
+    dbest = best & low
     valid = best != _INT_MAX
-    bestc = (best & ~low).view(np.float32)
+    bestc = (best >> nb).astype(np.float32)
+    flat = buf.reshape(-1)
+    x = np.arange(w, dtype=np.int32)
+    pix = np.arange(h, dtype=np.int32)[:, None] * wp + x  # flat index of (y, x)
 
     # sub-pixel: parabola through d-1, d, d+1
-    dm = np.clip(dbest - 1, 0, D - 1)[None]
-    dp = np.clip(dbest + 1, 0, D - 1)[None]
-    cm = (np.take_along_axis(vol, dm, 0)[0] & ~low).view(np.float32)
-    cp = (np.take_along_axis(vol, dp, 0)[0] & ~low).view(np.float32)
-    inner = (dbest > 0) & (dbest < D - 1) & (np.take_along_axis(vol, dm, 0)[0] != _INT_MAX)
     disp = dbest.astype(np.float32)
     if subpixel:
+        em = np.take(flat, pix + np.maximum(dbest - 1, 0) * slab)
+        ep = np.take(flat, pix + np.minimum(dbest + 1, D - 1) * slab)
+        inner = valid & (dbest > 0) & (dbest < D - 1) & (em != _INT_MAX) & (ep != _INT_MAX)
+        cm = (em >> nb).astype(np.float32)
+        cp = (ep >> nb).astype(np.float32)
         with np.errstate(divide="ignore", invalid="ignore"):
             curv = cm - 2 * bestc + cp
             delta = np.where(inner & (curv > 0), 0.5 * (cm - cp) / curv, 0.0)
-        disp = disp + np.clip(delta, -0.5, 0.5).astype(np.float32)
+        disp += np.clip(delta, -0.5, 0.5).astype(np.float32)
 
-    # left-right: best disparity of each right pixel from the sheared volume
+    # left-right: the right pixel x - d must choose d back (within tolerance)
     if lr_tolerance >= 0:
-        from numpy.lib.stride_tricks import as_strided
-
-        volR = as_strided(full, shape=(D, h, w), strides=(full.strides[0] + full.strides[2],
-                                                          full.strides[1], full.strides[2]),
-                          writeable=False)
-        dR = (volR.min(axis=0) & low).astype(np.int64)
-        xr = np.clip(np.arange(w)[None, :] - dbest, 0, w - 1)
-        back = np.take_along_axis(dR, xr, 1)
+        back = np.take(best_r, pix - np.minimum(dbest, x)) & low  # at x_r = max(x - d, 0)
         consistent = np.abs(back - dbest) <= lr_tolerance
     else:
         consistent = np.ones((h, w), bool)
 
-    # uniqueness: best outside d-1..d+1 (after the left-right check: this
-    # overwrites the volume)
+    # per-pixel window size (pixels) and its variance, for the noise margin
+    nwin = np.asarray(windows, np.float32)[np.minimum(pick, len(windows) - 1)] ** 2
+    vpick = var[0].copy()
+    for k in range(1, len(windows)):
+        np.copyto(vpick, var[k], where=pick == k)
     if uniqueness > 0 or distinct > 0:
+        # runner-up outside d*-1..d*+1 (this overwrites the volume)
         for off in (-1, 0, 1):
-            idx = np.clip(dbest + off, 0, D - 1)[None]
-            np.put_along_axis(vol, idx, _INT_MAX, 0)
-        second = vol.min(axis=0)
-        secondc = (second & ~low).view(np.float32)
+            np.put(flat, pix + np.clip(dbest + off, 0, D - 1) * slab, _INT_MAX)
+        second = vol.min(axis=0)[:, :w]
+        secondc = (second >> nb).astype(np.float32)
         # ratio test, plus an absolute margin: on a flat (textureless) window
         # every disparity costs 2σ² ± σ²·sqrt(8/n) (noise only), so a winner
         # by less than `distinct` such deviations is chance, not a match
-        nwin = np.asarray(windows, np.float32)[np.minimum(pick, len(windows) - 1)] ** 2
-        margin = distinct * noise_var * np.sqrt(8.0 / nwin)
+        margin = distinct * noise_var * np.sqrt(8.0 / nwin) * unit
         # windows holding little more than noise (variance < 2σ²) must win by
         # three times the margin: chance minima are what they mostly offer
-        vpick = var[0].copy()
-        for k in range(1, len(windows)):
-            np.copyto(vpick, var[k], where=pick == k)
         margin = np.where(vpick < 2 * noise_var, 3 * margin, margin)
         unique = (second == _INT_MAX) | ((secondc > bestc * (1 + uniqueness))
                                          & (secondc - bestc > margin))
@@ -270,7 +349,7 @@ def _band(left, right, y0, y1, *, max_disp, windows, thresholds, uniqueness, lr_
               "not_unique": int((valid & has_texture & ~unique)[s].sum()),
               "left_right": int((valid & has_texture & unique & ~consistent)[s].sum())}
     picks = np.bincount(pick[s].ravel(), minlength=len(windows) + 1)
-    return disp[s], np.where(valid, bestc, np.nan)[s], win_arr[s].astype(np.uint8), counts, picks
+    return disp[s], np.where(valid, bestc / unit, np.nan)[s], win_arr[s].astype(np.uint8), counts, picks
 
 
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
@@ -318,7 +397,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     """
     import cv2
 
-    L, R = to_gray(left), to_gray(right)
+    L, R, gray = _match_images(left, right)
     if L.shape != R.shape:
         raise ValueError(f"right: expected the left image's shape {L.shape}, got {R.shape}")
     h, w = L.shape
@@ -335,7 +414,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
     if texture_snr < 0 or uniqueness < 0:
         raise ValueError("texture_snr, uniqueness: expected values >= 0")
-    sigma = noise_sigma(L)
+    sigma = noise_sigma(gray)
     # texture threshold: window variance >= (snr·σ)², σ floored at half a code
     # value (quantisation alone gives σ ≈ 0.29). The noise estimate reads high
     # on finely textured images, so the default snr is modest; flat areas
@@ -343,23 +422,31 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     # tests (their cost curve is flat and random).
     thr = (texture_snr * max(sigma, 0.5)) ** 2
     thresholds = tuple(thr for _ in windows)
+    D = max_disp + 1
+    span = max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
+    # padded so that every disparity's view is a plain slice of width W + D
+    Lp = cv2.copyMakeBorder(L, 0, 0, 0, D, cv2.BORDER_REFLECT)
+    Rp = cv2.copyMakeBorder(R, 0, 0, D - 1, D, cv2.BORDER_REPLICATE)
     n_threads = threads or min(4, os.cpu_count() or 1)
-    n_bands = max(1, min(n_threads, h // 32))
+    # bands of about BAND_ROWS rows keep each disparity's working set in the
+    # CPU cache; threads take bands in turn, each with its own scratch volume
+    n_bands = max(1, round(h / BAND_ROWS))
     edges = np.linspace(0, h, n_bands + 1).astype(int)
     kw = dict(max_disp=max_disp, windows=windows, thresholds=thresholds, distinct=distinct,
-              noise_var=max(sigma, 0.5) ** 2,
+              noise_var=max(sigma, 0.5) ** 2, span=span,
               uniqueness=uniqueness, lr_tolerance=lr_tolerance, subpixel=subpixel)
     old = cv2.getNumThreads()
     try:
-        if n_bands == 1:
-            parts = [_band(L, R, 0, h, **kw)]
+        if n_threads == 1 or n_bands == 1:
+            parts = [_band(Lp, Rp, gray, edges[i], edges[i + 1], scratch=_scratch(), **kw)
+                     for i in range(n_bands)]
         else:
             from concurrent.futures import ThreadPoolExecutor
 
             cv2.setNumThreads(1)  # our bands are the parallelism
-            with ThreadPoolExecutor(n_bands) as ex:
-                parts = list(ex.map(lambda i: _band(L, R, edges[i], edges[i + 1], **kw),
-                                    range(n_bands)))
+            with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
+                parts = list(ex.map(lambda i: _band(Lp, Rp, gray, edges[i], edges[i + 1],
+                                                    scratch=_scratch(), **kw), range(n_bands)))
     finally:
         cv2.setNumThreads(old)
     disp = np.concatenate([p[0] for p in parts])
