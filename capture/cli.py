@@ -8,7 +8,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from capture.artifact import make_meta, write_json
-from capture.command import make_parser, parse_size, run, say
+from capture.command import make_parser, parse_size, run, say, show_progress
 from capture.errors import InputError
 
 EPILOG = """\
@@ -69,7 +69,8 @@ def _render(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(out, "exists and is not a folder")
-    say(args, f"rendering {args.scene} -> {out}")
+    if show_progress(args.quiet):  # on a terminal only: piped stderr keeps to one error line
+        say(args, f"rendering {args.scene} -> {out}")
     result = render(args.scene, size=size, seed=args.seed, cache=not args.no_cache, **opts)
     result.save(out)
     write_json(out / "stack.json.meta.json",

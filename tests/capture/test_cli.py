@@ -55,6 +55,9 @@ def test_render_bad_options(tmp_path):
                        "--bit-depth", "out of range")
     assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--colour", "red"),
                        "--colour", "no such option")
+    # validated late (after the options parse), still one line
+    assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--size", "10x10"),
+                       "--size", "impossible size")
     assert not (tmp_path / "x").exists()
 
 
