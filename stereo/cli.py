@@ -382,8 +382,8 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--rig", help="rig.json (or a scene gt.json): rectify the pair first")
     v.add_argument("--max-disp", type=int, required=True, help="largest disparity searched (px)")
     v.add_argument("--window", default="auto", help="odd window side, or auto (default)")
-    v.add_argument("--texture-snr", type=float, default=0.5,
-                   help="minimum window signal std in units of the noise sigma (default 0.5)")
+    v.add_argument("--texture-snr", type=float, default=1.0,
+                   help="minimum window signal std in units of the noise sigma (default 1.0)")
     v.add_argument("--uniqueness", type=float, default=0.02,
                    help="second-best must cost (1+u) times the best (default 0.02)")
     v.add_argument("--lr-tolerance", type=int, default=2,
