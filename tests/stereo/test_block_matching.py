@@ -5,7 +5,7 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from capture.render import render
-from stereo.block_matching import match, noise_sigma
+from stereo.block_matching import match, noise_sigma, to_gray
 
 
 def test_rendered_pair_accuracy_bounded_on_both_sides():
@@ -82,3 +82,22 @@ def test_inputs_not_mutated():
     a, b = s.images[0].copy(), s.images[1].copy()
     match(a, b, max_disp=16)
     assert np.array_equal(a, s.images[0]) and np.array_equal(b, s.images[1])
+
+
+@pytest.mark.parametrize("window, max_disp", [(9, 24), (31, 130)])
+def test_integer_and_float_paths_agree(window, max_disp):
+    # 8-bit pairs are matched on exact integer SSD of quarter-code luma
+    # (low bits dropped when window sums and the disparity code would not fit
+    # 30 bits: the (31, 130) case); float pairs on float32 luma. The same
+    # scene must give the same matches: the quarter-code rounding (sigma 0.07
+    # code values) is far below the noise of 1 code value rendered into it.
+    s = render("stereo-pair", size=(320, 120) if max_disp > 100 else (160, 120))
+    a = match(s.images[0], s.images[1], max_disp=max_disp, window=window)
+    b = match(to_gray(s.images[0]), to_gray(s.images[1]), max_disp=max_disp, window=window)
+    both = np.isfinite(a.disparity) & np.isfinite(b.disparity)
+    assert both.mean() > 0.5
+    assert np.mean(np.abs(a.disparity[both] - b.disparity[both]) < 0.1) > 0.98
+    assert abs(a.valid_fraction - b.valid_fraction) < 0.02
+    # costs are reported in code values² per pixel on both paths
+    ca, cb = a.cost[both], b.cost[both]
+    assert 0.9 < np.median(ca / np.maximum(cb, 1e-6)) < 1.1
