@@ -117,10 +117,11 @@ def test_memorial_church_real_film_scans():
     from hdr.formats import read_rgbe
 
     d = need_shared("data", "hdr-real", "memorial")
-    names = [f"memorial{n:04d}.png" for n in range(61, 77)]
-    times = [32.0 / 2 ** k for k in range(16)]
+    # Every other frame (2 stops apart, 32 s .. 1/256 s), quarter resolution: fast.
+    names = [f"memorial{n:04d}.png" for n in range(61, 77, 2)]
+    times = [32.0 / 4 ** k for k in range(8)]
     z = np.stack([read_image(d / n)[::4, ::4] for n in names])
-    r = debevec(z, times)
+    r = debevec(z, times, samples=400)
     assert np.all(np.diff(r.g, axis=1) >= 0)
     m = merge(z, times, r)
     ref = read_rgbe(d / "memorial.hdr")[::4, ::4]
