@@ -45,7 +45,8 @@ from __future__ import annotations
 
 import math
 import os
-import threading
+import queue
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -165,16 +166,24 @@ def noise_sigma(gray: np.ndarray) -> float:
     return float(np.sqrt(np.pi / 2) * np.percentile(blocks, 10) / 6.0 / 0.785)
 
 
-_SCRATCH = threading.local()
+_SCRATCH: queue.SimpleQueue = queue.SimpleQueue()
 
 
-def _scratch() -> dict:
-    """This thread's scratch buffers for the cost volume. Kept between calls:
-    fresh memory costs a page fault per 4 KiB on first write, which for a
-    volume of tens of MB takes longer than filling it."""
-    if not hasattr(_SCRATCH, "buffers"):
-        _SCRATCH.buffers = {}
-    return _SCRATCH.buffers
+@contextmanager
+def _scratch():
+    """Scratch buffers for one band's cost volume, returned to a module-wide
+    pool afterwards. Kept between calls because fresh memory costs a page
+    fault per 4 KiB on first write, which for a volume of tens of MB takes
+    longer than filling it; the pool holds at most one buffer per thread that
+    ever matched at the same time."""
+    try:
+        buffers = _SCRATCH.get_nowait()
+    except queue.Empty:
+        buffers = {}
+    try:
+        yield buffers
+    finally:
+        _SCRATCH.put(buffers)
 
 
 def _match_images(left, right):
@@ -277,13 +286,15 @@ def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds,
     # image, and D columns of padding on the right let the right view's
     # volume (x_r = x - d) be a flat slice: both hold INT_MAX, never chosen.
     wp = w + D
-    # the volume lives in this thread's scratch buffer (see _scratch)
+    # the volume lives in a pooled scratch buffer (see _scratch)
+    size = D * h * wp
     buf = scratch.get("vol")
-    if buf is None or buf.shape[0] != D or buf.shape[1] < h or buf.shape[2] != wp:
-        rows = max(h, BAND_ROWS + 2 * margin + 2)  # room for any band of this image
-        buf = scratch["vol"] = np.empty((D, rows, wp), np.int32)
-    vol = buf[:, :h]
-    slab = buf.shape[1] * wp  # flat distance between disparities
+    if buf is None or buf.size < size:
+        # room for any band of this image, so one allocation serves them all
+        buf = scratch["vol"] = np.empty(D * max(h, BAND_ROWS + 2 * margin + 2) * wp, np.int32)
+    flat = buf[:size]
+    vol = flat.reshape(D, h, wp)  # contiguous: reductions over d run at full speed
+    slab = h * wp  # flat distance between disparities
     best = np.full((h, wp), _INT_MAX, np.int32)
     best_r = np.full(h * wp, _INT_MAX, np.int32)
     diff = np.empty((h, wp), L.dtype)
@@ -300,12 +311,11 @@ def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds,
             # the right pixel x - d sees this cost at disparity d
             np.minimum(best_r[:best_r.size - d], cur.reshape(-1)[d:], out=best_r[:best_r.size - d])
     best = best[:, :w]
-    dbest = best & low
+    dbest = (best & low).astype(np.intp)
     valid = best != _INT_MAX
     bestc = (best >> nb).astype(np.float32)
-    flat = buf.reshape(-1)
-    x = np.arange(w, dtype=np.int32)
-    pix = np.arange(h, dtype=np.int32)[:, None] * wp + x  # flat index of (y, x)
+    x = np.arange(w)
+    pix = np.arange(h)[:, None] * wp + x  # flat index of (y, x), intp for take/put
 
     # sub-pixel: parabola through d-1, d, d+1
     disp = dbest.astype(np.float32)
@@ -447,18 +457,20 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     kw = dict(max_disp=max_disp, windows=windows, thresholds=thresholds, distinct=distinct,
               noise_var=max(sigma, 0.5) ** 2, span=span,
               uniqueness=uniqueness, lr_tolerance=lr_tolerance, subpixel=subpixel)
+    def one(i):
+        with _scratch() as scratch:
+            return _band(Lp, Rp, gray, edges[i], edges[i + 1], scratch=scratch, **kw)
+
     old = cv2.getNumThreads()
     try:
         if n_threads == 1 or n_bands == 1:
-            parts = [_band(Lp, Rp, gray, edges[i], edges[i + 1], scratch=_scratch(), **kw)
-                     for i in range(n_bands)]
+            parts = [one(i) for i in range(n_bands)]
         else:
             from concurrent.futures import ThreadPoolExecutor
 
             cv2.setNumThreads(1)  # our bands are the parallelism
             with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
-                parts = list(ex.map(lambda i: _band(Lp, Rp, gray, edges[i], edges[i + 1],
-                                                    scratch=_scratch(), **kw), range(n_bands)))
+                parts = list(ex.map(one, range(n_bands)))
     finally:
         cv2.setNumThreads(old)
     disp = np.concatenate([p[0] for p in parts])
