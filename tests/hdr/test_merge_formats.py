@@ -7,8 +7,7 @@ import pytest
 from conftest import need_shared, need_tool
 
 from capture.render import render
-from hdr.formats import (RGB_TO_XYZ, read_logluv_tiff, read_rgbe, write_logluv_tiff,
-                         write_rgbe)
+from hdr.formats import RGB_TO_XYZ, read_logluv_tiff, read_rgbe, write_logluv_tiff, write_rgbe
 from hdr.merge import BLACK, CLIPPED, GHOST, merge
 from hdr.response import ResponseCurve
 
