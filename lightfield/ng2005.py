@@ -209,7 +209,7 @@ def _runs(first: np.ndarray) -> list[tuple[int, int, int]]:
     """Maximal runs ``(start, stop, value)`` of equal consecutive entries."""
     cut = np.flatnonzero(np.diff(first)) + 1
     starts, stops = np.r_[0, cut], np.r_[cut, len(first)]
-    return list(zip(starts.tolist(), stops.tolist(), first[starts].tolist()))
+    return list(zip(starts.tolist(), stops.tolist(), first[starts].tolist(), strict=True))
 
 
 def refocus(spec: FourierLightField, slope: float) -> np.ndarray:
