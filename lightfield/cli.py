@@ -14,6 +14,7 @@ EPILOG = """\
 examples:
   lumigraph lightfield import views/*.png --grid 5x5 --spacing 0.05 --focal-px 800 --out lf
   lumigraph lightfield import out/scenes/lightfield-array --out lf     (rendered folder)
+  lumigraph lightfield import views/*.png --grid 5x5 --rig rig.json --out lf  (rectified)
   lumigraph lightfield decode raw.png --white white.png --views 5 --out lf
   lumigraph lightfield refocus lf --slope 0.5 --out focus.exr
   lumigraph lightfield refocus lf --depth 2 3 4 5 6 7 8 9 10 12 --method auto --out stack/
@@ -71,9 +72,10 @@ def _import(args) -> int:
         raise InputError("--grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
     grid = parse_grid(grid_text)
     spacing = args.spacing if args.spacing is not None else info.get("spacing")
-    if spacing is None:
+    posed = args.rig is not None or "cameras" in info
+    if spacing is None and not posed:
         raise InputError("--spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
-    if not spacing > 0:
+    if spacing is not None and not spacing > 0:
         raise InputError("--spacing", f"must be positive, got {spacing}")
     focal = args.focal_px if args.focal_px is not None else info.get("focal_px")
     if focal is not None and not focal > 0:
@@ -81,17 +83,86 @@ def _import(args) -> int:
     if len(files) != grid[0] * grid[1]:
         raise InputError("--grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
                                    f"images, got {len(files)}")
+    cameras = None
+    if args.rig is not None:
+        cameras = _read_rig(Path(args.rig))
+    elif "cameras" in info:
+        cameras = (info["cameras"], inputs[0] / "stack.json")
     images = [read_image(f) for f in files]
-    lf = from_images(images, grid=grid, spacing=spacing, focal_px=focal, linear=linear,
+    lf = from_images(images, grid=grid, spacing=spacing or 1.0, focal_px=focal, linear=linear,
                      bit_depth=bit_depth, names=[str(f) for f in files])
-    lf = type(lf)(lf.data, spacing=lf.spacing, focal_px=lf.focal_px,
-                  info={"source": [str(f) for f in files], "decoded": "linear" if linear
-                        else "sRGB -> linear"})
+    info_out = {"source": [str(f) for f in files],
+                "decoded": "linear" if linear else "sRGB -> linear"}
+    quality, warnings = {}, []
+    if cameras is not None:
+        lf, quality, warnings = _rectify(lf, cameras, args, grid, files, spacing)
+        focal = lf.focal_px
+        info_out["rectified"] = quality
+    lf = type(lf)(lf.data, spacing=lf.spacing, focal_px=lf.focal_px, info=info_out)
     lf.save(out, meta=make_meta("lumigraph.lightfield", inputs=files,
-                                params={"grid": list(grid), "spacing": spacing, "focal_px": focal,
-                                        "linear": linear}))
+                                params={"grid": list(grid), "spacing": lf.spacing,
+                                        "focal_px": focal, "linear": linear,
+                                        "rig": str(args.rig) if args.rig else None,
+                                        "plane_depth": args.plane_depth,
+                                        "grid_tolerance": args.grid_tolerance},
+                                quality=quality, warnings=warnings))
     say(args, f"wrote {grid[0]}x{grid[1]} views of {lf.size[0]}x{lf.size[1]} to {out}")
     return 0
+
+
+def _read_rig(path: Path):
+    if not path.is_file():
+        raise InputError(path, "rig file not found")
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(path, f"not JSON ({e})") from None
+    cams = d.get("cameras") if isinstance(d, dict) else d
+    if not isinstance(cams, list):
+        raise InputError(path, 'expected {"cameras": [camera.json entries with cam_from_world '
+                               '{R, t}, row-major]}')
+    return cams, path
+
+
+def _rectify(lf, cameras, args, grid, files, spacing):
+    import numpy as np
+
+    from calib.camera import Camera
+    from lightfield.field import LightField
+    from lightfield.rectify import rectify_views
+
+    entries, where = cameras
+    if len(entries) != len(files):
+        raise InputError(where, f"has {len(entries)} cameras for {len(files)} views")
+    cams, poses = [], []
+    for k, e in enumerate(entries):
+        name = f"{where}: camera {k}"
+        cams.append(Camera.from_dict(e, where=name))
+        try:
+            pose = e["cam_from_world"]
+            poses.append((np.array(pose["R"], float).reshape(3, 3),
+                          np.array(pose["t"], float).reshape(3)))
+        except (KeyError, TypeError, ValueError) as err:
+            raise InputError(name, f"needs cam_from_world {{R: 3x3, t: 3}} ({err})") from None
+    u, v = grid
+    views = [lf.data[i, j] for i in range(u) for j in range(v)]
+    r = rectify_views(views, cams, poses, grid=grid, tolerance=args.grid_tolerance,
+                      plane_depth=args.plane_depth, names=[str(f) for f in files])
+    s = r.array.spacing
+    if spacing is not None and abs(spacing - s) > args.grid_tolerance * s:
+        raise InputError("--spacing", f"{spacing:g} disagrees with the {s:.6g} fitted to the "
+                                      "camera centres; omit --spacing to use the rig's")
+    warnings = []
+    if r.outside.max() > 0.01:
+        warnings.append(f"rectified views map up to {100 * r.outside.max():.1f}% outside their "
+                        "source images (filled by mirror extension)")
+    for w_ in warnings:
+        warn(w_)
+    quality = {"fitted_spacing": s, "max_centre_offset_steps": float(r.array.residuals.max()),
+               "focal_px": float(r.K[0, 0]), "max_outside_fraction": float(r.outside.max()),
+               "ref_from_world": r.array.ref_from_world.tolist(),
+               "plane_depth": args.plane_depth}
+    return LightField(r.views, spacing=s, focal_px=float(r.K[0, 0])), quality, warnings
 
 
 # ---------------------------------------------------------------------- decode
@@ -278,6 +349,14 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.add_argument("--focal-px", type=float, help="focal length of the views in pixels")
     v.add_argument("--linear", action="store_true",
                    help="integer views are linear codes (default: sRGB, decoded to linear)")
+    v.add_argument("--rig", help="camera poses: JSON {\"cameras\": [camera.json entries with "
+                                 "cam_from_world {R, t}], row-major}; the views are undistorted "
+                                 "and rectified onto a regular planar array (default: the "
+                                 "cameras in a rendered folder's stack.json, if any)")
+    v.add_argument("--plane-depth", type=float, default=float("inf"),
+                   help="reference plane depth for --rig (world units; default inf)")
+    v.add_argument("--grid-tolerance", type=float, default=0.1,
+                   help="largest camera-centre offset from its grid node, in grid steps")
     v.add_argument("--out", required=True, help="light-field folder")
     v.set_defaults(func=_import)
 

@@ -319,8 +319,18 @@ def _codes(radiance: np.ndarray, bits: int, noise: float, rng) -> np.ndarray:
 
 def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
                  disparity_far=0.2, spacing=1.0, texel_px=1.5, focus=(), thin_lens=True,
-                 novel=(0.5, 0.5, 0.0), noise=0.0):
+                 novel=(0.5, 0.5, 0.0), noise=0.0, jitter_deg=0.0, jitter_pos=0.0):
     """A U x V camera-array light field of textured planes, with exact truth.
+
+    With ``jitter_deg`` / ``jitter_pos`` the captured images come from a
+    non-ideal rig: camera ``k`` is rotated by a random angle up to
+    ``jitter_deg`` about a random axis and its centre moved in the array
+    plane by up to ``jitter_pos`` grid steps per axis; ``stack.json`` and
+    ``gt.json`` then carry ``lightfield.cameras`` (K, dist, image_size,
+    ``cam_from_world`` R, t per view, row-major) and ``views`` stays the ideal
+    array. A rotated view is exact at its centre (analytic render on a frame
+    extended by a margin) resampled by the rotation homography
+    ``K R^T K^-1`` with a cubic B-spline (the only approximation).
 
     Views are 16-bit linear PNGs ``view-UU-VV.png`` (row-major); ``stack.json``
     carries ``lightfield`` (grid, spacing, focal_px). Ground truth: ``views``
@@ -337,6 +347,11 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
     disp = np.linspace(disparity_near, disparity_far, planes) if planes > 1 else \
         np.array([disparity_near])
     reach = (max(u, v) / 2 + 1.5) * spacing
+    jittered = jitter_deg > 0 or jitter_pos > 0
+    margin = int(math.ceil(2 * f * math.tan(math.radians(jitter_deg)) + jitter_pos + 4)) \
+        if jittered else 0
+    if jittered:
+        reach += margin * spacing / float(np.min(disp)) + jitter_pos * spacing
     scene = build_scene(rng, width=w, height=h, f=f, spacing=spacing, disparities=disp,
                         texel_px=texel_px, reach=reach)
     xs, ys = np.arange(w, dtype=float), np.arange(h, dtype=float)
@@ -354,11 +369,18 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
     if thin_lens:
         gt_arrays["thin_lens"] = np.stack(
             [thin_lens_image(scene, u, v, spacing, s, w, h) for s in slopes]).astype(np.float32)
-    codes = _codes(views, 16, noise, rng)
+    captured = views
+    lf_cams = None
+    if jittered:
+        captured, lf_cams = _jittered_views(scene, u, v, spacing, w, h, f, margin, jitter_deg,
+                                            jitter_pos, rng)
+    codes = _codes(captured, 16, noise, rng)
     names = [f"view-{i:02d}-{j:02d}.png" for i in range(u) for j in range(v)]
     images = tuple(codes[i, j] for i in range(u) for j in range(v))
     lf = {"grid": [u, v], "spacing": spacing, "focal_px": f, "principal_point": [(w - 1) / 2,
                                                                                  (h - 1) / 2]}
+    if lf_cams is not None:
+        lf["cameras"] = lf_cams
     return RenderedScene(
         "lightfield-array", {}, images, tuple(names),
         stack={"bit_depth": 16, "linear": True, "exposure_times_s": [1.0] * len(names),
@@ -372,6 +394,42 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
             "slope_convention": "view (u, v) sees a point of disparity d at "
                                 "x - d (v - vc), y - d (u - uc)"},
         gt_arrays=gt_arrays)
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    a = axis / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+
+
+def _jittered_views(scene, u, v, spacing, w, h, f, margin, jitter_deg, jitter_pos, rng):
+    """Views (U, V, H, W, 3) float64 of rotated, displaced cameras and their
+    camera.json-style descriptions (see :func:`render_array`)."""
+    from scipy.ndimage import map_coordinates
+
+    K = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1.0]])
+    xs_e = np.arange(-margin, w + margin, dtype=float)
+    ys_e = np.arange(-margin, h + margin, dtype=float)
+    gx, gy = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    pix = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    out = np.empty((u, v, h, w, 3))
+    cams = []
+    for i, ou in enumerate(view_offsets(u)):
+        for j, ov in enumerate(view_offsets(v)):
+            d = rng.uniform(-jitter_pos, jitter_pos, 2)
+            centre = np.array([(ov + d[0]) * spacing, (ou + d[1]) * spacing, 0.0])
+            R = _rotation(rng.normal(size=3), math.radians(rng.uniform(0, jitter_deg)))
+            ideal = scene.render(centre[0], xs_e, centre[1], ys_e)
+            # The rotated camera's pixel x_r sees what the unrotated camera at
+            # the same centre sees at K R^T K^-1 x_r (depth-independent).
+            q = K @ R.T @ np.linalg.inv(K) @ pix
+            qx, qy = q[0] / q[2] + margin, q[1] / q[2] + margin
+            for c in range(3):
+                out[i, j, ..., c] = map_coordinates(ideal[..., c], [qy, qx], order=3,
+                                                    mode="mirror").reshape(h, w)
+            cams.append({"K": K.tolist(), "dist": [0.0] * 5, "image_size": [w, h],
+                         "cam_from_world": {"R": R.tolist(), "t": (-R @ centre).tolist()}})
+    return out, cams
 
 
 # ----------------------------------------------------------------- lenslet raws
@@ -493,6 +551,10 @@ def _array_options(**defaults):
         Option("thin_lens", bool, d["thin_lens"], "also render thin-lens refocus truth"),
         Option("novel", tuple, (0.5, 0.5, 0.0), "novel-view truth position X,Y,Z (view steps)"),
         Option("noise", float, d["noise"], "Gaussian noise in 16-bit code values", low=0.0),
+        Option("jitter_deg", float, 0.0, "per-camera rotation jitter (max degrees; poses in "
+                                         "stack.json)", low=0.0, high=5.0),
+        Option("jitter_pos", float, 0.0, "per-camera in-plane centre jitter (max grid steps)",
+               low=0.0, high=0.5),
     )
 
 
