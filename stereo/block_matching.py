@@ -43,9 +43,12 @@ Examples
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import queue
+import time
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 
@@ -198,95 +201,121 @@ def _match_images(left, right):
     return L, R, L
 
 
-def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds, uniqueness,
-          lr_tolerance, subpixel, distinct, noise_var, span, scratch):
-    """Match rows ``y0:y1``. ``left`` is the whole matching image with ``D = max_disp + 1``
-    reflected columns on its right, ``right_padded`` the right one with ``D - 1`` replicated
-    columns on its left and ``D`` on its right (so every disparity's view is a plain slice
-    of width ``W + D``), ``texture`` the float luma of the left (unpadded). One pass over
-    the disparities writes an encoded cost volume into ``scratch`` while keeping the best
-    cost of every left and every right pixel; the runner-up and the parabola's neighbours
-    are then read from the volume. Returns per-pixel arrays for the band."""
+def _texture(gray, windows, thresholds):
+    """Window variance of the left luma per candidate window, and per pixel the
+    index of the smallest window whose variance passes its threshold
+    (``len(windows)`` = none)."""
     import cv2
 
-    margin = max(windows) // 2
-    a0, a1 = max(0, y0 - margin), min(left.shape[0], y1 + margin)
-    L, Rp, T = left[a0:a1], right_padded[a0:a1], texture[a0:a1]
-    h, w = T.shape
-    D = max_disp + 1
-    nb = max(1, math.ceil(math.log2(D)))
-    low = np.int32((1 << nb) - 1)
-    integer = L.dtype == np.uint16
-    reflect = cv2.BORDER_REFLECT
-
-    # texture: window variance of the left image, per candidate window
     var = []
     for win in windows:
-        m = cv2.boxFilter(T, -1, (win, win), borderType=reflect)
-        m2 = cv2.sqrBoxFilter(T, cv2.CV_32F, (win, win), borderType=reflect)
+        m = cv2.boxFilter(gray, -1, (win, win), borderType=cv2.BORDER_REFLECT)
+        m2 = cv2.sqrBoxFilter(gray, cv2.CV_32F, (win, win), borderType=cv2.BORDER_REFLECT)
         var.append(m2 - m * m)
-    # smallest textured window per pixel; index len(windows) = none
-    pick = np.full((h, w), len(windows), np.uint8)
+    pick = np.full(gray.shape, len(windows), np.uint8)
     for k in range(len(windows) - 1, -1, -1):
         pick[var[k] >= thresholds[k]] = k
-    used = [k for k in range(len(windows)) if (pick == k).any()] or [0]
-    if len(windows) == 1 or len(used) == 1:
-        fixed = windows[used[0]]
-    else:
-        fixed = None
-        masks = {k: np.pad(pick == k, ((0, 0), (0, D))).astype(np.uint8) for k in used}
-        merged = np.empty((h, w + D), np.int32 if integer else np.float32)
-    n = (fixed or 1) ** 2
-    # integer units per code value² of mean cost, so that a cost shifted left
-    # by nb bits stays below 2^30: 8-bit inputs are matched in quarter code
-    # values (squares <= 1020², 20 bits), summed over n pixels (fixed window)
-    # or averaged (auto); float inputs map the largest possible cost, span²
-    if integer:
-        bits = math.ceil(math.log2(n * 1020 ** 2 + 1))
-        shift = 30 - nb - bits  # > 0: spare bits (auto), < 0: drop low bits
-        if fixed:
-            shift = min(shift, 0)  # sums are used as they come unless too wide
-        unit = 16.0 * (n if fixed else 1) * 2.0 ** shift
-    else:
-        shift, unit = 0, 2.0 ** (30 - nb) / span ** 2
+    return var, pick
 
-    sq = np.empty((h, w + D), np.int32 if integer else np.float32)
+
+@dataclass(frozen=True)
+class _Costs:
+    """How window SSDs become comparable int32 costs for one image.
+
+    ``wins`` are the windows whose costs are computed (the used candidates),
+    ``cwin`` (H, W) uint8 the index into ``wins`` per pixel. A cost is stored as
+    ``(c << nb) | d`` so one integer min carries its disparity, with ``c`` in
+    integer units, ``unit`` per code value² of mean squared difference: for
+    8-bit inputs (quarter-code luma, squares <= 1020², 20 bits) the window sum
+    shifted right by ``rshift`` (one window: sums used as they come unless
+    too wide for 30 bits) or, with several windows, the sum times ``scale[k]``
+    = 2^shift / n_k truncated (a mean in fixed point, so that pixels with
+    different windows compare in the left–right check); for float inputs the
+    largest possible cost, span², maps to 2^(30 - nb)."""
+
+    wins: tuple
+    cwin: np.ndarray
+    nb: int
+    unit: float
+    integer: bool
+    rshift: int = 0
+    scale: tuple | None = None
+
+
+def _costs(windows, pick, *, D, integer, span):
+    used = [k for k in range(len(windows)) if (pick == k).any()] or [0]
+    # untextured pixels are refused later, but their costs still compete for
+    # the right image's best (left–right check): they use the largest window
+    index = np.full(len(windows) + 1, len(used) - 1, np.uint8)
+    index[used] = np.arange(len(used))
+    wins = tuple(windows[k] for k in used)
+    cwin = index[pick]
+    nb = max(1, math.ceil(math.log2(D)))
+    if not integer:
+        return _Costs(wins, cwin, nb, 2.0 ** (30 - nb) / span ** 2, False)
+    if len(wins) == 1:
+        n = wins[0] ** 2
+        shift = min(30 - nb - math.ceil(math.log2(n * 1020 ** 2 + 1)), 0)
+        return _Costs(wins, cwin, nb, 16.0 * n * 2.0 ** shift, True, rshift=-shift)
+    shift = 30 - nb - 20
+    return _Costs(wins, cwin, nb, 16.0 * 2.0 ** shift, True,
+                  scale=tuple(2.0 ** shift / win ** 2 for win in wins))
+
+
+def _scan_numpy(left, right_padded, y0, y1, *, D, costs, scratch):
+    """Rows ``y0:y1`` on numpy/OpenCV, one pass per disparity over a cost volume.
+
+    ``left`` is the whole matching image with ``D`` reflected columns on its
+    right, ``right_padded`` the right one with ``D - 1`` replicated columns on
+    its left and ``D`` on its right (so every disparity's view is a plain slice
+    of width ``W + D``). Returns the encoded best, the costs at ``d* ∓ 1``, the
+    best outside ``d* - 1 .. d* + 1`` and the best of every right pixel, each
+    (y1 - y0, W) int32."""
+    import cv2
+
+    wins, nb = costs.wins, costs.nb
+    margin = max(wins) // 2
+    H = left.shape[0]
+    a0, a1 = max(0, y0 - margin), min(H, y1 + margin)
+    L, Rp = left[a0:a1], right_padded[a0:a1]
+    h, wp = L.shape
+    w = wp - D
+    reflect = cv2.BORDER_REFLECT
+    integer = costs.integer
+    if len(wins) > 1:
+        cw = costs.cwin[a0:a1]
+        masks = [np.pad(cw == k, ((0, 0), (0, D))).astype(np.uint8) for k in range(len(wins))]
+        merged = np.empty((h, wp), np.int32 if integer else np.float32)
+    sq = np.empty((h, wp), np.int32 if integer else np.float32)
 
     def cost_into(v, diff):
-        """Window SSD for one disparity from the absolute differences, written
-        into ``v`` as integers: ``unit`` per code value² of mean cost (window
-        sums, or means under ``auto``)."""
         if integer:
             np.square(diff, out=sq, dtype=np.int32)
-            if fixed:
-                cv2.boxFilter(sq, -1, (fixed, fixed), dst=v, normalize=False, borderType=reflect)
-                if shift < 0:
-                    np.right_shift(v, -shift, out=v)
+            if len(wins) == 1:
+                cv2.boxFilter(sq, -1, (wins[0], wins[0]), dst=v, normalize=False, borderType=reflect)
+                if costs.rshift:
+                    np.right_shift(v, costs.rshift, out=v)
                 return
-            for k in used:
-                mk = cv2.boxFilter(sq, -1, (windows[k], windows[k]), borderType=reflect)
+            for k, win in enumerate(wins):
+                mk = cv2.boxFilter(sq, -1, (win, win), normalize=False, borderType=reflect)
+                mk = (mk * costs.scale[k]).astype(np.int32)  # truncation, as the C kernel
                 cv2.copyTo(mk, masks[k], merged)
-            if shift >= 0:
-                np.left_shift(merged, shift, out=v)
-            else:
-                np.right_shift(merged, -shift, out=v)
-        elif fixed:
-            cv2.sqrBoxFilter(diff, cv2.CV_32F, (fixed, fixed), dst=sq, normalize=False,
+            v[...] = merged
+        elif len(wins) == 1:
+            n = wins[0] ** 2
+            cv2.sqrBoxFilter(diff, cv2.CV_32F, (wins[0], wins[0]), dst=sq, normalize=False,
                              borderType=reflect)
-            np.multiply(sq, unit / n, out=v, casting="unsafe")
+            np.multiply(sq, costs.unit / n, out=v, casting="unsafe")
         else:
             cv2.multiply(diff, diff, dst=sq)
-            for k in used:
-                mk = cv2.boxFilter(sq, -1, (windows[k], windows[k]), borderType=reflect)
+            for k, win in enumerate(wins):
+                mk = cv2.boxFilter(sq, -1, (win, win), borderType=reflect)
                 cv2.copyTo(mk, masks[k], merged)
-            np.multiply(merged, unit, out=v, casting="unsafe")
+            np.multiply(merged, costs.unit, out=v, casting="unsafe")
 
-    # Cost volume, int32-encoded as (cost << nb) | d so that one integer min
-    # carries its disparity. Columns x < d have no partner in the right
-    # image, and D columns of padding on the right let the right view's
-    # volume (x_r = x - d) be a flat slice: both hold INT_MAX, never chosen.
-    wp = w + D
-    # the volume lives in a pooled scratch buffer (see _scratch)
+    # Columns x < d have no partner in the right image, and D columns of
+    # padding on the right let the right view's volume (x_r = x - d) be a
+    # flat slice: both hold INT_MAX, never chosen.
     size = D * h * wp
     buf = scratch.get("vol")
     if buf is None or buf.size < size:
@@ -307,21 +336,78 @@ def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds,
         cur[:, :d] = _INT_MAX
         cur[:, w:] = _INT_MAX
         np.minimum(best, cur, out=best)
-        if lr_tolerance >= 0:
-            # the right pixel x - d sees this cost at disparity d
-            np.minimum(best_r[:best_r.size - d], cur.reshape(-1)[d:], out=best_r[:best_r.size - d])
+        # the right pixel x - d sees this cost at disparity d
+        np.minimum(best_r[:best_r.size - d], cur.reshape(-1)[d:], out=best_r[:best_r.size - d])
     best = best[:, :w]
+    dbest = (best & np.int32((1 << nb) - 1)).astype(np.intp)
+    pix = np.arange(h)[:, None] * wp + np.arange(w)  # flat index of (y, x)
+    em = np.take(flat, pix + np.maximum(dbest - 1, 0) * slab)
+    ep = np.take(flat, pix + np.minimum(dbest + 1, D - 1) * slab)
+    # runner-up outside d*-1..d*+1 (this overwrites the volume)
+    for off in (-1, 0, 1):
+        np.put(flat, pix + np.clip(dbest + off, 0, D - 1) * slab, _INT_MAX)
+    second = vol.min(axis=0)[:, :w]
+    s = slice(y0 - a0, y1 - a0)
+    return best[s], em[s], ep[s], second[s], best_r.reshape(h, wp)[s, :w]
+
+
+def _scan_c(kernel, left, right_rev, y0, y1, out, *, D, costs):
+    """Rows ``y0:y1`` through the compiled kernel (``stereo/_ssd.c``), writing
+    into the rows of the five (H, W) int32 arrays of ``out``; ``right_rev`` is
+    the padded right image with its columns reversed."""
+    H, wp = left.shape
+    w = wp - D
+    wins = np.asarray(costs.wins, np.int32)
+    rshift = np.asarray([costs.rshift] * len(wins), np.int32)
+    scale = None if costs.scale is None else np.asarray(costs.scale, np.float64)
+    cwin = costs.cwin if len(wins) > 1 else None
+
+    def ptr(a, row=0):
+        return None if a is None else int(a.ctypes.data + row * a.strides[0])
+
+    rc = kernel(ptr(left), left.strides[0] // 2, ptr(right_rev), right_rev.strides[0] // 2,
+                H, w, D, int(y0), int(y1), len(wins), ptr(wins), ptr(cwin), ptr(rshift), ptr(scale),
+                costs.nb, *(ptr(a, y0) for a in out))
+    if rc != 0:
+        raise RuntimeError(f"stereo/_ssd.c: scan of rows {y0}:{y1} failed (code {rc})")
+
+
+@functools.cache
+def _kernel():
+    """The compiled scan as a ctypes function, or None (with one warning) when
+    the extension was not built; the numpy path gives identical results."""
+    import ctypes
+
+    try:
+        from stereo import _ssd
+
+        f = ctypes.CDLL(_ssd.__file__).lumigraph_ssd_scan
+    except (ImportError, OSError, AttributeError) as e:
+        warnings.warn(f"stereo.block_matching: compiled kernel stereo/_ssd.c unavailable ({e}); "
+                      "using the numpy path (same results, 5-10x slower). Reinstall "
+                      "(pip install -e .) with a C compiler to build it.", stacklevel=3)
+        return None
+    P, I = ctypes.c_void_p, ctypes.c_int
+    f.argtypes = [P, I, P, I, I, I, I, I, I, I, P, P, P, P, I, P, P, P, P, P]
+    f.restype = I
+    return f
+
+
+def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqueness,
+            lr_tolerance, subpixel, distinct, noise_var):
+    """Disparity, cost and window per pixel from the scan's encoded costs:
+    parabola sub-pixel fit, uniqueness, left–right check, texture test."""
+    h, w = best.shape
+    nb, unit = costs.nb, costs.unit
+    low = np.int32((1 << nb) - 1)
     dbest = (best & low).astype(np.intp)
     valid = best != _INT_MAX
     bestc = (best >> nb).astype(np.float32)
     x = np.arange(w)
-    pix = np.arange(h)[:, None] * wp + x  # flat index of (y, x), intp for take/put
 
     # sub-pixel: parabola through d-1, d, d+1
     disp = dbest.astype(np.float32)
     if subpixel:
-        em = np.take(flat, pix + np.maximum(dbest - 1, 0) * slab)
-        ep = np.take(flat, pix + np.minimum(dbest + 1, D - 1) * slab)
         inner = valid & (dbest > 0) & (dbest < D - 1) & (em != _INT_MAX) & (ep != _INT_MAX)
         cm = (em >> nb).astype(np.float32)
         cp = (ep >> nb).astype(np.float32)
@@ -332,7 +418,7 @@ def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds,
 
     # left-right: the right pixel x - d must choose d back (within tolerance)
     if lr_tolerance >= 0:
-        back = np.take(best_r, pix - np.minimum(dbest, x)) & low  # at x_r = max(x - d, 0)
+        back = np.take_along_axis(best_r, x - np.minimum(dbest, x), axis=1) & low
         consistent = np.abs(back - dbest) <= lr_tolerance
     else:
         consistent = np.ones((h, w), bool)
@@ -343,10 +429,6 @@ def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds,
     for k in range(1, len(windows)):
         np.copyto(vpick, var[k], where=pick == k)
     if uniqueness > 0 or distinct > 0:
-        # runner-up outside d*-1..d*+1 (this overwrites the volume)
-        for off in (-1, 0, 1):
-            np.put(flat, pix + np.clip(dbest + off, 0, D - 1) * slab, _INT_MAX)
-        second = vol.min(axis=0)[:, :w]
         secondc = (second >> nb).astype(np.float32)
         # ratio test, plus an absolute margin: on a flat (textureless) window
         # every disparity costs 2σ² ± σ²·sqrt(8/n) (noise only), so a winner
@@ -364,18 +446,16 @@ def _band(left, right_padded, texture, y0, y1, *, max_disp, windows, thresholds,
     keep = valid & has_texture & unique & consistent
     disp = np.where(keep, disp, np.nan).astype(np.float32)
     win_arr = np.where(has_texture, np.asarray(windows, np.uint8)[np.minimum(pick, len(windows) - 1)], 0)
-    s = slice(y0 - a0, y0 - a0 + (y1 - y0))
-    counts = {"no_texture": int((valid & ~has_texture)[s].sum()),
-              "not_unique": int((valid & has_texture & ~unique)[s].sum()),
-              "left_right": int((valid & has_texture & unique & ~consistent)[s].sum())}
-    picks = np.bincount(pick[s].ravel(), minlength=len(windows) + 1)
-    return disp[s], np.where(valid, bestc / unit, np.nan)[s], win_arr[s].astype(np.uint8), counts, picks
+    counts = {"no_texture": int((valid & ~has_texture).sum()),
+              "not_unique": int((valid & has_texture & ~unique).sum()),
+              "left_right": int((valid & has_texture & unique & ~consistent).sum())}
+    return disp, np.where(valid, bestc / unit, np.nan).astype(np.float32), win_arr.astype(np.uint8), counts
 
 
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
           texture_snr: float = 1.0, uniqueness: float = 0.02, lr_tolerance: int = 2,
           distinct: float = 0.0, subpixel: bool = True,
-          threads: int | None = None) -> DisparityMap:
+          threads: int | None = None, engine: str = "auto") -> DisparityMap:
     """Dense disparity of a rectified pair by SSD block matching (eq. 5.1).
 
     Parameters
@@ -408,6 +488,12 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     threads : int, optional
         Row bands matched in parallel (OpenCV and numpy release the GIL);
         default: the number of CPUs, at most 4.
+    engine : {"auto", "numpy"}
+        ``"auto"`` scans 8-bit pairs with the compiled kernel
+        (``stereo/_ssd.c``) when it was built, else with numpy/OpenCV;
+        ``"numpy"`` forces the latter. Both give identical results; float
+        inputs always take the numpy path. ``info["engine"]`` says which ran
+        and ``info["timings_s"]`` the time per phase.
 
     Returns
     -------
@@ -435,6 +521,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         raise ValueError(f"window: expected 'auto' or an odd integer in [3, 63], got {window!r}")
     if min(h, w) < max(windows):
         raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
+    if engine not in ("auto", "numpy"):
+        raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
     if texture_snr < 0 or uniqueness < 0:
         raise ValueError("texture_snr, uniqueness: expected values >= 0")
     sigma = noise_sigma(gray)
@@ -446,20 +534,36 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     thresholds = tuple(thr for _ in windows)
     D = max_disp + 1
     span = max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
+    timings = {}
+    t0 = time.perf_counter()
+    var, pick = _texture(gray, windows, thresholds)
+    costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=span)
     # padded so that every disparity's view is a plain slice of width W + D
     Lp = cv2.copyMakeBorder(L, 0, 0, 0, D, cv2.BORDER_REFLECT)
     Rp = cv2.copyMakeBorder(R, 0, 0, D - 1, D, cv2.BORDER_REPLICATE)
     n_threads = threads or min(4, os.cpu_count() or 1)
-    # bands of about BAND_ROWS rows keep each disparity's working set in the
-    # CPU cache; threads take bands in turn, each with its own scratch volume
-    n_bands = max(1, round(h / BAND_ROWS))
-    edges = np.linspace(0, h, n_bands + 1).astype(int)
-    kw = dict(max_disp=max_disp, windows=windows, thresholds=thresholds, distinct=distinct,
-              noise_var=max(sigma, 0.5) ** 2, span=span,
-              uniqueness=uniqueness, lr_tolerance=lr_tolerance, subpixel=subpixel)
-    def one(i):
-        with _scratch() as scratch:
-            return _band(Lp, Rp, gray, edges[i], edges[i + 1], scratch=scratch, **kw)
+    kernel = _kernel() if costs.integer and engine != "numpy" else None
+    t1 = time.perf_counter()
+    timings["prepare"] = t1 - t0
+    if kernel is not None:
+        # one band per thread: the kernel's cost per band start is 2w+1 rows
+        n_bands = max(1, min(n_threads, h // max(costs.wins)))
+        out = [np.empty((h, w), np.int32) for _ in range(5)]
+        Rr = np.ascontiguousarray(Rp[:, ::-1])
+        edges = np.linspace(0, h, n_bands + 1).astype(int)
+
+        def one(i):
+            _scan_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs)
+    else:
+        # bands of about BAND_ROWS rows keep each disparity's working set in the
+        # CPU cache; threads take bands in turn, each with its own scratch volume
+        n_bands = max(1, round(h / BAND_ROWS))
+        edges = np.linspace(0, h, n_bands + 1).astype(int)
+
+        def one(i):
+            with _scratch() as scratch:
+                return _scan_numpy(Lp, Rp, edges[i], edges[i + 1], D=D, costs=costs,
+                                   scratch=scratch)
 
     old = cv2.getNumThreads()
     try:
@@ -473,17 +577,23 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
                 parts = list(ex.map(one, range(n_bands)))
     finally:
         cv2.setNumThreads(old)
-    disp = np.concatenate([p[0] for p in parts])
-    cost = np.concatenate([p[1] for p in parts])
-    win = np.concatenate([p[2] for p in parts])
-    counts = {k: sum(p[3][k] for p in parts) for k in parts[0][3]}
-    picks = sum(p[4] for p in parts)
+    if kernel is None:
+        out = [np.concatenate([p[j] for p in parts]) for j in range(5)]
+    t2 = time.perf_counter()
+    timings["scan"] = t2 - t1
+    disp, cost, win, counts = _decide(
+        *out, var=var, pick=pick, windows=windows, costs=costs, D=D, uniqueness=uniqueness,
+        lr_tolerance=lr_tolerance, subpixel=subpixel, distinct=distinct,
+        noise_var=max(sigma, 0.5) ** 2)
+    timings["decide"] = time.perf_counter() - t2
+    picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
     n = h * w
     info = {"method": "ssd-block-matching", "max_disp": max_disp, "window": window,
             "texture_snr": texture_snr, "uniqueness": uniqueness, "distinct": distinct, "lr_tolerance": lr_tolerance,
             "subpixel": subpixel, "noise_sigma_estimate": sigma, "texture_threshold_var": thr,
             "rejected_fraction": {k: v / n for k, v in counts.items()},
-            "valid_fraction": float(np.isfinite(disp).mean())}
+            "valid_fraction": float(np.isfinite(disp).mean()),
+            "engine": "numpy" if kernel is None else "c", "timings_s": timings}
     if choose:
         info["auto"] = {"candidates": list(windows),
                         "share_of_pixels": {str(k): float(picks[i] / n) for i, k in enumerate(windows)},

@@ -1,0 +1,218 @@
+/*
+ * SSD block-matching scan for stereo/block_matching.py (reference ch. 5,
+ * eq. 5.1), plain C99, loaded through ctypes: no Python or numpy headers.
+ *
+ * One fused pass per row band. For every disparity d the squared differences
+ * of the left row and the right row shifted by d are summed over the window
+ * incrementally: column sums (one per column and disparity) move down one row
+ * at a time, and a running window sum moves along the row, so each pixel and
+ * disparity costs O(1) whatever the window. Disparities are the innermost,
+ * contiguous axis so the compiler vectorises across them. Per left pixel the
+ * kernel keeps the best cost, the best outside d* - 1 .. d* + 1 (uniqueness)
+ * and the costs at d* - 1 and d* + 1 (parabola); per right pixel the best
+ * cost (left-right check). All arithmetic is integer and reproduces the numpy
+ * path of block_matching.py bit for bit:
+ *
+ *   sq(y, x, d) = (Lp[y, x] - R[y, clamp(x - d, 0, W - 1)])^2
+ *   sum         = window sum of sq, rows reflected at the image edges and
+ *                 columns reflected at 0 and W + D (OpenCV BORDER_REFLECT)
+ *   cost        = sum >> rshift[k]            (scale == NULL)
+ *               = (int32) (sum * scale[k])    (otherwise; truncation)
+ *   encoded     = (cost << nb) | d, INT32_MAX where x < d.
+ */
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define BIG INT32_MAX
+#define MAXWIN 4
+
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
+#define CLONES __attribute__((target_clones("avx2", "default")))
+#else
+#define CLONES
+#endif
+
+static inline int reflect(int i, int n)
+{
+    if (i < 0)
+        return -i - 1;
+    if (i >= n)
+        return 2 * n - i - 1;
+    return i;
+}
+
+/* col[c][d] += sign * sq(row, c, d) for c in [0, nc) */
+static inline void add_row(uint32_t *restrict col, int dp, int nc, int D,
+                           const uint16_t *restrict lrow, const uint16_t *restrict rrev, int roff,
+                           int sign)
+{
+    for (int c = 0; c < nc; c++) {
+        const int32_t lv = lrow[c];
+        const uint16_t *restrict rv = rrev + (roff - c);
+        uint32_t *restrict cc = col + (size_t)c * dp;
+        if (sign > 0)
+            for (int d = 0; d < D; d++) {
+                const int32_t t = lv - (int32_t)rv[d];
+                cc[d] += (uint32_t)(t * t);
+            }
+        else
+            for (int d = 0; d < D; d++) {
+                const int32_t t = lv - (int32_t)rv[d];
+                cc[d] -= (uint32_t)(t * t);
+            }
+    }
+}
+
+/* col[c][d] += sq(in, c, d) - sq(out, c, d) */
+static inline void move_row(uint32_t *restrict col, int dp, int nc, int D,
+                            const uint16_t *restrict lin, const uint16_t *restrict rin,
+                            const uint16_t *restrict lout, const uint16_t *restrict rout, int roff)
+{
+    for (int c = 0; c < nc; c++) {
+        const int32_t a = lin[c], b = lout[c];
+        const uint16_t *restrict ra = rin + (roff - c);
+        const uint16_t *restrict rb = rout + (roff - c);
+        uint32_t *restrict cc = col + (size_t)c * dp;
+        for (int d = 0; d < D; d++) {
+            const int32_t t = a - (int32_t)ra[d];
+            const int32_t u = b - (int32_t)rb[d];
+            cc[d] += (uint32_t)(t * t) - (uint32_t)(u * u);
+        }
+    }
+}
+
+/*
+ * Lp     H x lstride uint16: left image with D reflected columns on its right
+ *        (lstride >= W + D).
+ * Rrev   H x rstride uint16: each row of the right image padded with D - 1
+ *        replicated columns on its left and D on its right (length
+ *        P = W + 2D - 1 <= rstride), then reversed, so that
+ *        R[clamp(c - d)] = Rrev[P - D - c + d], increasing in d.
+ * wins   nwin odd window sides (nwin <= MAXWIN); cwin H x W window index per
+ *        pixel (NULL when nwin == 1).
+ * out    (y1 - y0) x W int32 each: best, em (cost at d* - 1), ep (d* + 1),
+ *        second (best outside d* - 1 .. d* + 1), best_r (per right pixel).
+ * Returns 0, or -1 on bad arguments / out of memory.
+ */
+CLONES
+int lumigraph_ssd_scan(const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride,
+                       int H, int W, int D, int y0, int y1,
+                       int nwin, const int32_t *wins, const uint8_t *cwin,
+                       const int32_t *rshift, const double *scale, int nb,
+                       int32_t *best, int32_t *em, int32_t *ep, int32_t *second, int32_t *best_r)
+{
+    if (nwin < 1 || nwin > MAXWIN || D < 1 || W < 1 || y0 < 0 || y1 > H || y0 >= y1)
+        return -1;
+    const int wp = W + D;           /* width of the numpy path's diff array */
+    const int P = W + 2 * D - 1;    /* padded right row */
+    const int roff = P - D;
+    int half[MAXWIN], hmax = 0;
+    for (int k = 0; k < nwin; k++) {
+        if (wins[k] < 1 || wins[k] % 2 == 0 || wins[k] / 2 >= H || wins[k] / 2 >= wp)
+            return -1;
+        half[k] = wins[k] / 2;
+        if (half[k] > hmax)
+            hmax = half[k];
+    }
+    const int nc = W + hmax < wp ? W + hmax : wp;
+    const int dp = (D + 15) & ~15;
+    uint32_t *col = malloc(sizeof(uint32_t) * (size_t)dp * ((size_t)nc * nwin + nwin));
+    int32_t *enc = malloc(sizeof(int32_t) * (size_t)dp);
+    int32_t *rrev_best = malloc(sizeof(int32_t) * (size_t)W);
+    if (!col || !enc || !rrev_best) {
+        free(col);
+        free(enc);
+        free(rrev_best);
+        return -1;
+    }
+    uint32_t *acc = col + (size_t)dp * nc * nwin;
+
+    for (int y = y0; y < y1; y++) {
+        for (int k = 0; k < nwin; k++) {
+            uint32_t *ck = col + (size_t)dp * nc * k;
+            const int h = half[k];
+            if (y == y0) {
+                memset(ck, 0, sizeof(uint32_t) * (size_t)dp * nc);
+                for (int r = y - h; r <= y + h; r++) {
+                    const int rr = reflect(r, H);
+                    add_row(ck, dp, nc, D, Lp + (size_t)rr * lstride, Rrev + (size_t)rr * rstride,
+                            roff, 1);
+                }
+            } else {
+                const int ri = reflect(y + h, H), ro = reflect(y - h - 1, H);
+                move_row(ck, dp, nc, D, Lp + (size_t)ri * lstride, Rrev + (size_t)ri * rstride,
+                         Lp + (size_t)ro * lstride, Rrev + (size_t)ro * rstride, roff);
+            }
+        }
+        for (int x = 0; x < W; x++)
+            rrev_best[x] = BIG;
+        const size_t o = (size_t)(y - y0) * W;
+        for (int x = 0; x < W; x++) {
+            for (int k = 0; k < nwin; k++) {
+                const uint32_t *ck = col + (size_t)dp * nc * k;
+                uint32_t *restrict ak = acc + (size_t)dp * k;
+                const int h = half[k];
+                if (x == 0) {
+                    memset(ak, 0, sizeof(uint32_t) * (size_t)dp);
+                    for (int c = -h; c <= h; c++) {
+                        const uint32_t *restrict cc = ck + (size_t)dp * reflect(c, wp);
+                        for (int d = 0; d < D; d++)
+                            ak[d] += cc[d];
+                    }
+                } else {
+                    const uint32_t *restrict ci = ck + (size_t)dp * reflect(x + h, wp);
+                    const uint32_t *restrict co = ck + (size_t)dp * reflect(x - h - 1, wp);
+                    for (int d = 0; d < D; d++)
+                        ak[d] += ci[d] - co[d];
+                }
+            }
+            const int k = cwin ? cwin[(size_t)y * W + x] : 0;
+            const uint32_t *restrict ak = acc + (size_t)dp * (k < nwin ? k : 0);
+            const int n = x + 1 < D ? x + 1 : D; /* disparities 0 .. n - 1 have a partner */
+            if (scale) {
+                const double s = scale[k < nwin ? k : 0];
+                for (int d = 0; d < n; d++)
+                    enc[d] = ((int32_t)((double)ak[d] * s) << nb) | d;
+            } else {
+                const int sh = rshift[k < nwin ? k : 0];
+                for (int d = 0; d < n; d++)
+                    enc[d] = ((int32_t)(ak[d] >> sh) << nb) | d;
+            }
+            int32_t b = BIG;
+            for (int d = 0; d < n; d++)
+                b = enc[d] < b ? enc[d] : b;
+            const int bd = b & ((1 << nb) - 1);
+            int32_t s2 = BIG;
+            for (int d = 0; d < bd - 1; d++)
+                s2 = enc[d] < s2 ? enc[d] : s2;
+            for (int d = bd + 2; d < n; d++)
+                s2 = enc[d] < s2 ? enc[d] : s2;
+            best[o + x] = b;
+            second[o + x] = s2;
+            em[o + x] = bd > 0 ? enc[bd - 1] : enc[0];
+            ep[o + x] = bd + 1 < n ? enc[bd + 1] : (bd + 1 < D ? BIG : enc[D - 1]);
+            /* the right pixel x - d sees enc[d]: reversed so the index grows with d */
+            int32_t *restrict rb = rrev_best + (W - 1 - x);
+            for (int d = 0; d < n; d++)
+                rb[d] = enc[d] < rb[d] ? enc[d] : rb[d];
+        }
+        for (int x = 0; x < W; x++)
+            best_r[o + x] = rrev_best[W - 1 - x];
+    }
+    free(col);
+    free(enc);
+    free(rrev_best);
+    return 0;
+}
+
+#ifdef LUMIGRAPH_PYMODULE
+/* An empty module, so that the import system finds the built library
+ * (`import stereo._ssd`); the kernel itself is called through ctypes. */
+#include <Python.h>
+
+static struct PyModuleDef ssd_module = {PyModuleDef_HEAD_INIT, "_ssd",
+                                        "SSD block-matching scan (loaded with ctypes).", -1, NULL};
+
+PyMODINIT_FUNC PyInit__ssd(void) { return PyModule_Create(&ssd_module); }
+#endif
