@@ -8,5 +8,5 @@ install still succeeds and ``stereo.block_matching`` falls back to numpy.
 from setuptools import Extension, setup
 
 setup(ext_modules=[Extension(
-    "stereo._ssd", sources=["stereo/_ssd.c"], define_macros=[("LUMIGRAPH_PYMODULE", "1")],
-    extra_compile_args=["-O3", "-std=c99"], optional=True)])
+    "stereo._ssd", sources=["stereo/_ssd.c"], define_macros=[("LUMIGRAPH_PYMODULE", "1")], libraries=["m"],
+    extra_compile_args=["-O3", "-std=c99", "-ffp-contract=off"], optional=True)])

@@ -19,9 +19,13 @@
  *   cost        = sum >> rshift[k]            (scale == NULL)
  *               = (int32) (sum * scale[k])    (otherwise; truncation)
  *   encoded     = (cost << nb) | d, INT32_MAX where x < d.
+ *
+ * Each row is then decided (sub-pixel parabola, uniqueness, left-right check,
+ * texture) in float32 exactly as block_matching._decide does it in numpy.
  */
 #include <stdint.h>
 #include <stdlib.h>
+#include <math.h>
 #include <string.h>
 
 #define BIG INT32_MAX
@@ -82,6 +86,78 @@ static inline void move_row(uint32_t *restrict col, int dp, int nc, int D,
     }
 }
 
+/* Decision for one row, float32 arithmetic in the order numpy evaluates
+ * block_matching._decide (so both paths agree bit for bit; this file is
+ * compiled without floating-point contraction). */
+typedef struct {
+    int D, nb, subpixel, lr_tolerance, unique_test, npick;
+    float u1;         /* 1 + uniqueness */
+    float dist_var;   /* distinct * noise variance */
+    float two_var;    /* 2 * noise variance */
+    float unit;
+    const int32_t *sides; /* npick candidate window sides */
+} decide_t;
+
+static void decide_row(const decide_t *p, int W, const int32_t *best, const int32_t *em,
+                       const int32_t *ep, const int32_t *second, const int32_t *rrev_best,
+                       const uint8_t *pick, const float *vpick, float *disp, float *cost,
+                       int64_t *counts)
+{
+    const int nb = p->nb;
+    const int32_t low = (1 << nb) - 1;
+    for (int x = 0; x < W; x++) {
+        const int32_t b = best[x];
+        if (b == BIG) {
+            disp[x] = NAN;
+            cost[x] = NAN;
+            continue;
+        }
+        const int bd = b & low;
+        const float bc = (float)(b >> nb);
+        float d = (float)bd;
+        if (p->subpixel && bd > 0 && bd < p->D - 1 && em[x] != BIG && ep[x] != BIG) {
+            const float cm = (float)(em[x] >> nb), cp = (float)(ep[x] >> nb);
+            const float curv = (cm - 2.0f * bc) + cp;
+            if (curv > 0) {
+                float delta = (0.5f * (cm - cp)) / curv;
+                delta = delta < -0.5f ? -0.5f : (delta > 0.5f ? 0.5f : delta);
+                d = d + delta;
+            }
+        }
+        int consistent = 1;
+        if (p->lr_tolerance >= 0) {
+            const int xr = x - (bd < x ? bd : x);
+            const int back = rrev_best[W - 1 - xr] & low;
+            consistent = abs(back - bd) <= p->lr_tolerance;
+        }
+        int unique = 1;
+        if (p->unique_test) {
+            const int32_t s = second[x];
+            if (s != BIG) {
+                const float sc = (float)(s >> nb);
+                float margin = 0.0f;
+                if (p->dist_var != 0.0f) {
+                    const int k = pick[x] < p->npick ? pick[x] : p->npick - 1;
+                    const float n = (float)p->sides[k] * (float)p->sides[k];
+                    margin = (p->dist_var * sqrtf(8.0f / n)) * p->unit;
+                    if (vpick[x] < p->two_var)
+                        margin = 3.0f * margin;
+                }
+                unique = (sc > bc * p->u1) && (sc - bc > margin);
+            }
+        }
+        const int textured = pick[x] < p->npick;
+        if (!textured)
+            counts[0]++;
+        else if (!unique)
+            counts[1]++;
+        else if (!consistent)
+            counts[2]++;
+        disp[x] = textured && unique && consistent ? d : NAN;
+        cost[x] = bc / p->unit;
+    }
+}
+
 /*
  * Lp     H x lstride uint16: left image with D reflected columns on its right
  *        (lstride >= W + D).
@@ -91,18 +167,23 @@ static inline void move_row(uint32_t *restrict col, int dp, int nc, int D,
  *        R[clamp(c - d)] = Rrev[P - D - c + d], increasing in d.
  * wins   nwin odd window sides (nwin <= MAXWIN); cwin H x W window index per
  *        pixel (NULL when nwin == 1).
- * out    (y1 - y0) x W int32 each: best, em (cost at d* - 1), ep (d* + 1),
- *        second (best outside d* - 1 .. d* + 1), best_r (per right pixel).
+ * pick   H x W index of the textured candidate window (npick = none), vpick
+ *        H x W float32 its variance (may be NULL when distinct is 0).
+ * out    disp, cost: H x W float32, rows y0 .. y1 - 1 written; counts[3]
+ *        (no texture, not unique, left-right) incremented.
  * Returns 0, or -1 on bad arguments / out of memory.
  */
 CLONES
-int lumigraph_ssd_scan(const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride,
-                       int H, int W, int D, int y0, int y1,
-                       int nwin, const int32_t *wins, const uint8_t *cwin,
-                       const int32_t *rshift, const double *scale, int nb,
-                       int32_t *best, int32_t *em, int32_t *ep, int32_t *second, int32_t *best_r)
+int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride,
+                        int H, int W, int D, int y0, int y1,
+                        int nwin, const int32_t *wins, const uint8_t *cwin,
+                        const int32_t *rshift, const double *scale, int nb,
+                        const uint8_t *pick, int npick, const int32_t *sides, const float *vpick,
+                        int subpixel, int lr_tolerance, int unique_test, double u1,
+                        double dist_var, double two_var, double unit,
+                        float *disp, float *cost, int64_t *counts)
 {
-    if (nwin < 1 || nwin > MAXWIN || D < 1 || W < 1 || y0 < 0 || y1 > H || y0 >= y1)
+    if (nwin < 1 || nwin > MAXWIN || D < 1 || W < 1 || y0 < 0 || y1 > H || y0 >= y1 || npick < 1)
         return -1;
     const int wp = W + D;           /* width of the numpy path's diff array */
     const int P = W + 2 * D - 1;    /* padded right row */
@@ -115,18 +196,22 @@ int lumigraph_ssd_scan(const uint16_t *Lp, int lstride, const uint16_t *Rrev, in
         if (half[k] > hmax)
             hmax = half[k];
     }
+    const decide_t dp_ = {D, nb, subpixel, lr_tolerance, unique_test, npick, (float)u1,
+                          (float)dist_var, (float)two_var, (float)unit, sides};
     const int nc = W + hmax < wp ? W + hmax : wp;
     const int dp = (D + 15) & ~15;
     uint32_t *col = malloc(sizeof(uint32_t) * (size_t)dp * ((size_t)nc * nwin + nwin));
     int32_t *enc = malloc(sizeof(int32_t) * (size_t)dp);
-    int32_t *rrev_best = malloc(sizeof(int32_t) * (size_t)W);
-    if (!col || !enc || !rrev_best) {
+    int32_t *rows = malloc(sizeof(int32_t) * (size_t)W * 5);
+    if (!col || !enc || !rows) {
         free(col);
         free(enc);
-        free(rrev_best);
+        free(rows);
         return -1;
     }
     uint32_t *acc = col + (size_t)dp * nc * nwin;
+    int32_t *best = rows, *em = rows + W, *ep = rows + 2 * W, *second = rows + 3 * W;
+    int32_t *rrev_best = rows + 4 * W;
 
     for (int y = y0; y < y1; y++) {
         for (int k = 0; k < nwin; k++) {
@@ -147,7 +232,6 @@ int lumigraph_ssd_scan(const uint16_t *Lp, int lstride, const uint16_t *Rrev, in
         }
         for (int x = 0; x < W; x++)
             rrev_best[x] = BIG;
-        const size_t o = (size_t)(y - y0) * W;
         for (int x = 0; x < W; x++) {
             for (int k = 0; k < nwin; k++) {
                 const uint32_t *ck = col + (size_t)dp * nc * k;
@@ -167,42 +251,45 @@ int lumigraph_ssd_scan(const uint16_t *Lp, int lstride, const uint16_t *Rrev, in
                         ak[d] += ci[d] - co[d];
                 }
             }
-            const int k = cwin ? cwin[(size_t)y * W + x] : 0;
-            const uint32_t *restrict ak = acc + (size_t)dp * (k < nwin ? k : 0);
+            const int k0 = cwin ? cwin[(size_t)y * W + x] : 0;
+            const int k = k0 < nwin ? k0 : 0;
+            const uint32_t *restrict ak = acc + (size_t)dp * k;
             const int n = x + 1 < D ? x + 1 : D; /* disparities 0 .. n - 1 have a partner */
+            int32_t *restrict e = enc;
             if (scale) {
-                const double s = scale[k < nwin ? k : 0];
+                const double s = scale[k];
                 for (int d = 0; d < n; d++)
-                    enc[d] = ((int32_t)((double)ak[d] * s) << nb) | d;
+                    e[d] = ((int32_t)((double)ak[d] * s) << nb) | d;
             } else {
-                const int sh = rshift[k < nwin ? k : 0];
+                const int sh = rshift[k];
                 for (int d = 0; d < n; d++)
-                    enc[d] = ((int32_t)(ak[d] >> sh) << nb) | d;
+                    e[d] = ((int32_t)(ak[d] >> sh) << nb) | d;
             }
             int32_t b = BIG;
             for (int d = 0; d < n; d++)
-                b = enc[d] < b ? enc[d] : b;
+                b = e[d] < b ? e[d] : b;
             const int bd = b & ((1 << nb) - 1);
             int32_t s2 = BIG;
             for (int d = 0; d < bd - 1; d++)
-                s2 = enc[d] < s2 ? enc[d] : s2;
+                s2 = e[d] < s2 ? e[d] : s2;
             for (int d = bd + 2; d < n; d++)
-                s2 = enc[d] < s2 ? enc[d] : s2;
-            best[o + x] = b;
-            second[o + x] = s2;
-            em[o + x] = bd > 0 ? enc[bd - 1] : enc[0];
-            ep[o + x] = bd + 1 < n ? enc[bd + 1] : (bd + 1 < D ? BIG : enc[D - 1]);
-            /* the right pixel x - d sees enc[d]: reversed so the index grows with d */
+                s2 = e[d] < s2 ? e[d] : s2;
+            best[x] = b;
+            second[x] = s2;
+            em[x] = bd > 0 ? e[bd - 1] : e[0];
+            ep[x] = bd + 1 < n ? e[bd + 1] : (bd + 1 < D ? BIG : e[D - 1]);
+            /* the right pixel x - d sees e[d]: reversed so the index grows with d */
             int32_t *restrict rb = rrev_best + (W - 1 - x);
             for (int d = 0; d < n; d++)
-                rb[d] = enc[d] < rb[d] ? enc[d] : rb[d];
+                rb[d] = e[d] < rb[d] ? e[d] : rb[d];
         }
-        for (int x = 0; x < W; x++)
-            best_r[o + x] = rrev_best[W - 1 - x];
+        const size_t o = (size_t)y * W;
+        decide_row(&dp_, W, best, em, ep, second, rrev_best, pick + o, vpick ? vpick + o : NULL,
+                   disp + o, cost + o, counts);
     }
     free(col);
     free(enc);
-    free(rrev_best);
+    free(rows);
     return 0;
 }
 

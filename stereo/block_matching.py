@@ -351,25 +351,33 @@ def _scan_numpy(left, right_padded, y0, y1, *, D, costs, scratch):
     return best[s], em[s], ep[s], second[s], best_r.reshape(h, wp)[s, :w]
 
 
-def _scan_c(kernel, left, right_rev, y0, y1, out, *, D, costs):
-    """Rows ``y0:y1`` through the compiled kernel (``stereo/_ssd.c``), writing
-    into the rows of the five (H, W) int32 arrays of ``out``; ``right_rev`` is
-    the padded right image with its columns reversed."""
+def _match_c(kernel, left, right_rev, y0, y1, out, *, D, costs, pick, vpick, windows,
+             subpixel, lr_tolerance, uniqueness, distinct, noise_var):
+    """Rows ``y0:y1`` through the compiled kernel (``stereo/_ssd.c``): the scan
+    and the decision of ``_decide``, fused per row, written into the rows of
+    ``out`` = (disparity, cost) (H, W) float32; returns the rejection counts.
+    ``right_rev`` is the padded right image with its columns reversed."""
     H, wp = left.shape
     w = wp - D
     wins = np.asarray(costs.wins, np.int32)
     rshift = np.asarray([costs.rshift] * len(wins), np.int32)
     scale = None if costs.scale is None else np.asarray(costs.scale, np.float64)
     cwin = costs.cwin if len(wins) > 1 else None
+    sides = np.asarray(windows, np.int32)
+    counts = np.zeros(3, np.int64)
 
-    def ptr(a, row=0):
-        return None if a is None else int(a.ctypes.data + row * a.strides[0])
+    def ptr(a):
+        return None if a is None else int(a.ctypes.data)
 
     rc = kernel(ptr(left), left.strides[0] // 2, ptr(right_rev), right_rev.strides[0] // 2,
-                H, w, D, int(y0), int(y1), len(wins), ptr(wins), ptr(cwin), ptr(rshift), ptr(scale),
-                costs.nb, *(ptr(a, y0) for a in out))
+                H, w, D, int(y0), int(y1), len(wins), ptr(wins), ptr(cwin), ptr(rshift),
+                ptr(scale), costs.nb, ptr(pick), len(windows), ptr(sides), ptr(vpick),
+                int(subpixel), int(lr_tolerance), int(uniqueness > 0 or distinct > 0),
+                1 + uniqueness, distinct * noise_var, 2 * noise_var, costs.unit,
+                ptr(out[0]), ptr(out[1]), ptr(counts))
     if rc != 0:
-        raise RuntimeError(f"stereo/_ssd.c: scan of rows {y0}:{y1} failed (code {rc})")
+        raise RuntimeError(f"stereo/_ssd.c: match of rows {y0}:{y1} failed (code {rc})")
+    return counts
 
 
 @functools.cache
@@ -381,21 +389,30 @@ def _kernel():
     try:
         from stereo import _ssd
 
-        f = ctypes.CDLL(_ssd.__file__).lumigraph_ssd_scan
+        f = ctypes.CDLL(_ssd.__file__).lumigraph_ssd_match
     except (ImportError, OSError, AttributeError) as e:
         warnings.warn(f"stereo.block_matching: compiled kernel stereo/_ssd.c unavailable ({e}); "
                       "using the numpy path (same results, 5-10x slower). Reinstall "
                       "(pip install -e .) with a C compiler to build it.", stacklevel=3)
         return None
-    P, I = ctypes.c_void_p, ctypes.c_int
-    f.argtypes = [P, I, P, I, I, I, I, I, I, I, P, P, P, P, I, P, P, P, P, P]
+    P, I, F = ctypes.c_void_p, ctypes.c_int, ctypes.c_double
+    f.argtypes = [P, I, P, I, I, I, I, I, I, I, P, P, P, P, I, P, I, P, P, I, I, I, F, F, F, F,
+                  P, P, P]
     f.restype = I
     return f
 
 
+def _picked_variance(var, pick):
+    """The window variance of each pixel's picked window (the smallest when none)."""
+    vpick = var[0].copy()
+    for k in range(1, len(var)):
+        np.copyto(vpick, var[k], where=pick == k)
+    return vpick
+
+
 def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqueness,
             lr_tolerance, subpixel, distinct, noise_var):
-    """Disparity, cost and window per pixel from the scan's encoded costs:
+    """Disparity and cost per pixel from the scan's encoded costs:
     parabola sub-pixel fit, uniqueness, left–right check, texture test."""
     h, w = best.shape
     nb, unit = costs.nb, costs.unit
@@ -425,9 +442,7 @@ def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqu
 
     # per-pixel window size (pixels) and its variance, for the noise margin
     nwin = np.asarray(windows, np.float32)[np.minimum(pick, len(windows) - 1)] ** 2
-    vpick = var[0].copy()
-    for k in range(1, len(windows)):
-        np.copyto(vpick, var[k], where=pick == k)
+    vpick = _picked_variance(var, pick)
     if uniqueness > 0 or distinct > 0:
         secondc = (second >> nb).astype(np.float32)
         # ratio test, plus an absolute margin: on a flat (textureless) window
@@ -445,11 +460,10 @@ def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqu
     has_texture = pick < len(windows)
     keep = valid & has_texture & unique & consistent
     disp = np.where(keep, disp, np.nan).astype(np.float32)
-    win_arr = np.where(has_texture, np.asarray(windows, np.uint8)[np.minimum(pick, len(windows) - 1)], 0)
     counts = {"no_texture": int((valid & ~has_texture).sum()),
               "not_unique": int((valid & has_texture & ~unique).sum()),
               "left_right": int((valid & has_texture & unique & ~consistent).sum())}
-    return disp, np.where(valid, bestc / unit, np.nan).astype(np.float32), win_arr.astype(np.uint8), counts
+    return disp, np.where(valid, bestc / unit, np.nan).astype(np.float32), counts
 
 
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
@@ -545,26 +559,30 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     kernel = _kernel() if costs.integer and engine != "numpy" else None
     t1 = time.perf_counter()
     timings["prepare"] = t1 - t0
+    noise_var = max(sigma, 0.5) ** 2
+    decide = dict(subpixel=subpixel, lr_tolerance=lr_tolerance, uniqueness=uniqueness,
+                  distinct=distinct, noise_var=noise_var)
     if kernel is not None:
-        # one band per thread: the kernel's cost per band start is 2w+1 rows
+        # one band per thread: each band start costs a window of rows
         n_bands = max(1, min(n_threads, h // max(costs.wins)))
-        out = [np.empty((h, w), np.int32) for _ in range(5)]
+        out = (np.empty((h, w), np.float32), np.empty((h, w), np.float32))
         Rr = np.ascontiguousarray(Rp[:, ::-1])
-        edges = np.linspace(0, h, n_bands + 1).astype(int)
+        vpick = _picked_variance(var, pick) if distinct > 0 else None
 
         def one(i):
-            _scan_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs)
+            return _match_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs,
+                            pick=pick, vpick=vpick, windows=windows, **decide)
     else:
         # bands of about BAND_ROWS rows keep each disparity's working set in the
         # CPU cache; threads take bands in turn, each with its own scratch volume
         n_bands = max(1, round(h / BAND_ROWS))
-        edges = np.linspace(0, h, n_bands + 1).astype(int)
 
         def one(i):
             with _scratch() as scratch:
                 return _scan_numpy(Lp, Rp, edges[i], edges[i + 1], D=D, costs=costs,
                                    scratch=scratch)
 
+    edges = np.linspace(0, h, n_bands + 1).astype(int)
     old = cv2.getNumThreads()
     try:
         if n_threads == 1 or n_bands == 1:
@@ -577,14 +595,17 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
                 parts = list(ex.map(one, range(n_bands)))
     finally:
         cv2.setNumThreads(old)
-    if kernel is None:
-        out = [np.concatenate([p[j] for p in parts]) for j in range(5)]
     t2 = time.perf_counter()
     timings["scan"] = t2 - t1
-    disp, cost, win, counts = _decide(
-        *out, var=var, pick=pick, windows=windows, costs=costs, D=D, uniqueness=uniqueness,
-        lr_tolerance=lr_tolerance, subpixel=subpixel, distinct=distinct,
-        noise_var=max(sigma, 0.5) ** 2)
+    if kernel is None:
+        scan = [np.concatenate([p[j] for p in parts]) for j in range(5)]
+        disp, cost, counts = _decide(*scan, var=var, pick=pick, windows=windows, costs=costs,
+                                     D=D, **decide)
+    else:
+        disp, cost = out
+        c = sum(parts)
+        counts = {"no_texture": int(c[0]), "not_unique": int(c[1]), "left_right": int(c[2])}
+    win = np.asarray((0, *windows), np.uint8)[(pick + 1) % (len(windows) + 1)]
     timings["decide"] = time.perf_counter() - t2
     picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
     n = h * w
