@@ -30,6 +30,7 @@
 
 #define BIG INT32_MAX
 #define MAXWIN 4
+#define RB 8
 
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
 #define CLONES __attribute__((target_clones("avx2", "default")))
@@ -99,7 +100,7 @@ typedef struct {
 } decide_t;
 
 static void decide_row(const decide_t *p, int W, const int32_t *best, const int32_t *em,
-                       const int32_t *ep, const int32_t *second, const int32_t *rrev_best,
+                       const int32_t *ep, const int32_t *second, const int32_t *rrev,
                        const uint8_t *pick, const float *vpick, float *disp, float *cost,
                        int64_t *counts)
 {
@@ -127,7 +128,7 @@ static void decide_row(const decide_t *p, int W, const int32_t *best, const int3
         int consistent = 1;
         if (p->lr_tolerance >= 0) {
             const int xr = x - (bd < x ? bd : x);
-            const int back = rrev_best[W - 1 - xr] & low;
+            const int back = rrev[W - 1 - xr] & low;
             consistent = abs(back - bd) <= p->lr_tolerance;
         }
         int unique = 1;
@@ -202,7 +203,8 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
     const int dp = (D + 15) & ~15;
     uint32_t *col = malloc(sizeof(uint32_t) * (size_t)dp * ((size_t)nc * nwin + nwin));
     int32_t *enc = malloc(sizeof(int32_t) * (size_t)dp);
-    int32_t *rows = malloc(sizeof(int32_t) * (size_t)W * 5);
+    /* best, em, ep, second, then RB right-best accumulators */
+    int32_t *rows = malloc(sizeof(int32_t) * (size_t)W * (4 + RB));
     if (!col || !enc || !rows) {
         free(col);
         free(enc);
@@ -211,7 +213,7 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
     }
     uint32_t *acc = col + (size_t)dp * nc * nwin;
     int32_t *best = rows, *em = rows + W, *ep = rows + 2 * W, *second = rows + 3 * W;
-    int32_t *rrev_best = rows + 4 * W;
+    int32_t *rrev = rows + 4 * W;
 
     for (int y = y0; y < y1; y++) {
         for (int k = 0; k < nwin; k++) {
@@ -230,44 +232,72 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
                          Lp + (size_t)ro * lstride, Rrev + (size_t)ro * rstride, roff);
             }
         }
-        for (int x = 0; x < W; x++)
-            rrev_best[x] = BIG;
+        for (int x = 0; x < W * RB; x++)
+            rrev[x] = BIG;
         for (int x = 0; x < W; x++) {
-            for (int k = 0; k < nwin; k++) {
-                const uint32_t *ck = col + (size_t)dp * nc * k;
-                uint32_t *restrict ak = acc + (size_t)dp * k;
-                const int h = half[k];
-                if (x == 0) {
-                    memset(ak, 0, sizeof(uint32_t) * (size_t)dp);
-                    for (int c = -h; c <= h; c++) {
-                        const uint32_t *restrict cc = ck + (size_t)dp * reflect(c, wp);
+            const int n = x + 1 < D ? x + 1 : D; /* disparities 0 .. n - 1 have a partner */
+            /* the right pixel x - d sees e[d]: reversed so that the index grows
+             * with d, and spread over RB buffers by x mod RB, so that a buffer's
+             * next update starts RB elements (a whole vector) further and
+             * reloads what was stored as it was stored (store forwarding) */
+            int32_t *restrict rb = rrev + (size_t)W * (x % RB) + (W - 1 - x);
+            int32_t *restrict e = enc;
+            int32_t b = BIG;
+            if (nwin == 1 && !scale && x > 0 && n == D) {
+                /* one window, away from the left edge: window sum, encoding, best
+                 * and right best in one pass */
+                uint32_t *restrict ak = acc;
+                const uint32_t *restrict ci = col + (size_t)dp * reflect(x + half[0], wp);
+                const uint32_t *restrict co = col + (size_t)dp * reflect(x - half[0] - 1, wp);
+                const int sh = rshift[0];
+                for (int d = 0; d < D; d++) {
+                    const uint32_t a = ak[d] + ci[d] - co[d];
+                    ak[d] = a;
+                    const int32_t v = ((int32_t)(a >> sh) << nb) | d;
+                    e[d] = v;
+                    b = v < b ? v : b;
+                    rb[d] = v < rb[d] ? v : rb[d];
+                }
+            } else {
+                for (int k = 0; k < nwin; k++) {
+                    const uint32_t *ck = col + (size_t)dp * nc * k;
+                    uint32_t *restrict ak = acc + (size_t)dp * k;
+                    const int h = half[k];
+                    if (x == 0) {
+                        memset(ak, 0, sizeof(uint32_t) * (size_t)dp);
+                        for (int c = -h; c <= h; c++) {
+                            const uint32_t *restrict cc = ck + (size_t)dp * reflect(c, wp);
+                            for (int d = 0; d < D; d++)
+                                ak[d] += cc[d];
+                        }
+                    } else {
+                        const uint32_t *restrict ci = ck + (size_t)dp * reflect(x + h, wp);
+                        const uint32_t *restrict co = ck + (size_t)dp * reflect(x - h - 1, wp);
                         for (int d = 0; d < D; d++)
-                            ak[d] += cc[d];
+                            ak[d] += ci[d] - co[d];
+                    }
+                }
+                const int k0 = cwin ? cwin[(size_t)y * W + x] : 0;
+                const int k = k0 < nwin ? k0 : 0;
+                const uint32_t *restrict ak = acc + (size_t)dp * k;
+                if (scale) {
+                    const double s = scale[k];
+                    for (int d = 0; d < n; d++) {
+                        const int32_t v = ((int32_t)((double)ak[d] * s) << nb) | d;
+                        e[d] = v;
+                        b = v < b ? v : b;
+                        rb[d] = v < rb[d] ? v : rb[d];
                     }
                 } else {
-                    const uint32_t *restrict ci = ck + (size_t)dp * reflect(x + h, wp);
-                    const uint32_t *restrict co = ck + (size_t)dp * reflect(x - h - 1, wp);
-                    for (int d = 0; d < D; d++)
-                        ak[d] += ci[d] - co[d];
+                    const int sh = rshift[k];
+                    for (int d = 0; d < n; d++) {
+                        const int32_t v = ((int32_t)(ak[d] >> sh) << nb) | d;
+                        e[d] = v;
+                        b = v < b ? v : b;
+                        rb[d] = v < rb[d] ? v : rb[d];
+                    }
                 }
             }
-            const int k0 = cwin ? cwin[(size_t)y * W + x] : 0;
-            const int k = k0 < nwin ? k0 : 0;
-            const uint32_t *restrict ak = acc + (size_t)dp * k;
-            const int n = x + 1 < D ? x + 1 : D; /* disparities 0 .. n - 1 have a partner */
-            int32_t *restrict e = enc;
-            if (scale) {
-                const double s = scale[k];
-                for (int d = 0; d < n; d++)
-                    e[d] = ((int32_t)((double)ak[d] * s) << nb) | d;
-            } else {
-                const int sh = rshift[k];
-                for (int d = 0; d < n; d++)
-                    e[d] = ((int32_t)(ak[d] >> sh) << nb) | d;
-            }
-            int32_t b = BIG;
-            for (int d = 0; d < n; d++)
-                b = e[d] < b ? e[d] : b;
             const int bd = b & ((1 << nb) - 1);
             int32_t s2 = BIG;
             for (int d = 0; d < bd - 1; d++)
@@ -278,13 +308,12 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
             second[x] = s2;
             em[x] = bd > 0 ? e[bd - 1] : e[0];
             ep[x] = bd + 1 < n ? e[bd + 1] : (bd + 1 < D ? BIG : e[D - 1]);
-            /* the right pixel x - d sees e[d]: reversed so the index grows with d */
-            int32_t *restrict rb = rrev_best + (W - 1 - x);
-            for (int d = 0; d < n; d++)
-                rb[d] = e[d] < rb[d] ? e[d] : rb[d];
         }
+        for (int m = 1; m < RB; m++)
+            for (int x = 0; x < W; x++)
+                rrev[x] = rrev[(size_t)W * m + x] < rrev[x] ? rrev[(size_t)W * m + x] : rrev[x];
         const size_t o = (size_t)y * W;
-        decide_row(&dp_, W, best, em, ep, second, rrev_best, pick + o, vpick ? vpick + o : NULL,
+        decide_row(&dp_, W, best, em, ep, second, rrev, pick + o, vpick ? vpick + o : NULL,
                    disp + o, cost + o, counts);
     }
     free(col);
