@@ -299,11 +299,13 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
                 }
             }
             const int bd = b & ((1 << nb) - 1);
+            /* runner-up outside bd - 1 .. bd + 1: those three are raised to BIG
+             * (codes are >= 0, so or-ing BIG gives BIG) in one full-width pass */
             int32_t s2 = BIG;
-            for (int d = 0; d < bd - 1; d++)
-                s2 = e[d] < s2 ? e[d] : s2;
-            for (int d = bd + 2; d < n; d++)
-                s2 = e[d] < s2 ? e[d] : s2;
+            for (int d = 0; d < n; d++) {
+                const int32_t v = e[d] | ((uint32_t)(d - bd + 1) <= 2u ? BIG : 0);
+                s2 = v < s2 ? v : s2;
+            }
             best[x] = b;
             second[x] = s2;
             em[x] = bd > 0 ? e[bd - 1] : e[0];
