@@ -148,13 +148,11 @@ static void decide_row(const decide_t *p, int W, const int32_t *best, const int3
             }
         }
         const int textured = pick[x] < p->npick;
-        if (!textured)
-            counts[0]++;
-        else if (!unique)
-            counts[1]++;
-        else if (!consistent)
-            counts[2]++;
-        disp[x] = textured && unique && consistent ? d : NAN;
+        /* branch-free: the three tests disagree from pixel to pixel */
+        counts[0] += !textured;
+        counts[1] += textured & !unique;
+        counts[2] += textured & unique & !consistent;
+        disp[x] = textured & unique & consistent ? d : NAN;
         cost[x] = bc / p->unit;
     }
 }

@@ -605,7 +605,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         disp, cost = out
         c = sum(parts)
         counts = {"no_texture": int(c[0]), "not_unique": int(c[1]), "left_right": int(c[2])}
-    win = np.asarray((0, *windows), np.uint8)[(pick + 1) % (len(windows) + 1)]
+    win = np.asarray((*windows, 0), np.uint8)[pick]
     timings["decide"] = time.perf_counter() - t2
     picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
     n = h * w
