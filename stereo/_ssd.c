@@ -22,6 +22,10 @@
  *
  * Each row is then decided (sub-pixel parabola, uniqueness, left-right check,
  * texture) in float32 exactly as block_matching._decide does it in numpy.
+ *
+ * On x86-64 an AVX2 build of the whole scan is chosen at run time when the
+ * CPU has it; LUMIGRAPH_SSD_BASELINE=1 in the environment forces the
+ * portable build (the tests compare both with numpy).
  */
 #include <stdint.h>
 #include <stdlib.h>
@@ -32,10 +36,12 @@
 #define MAXWIN 4
 #define RB 8
 
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__)
-#define CLONES __attribute__((target_clones("avx2", "default")))
-#else
-#define CLONES
+/* x86-64 with GCC or Clang: an AVX2 build of the scan beside the baseline
+ * one, chosen at run time (the library is built on one machine and may run
+ * on another of the same kind). */
+#if (defined(__GNUC__) || defined(__clang__)) && defined(__x86_64__)
+#define HAVE_AVX2_PATH 1
+#include <immintrin.h>
 #endif
 
 static inline int reflect(int i, int n)
@@ -86,6 +92,47 @@ static inline void move_row(uint32_t *restrict col, int dp, int nc, int D,
         }
     }
 }
+
+#ifdef HAVE_AVX2_PATH
+/* move_row with 16-bit differences: one vpmaddwd of the interleaved pairs
+ * (t, u) and (t, -u) gives t^2 - u^2 for 8 disparities (|t|, |u| <= 1020 fit
+ * int16; the 64-bit lane permute first keeps the disparities in order). */
+__attribute__((target("avx2"))) static void move_row_avx2(
+    uint32_t *restrict col, int dp, int nc, int D, const uint16_t *restrict lin,
+    const uint16_t *restrict rin, const uint16_t *restrict lout,
+    const uint16_t *restrict rout, int roff)
+{
+    for (int c = 0; c < nc; c++) {
+        const int32_t a = lin[c], b = lout[c];
+        const __m256i va = _mm256_set1_epi16((short)a), vb = _mm256_set1_epi16((short)b);
+        const uint16_t *restrict ra = rin + (roff - c);
+        const uint16_t *restrict rb = rout + (roff - c);
+        uint32_t *restrict cc = col + (size_t)c * dp;
+        int d = 0;
+        for (; d + 16 <= D; d += 16) {
+            const __m256i x = _mm256_permute4x64_epi64(
+                _mm256_loadu_si256((const __m256i *)(ra + d)), 0xD8);
+            const __m256i y = _mm256_permute4x64_epi64(
+                _mm256_loadu_si256((const __m256i *)(rb + d)), 0xD8);
+            const __m256i t = _mm256_sub_epi16(va, x);
+            const __m256i u = _mm256_sub_epi16(vb, y);
+            const __m256i nu = _mm256_sub_epi16(y, vb);
+            const __m256i lo = _mm256_madd_epi16(_mm256_unpacklo_epi16(t, u),
+                                                 _mm256_unpacklo_epi16(t, nu));
+            const __m256i hi = _mm256_madd_epi16(_mm256_unpackhi_epi16(t, u),
+                                                 _mm256_unpackhi_epi16(t, nu));
+            __m256i *p0 = (__m256i *)(cc + d), *p1 = (__m256i *)(cc + d + 8);
+            _mm256_storeu_si256(p0, _mm256_add_epi32(_mm256_loadu_si256(p0), lo));
+            _mm256_storeu_si256(p1, _mm256_add_epi32(_mm256_loadu_si256(p1), hi));
+        }
+        for (; d < D; d++) {
+            const int32_t t = a - (int32_t)ra[d];
+            const int32_t u = b - (int32_t)rb[d];
+            cc[d] += (uint32_t)(t * t) - (uint32_t)(u * u);
+        }
+    }
+}
+#endif
 
 /* Decision for one row, float32 arithmetic in the order numpy evaluates
  * block_matching._decide (so both paths agree bit for bit; this file is
@@ -172,15 +219,19 @@ static void decide_row(const decide_t *p, int W, const int32_t *best, const int3
  *        (no texture, not unique, left-right) incremented.
  * Returns 0, or -1 on bad arguments / out of memory.
  */
-CLONES
-int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride,
-                        int H, int W, int D, int y0, int y1,
-                        int nwin, const int32_t *wins, const uint8_t *cwin,
-                        const int32_t *rshift, const double *scale, int nb,
-                        const uint8_t *pick, int npick, const int32_t *sides, const float *vpick,
-                        int subpixel, int lr_tolerance, int unique_test, double u1,
-                        double dist_var, double two_var, double unit,
-                        float *disp, float *cost, int64_t *counts)
+#define MATCH_ARGS                                                                           \
+    const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride, int H, int W, int D,   \
+        int y0, int y1, int nwin, const int32_t *wins, const uint8_t *cwin,                    \
+        const int32_t *rshift, const double *scale, int nb, const uint8_t *pick, int npick,    \
+        const int32_t *sides, const float *vpick, int subpixel, int lr_tolerance,              \
+        int unique_test, double u1, double dist_var, double two_var, double unit, float *disp, \
+        float *cost, int64_t *counts
+#define MATCH_CALL                                                                            \
+    Lp, lstride, Rrev, rstride, H, W, D, y0, y1, nwin, wins, cwin, rshift, scale, nb, pick,    \
+        npick, sides, vpick, subpixel, lr_tolerance, unique_test, u1, dist_var, two_var, unit, \
+        disp, cost, counts
+
+static inline __attribute__((always_inline)) int match_body(MATCH_ARGS, int avx2)
 {
     if (nwin < 1 || nwin > MAXWIN || D < 1 || W < 1 || y0 < 0 || y1 > H || y0 >= y1 || npick < 1)
         return -1;
@@ -226,8 +277,14 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
                 }
             } else {
                 const int ri = reflect(y + h, H), ro = reflect(y - h - 1, H);
-                move_row(ck, dp, nc, D, Lp + (size_t)ri * lstride, Rrev + (size_t)ri * rstride,
-                         Lp + (size_t)ro * lstride, Rrev + (size_t)ro * rstride, roff);
+                const uint16_t *li = Lp + (size_t)ri * lstride, *lo = Lp + (size_t)ro * lstride;
+                const uint16_t *rI = Rrev + (size_t)ri * rstride, *rO = Rrev + (size_t)ro * rstride;
+#ifdef HAVE_AVX2_PATH
+                if (avx2)
+                    move_row_avx2(ck, dp, nc, D, li, rI, lo, rO, roff);
+                else
+#endif
+                    move_row(ck, dp, nc, D, li, rI, lo, rO, roff);
             }
         }
         for (int x = 0; x < W * RB; x++)
@@ -320,6 +377,24 @@ int lumigraph_ssd_match(const uint16_t *Lp, int lstride, const uint16_t *Rrev, i
     free(enc);
     free(rows);
     return 0;
+}
+
+static int match_baseline(MATCH_ARGS) { return match_body(MATCH_CALL, 0); }
+
+#ifdef HAVE_AVX2_PATH
+__attribute__((target("avx2"))) static int match_avx2(MATCH_ARGS)
+{
+    return match_body(MATCH_CALL, 1);
+}
+#endif
+
+int lumigraph_ssd_match(MATCH_ARGS)
+{
+#ifdef HAVE_AVX2_PATH
+    if (__builtin_cpu_supports("avx2") && !getenv("LUMIGRAPH_SSD_BASELINE"))
+        return match_avx2(MATCH_CALL);
+#endif
+    return match_baseline(MATCH_CALL);
 }
 
 #ifdef LUMIGRAPH_PYMODULE

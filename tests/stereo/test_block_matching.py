@@ -101,3 +101,64 @@ def test_integer_and_float_paths_agree(window, max_disp):
     # costs are reported in code values² per pixel on both paths
     ca, cb = a.cost[both], b.cost[both]
     assert 0.9 < np.median(ca / np.maximum(cb, 1e-6)) < 1.1
+
+
+# --- compiled kernel (stereo/_ssd.c) against the numpy path -----------------
+def _same(a, b):
+    return (np.array_equal(a.disparity, b.disparity, equal_nan=True)
+            and np.array_equal(a.cost, b.cost, equal_nan=True)
+            and np.array_equal(a.window, b.window)
+            and a.info["rejected_fraction"] == b.info["rejected_fraction"])
+
+
+@pytest.mark.parametrize("window, max_disp, size, kw", [
+    (9, 31, (160, 120), {}),
+    (5, 31, (160, 120), dict(distinct=0.5, uniqueness=0.1, lr_tolerance=0)),
+    ("auto", 31, (160, 120), dict(distinct=1.0)),
+    (15, 3, (96, 72), dict(subpixel=False)),   # window wider than the disparity padding
+    (31, 130, (320, 96), {}),                  # window sums shifted to fit 30 bits
+])
+def test_compiled_kernel_identical_to_numpy_path(window, max_disp, size, kw, monkeypatch):
+    # the kernel's integer SSD and float32 decision are specified to reproduce
+    # the numpy path exactly on 8-bit input: any difference is a bug
+    import stereo.block_matching as bm
+
+    assert bm._kernel() is not None, "stereo/_ssd.c was not built (pip install -e . needs a C compiler)"
+    s = render("stereo-pair", size=size, textureless=True)
+    a = match(s.images[0], s.images[1], max_disp=max_disp, window=window, **kw)
+    b = match(s.images[0], s.images[1], max_disp=max_disp, window=window, engine="numpy", **kw)
+    assert (a.info["engine"], b.info["engine"]) == ("c", "numpy")
+    assert 0.3 < a.valid_fraction < 1
+    assert _same(a, b)
+    # the portable (non-AVX2) build of the kernel too
+    monkeypatch.setenv("LUMIGRAPH_SSD_BASELINE", "1")
+    assert _same(match(s.images[0], s.images[1], max_disp=max_disp, window=window, **kw), b)
+
+
+def test_missing_kernel_falls_back_with_one_warning(monkeypatch):
+    import sys
+
+    import stereo.block_matching as bm
+
+    s = render("stereo-pair", size=(96, 72))
+    ref = match(s.images[0], s.images[1], max_disp=16, window=5)
+    monkeypatch.setitem(sys.modules, "stereo._ssd", None)  # import fails
+    bm._kernel.cache_clear()
+    try:
+        with pytest.warns(UserWarning, match="numpy path"):
+            a = match(s.images[0], s.images[1], max_disp=16, window=5)
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            b = match(s.images[0], s.images[1], max_disp=16, window=5)
+    finally:
+        bm._kernel.cache_clear()
+    assert a.info["engine"] == b.info["engine"] == "numpy"
+    assert _same(a, ref) and _same(b, ref)
+
+
+def test_bad_engine():
+    a = np.zeros((20, 30), np.uint8)
+    with pytest.raises(ValueError, match="engine"):
+        match(a, a, max_disp=4, engine="gpu")
