@@ -221,7 +221,7 @@ def _texture(gray, windows, thresholds):
         var.append(m2 - m * m)
     pick = np.full(gray.shape, len(windows), np.uint8)
     for k in range(len(windows) - 1, -1, -1):
-        pick[var[k] >= thresholds[k]] = k
+        np.copyto(pick, k, where=var[k] >= thresholds[k], casting="unsafe")
     return var, pick
 
 
@@ -230,7 +230,8 @@ class _Costs:
     """How window SSDs become comparable int32 costs for one image.
 
     ``wins`` are the windows whose costs are computed (the used candidates),
-    ``cwin`` (H, W) uint8 the index into ``wins`` per pixel. A cost is stored as
+    ``cwin`` (H, W) uint8 the index into ``wins`` per pixel (None for one).
+    A cost is stored as
     ``(c << nb) | d`` so one integer min carries its disparity, with ``c`` in
     integer units, ``unit`` per code value² of mean squared difference: for
     8-bit inputs (quarter-code luma, squares <= 1020², 20 bits) the window sum
@@ -241,7 +242,7 @@ class _Costs:
     largest possible cost, span², maps to 2^(30 - nb)."""
 
     wins: tuple
-    cwin: np.ndarray
+    cwin: np.ndarray | None
     nb: int
     unit: float
     integer: bool
@@ -250,13 +251,17 @@ class _Costs:
 
 
 def _costs(windows, pick, *, D, integer, span):
-    used = [k for k in range(len(windows)) if (pick == k).any()] or [0]
+    if len(windows) == 1:
+        used = [0]
+    else:
+        used = [k for k, c in enumerate(np.bincount(pick.ravel(), minlength=len(windows) + 1)[:-1])
+                if c] or [0]
     # untextured pixels are refused later, but their costs still compete for
     # the right image's best (left–right check): they use the largest window
     index = np.full(len(windows) + 1, len(used) - 1, np.uint8)
     index[used] = np.arange(len(used))
     wins = tuple(windows[k] for k in used)
-    cwin = index[pick]
+    cwin = index[pick] if len(used) > 1 else None
     nb = max(1, math.ceil(math.log2(D)))
     if not integer:
         return _Costs(wins, cwin, nb, 2.0 ** (30 - nb) / span ** 2, False)
@@ -369,7 +374,7 @@ def _match_c(kernel, left, right_rev, y0, y1, out, *, D, costs, pick, vpick, win
     wins = np.asarray(costs.wins, np.int32)
     rshift = np.asarray([costs.rshift] * len(wins), np.int32)
     scale = None if costs.scale is None else np.asarray(costs.scale, np.float64)
-    cwin = costs.cwin if len(wins) > 1 else None
+    cwin = costs.cwin
     sides = np.asarray(windows, np.int32)
     counts = np.zeros(3, np.int64)
 
@@ -385,6 +390,15 @@ def _match_c(kernel, left, right_rev, y0, y1, out, *, D, costs, pick, vpick, win
     if rc != 0:
         raise RuntimeError(f"stereo/_ssd.c: match of rows {y0}:{y1} failed (code {rc})")
     return counts
+
+
+@functools.cache
+def _pool():
+    """Worker threads for the kernel's row bands, started once (starting
+    threads per call costs as much as matching a small pair)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    return ThreadPoolExecutor(min(4, os.cpu_count() or 1), thread_name_prefix="stereo-ssd")
 
 
 @functools.cache
@@ -589,18 +603,20 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
                                    scratch=scratch)
 
     edges = np.linspace(0, h, n_bands + 1).astype(int)
-    old = cv2.getNumThreads()
-    try:
-        if n_threads == 1 or n_bands == 1:
-            parts = [one(i) for i in range(n_bands)]
-        else:
-            from concurrent.futures import ThreadPoolExecutor
+    if n_threads == 1 or n_bands == 1:
+        parts = [one(i) for i in range(n_bands)]
+    elif kernel is not None:  # ctypes releases the GIL
+        parts = list(_pool().map(one, range(n_bands)))
+    else:
+        from concurrent.futures import ThreadPoolExecutor
 
+        old = cv2.getNumThreads()
+        try:
             cv2.setNumThreads(1)  # our bands are the parallelism
             with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
                 parts = list(ex.map(one, range(n_bands)))
-    finally:
-        cv2.setNumThreads(old)
+        finally:
+            cv2.setNumThreads(old)
     t2 = time.perf_counter()
     timings["scan"] = t2 - t1
     if kernel is None:
