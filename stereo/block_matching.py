@@ -527,7 +527,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         (``stereo/_ssd.c``) when it was built, else with numpy/OpenCV;
         ``"numpy"`` forces the latter. Both give identical results; float
         inputs always take the numpy path. ``info["engine"]`` says which ran
-        and ``info["timings_s"]`` the time per phase.
+        and ``info["timings_s"]`` the time per phase (prepare: luma, noise,
+        texture; scan; decide: what is left after the scan).
 
     Returns
     -------
@@ -540,6 +541,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     """
     import cv2
 
+    t0 = time.perf_counter()
     L, R, gray = _match_images(left, right)
     if L.shape != R.shape:
         raise ValueError(f"right: expected the left image's shape {L.shape}, got {R.shape}")
@@ -569,7 +571,6 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     D = max_disp + 1
     span = max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
     timings = {}
-    t0 = time.perf_counter()
     var, pick = _texture(gray, windows, thresholds)
     costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=span)
     # padded so that every disparity's view is a plain slice of width W + D
