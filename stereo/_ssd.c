@@ -1,6 +1,8 @@
 /*
  * SSD block-matching scan for stereo/block_matching.py (reference ch. 5,
- * eq. 5.1), plain C99, loaded through ctypes: no Python or numpy headers.
+ * eq. 5.1), plain C99 called through ctypes: the kernel needs no Python or
+ * numpy headers (only the empty module at the end, built by setup.py, uses
+ * Python.h, so that `import stereo._ssd` locates the library).
  *
  * One fused pass per row band. For every disparity d the squared differences
  * of the left row and the right row shifted by d are summed over the window
