@@ -5,7 +5,8 @@ import pytest
 
 from capture.render import render
 from hdr.bench import ln_response_rms
-from hdr.debevec1997 import debevec, solve_sparse_lstsq
+from hdr.debevec1997 import _fit_channel_sparse, _Reduced, data_weight, debevec, solve_sparse_lstsq
+from hdr.samples import sample_pixels
 from hdr.mitsunaga1999 import basis, mitsunaga_nayar
 from hdr.response import ResponseCurve
 
@@ -39,6 +40,38 @@ def test_sparse_augmented_solve_matches_dense_lstsq():
     b = rng.normal(size=80)
     assert np.allclose(solve_sparse_lstsq(a.tocsr(), b),
                        np.linalg.lstsq(a.toarray(), b, rcond=None)[0], atol=1e-9)
+
+
+def test_reduced_solve_equals_the_full_sparse_system():
+    # Eliminating ln E_i and one QR must give eq. 6.5's own solution (to rounding).
+    s, z = _bracket(bit_depth=12, seed=3)
+    lnt = np.log(s.stack["exposure_times_s"])
+    idx = sample_pixels(z, n=200, bit_depth=12, rng=np.random.default_rng(0))
+    zc = z.reshape(z.shape[0], -1, 3)[:, idx, 1].T.astype(np.int64)
+    wc = data_weight(zc, 12, 0.03)
+    for lam in (1e-9, 1e-6, 1e-3):
+        g1, l1 = _fit_channel_sparse(zc, lnt, wc, 256, 12, lam)
+        g2, l2, _, _ = _Reduced(zc, lnt, wc, 256, 12).fit(lam)
+        assert np.allclose(g1, g2, atol=1e-7) and np.allclose(l1, l2, atol=1e-6)
+
+
+def test_debevec_error_does_not_grow_with_samples_or_bits():
+    # More samples and more bits carry more information, so the error must not
+    # grow beyond the sampling scatter of the estimate. That scatter: shot noise
+    # sigma(ln X) ~ 1/sqrt(0.2 * 20000) = 1.6 % per observation at mid exposure;
+    # ~300 pixels x ~3 well-exposed frames over a curve of ~10 effective degrees
+    # of freedom (lambda = 1e-6) leave ~90 observations per dof: 1.6 %/sqrt(90)
+    # = 0.0017 ln; margin 1.5x that (two independent fits differ by sqrt(2)).
+    margin = 0.0025
+    errs = {}
+    for bd, n in ((8, 300), (8, 1200), (12, 300), (12, 1200)):
+        s, z = _bracket(bit_depth=bd, seed=3)
+        r = debevec(z, s.stack["exposure_times_s"], bit_depth=bd, samples=n)
+        errs[bd, n] = ln_response_rms(r.g, s.gt_arrays["g"], bd)
+    assert errs[8, 1200] <= errs[8, 300] + margin, errs
+    assert errs[12, 1200] <= errs[12, 300] + margin, errs
+    assert errs[12, 300] <= errs[8, 300] + margin, errs
+    assert errs[12, 1200] <= errs[8, 1200] + margin, errs
 
 
 @pytest.mark.parametrize("bit_depth, bound", [(8, 0.015), (12, 0.015), (16, 0.015)])
