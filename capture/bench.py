@@ -48,14 +48,38 @@ BENCH_STAGES: dict[str, str] = {
 }
 
 
+def shared_data(*parts: str) -> Path:
+    """A path in the shared real-data folder: ``$LUMIGRAPH_SHARED`` or the
+    ``shared/`` folder beside this checkout (DESIGN §7), e.g.
+    ``shared_data("data", "stereo-real", "teddy")``. It may not exist: pair it
+    with :func:`missing_shared` as a case's ``unavailable``."""
+    import os
+
+    root = os.environ.get("LUMIGRAPH_SHARED", Path(__file__).resolve().parents[2] / "shared")
+    return Path(root).joinpath(*parts)
+
+
+def missing_shared(*parts: str) -> Callable[[], str | None]:
+    """An ``unavailable`` callback: the reason when a shared data path is absent."""
+
+    def reason() -> str | None:
+        p = shared_data(*parts)
+        return None if p.exists() else f"real data not found: {p}"
+
+    return reason
+
+
 @dataclass(frozen=True)
 class Case:
     """Inputs with ground truth. ``load()`` is called once per run; its result is
-    passed to every method and to the error metric."""
+    passed to every method and to the error metric. ``unavailable()`` returns a
+    reason when the case cannot be built here (real data not present); its rows
+    then say so instead of failing the run."""
 
     name: str
     load: Callable[[], Any]
     note: str = ""
+    unavailable: Callable[[], str | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -157,6 +181,16 @@ def run_stage(stage: Stage, *, repeats: int | None = None,
     repeats = max(3, repeats or stage.repeats)
     rows: list[Row] = []
     for case in stage.cases:
+        reason = case.unavailable() if case.unavailable else None
+        if reason:
+            for m in stage.methods:
+                if m.cases is None or case.name in m.cases:
+                    row = Row(stage.name, case.name, m.name, m.peer, m.knob, None, math.nan, (),
+                              math.nan, f"unavailable: {reason}")
+                    rows.append(row)
+                    if on_row:
+                        on_row(row)
+            continue
         data = case.load()
         for m in stage.methods:
             if m.cases is not None and case.name not in m.cases:

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
 
 BIG = {"size": (512, 512), "grid": "9x9"}
 SMALL = {"size": (128, 128), "grid": "5x5"}
@@ -88,13 +88,10 @@ def _novel_case(quick: bool):
 
 def _hci_case():
     def load():
-        from pathlib import Path
-
         from capture.io import read_image, read_pfm
         from lightfield.field import from_images
 
-        root = Path(__file__).resolve().parents[2] / "shared" / "data" / "lightfield-real" / \
-            "hci_antinous_5x5"
+        root = shared_data(*_HCI)
         names = [root / f"input_Cam{9 * r + c:03d}.png" for r in range(2, 7) for c in range(2, 7)]
         crop = (slice(176, 336), slice(176, 336))
         lf = from_images([read_image(n)[crop] for n in names], grid=(5, 5), spacing=1.0)
@@ -102,14 +99,10 @@ def _hci_case():
         return {"kind": "depth", "lf": lf, "truth": gt}
 
     return Case("HCI antinous", load, "real-data check: HCI antinous 5x5 (centre 160x160 crop), "
-                                      "GT disparity")
+                                      "GT disparity", unavailable=missing_shared(*_HCI))
 
 
-def _hci_available():
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[2] / "shared" / "data" / "lightfield-real"
-    return None if (root / "hci_antinous_5x5").exists() else f"{root} missing"
+_HCI = ("data", "lightfield-real", "hci_antinous_5x5")
 
 
 # ------------------------------------------------------------------ methods
@@ -343,8 +336,7 @@ def stage(*, quick: bool = False) -> Stage:
                cases=("novel view",)),
         Method("light slab uv-bilinear", _novel("uv-bilinear"), "focus slope", (0.0, 0.35),
                cases=("novel view",)),
-        Method("disparity (ours)", _depth, "window", (5, 9), cases=("HCI antinous",),
-               unavailable=_hci_available),
+        Method("disparity (ours)", _depth, "window", (5, 9), cases=("HCI antinous",)),
     )
     return Stage("lightfield", cases, methods, _error, "RMS error (linear radiance; px for "
                                                         "disparity)", checks=_checks,
