@@ -20,7 +20,10 @@ checkerboards, ``aruco.CharucoDetector`` for ChArUco). For large images the
 checkerboard search runs on a 2× reduced copy and only the sub-pixel refinement
 on the full image; checkerboards whose 180° rotation differs in colour (COLS +
 ROWS odd) are put in the board's own orientation (square (0, 0) black), so the
-corner order of a left and a right view agree.
+corner order of a left and a right view agree. A found grid whose checker
+pattern continues beyond its outer squares (OpenCV matched a smaller pattern
+inside a larger board: the ``--board`` counts too few squares) is rejected, so
+a wrong spec never yields silently wrong object points.
 
 Examples
 --------
@@ -205,6 +208,51 @@ def _orient(gray: np.ndarray, pts: np.ndarray, board: BoardSpec) -> np.ndarray:
     return pts[::-1].copy() if vals[0] > vals[1] else pts
 
 
+def _pattern_continues(gray: np.ndarray, pts: np.ndarray, board: BoardSpec) -> bool:
+    """Whether the checker pattern goes on beyond the found grid, i.e. OpenCV
+    matched a smaller pattern inside a larger board (a ``--board`` with too few
+    squares). The ring of square centres 1.5 squares outside the outermost
+    inner corners lies on the board's plain margin for the right board, but
+    on alternating squares for a larger one: compare the parity contrast
+    there with that of the outer squares (0.5 squares outside), which a
+    checkerboard always has."""
+    import cv2
+
+    nc, nr = board.pattern_size
+    grid = np.mgrid[0:nr, 0:nc][::-1].reshape(2, -1).T.astype(np.float64)  # (col, row)
+    H, _ = cv2.findHomography(grid, pts)
+    if H is None:
+        return False
+
+    def side_contrast(d):
+        """Parity contrast of the square centres at distance ``d`` outside each side."""
+        c = np.arange(-d, nc - 1 + d + 1e-9)
+        r = np.arange(-d, nr - 1 + d + 1e-9)
+        sides = [np.column_stack([c, np.full(c.size, -d)]), np.column_stack([c, np.full(c.size, nr - 1 + d)]),
+                 np.column_stack([np.full(r.size, -d), r]), np.column_stack([np.full(r.size, nc - 1 + d), r])]
+        h, w = gray.shape
+        out = []
+        for cells in sides:
+            xy = cv2.perspectiveTransform(cells[None], H)[0]
+            inside = np.all((xy >= 1) & (xy <= np.array([w - 2, h - 2])), axis=1)
+            if inside.sum() < 3:
+                out.append(np.nan)
+                continue
+            v = cv2.remap(gray.astype(np.float32), xy[inside, 0:1].astype(np.float32),
+                          xy[inside, 1:2].astype(np.float32), cv2.INTER_LINEAR).ravel()
+            parity = np.where((np.floor(cells[inside, 0]) + np.floor(cells[inside, 1])) % 2 == 0, 1.0, -1.0)
+            # a continuing checker alternates at every sample (a cluttered background
+            # beyond a narrow margin correlates with the parity only by chance)
+            signed = (v - np.median(v)) * parity
+            agree = max(np.mean(signed > 0), np.mean(signed < 0))
+            out.append(abs(float(np.mean(signed))) if agree >= 0.85 else 0.0)
+        return np.array(out)
+
+    outer, beyond = side_contrast(0.5), side_contrast(1.5)
+    with np.errstate(invalid="ignore"):
+        return bool(np.any(beyond > 0.5 * outer))
+
+
 def _empty(size) -> Detection:
     return Detection(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), size)
 
@@ -260,5 +308,7 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
     pts = cv2.cornerSubPix(gray, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                            _SUBPIX_CRITERIA).reshape(-1, 2)
     pts = _orient(gray, pts.astype(np.float64), board)
+    if _pattern_continues(gray, pts, board):
+        return _empty((w, h))
     ids = np.arange(board.n_corners, dtype=np.int64)
     return Detection(ids, pts, board.object_points, (w, h))

@@ -116,7 +116,8 @@ class ZhangFit:
 
 def calibrate_fixed(object_points, image_points, image_size, *, model: str,
                     K0: np.ndarray | None = None, dist0: np.ndarray | None = None,
-                    uncertainties: bool = True) -> ZhangFit:
+                    uncertainties: bool = True, rvecs0=None, tvecs0=None,
+                    max_iter: int = 60, eps: float = 1e-9) -> ZhangFit:
     """Zhang calibration with the distortion terms of ``model`` free.
 
     Parameters
@@ -135,6 +136,12 @@ def calibrate_fixed(object_points, image_points, image_size, *, model: str,
     uncertainties : bool, keyword-only
         Compute ``std`` and ``view_rms_px`` (``calibrateCameraExtended``);
         without them (``std`` empty, ``view_rms_px`` NaN) a refit is ~2x faster.
+    rvecs0, tvecs0 : array_like, (V, 3), optional
+        Starting poses (with ``K0``): skips the per-view pose initialisation.
+    max_iter, eps : keyword-only
+        Levenberg–Marquardt stopping rule (iterations, parameter change). The
+        defaults converge fully; a warm-started refit of a subset of views
+        needs only a few iterations.
 
     Returns
     -------
@@ -166,15 +173,20 @@ def calibrate_fixed(object_points, image_points, image_size, *, model: str,
             for i, name in enumerate(("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")[:dist.size]):
                 if name not in FREE[model]:
                     dist[i] = 0.0
-    # parameter steps below 1e-9 change no pixel measurably; fewer iterations than OpenCV's default
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 60, 1e-9)
+    # parameter steps below 1e-9 change no pixel measurably
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, int(max_iter), float(eps))
     size = tuple(int(v) for v in image_size)
+    rv = tv = None
+    if K0 is not None and rvecs0 is not None and tvecs0 is not None:
+        rv = [np.asarray(r, np.float64).reshape(3, 1) for r in rvecs0]
+        tv = [np.asarray(t, np.float64).reshape(3, 1) for t in tvecs0]
+        flags |= cv2.CALIB_USE_EXTRINSIC_GUESS
     try:
         if uncertainties:
             rms, K, dist, rv, tv, std_i, _, per_view = cv2.calibrateCameraExtended(
-                obj, img, size, K, dist, flags=flags, criteria=criteria)
+                obj, img, size, K, dist, rv, tv, flags=flags, criteria=criteria)
         else:
-            rms, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, K, dist, flags=flags,
+            rms, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, K, dist, rv, tv, flags=flags,
                                                        criteria=criteria)
             std_i, per_view = np.zeros(18), np.full(len(obj), np.nan)
     except cv2.error as e:

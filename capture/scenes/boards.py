@@ -142,25 +142,38 @@ def _sample_poses(rng, cams, spec, views, poses):
     w, h = cam0.image_size
     fovs = [_fov_radius(c) for c, _, _ in cams]
     cells = rng.permutation(9)
+    # tilt-axis directions stratified over the views (one per 360/V deg sector, in random
+    # order) so the board normals fan out in every direction, not by the luck of the draw
+    sectors = rng.permutation(views)
     out = []
     for k in range(views):
         for attempt in range(400):
-            # pull the target towards the centre if a cell proves hard to fill
+            # pull the target towards the centre, and shrink the board, if a cell proves hard to fill
             pull = max(0.0, 1.0 - attempt / 300)
+            shrink = 1.0 - 0.4 * max(0.0, attempt - 100) / 300
             cell = cells[k % 9]
-            off = np.array([(cell % 3 - 1) * 0.22 + rng.uniform(-0.08, 0.08),
-                            (cell // 3 - 1) * 0.2 + rng.uniform(-0.08, 0.08)])
-            target = np.array([w, h]) * (0.5 + pull * off)
             if poses == "varied":
-                # strong tilts and large boards pin down the focal length and the
-                # principal point (Zhang 2000, sec. 3.3: constraints come from the
-                # planes' differing orientations)
-                tilt = np.deg2rad(rng.uniform(25, 50))
-                frac = rng.uniform(0.5, 0.7)
+                # The principal point is pinned by perspective foreshortening (Zhang 2000,
+                # sec. 3.3: constraints come from the planes' differing orientations) and
+                # by the distortion seen toward the image edges and corners, and its standard
+                # deviation falls as sigma / sqrt(corners). So: boards filling 80-100 % of
+                # the width, centres spread to +-40 % of the frame (views reach the corners
+                # and edges), tilts 20-50 deg about axes in every direction. With a 19x14
+                # board at 1280x960 and 0.2 px corner noise this gives sigma(cx) ~ 0.21 px,
+                # sigma(cy) ~ 0.16 px (from the fit's covariance; calib/bench.py).
+                spread, jitter = (0.4, 0.06) if len(cams) == 1 else (0.22, 0.08)
+                tilt = np.deg2rad(rng.uniform(20, 50))
+                # a rig's board must fit both views (shifted by the baseline): smaller
+                frac = rng.uniform(*((0.8, 1.0) if len(cams) == 1 else (0.5, 0.7))) * shrink
+                phi = 2 * np.pi * (sectors[k] + rng.uniform()) / views
             else:
+                spread, jitter = 0.21, 0.08
                 tilt = np.deg2rad(rng.uniform(0.5, 3.0))
-                frac = rng.uniform(0.45, 0.6)
-            phi = rng.uniform(0, 2 * np.pi)
+                frac = rng.uniform(0.45, 0.6) * shrink
+                phi = rng.uniform(0, 2 * np.pi)
+            off = np.array([(cell % 3 - 1) * spread + rng.uniform(-jitter, jitter),
+                            (cell // 3 - 1) * spread + rng.uniform(-jitter, jitter)])
+            target = np.array([w, h]) * (0.5 + pull * off)
             roll = np.deg2rad(rng.uniform(-20, 20))
             R = _rot([np.cos(phi), np.sin(phi), 0.0], tilt) @ _rot([0, 0, 1], roll)
             dist = cam0.K[0, 0] * bw / (frac * w)
@@ -375,9 +388,9 @@ SCENES = {
             Option("views", int, 15, "number of board poses", low=1, high=60),
             Option("distortion", str, "normal", "lens: none, normal (k1..k3 + tangential) or "
                    "strong (k1 = -0.3)", choices=("none", "normal", "strong")),
-            Option("poses", str, "varied", "varied tilts (25-50 deg) or a near-degenerate "
+            Option("poses", str, "varied", "varied tilts (20-50 deg, every direction) or a near-degenerate "
                    "fronto-parallel set (< 3 deg)", choices=("varied", "fronto"))),
-        min_size=(96, 72), version=3),
+        min_size=(96, 72), version=4),
     "boards-stereo": SceneSpec(
         "boards-stereo", "a stereo rig (two cameras, known R, T) viewing calibration boards",
         render_boards_stereo, (320, 240),
@@ -386,5 +399,5 @@ SCENES = {
             Option("baseline", float, 120.0, "baseline, in board units", low=0.0, open_low=True),
             Option("distortion", str, "normal", "lens of both cameras",
                    choices=("none", "normal", "strong"))),
-        min_size=(96, 72), version=3),
+        min_size=(96, 72), version=4),
 }
