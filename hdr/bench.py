@@ -296,10 +296,13 @@ def _checks(res: Results, ctx) -> list[Check]:
         except KeyError:
             o = None
         if o and o.status == "ok":
-            # Correct: within 2x of the 8-bit error (deeper data are at least as informative).
-            ref = ours_default.error if ours_default else math.nan
-            out.append(Check(f"{bd} ln-response RMS correct (<= 2x ours at 8 bit)", o.error,
-                             2 * ref, o.error <= 2 * ref, "OpenCV cannot run on > 8-bit input"))
+            # Correct: deeper data carry less quantisation noise, so no worse than our
+            # 8-bit error plus the fit's sampling scatter (shot noise 1.6 % per
+            # observation at mid exposure over ~90 observations per effective degree of
+            # freedom: 0.0017 ln, x1.5 for two independent fits = 0.0025).
+            ref = (ours_default.error if ours_default else math.nan) + 0.0025
+            out.append(Check(f"{bd} ln-response RMS correct (<= ours at 8 bit + 0.0025)",
+                             o.error, ref, o.error <= ref, "OpenCV cannot run on > 8-bit input"))
     try:
         mo, mc = res.get("merge", "merge (ours, own curve)"), \
             res.get("merge", "MergeDebevec (OpenCV, own curve)")
