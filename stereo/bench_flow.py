@@ -20,22 +20,15 @@ time budget).
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
 
 SYNTHETIC = ("flow", "flow-large", "flow-textureless", "flow-brightness", "flow-video")
 REAL = ("RubberWhale", "Venus", "Dimetrodon", "Hydrangea")
 LIGHTING = ("flow-brightness", "flow-video")
 OURS_FLOW = ("pyramid (ours)", "pyramid-fast (ours)", "pyramid-dense (ours)",
              "pyramid + weighted median (ours)")
-
-
-def _shared() -> Path:
-    return Path(os.environ.get("LUMIGRAPH_SHARED", Path(__file__).resolve().parents[2] / "shared"))
 
 
 def _synthetic(name: str, size):
@@ -56,7 +49,7 @@ def _real(name: str, quick: bool):
 
         from capture import io
 
-        d = _shared() / "data" / "flow-real" / name
+        d = shared_data("data", "flow-real", name)
         i0, i1 = io.read_image(d / "frame10.png"), io.read_image(d / "frame11.png")
         gt = io.read_flo(d / "flow10.flo")
         if quick:  # half size for the smoke test; the flow halves with it
@@ -195,10 +188,9 @@ def stage(*, quick: bool = False) -> Stage:
     real = ("RubberWhale",) if quick else REAL
     cases = [Case(n, _synthetic(n, size), f"capture scene {n!r} at {size[0]}x{size[1]}, seed 0")
              for n in synth]
-    have_real = (_shared() / "data" / "flow-real").is_dir()
-    if have_real:
-        cases += [Case(n, _real(n, quick), f"Middlebury {n} frame10 -> frame11"
-                       + (" (half size)" if quick else "")) for n in real]
+    cases += [Case(n, _real(n, quick), f"Middlebury {n} frame10 -> frame11"
+                   + (" (half size)" if quick else ""),
+                   unavailable=missing_shared("data", "flow-real", n)) for n in real]
     windows = (7, 9) if quick else (5, 7, 9, 13)
     warps = (2, 3) if quick else (1, 2, 3, 5)
     slow = tuple(c.name for c in cases if c.name in ("flow", "flow-brightness", "RubberWhale"))

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
 
 REAL = {"tsukuba": ("im3.png", "im4.png", "disp3.pgm", 16),
         "venus": ("im2.png", "im6.png", "disp2.pgm", 8),
@@ -32,18 +32,11 @@ REAL = {"tsukuba": ("im3.png", "im4.png", "disp3.pgm", 16),
 WINDOWS = (5, 9, 15)
 
 
-def _shared():
-    import os
-    from pathlib import Path
-
-    return Path(os.environ.get("LUMIGRAPH_SHARED", Path(__file__).resolve().parents[2] / "shared"))
-
-
 def _real(name):
     from capture.io import read_image
 
     a, b, g, scale = REAL[name]
-    base = _shared() / "data" / "stereo-real" / name
+    base = shared_data("data", "stereo-real", name)
     gt = read_image(base / g).astype(np.float64)
     if gt.ndim == 3:
         gt = gt[..., 0]
@@ -257,19 +250,17 @@ def _checks(res: Results, ctx) -> list[Check]:
 
 
 def stage(*, quick: bool = False) -> Stage:
-    shared_ok = (_shared() / "data" / "stereo-real").is_dir()
+    real = missing_shared("data", "stereo-real")
     if quick:
-        cases = [Case("pair", lambda: _pair((240, 180)), "stereo-pair 240x180")]
-        if shared_ok:
-            cases.append(Case("tsukuba", lambda: _real("tsukuba"), "Middlebury Tsukuba"))
+        cases = [Case("pair", lambda: _pair((240, 180)), "stereo-pair 240x180"),
+                 Case("tsukuba", lambda: _real("tsukuba"), "Middlebury Tsukuba", unavailable=real)]
         windows = (9,)
         cases.append(Case("triangulation", lambda: _tri_case(1000), "1000 points, 2 distorted cameras"))
     else:
         cases = [Case("pair", lambda: _pair((320, 240)), "stereo-pair 320x240, noise 1"),
                  Case("pair-hard", lambda: _pair((320, 240), textureless=True, occluders=2),
                       "stereo-pair with a textureless card and two thin occluders")]
-        if shared_ok:
-            cases += [Case(n, (lambda n=n: _real(n)), f"Middlebury {n}") for n in REAL]
+        cases += [Case(n, (lambda n=n: _real(n)), f"Middlebury {n}", unavailable=real) for n in REAL]
         windows = WINDOWS
         cases.append(Case("triangulation", _tri_case, "4000 points, 2 distorted cameras, asymmetric K"))
         cases.append(Case("sfm", _views, "stereo-views: 10 views 320x240 on a 70 deg arc"))
