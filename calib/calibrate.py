@@ -17,7 +17,13 @@ Model choice (``model="auto"``, DESIGN §9)
     error is inflated, cannot make a too-simple one look acceptable; normally
     the best is the richest or ties with it.) Every candidate's training RMS,
     held-out RMS, mean difference, its standard error and the verdict go to
-    ``camera.json["candidates"]``.
+    ``camera.json["candidates"]``. To stay within 1.5x of one bare OpenCV
+    calibration, the work is pruned (see :func:`select_model`): candidates are
+    warm-started from the anchor ``k1k2p1p2k3`` fit, fold refits from the
+    all-view solution (3 LM steps), simple candidates whose training error is
+    already significantly worse than the best held-out error are rejected
+    without refits (with the candidates nested in them), and richer candidates
+    are tried only while each step up improves significantly.
 
 Outlier views
     A view whose RMS under the k1k2p1p2k3 fit (the fixed model's own fit when
@@ -47,7 +53,7 @@ Examples
 --------
 >>> from capture.render import render
 >>> from calib.detect import BoardSpec, detect
->>> s = render("boards", size=(320, 240), seed=2, views=6, cache=False)
+>>> s = render("boards", size=(320, 240), seed=2, views=6)
 >>> board = BoardSpec.parse(s.stack["board"])
 >>> cam = calibrate([detect(im, board) for im in s.images], model="k1k2")
 >>> bool(abs(cam.K[0, 0] / s.gt["camera"]["K"][0][0] - 1) < 0.01)
@@ -63,7 +69,7 @@ import numpy as np
 
 from calib.camera import Camera
 from calib.detect import Detection
-from calib.zhang2000 import FREE, MODELS, ZhangFit, calibrate_fixed
+from calib.zhang2000 import FREE, MODELS, ZhangFit, calibrate_fixed, n_intrinsics
 from capture.errors import EstimationError, InputError
 
 MIN_VIEWS = 3
@@ -139,18 +145,30 @@ def _heldout(fits_full: ZhangFit, obj, img, size, folds) -> np.ndarray:
     return err
 
 
-def select_model(fits: dict[str, ZhangFit], obj, img, size) -> tuple[str, list[dict]]:
+def select_model(fits, obj, img, size) -> tuple[str, list[dict]]:
     """The simplest candidate not significantly worse than the best on held-out
     views (rule in the module docstring); returns the choice and every score.
 
-    ``fits`` are the all-view fits, simple to rich. Candidates are visited from
-    rich to simple; one whose *training* error is already significantly worse
-    than the best held-out error found so far is rejected without
-    cross-validation (a view's held-out error exceeds its training error in
-    expectation, so the held-out test could only confirm the verdict).
+    ``fits`` maps candidate names, simple to rich, to their all-view fits (a
+    dict, or a callable ``name -> ZhangFit`` with ``fits.candidates`` giving
+    the order, so fits are made only when needed). Work saved, all recorded
+    in the rows:
+
+    * the anchor (``k1k2p1p2k3``, else the richest) is cross-validated first;
+    * simpler candidates, rich to simple: one whose *training* error is
+      already significantly worse than the best held-out error is rejected
+      without cross-validation (a view's held-out error exceeds its training
+      error in expectation, so the held-out test could only confirm it), and
+      so are the candidates nested in it (their training error is larger);
+    * richer candidates are evaluated only while each step up improved the
+      held-out error significantly (early stop).
     """
     from scipy.special import stdtrit  # scipy.stats costs a second to import
 
+    if isinstance(fits, dict):
+        order, get = list(fits), fits.__getitem__
+    else:
+        order, get = list(fits.candidates), fits
     V = len(obj)
     folds = min(FOLDS, V)
     tcrit = float(stdtrit(V - 1, 1 - SIGNIFICANCE))
@@ -160,37 +178,85 @@ def select_model(fits: dict[str, ZhangFit], obj, img, size) -> tuple[str, list[d
         se = float(d.std(ddof=1) / np.sqrt(V)) if V > 1 else 0.0
         return bool(d.mean() > tcrit * se and d.mean() > 0), float(d.mean()), se
 
-    errs, screened, best = {}, {}, None
-    for m in reversed(list(fits)):
-        if best is not None:
-            train = view_mse(fits[m], obj, img)
-            worse, md, se = compare(train, errs[best])
-            if worse:
-                screened[m] = {"mean_diff_px2": md, "se_px2": se, "vs": best}
-                continue
-        e = _heldout(fits[m], obj, img, size, folds)
+    done, errs, notes, best = {}, {}, {}, None
+
+    def fitted(m):
+        if m not in done:
+            try:
+                done[m] = get(m)
+            except (EstimationError, KeyError):
+                done[m] = None
+                notes[m] = "fit failed"
+        return done[m]
+
+    def cross_validate(m):
+        nonlocal best
+        e = _heldout(done[m], obj, img, size, folds)
+        if not np.all(np.isfinite(e)):
+            notes[m] = "cross-validation fit failed"
+            return
         errs[m] = e
-        finite = {k: v for k, v in errs.items() if np.all(np.isfinite(v))}
-        best = min(finite, key=lambda k: finite[k].mean()) if finite else None
+        best = min(errs, key=lambda k: errs[k].mean())
+
+    ai = order.index("k1k2p1p2k3") if "k1k2p1p2k3" in order else len(order) - 1
+    if fitted(order[ai]) is not None:
+        cross_validate(order[ai])
+    screened_below = None
+    for m in reversed(order[:ai]):
+        if screened_below is not None:
+            notes[m] = f"nested in {screened_below}, rejected by its training error: not evaluated"
+            continue
+        if fitted(m) is None:
+            continue
+        if best is not None:
+            worse, md, se = compare(view_mse(done[m], obj, img), errs[best])
+            if worse:
+                notes[m] = (f"training error significantly worse than {best}'s held-out error: "
+                            "not cross-validated")
+                errs_screen = {"mean_diff_px2": md, "se_px2": se}
+                done[m] = (done[m], errs_screen)
+                screened_below = m
+                continue
+        cross_validate(m)
+    prev = order[ai]
+    for k, m in enumerate(order[ai + 1:], start=ai + 1):
+        simpler = order[k - 2] if k >= 2 else None
+        below = done.get(simpler)
+        improved = simpler is None or isinstance(below, tuple) or (
+            prev in errs and simpler in errs and compare(errs[simpler], errs[prev])[0])
+        if not improved:
+            for r in order[k:]:
+                notes[r] = f"not evaluated: {prev} did not improve significantly on {simpler}"
+            break
+        if fitted(m) is not None:
+            cross_validate(m)
+        prev = m
     if best is None:
         raise EstimationError("calibration", "no distortion model could be cross-validated; "
                                              "add views with the whole board visible")
     rows, chosen = [], None
-    for m in fits:
-        row = {"model": m, "n_params": fits[m].n_params, "rms_px": fits[m].rms_px}
-        if m in screened:
-            row.update(heldout_rms_px=None, significantly_worse=True,
-                       note=f"training error significantly worse than {screened[m].pop('vs')}'s "
-                            "held-out error: not cross-validated", **screened[m])
-        elif np.all(np.isfinite(errs[m])):
+    for m in order:
+        f = done.get(m)
+        screen = None
+        if isinstance(f, tuple):
+            f, screen = f
+        row = {"model": m, "n_params": n_intrinsics(m) + 6 * V,
+               "rms_px": f.rms_px if f is not None else None}
+        if m in errs:
             worse, md, se = compare(errs[m], errs[best])
             row.update(heldout_rms_px=float(np.sqrt(errs[m].mean())), mean_diff_px2=md, se_px2=se,
                        significantly_worse=worse)
             if chosen is None and not worse:
                 chosen = m
         else:
-            row.update(heldout_rms_px=None, significantly_worse=True,
-                       note="cross-validation fit failed")
+            # screened or nested in a screened candidate: rejected; richer ones never
+            # evaluated (early stop) or failed: no verdict
+            nested = notes.get(m, "").startswith("nested")
+            row.update(heldout_rms_px=None,
+                       significantly_worse=True if (screen is not None or nested) else None,
+                       **(screen or {}))
+        if m in notes:
+            row["note"] = notes[m]
         rows.append(row)
     for r in rows:
         r["chosen"] = r["model"] == chosen
@@ -335,42 +401,49 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
     vnames = [n for n, _ in used]
     obj = [d.object_points for _, d in used]
     img = [d.image_points for _, d in used]
-    def fit_all(models):
-        # One cold fit (Zhang's closed-form start) of the anchor model; every other
-        # candidate starts from its intrinsics and poses (a few LM steps instead of a
-        # full solve: the rational model alone costs 5-20x more from scratch).
+    def fitter(models):
+        """Candidate fits on demand: one cold fit (Zhang's closed-form start) of the
+        anchor model; every other candidate starts from its intrinsics and poses (a
+        few LM steps instead of a full solve: the rational model alone costs 5-20x
+        more from scratch)."""
         anchor = "k1k2p1p2k3" if "k1k2p1p2k3" in models else models[-1]
-        try:
-            a = calibrate_fixed(obj, img, size, model=anchor, uncertainties=False)
-        except EstimationError:
-            a = None
-        out = {}
-        for m in models:
-            try:
-                out[m] = a if (m == anchor and a is not None) else calibrate_fixed(
-                    obj, img, size, model=m, uncertainties=False, max_iter=_WARM_ITER, eps=_WARM_EPS,
-                    **({} if a is None else {"K0": a.K, "dist0": a.dist, "rvecs0": a.rvecs,
-                                             "tvecs0": a.tvecs}))
-            except EstimationError:
-                continue
-        return out
+        cache = {}
+
+        def get(m):
+            if m not in cache:
+                if m == anchor:
+                    cache[m] = calibrate_fixed(obj, img, size, model=m, uncertainties=False)
+                else:
+                    try:
+                        a = get(anchor)
+                        warm = {"K0": a.K, "dist0": a.dist, "rvecs0": a.rvecs, "tvecs0": a.tvecs}
+                    except EstimationError:
+                        warm = {}
+                    cache[m] = calibrate_fixed(obj, img, size, model=m, uncertainties=False,
+                                               max_iter=_WARM_ITER, eps=_WARM_EPS, **warm)
+            return cache[m]
+
+        get.candidates = tuple(models)
+        get.anchor = anchor
+        return get
 
     rejected = []
     if model == "auto":
         candidates = tuple(candidates)
-        fits = fit_all(candidates)
-        if reject_outliers:  # the k1k2p1p2k3 candidate doubles as the outlier screen
-            screen = fits.get("k1k2p1p2k3") or next(iter(fits.values()), None)
+        fits = fitter(candidates)
+        if reject_outliers:  # the anchor candidate doubles as the outlier screen
+            try:
+                screen = fits(fits.anchor)
+            except EstimationError:
+                screen = None
             if screen is not None:
                 screen = replace(screen, view_rms_px=np.sqrt(view_mse(screen, obj, img)))
                 rejected = _reject_outliers(obj, img, vnames, size, screen)
             if rejected:
-                fits = fit_all(candidates)
-        if not fits:
-            raise EstimationError("calibration", "every candidate model failed to converge")
+                fits = fitter(candidates)
         chosen, rows = select_model(fits, obj, img, size)
         # the uncertainties (and per-view RMS) of the chosen model only, from its optimum
-        c = fits[chosen]
+        c = fits(chosen)
         fit = calibrate_fixed(obj, img, size, model=chosen, K0=c.K, dist0=c.dist, rvecs0=c.rvecs,
                               tvecs0=c.tvecs)
         selection = {"rule": "simplest candidate whose held-out (leave-views-out, "
