@@ -130,33 +130,58 @@ class Camera:
         P = np.asarray(points_world, dtype=np.float64).reshape(-1, 3)
         return self.project(P @ np.asarray(cam_from_world_R).T + np.asarray(cam_from_world_t).ravel())
 
-    def unproject(self, pixels: np.ndarray, *, iterations: int = 20) -> np.ndarray:
+    def _distort_with_jacobian(self, xy: np.ndarray):
+        """Distorted coordinates ``(N, 2)`` and the 2×2 Jacobian entries of the
+        model at ``xy`` (analytic, from the formula in the module docstring)."""
+        d = np.zeros(8)
+        d[: self.dist.size] = self.dist
+        k1, k2, p1, p2, k3, k4, k5, k6 = d
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        a = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        b = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+        radial = a / b
+        # d(radial)/d(r²) by the quotient rule
+        dr = ((k1 + r2 * (2 * k2 + 3 * k3 * r2)) * b - a * (k4 + r2 * (2 * k5 + 3 * k6 * r2))) / (b * b)
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        jxx = radial + 2 * x * x * dr + 2 * p1 * y + 6 * p2 * x
+        jxy = 2 * x * y * dr + 2 * p1 * x + 2 * p2 * y
+        jyx = 2 * x * y * dr + 2 * p1 * x + 2 * p2 * y
+        jyy = radial + 2 * y * y * dr + 6 * p1 * y + 2 * p2 * x
+        return xd, yd, jxx, jxy, jyx, jyy
+
+    def unproject(self, pixels: np.ndarray, *, iterations: int = 30) -> np.ndarray:
         """Undistorted rays ``(N, 3)`` as ``(x, y, 1)`` for distorted pixels ``(N, 2)``.
 
-        The distortion is inverted by fixed-point iteration started at the
-        distorted point, then polished with Gauss–Newton steps on the forward
-        model, so the round trip ``project(unproject(p))`` is exact to ~1e-10
-        px for the distortion of real lenses.
+        The distortion is inverted by Newton's method on the forward model
+        with its analytic Jacobian, started at the distorted point and stopped
+        when every step is below 1e-14 (normalised units), so the round trip
+        ``project(unproject(p))`` is exact to ~1e-10 px for the distortion of
+        real lenses. Pixels whose inversion does not converge (outside the
+        region where the model is invertible) give NaN.
         """
         uv = np.asarray(pixels, dtype=np.float64).reshape(-1, 2)
         K = self.K
         yd = (uv[:, 1] - K[1, 2]) / K[1, 1]
         xd = (uv[:, 0] - K[0, 2] - K[0, 1] * yd) / K[0, 0]
-        target = np.stack([xd, yd], axis=1)
         if not np.any(self.dist):
-            return np.column_stack([target, np.ones(len(target))])
-        xy = target.copy()
-        for _ in range(iterations):  # fixed point: x = x_d - (distort(x) - x)
-            xy = target - (self.distort_normalized(xy) - xy)
-        eps = 1e-7
-        for _ in range(3):  # Gauss-Newton with a numerical 2x2 Jacobian per point
-            f = self.distort_normalized(xy) - target
-            jx = (self.distort_normalized(xy + [eps, 0]) - self.distort_normalized(xy - [eps, 0])) / (2 * eps)
-            jy = (self.distort_normalized(xy + [0, eps]) - self.distort_normalized(xy - [0, eps])) / (2 * eps)
-            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
-            dx = (jy[:, 1] * f[:, 0] - jy[:, 0] * f[:, 1]) / det
-            dy = (-jx[:, 1] * f[:, 0] + jx[:, 0] * f[:, 1]) / det
-            xy = xy - np.stack([dx, dy], axis=1)
+            return np.column_stack([xd, yd, np.ones(len(xd))])
+        xy = np.stack([xd, yd], axis=1)
+        converged = False
+        for _ in range(iterations):
+            fx, fy, jxx, jxy, jyx, jyy = self._distort_with_jacobian(xy)
+            ex, ey = fx - xd, fy - yd
+            det = jxx * jyy - jxy * jyx
+            step = np.stack([(jyy * ex - jxy * ey) / det, (-jyx * ex + jxx * ey) / det], axis=1)
+            xy = xy - step
+            if np.all(np.abs(step) < 1e-14):
+                converged = True
+                break
+        if not converged:
+            fx, fy, *_ = self._distort_with_jacobian(xy)
+            bad = ~((np.abs(fx - xd) < 1e-9) & (np.abs(fy - yd) < 1e-9))
+            xy[bad] = np.nan
         return np.column_stack([xy, np.ones(len(xy))])
 
     # ------------------------------------------------------------------- files
