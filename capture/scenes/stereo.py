@@ -147,9 +147,10 @@ def _corners(p):
     return p.center + p.radius * o
 
 
-def _cast(prims, C, D, cull=None):
+def _cast(prims, C, D, cull=None, *, shade=True):
     """Nearest hit of rays ``C + t·D`` (``D (N, 3)``): ``(t, colour (N, 3))``; a miss
-    gives ``t = inf`` and black.
+    gives ``t = inf`` and black. ``shade=False`` skips the colours (depth passes)
+    and returns ``(t, None)``.
 
     ``cull = (K, R, t, pix (N, 2))`` restricts each primitive's test to the
     rays inside the image rectangle bounding its projected corners (exact: a
@@ -178,6 +179,8 @@ def _cast(prims, C, D, cull=None):
             hits.append((sel, uv))
     which = np.argmin(T, axis=0)
     t = T[which, np.arange(n)]
+    if not shade:
+        return t, None
     colour = np.zeros((n, 3), np.float32)
     P = C + np.where(np.isfinite(t), t, 0)[:, None] * D
     for k, p in enumerate(prims):
@@ -229,7 +232,7 @@ def _depth(prims, K, R, t, size):
     """Camera-frame depth ``Z (H, W)`` at pixel centres (inf where nothing is hit)."""
     w, h = size
     C, D, pix = _rays(K, R, t, size, 1)
-    T, _ = _cast(prims, C, D, (K, R, t, pix))
+    T, _ = _cast(prims, C, D, (K, R, t, pix), shade=False)
     return T.reshape(h, w)
 
 
@@ -339,7 +342,7 @@ def render_pair(*, size, seed, rng, layout="rectified", textureless=False, occlu
     Pf = P.reshape(-1, 3)
     ok = np.isfinite(Pf).all(axis=1)
     dirs = Pf[ok] - c_r
-    t_hit, _ = _cast(prims, c_r, dirs)
+    t_hit, _ = _cast(prims, c_r, dirs, shade=False)
     visible = np.zeros(len(Pf), bool)
     visible[np.flatnonzero(ok)] = t_hit >= 1 - 1e-6
     Pr = Pf @ R.T + T
