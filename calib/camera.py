@@ -204,22 +204,12 @@ class Camera:
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``camera.json`` atomically (with a sidecar when ``meta`` is given)."""
-        from capture.artifact import dumps_json, write_artifact, write_json
+        from capture.artifact import save_json_artifact
 
-        if meta is None:
-            write_json(path, self.to_dict())
-            return Path(path)
-        return write_artifact(path, lambda tmp: tmp.write_text(dumps_json(self.to_dict())), meta=meta)
+        return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Camera:
-        import json
+        from capture.artifact import load_json_artifact
 
-        p = Path(path)
-        if not p.is_file():
-            raise InputError(p, "camera file not found")
-        try:
-            d = json.loads(p.read_text())
-        except json.JSONDecodeError as e:
-            raise InputError(p, f"invalid JSON ({e})") from None
-        return cls.from_dict(d, where=str(p))
+        return cls.from_dict(load_json_artifact(path, "camera"), where=str(path))

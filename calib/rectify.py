@@ -27,7 +27,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -248,23 +247,15 @@ class Rectification:
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``rectification.json`` atomically (with a sidecar when ``meta`` is given)."""
-        from capture.artifact import dumps_json, write_artifact, write_json
+        from capture.artifact import save_json_artifact
 
-        if meta is None:
-            write_json(path, self.to_dict())
-            return Path(path)
-        return write_artifact(path, lambda tmp: tmp.write_text(dumps_json(self.to_dict())), meta=meta)
+        return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Rectification:
-        p = Path(path)
-        if not p.is_file():
-            raise InputError(p, "rectification file not found")
-        try:
-            d = json.loads(p.read_text())
-        except json.JSONDecodeError as e:
-            raise InputError(p, f"invalid JSON ({e})") from None
-        return cls.from_dict(d, where=str(p))
+        from capture.artifact import load_json_artifact
+
+        return cls.from_dict(load_json_artifact(path, "rectification"), where=str(path))
 
 
 def rectify(rig: Rig, *, alpha: float = 0.0, image_size: tuple[int, int] | None = None) -> Rectification:

@@ -18,7 +18,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -89,26 +88,23 @@ class Rig:
                 **self.extra}
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
-        from capture.artifact import dumps_json, write_artifact, write_json
+        """Write ``rig.json`` atomically (with a sidecar when ``meta`` is given)."""
+        from capture.artifact import save_json_artifact
 
-        if meta is None:
-            write_json(path, self.to_dict())
-            return Path(path)
-        return write_artifact(path, lambda tmp: tmp.write_text(dumps_json(self.to_dict())), meta=meta)
+        return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Rig:
-        p = Path(path)
-        if not p.is_file():
-            raise InputError(p, "rig file not found")
+        from capture.artifact import load_json_artifact
+
+        d = load_json_artifact(path, "rig")
         try:
-            d = json.loads(p.read_text())
             extra = {k: v for k, v in d.items()
                      if k not in ("schema", "schema_version", "left", "right", "R", "T", "E", "F", "baseline")}
-            return cls(Camera.from_dict(d["left"], where=f"{p}:left"),
-                       Camera.from_dict(d["right"], where=f"{p}:right"),
+            return cls(Camera.from_dict(d["left"], where=f"{path}:left"),
+                       Camera.from_dict(d["right"], where=f"{path}:right"),
                        np.array(d["R"]), np.array(d["T"]), np.array(d["E"]), np.array(d["F"]), extra)
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as e:
-            if isinstance(e, InputError):
-                raise
-            raise InputError(p, f"not a valid rig description ({e})") from None
+        except InputError:
+            raise
+        except (KeyError, TypeError, ValueError) as e:
+            raise InputError(path, f"not a valid rig description ({e})") from None

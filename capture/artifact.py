@@ -93,6 +93,32 @@ def write_json(path: str | os.PathLike, obj) -> None:
         tmp.write_text(dumps_json(obj))
 
 
+def save_json_artifact(path: str | os.PathLike, body: dict, *, meta: dict | None = None) -> Path:
+    """Write a JSON artifact (``camera.json``, ``rig.json``, ``response.json``, …)
+    atomically, with its ``.meta.json`` sidecar when ``meta`` is given."""
+    if meta is None:
+        write_json(path, body)
+        return Path(path)
+    return write_artifact(path, lambda tmp: tmp.write_text(dumps_json(body)), meta=meta)
+
+
+def load_json_artifact(path: str | os.PathLike, what: str) -> dict:
+    """Read a JSON artifact, raising InputError naming the file when it is
+    missing or not valid JSON (``what`` names the kind, e.g. ``"camera"``)."""
+    from capture.errors import InputError
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, f"{what} file not found")
+    try:
+        body = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise InputError(p, f"invalid JSON in the {what} file ({e})") from None
+    if not isinstance(body, dict):
+        raise InputError(p, f"expected a JSON object describing a {what}")
+    return body
+
+
 def file_sha256(path: str | os.PathLike) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
