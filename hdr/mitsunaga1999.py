@@ -91,7 +91,7 @@ def _pairs(mz: np.ndarray, valid: np.ndarray):
     return pix, qa[k], qb[k]
 
 
-def _fit(chans, ln_e0, orders, iters=10, tol=1e-8):
+def _fit(chans, ln_e0, orders, iters=10, tol=1e-8, noise_weights=True):
     """Alternate eq. 6.6 (coefficients, per channel) and the ratio update
     (pooled over channels: the exposures are common to all of them).
 
@@ -104,43 +104,75 @@ def _fit(chans, ln_e0, orders, iters=10, tol=1e-8):
         if pix.size < order + 2:
             raise np.linalg.LinAlgError("too few pixel pairs")
         ma, mb = mz[pix, qa], mz[pix, qb]
-        data.append((qa, qb, basis(ma, order), basis(mb, order), np.maximum(ma, 1e-3),
-                     np.maximum(mb, 1e-3)))
+        data.append([qa, qb, basis(ma, order), basis(mb, order), np.maximum(ma, 1e-3),
+                     np.maximum(mb, 1e-3), ma, mb, None])
     ln_e = ln_e0.copy()
     coeffs = [np.zeros(o) for o in orders]
-    for _ in range(iters):
+    for it in range(iters):
         lap = np.zeros((p, p))
         rhs_e = np.zeros(p)
         change = 0.0
-        for k, (qa, qb, ba, bb, fa_prev, fb_prev) in enumerate(data):
+        for k, (qa, qb, ba, bb, fa_prev, fb_prev, ma, mb, var) in enumerate(data):
             r = np.exp(ln_e[qa] - ln_e[qb])
-            s = 1.0 / (fa_prev + r * fb_prev)  # relative residuals
+            # (fa - r fb) / (fa + r fb) is half the ln residual; divided by the
+            # predicted sd of that ln residual (shot + quantisation noise) when known.
+            s = 2.0 / (fa_prev + r * fb_prev)
+            if var is not None:
+                s = s / np.sqrt(var)
             # QR with column pivoting (LAPACK gelsy): stable, and far cheaper than SVD.
             a_new = scipy.linalg.lstsq((ba - r[:, None] * bb) * s[:, None], -(1.0 - r) * s,
                                        lapack_driver="gelsy", check_finite=False)[0]
             fa, fb = 1.0 + ba @ a_new, 1.0 + bb @ a_new
             pos = (fa > 1e-6) & (fb > 1e-6)
             d = np.log(fa[pos]) - np.log(fb[pos])
+            wts = np.ones(d.size) if var is None else 1.0 / var[pos]
             # Normal equations of the tiny, well-conditioned exposure graph (P x P).
             ia, ib = qa[pos], qb[pos]
-            np.add.at(lap, (ia, ia), 1.0)
-            np.add.at(lap, (ib, ib), 1.0)
-            np.add.at(lap, (ia, ib), -1.0)
-            np.add.at(lap, (ib, ia), -1.0)
-            np.add.at(rhs_e, ia, d)
-            np.add.at(rhs_e, ib, -d)
+            np.add.at(lap, (ia, ia), wts)
+            np.add.at(lap, (ib, ib), wts)
+            np.add.at(lap, (ia, ib), -wts)
+            np.add.at(lap, (ib, ia), -wts)
+            np.add.at(rhs_e, ia, wts * d)
+            np.add.at(rhs_e, ib, -wts * d)
             change = max(change, float(np.max(np.abs(a_new - coeffs[k]))))
             coeffs[k] = a_new
-            data[k] = (qa, qb, ba, bb, np.maximum(fa, 1e-6), np.maximum(fb, 1e-6))
+            if noise_weights:
+                var = _noise_var(a_new, ma, mb, np.maximum(fa, 1e-6), np.maximum(fb, 1e-6),
+                                 d, pos, ln_e[qa] - ln_e[qb])
+            data[k] = [qa, qb, ba, bb, np.maximum(fa, 1e-6), np.maximum(fb, 1e-6), ma, mb, var]
         lap[0, :] = 0.0
         lap[0, 0] = 1.0  # gauge: the first exposure keeps its given value
         rhs_e[0] = ln_e0[0]
-        ln_new = np.linalg.solve(lap, rhs_e)
+        # Eq. 6.6 is unchanged by f -> f^γ, R -> R^γ: without a gauge for the power the
+        # alternation drifts along that valley (towards a curve flat near zero). Fix it
+        # each iteration: the exposures' log-span agrees best with the rough one.
+        ln_new = _align_power(np.linalg.solve(lap, rhs_e), ln_e0)[1]
         change = max(change, float(np.max(np.abs(ln_new - ln_e))))
         ln_e = ln_new
         if change < tol:
             break
     return coeffs, ln_e
+
+
+def _noise_var(a, ma, mb, fa, fb, d, pos, ln_r):
+    """Predicted variance of each pair's ln residual: shot noise (∝ 1/f) plus
+    code quantisation (∝ (f'/f)²), the two coefficients fitted to the squared
+    residuals by non-negative least squares (so the noise level comes from the data)."""
+    from scipy.optimize import nnls
+
+    h = 1e-4
+    da = (evaluate(a, ma + h) - evaluate(a, ma - h)) / (2 * h) / fa
+    db = (evaluate(a, mb + h) - evaluate(a, mb - h)) / (2 * h) / fb
+    shot = 1.0 / fa + 1.0 / fb
+    quant = da ** 2 + db ** 2
+    res2 = np.zeros(fa.size)
+    res2[pos] = (d - ln_r[pos]) ** 2
+    x = np.stack([shot, quant], axis=1)
+    ok = pos & np.isfinite(quant)
+    coef = nnls(x[ok], res2[ok])[0]
+    var = x @ coef
+    floor = 1e-3 * max(float(np.median(var[ok])), 1e-12)
+    return np.where(np.isfinite(var), np.maximum(var, floor), floor)
 
 
 def _held_out(a, ln_e, mz, valid):
