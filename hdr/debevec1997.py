@@ -300,6 +300,37 @@ def _l_curve(red: _Reduced, grid):
     return float(lam_a[i]), cand
 
 
+def _discrepancy(red: _Reduced, cand, lam_corner, lnt, w):
+    """Under heavy noise the L-curve corner is broad and sits at its low-λ end;
+    there, take instead the largest λ whose misfit stays within what the noise
+    predicts (Morozov's discrepancy principle).
+
+    The noise variance is estimated from the least-smoothed fit (``m`` rows,
+    ``N`` pixel unknowns, ``K`` knots): ``σ² ≈ ρ_min m / (m − N − K)``; the
+    exact curve would leave ``E ρ = σ² (m − N) / m`` (only the ``ln E`` fitted),
+    so λ may grow while ``ρ(λ) ≤ ρ_min (m − N) / (m − N − K)``. Applied only
+    when the corner's per-observation residual says the noise is heavy
+    (> 0.1 ln units, the warning below): on clean data the corner is sharp
+    and kept.
+    """
+    gk, lne, _, _ = red.fit(lam_corner)
+    ok = w > 0
+    ok = ok[np.count_nonzero(ok, axis=1) >= 2]
+    resid = (_g_at(gk, red.z, red.k, red.bd) - lne[:, None] - lnt[None]) * ok
+    if np.sqrt((resid ** 2).sum() / max(ok.sum(), 1)) <= 0.1:
+        return lam_corner
+    m, n_px = red.ii.size, red.z.shape[0]
+    dof = m - n_px - red.k
+    if dof <= 0:
+        return lam_corner
+    bound = math.log(math.exp(cand[0]["ln_misfit"]) * (m - n_px) / dof)
+    within = [c["lambda"] for c in cand if c["ln_misfit"] <= bound]
+    lam = max([lam_corner] + within)
+    for c in cand:
+        c["discrepancy_bound_ln_misfit"] = bound
+    return float(lam)
+
+
 def _monotone(gk, counts):
     from scipy.optimize import isotonic_regression
 
@@ -397,6 +428,8 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
         else:
             lam_ch = grid[0]
             cand = [{"lambda": lam_ch}]
+        if len(grid) > 1:
+            lam_ch = _discrepancy(red, cand, lam_ch, lnt, wc)
         scores[str(ch)] = cand
         try:
             gk, lne, _, _ = red.fit(lam_ch)
@@ -434,7 +467,8 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
         chosen.append(lam_ch)
     # Codes strictly outside the sampled range keep the smoothness extrapolation.
     sel = {"parameter": "lambda", "chosen": chosen, "rule": "given" if lam_given else
-           "L-curve corner: largest curvature of (ln data misfit, ln roughness) over λ",
+           ("L-curve corner: largest curvature of (ln data misfit, ln roughness) over λ; "
+            "under heavy noise the largest λ within the discrepancy bound"),
            "candidates": scores, "knots": n_knots}
     fit = {"samples": int(idx.size), "residual_rms_ln": fit_rms, "linked_pixels": linked_px,
            "monotone_max_change_ln": monotone_fix}

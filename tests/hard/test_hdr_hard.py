@@ -36,8 +36,6 @@ def test_exposures_four_stops_apart_is_flagged_as_poorly_constrained():
     assert err < 0.05 or any("poorly constrained" in w for w in r.warnings)
 
 
-@pytest.mark.xfail(strict=True, reason="L-curve λ (1.8e-5) leaves 0.202 > 0.2 on this case: at "
-                   "15 % noise the corner is broad; open, see the issue-5 report")
 def test_heavy_noise_picks_a_larger_lambda_and_warns():
     s, z, t = _b(full_well=1500.0, read_noise=20.0)
     r = debevec(z, t)
