@@ -22,8 +22,13 @@ order at 3 and skips the ratio update):
   (``scipy.linalg.lstsq``, LAPACK ``gelsy``), never the
   normal equations of a raw Vandermonde matrix; the constraint ``f(1) = 1`` is
   built into the basis (``f = 1 + Σ a_n (T_n(2M−1) − 1)``);
-- equations reweighted each iteration so residuals are relative (≈ ln
-  units), so bright pixels do not dominate;
+- equations reweighted each iteration so residuals are in ln units and
+  divided by their predicted noise (shot noise ∝ 1/f plus code quantisation
+  ∝ (f'/f)², the two levels fitted to the residuals by NNLS): eq. 6.6 in
+  irradiance units would let dark, relatively noisy samples count least
+  where ln error counts them most;
+- the power gauge fixed every iteration (exposures' log-span matched to the
+  rough one), so the alternation cannot drift along the ambiguity below;
 - the ratio update (the paper's ``R_q^(k)``) as a weighted least-squares fit
   of ``ln e_q`` to ``ln f(M_pq) − ln f(M_pq')`` over all pairs;
 - the data fix the exposures only up to a common power (``f → f^γ``,
