@@ -24,6 +24,10 @@ SHARED     ?= $(abspath ../shared)
 SYSTOOLS   := pfshdrcalibrate exrheader tiffinfo
 APT_PKGS   := pfstools openexr libtiff-tools
 PYTEST_ARGS ?=
+# One BLAS thread per process: the tests run two xdist workers on two cores and
+# the bench times methods side by side; threaded BLAS on small least-squares
+# problems oversubscribes the cores and made some solves 30x slower.
+BLAS1      := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 .PHONY: all venv sysdeps test demo bench clean lint
 all: demo
@@ -53,13 +57,13 @@ PACKAGES := capture calib hdr stereo lightfield separation
 
 # Unit, property, hard-case and end-to-end tests, plus every docstring example.
 test: $(STAMP) sysdeps
-	$(PY) -m pytest -n 2 --doctest-modules tests $(PACKAGES) $(PYTEST_ARGS)
+	$(BLAS1) $(PY) -m pytest -n 2 --doctest-modules tests $(PACKAGES) $(PYTEST_ARGS)
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 
 bench: $(STAMP) sysdeps
-	$(LUMI) bench --out $(OUT)/bench
+	$(BLAS1) $(LUMI) bench --out $(OUT)/bench
 
 clean:
 	rm -rf $(OUT) .pytest_cache

@@ -1,8 +1,11 @@
 """HDR imaging: camera-response recovery (one module per method), radiance
 merge, exposure alignment, tone mapping and HDR file formats.
 
-``from hdr import debevec, mitsunaga_nayar, merge, tonemap, ResponseCurve``
-works; the names load their modules on first use so ``import hdr`` stays cheap.
+``from hdr import debevec, mitsunaga_nayar, tonemap, ResponseCurve`` works;
+the names load their modules on first use so ``import hdr`` stays cheap. The
+merge is ``from hdr.merge import merge``: ``hdr.merge`` is the module's name,
+and a package attribute of the same name would be the function or the module
+depending on what had been imported before.
 """
 
 from __future__ import annotations
@@ -13,7 +16,6 @@ _LAZY = {
     "ResponseCurve": "hdr.response",
     "debevec": "hdr.debevec1997",
     "mitsunaga_nayar": "hdr.mitsunaga1999",
-    "merge": "hdr.merge",
     "RadianceMap": "hdr.merge",
     "tonemap": "hdr.reinhard2002",
     "align": "hdr.ward2003",

@@ -113,7 +113,7 @@ def _fit(chans, ln_e0, orders, iters=10, tol=1e-8, noise_weights=True):
                      np.maximum(mb, 1e-3), ma, mb, None])
     ln_e = ln_e0.copy()
     coeffs = [np.zeros(o) for o in orders]
-    for it in range(iters):
+    for _ in range(iters):
         lap = np.zeros((p, p))
         rhs_e = np.zeros(p)
         change = 0.0

@@ -24,7 +24,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -216,25 +215,21 @@ class ResponseCurve:
         ``meta`` is a sidecar from :func:`capture.artifact.make_meta`; a minimal
         one is made when omitted.
         """
-        from capture.artifact import dumps_json, make_meta, write_artifact
+        from capture.artifact import make_meta, save_json_artifact
 
         if meta is None:
             meta = make_meta(SCHEMA, model={"method": self.method, "selection": self.selection},
                              warnings=self.warnings)
-        text = dumps_json(self.to_dict())
-        return write_artifact(path, lambda p: Path(p).write_text(text), meta=meta)
+        return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> ResponseCurve:
         """Read a ``response.json``; InputError naming the file if it is not one."""
-        p = Path(path)
-        if not p.is_file():
-            raise InputError(p, "response file not found (make one with 'lumigraph hdr response')")
-        try:
-            d = json.loads(p.read_text())
-        except (json.JSONDecodeError, UnicodeDecodeError) as e:
-            raise InputError(p, f"invalid JSON ({e})") from None
-        return cls.from_dict(d, where=str(p))
+        from capture.artifact import load_json_artifact
+
+        if not Path(path).is_file():
+            raise InputError(path, "response file not found (make one with 'lumigraph hdr response')")
+        return cls.from_dict(load_json_artifact(path, "response curve"), where=str(path))
 
     @classmethod
     def linear(cls, bit_depth: int, channels: int = 3, *, reason: str = "") -> ResponseCurve:

@@ -15,9 +15,11 @@ def test_first_screen_shows_the_two_commands():
     assert "make demo" in head and "make test" in head
 
 
-def test_python_examples_run():
+def test_python_examples_run(tmp_path):
     blocks = re.findall(r"```python\n(.*?)```", README.read_text(), re.S)
     assert len(blocks) >= 6
     code = "\n\n".join(blocks)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    # in a scratch folder: the examples write files, as a user's would
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
+                       cwd=tmp_path)
     assert r.returncode == 0, r.stderr[-2000:]

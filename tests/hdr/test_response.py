@@ -6,9 +6,9 @@ import pytest
 from capture.render import render
 from hdr.bench import ln_response_rms
 from hdr.debevec1997 import _fit_channel_sparse, _Reduced, data_weight, debevec, solve_sparse_lstsq
-from hdr.samples import sample_pixels
 from hdr.mitsunaga1999 import basis, mitsunaga_nayar
 from hdr.response import ResponseCurve
+from hdr.samples import sample_pixels
 
 
 def _bracket(**kw):
