@@ -55,6 +55,11 @@ def test_render_bad_options(tmp_path):
                        "--bit-depth", "out of range")
     assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--colour", "red"),
                        "--colour", "no such option")
+    # issue 3's list, on the scenes they concern
+    assert_clean_error(lumigraph("render", "bracket", "--out", tmp_path / "x", "--bit-depth", "7"),
+                       "--bit-depth")
+    assert_clean_error(lumigraph("render", "bracket", "--out", tmp_path / "x", "--min-time", "-0.01"),
+                       "--min-time", "out of range")
     # validated late (after the options parse), still one line
     assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--size", "10x10"),
                        "--size", "impossible size")

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from capture import io
+from capture.errors import InputError
 
 BLACK, WHITE = 64, 4095
 
@@ -60,3 +61,11 @@ def test_raw_stack_is_linear_and_srgb_output_has_shape(tmp_path):
     st = io.read_stack([tmp_path / f"r{i}.dng" for i in range(3)], times=[1, 2, 4])
     assert st.linear and st.bit_depth == 12 and st.images.shape == (3, 32, 48, 3)
     assert io.read_raw(tmp_path / "r0.dng").codes.dtype == np.uint16
+
+
+def test_truncated_raw_is_refused(tmp_path):
+    p = tmp_path / "cut.dng"
+    _write_dng(p, _bayer(1000, 1500, 800, shape=(64, 96)))
+    p.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+    with pytest.raises(InputError, match="cut.dng"):
+        io.read_raw(p)
