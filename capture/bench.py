@@ -312,18 +312,25 @@ def _plot(path: Path, stage: Stage, rows: list[Row]) -> None:
     from capture.artifact import atomic_path
 
     cases = [c.name for c in stage.cases if any(r.case == c.name for r in rows)] or ["-"]
-    fig, axes = plt.subplots(1, len(cases), figsize=(5.2 * len(cases), 4.2), squeeze=False)
-    for ax, case in zip(axes[0], cases, strict=True):
+    # a grid at most three wide, so a stage with many cases stays legible
+    ncols = min(3, len(cases))
+    nrows = -(-len(cases) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(5.6 * ncols, 4.4 * nrows), squeeze=False)
+    for ax in axes.flat[len(cases):]:
+        ax.set_visible(False)
+    for ax, case in zip(axes.flat, cases, strict=False):
         methods = dict.fromkeys(r.method for r in rows if r.case == case)
         for m in methods:
             pts = [(r.time_s, r.error, r.value) for r in rows
                    if r.case == case and r.method == m and r.status == "ok"
+                   and r.time_s is not None and r.error is not None
                    and r.time_s > 0 and r.error > 0 and math.isfinite(r.error)]
             if not pts:
                 continue
             pts.sort()
             peer = next(r.peer for r in rows if r.method == m)
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], "--o" if peer else "-o",
+            # peers: squares and dashes, ours: circles and solid lines (colours repeat)
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "--s" if peer else "-o",
                     label=m + (f" ({peer})" if peer else ""), ms=4)
         ax.set_xscale("log")
         ax.set_yscale("log")
