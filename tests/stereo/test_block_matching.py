@@ -117,6 +117,8 @@ def _same(a, b):
     ("auto", 31, (160, 120), dict(distinct=1.0)),
     (15, 3, (96, 72), dict(subpixel=False)),   # window wider than the disparity padding
     (31, 130, (320, 96), {}),                  # window sums shifted to fit 30 bits
+    ("auto", 31, (160, 120), dict(prefilter="local-mean")),
+    (9, 31, (160, 120), dict(prefilter="local-mean", prefilter_cap=4.0)),  # clipping active
 ])
 def test_compiled_kernel_identical_to_numpy_path(window, max_disp, size, kw, monkeypatch):
     # the kernel's integer SSD and float32 decision are specified to reproduce
@@ -162,3 +164,37 @@ def test_bad_engine():
     a = np.zeros((20, 30), np.uint8)
     with pytest.raises(ValueError, match="engine"):
         match(a, a, max_disp=4, engine="gpu")
+
+
+def test_local_mean_prefilter_removes_an_offset_between_views():
+    # the local-mean response of a + c is that of a, exactly in integers
+    # (81(a + c) - (S + 81c) = 81a - S), so an offset added to the right view
+    # leaves the prefiltered match unchanged; plain SSD is hurt by it
+    import cv2
+
+    s = render("stereo-pair", size=(160, 120))
+    gl = cv2.cvtColor(s.images[0], cv2.COLOR_RGB2GRAY)
+    gr = cv2.cvtColor(s.images[1], cv2.COLOR_RGB2GRAY)
+    assert int(gr.max()) + 20 <= 255  # no saturation, so the offset is exact
+    brighter = gr + np.uint8(20)
+    gt = s.gt_arrays["disparity"]
+    known = np.isfinite(gt)
+
+    def bad2(res):
+        return float(np.mean(~(np.abs(res.disparity[known] - gt[known]) <= 2)))
+
+    kw = dict(max_disp=int(s.gt["suggested_max_disp"]) - 1, window=9)
+    a = match(gl, gr, prefilter="local-mean", **kw)
+    b = match(gl, brighter, prefilter="local-mean", **kw)
+    assert np.array_equal(a.disparity, b.disparity, equal_nan=True)
+    assert a.info["prefilter"] == "local-mean"
+    plain, plain_off = match(gl, gr, **kw), match(gl, brighter, **kw)
+    assert bad2(plain_off) > bad2(plain) + 0.2
+
+
+@pytest.mark.parametrize("kw, fragment", [(dict(prefilter="sobel"), "prefilter"),
+                                          (dict(prefilter="local-mean", prefilter_cap=0), "prefilter_cap")])
+def test_bad_prefilter(kw, fragment):
+    a = np.zeros((20, 30), np.uint8)
+    with pytest.raises(ValueError, match=fragment):
+        match(a, a, max_disp=4, **kw)
