@@ -101,6 +101,19 @@ def test_mitsunaga_nayar_refines_rough_times():
     assert all(1 <= o <= 10 for o in r.selection["chosen"])
 
 
+def test_mitsunaga_nayar_order_ten_stays_usable_after_the_joint_ln_fit():
+    # The reweighted linear solve alone ran away at order 10 on this noisy bracket
+    # (ln-response RMS 0.41 against 0.006 at order 6); the joint Gauss-Newton fit in
+    # ln units keeps it as good as order 6 up to the sampling scatter of two
+    # independent fits (0.0025 ln, derived in hdr/bench.py for the same bracket).
+    s, z = _bracket(seed=3)
+    t = s.stack["exposure_times_s"]
+    err = {n: ln_response_rms(mitsunaga_nayar(z, t, order=n, samples=400).g, s.gt_arrays["g"], 8)
+           for n in (6, 10)}
+    assert 0 < err[6] < 0.03
+    assert 0 < err[10] < err[6] + 0.0025
+
+
 def test_chebyshev_basis_is_well_conditioned_where_vandermonde_is_not():
     m = np.linspace(0, 1, 500)
     cheb = np.linalg.cond(basis(m, 10))
