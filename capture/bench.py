@@ -39,6 +39,7 @@ from typing import Any
 # stage name -> module providing stage(*, quick) -> Stage
 BENCH_STAGES: dict[str, str] = {
     "io": "capture.bench_io",
+    "render": "capture.bench_render",
     "calib": "calib.bench",
     "hdr": "hdr.bench",
     "flow": "stereo.bench_flow",

@@ -45,3 +45,12 @@ def test_bench_io_writes_report_and_plot(tmp_path):
 def test_unknown_bench_stage():
     r = lumigraph("bench", "nosuch", "--out", "/tmp/never-written")
     assert r.returncode == 2 and "unknown bench stage" in r.stderr
+
+
+def test_bench_render_times_every_scene_cold(tmp_path):
+    r = lumigraph("bench", "render", "--out", tmp_path, "--quick", "-q")
+    assert r.returncode == 0, r.stderr
+    js = json.loads((tmp_path / "report.json").read_text())["stages"]["render"]
+    assert {row["method"] for row in js["rows"]} == {"sample", "bracket", "stereo-pair", "flow"}
+    assert all(row["status"] == "ok" and row["time_s"] > 0 for row in js["rows"])
+    assert len(js["checks"]) == 4 and all("<= 5 s" in c["target"] for c in js["checks"])

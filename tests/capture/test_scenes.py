@@ -19,10 +19,13 @@ def test_scene_renders_fast_deterministically_and_round_trips(name, tmp_path):
     t0, c0 = time.perf_counter(), time.process_time()
     a = render(name, seed=5, cache=False)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    # Target: <= 5 s on 2 cores. On a loaded machine wall time overstates the
-    # cost and CPU time is the fair figure; multithreaded renderers make CPU
-    # time exceed wall time on an idle one. The smaller of the two must meet it.
-    assert min(wall, cpu) <= 5.0, f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU"
+    # The target (<= 5 s on 2 idle cores) is measured by `lumigraph bench
+    # render`, with nothing beside it. Here two xdist workers share the two
+    # cores, so a scene gets one core on average: a renderer that uses both
+    # cores (Mitsuba, OpenCV) may take up to twice its idle wall time, and its
+    # CPU time is up to twice its wall time. This guard catches regressions
+    # beyond that: the smaller of the two figures within 2 x 5 s.
+    assert min(wall, cpu) <= 2 * 5.0, f"{name}: {wall:.2f} s wall, {cpu:.2f} s CPU"
     b = render(name, seed=5, cache=False)
     assert len(a.images) == len(b.images) > 0
     assert all(np.array_equal(x, y) for x, y in zip(a.images, b.images, strict=True))
