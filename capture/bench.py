@@ -181,28 +181,28 @@ def run_stage(stage: Stage, *, repeats: int | None = None,
     method's failure (the row's status says what went wrong)."""
     repeats = max(3, repeats or stage.repeats)
     rows: list[Row] = []
+
+    def emit(row: Row) -> None:
+        rows.append(row)
+        if on_row:
+            on_row(row)
+
+    def unavailable(case: Case, m: Method, reason: str) -> None:
+        emit(Row(stage.name, case.name, m.name, m.peer, m.knob, None, math.nan, (), math.nan,
+                 f"unavailable: {reason}"))
+
     for case in stage.cases:
+        methods = [m for m in stage.methods if m.cases is None or case.name in m.cases]
         reason = case.unavailable() if case.unavailable else None
         if reason:
-            for m in stage.methods:
-                if m.cases is None or case.name in m.cases:
-                    row = Row(stage.name, case.name, m.name, m.peer, m.knob, None, math.nan, (),
-                              math.nan, f"unavailable: {reason}")
-                    rows.append(row)
-                    if on_row:
-                        on_row(row)
+            for m in methods:
+                unavailable(case, m, reason)
             continue
         data = case.load()
-        for m in stage.methods:
-            if m.cases is not None and case.name not in m.cases:
-                continue
+        for m in methods:
             reason = m.unavailable() if m.unavailable else None
             if reason:
-                row = Row(stage.name, case.name, m.name, m.peer, m.knob, None, math.nan, (),
-                          math.nan, f"unavailable: {reason}")
-                rows.append(row)
-                if on_row:
-                    on_row(row)
+                unavailable(case, m, reason)
                 continue
             state = m.prepare(data) if m.prepare else data
             for value in m.values:
@@ -221,12 +221,9 @@ def run_stage(stage: Stage, *, repeats: int | None = None,
                     status = f"failed: {type(e).__name__}: {str(e).splitlines()[0][:160] if str(e) else ''}"
                     err = math.nan
                     extra = {"traceback": traceback.format_exc(limit=3)}
-                row = Row(stage.name, case.name, m.name, m.peer, m.knob, value,
-                          statistics.median(times) if times else math.nan, tuple(times), err,
-                          status, extra)
-                rows.append(row)
-                if on_row:
-                    on_row(row)
+                emit(Row(stage.name, case.name, m.name, m.peer, m.knob, value,
+                         statistics.median(times) if times else math.nan, tuple(times), err,
+                         status, extra))
     return rows
 
 
