@@ -258,7 +258,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--out", required=True, help="response.json")
     v.add_argument("--plot", help="also plot the curve to this PNG")
     v.add_argument("--linear", action="store_true", help="the data are linear: identity response")
-    v.add_argument("--smoothness", default="auto", help="Debevec λ, or auto (held-out prediction)")
+    v.add_argument("--smoothness", default="auto", help="Debevec λ, or auto (the L-curve corner; the discrepancy principle under heavy noise)")
     v.add_argument("--order", default="auto", help="Mitsunaga-Nayar order 1..10, or auto")
     v.add_argument("--samples", type=int, default=600, help="pixels sampled (default 600)")
     v.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling")
