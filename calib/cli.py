@@ -14,6 +14,7 @@ from pathlib import Path
 
 from capture.command import (
     add_verb,
+    check_output_dir,
     check_output_path,
     make_parser,
     progress,
@@ -163,9 +164,7 @@ def _undistort(args) -> int:
     from capture.artifact import atomic_path, make_meta, write_json
     from capture.io import write_image
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder")
+    out = check_output_dir(args.out)
     cam = Camera.load(args.camera)
     paths, _ = _expand(args.images, "IMAGES")
     images = _read_all(paths, args, "images")
@@ -240,9 +239,7 @@ def _rectify(args) -> int:
     from capture.artifact import atomic_path, make_meta
     from capture.io import read_image, write_image
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder")
+    out = check_output_dir(args.out)
     if not 0.0 <= args.alpha <= 1.0:
         raise InputError("--alpha", f"expected a value in [0, 1], got {args.alpha}")
     rig = Rig.load(args.rig)

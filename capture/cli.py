@@ -5,10 +5,8 @@ A thin layer over :mod:`capture.render`: parse, validate, render, save.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from capture.artifact import make_meta, write_json
-from capture.command import make_parser, parse_size, run, say, show_progress
+from capture.command import check_output_dir, make_parser, parse_size, run, say, show_progress
 from capture.errors import InputError
 
 EPILOG = """\
@@ -66,9 +64,7 @@ def _render(args) -> int:
     spec = get_scene(args.scene)
     size = parse_size(args.size) if args.size else None
     opts = spec.parse_options(_scene_options(extra))
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "exists and is not a folder")
+    out = check_output_dir(args.out)
     if show_progress(args.quiet):  # on a terminal only: piped stderr keeps to one error line
         say(args, f"rendering {args.scene} -> {out}")
     result = render(args.scene, size=size, seed=args.seed, cache=not args.no_cache, **opts)

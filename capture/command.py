@@ -194,6 +194,15 @@ def check_output_path(out: str | os.PathLike, *, suffixes: Iterable[str] | None 
     return p
 
 
+def check_output_dir(out: str | os.PathLike) -> Path:
+    """Validate an ``--out`` folder before any work is done: it may exist, but
+    as a folder."""
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        raise InputError("--out", f"{p} exists and is not a folder")
+    return p
+
+
 def _load_stage(name: str) -> Callable[..., int]:
     module, _ = STAGES[name]
     return importlib.import_module(module).main

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from capture.command import (
     add_verb,
+    check_output_dir,
     check_output_path,
     make_parser,
     parse_floats,
@@ -180,9 +181,7 @@ def _align(args) -> int:
     from capture.io import read_stack, write_image, write_stack_json
     from hdr.ward2003 import align
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder")
+    out = check_output_dir(args.out)
     stack = read_stack(args.images, times=_times(args))
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "align works on code values (PNG/TIFF/JPEG)")

@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from capture.command import add_verb, make_parser, run, say, subparsers, warn
+from capture.command import add_verb, check_output_dir, make_parser, run, say, subparsers, warn
 from capture.errors import InputError
 
 EPILOG = """\
@@ -52,9 +52,7 @@ def _import(args) -> int:
     from lightfield.field import from_images
 
     inputs = [Path(p) for p in args.images]
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder")
+    out = check_output_dir(args.out)
     info, linear, bit_depth = {}, args.linear, None
     if len(inputs) == 1 and inputs[0].is_dir():
         sj = inputs[0] / "stack.json"
@@ -171,9 +169,7 @@ def _decode(args) -> int:
     from capture.io import read_image
     from lightfield.lenslet import decode
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder")
+    out = check_output_dir(args.out)
     raw, white = read_image(args.raw), read_image(args.white)
     if raw.shape[:2] != white.shape[:2]:
         raise InputError(args.white, f"is {white.shape[1]}x{white.shape[0]} but the raw is "

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from capture.command import make_parser, parse_size, run, say, warn
+from capture.command import check_output_dir, make_parser, parse_size, run, say, warn
 from capture.errors import InputError
 
 EPILOG = """\
@@ -111,9 +111,7 @@ def _separate(args) -> int:
         raise InputError("--b", f"black level must lie in [0, 1), got {args.b}")
     if args.tile < 2:
         raise InputError("--tile", f"expected at least 2 pixels, got {args.tile}")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder")
+    out = check_output_dir(args.out)
     response = None
     if args.response:
         from hdr.response import ResponseCurve

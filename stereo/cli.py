@@ -14,7 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.command import add_verb, check_output_path, make_parser, run, say, subparsers, warn
+from capture.command import (
+    add_verb,
+    check_output_dir,
+    check_output_path,
+    make_parser,
+    run,
+    say,
+    subparsers,
+    warn,
+)
 from capture.errors import EstimationError, InputError
 
 EPILOG = """\
@@ -348,9 +357,7 @@ def _sfm(args) -> int:
     from capture.artifact import make_meta
     from stereo.sfm import reconstruct
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError(out, "exists and is not a folder")
+    out = check_output_dir(args.out)
     images = [_read(p) for p in args.images]
     camera = load_camera(args.camera) if args.camera else None
     rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
