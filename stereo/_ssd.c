@@ -15,7 +15,7 @@
  * cost (left-right check). All arithmetic is integer and reproduces the numpy
  * path of block_matching.py bit for bit:
  *
- *   sq(y, x, d) = (Lp[y, x] - R[y, clamp(x - d, 0, W - 1)])^2
+ *   sq(y, x, d) = sum over planes p of (Lp[p, y, x] - R[p, y, clamp(x - d, 0, W - 1)])^2
  *   sum         = window sum of sq, rows reflected at the image edges and
  *                 columns reflected at 0 and W + D (OpenCV BORDER_REFLECT)
  *   cost        = sum >> rshift[k]            (scale == NULL)
@@ -55,42 +55,42 @@ static inline int reflect(int i, int n)
     return i;
 }
 
-/* col[c][d] += sign * sq(row, c, d) for c in [0, nc) */
+/* col[c][d] += sq(row, c, d) for c in [0, nc), summed over the nch planes
+ * (lplane, rplane elements apart) */
 static inline void add_row(uint32_t *restrict col, int dp, int nc, int D,
                            const uint16_t *restrict lrow, const uint16_t *restrict rrev, int roff,
-                           int sign)
+                           int nch, int64_t lplane, int64_t rplane)
 {
     for (int c = 0; c < nc; c++) {
-        const int32_t lv = lrow[c];
-        const uint16_t *restrict rv = rrev + (roff - c);
         uint32_t *restrict cc = col + (size_t)c * dp;
-        if (sign > 0)
+        for (int ch = 0; ch < nch; ch++) {
+            const int32_t lv = lrow[ch * lplane + c];
+            const uint16_t *restrict rv = rrev + ch * rplane + (roff - c);
             for (int d = 0; d < D; d++) {
                 const int32_t t = lv - (int32_t)rv[d];
                 cc[d] += (uint32_t)(t * t);
             }
-        else
-            for (int d = 0; d < D; d++) {
-                const int32_t t = lv - (int32_t)rv[d];
-                cc[d] -= (uint32_t)(t * t);
-            }
+        }
     }
 }
 
 /* col[c][d] += sq(in, c, d) - sq(out, c, d) */
 static inline void move_row(uint32_t *restrict col, int dp, int nc, int D,
                             const uint16_t *restrict lin, const uint16_t *restrict rin,
-                            const uint16_t *restrict lout, const uint16_t *restrict rout, int roff)
+                            const uint16_t *restrict lout, const uint16_t *restrict rout, int roff,
+                            int nch, int64_t lplane, int64_t rplane)
 {
     for (int c = 0; c < nc; c++) {
-        const int32_t a = lin[c], b = lout[c];
-        const uint16_t *restrict ra = rin + (roff - c);
-        const uint16_t *restrict rb = rout + (roff - c);
         uint32_t *restrict cc = col + (size_t)c * dp;
-        for (int d = 0; d < D; d++) {
-            const int32_t t = a - (int32_t)ra[d];
-            const int32_t u = b - (int32_t)rb[d];
-            cc[d] += (uint32_t)(t * t) - (uint32_t)(u * u);
+        for (int ch = 0; ch < nch; ch++) {
+            const int32_t a = lin[ch * lplane + c], b = lout[ch * lplane + c];
+            const uint16_t *restrict ra = rin + ch * rplane + (roff - c);
+            const uint16_t *restrict rb = rout + ch * rplane + (roff - c);
+            for (int d = 0; d < D; d++) {
+                const int32_t t = a - (int32_t)ra[d];
+                const int32_t u = b - (int32_t)rb[d];
+                cc[d] += (uint32_t)(t * t) - (uint32_t)(u * u);
+            }
         }
     }
 }
@@ -98,39 +98,46 @@ static inline void move_row(uint32_t *restrict col, int dp, int nc, int D,
 #ifdef HAVE_AVX2_PATH
 /* move_row with 16-bit differences: one vpmaddwd of the interleaved pairs
  * (t, u) and (t, -u) gives t^2 - u^2 for 8 disparities (|t|, |u| <= 1020 fit
- * int16; the 64-bit lane permute first keeps the disparities in order). */
+ * int16; the 64-bit lane permute first keeps the disparities in order). The
+ * planes are summed in registers, so each column sum is loaded and stored
+ * once per row whatever nch. */
 __attribute__((target("avx2"))) static void move_row_avx2(
     uint32_t *restrict col, int dp, int nc, int D, const uint16_t *restrict lin,
     const uint16_t *restrict rin, const uint16_t *restrict lout,
-    const uint16_t *restrict rout, int roff)
+    const uint16_t *restrict rout, int roff, int nch, int64_t lplane, int64_t rplane)
 {
     for (int c = 0; c < nc; c++) {
-        const int32_t a = lin[c], b = lout[c];
-        const __m256i va = _mm256_set1_epi16((short)a), vb = _mm256_set1_epi16((short)b);
-        const uint16_t *restrict ra = rin + (roff - c);
-        const uint16_t *restrict rb = rout + (roff - c);
         uint32_t *restrict cc = col + (size_t)c * dp;
         int d = 0;
         for (; d + 16 <= D; d += 16) {
-            const __m256i x = _mm256_permute4x64_epi64(
-                _mm256_loadu_si256((const __m256i *)(ra + d)), 0xD8);
-            const __m256i y = _mm256_permute4x64_epi64(
-                _mm256_loadu_si256((const __m256i *)(rb + d)), 0xD8);
-            const __m256i t = _mm256_sub_epi16(va, x);
-            const __m256i u = _mm256_sub_epi16(vb, y);
-            const __m256i nu = _mm256_sub_epi16(y, vb);
-            const __m256i lo = _mm256_madd_epi16(_mm256_unpacklo_epi16(t, u),
-                                                 _mm256_unpacklo_epi16(t, nu));
-            const __m256i hi = _mm256_madd_epi16(_mm256_unpackhi_epi16(t, u),
-                                                 _mm256_unpackhi_epi16(t, nu));
+            __m256i lo = _mm256_setzero_si256(), hi = _mm256_setzero_si256();
+            for (int ch = 0; ch < nch; ch++) {
+                const __m256i va = _mm256_set1_epi16((short)lin[ch * lplane + c]);
+                const __m256i vb = _mm256_set1_epi16((short)lout[ch * lplane + c]);
+                const uint16_t *ra = rin + ch * rplane + (roff - c);
+                const uint16_t *rb = rout + ch * rplane + (roff - c);
+                const __m256i x = _mm256_permute4x64_epi64(
+                    _mm256_loadu_si256((const __m256i *)(ra + d)), 0xD8);
+                const __m256i y = _mm256_permute4x64_epi64(
+                    _mm256_loadu_si256((const __m256i *)(rb + d)), 0xD8);
+                const __m256i t = _mm256_sub_epi16(va, x);
+                const __m256i u = _mm256_sub_epi16(vb, y);
+                const __m256i nu = _mm256_sub_epi16(y, vb);
+                lo = _mm256_add_epi32(lo, _mm256_madd_epi16(_mm256_unpacklo_epi16(t, u),
+                                                            _mm256_unpacklo_epi16(t, nu)));
+                hi = _mm256_add_epi32(hi, _mm256_madd_epi16(_mm256_unpackhi_epi16(t, u),
+                                                            _mm256_unpackhi_epi16(t, nu)));
+            }
             __m256i *p0 = (__m256i *)(cc + d), *p1 = (__m256i *)(cc + d + 8);
             _mm256_storeu_si256(p0, _mm256_add_epi32(_mm256_loadu_si256(p0), lo));
             _mm256_storeu_si256(p1, _mm256_add_epi32(_mm256_loadu_si256(p1), hi));
         }
         for (; d < D; d++) {
-            const int32_t t = a - (int32_t)ra[d];
-            const int32_t u = b - (int32_t)rb[d];
-            cc[d] += (uint32_t)(t * t) - (uint32_t)(u * u);
+            for (int ch = 0; ch < nch; ch++) {
+                const int32_t t = lin[ch * lplane + c] - (int32_t)rin[ch * rplane + roff - c + d];
+                const int32_t u = lout[ch * lplane + c] - (int32_t)rout[ch * rplane + roff - c + d];
+                cc[d] += (uint32_t)(t * t) - (uint32_t)(u * u);
+            }
         }
     }
 }
@@ -207,9 +214,10 @@ static void decide_row(const decide_t *p, int W, const int32_t *best, const int3
 }
 
 /*
- * Lp     H x lstride uint16: left image with D reflected columns on its right
- *        (lstride >= W + D).
- * Rrev   H x rstride uint16: each row of the right image padded with D - 1
+ * Lp     nch planes (lplane elements apart) of H x lstride uint16: left image
+ *        with D reflected columns on its right (lstride >= W + D); nch = 1
+ *        (luma) or 3 (R, G, B, squared differences summed).
+ * Rrev   nch planes (rplane apart) of H x rstride uint16: each row of the right image padded with D - 1
  *        replicated columns on its left and D on its right (length
  *        P = W + 2D - 1 <= rstride), then reversed, so that
  *        R[clamp(c - d)] = Rrev[P - D - c + d], increasing in d.
@@ -222,20 +230,21 @@ static void decide_row(const decide_t *p, int W, const int32_t *best, const int3
  * Returns 0, or -1 on bad arguments / out of memory.
  */
 #define MATCH_ARGS                                                                           \
-    const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride, int H, int W, int D,   \
+    const uint16_t *Lp, int lstride, const uint16_t *Rrev, int rstride, int nch,              \
+        int64_t lplane, int64_t rplane, int H, int W, int D,                                   \
         int y0, int y1, int nwin, const int32_t *wins, const uint8_t *cwin,                    \
         const int32_t *rshift, const double *scale, int nb, const uint8_t *pick, int npick,    \
         const int32_t *sides, const float *vpick, int subpixel, int lr_tolerance,              \
         int unique_test, double u1, double dist_var, double two_var, double unit, float *disp, \
         float *cost, int64_t *counts
 #define MATCH_CALL                                                                            \
-    Lp, lstride, Rrev, rstride, H, W, D, y0, y1, nwin, wins, cwin, rshift, scale, nb, pick,    \
+    Lp, lstride, Rrev, rstride, nch, lplane, rplane, H, W, D, y0, y1, nwin, wins, cwin, rshift, scale, nb, pick,    \
         npick, sides, vpick, subpixel, lr_tolerance, unique_test, u1, dist_var, two_var, unit, \
         disp, cost, counts
 
 static inline __attribute__((always_inline)) int match_body(MATCH_ARGS, int avx2)
 {
-    if (nwin < 1 || nwin > MAXWIN || D < 1 || W < 1 || y0 < 0 || y1 > H || y0 >= y1 || npick < 1)
+    if (nch < 1 || nch > 4 || nwin < 1 || nwin > MAXWIN || D < 1 || W < 1 || y0 < 0 || y1 > H || y0 >= y1 || npick < 1)
         return -1;
     const int wp = W + D;           /* width of the numpy path's diff array */
     const int P = W + 2 * D - 1;    /* padded right row */
@@ -275,7 +284,7 @@ static inline __attribute__((always_inline)) int match_body(MATCH_ARGS, int avx2
                 for (int r = y - h; r <= y + h; r++) {
                     const int rr = reflect(r, H);
                     add_row(ck, dp, nc, D, Lp + (size_t)rr * lstride, Rrev + (size_t)rr * rstride,
-                            roff, 1);
+                            roff, nch, lplane, rplane);
                 }
             } else {
                 const int ri = reflect(y + h, H), ro = reflect(y - h - 1, H);
@@ -283,10 +292,10 @@ static inline __attribute__((always_inline)) int match_body(MATCH_ARGS, int avx2
                 const uint16_t *rI = Rrev + (size_t)ri * rstride, *rO = Rrev + (size_t)ro * rstride;
 #ifdef HAVE_AVX2_PATH
                 if (avx2)
-                    move_row_avx2(ck, dp, nc, D, li, rI, lo, rO, roff);
+                    move_row_avx2(ck, dp, nc, D, li, rI, lo, rO, roff, nch, lplane, rplane);
                 else
 #endif
-                    move_row(ck, dp, nc, D, li, rI, lo, rO, roff);
+                    move_row(ck, dp, nc, D, li, rI, lo, rO, roff, nch, lplane, rplane);
             }
         }
         for (int x = 0; x < W * RB; x++)

@@ -5,7 +5,8 @@ textureless card and thin occluders) and the four Middlebury pairs in
 ``../shared/data/stereo-real`` (GT scale 16/8/4/4, 0 = unknown). Methods: our
 SSD block matching (knob: window side, and ``auto``; 8-bit pairs run the
 compiled kernel ``stereo/_ssd.c``, the phases' shares are reported), the same
-with the local-mean prefilter (informational, not the default), OpenCV
+with the local-mean prefilter and with colour SSD (informational, not the
+defaults), OpenCV
 StereoBM (same windows) and StereoSGBM (block size). Error: **bad-2.0**, the share of pixels
 with ground truth whose estimate is missing or off by more than 2 px (a
 method gains nothing by leaving pixels unknown); the share among estimated
@@ -78,6 +79,13 @@ def _ours_prefiltered(data, window):
 
     return match(data["left"], data["right"], max_disp=data["max_disp"], window=window,
                  prefilter="local-mean").disparity
+
+
+def _ours_colour(data, window):
+    from stereo.block_matching import match
+
+    return match(data["left"], data["right"], max_disp=data["max_disp"], window=window,
+                 channels="color").disparity
 
 
 def _bm_prepare(data):
@@ -277,6 +285,8 @@ def stage(*, quick: bool = False) -> Stage:
         Method("ssd (ours)", _ours, "window", (*windows, "auto"), cases=stereo_names),
         # informational: the local-mean prefilter, not the default (DEFAULTS_CHOICE)
         Method("ssd local-mean (ours)", _ours_prefiltered, "window", windows, cases=stereo_names),
+        # informational: colour SSD, not the default (DEFAULTS_CHOICE)
+        Method("ssd color (ours)", _ours_colour, "window", windows, cases=stereo_names),
         Method("StereoBM", _bm, "window", windows, peer="opencv", cases=stereo_names,
                prepare=_bm_prepare),
         Method("StereoSGBM", _sgbm, "window", (3, 5) if not quick else (5,), peer="opencv",

@@ -177,7 +177,8 @@ def _match(args) -> int:
                                        f"{left.shape[1]}), got {args.max_disp}")
     t0 = time.perf_counter()
     params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
-              "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance}
+              "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
+              "channels": args.channels, "prefilter": args.prefilter}
     model: dict = {}
     inputs = [args.left, args.right]
     if args.rig:
@@ -206,7 +207,8 @@ def _match(args) -> int:
         else:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
     res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
-                uniqueness=args.uniqueness, lr_tolerance=args.lr_tolerance)
+                uniqueness=args.uniqueness, lr_tolerance=args.lr_tolerance, channels=args.channels,
+                prefilter=args.prefilter)
     model["block_matching"] = res.info
     dt = time.perf_counter() - t0
     meta = make_meta("lumigraph.disparity", inputs=inputs, params=params, model=model,
@@ -393,8 +395,14 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
                    help="minimum window signal std in units of the noise sigma (default 1.0)")
     v.add_argument("--uniqueness", type=float, default=0.02,
                    help="second-best must cost (1+u) times the best (default 0.02)")
-    v.add_argument("--lr-tolerance", type=int, default=2,
-                   help="left-right check tolerance in px, -1 disables (default 2)")
+    v.add_argument("--lr-tolerance", type=int, default=3,
+                   help="left-right check tolerance in px, -1 disables (default 3)")
+    v.add_argument("--channels", choices=("luma", "color"), default="luma",
+                   help="compare luma (default) or the sum over R, G, B (slower; helps "
+                        "colourful scenes of equal-luma hues)")
+    v.add_argument("--prefilter", choices=("none", "local-mean"), default="none",
+                   help="local-mean: match each image minus its 9x9 mean, clipped (StereoBM's "
+                        "normalised response); cancels a gain/offset between the views")
     v.add_argument("--out", required=True, help="disparity .pfm (unknown stored as inf)")
     v.set_defaults(func=_match)
 

@@ -84,16 +84,23 @@ def test_inputs_not_mutated():
     assert np.array_equal(a, s.images[0]) and np.array_equal(b, s.images[1])
 
 
+@pytest.mark.parametrize("channels", ["luma", "color"])
 @pytest.mark.parametrize("window, max_disp", [(9, 24), (31, 130)])
-def test_integer_and_float_paths_agree(window, max_disp):
-    # 8-bit pairs are matched on exact integer SSD of quarter-code luma
-    # (low bits dropped when window sums and the disparity code would not fit
-    # 30 bits: the (31, 130) case); float pairs on float32 luma. The same
-    # scene must give the same matches: the quarter-code rounding (sigma 0.07
-    # code values) is far below the noise of 1 code value rendered into it.
+def test_integer_and_float_paths_agree(window, max_disp, channels):
+    # 8-bit pairs are matched on exact integer SSD (of quarter-code luma, or
+    # of the code values of R, G, B), low bits dropped when window sums and
+    # the disparity code would not fit 30 bits (the (31, 130) case); float
+    # pairs on float32. The same scene must give the same matches: the
+    # quarter-code rounding of luma (sigma 0.07 code values) is far below the
+    # noise of 1 code value rendered into it, and colour is exact.
     s = render("stereo-pair", size=(320, 120) if max_disp > 100 else (160, 120))
-    a = match(s.images[0], s.images[1], max_disp=max_disp, window=window)
-    b = match(to_gray(s.images[0]), to_gray(s.images[1]), max_disp=max_disp, window=window)
+    a = match(s.images[0], s.images[1], max_disp=max_disp, window=window, channels=channels)
+    if channels == "luma":
+        fl, fr = to_gray(s.images[0]), to_gray(s.images[1])
+    else:
+        fl, fr = s.images[0].astype(np.float32), s.images[1].astype(np.float32)
+    b = match(fl, fr, max_disp=max_disp, window=window, channels=channels)
+    assert a.info["channels"] == b.info["channels"] == ("luma" if channels == "luma" else "rgb")
     both = np.isfinite(a.disparity) & np.isfinite(b.disparity)
     assert both.mean() > 0.5
     assert np.mean(np.abs(a.disparity[both] - b.disparity[both]) < 0.1) > 0.98
@@ -119,6 +126,10 @@ def _same(a, b):
     (31, 130, (320, 96), {}),                  # window sums shifted to fit 30 bits
     ("auto", 31, (160, 120), dict(prefilter="local-mean")),
     (9, 31, (160, 120), dict(prefilter="local-mean", prefilter_cap=4.0)),  # clipping active
+    (9, 31, (160, 120), dict(channels="color")),
+    ("auto", 31, (160, 120), dict(channels="color", distinct=1.0)),
+    (31, 130, (320, 96), dict(channels="color")),
+    (9, 31, (160, 120), dict(channels="color", prefilter="local-mean")),
 ])
 def test_compiled_kernel_identical_to_numpy_path(window, max_disp, size, kw, monkeypatch):
     # the kernel's integer SSD and float32 decision are specified to reproduce
@@ -198,3 +209,29 @@ def test_bad_prefilter(kw, fragment):
     a = np.zeros((20, 30), np.uint8)
     with pytest.raises(ValueError, match=fragment):
         match(a, a, max_disp=4, **kw)
+
+
+def test_colour_matches_hues_of_equal_luma():
+    # A texture carried almost wholly by hue: red and green move against each
+    # other so that luma keeps only a faint texture (std 0.8, below the luma
+    # noise std 1.3 of per-channel noise 2), while each channel varies by
+    # tens of code values. Luma has next to nothing to match (refused as
+    # textureless, or wrong); the colour SSD sees the channels and matches.
+    rng = np.random.default_rng(3)
+    h, w, shift = 60, 120, 7
+    chroma = gaussian_filter(rng.normal(0, 1, (h, w + shift)), 1.2)
+    luma = gaussian_filter(rng.normal(0, 1, (h, w + shift)), 1.2)
+    chroma *= 40 / chroma.std()
+    luma *= 0.8 / luma.std()
+    img = np.stack([128 + luma + chroma, 128 + luma - chroma * 0.299 / 0.587, 128 + luma], -1)
+    left, right = img[:, :w], img[:, shift:shift + w]      # left x sees right x - shift
+
+    def noisy(a):
+        return np.clip(np.rint(a + rng.normal(0, 2, a.shape)), 0, 255).astype(np.uint8)
+
+    L, R = noisy(left), noisy(right)
+    ok = {}
+    for channels in ("luma", "color"):
+        d = match(L, R, max_disp=15, window=9, channels=channels).disparity[:, 20:]
+        ok[channels] = np.mean(np.abs(d - shift) <= 0.5)
+    assert ok["color"] > 0.95 > 0.5 > ok["luma"], ok

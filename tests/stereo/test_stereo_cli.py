@@ -139,3 +139,23 @@ def test_bench_quick_through_cli(tmp_path):
     assert r.returncode == 0, r.stderr
     rep = (tmp_path / "b" / "report.md").read_text()
     assert "StereoBM" in rep and "triangulation" in rep
+
+
+def test_match_channels_and_prefilter_flags(pairs, tmp_path):
+    # the options reach the matcher and its record; both still match the pair
+    folder, s = pairs["rectified"]
+    gt = s.gt_arrays["disparity"]
+    for flags, channels, prefilter in ((["--channels", "color"], "rgb", "none"),
+                                       (["--prefilter", "local-mean"], "luma", "local-mean")):
+        d = tmp_path / f"{channels}-{prefilter}.pfm"
+        r = lumigraph("stereo", "match", folder / "left.png", folder / "right.png", "--max-disp", "40",
+                      "--window", "9", *flags, "--out", d, "-q")
+        assert r.returncode == 0, r.stderr
+        info = json.loads(d.with_name(d.name + ".meta.json").read_text())["model"]["block_matching"]
+        assert (info["channels"], info["prefilter"]) == (channels, prefilter)
+        e = np.abs(io.read_pfm(d) - gt)[np.isfinite(gt)]
+        assert 0 < np.nanmedian(e) < 0.3
+    assert_clean_error(lumigraph("stereo", "match", folder / "left.png", folder / "right.png",
+                                 "--max-disp", "40", "--channels", "hsv", "--out", tmp_path / "x.pfm"),
+                       "--channels")
+    assert not (tmp_path / "x.pfm").exists()
