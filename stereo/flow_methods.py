@@ -12,18 +12,20 @@ Examples
 from __future__ import annotations
 
 
-def _pyramid(i0, i1, *, levels="auto", window=9, iterations=3, **_):
+def _pyramid(i0, i1, *, levels="auto", window=9, iterations=3, finest_level=0, median_radius=0,
+             **_):
     from stereo.pyramid_flow import pyramid_flow
 
     return pyramid_flow(i0, i1, levels=levels, window=window, iterations=iterations,
-                        method="local")
+                        finest_level=finest_level, median_radius=median_radius, method="local")
 
 
-def _pyramid_dense(i0, i1, *, levels="auto", window=9, iterations=3, **_):
+def _pyramid_dense(i0, i1, *, levels="auto", window=9, iterations=3, finest_level=0,
+                   median_radius=0, **_):
     from stereo.pyramid_flow import pyramid_flow
 
     return pyramid_flow(i0, i1, levels=levels, window=window, iterations=iterations,
-                        method="dense")
+                        finest_level=finest_level, median_radius=median_radius, method="dense")
 
 
 def _video_matching(i0, i1, *, levels="auto", **_):

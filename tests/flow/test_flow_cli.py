@@ -85,3 +85,31 @@ def test_bench_flow_quick(tmp_path):
     assert all(x["status"] == "ok" or x["status"].startswith("unavailable") for x in rows)
     assert js["stages"]["flow"]["checks"]
     assert (tmp_path / "flow.png").read_bytes().startswith(b"\x89PNG")
+
+
+@pytest.mark.parametrize("flags, kw", [(["--median-radius", "5"], dict(median_radius=5)),
+                                       (["--finest-level", "1", "--iterations", "1"],
+                                        dict(finest_level=1, iterations=1))])
+def test_median_radius_and_finest_level_reach_the_method(pair, tmp_path, flags, kw):
+    from stereo.pyramid_flow import pyramid_flow
+
+    out = tmp_path / "k.flo"
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out, *flags, "-q")
+    assert r.returncode == 0, r.stderr
+    params = json.loads((tmp_path / "k.flo.meta.json").read_text())["params"]
+    assert all(params[k] == v for k, v in kw.items())
+    i0, i1 = io.read_image(pair / "frame00.png"), io.read_image(pair / "frame01.png")
+    ref = pyramid_flow(i0, i1, method="local", **kw).flow
+    # the file holds the library's answer (float32 .flo, unknown stored as 1e10)
+    assert np.array_equal(np.isfinite(io.read_flo(out)), np.isfinite(ref))
+    assert np.allclose(io.read_flo(out), ref, equal_nan=True, atol=0)
+
+
+@pytest.mark.parametrize("flags, fragment", [(["--median-radius", "-1"], "--median-radius"),
+                                             (["--finest-level", "3", "--levels", "2"], "--finest-level"),
+                                             (["--method", "video-matching", "--median-radius", "5"],
+                                              "--method")])
+def test_bad_flow_knobs(pair, tmp_path, flags, fragment):
+    assert_clean_error(lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out",
+                                 tmp_path / "out.flo", *flags), fragment)
+    assert _nothing_written(tmp_path)
