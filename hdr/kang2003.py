@@ -1,0 +1,591 @@
+"""Kang, Uyttendaele, Winder & Szeliski (2003): HDR video from alternating exposures.
+
+S. B. Kang, M. Uyttendaele, S. Winder and R. Szeliski, "High Dynamic Range
+Video", SIGGRAPH 2003, doi:10.1145/882262.882270 (reference ch. 6, §6.3.2).
+
+The camera alternates short and long exposures; every output frame is the
+radiance of the *current* frame, completed from its registered neighbours:
+
+1. **Exposure equalisation** ("boosting", §6.3.2 step 2). A pair of frames is
+   compared at the longer of their two exposures: each frame's relative
+   exposure ``f⁻¹(z)`` (eq. 6.4: ``X = f⁻¹(Z)/Δt``) is rescaled to that
+   exposure, clipped to the range both frames can record (the shorter frame's
+   boosted black level up to saturation) and re-encoded through the response,
+   so optical flow sees equal brightness.
+2. **Registration.** For an inner frame the two neighbours share an exposure,
+   so the flow between them (previous → next) sees texture exactly where the
+   current frame is clipped; under constant velocity the current frame sits
+   half-way, ``v(x) = ½ F(x − v(x))`` (Kang's *bidirectional* estimate,
+   without his global/projective refinement). The first and last frame use the
+   flow current → neighbour on the equalised pair (*unidirectional*). Flow is
+   :func:`stereo.pyramid_flow.pyramid_flow`; the neighbours' radiance is
+   pulled onto the current frame by ``cv2.remap``.
+3. **HDR recovery** (§6.3.2 step 3). Where the current frame's code values are
+   reliable (non-zero variance weight of :func:`hdr.merge.variance_weight_table`)
+   its own radiance is kept. Elsewhere a warped neighbour is used only if it
+   is consistent: flow forward-backward consistent, every pixel it is
+   interpolated from reliable, within the bound the clipped current pixel
+   implies (saturated: radiance ≥ ``f⁻¹(z_hi)/Δt``; black: ≤ ``f⁻¹(z_lo)/Δt``)
+   to ``k`` noise σ, agreeing with the current frame on the well-exposed
+   pixels around it, and (inner frames) with the other neighbour. Accepted
+   neighbours are averaged with inverse-variance weights; a pixel with none
+   keeps the current frame's bound and is flagged :data:`FALLBACK` (and
+   :data:`CLIPPED` / :data:`BLACK` as in :func:`hdr.merge.merge`), never a
+   ghost.
+4. **Tone mapping** (step 4): :func:`tonemap_video` is Reinhard et al.'s global
+   operator (eq. 1-4 of doi:10.1145/566570.566575, :mod:`hdr.reinhard2002`)
+   with the log-average luminance and the white point smoothed over a window
+   of frames, so the exposure of the display does not flicker.
+
+Examples
+--------
+>>> from capture.scenes.brackets import render_bracket_video
+>>> from hdr.response import ResponseCurve
+>>> s = render_bracket_video(size=(48, 36), seed=0, rng=np.random.default_rng(0), frames=3)
+>>> v = hdr_video(np.stack(s.images), s.stack["exposure_times_s"], ResponseCurve("gt", 8, s.gt_arrays["g"]))
+>>> v.radiance.shape, v.radiance.dtype.name, sorted(v.frames[1]["sources"])
+((3, 36, 48, 3), 'float32', ['both', 'current', 'fallback', 'next', 'previous'])
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from capture.errors import InputError
+from hdr.merge import BLACK, CLIPPED, GHOST, variance_weight_table
+from hdr.response import ResponseCurve
+
+WARPED = 8  # the value comes from registered neighbours
+FALLBACK = 16  # unreliable in the current frame and no consistent neighbour: its bound
+
+
+# ------------------------------------------------------------------ results
+@dataclass(frozen=True)
+class HDRVideo:
+    """Per-frame radiance of an alternating-exposure video.
+
+    Attributes
+    ----------
+    radiance : ndarray, ``(N, H, W, C)`` float32
+        Relative linear radiance per frame (``f⁻¹(z)/Δt`` units, as
+        :func:`hdr.merge.merge`).
+    flags : ndarray, ``(N, H, W, C)`` uint8
+        :data:`WARPED`, :data:`FALLBACK`, :data:`GHOST` (a neighbour was
+        rejected), :data:`hdr.merge.CLIPPED` / :data:`hdr.merge.BLACK` (the
+        value is a bound).
+    exposure_times_s : tuple of float
+    frames : tuple of dict
+        Per frame: ``sources`` (share of pixel-channels from ``current``,
+        ``previous``, ``next``, ``both``, ``fallback``), ``rejected`` (share of
+        the current frame's unreliable pixel-channels each test refused, per
+        neighbour), ``flow`` (mode, levels, occluded share, mean |v| px).
+    params : dict
+    warnings : tuple of str
+    """
+
+    radiance: np.ndarray
+    flags: np.ndarray
+    exposure_times_s: tuple[float, ...]
+    frames: tuple[dict, ...]
+    params: dict = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+
+    def __post_init__(self):
+        if self.radiance.dtype != np.float32 or self.radiance.ndim != 4:
+            raise TypeError(f"radiance: expected (N, H, W, C) float32, got "
+                            f"{self.radiance.shape} {self.radiance.dtype}")
+        if self.flags.shape != self.radiance.shape or self.flags.dtype != np.uint8:
+            raise ValueError(f"flags: expected {self.radiance.shape} uint8, got "
+                             f"{self.flags.shape} {self.flags.dtype}")
+        if len(self.frames) != self.radiance.shape[0]:
+            raise ValueError(f"frames: expected {self.radiance.shape[0]} diagnostics, got "
+                             f"{len(self.frames)}")
+
+
+@dataclass(frozen=True)
+class TonemappedVideo:
+    """Display frames of :func:`tonemap_video`.
+
+    Attributes
+    ----------
+    images : ndarray, ``(N, H, W, 3)`` uint8 or uint16, sRGB-encoded
+    log_average : ndarray, ``(N,)`` float64
+        Each frame's own log-average luminance ``L̄_w`` (Reinhard eq. 1).
+    log_average_used : ndarray, ``(N,)`` float64
+        The temporally smoothed ``L̄_w`` the frames were scaled by.
+    flicker : float
+        Mean ``|Δ ln L̄|`` between consecutive frames of the log-average the
+        frames were scaled by: how much the display of a pixel whose radiance
+        did not change jumps from frame to frame (0: none).
+    """
+
+    images: np.ndarray
+    log_average: np.ndarray
+    log_average_used: np.ndarray
+    flicker: float
+    params: dict = field(default_factory=dict)
+
+
+# ------------------------------------------------------------- validation
+def _check(frames, times, response):
+    z = np.asarray(frames)
+    if z.ndim == 3:
+        z = z[..., None]
+    if z.ndim != 4:
+        raise InputError("frames", f"expected a video (N, H, W, C), got shape {z.shape}")
+    if z.dtype.kind not in "ui":
+        raise TypeError(f"frames: expected integer code values, got {z.dtype}")
+    if z.shape[0] < 2:
+        raise InputError("frames", f"HDR video needs at least 2 frames, got {z.shape[0]}")
+    if not isinstance(response, ResponseCurve):
+        raise TypeError(f"response: expected a ResponseCurve, got {type(response).__name__}")
+    if z.size and int(z.max()) > response.code_max:
+        raise InputError("--response", f"codes up to {int(z.max())} exceed the curve's bit depth "
+                                       f"{response.bit_depth}")
+    if response.channels not in (1, z.shape[-1]):
+        raise InputError("--response", f"curve has {response.channels} channels, frames have "
+                                       f"{z.shape[-1]}")
+    if times is None:
+        raise InputError("--times", "exposure times are needed (stack.json or --times)")
+    t = np.asarray(times, dtype=np.float64).ravel()
+    if t.size != z.shape[0]:
+        raise InputError("--times", f"{t.size} exposure times for {z.shape[0]} frames")
+    if not np.all(np.isfinite(t)) or np.any(t <= 0):
+        raise InputError("--times", f"exposure times must be positive and finite, got {t.tolist()}")
+    if float(t.max() / t.min()) < 1.0 + 1e-3:
+        raise InputError("--times", f"every frame has the same exposure ({t[0]:g} s): HDR video "
+                                    "needs alternating exposures (neighbours would clip where "
+                                    "the current frame does); use a plain merge or tone map")
+    return z, t
+
+
+# ------------------------------------------------------------ the pieces
+class _Radiometry:
+    """Per-code lookup tables shared by every frame."""
+
+    def __init__(self, response, c, *, full_well_e, read_noise_e, clip_margin):
+        x = response.exposure_table()
+        if response.channels == 1:
+            x = np.repeat(x, c, axis=0)
+        self.x = x  # f^-1(z), (C, Z)
+        w = variance_weight_table(x, full_well_e=full_well_e, read_noise_e=read_noise_e,
+                                  clip_margin=clip_margin)
+        self.reliable = w > 0  # (C, Z)
+        # Variance of f^-1(z) (before / Δt²); at unreliable codes that of the
+        # nearest reliable code, used only for the bound tests.
+        var = np.where(w > 0, 1.0 / np.maximum(w, 1e-300), np.nan)
+        self.zmax = response.code_max
+        self.lo = int(math.ceil(clip_margin * self.zmax))
+        self.hi = int(math.floor((1 - clip_margin) * self.zmax))
+        ok = np.nonzero(self.reliable.all(axis=0))[0]
+        if ok.size == 0:
+            raise InputError("--response", "no code value is reliable at this clip margin")
+        self.lo, self.hi = int(ok[0]), int(ok[-1])
+        self.var = np.where(np.isfinite(var), var, 0.0)
+        self.var_lo = var[:, self.lo]
+        self.var_hi = var[:, self.hi]
+        # Monotone copy of f^-1 for re-encoding exposures as codes.
+        self.x_mono = np.maximum.accumulate(x, axis=1)
+
+    def lookup(self, table, z):
+        out = np.empty(z.shape, np.float32)
+        for ch in range(z.shape[-1]):
+            out[..., ch] = table[ch][z[..., ch]]
+        return out
+
+    def encode(self, e):
+        """Exposure (``f⁻¹`` units) → normalised code in [0, 1], per channel."""
+        out = np.empty(e.shape, np.float32)
+        codes = np.arange(self.zmax + 1, dtype=np.float64) / self.zmax
+        for ch in range(e.shape[-1]):
+            out[..., ch] = np.interp(e[..., ch], self.x_mono[ch], codes)
+        return out
+
+
+def equalise(x_a, t_a, x_b, t_b, rad: _Radiometry):
+    """Both frames' radiance re-exposed at ``max(t_a, t_b)``, clipped to the range
+    both can record and re-encoded through the response (Kang's "boost")."""
+    t = max(t_a, t_b)
+    lo = rad.x[:, rad.lo] * t / min(t_a, t_b)
+    hi = rad.x[:, rad.hi]
+    lo = np.minimum(lo, hi)
+    return (rad.encode(np.clip(x_a * t, lo, hi)), rad.encode(np.clip(x_b * t, lo, hi)))
+
+
+def _flow(a, b, *, window, method, max_motion_px):
+    from stereo.pyramid_flow import pyramid_flow
+
+    return pyramid_flow(a, b, levels="auto", max_motion_px=max_motion_px, method=method,
+                        window=window, consistency=True)
+
+
+def _remap(img, m, *, linear=True, border_value=0.0):
+    import cv2
+
+    interp = cv2.INTER_LINEAR if linear else cv2.INTER_NEAREST
+    return cv2.remap(np.ascontiguousarray(img, np.float32), m, None, interp,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
+
+
+def _grid(h, w):
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    return np.stack([xs, ys], axis=-1)
+
+
+def _dilate(a, k):
+    import cv2
+
+    return cv2.dilate(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
+
+
+def _erode(a, k):
+    import cv2
+
+    return cv2.erode(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
+
+
+def _box_mean(a, k):
+    import cv2
+
+    return cv2.blur(np.ascontiguousarray(a, np.float32), (k, k), borderType=cv2.BORDER_REFLECT)
+
+
+# --------------------------------------------------------------- the method
+def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int = 9,
+              flow_method: str = "dense", consistency_sigma: float = 4.0,
+              neighbourhood: int = 7, outlier_share: float = 0.25,
+              bidirectional: bool = True, max_motion_px: float | None = None,
+              full_well_e: float = 10000.0, read_noise_e: float = 5.0,
+              clip_margin: float = 0.02, progress=None) -> HDRVideo:
+    """Radiance of every frame of an alternating-exposure video.
+
+    Parameters
+    ----------
+    frames : ndarray, ``(N, H, W, C)`` uint8/uint16 codes, ``N >= 2``
+        In time order; consecutive frames should differ in exposure.
+    times : sequence of float, ``(N,)``
+        Exposure time of each frame, seconds (not all equal).
+    response : ResponseCurve
+        The camera's curve (bit depth of the codes).
+    window : int
+        Flow window (odd, px) of :func:`stereo.pyramid_flow.pyramid_flow`.
+    flow_method : {"dense", "local"}
+        ``"dense"`` fills textureless (clipped) areas from their surroundings.
+    consistency_sigma : float
+        ``k``: a warped neighbour further than ``k`` noise σ from what the
+        current frame says (its bound, or the other neighbour) is rejected.
+    neighbourhood : int
+        Side (px) of the window of well-exposed current pixels a warped
+        neighbour must agree with.
+    outlier_share : float
+        Reject a neighbour pixel when more than this share of those current
+        pixels differ by more than ``k`` σ (misregistration nearby).
+    bidirectional : bool
+        Inner frames register through the previous → next flow (True) or
+        each neighbour on its own equalised pair (False).
+    max_motion_px : float, optional
+        Largest expected motion between consecutive frames (px) for the
+        flow's pyramid depth; default estimated by the flow.
+    full_well_e, read_noise_e, clip_margin : float
+        Noise model and clipping of :func:`hdr.merge.merge`.
+    progress : callable, optional
+        Wraps the frame loop (``progress(range(N))``), e.g.
+        :func:`capture.command.progress`.
+
+    Returns
+    -------
+    HDRVideo
+
+    Raises
+    ------
+    InputError
+        Fewer than 2 frames, times not one per frame / not positive, all
+        frames at one exposure, codes beyond the curve's bit depth.
+    """
+    import time as _time
+
+    z, t = _check(frames, times, response)
+    if flow_method not in ("dense", "local"):
+        raise ValueError(f"flow_method: expected 'dense' or 'local', got {flow_method!r}")
+    if not consistency_sigma > 0:
+        raise ValueError(f"consistency_sigma: expected > 0, got {consistency_sigma}")
+    if neighbourhood < 1 or neighbourhood % 2 == 0:
+        raise ValueError(f"neighbourhood: expected an odd size >= 1, got {neighbourhood}")
+    if not 0 < outlier_share <= 1:
+        raise ValueError(f"outlier_share: expected in (0, 1], got {outlier_share}")
+    n, h, w, c = z.shape
+    rad = _Radiometry(response, c, full_well_e=full_well_e, read_noise_e=read_noise_e,
+                      clip_margin=clip_margin)
+    k2 = float(consistency_sigma) ** 2
+    flow_opts = dict(window=window, method=flow_method, max_motion_px=max_motion_px)
+    grid = _grid(h, w)
+
+    x_all = [rad.lookup(rad.x, z[i]) / np.float32(t[i]) for i in range(n)]
+    rel_all = [rad.lookup(rad.reliable.astype(np.float32), z[i]) > 0 for i in range(n)]
+    var_all = [rad.lookup(rad.var, z[i]) / np.float32(t[i] ** 2) for i in range(n)]
+
+    out = np.empty((n, h, w, c), np.float32)
+    flags = np.zeros((n, h, w, c), np.uint8)
+    diags = []
+    warnings = []
+    steps = range(n) if progress is None else progress(range(n))
+    for i in steps:
+        t0 = _time.perf_counter()
+        xc, rc, vc = x_all[i], rel_all[i], var_all[i]
+        unrel = ~rc
+        sat = unrel & (z[i] > rad.hi)
+        # Registration: a sampling map per neighbour (current pixel -> neighbour pixel).
+        maps, occ, fdiag = {}, {}, {}
+        nbrs = [j for j in (i - 1, i + 1) if 0 <= j < n]
+        if bidirectional and len(nbrs) == 2:
+            p, q = nbrs
+            ea, eb = equalise(x_all[p], t[p], x_all[q], t[q], rad)
+            fr = _flow(ea, eb, **flow_opts)
+            # Constant velocity: v(x) = F(x - v(x)) / 2 by fixed-point iteration.
+            v = 0.5 * fr.flow
+            for _ in range(3):
+                v = 0.5 * _remap(fr.flow, grid - v, border_value=0.0)
+            occ_q = _remap(fr.occluded.astype(np.float32), grid - v, linear=False,
+                           border_value=1.0) > 0
+            maps = {p: grid - v, q: grid + v}
+            occ = {p: occ_q, q: occ_q}
+            fdiag = {"mode": "bidirectional", "levels": fr.levels,
+                     "occluded": float(fr.occluded.mean()),
+                     "mean_motion_px": float(np.hypot(v[..., 0], v[..., 1]).mean())}
+        else:
+            fdiag = {"mode": "unidirectional"}
+            for j in nbrs:
+                ea, eb = equalise(xc, t[i], x_all[j], t[j], rad)
+                fr = _flow(ea, eb, **flow_opts)
+                maps[j] = grid + fr.flow
+                occ[j] = fr.occluded
+                fdiag[f"levels_{j - i:+d}"] = fr.levels
+                fdiag[f"occluded_{j - i:+d}"] = float(fr.occluded.mean())
+                fdiag[f"mean_motion_px_{j - i:+d}"] = float(
+                    np.hypot(fr.flow[..., 0], fr.flow[..., 1]).mean())
+        # Bounds the clipped current pixel puts on the truth (per channel).
+        bound_hi = (rad.x[:, rad.hi] / t[i]).astype(np.float32)
+        bound_lo = (rad.x[:, rad.lo] / t[i]).astype(np.float32)
+        var_bhi = (rad.var_hi / t[i] ** 2).astype(np.float32)
+        var_blo = (rad.var_lo / t[i] ** 2).astype(np.float32)
+
+        base, occls, relws, warped, rejected = {}, {}, {}, {}, {}
+        nu = max(int(unrel.sum()), 1)
+        for j in nbrs:
+            m = maps[j]
+            # Normalised interpolation: only the neighbour's reliable pixels
+            # contribute, so one clipped pixel in a footprint does not void it.
+            rw = _remap(rel_all[j].astype(np.float32), m, border_value=0.0)
+            relw = rw > 0.5
+            rws = np.maximum(rw, 1e-6)
+            xw = _remap(np.where(rel_all[j], x_all[j], 0.0), m) / rws
+            vw = _remap(np.where(rel_all[j], var_all[j], 0.0), m) / rws
+            # A flow the round trip disowns only matters where the neighbour has
+            # structure within the flow's uncertainty (a few px); flat there, the
+            # value is the same wherever it was sampled.
+            spread = _dilate(np.where(relw, xw, 0.0), 5) - _erode(np.where(relw, xw, np.inf), 5)
+            occl = np.repeat(occ[j][..., None], c, axis=2) & ~(spread ** 2 <= k2 * vw)
+            # Clipped current pixel: the truth is above (saturated) / below (black) its bound.
+            low = sat & ((bound_hi - xw) ** 2 > k2 * (vw + var_bhi)) & (xw < bound_hi)
+            high = (unrel & ~sat) & ((xw - bound_lo) ** 2 > k2 * (vw + var_blo)) & (xw > bound_lo)
+            # Misregistration shows where both frames are well exposed nearby.
+            both = rc & relw
+            r2 = np.where(both, (xw - xc) ** 2 / np.maximum(vw + vc, 1e-30), 0.0)
+            cnt = _box_mean(both.astype(np.float32), neighbourhood)
+            bad = _box_mean((both & (r2 > k2)).astype(np.float32), neighbourhood)
+            ghost_near = (cnt * neighbourhood ** 2 >= 3) & (bad > outlier_share * cnt)
+            base[j] = relw & ~low & ~high & ~ghost_near
+            occls[j] = occl
+            relws[j] = relw
+            warped[j] = (xw, vw)
+            rejected[f"{j - i:+d}"] = {
+                "neighbour_unreliable": float((unrel & ~relw).sum() / nu),
+                "bound": float((unrel & (low | high)).sum() / nu),
+                "neighbourhood": float((unrel & ghost_near).sum() / nu)}
+        accepted = {}
+        if len(nbrs) == 2:
+            p, q = nbrs
+            (xa, va), (xb, vb) = warped[p], warped[q]
+            pair = base[p] & base[q]
+            agree = pair & ((xa - xb) ** 2 <= k2 * (va + vb))
+            disagree = pair & ~agree
+            # Two neighbours warped independently and agreeing within noise
+            # outvote a flow round trip that did not close.
+            for j in nbrs:
+                accepted[j] = base[j] & ~disagree & (~occls[j] | agree)
+            rejected["disagree"] = float((unrel & disagree).sum() / nu)
+        else:
+            for j in nbrs:
+                accepted[j] = base[j] & ~occls[j]
+        for j in nbrs:
+            rejected[f"{j - i:+d}"]["occluded"] = float(
+                (unrel & base[j] & occls[j] & ~accepted[j]).sum() / nu)
+        inconsistent = {j: unrel & relws[j] & ~accepted[j] for j in nbrs}
+        num = np.zeros((h, w, c), np.float32)
+        den = np.zeros((h, w, c), np.float32)
+        used = {}
+        for j in nbrs:
+            xw, vw = warped[j]
+            ok = accepted[j] & unrel
+            used[j] = ok
+            wgt = np.where(ok, 1.0 / np.maximum(vw, 1e-30), 0.0).astype(np.float32)
+            num += wgt * np.where(ok, xw, 0.0)
+            den += wgt
+        filled = unrel & (den > 0)
+        fallback = unrel & ~filled
+        res = xc.copy()
+        res[filled] = num[filled] / den[filled]
+        # No consistent neighbour: the current frame's own bound, as merge() does.
+        res[fallback & sat] = np.broadcast_to(bound_hi, res.shape)[fallback & sat]
+        fb_dark = fallback & ~sat
+        res[fb_dark] = np.broadcast_to(bound_lo, res.shape)[fb_dark]
+        f = np.zeros((h, w, c), np.uint8)
+        f[filled] |= WARPED
+        f[fallback] |= FALLBACK
+        f[fallback & sat] |= CLIPPED
+        f[fb_dark] |= BLACK
+        any_rej = np.zeros((h, w, c), bool)
+        for j in nbrs:
+            any_rej |= unrel & inconsistent[j]
+        f[any_rej] |= GHOST
+        out[i] = res
+        flags[i] = f
+        total = float(h * w * c)
+        prev_u = used.get(i - 1, np.zeros_like(unrel))
+        next_u = used.get(i + 1, np.zeros_like(unrel))
+        sources = {"current": float(rc.sum() / total),
+                   "previous": float((prev_u & ~next_u).sum() / total),
+                   "next": float((next_u & ~prev_u).sum() / total),
+                   "both": float((prev_u & next_u).sum() / total),
+                   "fallback": float(fallback.sum() / total)}
+        diags.append({"frame": i, "exposure_s": float(t[i]), "sources": sources,
+                      "rejected": rejected, "flow": fdiag,
+                      "time_s": _time.perf_counter() - t0})
+        if sources["fallback"] > 0.05:
+            warnings.append(f"frame {i}: {100 * sources['fallback']:.1f} % of pixel-channels are "
+                            "unreliable and have no consistent neighbour: kept the current "
+                            "frame's clipping bound (flagged)")
+    params = {"window": window, "flow_method": flow_method,
+              "consistency_sigma": float(consistency_sigma), "neighbourhood": neighbourhood,
+              "outlier_share": float(outlier_share), "bidirectional": bool(bidirectional),
+              "max_motion_px": max_motion_px, "full_well_e": full_well_e,
+              "read_noise_e": read_noise_e, "clip_margin": clip_margin}
+    return HDRVideo(out, flags, tuple(float(x) for x in t), tuple(diags), params,
+                    tuple(warnings))
+
+
+def unaligned_merge(frames: np.ndarray, times, response: ResponseCurve, index: int, *,
+                    full_well_e: float = 10000.0, read_noise_e: float = 5.0,
+                    clip_margin: float = 0.02) -> np.ndarray:
+    """The naive baseline: frame ``index`` and its neighbours merged without registration.
+
+    Inverse-variance weights of :func:`hdr.merge.merge` over frames
+    ``index-1 .. index+1`` (those that exist; repeated exposure times are fine
+    here, unlike a bracket); where none is reliable, the current frame's
+    clipping bound as in :func:`hdr_video`.
+
+    Returns
+    -------
+    ndarray, ``(H, W, C)`` float32, relative radiance.
+
+    Examples
+    --------
+    >>> r = ResponseCurve.linear(8, 1)
+    >>> z = np.stack([np.full((2, 2, 1), v, np.uint8) for v in (100, 200, 100)])
+    >>> round(float(unaligned_merge(z, [1.0, 2.0, 1.0], r, 1)[0, 0, 0]), 4)  # 100/255 per second
+    0.3922
+    """
+    z, t = _check(frames, times, response)
+    if not 0 <= index < z.shape[0]:
+        raise ValueError(f"index: expected 0..{z.shape[0] - 1}, got {index}")
+    rad = _Radiometry(response, z.shape[-1], full_well_e=full_well_e, read_noise_e=read_noise_e,
+                      clip_margin=clip_margin)
+    num = np.zeros(z.shape[1:], np.float32)
+    den = np.zeros(z.shape[1:], np.float32)
+    for j in range(max(0, index - 1), min(z.shape[0], index + 2)):
+        var = rad.lookup(rad.var, z[j]) / np.float32(t[j] ** 2)
+        ok = rad.lookup(rad.reliable.astype(np.float32), z[j]) > 0
+        wgt = np.where(ok, 1.0 / np.maximum(var, 1e-30), 0.0).astype(np.float32)
+        num += wgt * rad.lookup(rad.x, z[j]) / np.float32(t[j])
+        den += wgt
+    out = np.where(den > 0, num / np.maximum(den, 1e-30), 0.0).astype(np.float32)
+    zi = z[index]
+    sat = (den <= 0) & (zi > rad.hi)
+    dark = (den <= 0) & ~sat
+    out[sat] = np.broadcast_to((rad.x[:, rad.hi] / t[index]).astype(np.float32), out.shape)[sat]
+    out[dark] = np.broadcast_to((rad.x[:, rad.lo] / t[index]).astype(np.float32), out.shape)[dark]
+    return out
+
+
+# ------------------------------------------------------------ tone mapping
+def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5,
+                  bit_depth: int = 8, delta: float = 1e-6) -> TonemappedVideo:
+    """Temporally coherent Reinhard global tone mapping of a radiance video.
+
+    Each frame is Reinhard et al. 2002's global operator (eq. 1-4,
+    :func:`hdr.reinhard2002.global_operator`), but the log-average luminance
+    ``L̄_w`` (eq. 1) and the white point are the geometric mean over a centred
+    window of ``temporal`` frames, so a frame whose clipped areas differ from
+    its neighbours' does not change the exposure of the whole picture.
+
+    Parameters
+    ----------
+    radiances : ndarray, ``(N, H, W, 3)`` float, linear, finite, ≥ 0
+    key : float
+        Reinhard's key ``a``.
+    temporal : int
+        Odd window length in frames; 1 is per-frame tone mapping.
+    bit_depth : {8, 16}
+
+    Returns
+    -------
+    TonemappedVideo
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> v = np.repeat(np.exp(rng.normal(0, 1, (1, 8, 8, 3))), 6, axis=0).astype(np.float32)
+    >>> v[1::2, :2] *= 50.0  # a clipped area's bound alternates, the rest is still
+    >>> a, b = tonemap_video(v, temporal=1), tonemap_video(v, temporal=5)
+    >>> bool(b.flicker < a.flicker), a.images.shape
+    (True, (6, 8, 8, 3))
+    """
+    from hdr.reinhard2002 import LUMA, global_operator, srgb_encode
+
+    v = np.asarray(radiances, dtype=np.float64)
+    if v.ndim != 4 or v.shape[-1] != 3:
+        raise ValueError(f"radiances: expected (N, H, W, 3), got {np.shape(radiances)}")
+    if not np.isfinite(v).all():
+        raise ValueError("radiances: expected finite values, got NaN/inf")
+    if not isinstance(temporal, int | np.integer) or temporal < 1 or temporal % 2 == 0:
+        raise ValueError(f"temporal: expected an odd number of frames >= 1, got {temporal!r}")
+    if bit_depth not in (8, 16):
+        raise ValueError(f"bit_depth: expected 8 or 16, got {bit_depth}")
+    if not key > 0:
+        raise ValueError(f"key: expected > 0, got {key}")
+    n = v.shape[0]
+    v = np.maximum(v, 0.0)
+    lum = v @ LUMA
+    log_avg = np.array([np.mean(np.log(delta + lum[i])) for i in range(n)])
+    log_max = np.array([np.log(max(float(lum[i].max()), delta)) for i in range(n)])
+    half = temporal // 2
+    # Centred moving average of ln L̄_w (and ln L_max), shrinking at the ends.
+    sm_avg = np.array([log_avg[max(0, i - half):i + half + 1].mean() for i in range(n)])
+    sm_max = np.array([log_max[max(0, i - half):i + half + 1].mean() for i in range(n)])
+    top = 2 ** bit_depth - 1
+    images = np.empty(v.shape, np.uint8 if bit_depth == 8 else np.uint16)
+    for i in range(n):
+        # global_operator scales by the frame's own L̄_w; a key rescaled by
+        # L̄_w / L̄_smoothed makes it scale by the smoothed one instead.
+        k_i = key * math.exp(log_avg[i] - sm_avg[i])
+        white = key * math.exp(sm_max[i] - sm_avg[i])
+        ld = global_operator(lum[i], key=k_i, white=white, delta=delta)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(lum[i] > 0, ld / lum[i], 0.0)
+        images[i] = np.round(srgb_encode(v[i] * ratio[..., None]) * top)
+    flicker = float(np.mean(np.abs(np.diff(sm_avg)))) if n > 1 else 0.0
+    return TonemappedVideo(images, np.exp(log_avg), np.exp(sm_avg), flicker,
+                           {"key": key, "temporal": int(temporal), "bit_depth": bit_depth})
