@@ -45,6 +45,7 @@ SCENE_MODULES = (
     "capture.scenes.stereo",
     "capture.scenes.lightfield",
     "capture.scenes.projector",
+    "capture.scenes.model_stereo",
 )
 GT_SCHEMA = "lumigraph.gt"
 

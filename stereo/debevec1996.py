@@ -1,0 +1,479 @@
+"""Model-based stereo (Debevec, Taylor & Malik 1996): detail on a rough model
+from a wide-baseline key/offset pair.
+
+P. E. Debevec, C. J. Taylor and J. Malik, "Modeling and Rendering
+Architecture from Photographs: A hybrid geometry- and image-based approach",
+SIGGRAPH 1996, doi:10.1145/237170.237191 (reference ch. 5, §5.3.2, "Stage 3.
+Model-based stereo", Figs. 5.12 and 5.13).
+
+Two photographs taken far apart foreshorten a surface differently, so plain
+window matching (eq. 5.1) between them fails. Given a *rough model* of the
+scene (a facade plane, a block, without its detail), the *offset* image is
+projected onto the model and re-rendered from the *key* viewpoint: the
+*warped offset image* (Fig. 5.12c). Where the real surface lies on the model
+the warped image equals the key image; detail off the model appears as a
+small disparity along the key image's epipolar lines (Fig. 5.13), which
+window matching recovers. Here that search is parametrised by the offset
+``δ`` of the surface from the model along each key ray (in the unit of the
+rig's ``T``): the key pixel ``x`` with unit-``z`` ray ``r(x)`` and model
+depth ``z_m(x)`` is tried at the 3-D point
+
+    X(δ) = (z_m(x) + δ) · r(x)            (key camera frame; eq. 5.2's ray)
+
+projected into the offset camera (``x_offset = R X + T``, with its lens
+distortion) and the offset image sampled there (bilinear, ``cv2.remap``),
+giving ``warped_δ``; ``δ = 0`` is exactly the warped offset image of
+Fig. 5.12c. Stepping ``δ`` moves the sample along the epipolar line of ``x``
+in the offset image, i.e. along the key image's epipolar line in the warped
+image. For each ``δ`` in ``[−max_offset, max_offset]`` the cost is the mean
+squared difference over a ``window × window`` box (eq. 5.1); the best ``δ``
+per pixel (winner-take-all) is refined by a parabola through its neighbours.
+The step is chosen so that the sample moves at most one offset-image pixel
+per step. The depth along the key camera's ``z`` is ``z_m + δ``.
+
+A pixel is left unknown (NaN) when
+
+- the model is absent there (``model_depth`` NaN or ``<= 0``);
+- its model point is not seen by the offset camera: outside the offset
+  frame, behind it, or hidden by a nearer part of the model (a z-buffer of
+  the model in the offset view);
+- its window lacks texture: the key image's window standard deviation is
+  below ``texture_snr · σ`` (``σ`` the key image's noise, estimated);
+- the best ``δ`` is not unique: some ``δ`` more than one step away costs
+  less than ``(1 + uniqueness)`` times the best;
+- the best ``δ`` lies at either end of the range: the surface is probably
+  farther from the model than ``max_offset`` (a wrong model or range);
+- the best cost is implausibly high for a true match: above ``max_cost``
+  times the key window's variance (a point of the key view hidden from the
+  offset camera by detail the model lacks, e.g. the reveal of a recess).
+
+Examples
+--------
+>>> from capture.scenes.model_stereo import render_facade
+>>> from calib.camera import Camera
+>>> from calib.rig import Rig
+>>> s = render_facade(size=(128, 96), seed=0, rng=np.random.default_rng(0), supersample=2, noise=0.5)
+>>> g = s.gt["rig"]
+>>> rig = Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
+>>> res = model_stereo(s.images[0], s.images[1], s.gt_arrays["model_depth"], rig, max_offset=0.35,
+...                    window=7)
+>>> err = np.abs(res.depth - s.gt_arrays["depth"])   # metres; the relief is 0.18-0.27 m deep
+>>> bool(0 < np.nanmedian(err) < 0.05), bool(res.valid_fraction > 0.5)
+(True, True)
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MAX_STEPS = 257
+
+
+@dataclass(frozen=True)
+class ModelStereo:
+    """Depth of a key view recovered as offsets from a rough model.
+
+    Attributes
+    ----------
+    depth : ndarray, (H, W) float32
+        ``z`` in the key camera frame (unit of the rig's ``T``): ``model_depth
+        + offset``; NaN where unknown.
+    offset : ndarray, (H, W) float32
+        ``δ``, the surface's offset from the model along the key ray, measured
+        in key-camera ``z`` (positive = behind the model); NaN where unknown.
+    warped : ndarray, (H, W) or (H, W, C) float32
+        The offset image projected onto the model and seen from the key
+        camera (``δ = 0``, Fig. 5.12c), in the offset image's code values;
+        NaN where the model is absent or its point is unseen by the offset
+        camera.
+    cost : ndarray, (H, W) float32
+        Best mean squared difference (key-image code values²); NaN where
+        never computed.
+    valid : ndarray, (H, W) bool
+        Where ``depth`` is known.
+    info : dict
+        Parameters, the ``δ`` range and step, the noise estimate, the pixel
+        counts each test rejected, timings and warnings.
+    """
+
+    depth: np.ndarray
+    offset: np.ndarray
+    warped: np.ndarray
+    cost: np.ndarray
+    valid: np.ndarray
+    info: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        d = np.asarray(self.depth)
+        if d.ndim != 2 or d.dtype != np.float32:
+            raise ValueError(f"depth: expected (H, W) float32, got {d.shape} {d.dtype}")
+        for name in ("offset", "cost", "valid"):
+            if np.shape(getattr(self, name)) != d.shape:
+                raise ValueError(f"{name}: expected shape {d.shape}, got {np.shape(getattr(self, name))}")
+        if np.shape(self.warped)[:2] != d.shape:
+            raise ValueError(f"warped: expected shape {d.shape}[+C], got {np.shape(self.warped)}")
+        if not np.array_equal(np.isfinite(d), np.asarray(self.valid, bool)):
+            raise ValueError("valid: must be exactly where depth is finite")
+        if (d <= 0).any():  # NaN compares False
+            raise ValueError("depth: values must be > 0 (in front of the key camera)")
+
+    @property
+    def valid_fraction(self) -> float:
+        """Share of all key pixels with a depth."""
+        return float(np.mean(self.valid))
+
+    def save(self, path, *, meta: dict) -> None:
+        """Write the depth as PFM (NaN stored as inf) with its ``.meta.json``."""
+        from capture.artifact import write_artifact
+        from capture.io import write_pfm
+
+        write_artifact(path, lambda tmp: write_pfm(tmp, self.depth), meta=meta)
+
+
+# ----------------------------------------------------------------- geometry
+def key_rays(camera, shape) -> np.ndarray:
+    """Unit-``z`` rays ``(H, W, 3)`` float64 of every key pixel centre, in the
+    key camera frame (lens distortion inverted by :meth:`Camera.unproject`)."""
+    h, w = shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    return camera.unproject(np.stack([xs.ravel(), ys.ravel()], axis=1)).reshape(h, w, 3)
+
+
+def _project_offset(rig, a, z):
+    """Offset-image pixels ``(H, W, 2)`` and offset-frame depth ``(H, W)`` of
+    the key-frame points ``z · r`` given ``a = R r`` (so ``x_o = z a + T``)."""
+    Xo = a * z[..., None] + rig.T
+    px = rig.right.project(Xo.reshape(-1, 3)).reshape(*z.shape, 2)
+    return px, Xo[..., 2]
+
+
+def _inside(px, size):
+    w, h = size
+    with np.errstate(invalid="ignore"):
+        return ((px[..., 0] > -0.5) & (px[..., 0] < w - 0.5) & (px[..., 1] > -0.5)
+                & (px[..., 1] < h - 0.5))
+
+
+def _model_visible(px, zo, ok, size, tolerance, *, close=True):
+    """Which model points (``ok``) the offset camera sees: a z-buffer of the
+    model splatted at the nearest offset pixel, its gaps closed by a 3×3
+    minimum (the model is sampled at the key image's density), and a point
+    counted as hidden only when something is nearer by more than
+    ``tolerance`` (an array, same unit as ``zo``)."""
+    import cv2
+
+    w, h = size
+    zbuf = np.full((h, w), np.inf, np.float32)
+    ix = np.rint(px[ok]).astype(np.intp)
+    np.minimum.at(zbuf, (ix[:, 1], ix[:, 0]), zo[ok].astype(np.float32))
+    if close:
+        zbuf = cv2.erode(zbuf, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    vis = np.zeros(zo.shape, bool)
+    vis[ok] = zo[ok] <= zbuf[ix[:, 1], ix[:, 0]] + tolerance[ok]
+    return vis
+
+
+def _hidden_by_better(px, zo, cost, ok, size, tolerance):
+    """Recovered points (``ok``) that lie behind the nearest recovered point
+    on the same offset pixel by more than ``tolerance · zo`` while matching
+    worse than it (higher ``cost``). The cost condition keeps a wrong, too
+    near match from hiding correct points behind it."""
+    w, _ = size
+    idx = np.flatnonzero(ok)
+    ix = np.rint(px.reshape(-1, 2)[idx]).astype(np.intp)
+    pid = ix[:, 1] * w + ix[:, 0]
+    z = zo.ravel()[idx]
+    order = np.lexsort((z, pid))
+    pid_s = pid[order]
+    first = np.r_[True, pid_s[1:] != pid_s[:-1]]
+    head = order[np.maximum.accumulate(np.where(first, np.arange(len(order)), 0))]
+    near_z = np.empty_like(z)
+    near_c = np.empty_like(z)
+    near_z[order] = z[head]
+    near_c[order] = cost.ravel()[idx][head]
+    out = np.zeros(ok.shape, bool)
+    out.ravel()[idx] = (z > near_z * (1 + tolerance)) & (cost.ravel()[idx] > near_c)
+    return out
+
+
+def _remap(image, px):
+    import cv2
+
+    mx = np.ascontiguousarray(px[..., 0], np.float32)
+    my = np.ascontiguousarray(px[..., 1], np.float32)
+    bad = ~np.isfinite(mx) | ~np.isfinite(my)
+    mx[bad] = -10.0
+    my[bad] = -10.0
+    return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def warp_offset(offset_image: np.ndarray, model_depth: np.ndarray, rig, *, delta: float = 0.0) -> np.ndarray:
+    """The offset image projected onto the model (shifted by ``delta`` along
+    the key rays) and seen from the key camera (Fig. 5.12c for ``delta = 0``).
+
+    Parameters
+    ----------
+    offset_image : ndarray, (H', W') or (H', W', C)
+        The offset view (``rig.right``), any numeric dtype.
+    model_depth : ndarray, (H, W)
+        Key-camera ``z`` of the rough model per key pixel (``rig.left``'s
+        size); NaN or ``<= 0`` where the model is absent.
+    rig : calib.rig.Rig
+        ``left`` = key camera, ``right`` = offset camera,
+        ``x_offset = R x_key + T``.
+    delta : float, keyword-only
+        Offset from the model along the key ray, in key-camera ``z``.
+
+    Returns
+    -------
+    ndarray, (H, W) or (H, W, C) float32
+        In the offset image's code values; NaN where the model is absent or
+        its point falls outside the offset frame or behind the camera (no
+        visibility test: see :func:`model_stereo` for that).
+    """
+    img = np.asarray(offset_image)
+    zm = _check_model(model_depth, rig)
+    _check_image("offset_image", img, rig.right.image_size)
+    rays = key_rays(rig.left, zm.shape)
+    px, zo = _project_offset(rig, rays @ rig.R.T, zm + delta)
+    ok = np.isfinite(zm) & (zo > 0) & _inside(px, rig.right.image_size)
+    out = _remap(np.ascontiguousarray(img, np.float32), px)
+    out[~ok] = np.nan
+    return out
+
+
+# -------------------------------------------------------------- validation
+def _check_image(name, img, size):
+    if img.ndim not in (2, 3) or img.shape[1::-1] != tuple(size):
+        raise ValueError(f"{name}: expected an image of {size[0]}x{size[1]} (the rig's), "
+                         f"got array shape {img.shape}")
+
+
+def _check_model(model_depth, rig):
+    from calib.rig import Rig
+
+    if not isinstance(rig, Rig):
+        raise TypeError(f"rig: expected a calib.rig.Rig, got {type(rig).__name__}")
+    zm = np.asarray(model_depth, np.float64)
+    w, h = rig.left.image_size
+    if zm.shape != (h, w):
+        raise ValueError(f"model_depth: expected shape ({h}, {w}) (the key camera's), got {zm.shape}")
+    zm = np.where(zm > 0, zm, np.nan)  # NaN compares False: absent stays absent
+    if not np.isfinite(zm).any():
+        raise ValueError("model_depth: no finite positive depth (the model is absent everywhere)")
+    return zm
+
+
+# ---------------------------------------------------------------- matching
+def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, rig, *,
+                 max_offset: float, step: float | None = None, window: int = 9,
+                 texture_snr: float = 1.0, uniqueness: float = 0.02, max_cost: float = 1.0,
+                 occlusion_tolerance: float | None = 0.01, subpixel: bool = True,
+                 noise_sigma: float | None = None) -> ModelStereo:
+    """Depth of the key view as offsets from a rough model (model-based stereo).
+
+    Parameters
+    ----------
+    key, offset : ndarray, (H, W) or (H, W, C)
+        Key and offset images as captured (same dtype family; compared as
+        Rec. 601 luma in code values). Sizes must be the rig's.
+    model_depth : ndarray, (H, W)
+        Key-camera ``z`` of the rough model per key pixel centre, unit of the
+        rig's ``T``; NaN (or ``<= 0``) where there is no model.
+    rig : calib.rig.Rig
+        ``left`` = key camera, ``right`` = offset camera, ``x_offset = R
+        x_key + T``; lens distortion of either camera is handled exactly
+        (rays by ``Camera.unproject``, projection by ``Camera.project``).
+    max_offset : float, keyword-only
+        Largest ``|δ|`` searched, unit of ``T``: the detail's depth off the
+        model, with margin.
+    step : float, optional
+        ``δ`` step; default: the step that moves the offset-image sample by
+        one pixel at the 99th percentile of the pixels (most move less).
+        The number of steps is capped at ``MAX_STEPS`` (a warning says so).
+    window : int
+        Odd side of the SSD box (3..63), eq. 5.1.
+    texture_snr : float
+        Minimum key window standard deviation in units of the noise ``σ``
+        (0 disables).
+    uniqueness : float
+        Every ``δ`` more than one step from the best must cost more than
+        ``(1 + uniqueness)`` times the best (0 disables).
+    max_cost : float
+        The best mean squared difference may be at most ``2 σ² + max_cost ·
+        var(window)`` (``inf`` disables): a wrong match costs about twice
+        the window variance, a true one the noise ``2σ²`` plus resampling.
+    subpixel : bool
+        Parabola refinement of the best step.
+    noise_sigma : float, optional
+        Noise of the key image in code values; estimated when not given
+        (:func:`stereo.block_matching.noise_sigma`, at least the 8-bit
+        quantisation noise ``1/√12``).
+
+    Returns
+    -------
+    ModelStereo
+
+    Raises
+    ------
+    ValueError, TypeError
+        Sizes that do not match the rig or each other, no model, a bad
+        option.
+    """
+    import cv2
+
+    from stereo.block_matching import noise_sigma as estimate_noise
+    from stereo.block_matching import to_gray
+
+    t0 = time.perf_counter()
+    zm = _check_model(model_depth, rig)
+    key = np.asarray(key)
+    offset = np.asarray(offset)
+    _check_image("key", key, rig.left.image_size)
+    _check_image("offset", offset, rig.right.image_size)
+    max_offset = float(max_offset)
+    if not (np.isfinite(max_offset) and max_offset > 0):
+        raise ValueError(f"max_offset: expected a finite value > 0, got {max_offset}")
+    if not (isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63):
+        raise ValueError(f"window: expected an odd integer in [3, 63], got {window!r}")
+    if step is not None and not (np.isfinite(step) and 0 < step <= max_offset):
+        raise ValueError(f"step: expected a value in (0, max_offset={max_offset}], got {step}")
+    for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness), ("max_cost", max_cost)):
+        if not v >= 0:
+            raise ValueError(f"{name}: expected a value >= 0, got {v}")
+
+    h, w = zm.shape
+    size_o = rig.right.image_size
+    gk = to_gray(key)
+    go = to_gray(offset)
+    quant = 1 / np.sqrt(12) * (257.0 if key.dtype == np.uint16 else 1.0)
+    if noise_sigma is None:
+        sigma = max(estimate_noise(gk), quant if key.dtype.kind in "ui" else 0.0)
+    else:
+        sigma = float(noise_sigma)
+    warnings: list[str] = []
+
+    # -- the model seen from the offset camera (delta = 0): what is visible
+    rays = key_rays(rig.left, (h, w))
+    a = rays @ rig.R.T
+    has_model = np.isfinite(zm)
+    px0, zo0 = _project_offset(rig, a, np.where(has_model, zm, 1.0))
+    in_front = has_model & (zo0 > 0) & np.isfinite(px0).all(axis=-1)
+    seen = in_front & _inside(px0, size_o)
+    tol = np.maximum(0.02 * np.abs(zo0), max_offset)
+    seen &= _model_visible(px0, zo0, seen, size_o, tol)
+    zz = np.where(seen, zm, np.nan)
+
+    # -- the delta step: one offset-image pixel of epipolar motion
+    eps = 1e-3 * max_offset
+    px1, _ = _project_offset(rig, a, np.where(seen, zm + eps, 1.0))
+    rate = np.linalg.norm(px1 - px0, axis=-1)[seen] / eps  # px per unit delta
+    if not seen.any():
+        raise ValueError("model_depth: no model point is seen by the offset camera "
+                         "(check the rig and the model)")
+    px_per_unit = float(np.percentile(rate, 99))
+    if step is None:
+        step = 1.0 / max(px_per_unit, 1e-12)
+    n_half = int(np.ceil(max_offset / step))
+    if 2 * n_half + 1 > MAX_STEPS:
+        n_half = (MAX_STEPS - 1) // 2
+        warnings.append(f"delta step coarsened to {max_offset / n_half:.4g} to stay within "
+                        f"{MAX_STEPS} steps")
+    step = max_offset / n_half
+    deltas = np.arange(-n_half, n_half + 1) * step
+    n = len(deltas)
+
+    # -- the cost volume (eq. 5.1 as a masked box mean)
+    box = (window, window)
+    gk_valid = np.where(seen, gk, 0).astype(np.float32)
+    t_scan = time.perf_counter()
+    costs = np.full((n, h, w), np.inf, np.float32)
+    zsafe = np.where(seen, zm, 1.0)
+    for i, dlt in enumerate(deltas):
+        px, zo = _project_offset(rig, a, zsafe + dlt)
+        m = seen & (zo > 0) & _inside(px, size_o)
+        warped = _remap(go, px)
+        diff2 = np.where(m, (gk_valid - warped) ** 2, 0).astype(np.float32)
+        mf = m.astype(np.float32)
+        num = cv2.boxFilter(diff2, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        den = cv2.boxFilter(mf, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        ok = m & (den >= 0.5 * window * window)
+        costs[i][ok] = num[ok] / den[ok]
+    t_decide = time.perf_counter()
+
+    # -- decision: winner-take-all, tests, parabola
+    best = np.argmin(costs, axis=0)
+    rows, cols = np.mgrid[0:h, 0:w]
+    bestc = costs[best, rows, cols]
+    computed = np.isfinite(bestc)
+    masked = costs.copy()
+    for k in (-1, 0, 1):
+        masked[np.clip(best + k, 0, n - 1), rows, cols] = np.inf
+    second = masked.min(axis=0)
+    del masked
+    mean = cv2.boxFilter(gk, -1, box, borderType=cv2.BORDER_REFLECT)
+    var = np.maximum(cv2.boxFilter(gk * gk, -1, box, borderType=cv2.BORDER_REFLECT) - mean * mean, 0)
+    textured = var >= (texture_snr * sigma) ** 2
+    with np.errstate(invalid="ignore"):
+        unique = ~(second <= (1 + uniqueness) * bestc)
+        plausible = bestc <= 2 * sigma ** 2 + max_cost * var
+    inner = (best > 0) & (best < n - 1)
+    valid = computed & textured & unique & inner & plausible
+
+    frac = np.zeros((h, w))
+    if subpixel:
+        i0 = np.clip(best - 1, 0, n - 1)
+        i2 = np.clip(best + 1, 0, n - 1)
+        cm, cp = costs[i0, rows, cols], costs[i2, rows, cols]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            den = cm - 2 * bestc + cp
+            frac = np.where(inner & (den > 0), 0.5 * (cm - cp) / den, 0.0)
+        frac = np.clip(np.nan_to_num(frac), -0.5, 0.5)
+    dlt = np.where(valid, deltas[best] + frac * step, np.nan)
+    depth = (zz + dlt).astype(np.float32)
+    valid &= depth > 0
+    # Half-occlusion: a key pixel the offset camera cannot see (hidden by
+    # detail the model lacks) still gets a best delta, but its recovered
+    # point then lies behind another recovered point on the same offset ray.
+    occluded = np.zeros((h, w), bool)
+    if occlusion_tolerance is not None and valid.any():
+        pxr, zor = _project_offset(rig, a, np.where(valid, depth, 1.0))
+        okr = valid & (zor > 0) & _inside(pxr, size_o)
+        occluded = _hidden_by_better(pxr, zor, bestc, okr, size_o, occlusion_tolerance)
+        valid &= ~occluded
+    depth[~valid] = np.nan
+    dlt = np.where(valid, dlt, np.nan).astype(np.float32)
+
+    # the warped offset image of Fig. 5.12c, every channel
+    warped0 = _remap(np.ascontiguousarray(offset, np.float32), px0)
+    warped0[~seen] = np.nan
+
+    counts = {"no_model": int((~has_model).sum()),
+              "unseen_by_offset": int((has_model & ~seen).sum()),
+              "no_texture": int((seen & ~textured).sum()),
+              "at_range_limit": int((seen & textured & computed & ~inner).sum()),
+              "not_unique": int((seen & textured & computed & inner & ~unique).sum()),
+              "implausible_cost": int((seen & textured & computed & inner & unique & ~plausible).sum()),
+              "occluded": int(occluded.sum())}
+    limited = counts["at_range_limit"] / max(1, int((seen & textured).sum()))
+    if limited > 0.2:
+        warnings.append(f"{limited:.0%} of the textured pixels matched best at the end of the "
+                        f"δ range ±{max_offset:g}: the surface is farther from the model than "
+                        "max_offset there (a wrong model or too small a range)")
+    t1 = time.perf_counter()
+    info = {"max_offset": max_offset, "step": float(step), "steps": n,
+            "delta_range": [float(deltas[0]), float(deltas[-1])],
+            "px_per_unit_delta_p99": px_per_unit, "window": int(window),
+            "texture_snr": texture_snr, "uniqueness": uniqueness, "max_cost": max_cost,
+            "subpixel": subpixel, "noise_sigma": float(sigma),
+            "noise_sigma_source": "given" if noise_sigma is not None else "estimated",
+            "rejected": counts, "seen_fraction": float(seen.mean()),
+            "valid_fraction": float(valid.mean()),
+            "valid_fraction_of_seen": float(valid.sum() / max(1, seen.sum())),
+            "warnings": warnings,
+            "timings_s": {"prepare": t_scan - t0, "scan": t_decide - t_scan, "decide": t1 - t_decide}}
+    return ModelStereo(depth, dlt, warped0, np.where(computed, bestc, np.nan).astype(np.float32),
+                       valid, info)
