@@ -28,6 +28,8 @@ examples:
   lumigraph hdr tonemap out/hdr/radiance.exr --method reinhard-local --out out/hdr/tonemapped.png
   lumigraph hdr align IMG_*.jpeg --out aligned/
   lumigraph hdr convert out/hdr/radiance.exr out/hdr/radiance.hdr
+  lumigraph render bracket_video --out out/video
+  lumigraph hdr video out/video --response out/hdr/response.json --out out/hdr/video --tonemap
 
 Inputs are image files in bracket order or a folder with stack.json; exposure
 times come from EXIF or stack.json unless --times gives them (fractions such
@@ -246,6 +248,78 @@ def _convert(args) -> int:
     return 0
 
 
+def _video(args) -> int:
+    import numpy as np
+
+    from capture.artifact import make_meta, write_artifact, write_json
+    from capture.command import progress
+    from capture.io import read_stack, write_exr, write_image
+    from hdr.kang2003 import hdr_video, tonemap_video
+    from hdr.response import ResponseCurve
+
+    out = check_output_dir(args.out)
+    if args.temporal < 1 or args.temporal % 2 == 0:
+        raise InputError("--temporal", f"expected an odd number of frames >= 1, got {args.temporal}")
+    curve = ResponseCurve.load(args.response)
+    stack = read_stack(args.frames, times=_times(args), need_times=True)
+    where = stack.paths[0] if len(stack.paths) == 1 else str(args.frames[0])
+    if stack.images.shape[0] < 2:
+        raise InputError(where, f"HDR video needs at least 2 frames, got {stack.images.shape[0]}")
+    if stack.images.dtype.kind == "f":
+        raise InputError(stack.paths[0], "float frames are already linear; HDR video needs "
+                                         "code values (integer PNG/TIFF)")
+    if stack.exposure_times_s is None:
+        raise InputError(where, "no exposure times (stack.json, EXIF or --times)")
+    if stack.bit_depth is not None and stack.bit_depth != curve.bit_depth:
+        raise InputError(args.response, f"curve is {curve.bit_depth}-bit but the frames are "
+                                        f"{stack.bit_depth}-bit; recover a curve at this depth")
+    if curve.channels not in (1, stack.images.shape[-1]):
+        raise InputError(args.response, f"curve has {curve.channels} channels, the frames "
+                                        f"{stack.images.shape[-1]}")
+    t0 = time.perf_counter()
+    v = hdr_video(stack.images, stack.exposure_times_s, curve, window=args.window,
+                  consistency_sigma=args.consistency_sigma,
+                  progress=lambda it: progress(it, total=stack.images.shape[0],
+                                               description="hdr video", quiet=args.quiet))
+    dt = time.perf_counter() - t0
+    for w in v.warnings:
+        warn(w)
+    tm = tonemap_video(v.radiance, key=args.key, temporal=args.temporal) if args.tonemap else None
+    out.mkdir(parents=True, exist_ok=True)
+    for i, src in enumerate(stack.paths):
+        meta = make_meta("lumigraph.radiance", inputs=[src, args.response],
+                         params={"frame": i, "exposure_s": v.exposure_times_s[i], **v.params},
+                         quality=v.frames[i],
+                         extra={"method": "kang2003",
+                                "units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
+                                "flags": "per pixel-channel in quality: 8 warped from neighbours, "
+                                         "16 fallback (clipping bound), 4 neighbour rejected"})
+        write_artifact(out / f"frame_{i:03d}.exr", lambda p, i=i: write_exr(p, v.radiance[i]),
+                       meta=meta)
+        if tm is not None:
+            write_artifact(out / f"frame_{i:03d}.png", lambda p, i=i: write_image(p, tm.images[i]),
+                           meta=make_meta("lumigraph.tonemapped", inputs=[src],
+                                          params=tm.params,
+                                          quality={"log_average": float(tm.log_average[i]),
+                                                   "log_average_used":
+                                                       float(tm.log_average_used[i])}))
+    shares = {k: float(np.mean([f["sources"][k] for f in v.frames])) for k in v.frames[0]["sources"]}
+    summary = make_meta("lumigraph.hdr_video", inputs=[*stack.paths, args.response],
+                        params={"times_s": list(v.exposure_times_s), **v.params,
+                                "tonemap": bool(args.tonemap), "key": args.key,
+                                "temporal": args.temporal},
+                        quality={"mean_sources": shares,
+                                 "flicker": None if tm is None else tm.flicker,
+                                 "frames": list(v.frames)},
+                        timings_s={"hdr_video": dt}, warnings=v.warnings)
+    write_json(out / "video.meta.json", summary)
+    say(args, f"wrote {len(stack.paths)} frames to {out} ({dt:.2f} s); mean share from current "
+              f"{shares['current']:.2f}, neighbours "
+              f"{shares['previous'] + shares['next'] + shares['both']:.2f}, "
+              f"fallback {shares['fallback']:.2f}")
+    return 0
+
+
 def main(argv=None, prog="lumigraph hdr") -> int:
     p = make_parser(prog, "HDR imaging: response curves, radiance maps, alignment, tone mapping.",
                     epilog=EPILOG)
@@ -284,6 +358,19 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
     v.add_argument("--out", required=True, help="image.png")
     v.set_defaults(func=_tonemap)
+    v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
+    v.add_argument("frames", nargs="+", help="frames in time order, or a folder with stack.json")
+    v.add_argument("--response", required=True, help="response.json from 'hdr response'")
+    v.add_argument("--times", help="exposure time of each frame T1,T2,... (seconds)")
+    v.add_argument("--out", required=True, help="output folder (frame_NNN.exr [+ .png])")
+    v.add_argument("--tonemap", action="store_true", help="also write tone-mapped frame_NNN.png")
+    v.add_argument("--key", type=float, default=0.18, help="tone-mapping key (0.18 middle grey)")
+    v.add_argument("--temporal", type=int, default=5,
+                   help="frames the tone-mapping log-average is smoothed over (odd; 1 = none)")
+    v.add_argument("--window", type=int, default=9, help="flow window, odd px (default 9)")
+    v.add_argument("--consistency-sigma", type=float, default=4.0,
+                   help="reject warped neighbours further than this many noise sigma (default 4)")
+    v.set_defaults(func=_video)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input")
     v.add_argument("output")

@@ -464,10 +464,13 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
         diags.append({"frame": i, "exposure_s": float(t[i]), "sources": sources,
                       "rejected": rejected, "flow": fdiag,
                       "time_s": _time.perf_counter() - t0})
-        if sources["fallback"] > 0.05:
-            warnings.append(f"frame {i}: {100 * sources['fallback']:.1f} % of pixel-channels are "
-                            "unreliable and have no consistent neighbour: kept the current "
-                            "frame's clipping bound (flagged)")
+    fb = [d["sources"]["fallback"] for d in diags]
+    if max(fb) > 0.05:
+        warnings.append(f"{100 * float(np.mean(fb)):.1f} % of pixel-channels (up to "
+                        f"{100 * max(fb):.1f} % in frame {int(np.argmax(fb))}) are unreliable in "
+                        "their frame with no consistent neighbour: kept the frame's clipping "
+                        "bound, flagged (the exposures are too close for this scene's range, or "
+                        "the motion too large)")
     params = {"window": window, "flow_method": flow_method,
               "consistency_sigma": float(consistency_sigma), "neighbourhood": neighbourhood,
               "outlier_share": float(outlier_share), "bidirectional": bool(bidirectional),
