@@ -19,3 +19,14 @@ $(HDR_OUT)/radiance.hdr: $(HDR_OUT)/radiance.exr
 	$(LUMI) hdr convert $< $@ --quiet
 
 DEMO_OUTPUTS += $(HDR_OUT)/curve.png $(HDR_OUT)/tonemapped.png $(HDR_OUT)/radiance.hdr
+
+# HDR video (Kang et al. 2003): alternating exposures, the same film camera as the
+# bracket, so its recovered response.json applies.
+$(OUT)/scenes/bracket_video/stack.json: $(STAMP)
+	$(LUMI) render bracket_video --out $(OUT)/scenes/bracket_video --size 160x120 --frames 6 --quiet
+
+$(HDR_OUT)/video/video.meta.json: $(OUT)/scenes/bracket_video/stack.json $(HDR_OUT)/response.json
+	$(LUMI) hdr video $(OUT)/scenes/bracket_video --response $(HDR_OUT)/response.json \
+	  --out $(HDR_OUT)/video --tonemap --quiet
+
+DEMO_OUTPUTS += $(HDR_OUT)/video/video.meta.json
