@@ -32,6 +32,9 @@ examples:
   lumigraph stereo match out/pair/left.png out/pair/right.png --max-disp 48 --out out/disparity.pfm
   lumigraph stereo match L.png R.png --rig rig.json --max-disp 64 --out d.pfm   (rectifies first)
   lumigraph stereo depth out/disparity.pfm --rig out/pair/gt.json --image out/pair/left.png --out out/points.ply
+  lumigraph render model-stereo --out out/facade
+  lumigraph stereo model-based out/facade/key.png out/facade/offset.png --rig out/facade/gt.json \
+      --model out/facade/gt/model_depth.npy --max-offset 0.35 --out out/facade_depth.pfm
   lumigraph stereo triangulate tracks.json --out points.json
   lumigraph stereo sfm out/views/*.png --camera out/views/gt.json --out out/sfm
 
@@ -376,6 +379,101 @@ def _sfm(args) -> int:
     return 0
 
 
+def _read_model(path):
+    """A rough model's key-view depth: PFM (inf = absent) or a ``.npy`` array."""
+    from capture.io import read_pfm
+
+    p = Path(path)
+    if p.suffix.lower() == ".npy":
+        if not p.is_file():
+            raise InputError(p, "file not found")
+        try:
+            z = np.load(p, allow_pickle=False)
+        except (ValueError, OSError) as e:
+            raise InputError(p, f"not a .npy array ({e})") from None
+    else:
+        z = read_pfm(p)
+    if z.ndim != 2 or z.dtype.kind != "f":
+        raise InputError(p, f"expected a one-channel float depth map, got shape {z.shape} {z.dtype}")
+    return z
+
+
+def _model_based(args) -> int:
+    from capture.artifact import make_meta, write_artifact
+    from capture.io import write_image
+    from stereo.debevec1996 import model_stereo
+
+    out = check_output_path(args.out, suffixes=(".pfm",))
+    if args.warped:
+        if Path(args.warped).suffix.lower() != ".png":
+            raise InputError("--warped", f"{args.warped}: expected a file ending in .png")
+    if not (np.isfinite(args.max_offset) and args.max_offset > 0):
+        raise InputError("--max-offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
+    if args.window % 2 == 0 or not 3 <= args.window <= 63:
+        raise InputError("--window", f"expected an odd integer in [3, 63], got {args.window}")
+    if args.step is not None and not (np.isfinite(args.step) and 0 < args.step <= args.max_offset):
+        raise InputError("--step", f"expected a value in (0, --max-offset], got {args.step}")
+    for flag, v in (("--texture-snr", args.texture_snr), ("--uniqueness", args.uniqueness),
+                    ("--max-cost", args.max_cost)):
+        if not v >= 0:
+            raise InputError(flag, f"expected a value >= 0, got {v}")
+    key, off = _read(args.key), _read(args.offset)
+    if key.shape[:2] != off.shape[:2]:
+        raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
+                                      f"{key.shape[1]}x{key.shape[0]}")
+    model = _read_model(args.model)
+    if model.shape != key.shape[:2]:
+        raise InputError(args.model, f"size {model.shape[1]}x{model.shape[0]} differs from the key "
+                                     f"image's {key.shape[1]}x{key.shape[0]}")
+    if not (model > 0).any():  # NaN compares False
+        raise InputError(args.model, "no finite positive depth: the model is absent everywhere")
+    rig = load_rig(args.rig)
+    for cam, name in ((rig.left, "left (key)"), (rig.right, "right (offset)")):
+        if tuple(cam.image_size) != (key.shape[1], key.shape[0]):
+            raise InputError(args.rig, f"the {name} camera is for {cam.image_size[0]}x{cam.image_size[1]} "
+                                       f"images, the pair is {key.shape[1]}x{key.shape[0]}")
+    t0 = time.perf_counter()
+    try:
+        res = model_stereo(key, off, model, rig, max_offset=args.max_offset, window=args.window,
+                           step=args.step, texture_snr=args.texture_snr, uniqueness=args.uniqueness,
+                           max_cost=args.max_cost)
+    except EstimationError as e:
+        raise EstimationError(args.model, e.problem) from None
+    except ValueError as e:
+        raise InputError(args.model, str(e)) from None
+    dt = time.perf_counter() - t0
+    for w in res.info["warnings"]:
+        warn(w)
+    params = {"max_offset": args.max_offset, "window": args.window, "step": args.step,
+              "texture_snr": args.texture_snr, "uniqueness": args.uniqueness,
+              "max_cost": args.max_cost}
+    info = {k: v for k, v in res.info.items() if k not in ("warnings", "timings_s")}
+    meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig],
+                     params=params, model={"model_based_stereo": info},
+                     quality={"valid_fraction": res.valid_fraction,
+                              "valid_fraction_of_seen": res.info["valid_fraction_of_seen"],
+                              "median_abs_offset": float(np.nanmedian(np.abs(res.offset)))
+                              if res.valid.any() else None},
+                     timings_s={"total": dt, **res.info["timings_s"]}, warnings=res.info["warnings"],
+                     extra={"convention": "depth = z in the key (left) camera frame, unit of the "
+                                         "rig's T; unknown = inf",
+                            "delta_range": res.info["delta_range"], "delta_step": res.info["step"]})
+    if args.warped:
+        wimg = np.nan_to_num(res.warped, nan=0.0)
+        hi = 65535 if off.dtype == np.uint16 else 255
+        wimg = np.clip(np.rint(wimg), 0, hi).astype(np.uint16 if hi == 65535 else np.uint8)
+        wmeta = make_meta("lumigraph.warped-offset", inputs=[args.offset, args.model, args.rig],
+                          params={"delta": 0.0},
+                          extra={"what": "offset image projected onto the model, seen from the key "
+                                         "camera (Debevec et al. 1996, Fig. 5.12c); 0 = unseen"})
+        write_artifact(args.warped, lambda tmp: write_image(tmp, wimg), meta=wmeta)
+    res.save(out, meta=meta)
+    say(args, f"wrote {out} ({100 * res.valid_fraction:.0f}% of pixels; δ in "
+              f"[{res.info['delta_range'][0]:.3g}, {res.info['delta_range'][1]:.3g}] step "
+              f"{res.info['step']:.3g})")
+    return 0
+
+
 def main(argv=None, prog: str = "lumigraph stereo") -> int:
     p = make_parser(prog, "Block-matching stereo, depth from disparity, triangulation and "
                           "structure from motion.", epilog=EPILOG)
@@ -415,6 +513,34 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--max-depth", type=float, help="drop points farther than this (rig units)")
     v.add_argument("--out", required=True, help="points .ply")
     v.set_defaults(func=_depth)
+
+    v = add_verb(sp, "model-based", "depth of a key view as detail on a rough model, from a "
+                 "wide-baseline key/offset pair (Debevec, Taylor & Malik 1996)",
+                 epilog="The offset image is projected onto the model and seen from the key camera "
+                        "(--warped writes it); each key pixel's offset from the model along its ray "
+                        "is searched in [-M, M] by SSD window matching (eq. 5.1). Unknown pixels "
+                        "(no model, unseen by the offset camera, no texture, ambiguous, at the end of "
+                        "the range, occluded) are inf in the PFM.")
+    v.add_argument("key", help="key image (the reference view, the rig's left camera)")
+    v.add_argument("offset", help="offset image (the rig's right camera)")
+    v.add_argument("--rig", required=True, help="rig.json or a scene gt.json: left = key, right = offset")
+    v.add_argument("--model", required=True,
+                   help="the rough model's depth seen from the key camera (.pfm, inf = no model, "
+                        "or .npy, NaN = no model), z in the rig's unit")
+    v.add_argument("--max-offset", type=float, required=True,
+                   help="largest offset of the detail from the model searched (rig's unit)")
+    v.add_argument("--window", type=int, default=9, help="odd SSD window side (default 9)")
+    v.add_argument("--step", type=float, help="offset step (default: one offset-image pixel)")
+    v.add_argument("--texture-snr", type=float, default=1.0,
+                   help="minimum window signal std in units of the noise sigma (default 1.0)")
+    v.add_argument("--uniqueness", type=float, default=0.02,
+                   help="every other offset must cost (1+u) times the best (default 0.02)")
+    v.add_argument("--max-cost", type=float, default=1.0,
+                   help="refuse matches costing more than 2 sigma^2 + this x window variance "
+                        "(default 1.0; inf disables)")
+    v.add_argument("--warped", help="also write the warped offset image (PNG)")
+    v.add_argument("--out", required=True, help="depth .pfm (key camera z; unknown stored as inf)")
+    v.set_defaults(func=_model_based)
 
     v = add_verb(sp, "triangulate", "3-D points with uncertainty from correspondences",
                  epilog=TRIANGULATE_EPILOG)
