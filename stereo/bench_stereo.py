@@ -19,6 +19,17 @@ error and how many rays under 0.5° were flagged. SfM case: the
 ``stereo-views`` scene through pycolmap (knob: fixed intrinsics or not);
 error: largest camera-centre error after similarity alignment, relative to
 the diameter of the camera path.
+
+Model-based case: the ``model-stereo`` facade (key and offset views 30°
+apart, relief 0.18-0.27 m at 6 m) with its rough model, the wall plane.
+Ours: model-based stereo (Debevec, Taylor & Malik 1996, ``stereo/debevec1996.py``;
+knob: window). Baseline, the plain approach on the same pair: rectify
+(``calib.rectify``, alpha 1 on a canvas twice the size so both views keep
+every pixel), search the ground truth's disparity range (with a 4 px margin)
+by our SSD block matching and by OpenCV StereoSGBM, and take each key pixel's
+disparity back to key-camera depth. Error: the share of key pixels the offset
+camera sees whose depth is missing or off by more than 1 % of the depth;
+the same on the relief alone, the density and the median error beside it.
 """
 
 from __future__ import annotations
@@ -113,6 +124,94 @@ def _sgbm(data, window):
     return d
 
 
+def _model_case(size=(320, 240)):
+    """The model-stereo facade (30 deg apart) with its rough model, and what
+    the plain baseline needs: the rectification and the disparity range."""
+    from calib.camera import Camera
+    from calib.rectify import rectify
+    from calib.rig import Rig
+    from capture.render import render
+
+    s = render("model-stereo", size=size)
+    g = s.gt["rig"]
+    rig = Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
+    # alpha 1 on a canvas twice the size: with views 30 deg apart the default
+    # crop (alpha 0, same size) leaves no overlap (disparities of 360-410 px
+    # in a 320 px image); this keeps every pixel of both views
+    rect = rectify(rig, alpha=1.0, image_size=(2 * size[0], 2 * size[1]))
+    gt = s.gt_arrays["depth"]
+    seen = np.isfinite(s.gt_arrays["offset_xy"][..., 0]) & np.isfinite(gt)
+    h, w = gt.shape
+    ys, xs = np.mgrid[0:h, 0:w].astype(np.float64)
+    rays = np.stack([xs, ys, np.ones_like(xs)], -1) @ np.linalg.inv(rig.left.K).T
+    X = (rays * gt[..., None])[seen]
+    d = rect.project_left(X)[:, 0] - rect.project_right(X)[:, 0]
+    return {"kind": "model", "key": s.images[0], "offset": s.images[1], "rig": rig, "rect": rect,
+            "model": s.gt_arrays["model_depth"], "gt": gt, "seen": seen,
+            "relief": seen & (np.abs(s.gt_arrays["relief"]) > 0.05),
+            "max_offset": float(s.gt["suggested_max_offset"]),
+            "d_range": (int(np.floor(d.min())) - 4, int(np.ceil(d.max())) + 4)}
+
+
+def _model_based(data, window):
+    from stereo.debevec1996 import model_stereo
+
+    return model_stereo(data["key"], data["offset"], data["model"], data["rig"],
+                        max_offset=data["max_offset"], window=window).depth
+
+
+def _unrectify(data, disp):
+    """Key-view depth from a rectified-left disparity: each key pixel's ray is
+    taken to the rectified frame, the disparity read there (nearest), the
+    point ``Z_rect · r / r_z`` taken back to the key frame."""
+    import cv2
+
+    from stereo.debevec1996 import key_rays
+
+    rect = data["rect"]
+    rays = key_rays(data["rig"].left, data["gt"].shape) @ rect.R1.T  # rectified frame
+    uv = rays @ rect.P1[:, :3].T
+    uv = (uv[..., :2] / uv[..., 2:]).astype(np.float32)
+    zr = rect.disparity_to_depth(disp)
+    z = cv2.remap(zr, uv[..., 0], uv[..., 1], cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
+                  borderValue=float("nan"))
+    X = rays * (z / rays[..., 2])[..., None]
+    return (X @ rect.R1)[..., 2].astype(np.float32)
+
+
+def _plain_pair(data):
+    """Rectified key/offset pair, the offset shifted right by the smallest
+    disparity so that a 0..max search covers the scene's range."""
+    kr, orr = data["rect"].apply(data["key"], data["offset"])
+    d0 = data["d_range"][0]
+    if not 0 <= d0 < orr.shape[1]:
+        raise ValueError(f"smallest disparity {d0} outside the rectified width {orr.shape[1]}")
+    shifted = np.zeros_like(orr)
+    shifted[:, d0:] = orr[:, :orr.shape[1] - d0]
+    return kr, shifted, d0, data["d_range"][1] - d0
+
+
+def _plain_ssd(data, window):
+    from stereo.block_matching import match
+
+    kr, orr, d0, span = _plain_pair(data)
+    d = match(kr, orr, max_disp=span, window=window).disparity + d0
+    return _unrectify(data, d)
+
+
+def _plain_sgbm(data, window):
+    import cv2
+
+    kr, orr = data["rect"].apply(data["key"], data["offset"])
+    d0, d1 = data["d_range"]
+    n = int(16 * np.ceil((d1 - d0 + 1) / 16))
+    sg = cv2.StereoSGBM_create(d0, n, window, P1=24 * window ** 2, P2=96 * window ** 2,
+                               disp12MaxDiff=1, uniquenessRatio=10, mode=cv2.STEREO_SGBM_MODE_SGBM)
+    d = sg.compute(kr, orr).astype(np.float32) / 16.0
+    d[d < d0] = np.nan
+    return _unrectify(data, d)
+
+
 def _tri_case(n=4000):
     from calib.camera import Camera
 
@@ -165,6 +264,16 @@ def _sfm(data, fixed):
 
 
 def _error(data, out):
+    if data["kind"] == "model":
+        gt, seen = data["gt"], data["seen"]
+        e = np.abs(out - gt)
+        bad = ~(e <= 0.01 * gt)  # missing (NaN) counts as bad
+        est = seen & np.isfinite(out)
+        return {"error": float(bad[seen].mean()),
+                "bad1pct_relief": float(bad[data["relief"]].mean()),
+                "bad1pct_of_estimated": float(bad[est].mean()) if est.any() else None,
+                "density": float(est.sum() / seen.sum()),
+                "median_abs_error": float(np.median(e[est])) if est.any() else None}
     if data["kind"] == "stereo":
         gt = data["gt"]
         known = np.isfinite(gt)
@@ -232,6 +341,18 @@ def _checks(res: Results, ctx) -> list[Check]:
                                                f"{ours.error:.3f} at {ours.value}"))
         except KeyError:
             pass
+    if res.of("model-based", "model-based (ours)"):
+        ours = res.best("model-based", "model-based (ours)")
+        plain = [res.best("model-based", m) for m in ("ssd rectified (plain)", "StereoSGBM rectified")
+                 if res.of("model-based", m)]
+        if plain:
+            p = min(plain, key=lambda r: r.error)
+            out.append(Check("model-based: share of key pixels off by > 1 % of depth, ours / best plain "
+                             "rectified stereo on the same 30 deg pair (informational)",
+                             ours.error / p.error, 1.0, True,
+                             f"ours {ours.error:.3f} (window {ours.value}, relief "
+                             f"{ours.extra['bad1pct_relief']:.3f}) vs {p.method} {p.error:.3f} "
+                             f"(window {p.value}, relief {p.extra['bad1pct_relief']:.3f})"))
     if _PHASES:
         phases = ("prepare", "scan", "decide")
         tot = {k: sum(p[k] for p in _PHASES) for k in phases}
@@ -280,7 +401,9 @@ def stage(*, quick: bool = False) -> Stage:
         windows = WINDOWS
         cases.append(Case("triangulation", _tri_case, "4000 points, 2 distorted cameras, asymmetric K"))
         cases.append(Case("sfm", _views, "stereo-views: 10 views 320x240 on a 70 deg arc"))
-    stereo_names = tuple(c.name for c in cases if c.name not in ("triangulation", "sfm"))
+        cases.append(Case("model-based", _model_case, "model-stereo facade 320x240, views 30 deg "
+                          "apart, rough model = the wall plane; error: share off by > 1 % of depth"))
+    stereo_names = tuple(c.name for c in cases if c.name not in ("triangulation", "sfm", "model-based"))
     methods = [
         Method("ssd (ours)", _ours, "window", (*windows, "auto"), cases=stereo_names),
         # informational: the local-mean prefilter, not the default (DEFAULTS_CHOICE)
@@ -296,6 +419,13 @@ def stage(*, quick: bool = False) -> Stage:
         Method("midpoint (ours)", _tri("midpoint"), "noise px", (0.0, 0.5), cases=("triangulation",)),
     ]
     if not quick:
+        methods += [
+            Method("model-based (ours)", _model_based, "window", WINDOWS, cases=("model-based",)),
+            # the plain approach on the same wide-baseline pair: rectify, match, unrectify
+            Method("ssd rectified (plain)", _plain_ssd, "window", WINDOWS, cases=("model-based",)),
+            Method("StereoSGBM rectified", _plain_sgbm, "window", (3, 5), peer="opencv",
+                   cases=("model-based",)),
+        ]
         methods.append(Method("pycolmap SfM", _sfm, "fixed intrinsics", (True, False), peer=None,
                               cases=("sfm",)))
     return Stage("stereo", tuple(cases), tuple(methods), _error,

@@ -11,3 +11,14 @@ $(OUT)/stereo/points.ply: $(OUT)/stereo/disparity.pfm
 	  --image $(OUT)/scenes/stereo-pair/left.png --out $@ --quiet
 
 DEMO_OUTPUTS += $(OUT)/stereo/disparity.pfm $(OUT)/stereo/points.ply
+
+# model-based stereo (Debevec, Taylor & Malik 1996): facade with relief, rough model = wall plane
+$(OUT)/scenes/model-stereo/stack.json: $(STAMP)
+	$(LUMI) render model-stereo --out $(OUT)/scenes/model-stereo --quiet
+
+$(OUT)/stereo/facade_depth.pfm: $(OUT)/scenes/model-stereo/stack.json
+	$(LUMI) stereo model-based $(OUT)/scenes/model-stereo/key.png $(OUT)/scenes/model-stereo/offset.png \
+	  --rig $(OUT)/scenes/model-stereo/gt.json --model $(OUT)/scenes/model-stereo/gt/model_depth.npy \
+	  --max-offset 0.35 --warped $(OUT)/stereo/facade_warped.png --out $@ --quiet
+
+DEMO_OUTPUTS += $(OUT)/stereo/facade_depth.pfm
