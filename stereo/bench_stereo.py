@@ -429,6 +429,7 @@ def stage(*, quick: bool = False) -> Stage:
         methods.append(Method("pycolmap SfM", _sfm, "fixed intrinsics", (True, False), peer=None,
                               cases=("sfm",)))
     return Stage("stereo", tuple(cases), tuple(methods), _error,
-                 "bad-2.0 (stereo) / relative 3-D error (triangulation, SfM)",
+                 "bad-2.0 (stereo) / relative 3-D error (triangulation, SfM) / share off > 1 % "
+                 "of depth (model-based)",
                  checks=lambda res, ctx: _checks(res, {"stereo_cases": stereo_names}),
                  description=__doc__.split("\n\n", 1)[1].strip())
