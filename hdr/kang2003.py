@@ -216,10 +216,74 @@ def equalise(x_a, t_a, x_b, t_b, rad: _Radiometry):
 
 
 def _flow(a, b, *, window, method, max_motion_px):
+    """Flow ``a → b`` with its forward-backward round trip: ``(flow, inconsistent,
+    round_trip_px, levels)``, as ``pyramid_flow(consistency=True)`` but keeping
+    the round-trip error, which bounds how far off a disowned vector may be."""
+    from stereo.pyramid import forward_backward
     from stereo.pyramid_flow import pyramid_flow
 
-    return pyramid_flow(a, b, levels="auto", max_motion_px=max_motion_px, method=method,
-                        window=window, consistency=True)
+    opts = dict(method=method, window=window, consistency=False)
+    fwd = pyramid_flow(a, b, levels="auto", max_motion_px=max_motion_px, **opts)
+    # Same pyramid depth and top-level search radius backwards.
+    bwd = pyramid_flow(b, a, levels="auto",
+                       max_motion_px=fwd.info["level_choice"]["max_motion_px"], **opts)
+    bad, rt = forward_backward(fwd.flow, bwd.flow)
+    return fwd.flow, bad, rt, fwd.levels
+
+
+def _register(i, x_all, t, rad, grid, flow_opts, *, bidirectional):
+    """Sampling maps of frame ``i``'s neighbours: ``{j: (H, W, 2) map}``, their
+    forward-backward inconsistency ``{j: (H, W) bool}``, the position
+    uncertainty of each sample ``{j: (H, W) px}`` and diagnostics."""
+    n = len(x_all)
+    nbrs = [j for j in (i - 1, i + 1) if 0 <= j < n]
+    maps, occ, unc = {}, {}, {}
+    if bidirectional and len(nbrs) == 2:
+        p, q = nbrs
+        f, bad, rt, levels = _flow(*equalise(x_all[p], t[p], x_all[q], t[q], rad), **flow_opts)
+        # Constant velocity: v(x) = F(x - v(x)) / 2 by fixed-point iteration.
+        v = 0.5 * f
+        for _ in range(3):
+            v = 0.5 * _remap(f, grid - v, border_value=0.0)
+        at = grid - v
+        bad_c = _remap(bad.astype(np.float32), at, linear=False, border_value=1.0) > 0
+        # Each neighbour is displaced by half the flow, so by half its error.
+        unc_c = 0.5 * _remap(rt, at, linear=False, border_value=np.inf)
+        maps = {p: grid - v, q: grid + v}
+        occ = {p: bad_c, q: bad_c}
+        unc = {p: unc_c, q: unc_c}
+        fdiag = {"mode": "bidirectional", "levels": levels, "occluded": float(bad.mean()),
+                 "mean_motion_px": float(np.hypot(v[..., 0], v[..., 1]).mean())}
+        return maps, occ, unc, fdiag
+    fdiag = {"mode": "unidirectional"}
+    for j in nbrs:
+        key = f"{j - i:+d}"
+        f, bad, rt, levels = _flow(*equalise(x_all[i], t[i], x_all[j], t[j], rad), **flow_opts)
+        maps[j], occ[j], unc[j] = grid + f, bad, rt
+        fdiag[f"levels_{key}"] = levels
+        fdiag[f"occluded_{key}"] = float(bad.mean())
+        fdiag[f"mean_motion_px_{key}"] = float(np.hypot(f[..., 0], f[..., 1]).mean())
+        b = 2 * j - i
+        if not (bidirectional and len(nbrs) == 1 and 0 <= b < n):
+            continue
+        # End frame: the frame two away has the current exposure, so their
+        # flow needs no boost (no amplified noise, no clipping to the common
+        # range); under constant velocity the neighbour sits half-way. Where
+        # that flow's round trip fails, the one-way flow's may still close.
+        f2, bad2, rt2, levels2 = _flow(*equalise(x_all[i], t[i], x_all[b], t[b], rad),
+                                       **flow_opts)
+        # Per pixel the registration whose round trip closes; if both or
+        # neither, the one with the smaller position uncertainty.
+        use2 = (~bad2 & bad) | ((bad2 == bad) & (0.5 * rt2 <= rt))
+        maps[j] = np.where(use2[..., None], grid + 0.5 * f2, maps[j])
+        occ[j] = bad2 & bad
+        unc[j] = np.where(use2, 0.5 * rt2, rt)
+        fdiag["mode"] = "halved same-exposure pair, else unidirectional"
+        fdiag["pair"] = [i, b]
+        fdiag[f"levels_{b - i:+d}"] = levels2
+        fdiag["occluded_same_exposure"] = float(bad2.mean())
+        fdiag[f"used_same_exposure_{key}"] = float(use2.mean())
+    return maps, occ, unc, fdiag
 
 
 def _remap(img, m, *, linear=True, border_value=0.0):
@@ -245,6 +309,25 @@ def _erode(a, k):
     import cv2
 
     return cv2.erode(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
+
+
+def _flat_within(xw, radius, tol2):
+    """Where the warped neighbour ``xw`` (NaN: unreliable) varies by at most
+    ``sqrt(tol2)`` over a square of half-width >= ``radius`` px (at least 2) around
+    each pixel: there the sample's value does not depend on where exactly it
+    was taken. Beyond 16 px nothing counts as flat."""
+    lo_img = np.where(np.isnan(xw), np.inf, xw)
+    hi_img = np.where(np.isnan(xw), 0.0, xw)
+    flat = np.zeros(xw.shape, bool)
+    todo = np.ones(radius.shape, bool)
+    for half in (2, 4, 8, 16):
+        here = todo & (radius <= half)
+        if here.any():
+            k = 2 * half + 1
+            ok = (_dilate(hi_img, k) - _erode(lo_img, k)) ** 2 <= tol2
+            flat |= here[..., None] & ok
+        todo &= ~here
+    return flat
 
 
 def _box_mean(a, k):
@@ -337,35 +420,9 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
         xc, rc, vc = x_all[i], rel_all[i], var_all[i]
         unrel = ~rc
         sat = unrel & (z[i] > rad.hi)
-        # Registration: a sampling map per neighbour (current pixel -> neighbour pixel).
-        maps, occ, fdiag = {}, {}, {}
         nbrs = [j for j in (i - 1, i + 1) if 0 <= j < n]
-        if bidirectional and len(nbrs) == 2:
-            p, q = nbrs
-            ea, eb = equalise(x_all[p], t[p], x_all[q], t[q], rad)
-            fr = _flow(ea, eb, **flow_opts)
-            # Constant velocity: v(x) = F(x - v(x)) / 2 by fixed-point iteration.
-            v = 0.5 * fr.flow
-            for _ in range(3):
-                v = 0.5 * _remap(fr.flow, grid - v, border_value=0.0)
-            occ_q = _remap(fr.occluded.astype(np.float32), grid - v, linear=False,
-                           border_value=1.0) > 0
-            maps = {p: grid - v, q: grid + v}
-            occ = {p: occ_q, q: occ_q}
-            fdiag = {"mode": "bidirectional", "levels": fr.levels,
-                     "occluded": float(fr.occluded.mean()),
-                     "mean_motion_px": float(np.hypot(v[..., 0], v[..., 1]).mean())}
-        else:
-            fdiag = {"mode": "unidirectional"}
-            for j in nbrs:
-                ea, eb = equalise(xc, t[i], x_all[j], t[j], rad)
-                fr = _flow(ea, eb, **flow_opts)
-                maps[j] = grid + fr.flow
-                occ[j] = fr.occluded
-                fdiag[f"levels_{j - i:+d}"] = fr.levels
-                fdiag[f"occluded_{j - i:+d}"] = float(fr.occluded.mean())
-                fdiag[f"mean_motion_px_{j - i:+d}"] = float(
-                    np.hypot(fr.flow[..., 0], fr.flow[..., 1]).mean())
+        maps, occ, unc, fdiag = _register(i, x_all, t, rad, grid, flow_opts,
+                                          bidirectional=bidirectional)
         # Bounds the clipped current pixel puts on the truth (per channel).
         bound_hi = (rad.x[:, rad.hi] / t[i]).astype(np.float32)
         bound_lo = (rad.x[:, rad.lo] / t[i]).astype(np.float32)
@@ -384,10 +441,12 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
             xw = _remap(np.where(rel_all[j], x_all[j], 0.0), m) / rws
             vw = _remap(np.where(rel_all[j], var_all[j], 0.0), m) / rws
             # A flow the round trip disowns only matters where the neighbour has
-            # structure within the flow's uncertainty (a few px); flat there, the
-            # value is the same wherever it was sampled.
-            spread = _dilate(np.where(relw, xw, 0.0), 5) - _erode(np.where(relw, xw, np.inf), 5)
-            occl = np.repeat(occ[j][..., None], c, axis=2) & ~(spread ** 2 <= k2 * vw)
+            # structure within the flow's uncertainty; flat there, the value is the
+            # same wherever it was sampled. The uncertainty is the round-trip error
+            # (a 90 px pan the pyramid cannot follow leaves errors of tens of px,
+            # where a fixed 5 px window let flat-but-wrong dark areas through).
+            flat = _flat_within(np.where(relw, xw, np.nan), unc[j], k2 * vw)
+            occl = np.repeat(occ[j][..., None], c, axis=2) & ~flat
             # Clipped current pixel: the truth is above (saturated) / below (black) its bound.
             low = sat & ((bound_hi - xw) ** 2 > k2 * (vw + var_bhi)) & (xw < bound_hi)
             high = (unrel & ~sat) & ((xw - bound_lo) ** 2 > k2 * (vw + var_blo)) & (xw > bound_lo)
