@@ -1,7 +1,8 @@
 """HDR imaging: camera-response recovery (one module per method), radiance
 merge, exposure alignment, tone mapping and HDR file formats.
 
-``from hdr import debevec, mitsunaga_nayar, tonemap, ResponseCurve`` works;
+``from hdr import debevec, mitsunaga_nayar, tonemap, ResponseCurve`` works
+(and ``hdr_video``, ``tonemap_video`` for HDR video);
 the names load their modules on first use so ``import hdr`` stays cheap. The
 merge is ``from hdr.merge import merge``: ``hdr.merge`` is the module's name,
 and a package attribute of the same name would be the function or the module
@@ -24,6 +25,12 @@ _LAZY = {
     "write_rgbe": "hdr.formats",
     "read_logluv_tiff": "hdr.formats",
     "write_logluv_tiff": "hdr.formats",
+    "hdr_video": "hdr.kang2003",
+    "unaligned_merge": "hdr.kang2003",
+    "tonemap_video": "hdr.kang2003",
+    "HDRVideo": "hdr.kang2003",
+    "TonemappedVideo": "hdr.kang2003",
+    "Radiometry": "hdr.kang2003",
 }
 __all__ = sorted(_LAZY)
 
