@@ -46,6 +46,16 @@ A pixel is left unknown (NaN) when
 - the best cost is implausibly high for a true match: above ``max_cost``
   times the key window's variance (a point of the key view hidden from the
   offset camera by detail the model lacks, e.g. the reveal of a recess).
+- its recovered point lies behind a better-matching recovered point on the
+  same offset pixel (half-occlusion);
+- it fails the left-right check: the same search run with the roles
+  swapped (the offset view as key, the model re-seen from the offset camera
+  by :func:`model_in_offset_view`) finds, on the offset pixel the key
+  point lands on, a point that projects back more than ``left_right``
+  units of ``1 + k`` key pixels from the key pixel (``k`` key pixels per
+  offset pixel, from the model's key-to-offset map). This is
+  what refuses most key pixels the *relief* hides from the offset camera
+  (the model says they are visible, so no model test can).
 
 Examples
 --------
@@ -199,6 +209,145 @@ def _hidden_by_better(px, zo, cost, ok, size, tolerance):
     return out
 
 
+def model_in_offset_view(model_depth: np.ndarray, rig) -> np.ndarray:
+    """The rough model seen from the offset camera: its offset-frame ``z`` per
+    offset pixel, by forward projection and a z-buffer.
+
+    The model is only given as a key-view depth map, so it is resampled on a
+    grid ``f`` times finer than the key pixels (bilinear in depth, ``f`` the
+    smallest integer that keeps the samples under half an offset pixel apart
+    at the 99th percentile of the key-to-offset stretch, at most 4), each
+    sample projected into the offset camera and the nearest surface kept per
+    offset pixel. Bilinear samples straddling a model discontinuity (the four
+    neighbours' depths differ by more than 5 %) are dropped rather than
+    bridged, so no phantom surface joins two model pieces.
+
+    Parameters
+    ----------
+    model_depth : ndarray, (H, W)
+        Key-camera ``z`` of the model per key pixel; NaN or ``<= 0`` = absent.
+    rig : calib.rig.Rig
+        ``left`` = key, ``right`` = offset, ``x_offset = R x_key + T``.
+
+    Returns
+    -------
+    ndarray, (H', W') float64
+        Offset-camera ``z`` of the nearest model point on each offset pixel
+        (``rig.right.image_size``), NaN where no model point projects.
+
+    Examples
+    --------
+    >>> from calib.camera import Camera
+    >>> from calib.rig import Rig
+    >>> K = np.array([[40., 0, 19.5], [0, 40, 14.5], [0, 0, 1]])
+    >>> cam = Camera(K, np.zeros(5), (40, 30))
+    >>> a = np.radians(20)
+    >>> R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    >>> T = -R @ [4 * np.sin(a), 0, 4 - 4 * np.cos(a)]   # 20 deg round, aiming at (0, 0, 4)
+    >>> rig = Rig.from_pose(cam, cam, R, T)
+    >>> zo = model_in_offset_view(np.full((30, 40), 4.0), rig)   # a fronto-parallel plane, 4 m
+    >>> X = cam.unproject(np.array([[20.0, 15.0]])) * zo[15, 20]   # back to the key frame
+    >>> bool(abs((rig.R.T @ (X[0] - rig.T))[2] - 4.0) < 0.02), bool(np.isfinite(zo[2:-2, 4:]).all())
+    (True, True)
+    """
+    zm = _check_model(model_depth, rig)
+    h, w = zm.shape
+    wo, ho = rig.right.image_size
+    px0, _ = _project_offset(rig, key_rays(rig.left, (h, w)) @ rig.R.T, np.where(np.isfinite(zm), zm, 1.0))
+    px0 = np.where(np.isfinite(zm)[..., None], px0, np.nan)
+    steps = np.concatenate([np.linalg.norm(np.diff(px0, axis=1), axis=-1).ravel(),
+                            np.linalg.norm(np.diff(px0, axis=0), axis=-1).ravel()])
+    steps = steps[np.isfinite(steps)]
+    stretch = float(np.percentile(steps, 99)) if steps.size else 1.0
+    f = int(np.clip(np.ceil(2 * stretch), 1, 4))
+    # sample positions on [0, W-1] x [0, H-1] at spacing 1/f (the key grid included)
+    xs = np.arange((w - 1) * f + 1) / f
+    ys = np.arange((h - 1) * f + 1) / f
+    x0 = np.minimum(np.floor(xs).astype(np.intp), w - 2) if w > 1 else np.zeros(len(xs), np.intp)
+    y0 = np.minimum(np.floor(ys).astype(np.intp), h - 2) if h > 1 else np.zeros(len(ys), np.intp)
+    ax, ay = xs - x0, ys - y0
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    num = np.zeros((len(ys), len(xs)))
+    bad = np.zeros((len(ys), len(xs)), bool)
+    lo = np.full((len(ys), len(xs)), np.inf)
+    hi = np.full((len(ys), len(xs)), -np.inf)
+    for yy, wy in ((y0, 1 - ay), (y1, ay)):
+        for xx, wx in ((x0, 1 - ax), (x1, ax)):
+            wgt = wy[:, None] * wx[None, :]
+            z = zm[yy[:, None], xx[None, :]]
+            used = wgt > 0
+            bad |= used & ~np.isfinite(z)
+            num += np.where(used & np.isfinite(z), wgt * np.nan_to_num(z), 0.0)
+            lo = np.where(used, np.fmin(lo, z), lo)
+            hi = np.where(used, np.fmax(hi, z), hi)
+    keep = ~bad & (hi <= 1.05 * lo)
+    gy, gx = np.meshgrid(ys, xs, indexing="ij")
+    pts = np.stack([gx[keep], gy[keep]], axis=1)
+    X = rig.left.unproject(pts) * num[keep][:, None]
+    Xo = X @ rig.R.T + rig.T
+    px = rig.right.project(Xo)
+    zo = Xo[:, 2]
+    ok = (zo > 0) & _inside(px, (wo, ho))
+    ix = np.rint(px[ok]).astype(np.intp)
+    zbuf = np.full(ho * wo, np.inf)
+    np.minimum.at(zbuf, ix[:, 1] * wo + ix[:, 0], zo[ok])
+    zbuf[~np.isfinite(zbuf)] = np.nan
+    return zbuf.reshape(ho, wo)
+
+
+def _round_trip(rig, depth, rev_depth, model_px):
+    """How far a key point comes back: key pixel ``x`` → its point (``depth``
+    along the key ray) → the nearest offset pixel ``c`` → the point the
+    reverse search found on ``c``'s ray (``rev_depth``, offset-frame ``z``) →
+    back into the key image at ``x'``.
+
+    Returns two ``(H, W)`` arrays: ``|x' − x|`` in key pixels (NaN where
+    ``depth`` is unknown, the point leaves the offset frame or the reverse
+    search has no depth on ``c``), and the unit it is judged in, ``1 + k``
+    key pixels, ``k`` the largest key displacement per offset pixel: the
+    inverted smallest singular value of the Jacobian of the model's
+    key-to-offset map ``model_px`` (H, W, 2), > 1 where the offset view sees
+    the model more obliquely than the key view (its median where the
+    Jacobian is undefined, at the model's edges). A correct pair of matches comes back
+    within ``0.5 + 1.21 k < 1.25 (1 + k)``: each search's sub-step error is
+    at most half a step, and a step moves the sample by at most one pixel
+    (the reverse step: one key pixel; the forward step: one offset pixel,
+    ``k`` key pixels), and rounding ``y`` to ``c`` adds ``√2/2`` offset
+    pixels, ``0.71 k`` key pixels."""
+    h, w = depth.shape
+    dist = np.full((h, w), np.nan)
+    unit = np.full((h, w), np.nan)
+    known = np.isfinite(depth)
+    if not known.any():
+        return dist, unit
+    J = np.stack([np.gradient(model_px, axis=1), np.gradient(model_px, axis=0)], axis=-1)
+    finite = np.isfinite(J).all(axis=(-1, -2))
+    smin = np.linalg.svd(np.where(finite[..., None, None], J, 0.0), compute_uv=False)[..., -1]
+    k = np.where(finite & (smin > 1e-6), 1.0 / np.maximum(smin, 1e-6), np.nan)
+    k = np.where(np.isfinite(k), k, np.nanmedian(k) if np.isfinite(k).any() else 1.0)
+    rays = key_rays(rig.left, (h, w))
+    px = rig.right.project((rays * np.where(known, depth, 1.0)[..., None]) @ rig.R.T
+                           + rig.T).reshape(h, w, 2)
+    wo, ho = rig.right.image_size
+    ys, xs = np.nonzero(known)
+    y = px[ys, xs]
+    inside = _inside(y, (wo, ho))
+    c = np.rint(np.clip(np.nan_to_num(y), 0, [wo - 1, ho - 1]))
+    z = rev_depth[c[:, 1].astype(np.intp), c[:, 0].astype(np.intp)].astype(np.float64)
+    Y = rig.right.unproject(c) * z[:, None]
+    x2 = rig.left.project((Y - rig.T) @ rig.R)  # x_key = Rᵀ (x_offset − T)
+    dist[ys, xs] = np.where(inside, np.hypot(x2[:, 0] - xs, x2[:, 1] - ys), np.nan)
+    unit[known] = 1 + k[known]
+    return dist, unit
+
+
+def _reverse_rig(rig):
+    """The rig with the roles swapped: offset as key (``x_key = Rᵀ x_offset − Rᵀ T``)."""
+    from calib.rig import Rig
+
+    return Rig.from_pose(rig.right, rig.left, rig.R.T, -rig.R.T @ rig.T)
+
+
 def _remap(image, px):
     import cv2
 
@@ -272,7 +421,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
                  max_offset: float, step: float | None = None, window: int = 9,
                  texture_snr: float = 1.0, uniqueness: float = 0.02, max_cost: float = 1.0,
                  occlusion_tolerance: float | None = 0.01, max_median_cost: float | None = 0.8,
-                 subpixel: bool = True,
+                 left_right: float | None = 1.25, subpixel: bool = True,
                  noise_sigma: float | None = None) -> ModelStereo:
     """Depth of the key view as offsets from a rough model (model-based stereo).
 
@@ -323,6 +472,19 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         On the ``model-stereo`` scene (window 9) the correct model gives
         0.28, a model off by ±0.2-0.3 m 0.30-0.59, one off by ±0.6 m (beyond
         ``max_offset`` 0.35) 1.1. ``None`` disables.
+    left_right : float or None
+        Left-right check tolerance in round-trip units of ``1 + k`` key
+        pixels (``k`` the key pixels per offset pixel; a correct pair comes
+        back within ``0.5 + 1.21 k``, so 1.25 units covers it for any ``k``).
+        An offset pixel the reverse search leaves unknown gives no verdict
+        (the key pixel is kept). ``None`` disables it (one search instead of
+        two: about a third of the time). Measured
+        on ``model-stereo`` 320x240, window 9 (seed 0; seeds 1-4 within
+        0.002), key pixels hidden by the relief refused / bench error (share
+        of seen pixels off by > 1 % of depth) without → with the check:
+        20°: 0.40 → 0.51 / 0.163 → 0.168; 30°: 0.50 → 0.64 / 0.178 → 0.189;
+        50°: 0.56 → 0.75 / 0.228 → 0.258; 65°: 0.55 → 0.72 / 0.293 → 0.334.
+        The refused correct pixels lie within a window of depth edges.
     subpixel : bool
         Parabola refinement of the best step.
     noise_sigma : float, optional
@@ -361,6 +523,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness), ("max_cost", max_cost)):
         if not v >= 0:
             raise ValueError(f"{name}: expected a value >= 0, got {v}")
+    if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
+        raise ValueError(f"left_right: expected a finite value > 0 or None, got {left_right}")
 
     h, w = zm.shape
     size_o = rig.right.image_size
@@ -461,7 +625,37 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         okr = valid & (zor > 0) & _inside(pxr, size_o)
         occluded = _hidden_by_better(pxr, zor, bestc, okr, size_o, occlusion_tolerance)
         valid &= ~occluded
+    # Left-right: the same search with the roles swapped (the offset view as
+    # key, the model re-seen from it) must send the offset pixel a key point
+    # lands on back to that key pixel.
+    t_check = time.perf_counter()
+    inconsistent = np.zeros((h, w), bool)
+    reverse_info = None
+    if left_right is not None and valid.any():
+        rev_model = model_in_offset_view(zm, rig)
+        if np.isfinite(rev_model).any():
+            rev = model_stereo(offset, key, rev_model, _reverse_rig(rig), max_offset=max_offset,
+                               window=window, texture_snr=texture_snr, uniqueness=uniqueness,
+                               max_cost=max_cost, occlusion_tolerance=occlusion_tolerance,
+                               max_median_cost=None, left_right=None, subpixel=subpixel,
+                               noise_sigma=noise_sigma)
+            back, unit = _round_trip(rig, np.where(valid, depth, np.nan), rev.depth,
+                                     np.where(seen[..., None], px0, np.nan))
+            reverse_info = {"steps": rev.info["steps"], "step": rev.info["step"],
+                            "valid_fraction": rev.valid_fraction,
+                            "round_trip_px_median": float(np.nanmedian(back)) if np.isfinite(back).any()
+                            else None,
+                            "round_trip_unit_px_median": float(np.nanmedian(unit)) if np.isfinite(unit).any()
+                            else None}
+            # where the reverse search refused the offset pixel there is no verdict
+            inconsistent = valid & (back > left_right * unit)
+        else:
+            inconsistent = valid.copy()
+            warnings.append("left-right check: no model point projects into the offset view; "
+                            "every pixel refused")
+        valid &= ~inconsistent
     depth[~valid] = np.nan
+    t_lr = time.perf_counter()
     dlt = np.where(valid, dlt, np.nan).astype(np.float32)
 
     # the warped offset image of Fig. 5.12c, every channel
@@ -474,7 +668,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
               "at_range_limit": int((seen & textured & computed & ~inner).sum()),
               "not_unique": int((seen & textured & computed & inner & ~unique).sum()),
               "implausible_cost": int((seen & textured & computed & inner & unique & ~plausible).sum()),
-              "occluded": int(occluded.sum())}
+              "occluded": int(occluded.sum()),
+              "left_right": int(inconsistent.sum())}
     judged = seen & textured & computed
     fit = float(np.median((bestc[judged] - 2 * sigma ** 2) / np.maximum(var[judged], 1e-12))) \
         if judged.any() else float("inf")
@@ -496,13 +691,15 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
             "delta_range": [float(deltas[0]), float(deltas[-1])],
             "px_per_unit_delta_p99": px_per_unit, "window": int(window),
             "texture_snr": texture_snr, "uniqueness": uniqueness, "max_cost": max_cost,
-            "subpixel": subpixel, "noise_sigma": float(sigma),
+            "subpixel": subpixel, "left_right": left_right, "reverse": reverse_info,
+            "noise_sigma": float(sigma),
             "noise_sigma_source": "given" if noise_sigma is not None else "estimated",
             "rejected": counts, "seen_fraction": float(seen.mean()),
             "median_cost_over_variance": fit, "max_median_cost": max_median_cost,
             "valid_fraction": float(valid.mean()),
             "valid_fraction_of_seen": float(valid.sum() / max(1, seen.sum())),
             "warnings": warnings,
-            "timings_s": {"prepare": t_scan - t0, "scan": t_decide - t_scan, "decide": t1 - t_decide}}
+            "timings_s": {"prepare": t_scan - t0, "scan": t_decide - t_scan,
+                          "decide": t1 - t_decide - (t_lr - t_check), "left_right": t_lr - t_check}}
     return ModelStereo(depth, dlt, warped0, np.where(computed, bestc, np.nan).astype(np.float32),
                        valid, info)

@@ -223,7 +223,7 @@ SCENES = {
         "windows, with its rough model (the wall plane) for model-based stereo",
         render_facade, (320, 240),
         (Option("angle", float, 30.0, "angle between the two viewing directions (degrees)",
-                low=5.0, high=45.0),
+                low=5.0, high=70.0),
          Option("noise", float, 1.0, "Gaussian read noise (8-bit code values)", low=0.0),
          Option("textureless", bool, False, "add a flat grey sign on the wall (a textureless patch)"),
          Option("supersample", int, 3, "rays per pixel side (anti-aliasing)", low=1, high=6)),
