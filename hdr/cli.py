@@ -3,6 +3,7 @@ HDR file conversion. Parses, loads, calls the library, saves."""
 
 from __future__ import annotations
 
+import inspect
 import time
 from pathlib import Path
 
@@ -368,8 +369,12 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--temporal", type=int, default=5,
                    help="frames the tone-mapping log-average is smoothed over (odd; 1 = none)")
     v.add_argument("--window", type=int, default=9, help="flow window, odd px (default 9)")
-    v.add_argument("--consistency-sigma", type=float, default=4.0,
-                   help="reject warped neighbours further than this many noise sigma (default 4)")
+    from hdr.kang2003 import hdr_video as _hv
+
+    sigma = inspect.signature(_hv).parameters["consistency_sigma"].default
+    v.add_argument("--consistency-sigma", type=float, default=sigma,
+                   help="reject warped neighbours further than this many noise sigma (default "
+                        f"{sigma:g}, chosen by the protocol in hdr.kang2003.DEFAULTS_CHOICE)")
     v.set_defaults(func=_video)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input")
