@@ -96,9 +96,10 @@ def test_warped_offset_image_reproduces_key_where_model_exact():
     w0 = warp_offset(s.images[1], g["model_depth"], rig)
     diff0 = np.abs(w0 - key)[wall]
     # Noise-free: only 8-bit rounding of both views (<= 0.5 code each) and
-    # bilinear resampling of the offset view, which sees the wall at 42 deg
-    # (its pixels are 1/cos-wider on the wall than the key's, a slightly
-    # different box filter) remain: mean |difference| under 2 codes.
+    # bilinear resampling of the offset view (it sees the wall 18 deg off its
+    # normal, the key 12 deg, and its focal is 3 % longer: its pixels cover a
+    # slightly different patch of wall, a different box filter) remain: mean
+    # |difference| under 2 codes.
     assert np.all(np.isfinite(diff0))
     assert np.mean(diff0) < 2.0
     # ...and misregistering by one step (one offset pixel) is much worse: the
