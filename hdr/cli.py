@@ -134,6 +134,16 @@ def plot_curve(curve, path) -> None:
     plt.close(fig)
 
 
+
+def _check_curve(curve, stack, path, what):
+    """The response must be for the stack's bit depth and channels."""
+    if stack.bit_depth is not None and stack.bit_depth != curve.bit_depth:
+        raise InputError(path, f"curve is {curve.bit_depth}-bit but the {what} are "
+                               f"{stack.bit_depth}-bit; recover a curve at this depth")
+    if curve.channels not in (1, stack.images.shape[-1]):
+        raise InputError(path, f"curve has {curve.channels} channels, the {what} "
+                               f"{stack.images.shape[-1]}")
+
 def _merge(args) -> int:
     import numpy as np
 
@@ -145,12 +155,7 @@ def _merge(args) -> int:
     out = check_output_path(args.out, suffixes=(".exr", ".hdr", ".tif", ".tiff", ".pfm"))
     curve = ResponseCurve.load(args.response)
     stack, times = _load(args)
-    if stack.bit_depth is not None and stack.bit_depth != curve.bit_depth:
-        raise InputError(args.response, f"curve is {curve.bit_depth}-bit but the images are "
-                                        f"{stack.bit_depth}-bit; recover a curve from this bracket")
-    if curve.channels not in (1, stack.images.shape[-1]):
-        raise InputError(args.response, f"curve has {curve.channels} channels, the images "
-                                        f"{stack.images.shape[-1]}")
+    _check_curve(curve, stack, args.response, "images")
     t0 = time.perf_counter()
     m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost)
     dt = time.perf_counter() - t0
@@ -271,12 +276,7 @@ def _video(args) -> int:
                                          "code values (integer PNG/TIFF)")
     if stack.exposure_times_s is None:
         raise InputError(where, "no exposure times (stack.json, EXIF or --times)")
-    if stack.bit_depth is not None and stack.bit_depth != curve.bit_depth:
-        raise InputError(args.response, f"curve is {curve.bit_depth}-bit but the frames are "
-                                        f"{stack.bit_depth}-bit; recover a curve at this depth")
-    if curve.channels not in (1, stack.images.shape[-1]):
-        raise InputError(args.response, f"curve has {curve.channels} channels, the frames "
-                                        f"{stack.images.shape[-1]}")
+    _check_curve(curve, stack, args.response, "frames")
     t0 = time.perf_counter()
     v = hdr_video(stack.images, stack.exposure_times_s, curve, window=args.window,
                   consistency_sigma=args.consistency_sigma,

@@ -57,6 +57,7 @@ import numpy as np
 from capture.errors import InputError
 from hdr.merge import BLACK, CLIPPED, GHOST, variance_weight_table
 from hdr.response import ResponseCurve
+from hdr.samples import check_stack
 
 DEFAULTS_CHOICE = """\
 consistency_sigma (2026-11-23) was chosen on bracket_video renders the bench and the
@@ -159,30 +160,15 @@ class TonemappedVideo:
 
 # ------------------------------------------------------------- validation
 def _check(frames, times, response):
-    z = np.asarray(frames)
-    if z.ndim == 3:
-        z = z[..., None]
-    if z.ndim != 4:
-        raise InputError("frames", f"expected a video (N, H, W, C), got shape {z.shape}")
-    if z.dtype.kind not in "ui":
-        raise TypeError(f"frames: expected integer code values, got {z.dtype}")
-    if z.shape[0] < 2:
-        raise InputError("frames", f"HDR video needs at least 2 frames, got {z.shape[0]}")
     if not isinstance(response, ResponseCurve):
         raise TypeError(f"response: expected a ResponseCurve, got {type(response).__name__}")
-    if z.size and int(z.max()) > response.code_max:
-        raise InputError("--response", f"codes up to {int(z.max())} exceed the curve's bit depth "
-                                       f"{response.bit_depth}")
+    z, t, _ = check_stack(frames, times, bit_depth=response.bit_depth, where="frames",
+                          distinct_times=False)
+    if z.shape[0] < 2:
+        raise InputError("frames", f"HDR video needs at least 2 frames, got {z.shape[0]}")
     if response.channels not in (1, z.shape[-1]):
         raise InputError("--response", f"curve has {response.channels} channels, frames have "
                                        f"{z.shape[-1]}")
-    if times is None:
-        raise InputError("--times", "exposure times are needed (stack.json or --times)")
-    t = np.asarray(times, dtype=np.float64).ravel()
-    if t.size != z.shape[0]:
-        raise InputError("--times", f"{t.size} exposure times for {z.shape[0]} frames")
-    if not np.all(np.isfinite(t)) or np.any(t <= 0):
-        raise InputError("--times", f"exposure times must be positive and finite, got {t.tolist()}")
     if float(t.max() / t.min()) < 1.0 + 1e-3:
         raise InputError("--times", f"every frame has the same exposure ({t[0]:g} s): HDR video "
                                     "needs alternating exposures (neighbours would clip where "

@@ -26,11 +26,13 @@ from capture.errors import InputError
 
 
 def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
-                where: str = "images") -> tuple[np.ndarray, np.ndarray, int]:
+                where: str = "images", distinct_times: bool = True) -> tuple[np.ndarray, np.ndarray, int]:
     """Validate a bracket: ``(P, H, W, C)`` integer codes and ``P`` times.
 
     Returns the stack (as given, with a channel axis), the times as float64
-    and the bit depth (inferred from the dtype when ``None``).
+    and the bit depth (inferred from the dtype when ``None``). A bracket
+    needs every time distinct; a video of alternating exposures repeats them
+    (``distinct_times=False``).
 
     Raises
     ------
@@ -58,7 +60,7 @@ def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
         raise InputError("--times", f"{t.size} exposure times for {z.shape[0]} images")
     if not np.all(np.isfinite(t)) or np.any(t <= 0):
         raise InputError("--times", f"exposure times must be positive and finite, got {t.tolist()}")
-    if np.unique(t).size != t.size:
+    if distinct_times and np.unique(t).size != t.size:
         dup = sorted({float(x) for x in t if np.sum(t == x) > 1})
         raise InputError("--times", f"duplicated exposure times {dup}: each image of a bracket "
                                     "needs its own exposure (drop the duplicate frames)")
