@@ -417,6 +417,8 @@ def _model_based(args) -> int:
                     ("--max-cost", args.max_cost)):
         if not v >= 0:
             raise InputError(flag, f"expected a value >= 0, got {v}")
+    if not (args.left_right >= 0 and np.isfinite(args.left_right)):
+        raise InputError("--left-right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
     key, off = _read(args.key), _read(args.offset)
     if key.shape[:2] != off.shape[:2]:
         raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
@@ -436,7 +438,7 @@ def _model_based(args) -> int:
     try:
         res = model_stereo(key, off, model, rig, max_offset=args.max_offset, window=args.window,
                            step=args.step, texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                           max_cost=args.max_cost)
+                           max_cost=args.max_cost, left_right=args.left_right or None)
     except EstimationError as e:
         raise EstimationError(args.model, e.problem) from None
     except ValueError as e:
@@ -446,7 +448,7 @@ def _model_based(args) -> int:
         warn(w)
     params = {"max_offset": args.max_offset, "window": args.window, "step": args.step,
               "texture_snr": args.texture_snr, "uniqueness": args.uniqueness,
-              "max_cost": args.max_cost}
+              "max_cost": args.max_cost, "left_right": args.left_right or None}
     info = {k: v for k, v in res.info.items() if k not in ("warnings", "timings_s")}
     meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig],
                      params=params, model={"model_based_stereo": info},
@@ -538,6 +540,10 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--max-cost", type=float, default=1.0,
                    help="refuse matches costing more than 2 sigma^2 + this x window variance "
                         "(default 1.0; inf disables)")
+    v.add_argument("--left-right", type=float, default=1.25,
+                   help="left-right check: the same search from the offset view must map back "
+                        "within this many units of 1 + (key px per offset px) (default 1.25, which "
+                        "covers a correct pair; 0 disables it, about 3x faster)")
     v.add_argument("--warped", help="also write the warped offset image (PNG)")
     v.add_argument("--out", required=True, help="depth .pfm (key camera z; unknown stored as inf)")
     v.set_defaults(func=_model_based)

@@ -250,4 +250,25 @@ def test_cli_bad_inputs(scene_dir, tmp_path):
     for bad in ("0", "-1", "nan"):
         assert_clean_error(_run(folder, model, out, "--max-offset", bad), "--max-offset")
     assert_clean_error(_run(folder, model, out, "--max-offset", "0.3", "--window", "8"), "--window")
+    for bad in ("-1", "nan", "inf"):
+        assert_clean_error(_run(folder, model, out, "--max-offset", "0.3", "--left-right", bad),
+                           "--left-right")
     assert not out.exists() and not (tmp_path / "d.pfm.meta.json").exists()
+
+
+def test_cli_left_right_flag(scene_dir, tmp_path):
+    # the flag reaches the library: 0 turns the check off (same as left_right=None),
+    # and the default refuses at least what the check-free run keeps out
+    folder, model, s = scene_dir
+    runs = {}
+    for flag in ("0", "1.25"):
+        out = tmp_path / f"lr{flag}.pfm"
+        r = _run(folder, model, out, "--max-offset", "0.35", "--left-right", flag, "-q")
+        assert r.returncode == 0, r.stderr
+        meta = json.loads(out.with_name(out.name + ".meta.json").read_text())
+        runs[flag] = (io.read_pfm(out), meta)
+    off, on = runs["0"], runs["1.25"]
+    assert off[1]["params"]["left_right"] is None and on[1]["params"]["left_right"] == 1.25
+    assert off[1]["model"]["model_based_stereo"]["rejected"]["left_right"] == 0
+    assert on[1]["model"]["model_based_stereo"]["rejected"]["left_right"] > 0
+    assert np.isfinite(on[0]).sum() < np.isfinite(off[0]).sum()
