@@ -144,6 +144,31 @@ def _check_curve(curve, stack, path, what):
         raise InputError(path, f"curve has {curve.channels} channels, the {what} "
                                f"{stack.images.shape[-1]}")
 
+def _noise(args) -> dict:
+    """The variance weights' sensor noise: ``--noise FULL_WELL_E,READ_NOISE_E`` or the
+    library's defaults (not estimated from the stack), with where it came from."""
+    import math
+
+    from hdr.merge import merge
+
+    if args.noise is None:
+        d = inspect.signature(merge).parameters
+        return {"full_well_e": d["full_well_e"].default, "read_noise_e": d["read_noise_e"].default,
+                "source": "library default (not estimated from the images)"}
+    if args.weights != "variance":
+        raise InputError("--noise", "applies to --weights variance only")
+    vals = parse_floats(args.noise, name="--noise")
+    if len(vals) != 2:
+        raise InputError("--noise", f"expected FULL_WELL_E,READ_NOISE_E (two numbers), got "
+                                    f"{args.noise!r}")
+    fw, rn = vals
+    if not (math.isfinite(fw) and fw > 0):
+        raise InputError("--noise", f"full well must be a positive number of electrons, got {fw}")
+    if not (math.isfinite(rn) and rn >= 0):
+        raise InputError("--noise", f"read noise must be >= 0 electrons RMS, got {rn}")
+    return {"full_well_e": float(fw), "read_noise_e": float(rn), "source": "given (--noise)"}
+
+
 def _merge(args) -> int:
     import numpy as np
 
@@ -153,17 +178,20 @@ def _merge(args) -> int:
     from hdr.response import ResponseCurve
 
     out = check_output_path(args.out, suffixes=(".exr", ".hdr", ".tif", ".tiff", ".pfm"))
+    noise = _noise(args)
     curve = ResponseCurve.load(args.response)
     stack, times = _load(args)
     _check_curve(curve, stack, args.response, "images")
     t0 = time.perf_counter()
-    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost)
+    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost,
+              **{k: v for k, v in noise.items() if k != "source"})
     dt = time.perf_counter() - t0
     for w in m.warnings:
         warn(w)
     meta = make_meta("lumigraph.radiance", inputs=[*stack.paths, args.response],
                      params={"weights": args.weights, "deghost": args.deghost, "times_s": times,
-                             "response_method": curve.method},
+                             "response_method": curve.method,
+                             "noise": noise if args.weights == "variance" else None},
                      quality=m.stats, timings_s={"merge": dt}, warnings=m.warnings,
                      extra={"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
                             "mask": "flags PNG beside the output: 1 clipped everywhere (lower "
@@ -344,6 +372,9 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--out", required=True, help="radiance.exr (or .hdr, .tif LogLuv, .pfm)")
     v.add_argument("--weights", choices=("variance", "hat"), default="variance")
     v.add_argument("--deghost", action="store_true", help="leave out moving content")
+    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
+                   help="sensor noise for the variance weights: electrons at saturation and read "
+                        "noise in electrons RMS (default 10000,5; not estimated from the images)")
     v.set_defaults(func=_merge)
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)")
     v.add_argument("images", nargs="+")
