@@ -6,7 +6,7 @@ choices (``--help``) stays cheap and cannot drift from what exists.
 Examples
 --------
 >>> sorted(RESPONSE_METHODS)
-['debevec', 'linear', 'mitsunaga-nayar']
+['debevec', 'linear', 'mitsunaga-nayar', 'robertson']
 >>> resolve(RESPONSE_METHODS, "debevec").__name__
 'debevec'
 """
@@ -18,6 +18,7 @@ import importlib
 RESPONSE_METHODS = {
     "debevec": "hdr.debevec1997:debevec",
     "mitsunaga-nayar": "hdr.mitsunaga1999:mitsunaga_nayar",
+    "robertson": "hdr.robertson2003:robertson",
     "linear": "hdr.methods:linear_response",
 }
 TONEMAP_METHODS = {

@@ -1,0 +1,248 @@
+"""Robertson, Borman & Stevenson (2003): the response by alternating
+maximum-likelihood estimation.
+
+M. A. Robertson, S. Borman and R. L. Stevenson, "Estimation-theoretic approach
+to dynamic range enhancement using multiple exposures", J. Electronic Imaging
+12(2), 2003, doi:10.1117/1.1557695; first in "Dynamic range improvement
+through multiple exposures", ICIP 1999, doi:10.1109/ICIP.1999.817091.
+(The shared reference chapters do not cover this method; equations are
+named by what they do.)
+
+Model: code ``y_ij = f(t_j x_i + N_ij)``; the unknowns are the inverse
+response values ``I_m = f⁻¹(m)`` and the radiances ``x_i``. With weights
+``w_ij = w(y_ij)`` the objective ``Σ w_ij (I_{y_ij} − t_j x_i)²`` is minimised
+by alternating its two closed-form partial minimisers:
+
+- radiance, ``I`` fixed: ``x_i = Σ_j w_ij t_j I_{y_ij} / Σ_j w_ij t_j²``
+  (weighted least squares over the exposures);
+- response, ``x`` fixed: ``I_m = mean of t_j x_i over the observations with
+  y_ij = m`` (one ``np.bincount``);
+- normalise ``I`` so the middle code maps to 1 (the scale is free),
+
+until the largest change of ``ln I`` between iterations is below ``tol``.
+The weight is the papers' Gaussian-like certainty function
+``w(y) = exp(−4 (y − y_mid)² / y_mid²)`` (``y_mid = z_max / 2``).
+
+What this implementation adds:
+
+- observations within ``clip_margin·z_max`` of 0 or ``z_max`` take no part
+  (weight 0 in the radiance step, no response update from them): clipping
+  truncates the noise there and biases the per-code means (the same reason
+  as :func:`hdr.debevec1997.data_weight`); those codes, and any code no
+  sample visits, get ``ln I`` by linear interpolation between visited codes
+  and linear extrapolation at the ends;
+- any bit depth up to 16: above 8 bits the codes are pooled into ``bins``
+  equal-width bins (default 256, so 16 codes a bin at 12 bits, 256 at 16);
+  each bin's ``I`` is the mean of ``t_j x_i`` over its observations and
+  belongs at the mean code of those observations; between bin centres
+  ``I`` is interpolated linearly. One unknown per code would leave a 16-bit
+  bin a handful of observations (or none);
+- principled pixel sampling (:func:`hdr.samples.sample_pixels`, pixels
+  unclipped in two exposures: one seen once only pulls its own code towards
+  the current curve), stratified over radiance; ``samples`` default 5000;
+- iterated to convergence (``tol`` 1e-6 in ``ln I``, at most 2000 iterations; 500-1000 are typical).
+
+What convergence shows (bench ``8-bit`` bracket, film response, shot + read
+noise, ln-response RMS against the exact curve over 5-95 % of the codes):
+the fixed point of the alternation is biased. The response step is
+``E[t x | y = m]``, and with noise before the response that conditional mean
+follows the radiance histogram (errors in variables), leaving a ripple of
+period one exposure step. Stratified sampling flattens the histogram:
+converged error 0.020 at 5000 stratified pixels against 0.034 with every
+pixel; OpenCV's CalibrateRobertson run to convergence (1000 iterations,
+threshold 1e-7) gives 0.037, while its default (30 iterations, threshold
+0.01) stops early at 0.014: early stopping regularises. We report the
+converged estimate the method defines, and its convergence;
+- a monotonic result (weighted isotonic regression, reported in ``fit``);
+- convergence recorded: iterations, the final change and the objective at
+  the first and last iteration (``fit["convergence"]``).
+
+Examples
+--------
+>>> rng = np.random.default_rng(0)
+>>> e = np.exp(rng.uniform(-6, 0, (40, 40, 1)))
+>>> t = np.array([0.05, 0.2, 0.8, 3.2])
+>>> z = np.stack([np.clip(np.round(255 * np.sqrt(np.clip(e * ti, 0, 1))), 0, 255)
+...               for ti in t]).astype(np.uint8)
+>>> r = robertson(z, t, rng=rng)
+>>> x = r.exposure_table()[0]
+>>> c = r.fit["convergence"][0]
+>>> bool(abs(x[200] / x[100] - 4.0) < 0.1), c["objective_last"] < c["objective_first"]
+(True, True)
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from hdr.response import ResponseCurve, normalise_g
+from hdr.samples import check_stack, sample_pixels
+
+
+def certainty_weight(z: np.ndarray, bit_depth: int) -> np.ndarray:
+    """Robertson et al.'s Gaussian-like weight ``exp(−4 (z − z_mid)² / z_mid²)``,
+    ``z_mid = z_max / 2`` (1 at mid-range, ``e⁻⁴`` at either end).
+
+    Examples
+    --------
+    >>> certainty_weight(np.array([0, 64, 127, 255]), 8).round(3).tolist()
+    [0.018, 0.371, 1.0, 0.018]
+    """
+    half = (2 ** bit_depth - 1) / 2.0
+    u = (np.asarray(z, dtype=np.float64) - half) / half
+    return np.exp(-4.0 * u * u)
+
+
+def _fill(ln_i: np.ndarray, centres: np.ndarray, known: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """``ln I`` at codes ``at`` from the ``known`` bins: linear between their centres,
+    extrapolated with the slope of the last two at either end."""
+    c, v = centres[known], ln_i[known]
+    out = np.interp(at, c, v)
+    if c.size >= 2:
+        lo, hi = at < c[0], at > c[-1]
+        out[lo] = v[0] + (at[lo] - c[0]) * (v[1] - v[0]) / (c[1] - c[0])
+        out[hi] = v[-1] + (at[hi] - c[-1]) * (v[-1] - v[-2]) / (c[-1] - c[-2])
+    return out
+
+
+def robertson(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
+              samples: int = 5000, bins: int | None = None, max_iter: int = 2000,
+              tol: float = 1e-6, clip_margin: float = 0.03,
+              rng: np.random.Generator | None = None) -> ResponseCurve:
+    """Recover ``g = ln f⁻¹`` per channel by Robertson et al.'s alternating estimation.
+
+    Parameters
+    ----------
+    images : ndarray, ``(P, H, W, C)`` or ``(P, H, W)``, uint8/uint16 codes
+        The bracket, registered, static scene.
+    exposure_times_s : sequence of float, ``(P,)``
+        Exposure times (or relative exposures), seconds, distinct.
+    bit_depth : int, optional
+        True bit depth of the codes (default: the dtype's).
+    samples : int
+        Pixels used (:func:`hdr.samples.sample_pixels`).
+    bins : int, optional
+        Response unknowns per channel; default ``min(2**bit_depth, 256)``
+        (one per code up to 8 bits, equal-width code bins above).
+    max_iter : int
+        Iterations at most (a warning says when they run out).
+    tol : float
+        Convergence: the largest change of ``ln I`` over the visited bins
+        between two iterations.
+    clip_margin : float
+        Fraction of the code range at each end left out of the fit.
+    rng : numpy.random.Generator, optional
+        For the pixel sampling's tie-breaking (default seeded 0).
+
+    Returns
+    -------
+    ResponseCurve
+        ``method="robertson"``; ``fit["convergence"]`` per channel holds
+        ``iterations``, ``final_change_ln``, ``converged`` and the objective
+        ``Σ w (I − t x)²`` (mean per weighted observation, ``I`` normalised)
+        at the first and last iteration; ``selection`` the bins and weight.
+
+    Raises
+    ------
+    InputError
+        Fewer than two exposures, duplicated times, too few usable pixels.
+    EstimationError
+        A channel with too few visited codes to define a curve.
+    """
+    from scipy.optimize import isotonic_regression
+
+    from capture.errors import EstimationError, InputError
+
+    z, t, bd = check_stack(images, exposure_times_s, bit_depth=bit_depth)
+    p, h, w_, c = z.shape
+    if p < 2:
+        raise InputError("images", "a response needs at least two exposures")
+    n_codes = 2 ** bd
+    n_bins = int(bins) if bins is not None else min(n_codes, 256)
+    if not 4 <= n_bins <= n_codes:
+        raise ValueError(f"bins: expected 4..{n_codes}, got {bins}")
+    if not (isinstance(max_iter, int | np.integer) and max_iter >= 1):
+        raise ValueError(f"max_iter: expected a positive integer, got {max_iter!r}")
+    if not (math.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol: expected a positive number, got {tol!r}")
+    rng = np.random.default_rng(0) if rng is None else rng
+    order = np.argsort(t)
+    z, t = z[order], t[order]
+    zmax = n_codes - 1
+    idx = sample_pixels(z, n=samples, bit_depth=bd, rng=rng)
+    zs = z.reshape(p, h * w_, c)[:, idx].astype(np.int64)  # (P, N, C)
+    lo, hi = clip_margin * zmax, (1 - clip_margin) * zmax
+    all_codes = np.arange(n_codes, dtype=np.float64)
+    tt = t[:, None]
+    g_out = np.empty((c, n_codes))
+    warnings: list[str] = []
+    conv, mono, visited = [], [], []
+    for ch in range(c):
+        y = zs[..., ch]  # (P, N)
+        use = (y >= lo) & (y <= hi)
+        w = np.where(use, certainty_weight(y, bd), 0.0)
+        b = (y * n_bins) // n_codes  # equal-width code bins (the identity at <= 8 bits)
+        bu = b[use]
+        den = np.maximum((w * tt ** 2).sum(axis=0), 1e-300)
+        cnt = np.bincount(bu, minlength=n_bins).astype(np.float64)
+        known = cnt > 0
+        if np.count_nonzero(known) < 4:
+            raise EstimationError("images", f"channel {ch}: only {np.count_nonzero(known)} code "
+                                            "levels are well exposed; no curve can be estimated")
+        # Each bin's I belongs at the mean code of its observations.
+        centres = np.where(known, np.bincount(bu, weights=y[use], minlength=n_bins)
+                           / np.maximum(cnt, 1), (np.arange(n_bins) + 0.5) * n_codes / n_bins)
+        # Linear interpolation of ln I from bin centres to each observation's code,
+        # fixed through the iterations: position k0 + a among the visited centres.
+        kc = np.flatnonzero(known)
+        pos = np.clip(np.searchsorted(centres[kc], y, side="right") - 1, 0, kc.size - 2)
+        k0, k1 = kc[pos], kc[pos + 1]
+        a = np.clip((y - centres[k0]) / (centres[k1] - centres[k0]), 0.0, 1.0)
+        mid_bin = int(np.argmin(np.abs(centres - zmax / 2.0) + np.where(known, 0, np.inf)))
+        # Start from a linear response, I = code / z_max, normalised at mid-code.
+        ln_i = np.log(np.maximum(centres, 0.5) / zmax)
+        ln_i -= ln_i[mid_bin]
+        change, obj0, obj, it = math.inf, math.nan, math.nan, 0
+        for it in range(1, max_iter + 1):
+            i_obs = np.exp(ln_i[k0] * (1 - a) + ln_i[k1] * a)
+            x = (w * tt * i_obs).sum(axis=0) / den  # radiance step
+            obj = float((w * (i_obs - tt * x) ** 2).sum() / w.sum())
+            if it == 1:
+                obj0 = obj
+            tx = (tt * x)[use]
+            new = np.bincount(bu, weights=tx, minlength=n_bins)
+            ln_new = np.full(n_bins, np.nan)
+            ln_new[known] = np.log(np.maximum(new[known] / cnt[known], 1e-300))  # response step
+            ln_new -= ln_new[mid_bin]  # I at mid-code = 1
+            change = float(np.max(np.abs(ln_new[known] - ln_i[known])))
+            ln_i = ln_new
+            ln_i[~known] = _fill(ln_i, centres, known, centres[~known])
+            if change < tol:
+                break
+        converged = change < tol
+        if not converged:
+            warnings.append(f"channel {ch}: not converged after {max_iter} iterations (last change "
+                            f"{change:.2g} in ln units); raise max_iter")
+        conv.append({"iterations": it, "final_change_ln": change, "converged": bool(converged),
+                     "objective_first": obj0, "objective_last": obj})
+        g_ch = _fill(ln_i, centres, known, all_codes)
+        wts = np.interp(all_codes, centres[kc], cnt[kc]) + 1.0
+        g_mono = np.asarray(isotonic_regression(g_ch, weights=wts, increasing=True).x)
+        change_mono = float(np.max(np.abs(g_mono - g_ch)))
+        mono.append(change_mono)
+        if change_mono > 0.05:
+            warnings.append(f"channel {ch}: the fit was not monotonic (max change "
+                            f"{change_mono:.3f} in ln units when made so); noisy data or too "
+                            "few samples")
+        visited.append(int(np.count_nonzero(known)))
+        g_out[ch] = g_mono
+    sel = {"parameter": "bins", "chosen": n_bins, "rule": "given" if bins is not None else
+           "one per code up to 8 bits, else 256 equal-width code bins",
+           "weight": "exp(-4 (z - z_mid)^2 / z_mid^2), zero within clip_margin of either end",
+           "clip_margin": clip_margin}
+    fit = {"samples": int(idx.size), "bins_visited": visited, "convergence": conv,
+           "monotone_max_change_ln": mono, "tol_ln": tol, "max_iter": int(max_iter)}
+    times = tuple(float(x) for x in np.asarray(exposure_times_s, dtype=np.float64))
+    return ResponseCurve("robertson", bd, normalise_g(g_out), times, sel, tuple(warnings), fit)
