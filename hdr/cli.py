@@ -75,14 +75,18 @@ def _response(args) -> int:
         say(args, "input is linear (RAW, float or declared linear in stack.json): no response "
                   "curve is needed; writing the identity response")
     opts = {"bit_depth": stack.bit_depth}
+    # Robertson's per-code means need many more pixels than a smoothness-
+    # regularised fit: 600 leaves codes unvisited
+    samples = args.samples if args.samples is not None else (5000 if method == "robertson" else 600)
+    if samples < 2:
+        raise InputError("--samples", f"expected at least 2 pixels, got {samples}")
     if method == "debevec":
         opts["smoothness"] = "auto" if args.smoothness == "auto" else _num(args.smoothness,
                                                                             "--smoothness")
-        opts["samples"] = args.samples
     elif method == "mitsunaga-nayar":
         opts["order"] = "auto" if args.order == "auto" else int(_num(args.order, "--order"))
-        opts["samples"] = args.samples
     if method != "linear":
+        opts["samples"] = samples
         opts["rng"] = np.random.default_rng(args.seed)
     fn = resolve(RESPONSE_METHODS, method)
     t0 = time.perf_counter()
@@ -91,7 +95,8 @@ def _response(args) -> int:
     for w in curve.warnings:
         warn(w)
     meta = make_meta("lumigraph.response", inputs=stack.paths,
-                     params={"method": method, "times_s": times, "samples": args.samples,
+                     params={"method": method, "times_s": times,
+                             "samples": samples if method != "linear" else None,
                              "seed": args.seed, "bit_depth": stack.bit_depth},
                      model={"method": curve.method, "selection": curve.selection},
                      quality=curve.fit, timings_s={"fit": dt}, warnings=curve.warnings)
@@ -362,7 +367,8 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--linear", action="store_true", help="the data are linear: identity response")
     v.add_argument("--smoothness", default="auto", help="Debevec λ, or auto (the L-curve corner; the discrepancy principle under heavy noise)")
     v.add_argument("--order", default="auto", help="Mitsunaga-Nayar order 1..10, or auto")
-    v.add_argument("--samples", type=int, default=600, help="pixels sampled (default 600)")
+    v.add_argument("--samples", type=int,
+                   help="pixels sampled (default 600; robertson 5000, for its per-code means)")
     v.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling")
     v.set_defaults(func=_response)
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")

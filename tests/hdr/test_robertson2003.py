@@ -93,3 +93,5 @@ def test_cli_method_robertson(tmp_path):
     meta = json.loads((tmp_path / "r.json.meta.json").read_text())
     conv = meta["quality"]["convergence"]
     assert len(conv) == 3 and all(c["converged"] for c in conv)
+    # without --samples Robertson gets its own default, and the meta says which
+    assert meta["params"]["samples"] == 5000
