@@ -15,3 +15,12 @@ $(OUT)/flow/video-match.flo: $(OUT)/scenes/flow-video/stack.json
 	  --out $@ --viz $(@D)/video-match.png --quiet
 
 DEMO_OUTPUTS += $(OUT)/flow/flow.flo $(OUT)/flow/video-match.flo
+
+# A 5-frame sequence: one flow per consecutive pair, with an index.json.
+$(OUT)/scenes/flow-sequence/stack.json: $(STAMP)
+	$(LUMI) render flow-sequence --out $(@D) --quiet
+
+$(OUT)/flow/sequence/index.json: $(OUT)/scenes/flow-sequence/stack.json
+	$(LUMI) flow $(<D)/frame0*.png --out $(@D) --viz $(@D)/pictures --quiet
+
+DEMO_OUTPUTS += $(OUT)/flow/sequence/index.json

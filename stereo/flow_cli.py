@@ -26,6 +26,13 @@ unknown = 1e10), OUT with .flo replaced by .prob.exr (one float channel Y in
 consistency, for video-matching the Sand-Teller matching probability), and
 OUT.meta.json (pyramid levels chosen and every candidate's score, timings,
 quality figures). --viz writes a Middlebury colour-coded PNG.
+
+Given more than two images, the flow between each consecutive pair is written
+to the --out folder as flow_000.flo (frame 0 -> 1), flow_001.flo, ..., each
+with its .prob.exr and .meta.json, plus index.json summarising every pair;
+--viz then names a folder for the pictures:
+  lumigraph render flow-sequence --out out/scenes/seq
+  lumigraph flow out/scenes/seq/frame*.png --out out/flow/seq --viz out/flow/seq-viz
 """
 
 
@@ -51,19 +58,7 @@ def _load(path: str):
     return img
 
 
-def _flow(args) -> int:
-    import time
-
-    import numpy as np
-
-    from capture import io
-    from capture.artifact import make_meta, write_artifact
-    from stereo.flow_methods import FLOW_METHODS
-    from stereo.pyramid_flow import prob_path
-
-    out = check_output_path(args.out, suffixes=(".flo",))
-    if args.viz is not None:
-        check_output_path(args.viz, suffixes=(".png",))
+def _check_knobs(args):
     levels = _levels(args.levels)
     if args.window < 3 or args.window % 2 == 0:
         raise InputError("--window", f"expected an odd size >= 3, got {args.window}")
@@ -76,39 +71,100 @@ def _flow(args) -> int:
     if args.method == "video-matching" and (args.median_radius or args.finest_level):
         raise InputError("--method", "video-matching takes no --median-radius or --finest-level "
                                      "(pyramid methods only)")
-    i0, i1 = _load(args.image0), _load(args.image1)
-    if i0.shape[:2] != i1.shape[:2]:
-        raise InputError(args.image1, f"is {i1.shape[1]}x{i1.shape[0]} but {args.image0} is "
-                                      f"{i0.shape[1]}x{i0.shape[0]}; flow needs two images of one size")
-    if i0.ndim != i1.ndim or (i0.ndim == 3 and i0.shape[2] != i1.shape[2]):
-        raise InputError(args.image1, "has a different number of channels than " + args.image0)
-    fn, _ = FLOW_METHODS[args.method]
-    say(args, f"flow ({args.method}): {args.image0} -> {args.image1}")
-    t0 = time.perf_counter()
-    res = fn(i0, i1, levels=levels, window=args.window, iterations=args.iterations,
-             finest_level=args.finest_level, median_radius=args.median_radius)
-    dt = time.perf_counter() - t0
-    info = res.info
-    meta = make_meta("lumigraph.flow", inputs=[args.image0, args.image1],
-                     params={"method": args.method, "levels": args.levels, "window": args.window,
-                             "iterations": args.iterations, "finest_level": args.finest_level,
-                             "median_radius": args.median_radius},
-                     model={"levels": res.levels, "level_choice": info.get("level_choice")},
-                     quality={**info.get("quality", {}),
-                              "occluded_fraction": float(res.occluded.mean())},
-                     timings_s={"flow": dt},
-                     extra={"diagnostics": {k: v for k, v in info.items()
-                                            if k not in ("quality", "level_choice", "timings_s")},
-                            "probability_file": str(prob_path(out))})
-    res.save(out, meta=meta)
-    if args.viz is not None:
-        from stereo.flow_colour import flow_to_colour
+    return levels
 
-        pic = flow_to_colour(np.where(res.occluded[..., None] & args.mask_viz, np.nan, res.flow))
-        write_artifact(args.viz, lambda p: io.write_image(p, pic),
-                       meta=make_meta("lumigraph.flow.viz", inputs=[out],
-                                      params={"coding": "middlebury"}))
-    say(args, f"wrote {out} and {prob_path(out)} ({res.levels} levels, {dt:.2f} s)")
+
+def _outputs(args):
+    """(flow paths, picture paths or Nones) per consecutive pair, checked
+    before any work: two images write the files named; a sequence writes
+    flow_NNN.flo (frame NNN -> NNN + 1) into the --out folder and, with
+    --viz, flow_NNN.png into the --viz folder."""
+    from capture.command import check_output_dir
+
+    n = len(args.images) - 1
+    if n == 1:
+        out = check_output_path(args.out, suffixes=(".flo",))
+        viz = check_output_path(args.viz, suffixes=(".png",)) if args.viz is not None else None
+        return [out], [viz]
+    if Path(args.out).suffix.lower() == ".flo":
+        raise InputError("--out", f"{len(args.images)} frames give {n} flows: name a folder, "
+                                  f"not one file ({args.out})")
+    out = check_output_dir(args.out)
+    if args.viz is not None and Path(args.viz).suffix:
+        raise InputError("--viz", f"for a sequence name a folder for the pictures, not {args.viz}")
+    viz = check_output_dir(args.viz) if args.viz is not None else None
+    return ([out / f"flow_{i:03d}.flo" for i in range(n)],
+            [viz / f"flow_{i:03d}.png" if viz is not None else None for i in range(n)])
+
+
+def _flow(args) -> int:
+    import time
+
+    import numpy as np
+
+    from capture import io
+    from capture.artifact import make_meta, write_artifact, write_json
+    from capture.command import progress
+    from stereo.flow_methods import FLOW_METHODS
+    from stereo.pyramid_flow import prob_path
+
+    if len(args.images) < 2:
+        raise InputError(args.images[0], "flow needs at least two images")
+    outs, vizs = _outputs(args)
+    levels = _check_knobs(args)
+    frames = [_load(p) for p in args.images]
+    for p, im in zip(args.images[1:], frames[1:], strict=True):
+        i0 = frames[0]
+        if im.shape[:2] != i0.shape[:2]:
+            raise InputError(p, f"is {im.shape[1]}x{im.shape[0]} but {args.images[0]} is "
+                                f"{i0.shape[1]}x{i0.shape[0]}; flow needs images of one size")
+        if im.ndim != i0.ndim or (im.ndim == 3 and im.shape[2] != i0.shape[2]):
+            raise InputError(p, "has a different number of channels than " + args.images[0])
+    fn, _ = FLOW_METHODS[args.method]
+    params = {"method": args.method, "levels": args.levels, "window": args.window,
+              "iterations": args.iterations, "finest_level": args.finest_level,
+              "median_radius": args.median_radius}
+    summary = []
+    pairs = range(len(outs))
+    for i in progress(pairs, total=len(outs), description="flow", quiet=args.quiet or len(outs) == 1):
+        a, b, out = args.images[i], args.images[i + 1], outs[i]
+        say(args, f"flow ({args.method}): {a} -> {b}")
+        t0 = time.perf_counter()
+        res = fn(frames[i], frames[i + 1], levels=levels, window=args.window,
+                 iterations=args.iterations, finest_level=args.finest_level,
+                 median_radius=args.median_radius)
+        dt = time.perf_counter() - t0
+        info = res.info
+        quality = {**info.get("quality", {}), "occluded_fraction": float(res.occluded.mean())}
+        meta = make_meta("lumigraph.flow", inputs=[a, b], params=params,
+                         model={"levels": res.levels, "level_choice": info.get("level_choice")},
+                         quality=quality, timings_s={"flow": dt},
+                         extra={"diagnostics": {k: v for k, v in info.items()
+                                                if k not in ("quality", "level_choice", "timings_s")},
+                                "probability_file": str(prob_path(out))})
+        res.save(out, meta=meta)
+        if vizs[i] is not None:
+            from stereo.flow_colour import flow_to_colour
+
+            pic = flow_to_colour(np.where(res.occluded[..., None] & args.mask_viz, np.nan, res.flow))
+            write_artifact(vizs[i], lambda p, pic=pic: io.write_image(p, pic),
+                           meta=make_meta("lumigraph.flow.viz", inputs=[out],
+                                          params={"coding": "middlebury"}))
+        say(args, f"wrote {out} and {prob_path(out)} ({res.levels} levels, {dt:.2f} s)")
+        summary.append({"from": a, "to": b, "flow": out.name, "levels": res.levels,
+                        "seconds": dt, **quality})
+    if len(outs) > 1:
+        index = outs[0].parent / "index.json"
+        body = {"schema": "lumigraph.flow-sequence", "params": params,
+                "convention": "flow_NNN.flo maps frame NNN to frame NNN + 1", "pairs": summary}
+        write_artifact(index, lambda p: write_json(p, body),
+                       meta=make_meta("lumigraph.flow-sequence", inputs=list(args.images),
+                                      params=params,
+                                      quality={"pairs": len(summary),
+                                               "mean_occluded_fraction": float(np.mean(
+                                                   [x["occluded_fraction"] for x in summary]))},
+                                      timings_s={"flow": float(sum(x["seconds"] for x in summary))}))
+        say(args, f"wrote {len(outs)} flows and {index}")
     return 0
 
 
@@ -119,9 +175,11 @@ def main(argv=None, prog="lumigraph flow") -> int:
     p = make_parser(prog, "Dense correspondence between two images: optical flow (coarse-to-fine "
                     "pyramid) or Sand-Teller video matching.\n\nmethods:\n" + methods,
                     epilog=EPILOG)
-    p.add_argument("image0", help="first (primary) image")
-    p.add_argument("image1", help="second (secondary) image, same size")
-    p.add_argument("--out", required=True, help="output flow file (.flo)")
+    p.add_argument("images", nargs="+", metavar="IMAGE",
+                   help="two images (primary, secondary), or a sequence: flows between "
+                        "consecutive frames")
+    p.add_argument("--out", required=True,
+                   help="output flow file (.flo) for two images; a folder for a sequence")
     p.add_argument("--method", choices=sorted(FLOW_METHODS), default="pyramid",
                    help="flow method (default: pyramid)")
     p.add_argument("--levels", default="auto",
@@ -135,7 +193,7 @@ def main(argv=None, prog="lumigraph flow") -> int:
     p.add_argument("--finest-level", type=int, default=0,
                    help="stop refining at this pyramid level and upsample (1: half size, about "
                         "4x faster, a little less accurate; default 0: full size)")
-    p.add_argument("--viz", help="also write a Middlebury colour-coded picture (.png)")
+    p.add_argument("--viz", help="(a folder, for a sequence) also write a Middlebury colour-coded picture (.png)")
     p.add_argument("--mask-viz", action="store_true",
                    help="paint occluded/unreliable pixels black in --viz")
     p.set_defaults(func=_flow)

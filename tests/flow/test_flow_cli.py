@@ -113,3 +113,37 @@ def test_bad_flow_knobs(pair, tmp_path, flags, fragment):
     assert_clean_error(lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out",
                                  tmp_path / "out.flo", *flags), fragment)
     assert _nothing_written(tmp_path)
+
+
+def test_sequence_writes_one_flow_per_consecutive_pair(tmp_path):
+    d = tmp_path / "seq"
+    s = render("flow-sequence", size=(96, 72), frames=4, seed=3)
+    s.save(d)
+    frames = [d / n for n in s.image_names]
+    out, viz = tmp_path / "flows", tmp_path / "pictures"
+    r = lumigraph("flow", *frames, "--out", out, "--viz", viz, "-q")
+    assert r.returncode == 0, r.stderr
+    index = json.loads((out / "index.json").read_text())
+    assert [p["flow"] for p in index["pairs"]] == ["flow_000.flo", "flow_001.flo", "flow_002.flo"]
+    for i in range(3):
+        flow = io.read_flo(out / f"flow_{i:03d}.flo")
+        assert (out / f"flow_{i:03d}.prob.exr").exists() and (viz / f"flow_{i:03d}.png").exists()
+        meta = json.loads((out / f"flow_{i:03d}.flo.meta.json").read_text())
+        assert [x["path"] for x in meta["inputs"]] == [str(frames[i]), str(frames[i + 1])]
+        # each file is that pair's flow: against the pair's ground truth, not another pair's
+        gt, occ = s.gt_arrays["flows"][i], s.gt_arrays["occlusions"][i]
+        ok = np.isfinite(flow[..., 0]) & ~occ
+        epe = np.median(np.linalg.norm(flow[ok] - gt[ok], axis=1))
+        assert 0 < epe < 0.5, (i, epe)
+
+
+def test_sequence_bad_outputs(tmp_path):
+    d = tmp_path / "seq"
+    s = render("flow-sequence", size=(96, 72), frames=3, seed=3)
+    s.save(d)
+    frames = [d / n for n in s.image_names]
+    assert_clean_error(lumigraph("flow", *frames, "--out", tmp_path / "out.flo"), "--out", "folder")
+    assert_clean_error(lumigraph("flow", *frames, "--out", tmp_path / "outdir", "--viz",
+                                 tmp_path / "out.png"), "--viz")
+    assert_clean_error(lumigraph("flow", frames[0], "--out", tmp_path / "out.flo"), "two images")
+    assert _nothing_written(tmp_path)
