@@ -8,6 +8,7 @@ from conftest import assert_clean_error, lumigraph
 
 from capture.io import read_exr
 from capture.render import render
+from hdr.bench import recoverable
 from hdr.kang2003 import FALLBACK, WARPED, Radiometry, hdr_video, tonemap_video, unaligned_merge
 from hdr.merge import merge
 from hdr.response import ResponseCurve
@@ -23,22 +24,6 @@ def _video(**opts):
     t = np.array(s.stack["exposure_times_s"])
     truth = s.gt_arrays["radiance"].astype(np.float64) * s.gt["exposure_scale"]
     return s, z, t, truth, ResponseCurve("gt", 8, s.gt_arrays["g"])
-
-
-def _recoverable(z, t, truth, rad, i):
-    """Pixel-channels clipped in frame ``i`` whose truth a neighbour's exposure records
-    well (a factor 2 / 1.5 inside its reliable range, so noise cannot clip it), away
-    from the 6 px borders the pan brings in from outside the neighbours."""
-    lo, hi = rad.x[:, rad.lo], rad.x[:, rad.hi]
-    clip = (z[i] < rad.lo) | (z[i] > rad.hi)
-    rec = np.zeros_like(clip)
-    for j in (i - 1, i + 1):
-        if 0 <= j < len(t):
-            e = truth[i] * t[j]
-            rec |= (e > 2 * lo) & (e < hi / 1.5)
-    m = clip & rec
-    m[:, :6] = m[:, -6:] = False
-    return m
 
 
 def _log_err(est, truth, m):
@@ -57,7 +42,7 @@ def test_beats_single_frame_and_unaligned_merge(moving):
     e = {"ours": [], "naive": [], "single": []}
     sig = []
     for i in range(FRAMES):
-        m = _recoverable(z, t, truth, rad, i)
+        m = recoverable(z, t, truth, rad, i)
         e["ours"].append(_log_err(v.radiance[i], truth[i], m))
         e["naive"].append(_log_err(unaligned_merge(z, t, r, i, **NOISE), truth[i], m))
         e["single"].append(_log_err(merge(z[i:i + 1], t[i:i + 1], r).radiance, truth[i], m))
@@ -132,7 +117,7 @@ def test_static_equals_plain_merge_within_noise():
     oneway = hdr_video(z, t, r, bidirectional=False, **NOISE)
     rad_rel = Radiometry(r, 3, clip_margin=0.02, **NOISE)
     for i in (0, FRAMES - 1):
-        m = _recoverable(z, t, truth, rad_rel, i)
+        m = recoverable(z, t, truth, rad_rel, i)
         ours = float(((v.flags[i] & FALLBACK) > 0)[m].mean())
         one = float(((oneway.flags[i] & FALLBACK) > 0)[m].mean())
         assert v.frames[i]["flow"]["pair"] == [i, 2 if i == 0 else FRAMES - 3]
