@@ -1,5 +1,5 @@
-"""``python -m calib …`` is ``lumigraph calib …``."""
+"""``python -m lumigraph.calib …`` is ``lumigraph calib …``."""
 
-from calib.cli import main
+from lumigraph.calib.cli import main
 
-raise SystemExit(main(prog="python -m calib"))
+raise SystemExit(main(prog="python -m lumigraph.calib"))

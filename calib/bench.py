@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage
 
 NOISE_RMS_PX = 0.2
 MODELS = ("none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
@@ -45,8 +45,8 @@ MODELS = ("none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
 
 def _synthetic(size, views, board_opts, **opts):
     def load():
-        from calib.detect import BoardSpec
-        from capture.render import render
+        from lumigraph.calib.detect import BoardSpec
+        from lumigraph.capture.render import render
 
         s = render("boards", size=size, seed=11, views=views, supersample=2 if size[0] <= 640 else 1,
                    **board_opts, **opts)
@@ -67,8 +67,8 @@ def _real_folder():
 
 
 def _real():
-    from calib.detect import BoardSpec
-    from capture.io import read_image
+    from lumigraph.calib.detect import BoardSpec
+    from lumigraph.capture.io import read_image
 
     folder = _real_folder()
     left = sorted(folder.glob("left*.jpg"))
@@ -78,7 +78,7 @@ def _real():
 
 
 def _noisy(data, dets):
-    from calib.detect import Detection
+    from lumigraph.calib.detect import Detection
 
     if data["noise"] is None:
         return dets
@@ -92,8 +92,8 @@ def _noisy(data, dets):
 
 def _ours(model):
     def run(data, value):
-        from calib.calibrate import calibrate
-        from calib.detect import detect
+        from lumigraph.calib.calibrate import calibrate
+        from lumigraph.calib.detect import detect
 
         m = model or value
         dets = _noisy(data, [detect(im, data["board"]) for im in data["images"]])
@@ -107,8 +107,8 @@ def _ours(model):
 def _opencv(data, model):
     import cv2
 
-    from calib.detect import to_gray8
-    from calib.zhang2000 import model_flags
+    from lumigraph.calib.detect import to_gray8
+    from lumigraph.calib.zhang2000 import model_flags
 
     board = data["board"]
     obj, img = [], []
@@ -176,9 +176,9 @@ def _rectified_y(rig_left_K, rig_left_d, rig_right_K, rig_right_d, R1, R2, P1, P
 
 
 def _ours_stereo(data, _value):
-    from calib.calibrate import calibrate_stereo
-    from calib.detect import detect
-    from calib.rectify import rectify
+    from lumigraph.calib.calibrate import calibrate_stereo
+    from lumigraph.calib.detect import detect
+    from lumigraph.calib.rectify import rectify
 
     ld = [detect(im, data["board"]) for im in data["images"]]
     rd = [detect(im, data["board"]) for im in data["right"]]

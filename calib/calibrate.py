@@ -51,8 +51,8 @@ Units: translations are in the board's square unit (``--board …:SQUARE``).
 
 Examples
 --------
->>> from capture.render import render
->>> from calib.detect import BoardSpec, detect
+>>> from lumigraph.capture.render import render
+>>> from lumigraph.calib.detect import BoardSpec, detect
 >>> s = render("boards", size=(320, 240), seed=2, views=6)
 >>> board = BoardSpec.parse(s.stack["board"])
 >>> cam = calibrate([detect(im, board) for im in s.images], model="k1k2")
@@ -67,10 +67,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from calib.camera import Camera
-from calib.detect import Detection
-from calib.zhang2000 import FREE, MODELS, ZhangFit, calibrate_fixed, n_intrinsics
-from capture.errors import EstimationError, InputError
+from lumigraph.calib.detect import Detection
+from lumigraph.calib.zhang2000 import FREE, MODELS, ZhangFit, calibrate_fixed, n_intrinsics
+from lumigraph.capture.camera import Camera
+from lumigraph.capture.errors import EstimationError, InputError
 
 MIN_VIEWS = 3
 OUTLIER_FACTOR = 3.0
@@ -502,7 +502,7 @@ def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, m
     """
     import cv2
 
-    from calib.rig import Rig
+    from lumigraph.capture.rig import Rig
 
     if len(left) != len(right):
         raise InputError("--right", f"expected as many right images as left ({len(left)}), got {len(right)}")

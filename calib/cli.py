@@ -12,7 +12,7 @@ import json
 import time
 from pathlib import Path
 
-from capture.command import (
+from lumigraph.capture.commandline import (
     add_verb,
     check_output_dir,
     check_output_path,
@@ -23,7 +23,7 @@ from capture.command import (
     subparsers,
     warn,
 )
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 MODEL_CHOICES = ("auto", "none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
 
@@ -66,7 +66,7 @@ def _expand(inputs: list[str], where: str) -> tuple[list[Path], dict]:
 
 
 def _read_all(paths: list[Path], args, what: str):
-    from capture.io import read_image
+    from lumigraph.capture.io import read_image
 
     images = []
     for p in progress(paths, total=len(paths), description=f"reading {what}", quiet=args.quiet):
@@ -84,7 +84,7 @@ def _check_sizes(paths, images):
 
 
 def _board(args, info):
-    from calib.detect import BoardSpec
+    from lumigraph.calib.detect import BoardSpec
 
     text = args.board or info.get("board")
     if not text:
@@ -93,7 +93,7 @@ def _board(args, info):
 
 
 def _detect_all(paths, images, board, args, what="images"):
-    from calib.detect import detect
+    from lumigraph.calib.detect import detect
 
     dets = []
     for im in progress(images, total=len(images), description=f"finding {board.kind} corners in {what}",
@@ -112,8 +112,8 @@ def _detect_all(paths, images, board, args, what="images"):
 
 
 def _exports(args, camera=None, rig=None):
-    from calib.export import colmap_cameras, opencv_yaml
-    from capture.artifact import atomic_path
+    from lumigraph.calib.export import colmap_cameras, opencv_yaml
+    from lumigraph.capture.artifact import atomic_path
 
     if args.yaml:
         with atomic_path(args.yaml) as tmp:
@@ -124,8 +124,8 @@ def _exports(args, camera=None, rig=None):
 
 
 def _calibrate(args) -> int:
-    from calib.calibrate import calibrate
-    from capture.artifact import make_meta
+    from lumigraph.calib.calibrate import calibrate
+    from lumigraph.capture.artifact import make_meta
 
     out = check_output_path(args.out, suffixes=(".json",))
     paths, info = _expand(args.images, "IMAGES")
@@ -159,10 +159,10 @@ def _calibrate(args) -> int:
 
 
 def _undistort(args) -> int:
-    from calib.camera import Camera
-    from calib.undistort import undistorter
-    from capture.artifact import atomic_path, make_meta, write_json
-    from capture.io import write_image
+    from lumigraph.calib.undistort import undistorter
+    from lumigraph.capture.artifact import atomic_path, make_meta, write_json
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.io import write_image
 
     out = check_output_dir(args.out)
     cam = Camera.load(args.camera)
@@ -180,7 +180,7 @@ def _undistort(args) -> int:
         name = p.stem + ".png"
         bd = None
         if im.dtype.kind == "u" and im.dtype.itemsize == 2:
-            from capture.io import png_significant_bits
+            from lumigraph.capture.io import png_significant_bits
             bd = png_significant_bits(p) if p.suffix.lower() == ".png" else 16
         with atomic_path(out / name) as tmp:
             write_image(tmp, u.apply(im), bit_depth=bd)
@@ -195,8 +195,8 @@ def _undistort(args) -> int:
 
 
 def _stereo(args) -> int:
-    from calib.calibrate import calibrate_stereo
-    from capture.artifact import make_meta
+    from lumigraph.calib.calibrate import calibrate_stereo
+    from lumigraph.capture.artifact import make_meta
 
     out = check_output_path(args.out, suffixes=(".json",))
     lp, linfo = _expand(args.left, "--left")
@@ -234,10 +234,10 @@ def _stereo(args) -> int:
 
 
 def _rectify(args) -> int:
-    from calib.rectify import rectify
-    from calib.rig import Rig
-    from capture.artifact import atomic_path, make_meta
-    from capture.io import read_image, write_image
+    from lumigraph.calib.rectify import rectify
+    from lumigraph.capture.artifact import atomic_path, make_meta
+    from lumigraph.capture.io import read_image, write_image
+    from lumigraph.capture.rig import Rig
 
     out = check_output_dir(args.out)
     if not 0.0 <= args.alpha <= 1.0:

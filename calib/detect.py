@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 _CHECKER = re.compile(r"^checker:(\d+)x(\d+):([0-9.eE+-]+)$")
 _CHARUCO = re.compile(r"^charuco:(\d+)x(\d+):([0-9.eE+-]+):([0-9.eE+-]+):(?:DICT_)?([A-Za-z0-9_]+)$")

@@ -10,7 +10,7 @@
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
+>>> from lumigraph.capture.camera import Camera
 >>> cam = Camera(np.array([[500., 0, 321], [0, 498, 239], [0, 0, 1]]), [-0.1, 0.01, 0, 0, 0], (640, 480),
 ...              "k1k2")
 >>> colmap_cameras([cam]).splitlines()[-1]
@@ -23,7 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from calib.camera import Camera
+from lumigraph.capture.camera import Camera
 
 
 def opencv_yaml(camera: Camera, *, rig=None) -> str:

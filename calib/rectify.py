@@ -13,8 +13,8 @@ or vertical disparities and is refused.
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
->>> from calib.rig import Rig
+>>> from lumigraph.capture.camera import Camera
+>>> from lumigraph.capture.rig import Rig
 >>> K = np.array([[300., 0, 82], [0, 310, 58], [0, 0, 1]])
 >>> cam = Camera(K, np.zeros(5), (160, 120))
 >>> rig = Rig.from_pose(cam, cam, np.eye(3), [-0.1, 0, 0])
@@ -34,9 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.camera import Camera
-from calib.rig import Rig
-from capture.errors import InputError
+from lumigraph.capture.camera import Camera
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.rig import Rig
 
 RECTIFICATION_SCHEMA = "lumigraph.rectification"
 
@@ -81,7 +81,7 @@ class Rectification:
 
     def __post_init__(self):
         if not isinstance(self.rig, Rig):
-            raise TypeError(f"rig: expected a calib.rig.Rig, got {type(self.rig).__name__}")
+            raise TypeError(f"rig: expected a capture.rig.Rig, got {type(self.rig).__name__}")
         for name in ("R1", "R2"):
             m = _mat(name, getattr(self, name), (3, 3))
             if not np.allclose(m @ m.T, np.eye(3), atol=1e-6):
@@ -247,13 +247,13 @@ class Rectification:
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``rectification.json`` atomically (with a sidecar when ``meta`` is given)."""
-        from capture.artifact import save_json_artifact
+        from lumigraph.capture.artifact import save_json_artifact
 
         return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Rectification:
-        from capture.artifact import load_json_artifact
+        from lumigraph.capture.artifact import load_json_artifact
 
         return cls.from_dict(load_json_artifact(path, "rectification"), where=str(path))
 
@@ -281,7 +281,7 @@ def rectify(rig: Rig, *, alpha: float = 0.0, image_size: tuple[int, int] | None 
     import cv2
 
     if not isinstance(rig, Rig):
-        raise TypeError(f"rig: expected a calib.rig.Rig, got {type(rig).__name__}")
+        raise TypeError(f"rig: expected a capture.rig.Rig, got {type(rig).__name__}")
     alpha = float(alpha)
     if not 0.0 <= alpha <= 1.0:
         raise ValueError(f"alpha: expected a value in [0, 1], got {alpha}")

@@ -8,7 +8,7 @@ corners). Bilinear resampling through ``initUndistortRectifyMap``.
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
+>>> from lumigraph.capture.camera import Camera
 >>> cam = Camera(np.array([[90., 0, 41], [0, 88, 29], [0, 0, 1]]), [-0.2, 0.03, 0, 0, 0], (80, 60))
 >>> u = undistorter(cam)
 >>> out = u.apply(np.full((60, 80), 200, np.uint8))
@@ -23,7 +23,7 @@ from functools import cached_property
 
 import numpy as np
 
-from calib.camera import Camera
+from lumigraph.capture.camera import Camera
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ def undistorter(camera: Camera, *, keep_all: bool = False) -> Undistortion:
     import cv2
 
     if not isinstance(camera, Camera):
-        raise TypeError(f"camera: expected a calib.camera.Camera, got {type(camera).__name__}")
+        raise TypeError(f"camera: expected a capture.camera.Camera, got {type(camera).__name__}")
     K, _ = cv2.getOptimalNewCameraMatrix(camera.K, camera.dist, camera.image_size,
                                          1.0 if keep_all else 0.0, camera.image_size)
     K = np.asarray(K, np.float64)

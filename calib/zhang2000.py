@@ -20,7 +20,7 @@ Distortion models, simple to rich (the ``--model`` names)::
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
+>>> from lumigraph.capture.camera import Camera
 >>> cam = Camera(np.array([[400., 0, 165], [0, 392, 118], [0, 0, 1]]), np.zeros(5), (320, 240))
 >>> obj = np.array([[x, y, 0.0] for y in range(6) for x in range(8)]) * 30
 >>> import cv2
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.errors import EstimationError
+from lumigraph.capture.errors import EstimationError
 
 MODELS = ("none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
 # which of the 8 OpenCV coefficients (k1, k2, p1, p2, k3, k4, k5, k6) each model frees

@@ -7,7 +7,7 @@ import it, it imports none of them. It holds
   OpenEXR, PFM, Middlebury ``.flo``, binary PLY) and image stacks;
 - ``capture.artifact``: atomic writes and the ``<output>.meta.json`` sidecar;
 - ``capture.errors``: the exceptions the command line turns into exit 2;
-- ``capture.command``: the ``lumigraph`` command and the CLI helpers;
+- ``capture.commandline``: the ``lumigraph`` command and the CLI helpers;
 - ``capture.bench``: the speed-against-error harness (``lumigraph bench``);
 - ``capture.render`` and ``capture.scenes``: synthetic scenes with exact
   ground truth (``lumigraph render``).
@@ -16,4 +16,3 @@ Importing ``capture`` is cheap on purpose: ``make`` starts Python once per
 stage, so heavy libraries are imported inside the functions that use them.
 """
 
-__version__ = "0.1.0"

@@ -1,3 +1,5 @@
-from capture.command import main
+"""``python -m lumigraph.capture …`` is ``lumigraph render …``."""
 
-raise SystemExit(main())
+from lumigraph.capture.cli import main
+
+raise SystemExit(main(prog="python -m lumigraph.capture"))

@@ -105,7 +105,7 @@ def save_json_artifact(path: str | os.PathLike, body: dict, *, meta: dict | None
 def load_json_artifact(path: str | os.PathLike, what: str) -> dict:
     """Read a JSON artifact, raising InputError naming the file when it is
     missing or not valid JSON (``what`` names the kind, e.g. ``"camera"``)."""
-    from capture.errors import InputError
+    from lumigraph.capture.errors import InputError
 
     p = Path(path)
     if not p.is_file():
@@ -134,7 +134,7 @@ def library_versions() -> dict[str, str]:
         mod = sys.modules.get(name)
         if mod is not None:
             out[name] = str(getattr(mod, "__version__", "unknown"))
-    from capture import __version__
+    from lumigraph import __version__
     out["lumigraph"] = __version__
     return out
 

@@ -1,7 +1,7 @@
 """Speed against error: our methods beside the peers, on the same inputs, in one run.
 
 Each stage contributes a :class:`Stage` from a module listed in
-:data:`BENCH_STAGES` (a function ``stage(*, quick: bool) -> Stage``):
+:data:`lumigraph.bench.BENCH_STAGES` (a function ``stage(*, quick: bool) -> Stage``):
 
 - **cases**: inputs with exact ground truth (built once per run);
 - **methods**: ours and the peers' (OpenCV, colour-hdri, pfstools, …), each
@@ -35,18 +35,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
-
-# stage name -> module providing stage(*, quick) -> Stage
-BENCH_STAGES: dict[str, str] = {
-    "io": "capture.bench_io",
-    "render": "capture.bench_render",
-    "calib": "calib.bench",
-    "hdr": "hdr.bench",
-    "flow": "stereo.bench_flow",
-    "stereo": "stereo.bench_stereo",
-    "lightfield": "lightfield.bench",
-    "separation": "separation.bench",
-}
 
 
 def shared_data(*parts: str) -> Path:
@@ -227,22 +215,6 @@ def run_stage(stage: Stage, *, repeats: int | None = None,
     return rows
 
 
-def load_stage(name: str, *, quick: bool = False) -> Stage:
-    import importlib
-
-    from capture.errors import InputError
-
-    if name not in BENCH_STAGES:
-        raise InputError(name, f"unknown bench stage; choose from {', '.join(BENCH_STAGES)}")
-    try:
-        mod = importlib.import_module(BENCH_STAGES[name])
-    except ModuleNotFoundError as e:
-        if e.name == BENCH_STAGES[name]:
-            raise InputError(name, "this stage has no bench yet") from None
-        raise
-    return mod.stage(quick=quick)
-
-
 def _fmt(x: Any, digits: int = 4) -> str:
     if x is None:
         return "—"
@@ -256,7 +228,7 @@ def _fmt(x: Any, digits: int = 4) -> str:
 def write_report(out_dir: str | Path, results: dict[str, tuple[Stage, list[Row], list[Check]]],
                  *, header: str = "") -> Path:
     """Write ``report.md``, ``report.json`` and ``<stage>.png`` into ``out_dir``."""
-    from capture.artifact import atomic_path, library_versions, write_json
+    from lumigraph.capture.artifact import atomic_path, library_versions, write_json
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -307,7 +279,7 @@ def _plot(path: Path, stage: Stage, rows: list[Row]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from capture.artifact import atomic_path
+    from lumigraph.capture.artifact import atomic_path
 
     cases = [c.name for c in stage.cases if any(r.case == c.name for r in rows)] or ["-"]
     # a grid at most three wide, so a stage with many cases stays legible

@@ -14,7 +14,7 @@ import tempfile
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage
 
 
 def _image(mp: float) -> np.ndarray:
@@ -73,7 +73,7 @@ def _checks(res: Results, _ctx) -> list[Check]:
 
 
 def stage(*, quick: bool = False) -> Stage:
-    from capture import io
+    from lumigraph.capture import io
 
     sizes = (0.1, 0.5) if quick else (0.25, 1.0, 4.0)
     case = Case("float image", lambda: {mp: _image(mp) for mp in sizes},

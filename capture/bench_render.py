@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 
-from capture.bench import Case, Check, Method, Results, Stage
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage
 
 TARGET_S = 5.0
 QUICK = ("sample", "bracket", "stereo-pair", "flow")
@@ -21,7 +21,7 @@ def _render(name):
     seeds = itertools.count(11)
 
     def run(_data, _value):
-        from capture.render import render
+        from lumigraph.capture.render import render
 
         # a new seed every repeat: scenes that keep intermediate renders (the
         # projector's light-transport basis) key them by seed, so each repeat
@@ -41,7 +41,7 @@ def _checks(res: Results, _ctx) -> list[Check]:
 
 
 def stage(*, quick: bool = False) -> Stage:
-    from capture.render import scenes
+    from lumigraph.capture.render import scenes
 
     names = [n for n in sorted(scenes()) if not quick or n in QUICK]
     methods = tuple(Method(n, _render(n)) for n in names)

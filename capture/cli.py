@@ -5,9 +5,16 @@ A thin layer over :mod:`capture.render`: parse, validate, render, save.
 
 from __future__ import annotations
 
-from capture.artifact import make_meta, write_json
-from capture.command import check_output_dir, make_parser, parse_size, run, say, show_progress
-from capture.errors import InputError
+from lumigraph.capture.artifact import make_meta, write_json
+from lumigraph.capture.commandline import (
+    check_output_dir,
+    make_parser,
+    parse_size,
+    run,
+    say,
+    show_progress,
+)
+from lumigraph.capture.errors import InputError
 
 EPILOG = """\
 examples:
@@ -24,7 +31,7 @@ $LUMIGRAPH_CACHE (default ~/.cache/lumigraph); --no-cache renders afresh.
 
 
 def _list(args) -> int:
-    from capture.render import scenes
+    from lumigraph.capture.render import scenes
 
     for name, spec in sorted(scenes().items()):
         w, h = spec.default_size
@@ -55,7 +62,7 @@ def _scene_options(extra: list[str]) -> dict[str, str]:
 
 def _render(args) -> int:
     extra = args.extra
-    from capture.render import get_scene, render
+    from lumigraph.capture.render import get_scene, render
 
     if args.scene is None:
         raise InputError("SCENE", "name a scene to render, or use --list")

@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.artifact import atomic_path, dumps_json
-from capture.errors import InputError
+from lumigraph.capture.artifact import atomic_path, dumps_json
+from lumigraph.capture.errors import InputError
 
 LDR_EXTS = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm"}
 RAW_EXTS = {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}

@@ -95,7 +95,7 @@ class PatternSet:
 
     def save(self, folder: str | os.PathLike) -> Path:
         """Write 8-bit PNGs (``<name>.png``) and a ``stack.json`` into ``folder``."""
-        from capture.io import write_image, write_stack_json
+        from lumigraph.capture.io import write_image, write_stack_json
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)

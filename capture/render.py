@@ -32,20 +32,20 @@ from typing import Any
 
 import numpy as np
 
-from capture.artifact import dumps_json, write_json
-from capture.errors import InputError
+from lumigraph.capture.artifact import dumps_json, write_json
+from lumigraph.capture.errors import InputError
 
 # Modules that contribute scenes (each defines SCENES). A stage that needs a new
 # kind of input adds a module here.
 SCENE_MODULES = (
-    "capture.scenes.sample",
-    "capture.scenes.boards",
-    "capture.scenes.brackets",
-    "capture.scenes.flow",
-    "capture.scenes.stereo",
-    "capture.scenes.lightfield",
-    "capture.scenes.projector",
-    "capture.scenes.model_stereo",
+    "lumigraph.capture.scenes.sample",
+    "lumigraph.capture.scenes.boards",
+    "lumigraph.capture.scenes.brackets",
+    "lumigraph.capture.scenes.flow",
+    "lumigraph.capture.scenes.stereo",
+    "lumigraph.capture.scenes.lightfield",
+    "lumigraph.capture.scenes.projector",
+    "lumigraph.capture.scenes.model_stereo",
 )
 GT_SCHEMA = "lumigraph.gt"
 
@@ -178,7 +178,7 @@ class RenderedScene:
 
         ``stack.json`` is written last: its presence means the folder is complete.
         """
-        from capture.io import write_image, write_stack_json
+        from lumigraph.capture.io import write_image, write_stack_json
 
         folder = Path(folder)
         (folder / "gt").mkdir(parents=True, exist_ok=True)
@@ -198,7 +198,7 @@ class RenderedScene:
     @classmethod
     def load(cls, folder: str | os.PathLike) -> RenderedScene:
         """Load a folder written by :meth:`save` (images exactly as saved)."""
-        from capture.io import read_image
+        from lumigraph.capture.io import read_image
 
         folder = Path(folder)
         if not (folder / "stack.json").exists():

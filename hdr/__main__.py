@@ -1,5 +1,5 @@
-"""``python -m hdr …`` is ``lumigraph hdr …``."""
+"""``python -m lumigraph.hdr …`` is ``lumigraph hdr …``."""
 
-from hdr.cli import main
+from lumigraph.hdr.cli import main
 
-raise SystemExit(main(prog="python -m hdr"))
+raise SystemExit(main(prog="python -m lumigraph.hdr"))

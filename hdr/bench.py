@@ -36,7 +36,7 @@ import tracemalloc
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage
 
 SIZE = (320, 240)
 
@@ -71,7 +71,7 @@ def radiance_rel_rms(est: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> fl
 
 # --------------------------------------------------------------------- cases
 def _bracket(bit_depth=8, size=SIZE, **opts):
-    from capture.render import render
+    from lumigraph.capture.render import render
 
     s = render("bracket", size=size, bit_depth=bit_depth, seed=3, **opts)
     z = np.stack(s.images)
@@ -84,7 +84,7 @@ def _bracket(bit_depth=8, size=SIZE, **opts):
 
 
 def _big(quick):
-    from capture.render import render
+    from lumigraph.capture.render import render
 
     s = render("bracket", size=(400, 300), exposures=9, stops=1.0, seed=4)
     reps = (1, 1) if quick else (10, 10)  # 0.12 MP or 12 MP
@@ -94,27 +94,27 @@ def _big(quick):
 
 # ------------------------------------------------------------------ methods
 def _ours_debevec(d, samples):
-    from hdr.debevec1997 import debevec
+    from lumigraph.hdr.debevec1997 import debevec
 
     t = d["exact"] if "exact_only" in d else d["times"]
     return debevec(d["z"], t, bit_depth=d["bit_depth"], samples=samples).g
 
 
 def _ours_debevec_exact(d, samples):
-    from hdr.debevec1997 import debevec
+    from lumigraph.hdr.debevec1997 import debevec
 
     return debevec(d["z"], d["exact"], bit_depth=d["bit_depth"], samples=samples).g
 
 
 def _ours_mn(d, order):
-    from hdr.mitsunaga1999 import mitsunaga_nayar
+    from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
 
     r = mitsunaga_nayar(d["z"], d["times"], bit_depth=d["bit_depth"], order=order)
     return r.g, np.array(r.exposure_times_s)
 
 
 def _ours_robertson(d, samples):
-    from hdr.robertson2003 import robertson
+    from lumigraph.hdr.robertson2003 import robertson
 
     return robertson(d["z"], d["times"], bit_depth=d["bit_depth"], samples=samples).g
 
@@ -158,7 +158,7 @@ def _pfs_unavailable():
 
 def _pfs(method):
     def run(d, _k):
-        from capture.io import write_image
+        from lumigraph.capture.io import write_image
 
         with tempfile.TemporaryDirectory() as tmp:
             lines = []
@@ -196,7 +196,7 @@ def _read_pfs_response(path) -> np.ndarray:
 def _merge_prepare(d):
     import cv2
 
-    from hdr.debevec1997 import debevec
+    from lumigraph.hdr.debevec1997 import debevec
 
     out = dict(d)
     out["curve"] = debevec(d["z"], d["times"], bit_depth=d["bit_depth"])
@@ -206,7 +206,7 @@ def _merge_prepare(d):
 
 
 def _merge_ours(d, _k):
-    from hdr.merge import merge
+    from lumigraph.hdr.merge import merge
 
     return merge(d["z"], d["times"], d["curve"]).radiance
 
@@ -219,9 +219,9 @@ def _merge_cv(d, _k):
 
 
 def _big_prepare_ours(d):
-    from capture.render import render
-    from hdr.merge import merge
-    from hdr.response import ResponseCurve
+    from lumigraph.capture.render import render
+    from lumigraph.hdr.merge import merge
+    from lumigraph.hdr.response import ResponseCurve
 
     s = render("bracket", size=(400, 300), exposures=9, stops=1.0, seed=4)
     curve = ResponseCurve("gt", 8, s.gt_arrays["g"])
@@ -236,7 +236,7 @@ def _big_prepare_ours(d):
 
 
 def _big_ours(d, _k):
-    from hdr.merge import merge
+    from lumigraph.hdr.merge import merge
 
     m = merge(d["z"], d["times"], d["curve"])
     return {"peak": d["peak"], "out_bytes": m.radiance.nbytes, "shape": m.radiance.shape}
@@ -245,7 +245,7 @@ def _big_ours(d, _k):
 def _big_prepare_cv(d):
     import cv2
 
-    from capture.render import render
+    from lumigraph.capture.render import render
 
     s = render("bracket", size=(400, 300), exposures=9, stops=1.0, seed=4)
     crv = np.exp(s.gt_arrays["g"]).T[:, None, ::-1].astype(np.float32).copy()
@@ -263,9 +263,9 @@ VIDEO_NOISE = {"full_well_e": 20000.0, "read_noise_e": 4.0}  # the scene's senso
 
 
 def _video_case():
-    from capture.render import render
-    from hdr.kang2003 import Radiometry
-    from hdr.response import ResponseCurve
+    from lumigraph.capture.render import render
+    from lumigraph.hdr.kang2003 import Radiometry
+    from lumigraph.hdr.response import ResponseCurve
 
     s = render("bracket_video", size=(160, 120), frames=6, seed=1)
     z = np.stack(s.images)
@@ -303,21 +303,21 @@ def recoverable(z, t, truth, rad, i):
 
 
 def _video_ours(d, sigma):
-    from hdr.kang2003 import hdr_video
+    from lumigraph.hdr.kang2003 import hdr_video
 
     return hdr_video(d["z"], d["times"], d["curve"], consistency_sigma=sigma,
                      **VIDEO_NOISE).radiance
 
 
 def _video_naive(d, _k):
-    from hdr.kang2003 import unaligned_merge
+    from lumigraph.hdr.kang2003 import unaligned_merge
 
     return np.stack([unaligned_merge(d["z"], d["times"], d["curve"], i, **VIDEO_NOISE)
                      for i in range(len(d["times"]))])
 
 
 def _video_single(d, _k):
-    from hdr.merge import merge
+    from lumigraph.hdr.merge import merge
 
     return np.stack([merge(d["z"][i:i + 1], d["times"][i:i + 1], d["curve"]).radiance
                      for i in range(len(d["times"]))])

@@ -7,7 +7,7 @@ import inspect
 import time
 from pathlib import Path
 
-from capture.command import (
+from lumigraph.capture.commandline import (
     add_verb,
     check_output_dir,
     check_output_path,
@@ -18,8 +18,8 @@ from capture.command import (
     subparsers,
     warn,
 )
-from capture.errors import InputError
-from hdr.methods import RESPONSE_METHODS, TONEMAP_METHODS
+from lumigraph.capture.errors import InputError
+from lumigraph.hdr.methods import RESPONSE_METHODS, TONEMAP_METHODS
 
 EPILOG = """\
 examples:
@@ -45,7 +45,7 @@ def _times(args):
 def _load(args, *, need_times=True):
     import numpy as np
 
-    from capture.io import read_stack
+    from lumigraph.capture.io import read_stack
 
     stack = read_stack(args.images, times=_times(args), need_times=need_times)
     if stack.images.dtype.kind == "f":
@@ -63,8 +63,8 @@ def _load(args, *, need_times=True):
 def _response(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta
-    from hdr.methods import resolve
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.hdr.methods import resolve
 
     out = check_output_path(args.out, suffixes=(".json",))
     if args.plot:
@@ -122,7 +122,7 @@ def plot_curve(curve, path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from capture.artifact import atomic_path
+    from lumigraph.capture.artifact import atomic_path
 
     z = np.arange(curve.code_max + 1)
     fig, ax = plt.subplots(figsize=(5, 4))
@@ -154,7 +154,7 @@ def _noise(args) -> dict:
     library's defaults (not estimated from the stack), with where it came from."""
     import math
 
-    from hdr.merge import merge
+    from lumigraph.hdr.merge import merge
 
     if args.noise is None:
         d = inspect.signature(merge).parameters
@@ -177,10 +177,10 @@ def _noise(args) -> dict:
 def _merge(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta, write_artifact
-    from capture.io import write_exr, write_image
-    from hdr.merge import merge
-    from hdr.response import ResponseCurve
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_exr, write_image
+    from lumigraph.hdr.merge import merge
+    from lumigraph.hdr.response import ResponseCurve
 
     out = check_output_path(args.out, suffixes=(".exr", ".hdr", ".tif", ".tiff", ".pfm"))
     noise = _noise(args)
@@ -208,7 +208,7 @@ def _merge(args) -> int:
     if out.suffix.lower() == ".exr":
         write_artifact(out, lambda p: write_exr(p, m.radiance), meta=meta)
     else:
-        from hdr.formats import write_hdr_image
+        from lumigraph.hdr.formats import write_hdr_image
 
         write_artifact(out, lambda p: write_hdr_image(p, m.radiance), meta=meta)
     say(args, f"wrote {out} and {mask_path.name} ({dt:.2f} s)")
@@ -218,9 +218,9 @@ def _merge(args) -> int:
 def _align(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta, write_json
-    from capture.io import read_stack, write_image, write_stack_json
-    from hdr.ward2003 import align
+    from lumigraph.capture.artifact import make_meta, write_json
+    from lumigraph.capture.io import read_stack, write_image, write_stack_json
+    from lumigraph.hdr.ward2003 import align
 
     out = check_output_dir(args.out)
     stack = read_stack(args.images, times=_times(args))
@@ -249,10 +249,10 @@ def _align(args) -> int:
 
 
 def _tonemap(args) -> int:
-    from capture.artifact import make_meta, write_artifact
-    from capture.io import write_image
-    from hdr.formats import read_hdr_image
-    from hdr.methods import resolve
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_image
+    from lumigraph.hdr.formats import read_hdr_image
+    from lumigraph.hdr.methods import resolve
 
     out = check_output_path(args.out, suffixes=(".png", ".tif", ".tiff"))
     img = read_hdr_image(args.input)
@@ -272,8 +272,8 @@ def _tonemap(args) -> int:
 
 
 def _convert(args) -> int:
-    from capture.artifact import make_meta, write_artifact
-    from hdr.formats import HDR_EXTS, read_hdr_image, write_hdr_image
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.hdr.formats import HDR_EXTS, read_hdr_image, write_hdr_image
 
     out = check_output_path(args.output, suffixes=HDR_EXTS)
     img = read_hdr_image(args.input)
@@ -290,11 +290,11 @@ def _convert(args) -> int:
 def _video(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta, write_artifact, write_json
-    from capture.command import progress
-    from capture.io import read_stack, write_exr, write_image
-    from hdr.kang2003 import hdr_video, tonemap_video
-    from hdr.response import ResponseCurve
+    from lumigraph.capture.artifact import make_meta, write_artifact, write_json
+    from lumigraph.capture.commandline import progress
+    from lumigraph.capture.io import read_stack, write_exr, write_image
+    from lumigraph.hdr.kang2003 import hdr_video, tonemap_video
+    from lumigraph.hdr.response import ResponseCurve
 
     out = check_output_dir(args.out)
     if args.temporal < 1 or args.temporal % 2 == 0:
@@ -406,7 +406,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--temporal", type=int, default=5,
                    help="frames the tone-mapping log-average is smoothed over (odd; 1 = none)")
     v.add_argument("--window", type=int, default=9, help="flow window, odd px (default 9)")
-    from hdr.kang2003 import hdr_video as _hv
+    from lumigraph.hdr.kang2003 import hdr_video as _hv
 
     sigma = inspect.signature(_hv).parameters["consistency_sigma"].default
     v.add_argument("--consistency-sigma", type=float, default=sigma,

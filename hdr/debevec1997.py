@@ -46,8 +46,8 @@ import math
 
 import numpy as np
 
-from hdr.response import ResponseCurve, normalise_g
-from hdr.samples import check_stack, hat_weight, sample_pixels
+from lumigraph.hdr.response import ResponseCurve, normalise_g
+from lumigraph.hdr.samples import check_stack, hat_weight, sample_pixels
 
 LAMBDA_GRID = tuple(10.0 ** (k / 4) for k in range(-40, -11))
 
@@ -280,7 +280,7 @@ def _l_curve(red: _Reduced, grid):
             continue
         rows.append((lam, math.log(max(rho, 1e-300)), math.log(max(eta, 1e-300))))
     if not rows:
-        from capture.errors import EstimationError
+        from lumigraph.capture.errors import EstimationError
 
         raise EstimationError("images", "every smoothness candidate failed to solve")
     lam_a = np.array([r[0] for r in rows])
@@ -375,7 +375,7 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
     InputError
         Fewer than two exposures, duplicated times, too few usable pixels.
     """
-    from capture.errors import EstimationError, InputError
+    from lumigraph.capture.errors import EstimationError, InputError
 
     z, t, bd = check_stack(images, exposure_times_s, bit_depth=bit_depth)
     p, h, w_, c = z.shape

@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.artifact import atomic_path
-from capture.errors import InputError
+from lumigraph.capture.artifact import atomic_path
+from lumigraph.capture.errors import InputError
 
 # ------------------------------------------------------------------ colour
 RGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
@@ -483,7 +483,7 @@ HDR_EXTS = (".exr", ".hdr", ".pic", ".tif", ".tiff", ".pfm")
 
 def read_hdr_image(path) -> np.ndarray:
     """Read linear radiance from EXR, RGBE ``.hdr``, LogLuv ``.tif`` or PFM."""
-    from capture.io import read_exr, read_pfm
+    from lumigraph.capture.io import read_exr, read_pfm
 
     p = Path(path)
     ext = p.suffix.lower()
@@ -504,7 +504,7 @@ def _missing(p):
 
 def write_hdr_image(path, img: np.ndarray, *, logluv_bits: int = 32, half: bool = False) -> None:
     """Write linear radiance by extension: ``.exr``, ``.hdr``, ``.tif`` (LogLuv), ``.pfm``."""
-    from capture.io import write_exr, write_pfm
+    from lumigraph.capture.io import write_exr, write_pfm
 
     ext = os.path.splitext(str(path))[1].lower()
     if ext == ".exr":

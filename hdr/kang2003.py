@@ -39,8 +39,8 @@ radiance of the *current* frame, completed from its registered neighbours:
 
 Examples
 --------
->>> from capture.scenes.brackets import render_bracket_video
->>> from hdr.response import ResponseCurve
+>>> from lumigraph.capture.scenes.brackets import render_bracket_video
+>>> from lumigraph.hdr.response import ResponseCurve
 >>> s = render_bracket_video(size=(48, 36), seed=0, rng=np.random.default_rng(0), frames=3)
 >>> v = hdr_video(np.stack(s.images), s.stack["exposure_times_s"], ResponseCurve("gt", 8, s.gt_arrays["g"]))
 >>> v.radiance.shape, v.radiance.dtype.name, sorted(v.frames[1]["sources"])
@@ -54,10 +54,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from capture.errors import InputError
-from hdr.merge import BLACK, CLIPPED, GHOST, variance_weight_table
-from hdr.response import ResponseCurve
-from hdr.samples import check_stack
+from lumigraph.capture.errors import InputError
+from lumigraph.hdr.merge import BLACK, CLIPPED, GHOST, variance_weight_table
+from lumigraph.hdr.response import ResponseCurve
+from lumigraph.hdr.samples import check_stack
 
 DEFAULTS_CHOICE = """\
 consistency_sigma (2026-11-23) was chosen on bracket_video renders the bench and the
@@ -263,8 +263,8 @@ def _flow(a, b, *, window, method, max_motion_px):
     """Flow ``a → b`` with its forward-backward round trip: ``(flow, inconsistent,
     round_trip_px, levels)``, as ``pyramid_flow(consistency=True)`` but keeping
     the round-trip error, which bounds how far off a disowned vector may be."""
-    from stereo.pyramid import forward_backward
-    from stereo.pyramid_flow import pyramid_flow
+    from lumigraph.stereo.pyramid import forward_backward
+    from lumigraph.stereo.pyramid_flow import pyramid_flow
 
     opts = dict(method=method, window=window, consistency=False)
     fwd = pyramid_flow(a, b, levels="auto", max_motion_px=max_motion_px, **opts)
@@ -422,7 +422,7 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
         Noise model and clipping of :func:`hdr.merge.merge`.
     progress : callable, optional
         Wraps the frame loop (``progress(range(N))``), e.g.
-        :func:`capture.command.progress`.
+        :func:`capture.commandline.progress`.
 
     Returns
     -------
@@ -661,7 +661,7 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     >>> bool(b.flicker < a.flicker), a.images.shape
     (True, (6, 8, 8, 3))
     """
-    from hdr.reinhard2002 import LUMA, global_operator, srgb_encode
+    from lumigraph.hdr.reinhard2002 import LUMA, global_operator, srgb_encode
 
     v = np.asarray(radiances, dtype=np.float64)
     if v.ndim != 4 or v.shape[-1] != 3:

@@ -27,7 +27,7 @@ peak memory is the inputs, the float32 output, its mask and a few blocks.
 
 Examples
 --------
->>> from hdr.response import ResponseCurve
+>>> from lumigraph.hdr.response import ResponseCurve
 >>> x = np.array([[[20 / 255], [100 / 255], [5.0]]])  # (1, 3, 1) radiance
 >>> t = [0.5, 2.0]
 >>> z = np.stack([np.clip(np.round(x * ti * 255), 0, 255) for ti in t]).astype(np.uint8)
@@ -45,9 +45,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from capture.errors import InputError
-from hdr.response import ResponseCurve
-from hdr.samples import check_stack, hat_weight
+from lumigraph.capture.errors import InputError
+from lumigraph.hdr.response import ResponseCurve
+from lumigraph.hdr.samples import check_stack, hat_weight
 
 CLIPPED = 1  # saturated in every exposure: the value is a lower bound
 BLACK = 2  # black in every exposure: the value is an upper bound

@@ -16,16 +16,16 @@ from __future__ import annotations
 import importlib
 
 RESPONSE_METHODS = {
-    "debevec": "hdr.debevec1997:debevec",
-    "mitsunaga-nayar": "hdr.mitsunaga1999:mitsunaga_nayar",
-    "robertson": "hdr.robertson2003:robertson",
-    "linear": "hdr.methods:linear_response",
+    "debevec": "lumigraph.hdr.debevec1997:debevec",
+    "mitsunaga-nayar": "lumigraph.hdr.mitsunaga1999:mitsunaga_nayar",
+    "robertson": "lumigraph.hdr.robertson2003:robertson",
+    "linear": "lumigraph.hdr.methods:linear_response",
 }
 TONEMAP_METHODS = {
-    "reinhard": "hdr.reinhard2002:tonemap",
-    "reinhard-local": "hdr.reinhard2002:tonemap",
+    "reinhard": "lumigraph.hdr.reinhard2002:tonemap",
+    "reinhard-local": "lumigraph.hdr.reinhard2002:tonemap",
 }
-ALIGN_METHODS = {"mtb": "hdr.ward2003:align"}
+ALIGN_METHODS = {"mtb": "lumigraph.hdr.ward2003:align"}
 
 
 def resolve(registry: dict, name: str):
@@ -40,7 +40,7 @@ def linear_response(images, exposure_times_s=None, *, bit_depth=None, **_ignored
     """The identity response for RAW/linear data (no fit: nothing to model)."""
     import numpy as np
 
-    from hdr.response import ResponseCurve
+    from lumigraph.hdr.response import ResponseCurve
 
     z = np.asarray(images)
     bd = int(bit_depth) if bit_depth is not None else 8 * z.dtype.itemsize

@@ -64,8 +64,8 @@ import math
 import numpy as np
 import scipy.linalg
 
-from hdr.response import ResponseCurve, normalise_g
-from hdr.samples import check_stack, sample_pixels
+from lumigraph.hdr.response import ResponseCurve, normalise_g
+from lumigraph.hdr.samples import check_stack, sample_pixels
 
 MAX_ORDER = 10
 
@@ -330,7 +330,7 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
         Chebyshev), the refined adjacent ratios and the common power γ;
         ``selection`` the order and each candidate's held-out error.
     """
-    from capture.errors import EstimationError, InputError
+    from lumigraph.capture.errors import EstimationError, InputError
 
     z, t, bd = check_stack(images, exposure_times_s, bit_depth=bit_depth)
     p, h, w_, c = z.shape

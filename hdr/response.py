@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 SCHEMA = "lumigraph.response"
 SCHEMA_VERSION = 1
@@ -215,7 +215,7 @@ class ResponseCurve:
         ``meta`` is a sidecar from :func:`capture.artifact.make_meta`; a minimal
         one is made when omitted.
         """
-        from capture.artifact import make_meta, save_json_artifact
+        from lumigraph.capture.artifact import make_meta, save_json_artifact
 
         if meta is None:
             meta = make_meta(SCHEMA, model={"method": self.method, "selection": self.selection},
@@ -225,7 +225,7 @@ class ResponseCurve:
     @classmethod
     def load(cls, path: str | os.PathLike) -> ResponseCurve:
         """Read a ``response.json``; InputError naming the file if it is not one."""
-        from capture.artifact import load_json_artifact
+        from lumigraph.capture.artifact import load_json_artifact
 
         if not Path(path).is_file():
             raise InputError(path, "response file not found (make one with 'lumigraph hdr response')")

@@ -77,8 +77,8 @@ import math
 
 import numpy as np
 
-from hdr.response import ResponseCurve, normalise_g
-from hdr.samples import check_stack, sample_pixels
+from lumigraph.hdr.response import ResponseCurve, normalise_g
+from lumigraph.hdr.samples import check_stack, sample_pixels
 
 
 def certainty_weight(z: np.ndarray, bit_depth: int) -> np.ndarray:
@@ -153,7 +153,7 @@ def robertson(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = N
     """
     from scipy.optimize import isotonic_regression
 
-    from capture.errors import EstimationError, InputError
+    from lumigraph.capture.errors import EstimationError, InputError
 
     z, t, bd = check_stack(images, exposure_times_s, bit_depth=bit_depth)
     p, h, w_, c = z.shape

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 
 def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,

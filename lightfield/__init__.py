@@ -13,6 +13,6 @@ module                      what
 ==========================  ====================================================
 """
 
-from lightfield.field import LightField
+from lumigraph.lightfield.field import LightField
 
 __all__ = ["LightField"]

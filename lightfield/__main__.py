@@ -1,3 +1,3 @@
-from lightfield.cli import main
+from lumigraph.lightfield.cli import main
 
-raise SystemExit(main(prog="python -m lightfield"))
+raise SystemExit(main(prog="python -m lumigraph.lightfield"))

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
 
 BIG = {"size": (512, 512), "grid": "9x9"}
 SMALL = {"size": (128, 128), "grid": "5x5"}
@@ -39,8 +39,8 @@ def _psnr(mse: float) -> float:
 
 def _array_case(quick: bool):
     def load():
-        from capture.render import render
-        from lightfield.field import LightField
+        from lumigraph.capture.render import render
+        from lumigraph.lightfield.field import LightField
 
         cfg = SMALL if quick else BIG
         s = render("lightfield-array", size=cfg["size"], grid=cfg["grid"], thin_lens=False,
@@ -57,7 +57,7 @@ def _array_case(quick: bool):
 
 def _lenslet_case(lattice: str, quick: bool):
     def load():
-        from capture.render import render
+        from lumigraph.capture.render import render
 
         name = "lightfield-lenslet" + ("-hex" if lattice == "hex" else "")
         n = 20 if quick else 40
@@ -72,8 +72,8 @@ def _lenslet_case(lattice: str, quick: bool):
 
 def _novel_case(quick: bool):
     def load():
-        from capture.render import render
-        from lightfield.field import LightField
+        from lumigraph.capture.render import render
+        from lumigraph.lightfield.field import LightField
 
         size = (96, 96) if quick else (256, 256)
         s = render("lightfield-array", size=size, grid="5x5", thin_lens=False,
@@ -88,8 +88,8 @@ def _novel_case(quick: bool):
 
 def _hci_case():
     def load():
-        from capture.io import read_image, read_pfm
-        from lightfield.field import from_images
+        from lumigraph.capture.io import read_image, read_pfm
+        from lumigraph.lightfield.field import from_images
 
         root = shared_data(*_HCI)
         names = [root / f"input_Cam{9 * r + c:03d}.png" for r in range(2, 7) for c in range(2, 7)]
@@ -107,7 +107,7 @@ _HCI = ("data", "lightfield-real", "hci_antinous_5x5")
 
 # ------------------------------------------------------------------ methods
 def _shift_add(data, kernel):
-    from lightfield.refocus import shift_and_add
+    from lumigraph.lightfield.refocus import shift_and_add
 
     return {"idx": list(range(len(data["slopes"]))),
             "images": np.stack([shift_and_add(data["lf"], s, kernel=kernel)
@@ -142,8 +142,8 @@ def _interleaved(data, _):
     the alternations is reported too."""
     import time
 
-    from lightfield import ng2005
-    from lightfield.refocus import shift_and_add
+    from lumigraph.lightfield import ng2005
+    from lumigraph.lightfield.refocus import shift_and_add
 
     t0 = time.perf_counter()
     spec = ng2005.prepare(data["lf"], max_slope=max(data["slopes"]))
@@ -169,7 +169,7 @@ def _interleaved(data, _):
 
 
 def _fft(data, _):
-    from lightfield import ng2005
+    from lumigraph.lightfield import ng2005
 
     spec = ng2005.prepare(data["lf"], max_slope=max(data["slopes"]))
     data["spec"] = spec
@@ -177,7 +177,7 @@ def _fft(data, _):
 
 
 def _fourier_prepare(data):
-    from lightfield import ng2005
+    from lumigraph.lightfield import ng2005
 
     if "spec" not in data:
         data["spec"] = ng2005.prepare(data["lf"], max_slope=max(data["slopes"]))
@@ -185,14 +185,14 @@ def _fourier_prepare(data):
 
 
 def _fourier(data, _):
-    from lightfield import ng2005
+    from lumigraph.lightfield import ng2005
 
     return {"idx": list(range(len(data["slopes"]))),
             "images": np.stack([ng2005.refocus(data["spec"], s) for s in data["slopes"]])}
 
 
 def _decode(data, _):
-    from lightfield.lenslet import decode
+    from lumigraph.lightfield.lenslet import decode
 
     d = decode(data["raw"], data["white"], views=data["views"])
     return {"views": d.lightfield.data, "centers": d.grid.centers()}
@@ -200,7 +200,7 @@ def _decode(data, _):
 
 def _novel(interp):
     def run(data, slope):
-        from lightfield.levoy1996 import render_view
+        from lumigraph.lightfield.levoy1996 import render_view
 
         return render_view(data["lf"], data["position"], focus_slope=slope, interpolation=interp)
 
@@ -208,7 +208,7 @@ def _novel(interp):
 
 
 def _depth(data, window):
-    from lightfield.refocus import estimate_disparity
+    from lumigraph.lightfield.refocus import estimate_disparity
 
     return estimate_disparity(data["lf"], np.linspace(-3.3, 2.9, 63), window=window)
 

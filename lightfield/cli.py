@@ -7,8 +7,16 @@ import json
 import time
 from pathlib import Path
 
-from capture.command import add_verb, check_output_dir, make_parser, run, say, subparsers, warn
-from capture.errors import InputError
+from lumigraph.capture.commandline import (
+    add_verb,
+    check_output_dir,
+    make_parser,
+    run,
+    say,
+    subparsers,
+    warn,
+)
+from lumigraph.capture.errors import InputError
 
 EPILOG = """\
 examples:
@@ -46,10 +54,10 @@ def _values(texts, name):
 
 # ---------------------------------------------------------------------- import
 def _import(args) -> int:
-    from capture.artifact import make_meta
-    from capture.io import read_image
-    from capture.scenes.lightfield import parse_grid
-    from lightfield.field import from_images
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.capture.io import read_image
+    from lumigraph.capture.scenes.lightfield import parse_grid
+    from lumigraph.lightfield.field import from_images
 
     inputs = [Path(p) for p in args.images]
     out = check_output_dir(args.out)
@@ -125,9 +133,9 @@ def _read_rig(path: Path):
 def _rectify(lf, cameras, args, grid, files, spacing):
     import numpy as np
 
-    from calib.camera import Camera
-    from lightfield.field import LightField
-    from lightfield.rectify import rectify_views
+    from lumigraph.capture.camera import Camera
+    from lumigraph.lightfield.field import LightField
+    from lumigraph.lightfield.rectify import rectify_views
 
     entries, where = cameras
     if len(entries) != len(files):
@@ -165,9 +173,9 @@ def _rectify(lf, cameras, args, grid, files, spacing):
 
 # ---------------------------------------------------------------------- decode
 def _decode(args) -> int:
-    from capture.artifact import make_meta
-    from capture.io import read_image
-    from lightfield.lenslet import decode
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.capture.io import read_image
+    from lumigraph.lightfield.lenslet import decode
 
     out = check_output_dir(args.out)
     raw, white = read_image(args.raw), read_image(args.white)
@@ -197,11 +205,11 @@ def _decode(args) -> int:
 def _refocus(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta, write_artifact, write_json
-    from capture.io import write_exr
-    from lightfield import ng2005
-    from lightfield.field import LightField
-    from lightfield.refocus import check_refocus_range, choose_method, shift_and_add
+    from lumigraph.capture.artifact import make_meta, write_artifact, write_json
+    from lumigraph.capture.io import write_exr
+    from lumigraph.lightfield import ng2005
+    from lumigraph.lightfield.field import LightField
+    from lumigraph.lightfield.refocus import check_refocus_range, choose_method, shift_and_add
 
     lf = LightField.load(args.lightfield)
     if args.alpha is not None:
@@ -262,10 +270,10 @@ def _refocus(args) -> int:
 def _render(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta, write_artifact
-    from capture.io import write_exr
-    from lightfield.field import LightField
-    from lightfield.levoy1996 import render_view
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_exr
+    from lumigraph.lightfield.field import LightField
+    from lumigraph.lightfield.levoy1996 import render_view
 
     out = Path(args.out)
     if out.suffix.lower() != ".exr":
@@ -303,11 +311,11 @@ def _render(args) -> int:
 def _depth(args) -> int:
     import numpy as np
 
-    from capture.artifact import make_meta, write_artifact
-    from capture.command import parse_floats
-    from capture.io import write_exr, write_pfm
-    from lightfield.field import LightField
-    from lightfield.refocus import all_in_focus, estimate_disparity, focal_stack
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.commandline import parse_floats
+    from lumigraph.capture.io import write_exr, write_pfm
+    from lumigraph.lightfield.field import LightField
+    from lumigraph.lightfield.refocus import all_in_focus, estimate_disparity, focal_stack
 
     out = Path(args.out)
     if out.suffix.lower() != ".pfm":

@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 SCHEMA = "lumigraph.lightfield"
 
@@ -142,8 +142,8 @@ class LightField:
 
     def save(self, folder: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write the views (EXR float32) and ``lightfield.json`` (last)."""
-        from capture.artifact import make_meta, write_artifact, write_json
-        from capture.io import write_exr
+        from lumigraph.capture.artifact import make_meta, write_artifact, write_json
+        from lumigraph.capture.io import write_exr
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -160,7 +160,7 @@ class LightField:
     @classmethod
     def load(cls, folder: str | os.PathLike) -> LightField:
         """Read a folder written by :meth:`save`."""
-        from capture.io import read_exr
+        from lumigraph.capture.io import read_exr
 
         folder = Path(folder)
         js = folder / "lightfield.json" if folder.is_dir() else folder

@@ -26,7 +26,7 @@ Decoding (the white image is the camera looking at a uniform white field):
 Examples
 --------
 >>> import numpy as np
->>> from capture.render import render
+>>> from lumigraph.capture.render import render
 >>> s = render("lightfield-lenslet", size=(12, 10), cache=False)
 >>> g = estimate_grid(s.images[1])
 >>> g.lattice, round(g.pitch_px, 1), (g.rows, g.cols)
@@ -40,8 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.errors import EstimationError
-from lightfield.field import LightField
+from lumigraph.capture.errors import EstimationError
+from lumigraph.lightfield.field import LightField
 
 SQRT3_2 = math.sqrt(3.0) / 2.0
 

@@ -22,7 +22,7 @@ grid or a view) are invalid: value 0, ``valid`` False.
 Examples
 --------
 >>> import numpy as np
->>> from lightfield.field import LightField
+>>> from lumigraph.lightfield.field import LightField
 >>> lf = LightField(np.random.default_rng(0).random((3, 3, 8, 10, 1)), focal_px=10.0)
 >>> out = render_view(lf, (0.0, 0.0, 0.0))     # the centre camera itself
 >>> bool(np.allclose(out.image, lf.data[1, 1])), bool(out.valid.all())
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lightfield.field import LightField
+from lumigraph.lightfield.field import LightField
 
 INTERPOLATIONS = ("quadrilinear", "uv-bilinear")
 

@@ -24,8 +24,8 @@ border rule as shift-and-add). Memory: complex64, real FFT along x:
 Examples
 --------
 >>> import numpy as np
->>> from lightfield.field import LightField
->>> from lightfield.refocus import shift_and_add
+>>> from lumigraph.lightfield.field import LightField
+>>> from lumigraph.lightfield.refocus import shift_and_add
 >>> rng = np.random.default_rng(1)
 >>> lf = LightField(rng.random((3, 3, 16, 20, 1)).astype(np.float32))
 >>> spec = prepare(lf, max_slope=1.0)
@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lightfield.field import LightField
+from lumigraph.lightfield.field import LightField
 
 # scipy.fft threads for the 2-D FFTs (-1: all cores).
 WORKERS = -1

@@ -27,7 +27,7 @@ each camera has its own intrinsics ``K_i``, distortion and pose
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
+>>> from lumigraph.capture.camera import Camera
 >>> cam = Camera(np.array([[40.0, 0, 15.5], [0, 40.0, 11.5], [0, 0, 1]]), np.zeros(5), (32, 24))
 >>> poses = [(np.eye(3), -np.array([0.1 * (j - 1), 0.1 * (i - 1), 0.0]))
 ...          for i in range(2) for j in range(3)]
@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 
 @dataclass(frozen=True)
@@ -186,7 +186,7 @@ def rectify_views(views, cameras, poses, *, grid: tuple[int, int], tolerance: fl
     ----------
     views : sequence of (H, W, C) float32
         Linear views, row-major.
-    cameras : sequence of calib.camera.Camera
+    cameras : sequence of capture.camera.Camera
         Intrinsics and distortion (OpenCV order) of each view.
     poses : sequence of (R, t)
         ``cam_from_world`` of each view.

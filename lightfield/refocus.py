@@ -20,7 +20,7 @@ The Fourier-slice method (Ng 2005, eqs. 5.10-5.11) is in
 Examples
 --------
 >>> import numpy as np
->>> from lightfield.field import LightField
+>>> from lumigraph.lightfield.field import LightField
 >>> rng = np.random.default_rng(0)
 >>> base = rng.random((20, 24, 1)).astype(np.float32)
 >>> views = np.stack([np.stack([np.roll(base, (-(u - 1), -(v - 1)), (0, 1)) for v in range(3)])
@@ -37,8 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.errors import InputError
-from lightfield.field import LightField
+from lumigraph.capture.errors import InputError
+from lumigraph.lightfield.field import LightField
 
 KERNELS = ("linear", "cubic", "lanczos3", "bspline3")
 
@@ -165,7 +165,7 @@ def focal_stack(lf: LightField, slopes, *, method: str = "shift-add", **options)
     """Refocus at each slope: (N, H, W, C) float32. ``method`` as in :data:`METHODS`."""
     slopes = [float(s) for s in slopes]
     if method == "fourier" or (method == "auto" and choose_method(lf, len(slopes)) == "fourier"):
-        from lightfield import ng2005
+        from lumigraph.lightfield import ng2005
 
         spec = ng2005.prepare(lf, max_slope=max(abs(s) for s in slopes), **options)
         return np.stack([ng2005.refocus(spec, s) for s in slopes])
@@ -285,7 +285,7 @@ def refocus(lf: LightField, slope: float, *, method: str = "shift-add", **option
     if method not in METHODS:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if method == "fourier":
-        from lightfield.ng2005 import refocus_lightfield
+        from lumigraph.lightfield.ng2005 import refocus_lightfield
 
         return refocus_lightfield(lf, slope, **options)
     return shift_and_add(lf, slope, **options)

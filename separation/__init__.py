@@ -15,7 +15,7 @@ occluder   a shadow sweep (thin occluder moved across)         >= 3
 ========== ================================================== ==============
 """
 
-from separation.result import Separation
-from separation.separate import METHODS, MIN_IMAGES, separate
+from lumigraph.separation.result import Separation
+from lumigraph.separation.separate import METHODS, MIN_IMAGES, separate
 
 __all__ = ["METHODS", "MIN_IMAGES", "Separation", "separate"]

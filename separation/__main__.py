@@ -1,5 +1,5 @@
-"""``python -m separation …`` is ``lumigraph separate …``."""
+"""``python -m lumigraph.separation …`` is ``lumigraph separate …``."""
 
-from separation.cli import main
+from lumigraph.separation.cli import main
 
-raise SystemExit(main(prog="python -m separation"))
+raise SystemExit(main(prog="python -m lumigraph.separation"))

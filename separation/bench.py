@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage
 
 SIZE = (128, 96)
 NOISE = {"full_well": 200.0, "read_noise": 60.0, "repeats": 2}
@@ -26,7 +26,7 @@ NOISE = {"full_well": 200.0, "read_noise": 60.0, "repeats": 2}
 
 def _load(spp, **opts):
     def load():
-        from capture.render import render
+        from lumigraph.capture.render import render
 
         s = render("projector", size=SIZE, spp=spp, **opts)
         top = 2 ** s.bit_depth - 1
@@ -53,7 +53,7 @@ def _error(data, out) -> dict:
 
 def _checker(estimator, *, use_b=True):
     def run(data, pairs):
-        from separation import separate
+        from lumigraph.separation import separate
 
         a = data["sets"]["checker"]
         chosen = [(i, j) for i, j in enumerate(data["comp"]) if i < j][:pairs]
@@ -67,7 +67,7 @@ def _checker(estimator, *, use_b=True):
 
 def _other(method, **kw):
     def run(data, value):
-        from separation import separate
+        from lumigraph.separation import separate
 
         extra = {"tile": value} if method == "single" else {}
         return separate(data["sets"][method], method=method, b=data["b"],
@@ -78,7 +78,7 @@ def _other(method, **kw):
 
 def _speed(n_images: int, megapixels: float) -> float:
     """Wall time of one checker separation of ``n_images`` RGB images of ``megapixels``."""
-    from separation import separate
+    from lumigraph.separation import separate
 
     w = int(round(np.sqrt(megapixels * 1e6 * 4 / 3)))
     h = int(round(megapixels * 1e6 / w))

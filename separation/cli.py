@@ -11,8 +11,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from capture.command import check_output_dir, make_parser, parse_size, run, say, warn
-from capture.errors import InputError
+from lumigraph.capture.commandline import check_output_dir, make_parser, parse_size, run, say, warn
+from lumigraph.capture.errors import InputError
 
 EPILOG = """\
 examples:
@@ -64,7 +64,7 @@ def _linear(stack, response, where):
 def _load(args):
     import json
 
-    from capture.io import read_stack
+    from lumigraph.capture.io import read_stack
 
     inputs = [Path(p) for p in args.images]
     black = white = None
@@ -102,8 +102,8 @@ def _load(args):
 
 
 def _separate(args) -> int:
-    from capture.artifact import make_meta
-    from separation import separate
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.separation import separate
 
     if args.alpha is not None and not 0.0 < args.alpha < 1.0:
         raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {args.alpha}")
@@ -114,7 +114,7 @@ def _separate(args) -> int:
     out = check_output_dir(args.out)
     response = None
     if args.response:
-        from hdr.response import ResponseCurve
+        from lumigraph.hdr.response import ResponseCurve
 
         response = ResponseCurve.load(args.response)
     t0 = time.perf_counter()
@@ -146,7 +146,7 @@ def _separate(args) -> int:
 
 
 def _patterns(args) -> int:
-    from capture import patterns as pt
+    from lumigraph.capture import patterns as pt
 
     size = parse_size(args.size)
     kinds = ["checker", "sinusoid", "stripe", "occluder", "flat"] if args.kind == "all" else [args.kind]
@@ -197,7 +197,7 @@ def main(argv=None, prog="lumigraph separate") -> int:
         p.add_argument("--out", required=True, help="output folder")
         p.set_defaults(func=_patterns)
         return run(p, argv[1:])
-    from separation.separate import METHODS
+    from lumigraph.separation.separate import METHODS
 
     p = make_parser(prog, "Separate direct and global light from captures under high-frequency "
                     "projector patterns (Nayar et al. 2006).", epilog=EPILOG)

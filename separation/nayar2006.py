@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.errors import EstimationError
+from lumigraph.capture.errors import EstimationError
 
 MASK_NEVER_LIT, MASK_SATURATED, MASK_LOW_CONTRAST = 1, 2, 4
 DEBIAS = 1.0
@@ -255,7 +255,7 @@ def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complemen
 
     Examples
     --------
-    >>> from capture.patterns import checker_set
+    >>> from lumigraph.capture.patterns import checker_set
     >>> ps = checker_set((8, 8), square=2, shifts=2)
     >>> d = np.full((8, 8), 0.6); g = np.full((8, 8), 0.2)
     >>> stack = np.stack([d * p + 0.5 * g for p in ps.images])[..., None]

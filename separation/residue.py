@@ -49,7 +49,7 @@ def pair_residue(images, complement_of, *, b: float, alpha: float, sigma: np.nda
     fraction : float
     flagged : ndarray, ``(H, W)`` bool
     """
-    from separation.nayar2006 import _coefficients
+    from lumigraph.separation.nayar2006 import _coefficients
 
     a = np.asarray(images, np.float32)
     pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(complement_of) if j >= 0 and j != i})

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from separation.nayar2006 import MASK_LOW_CONTRAST, MASK_NEVER_LIT, MASK_SATURATED
+from lumigraph.separation.nayar2006 import MASK_LOW_CONTRAST, MASK_NEVER_LIT, MASK_SATURATED
 
 SCHEMA = "lumigraph.separation"
 MASK_BITS = {"never_lit": MASK_NEVER_LIT, "saturated": MASK_SATURATED,
@@ -72,8 +72,8 @@ class Separation:
     def save(self, folder: str | os.PathLike, *, meta: dict) -> Path:
         """Write ``direct.exr``, ``global.exr`` and ``mask.png`` (each with its
         ``.meta.json``) into ``folder``; ``mask.png`` is written last."""
-        from capture import io
-        from capture.artifact import write_artifact
+        from lumigraph.capture import io
+        from lumigraph.capture.artifact import write_artifact
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -93,8 +93,8 @@ class Separation:
         """Read a folder written by :meth:`save`."""
         import json
 
-        from capture import io
-        from capture.errors import InputError
+        from lumigraph.capture import io
+        from lumigraph.capture.errors import InputError
 
         folder = Path(folder)
         need = [folder / n for n in ("direct.exr", "global.exr", "mask.png")]

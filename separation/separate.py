@@ -3,7 +3,7 @@
 Examples
 --------
 >>> import numpy as np
->>> from capture.patterns import checker_set
+>>> from lumigraph.capture.patterns import checker_set
 >>> ps = checker_set((16, 16), square=4, shifts=2)
 >>> d = np.full((16, 16), 0.5); g = np.full((16, 16), 0.2)
 >>> ims = np.stack([d * p + 0.5 * g for p in ps.images])[..., None].astype(np.float32)
@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.errors import EstimationError, InputError
-from separation import nayar2006
-from separation.result import Separation
+from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.separation import nayar2006
+from lumigraph.separation.result import Separation
 
 METHODS = {
     "checker": nayar2006.checker,
@@ -152,7 +152,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         frac, _ = _residue_pairs(a, comp, b=b, alpha=alpha, sigma=sigma, valid=valid)
         quality["residue"] = {"check": "per-pair global disagreement", "fraction": frac}
     else:
-        from separation.residue import spatial_residue
+        from lumigraph.separation.residue import spatial_residue
 
         frac, _ = spatial_residue(glob, mean_image, window=max(5, tile // 2 * 2 + 1), valid=valid)
         quality["residue"] = {"check": "spatial pattern-scale contrast", "fraction": frac}
@@ -166,6 +166,6 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
 
 
 def _residue_pairs(a, comp, **kw):
-    from separation.residue import pair_residue
+    from lumigraph.separation.residue import pair_residue
 
     return pair_residue(a, comp, **kw)

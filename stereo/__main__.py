@@ -1,5 +1,5 @@
-"""``python -m stereo …`` is ``lumigraph stereo …``."""
+"""``python -m lumigraph.stereo …`` is ``lumigraph stereo …``."""
 
-from stereo.cli import main
+from lumigraph.stereo.cli import main
 
-raise SystemExit(main(prog="python -m stereo"))
+raise SystemExit(main(prog="python -m lumigraph.stereo"))

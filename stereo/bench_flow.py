@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
 
 SYNTHETIC = ("flow", "flow-large", "flow-textureless", "flow-brightness", "flow-video")
 REAL = ("RubberWhale", "Venus", "Dimetrodon", "Hydrangea")
@@ -33,7 +33,7 @@ OURS_FLOW = ("pyramid (ours)", "pyramid-fast (ours)", "pyramid-dense (ours)",
 
 def _synthetic(name: str, size):
     def load():
-        from capture.render import render
+        from lumigraph.capture.render import render
 
         s = render(name, size=size, seed=0)
         g = s.gt_arrays
@@ -47,7 +47,7 @@ def _real(name: str, quick: bool):
     def load():
         import cv2
 
-        from capture import io
+        from lumigraph.capture import io
 
         d = shared_data("data", "flow-real", name)
         i0, i1 = io.read_image(d / "frame10.png"), io.read_image(d / "frame11.png")
@@ -63,7 +63,7 @@ def _real(name: str, quick: bool):
 
 
 def _gray8(img):
-    from stereo.pyramid import to_gray
+    from lumigraph.stereo.pyramid import to_gray
 
     return np.clip(np.rint(to_gray(img) * 255), 0, 255).astype(np.uint8)
 
@@ -74,7 +74,7 @@ def _prep_gray(data):
 
 def _ours(method: str, knob: str, **fixed):
     def run(d, value):
-        from stereo.pyramid_flow import pyramid_flow
+        from lumigraph.stereo.pyramid_flow import pyramid_flow
 
         kw = {**fixed, knob: value}
         return pyramid_flow(d["i0"], d["i1"], method=method, consistency=False, **kw).flow
@@ -82,7 +82,7 @@ def _ours(method: str, knob: str, **fixed):
 
 
 def _video(d, sigma):
-    from stereo.sand2004 import video_matching
+    from lumigraph.stereo.sand2004 import video_matching
 
     return video_matching(d["i0"], d["i1"], regression_sigma=sigma).flow
 

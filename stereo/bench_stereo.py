@@ -47,7 +47,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
+from lumigraph.capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
 
 REAL = {"tsukuba": ("im3.png", "im4.png", "disp3.pgm", 16),
         "venus": ("im2.png", "im6.png", "disp2.pgm", 8),
@@ -57,7 +57,7 @@ WINDOWS = (5, 9, 15)
 
 
 def _real(name):
-    from capture.io import read_image
+    from lumigraph.capture.io import read_image
 
     a, b, g, scale = REAL[name]
     base = shared_data("data", "stereo-real", name)
@@ -71,7 +71,7 @@ def _real(name):
 
 
 def _pair(size, **opts):
-    from capture.render import render
+    from lumigraph.capture.render import render
 
     s = render("stereo-pair", size=size, **opts)
     gt = s.gt_arrays["disparity"].astype(np.float64)
@@ -89,7 +89,7 @@ _PHASES: list[dict] = []  # per-phase timings of our runs, summarised by a check
 
 
 def _ours(data, window):
-    from stereo.block_matching import match
+    from lumigraph.stereo.block_matching import match
 
     res = match(data["left"], data["right"], max_disp=data["max_disp"], window=window)
     _PHASES.append({**res.info["timings_s"], "engine": res.info["engine"]})
@@ -97,14 +97,14 @@ def _ours(data, window):
 
 
 def _ours_prefiltered(data, window):
-    from stereo.block_matching import match
+    from lumigraph.stereo.block_matching import match
 
     return match(data["left"], data["right"], max_disp=data["max_disp"], window=window,
                  prefilter="local-mean").disparity
 
 
 def _ours_colour(data, window):
-    from stereo.block_matching import match
+    from lumigraph.stereo.block_matching import match
 
     return match(data["left"], data["right"], max_disp=data["max_disp"], window=window,
                  channels="color").disparity
@@ -146,7 +146,7 @@ def _wide_rectification(rig, X, scale=1.0):
     so that the canvas just contains every point's two projections."""
     import cv2
 
-    from calib.rectify import Rectification
+    from lumigraph.calib.rectify import Rectification
 
     l, r = rig.left, rig.right
     R1, R2, _, P2cv, _, _, _ = cv2.stereoRectify(l.K, l.dist, r.K, r.dist, l.image_size, rig.R,
@@ -173,9 +173,9 @@ def _model_case(angle, size=(320, 240)):
     """The model-stereo facade (views ``angle`` degrees apart) with its rough
     model, and what the plain baseline needs: the rectification and the
     disparity range."""
-    from calib.camera import Camera
-    from calib.rig import Rig
-    from capture.render import render
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.render import render
+    from lumigraph.capture.rig import Rig
 
     s = render("model-stereo", size=size, angle=float(angle))
     g = s.gt["rig"]
@@ -204,14 +204,14 @@ def _model_case(angle, size=(320, 240)):
 
 
 def _model_based(data, window):
-    from stereo.debevec1996 import model_stereo
+    from lumigraph.stereo.debevec1996 import model_stereo
 
     return model_stereo(data["key"], data["offset"], data["model"], data["rig"],
                         max_offset=data["max_offset"], window=window).depth
 
 
 def _model_based_no_lr(data, window):
-    from stereo.debevec1996 import model_stereo
+    from lumigraph.stereo.debevec1996 import model_stereo
 
     return model_stereo(data["key"], data["offset"], data["model"], data["rig"],
                         max_offset=data["max_offset"], window=window, left_right=None).depth
@@ -223,7 +223,7 @@ def _unrectify(data, disp):
     point ``Z_rect · r / r_z`` taken back to the key frame."""
     import cv2
 
-    from stereo.debevec1996 import key_rays
+    from lumigraph.stereo.debevec1996 import key_rays
 
     rect = data["rect"]
     rays = key_rays(data["rig"].left, data["gt"].shape) @ rect.R1.T  # rectified frame
@@ -249,7 +249,7 @@ def _plain_pair(data):
 
 
 def _plain_ssd(data, window):
-    from stereo.block_matching import match
+    from lumigraph.stereo.block_matching import match
 
     kr, orr, d0, span = _plain_pair(data)
     d = match(kr, orr, max_disp=span, window=window).disparity + d0
@@ -270,7 +270,7 @@ def _plain_sgbm(data, window):
 
 
 def _tri_case(n=4000):
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     rng = np.random.default_rng(11)
     cam_l = Camera(np.array([[610., 0, 331], [0, 598, 236], [0, 0, 1]]),
@@ -293,7 +293,7 @@ def _tri_case(n=4000):
 
 def _tri(method):
     def run(data, sigma):
-        from stereo.triangulate import triangulate
+        from lumigraph.stereo.triangulate import triangulate
 
         s = sigma if sigma > 0 else 0.5
         main = triangulate(data["px"] + sigma * data["noise"], list(data["cams"]), data["poses"],
@@ -305,15 +305,15 @@ def _tri(method):
 
 
 def _views():
-    from capture.render import render
+    from lumigraph.capture.render import render
 
     s = render("stereo-views")
     return {"kind": "sfm", "scene": s}
 
 
 def _sfm(data, fixed):
-    from calib.camera import Camera
-    from stereo.sfm import reconstruct
+    from lumigraph.capture.camera import Camera
+    from lumigraph.stereo.sfm import reconstruct
 
     s = data["scene"]
     cam = Camera.from_dict(s.gt["camera"]) if fixed else None
@@ -354,7 +354,7 @@ def _error(data, out):
                 "far_below_0.5deg": int((ang_true < 0.5).sum()),
                 "far_flagged": int(far.near_parallel[ang_true < 0.5].sum()),
                 "main_flagged": int(main.near_parallel.sum())}
-    from stereo.sfm import centre_error
+    from lumigraph.stereo.sfm import centre_error
 
     s = data["scene"]
     ce = centre_error(out, np.array(s.gt["centres"]))

@@ -152,8 +152,8 @@ class DisparityMap:
 
     def save(self, path, *, meta: dict) -> None:
         """Write the disparity as PFM (NaN stored as inf) with its sidecar."""
-        from capture.artifact import write_artifact
-        from capture.io import write_pfm
+        from lumigraph.capture.artifact import write_artifact
+        from lumigraph.capture.io import write_pfm
 
         write_artifact(path, lambda tmp: write_pfm(tmp, self.disparity), meta=meta)
 
@@ -540,9 +540,9 @@ def _kernel():
     import importlib
 
     try:
-        f = ctypes.CDLL(importlib.import_module("stereo._ssd").__file__).lumigraph_ssd_match
+        f = ctypes.CDLL(importlib.import_module("lumigraph.stereo._ssd").__file__).lumigraph_ssd_match
     except (ImportError, OSError, AttributeError) as e:
-        warnings.warn(f"stereo.block_matching: compiled kernel stereo/_ssd.c unavailable ({e}); "
+        warnings.warn(f"lumigraph.stereo.block_matching: compiled kernel stereo/_ssd.c unavailable ({e}); "
                       "using the numpy path (same results, 5-10x slower). Reinstall "
                       "(pip install -e .) with a C compiler to build it.", stacklevel=3)
         return None

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.command import (
+from lumigraph.capture.commandline import (
     add_verb,
     check_output_dir,
     check_output_path,
@@ -24,7 +24,7 @@ from capture.command import (
     subparsers,
     warn,
 )
-from capture.errors import EstimationError, InputError
+from lumigraph.capture.errors import EstimationError, InputError
 
 EPILOG = """\
 examples:
@@ -70,8 +70,8 @@ def _read_json(path) -> dict:
 
 def load_rig(path):
     """A ``rig.json``, or a scene's ``gt.json`` holding one under ``rig``."""
-    from calib.camera import Camera
-    from calib.rig import Rig
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import Rig
 
     d = _read_json(path)
     if "left" not in d and isinstance(d.get("rig"), dict):
@@ -89,7 +89,7 @@ def load_rig(path):
 
 def load_camera(path):
     """A ``camera.json``, or a scene's ``gt.json`` holding one under ``camera``."""
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     d = _read_json(path)
     if "K" not in d and isinstance(d.get("camera"), dict):
@@ -98,7 +98,7 @@ def load_camera(path):
 
 
 def _read(path):
-    from capture.io import read_image
+    from lumigraph.capture.io import read_image
 
     img = read_image(path)
     if img.size == 0 or min(img.shape[:2]) == 0:
@@ -107,7 +107,7 @@ def _read(path):
 
 
 def _rectify(rig, where):
-    from calib.rectify import rectify
+    from lumigraph.calib.rectify import rectify
 
     try:
         return rectify(rig)
@@ -124,7 +124,7 @@ def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
     """
     import cv2
 
-    from stereo.block_matching import to_gray
+    from lumigraph.stereo.block_matching import to_gray
 
     def u8(a):
         g = to_gray(a)
@@ -159,8 +159,8 @@ def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
 
 # ------------------------------------------------------------------ verbs
 def _match(args) -> int:
-    from capture.artifact import make_meta
-    from stereo.block_matching import match
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.stereo.block_matching import match
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     left, right = _read(args.left), _read(args.right)
@@ -228,8 +228,8 @@ def _match(args) -> int:
 def _depth(args) -> int:
     import cv2
 
-    from capture.artifact import make_meta, write_artifact
-    from capture.io import read_pfm, write_ply
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import read_pfm, write_ply
 
     out = check_output_path(args.out, suffixes=(".ply",))
     disp = read_pfm(args.disparity)
@@ -273,7 +273,7 @@ def _depth(args) -> int:
 
 
 def _load_tracks(args):
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     p = Path(args.correspondences)
     if p.suffix.lower() == ".json":
@@ -318,9 +318,9 @@ def _load_tracks(args):
 
 
 def _triangulate(args) -> int:
-    from capture.artifact import dumps_json, make_meta, write_artifact
-    from capture.io import write_ply
-    from stereo.triangulate import triangulate
+    from lumigraph.capture.artifact import dumps_json, make_meta, write_artifact
+    from lumigraph.capture.io import write_ply
+    from lumigraph.stereo.triangulate import triangulate
 
     out = check_output_path(args.out, suffixes=(".ply", ".json"))
     cams, poses, px, sigma = _load_tracks(args)
@@ -359,8 +359,8 @@ def _triangulate(args) -> int:
 
 
 def _sfm(args) -> int:
-    from capture.artifact import make_meta
-    from stereo.sfm import reconstruct
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.stereo.sfm import reconstruct
 
     out = check_output_dir(args.out)
     images = [_read(p) for p in args.images]
@@ -381,7 +381,7 @@ def _sfm(args) -> int:
 
 def _read_model(path):
     """A rough model's key-view depth: PFM (inf = absent) or a ``.npy`` array."""
-    from capture.io import read_pfm
+    from lumigraph.capture.io import read_pfm
 
     p = Path(path)
     if p.suffix.lower() == ".npy":
@@ -399,9 +399,9 @@ def _read_model(path):
 
 
 def _model_based(args) -> int:
-    from capture.artifact import make_meta, write_artifact
-    from capture.io import write_image
-    from stereo.debevec1996 import model_stereo
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_image
+    from lumigraph.stereo.debevec1996 import model_stereo
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     if args.warped:

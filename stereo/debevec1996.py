@@ -59,9 +59,9 @@ A pixel is left unknown (NaN) when
 
 Examples
 --------
->>> from capture.scenes.model_stereo import render_facade
->>> from calib.camera import Camera
->>> from calib.rig import Rig
+>>> from lumigraph.capture.scenes.model_stereo import render_facade
+>>> from lumigraph.capture.camera import Camera
+>>> from lumigraph.capture.rig import Rig
 >>> s = render_facade(size=(128, 96), seed=0, rng=np.random.default_rng(0), supersample=2, noise=0.5)
 >>> g = s.gt["rig"]
 >>> rig = Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
@@ -137,8 +137,8 @@ class ModelStereo:
 
     def save(self, path, *, meta: dict) -> None:
         """Write the depth as PFM (NaN stored as inf) with its ``.meta.json``."""
-        from capture.artifact import write_artifact
-        from capture.io import write_pfm
+        from lumigraph.capture.artifact import write_artifact
+        from lumigraph.capture.io import write_pfm
 
         write_artifact(path, lambda tmp: write_pfm(tmp, self.depth), meta=meta)
 
@@ -226,7 +226,7 @@ def model_in_offset_view(model_depth: np.ndarray, rig) -> np.ndarray:
     ----------
     model_depth : ndarray, (H, W)
         Key-camera ``z`` of the model per key pixel; NaN or ``<= 0`` = absent.
-    rig : calib.rig.Rig
+    rig : capture.rig.Rig
         ``left`` = key, ``right`` = offset, ``x_offset = R x_key + T``.
 
     Returns
@@ -237,8 +237,8 @@ def model_in_offset_view(model_depth: np.ndarray, rig) -> np.ndarray:
 
     Examples
     --------
-    >>> from calib.camera import Camera
-    >>> from calib.rig import Rig
+    >>> from lumigraph.capture.camera import Camera
+    >>> from lumigraph.capture.rig import Rig
     >>> K = np.array([[40., 0, 19.5], [0, 40, 14.5], [0, 0, 1]])
     >>> cam = Camera(K, np.zeros(5), (40, 30))
     >>> a = np.radians(20)
@@ -343,7 +343,7 @@ def _round_trip(rig, depth, rev_depth, model_px):
 
 def _reverse_rig(rig):
     """The rig with the roles swapped: offset as key (``x_key = Rᵀ x_offset − Rᵀ T``)."""
-    from calib.rig import Rig
+    from lumigraph.capture.rig import Rig
 
     return Rig.from_pose(rig.right, rig.left, rig.R.T, -rig.R.T @ rig.T)
 
@@ -370,7 +370,7 @@ def warp_offset(offset_image: np.ndarray, model_depth: np.ndarray, rig, *, delta
     model_depth : ndarray, (H, W)
         Key-camera ``z`` of the rough model per key pixel (``rig.left``'s
         size); NaN or ``<= 0`` where the model is absent.
-    rig : calib.rig.Rig
+    rig : capture.rig.Rig
         ``left`` = key camera, ``right`` = offset camera,
         ``x_offset = R x_key + T``.
     delta : float, keyword-only
@@ -402,10 +402,10 @@ def _check_image(name, img, size):
 
 
 def _check_model(model_depth, rig):
-    from calib.rig import Rig
+    from lumigraph.capture.rig import Rig
 
     if not isinstance(rig, Rig):
-        raise TypeError(f"rig: expected a calib.rig.Rig, got {type(rig).__name__}")
+        raise TypeError(f"rig: expected a capture.rig.Rig, got {type(rig).__name__}")
     zm = np.asarray(model_depth, np.float64)
     w, h = rig.left.image_size
     if zm.shape != (h, w):
@@ -433,7 +433,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     model_depth : ndarray, (H, W)
         Key-camera ``z`` of the rough model per key pixel centre, unit of the
         rig's ``T``; NaN (or ``<= 0``) where there is no model.
-    rig : calib.rig.Rig
+    rig : capture.rig.Rig
         ``left`` = key camera, ``right`` = offset camera, ``x_offset = R
         x_key + T``; lens distortion of either camera is handled exactly
         (rays by ``Camera.unproject``, projection by ``Camera.project``).
@@ -504,8 +504,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     """
     import cv2
 
-    from stereo.block_matching import noise_sigma as estimate_noise
-    from stereo.block_matching import to_gray
+    from lumigraph.stereo.block_matching import noise_sigma as estimate_noise
+    from lumigraph.stereo.block_matching import to_gray
 
     t0 = time.perf_counter()
     zm = _check_model(model_depth, rig)
@@ -674,7 +674,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     fit = float(np.median((bestc[judged] - 2 * sigma ** 2) / np.maximum(var[judged], 1e-12))) \
         if judged.any() else float("inf")
     if max_median_cost is not None and not fit <= max_median_cost:
-        from capture.errors import EstimationError
+        from lumigraph.capture.errors import EstimationError
 
         raise EstimationError("model_depth", f"the model does not explain the images: the median best "
                                              f"cost is {fit:.2f} x the window variance (limit "

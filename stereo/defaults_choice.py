@@ -2,7 +2,7 @@
 (``DEFAULTS_CHOICE``): a grid over the decision parameters, scored on the
 rendered capture/ pairs only, subject to the hard cases of the issue.
 
-Run ``python -m stereo.defaults_choice`` (about 3 minutes on 2 cores); it
+Run ``python -m lumigraph.stereo.defaults_choice`` (about 3 minutes on 2 cores); it
 prints every grid point's score and feasibility, then the ten best feasible
 points. Score: the mean bad-2.0 of the bench's ``pair`` and ``pair-hard``
 cases (320x240) at windows 5, 9 and 15. Feasible: on a textureless card,
@@ -33,7 +33,7 @@ def feasible(kw, *, card_scene, occlusion_scenes) -> tuple[bool, str]:
     """Whether the parameters ``kw`` meet the hard cases, and the figure that decided."""
     from scipy import ndimage
 
-    from stereo.block_matching import match
+    from lumigraph.stereo.block_matching import match
 
     s = card_scene
     gt = s.gt_arrays["disparity"]
@@ -55,9 +55,9 @@ def feasible(kw, *, card_scene, occlusion_scenes) -> tuple[bool, str]:
 
 
 def main() -> None:
-    from capture.render import render
-    from stereo.bench_stereo import _error, _pair
-    from stereo.block_matching import match
+    from lumigraph.capture.render import render
+    from lumigraph.stereo.bench_stereo import _error, _pair
+    from lumigraph.stereo.block_matching import match
 
     cases = [_pair((320, 240)), _pair((320, 240), textureless=True, occluders=2)]
     card_scene = render("stereo-pair", size=(240, 180), textureless=True)

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from capture.command import check_output_path, make_parser, run, say
-from capture.errors import InputError
+from lumigraph.capture.commandline import check_output_path, make_parser, run, say
+from lumigraph.capture.errors import InputError
 
 EPILOG = """\
 examples:
@@ -49,7 +49,7 @@ def _levels(text: str):
 
 
 def _load(path: str):
-    from capture import io
+    from lumigraph.capture import io
 
     p = Path(path)
     img = io.read_image(p)
@@ -79,7 +79,7 @@ def _outputs(args):
     before any work: two images write the files named; a sequence writes
     flow_NNN.flo (frame NNN -> NNN + 1) into the --out folder and, with
     --viz, flow_NNN.png into the --viz folder."""
-    from capture.command import check_output_dir
+    from lumigraph.capture.commandline import check_output_dir
 
     n = len(args.images) - 1
     if n == 1:
@@ -102,11 +102,11 @@ def _flow(args) -> int:
 
     import numpy as np
 
-    from capture import io
-    from capture.artifact import make_meta, write_artifact, write_json
-    from capture.command import progress
-    from stereo.flow_methods import FLOW_METHODS
-    from stereo.pyramid_flow import prob_path
+    from lumigraph.capture import io
+    from lumigraph.capture.artifact import make_meta, write_artifact, write_json
+    from lumigraph.capture.commandline import progress
+    from lumigraph.stereo.flow_methods import FLOW_METHODS
+    from lumigraph.stereo.pyramid_flow import prob_path
 
     if len(args.images) < 2:
         raise InputError(args.images[0], "flow needs at least two images")
@@ -144,7 +144,7 @@ def _flow(args) -> int:
                                 "probability_file": str(prob_path(out))})
         res.save(out, meta=meta)
         if vizs[i] is not None:
-            from stereo.flow_colour import flow_to_colour
+            from lumigraph.stereo.flow_colour import flow_to_colour
 
             pic = flow_to_colour(np.where(res.occluded[..., None] & args.mask_viz, np.nan, res.flow))
             write_artifact(vizs[i], lambda p, pic=pic: io.write_image(p, pic),
@@ -169,7 +169,7 @@ def _flow(args) -> int:
 
 
 def main(argv=None, prog="lumigraph flow") -> int:
-    from stereo.flow_methods import FLOW_METHODS
+    from lumigraph.stereo.flow_methods import FLOW_METHODS
 
     methods = "\n".join(f"  {k:<15} {d}" for k, (_, d) in FLOW_METHODS.items())
     p = make_parser(prog, "Dense correspondence between two images: optical flow (coarse-to-fine "

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 def _pyramid(i0, i1, *, levels="auto", window=9, iterations=3, finest_level=0, median_radius=0,
              **_):
-    from stereo.pyramid_flow import pyramid_flow
+    from lumigraph.stereo.pyramid_flow import pyramid_flow
 
     return pyramid_flow(i0, i1, levels=levels, window=window, iterations=iterations,
                         finest_level=finest_level, median_radius=median_radius, method="local")
@@ -22,14 +22,14 @@ def _pyramid(i0, i1, *, levels="auto", window=9, iterations=3, finest_level=0, m
 
 def _pyramid_dense(i0, i1, *, levels="auto", window=9, iterations=3, finest_level=0,
                    median_radius=0, **_):
-    from stereo.pyramid_flow import pyramid_flow
+    from lumigraph.stereo.pyramid_flow import pyramid_flow
 
     return pyramid_flow(i0, i1, levels=levels, window=window, iterations=iterations,
                         finest_level=finest_level, median_radius=median_radius, method="dense")
 
 
 def _video_matching(i0, i1, *, levels="auto", **_):
-    from stereo.sand2004 import video_matching
+    from lumigraph.stereo.sand2004 import video_matching
 
     return video_matching(i0, i1, levels=levels)
 

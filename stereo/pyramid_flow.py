@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stereo.pyramid import (
+from lumigraph.stereo.pyramid import (
     build_pyramid,
     choose_levels,
     estimate_max_motion,
@@ -106,8 +106,8 @@ class FlowResult:
         with its ``.meta.json`` sidecar; the .flo (what make checks) last."""
         from pathlib import Path
 
-        from capture import io
-        from capture.artifact import write_artifact
+        from lumigraph.capture import io
+        from lumigraph.capture.artifact import write_artifact
 
         path = Path(path)
         prob = prob_path(path)

@@ -51,7 +51,7 @@ import time
 
 import numpy as np
 
-from stereo.pyramid import (
+from lumigraph.stereo.pyramid import (
     build_pyramid,
     choose_levels,
     estimate_max_motion,
@@ -59,7 +59,7 @@ from stereo.pyramid import (
     to_gray,
     upsample_flow,
 )
-from stereo.pyramid_flow import FlowResult
+from lumigraph.stereo.pyramid_flow import FlowResult
 
 # Cost scale of the matching probability: the cost is in units of local
 # contrast (the images are normalised), summed over channels; a mean excess of
@@ -106,7 +106,7 @@ def invariant_pyramid_flow(primary: np.ndarray, secondary: np.ndarray, *,
         Of :func:`stereo.pyramid_flow.pyramid_flow` (``levels`` and the
         level choice as there).
     """
-    from stereo.pyramid_flow import pyramid_flow
+    from lumigraph.stereo.pyramid_flow import pyramid_flow
 
     n = [np.clip(0.5 + normalise_contrast(to_gray(x)[..., None])[..., 0] / 8, 0, 1)
          .astype(np.float32) for x in (primary, secondary)]

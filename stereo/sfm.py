@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from capture.errors import EstimationError, InputError
+from lumigraph.capture.errors import EstimationError, InputError
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class Reconstruction:
     cam_from_world_t : ndarray, (N, 3) float64
         ``x_cam = R x_world + t`` (NaN for unregistered images). The world
         frame and scale are COLMAP's (arbitrary similarity).
-    camera : calib.camera.Camera
+    camera : capture.camera.Camera
         The shared camera (fixed when given, else as estimated).
     points : ndarray, (P, 3) float64
     colors : ndarray, (P, 3) uint8
@@ -102,8 +102,8 @@ class Reconstruction:
         """Write ``points.ply`` and ``cameras.json`` (each with its sidecar) into ``folder``."""
         from pathlib import Path
 
-        from capture.artifact import dumps_json, write_artifact
-        from capture.io import write_ply
+        from lumigraph.capture.artifact import dumps_json, write_artifact
+        from lumigraph.capture.io import write_ply
 
         folder = Path(folder)
         folder.mkdir(parents=True, exist_ok=True)
@@ -176,7 +176,7 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
         The views (one camera, so one size).
     names : sequence of str
         One file name per image (kept in the result).
-    camera : calib.camera.Camera, optional
+    camera : capture.camera.Camera, optional
         Known intrinsics: held fixed in bundle adjustment. Without it COLMAP
         estimates a SIMPLE_RADIAL camera from a focal guess.
     seed : int
@@ -283,7 +283,7 @@ def _run_colmap(images, names, camera, seed, threads, max_features, t0):
 def _result(models, files, names, camera, size, seed, marks):
     import pycolmap
 
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     w, h = size
     t0, t_feat, t_match, t_map = marks

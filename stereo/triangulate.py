@@ -29,7 +29,7 @@ doi:10.1006/cviu.1997.0547; Hartley & Zisserman, *Multiple View Geometry*,
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
+>>> from lumigraph.capture.camera import Camera
 >>> cam = Camera(np.array([[500., 0, 160], [0, 480, 120], [0, 0, 1]]), np.zeros(5), (320, 240))
 >>> poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.array([-0.2, 0.0, 0.0]))]
 >>> X = np.array([[0.1, -0.05, 2.0], [0.3, 0.2, 3.0]])
@@ -204,7 +204,7 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
     pixels : ndarray, (V, N, 2)
         Distorted pixel coordinates ``(x, y)`` of N tracks in V views; NaN
         where a view does not see the track (each track needs >= 2 views).
-    cameras : sequence of calib.camera.Camera, length V
+    cameras : sequence of capture.camera.Camera, length V
     poses : sequence of (R (3, 3), t (3,)), length V
         ``cam_from_world``: ``x_cam = R x_world + t``.
     method : {"refined", "dlt", "midpoint"}

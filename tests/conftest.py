@@ -44,7 +44,7 @@ def need_shared(*parts: str) -> Path:
 
 def lumigraph(*args: str, cwd=None, timeout=600) -> subprocess.CompletedProcess:
     """Run the command line as a user would (a fresh process)."""
-    return subprocess.run([sys.executable, "-m", "capture", *map(str, args)], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "lumigraph", *map(str, args)], capture_output=True,
                           text=True, cwd=cwd, timeout=timeout)
 
 

@@ -28,7 +28,7 @@ margin of one square surrounds the squares.
 
 Rendering is exact resampling through the forward model: for each of the
 ``ss × ss`` sub-pixel samples of every pixel the distorted pixel is unprojected
-with :meth:`calib.camera.Camera.unproject` (shared by all views of a camera),
+with :meth:`capture.camera.Camera.unproject` (shared by all views of a camera),
 intersected with the board plane (a homography of the undistorted normalised
 coordinates), and the checker is integrated analytically over the sample's
 footprint on the board (a box filter: the integral of a square wave is a
@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 # lenses, as distortion (k1, k2, p1, p2, k3)
 _DISTORTION = {
@@ -68,7 +68,7 @@ _BLACK, _WHITE, _BACKGROUND = 0.07, 0.86, 0.35
 def camera_for(size: tuple[int, int], distortion: str, *, which: str = "left"):
     """The scene's camera for an image size: fx ≈ 0.9 w (a ~58° lens), fy
     1.5 % shorter, principal point off centre by (+2.7 %, −2.3 %) of the size."""
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     w, h = size
     f = 0.9 * w
@@ -297,7 +297,7 @@ def _pose_dict(R, t):
 
 
 def _common(size, rng, board, cols, rows, square, views, distortion, poses, ss, stereo, baseline):
-    from calib.rig import Rig
+    from lumigraph.capture.rig import Rig
 
     spec = board_spec(board, cols, rows, square)
     left = camera_for(size, distortion)

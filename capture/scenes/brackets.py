@@ -34,8 +34,8 @@ import math
 
 import numpy as np
 
-from capture.errors import InputError
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 # Per-channel film curve parameters (gamma, s): the channels differ, as dye
 # layers of a colour film do.

@@ -44,7 +44,7 @@ import math
 
 import numpy as np
 
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 BACKGROUND_TEXTURE = "astronaut"
 OBJECT_TEXTURE = "chelsea"

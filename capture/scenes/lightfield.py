@@ -54,8 +54,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.errors import InputError
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 TEXTURES = ("astronaut", "coffee", "rocket", "chelsea")
 THIN_LENS_SAMPLES = 256  # midpoint rule per aperture axis

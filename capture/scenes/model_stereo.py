@@ -45,8 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.render import Option, RenderedScene, SceneSpec
-from capture.scenes.stereo import _cast, _depth, _look_at, _Rect, _render_view, _texture
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.scenes.stereo import _cast, _depth, _look_at, _Rect, _render_view, _texture
 
 DISTANCE_M = 6.0  # key camera to the facade centre
 PILLAR_M = 0.18  # pillars protrude this much towards the cameras
@@ -158,8 +158,8 @@ def render_facade(*, size, seed, rng, angle=30.0, noise=1.0, textureless=False, 
     >>> bool(np.all(np.isfinite(m))), bool(np.nanmax(np.abs(z - m)) < 0.3)
     (True, True)
     """
-    from calib.camera import Camera
-    from calib.rig import Rig
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import Rig
 
     w, h = size
     f = 0.95 * w

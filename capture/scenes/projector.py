@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 N_CLASS = 4          # pattern period in projector cells (checker squares of 2 cells)
 GLOBAL_FACTOR = 4    # global light is rendered at 1/4 of the image resolution
@@ -147,7 +147,7 @@ def class_renders(size, *, mirror=False, spp_direct=8, spp_global=256, seed=0):
     """
     import hashlib
 
-    from capture.render import cache_dir
+    from lumigraph.capture.render import cache_dir
 
     key = hashlib.sha256(repr((VERSION, MEDIUM, tuple(size), bool(mirror), spp_direct, spp_global,
                                seed)).encode()).hexdigest()[:20]
@@ -206,7 +206,7 @@ def _class_renders(size, *, mirror, spp_direct, spp_global, seed):
 
 def pattern_sets(cells, *, alpha: float):
     """The pattern sets the scene captures, at projector-cell resolution."""
-    from capture import patterns as pt
+    from lumigraph.capture import patterns as pt
 
     sets = {}
     if abs(alpha - 0.5) < 1e-9:
@@ -222,7 +222,7 @@ def pattern_sets(cells, *, alpha: float):
 
 def compose(direct, glob, pattern, *, b):
     """Image of ``pattern`` (projector cells) from the class renders, black level ``b``."""
-    from capture.patterns import cell_weights, emitted
+    from lumigraph.capture.patterns import cell_weights, emitted
 
     wts = cell_weights(emitted(pattern, b=b), cell=1, period_cells=N_CLASS).ravel()
     return np.tensordot(wts, direct + glob, axes=1)

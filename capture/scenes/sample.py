@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 
 def render_sample(*, size, seed, rng, bit_depth=12, noise=0.0):

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from capture.render import Option, RenderedScene, SceneSpec
+from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 _LIGHT = np.array([-0.35, -0.6, -0.72]) / np.linalg.norm([-0.35, -0.6, -0.72])
 
@@ -295,7 +295,7 @@ def render_pair(*, size, seed, rng, layout="rectified", textureless=False, occlu
     = W`` (a 53° field of view), principal point at the image centre. The right
     centre is ``(B, 0, 0)`` (rectified) or ``(B, 0.02·B, 0.05·B)`` with a
     rotation of (yaw 2.5°, pitch 1.2°, roll 1.5°) and its own K (unrectified);
-    ``x_right = R x_left + T`` with ``T = −R c_right`` (calib.rig's convention).
+    ``x_right = R x_left + T`` with ``T = −R c_right`` (capture.rig's convention).
 
     Returns
     -------
@@ -358,8 +358,8 @@ def render_pair(*, size, seed, rng, layout="rectified", textureless=False, occlu
     else:
         disparity = np.full((h, w), np.nan, np.float32)
 
-    from calib.camera import Camera
-    from calib.rig import Rig
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import Rig
 
     full = Rig.from_pose(Camera(K_l, np.zeros(5), size, "none"), Camera(K_r, np.zeros(5), size, "none"),
                          R, T)

@@ -4,7 +4,7 @@
 import numpy as np
 import pytest
 
-from capture.render import render
+from lumigraph.capture.render import render
 
 
 def _opencv_corners(img, pattern):
@@ -30,7 +30,7 @@ def test_checkerboard_gt_corners_on_opencv_corners():
 
 
 def test_gt_camera_is_asymmetric_and_poses_reproject():
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     s = render("boards", size=(320, 240), seed=1, views=6, noise=0.0)
     cam = Camera.from_dict(s.gt["camera"])
@@ -42,7 +42,7 @@ def test_gt_camera_is_asymmetric_and_poses_reproject():
 
 
 def test_charuco_gt_corners_on_detected_corners():
-    from calib.detect import BoardSpec, detect
+    from lumigraph.calib.detect import BoardSpec, detect
 
     s = render("boards", size=(480, 360), seed=1, views=4, noise=0.0, board="charuco", cols=7, rows=5)
     board = BoardSpec.parse(s.stack["board"])
@@ -59,7 +59,7 @@ def test_charuco_gt_corners_on_detected_corners():
 
 
 def test_stereo_variant_gt_is_consistent():
-    from calib.rig import Rig
+    from lumigraph.capture.rig import Rig
 
     s = render("boards-stereo", size=(320, 240), seed=2, views=3, noise=0.0)
     rig_d = s.gt["rig"]
@@ -70,7 +70,7 @@ def test_stereo_variant_gt_is_consistent():
     assert T[0] < 0  # right camera to the right
     assert s.gt_arrays["corners_left"].shape == s.gt_arrays["corners_right"].shape == (3, 54, 2)
     # the GT corners of both images obey the epipolar constraint of the GT rig
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     left, right = Camera.from_dict(rig_d["left"]), Camera.from_dict(rig_d["right"])
     rig = Rig.from_pose(left, right, R, T)

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from calib.calibrate import calibrate
-from calib.detect import BoardSpec, Detection, detect
-from capture.render import render
+from lumigraph.calib.calibrate import calibrate
+from lumigraph.calib.detect import BoardSpec, Detection, detect
+from lumigraph.capture.render import render
 
 
 def _dets(s, noise_rms=0.0, seed=0):
@@ -76,7 +76,7 @@ def test_outlier_view_is_rejected(clean):
 def test_exports_are_readable(clean, tmp_path):
     import cv2
 
-    from calib.export import colmap_cameras, opencv_yaml
+    from lumigraph.calib.export import colmap_cameras, opencv_yaml
 
     cam = calibrate(_dets(clean), model="k1k2p1p2k3")
     (tmp_path / "c.yml").write_text(opencv_yaml(cam))
@@ -90,7 +90,7 @@ def test_exports_are_readable(clean, tmp_path):
 
 
 def test_too_few_views_and_no_board_refused():
-    from capture.errors import InputError
+    from lumigraph.capture.errors import InputError
 
     s = render("boards", size=(320, 240), seed=4, views=12)
     dets = _dets(s)
@@ -104,8 +104,8 @@ def test_too_few_views_and_no_board_refused():
 def test_undistort_straightens_the_board(clean):
     import cv2
 
-    from calib.camera import Camera
-    from calib.undistort import undistorter
+    from lumigraph.calib.undistort import undistorter
+    from lumigraph.capture.camera import Camera
 
     cam = Camera.from_dict(clean.gt["camera"])
     u = undistorter(cam)

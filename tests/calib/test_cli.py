@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture import io
-from capture.render import render
+from lumigraph.capture import io
+from lumigraph.capture.render import render
 
 
 @pytest.fixture(scope="module")
@@ -81,7 +81,7 @@ def test_board_that_does_not_match_the_photos(boards, tmp_path):
 
 
 def test_undistort_with_camera_of_another_size(boards, tmp_path):
-    from calib.camera import Camera
+    from lumigraph.capture.camera import Camera
 
     cam = tmp_path / "camera.json"
     Camera(np.array([[300.0, 0, 160], [0, 300, 120], [0, 0, 1]]), np.zeros(5), (640, 480)).save(cam)

@@ -4,9 +4,9 @@ equal rows, ``x_right = x_left - d`` with ``d = f B / Z > 0``."""
 import numpy as np
 import pytest
 
-from calib.camera import Camera
-from calib.rectify import Rectification, rectify
-from calib.rig import Rig
+from lumigraph.calib.rectify import Rectification, rectify
+from lumigraph.capture.camera import Camera
+from lumigraph.capture.rig import Rig
 
 
 def _rig(T=(-0.12, 0.004, 0.002)):

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from conftest import need_shared
 
-from calib.calibrate import calibrate, calibrate_stereo
-from calib.detect import BoardSpec, detect
-from calib.rectify import rectify
-from capture.render import render
+from lumigraph.calib.calibrate import calibrate, calibrate_stereo
+from lumigraph.calib.detect import BoardSpec, detect
+from lumigraph.calib.rectify import rectify
+from lumigraph.capture.render import render
 
 
 def _rect_y_rms(rig, ld, rd):
@@ -49,7 +49,7 @@ def test_synthetic_rig_recovers_R_T():
 
 @pytest.fixture(scope="module")
 def real():
-    from capture.io import read_image
+    from lumigraph.capture.io import read_image
 
     folder = need_shared("data", "calib-real")
     left = [read_image(p) for p in sorted(folder.glob("left*.jpg"))]

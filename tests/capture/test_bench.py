@@ -6,7 +6,7 @@ import math
 import numpy as np
 from conftest import lumigraph
 
-from capture.bench import Case, Method, Results, Stage, run_stage
+from lumigraph.capture.bench import Case, Method, Results, Stage, run_stage
 
 
 def test_failures_and_unavailable_peers_are_rows_not_crashes():

@@ -6,8 +6,8 @@ import json
 import numpy as np
 from conftest import assert_clean_error, lumigraph
 
-from capture import io
-from capture.artifact import atomic_path, make_meta, meta_path, write_artifact
+from lumigraph.capture import io
+from lumigraph.capture.artifact import atomic_path, make_meta, meta_path, write_artifact
 
 
 def test_version_and_help():
@@ -161,7 +161,7 @@ def test_atomic_path_keeps_suffix(tmp_path):
 
 
 def test_internal_fault_is_exit_1(tmp_path, monkeypatch):
-    from capture import command
+    from lumigraph.capture import commandline as command
 
     p = command.make_parser("t", "t")
     p.set_defaults(func=lambda a: 1 / 0)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from conftest import need_tool
 
-from capture import io
-from capture.errors import InputError
+from lumigraph.capture import io
+from lumigraph.capture.errors import InputError
 
 RNG = np.random.default_rng(1234)
 

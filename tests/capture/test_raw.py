@@ -6,8 +6,8 @@ white balance, so the developed output is exactly predictable."""
 import numpy as np
 import pytest
 
-from capture import io
-from capture.errors import InputError
+from lumigraph.capture import io
+from lumigraph.capture.errors import InputError
 
 BLACK, WHITE = 64, 4095
 

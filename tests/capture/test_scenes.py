@@ -8,8 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from capture import io
-from capture.render import RenderedScene, render, scenes
+from lumigraph.capture import io
+from lumigraph.capture.render import RenderedScene, render, scenes
 
 ALL = sorted(scenes())
 

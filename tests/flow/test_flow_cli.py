@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture import io
-from capture.render import render
+from lumigraph.capture import io
+from lumigraph.capture.render import render
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_bench_flow_quick(tmp_path):
                                        (["--finest-level", "1", "--iterations", "1"],
                                         dict(finest_level=1, iterations=1))])
 def test_median_radius_and_finest_level_reach_the_method(pair, tmp_path, flags, kw):
-    from stereo.pyramid_flow import pyramid_flow
+    from lumigraph.stereo.pyramid_flow import pyramid_flow
 
     out = tmp_path / "k.flo"
     r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out, *flags, "-q")

@@ -4,11 +4,11 @@
 import numpy as np
 import pytest
 
-from capture.render import render
-from stereo.flow_colour import flow_to_colour
-from stereo.pyramid import build_pyramid, choose_levels, forward_backward, upsample_flow
-from stereo.pyramid_flow import pyramid_flow
-from stereo.sand2004 import video_matching, weighted_regression
+from lumigraph.capture.render import render
+from lumigraph.stereo.flow_colour import flow_to_colour
+from lumigraph.stereo.pyramid import build_pyramid, choose_levels, forward_backward, upsample_flow
+from lumigraph.stereo.pyramid_flow import pyramid_flow
+from lumigraph.stereo.sand2004 import video_matching, weighted_regression
 
 SIZE = (160, 120)
 

@@ -5,7 +5,7 @@ from quantisation, bilinear interpolation and the injected noise."""
 import numpy as np
 import pytest
 
-from capture.render import render
+from lumigraph.capture.render import render
 
 SIZE = (160, 120)
 

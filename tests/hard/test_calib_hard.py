@@ -4,10 +4,10 @@ about clearly — never silently wrong."""
 import numpy as np
 import pytest
 
-from calib.calibrate import calibrate
-from calib.detect import BoardSpec, detect
-from capture.errors import EstimationError
-from capture.render import render
+from lumigraph.calib.calibrate import calibrate
+from lumigraph.calib.detect import BoardSpec, detect
+from lumigraph.capture.errors import EstimationError
+from lumigraph.capture.render import render
 
 
 def _dets(s):

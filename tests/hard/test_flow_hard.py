@@ -3,9 +3,9 @@ beyond 40 px, brightness change. Each meets its bound or says why not."""
 
 import numpy as np
 
-from capture.render import render
-from stereo.pyramid_flow import pyramid_flow
-from stereo.sand2004 import video_matching
+from lumigraph.capture.render import render
+from lumigraph.stereo.pyramid_flow import pyramid_flow
+from lumigraph.stereo.sand2004 import video_matching
 
 
 def _err(flow, gt):

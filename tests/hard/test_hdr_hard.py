@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph, need_shared
 
-from capture.errors import InputError
-from capture.render import render
-from hdr.bench import ln_response_rms
-from hdr.debevec1997 import debevec
-from hdr.merge import merge
-from hdr.mitsunaga1999 import mitsunaga_nayar
-from hdr.response import ResponseCurve
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.render import render
+from lumigraph.hdr.bench import ln_response_rms
+from lumigraph.hdr.debevec1997 import debevec
+from lumigraph.hdr.merge import merge
+from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
+from lumigraph.hdr.response import ResponseCurve
 
 
 def _b(**kw):
@@ -113,8 +113,8 @@ def test_order_ten_mitsunaga_nayar_on_noisy_data_is_finite_monotone_and_warned()
 
 
 def test_memorial_church_real_film_scans():
-    from capture.io import read_image
-    from hdr.formats import read_rgbe
+    from lumigraph.capture.io import read_image
+    from lumigraph.hdr.formats import read_rgbe
 
     d = need_shared("data", "hdr-real", "memorial")
     # Every other frame (2 stops apart, 32 s .. 1/256 s), quarter resolution: fast.
@@ -135,7 +135,7 @@ def test_memorial_church_real_film_scans():
 def test_iphone_jpegs_with_exif_times():
     from PIL import Image
 
-    from capture.io import read_exif
+    from lumigraph.capture.io import read_exif
 
     d = need_shared("data", "hdr-real", "iphone_xr_night")
     files = sorted(d.glob("IMG_*.jpeg"))
@@ -146,7 +146,7 @@ def test_iphone_jpegs_with_exif_times():
             imgs.append(np.asarray(im.convert("RGB")))
         times.append(read_exif(f).exposure_time_s)
     z = np.stack(imgs)
-    from hdr.ward2003 import align
+    from lumigraph.hdr.ward2003 import align
 
     z, shifts = align(z)
     r = debevec(z, times)

@@ -4,10 +4,10 @@ video without alternating exposures."""
 import numpy as np
 import pytest
 
-from capture.render import render
-from hdr.kang2003 import FALLBACK, WARPED, Radiometry, hdr_video, unaligned_merge
-from hdr.merge import merge
-from hdr.response import ResponseCurve
+from lumigraph.capture.render import render
+from lumigraph.hdr.kang2003 import FALLBACK, WARPED, Radiometry, hdr_video, unaligned_merge
+from lumigraph.hdr.merge import merge
+from lumigraph.hdr.response import ResponseCurve
 
 NOISE = {"full_well_e": 20000.0, "read_noise_e": 4.0}
 

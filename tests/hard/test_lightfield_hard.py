@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture.errors import InputError
-from capture.render import render
-from lightfield import ng2005
-from lightfield.field import LightField
-from lightfield.lenslet import decode
-from lightfield.refocus import check_refocus_range, shift_and_add
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.render import render
+from lumigraph.lightfield import ng2005
+from lumigraph.lightfield.field import LightField
+from lumigraph.lightfield.lenslet import decode
+from lumigraph.lightfield.refocus import check_refocus_range, shift_and_add
 
 
 def _psnr(a, b):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from capture.patterns import checker_set
-from capture.render import render
-from separation import separate
+from lumigraph.capture.patterns import checker_set
+from lumigraph.capture.render import render
+from lumigraph.separation import separate
 
 
 def _stack(d, g, b, sigma, rng):

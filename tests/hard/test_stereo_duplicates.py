@@ -3,7 +3,7 @@ refused with the reason, before COLMAP runs."""
 
 from conftest import assert_clean_error, lumigraph
 
-from capture.render import render
+from lumigraph.capture.render import render
 
 
 def test_duplicate_views_refused(tmp_path):

@@ -3,8 +3,8 @@ never as huge finite points."""
 
 import numpy as np
 
-from calib.camera import Camera
-from stereo.triangulate import triangulate
+from lumigraph.capture.camera import Camera
+from lumigraph.stereo.triangulate import triangulate
 
 
 def test_points_at_infinity_are_directions():

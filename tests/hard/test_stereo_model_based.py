@@ -7,12 +7,12 @@ import pytest
 from conftest import assert_clean_error, lumigraph
 from scipy import ndimage
 
-from calib.camera import Camera
-from calib.rig import Rig
-from capture import io
-from capture.errors import EstimationError
-from capture.render import render
-from stereo.debevec1996 import model_stereo
+from lumigraph.capture import io
+from lumigraph.capture.camera import Camera
+from lumigraph.capture.errors import EstimationError
+from lumigraph.capture.render import render
+from lumigraph.capture.rig import Rig
+from lumigraph.stereo.debevec1996 import model_stereo
 
 
 def rig_of(s):

@@ -4,8 +4,8 @@ and occlusion borders (refused by the left-right check, not smeared)."""
 import numpy as np
 from scipy import ndimage
 
-from capture.render import render
-from stereo.block_matching import match
+from lumigraph.capture.render import render
+from lumigraph.stereo.block_matching import match
 
 
 def test_textureless_card_is_unknown_not_garbage():

@@ -6,8 +6,8 @@ import shutil
 import numpy as np
 from conftest import assert_clean_error, lumigraph
 
-from capture.io import read_exr
-from capture.render import render
+from lumigraph.capture.io import read_exr
+from lumigraph.capture.render import render
 
 
 def _bracket_folder(tmp_path, **kw):
@@ -73,7 +73,7 @@ def test_python_dash_m_hdr_works():
     import subprocess
     import sys
 
-    r = subprocess.run([sys.executable, "-m", "hdr", "--help"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "lumigraph.hdr", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "response" in r.stdout
 
 

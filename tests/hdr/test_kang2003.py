@@ -6,12 +6,19 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture.io import read_exr
-from capture.render import render
-from hdr.bench import recoverable
-from hdr.kang2003 import FALLBACK, WARPED, Radiometry, hdr_video, tonemap_video, unaligned_merge
-from hdr.merge import merge
-from hdr.response import ResponseCurve
+from lumigraph.capture.io import read_exr
+from lumigraph.capture.render import render
+from lumigraph.hdr.bench import recoverable
+from lumigraph.hdr.kang2003 import (
+    FALLBACK,
+    WARPED,
+    Radiometry,
+    hdr_video,
+    tonemap_video,
+    unaligned_merge,
+)
+from lumigraph.hdr.merge import merge
+from lumigraph.hdr.response import ResponseCurve
 
 SIZE = (160, 120)
 FRAMES = 5
@@ -178,7 +185,7 @@ def test_cli_video(folder, tmp_path):
 def test_cli_bad_inputs_write_nothing(folder, tmp_path):
     import shutil
 
-    from capture.io import read_image, write_image
+    from lumigraph.capture.io import read_image, write_image
 
     out = tmp_path / "o"
     vid = folder / "vid"

@@ -6,10 +6,16 @@ import numpy as np
 import pytest
 from conftest import need_shared, need_tool
 
-from capture.render import render
-from hdr.formats import RGB_TO_XYZ, read_logluv_tiff, read_rgbe, write_logluv_tiff, write_rgbe
-from hdr.merge import BLACK, CLIPPED, GHOST, merge
-from hdr.response import ResponseCurve
+from lumigraph.capture.render import render
+from lumigraph.hdr.formats import (
+    RGB_TO_XYZ,
+    read_logluv_tiff,
+    read_rgbe,
+    write_logluv_tiff,
+    write_rgbe,
+)
+from lumigraph.hdr.merge import BLACK, CLIPPED, GHOST, merge
+from lumigraph.hdr.response import ResponseCurve
 
 
 def test_units_do_not_depend_on_bit_depth():

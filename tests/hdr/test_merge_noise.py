@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture.io import read_exr
-from capture.render import render
-from hdr.response import ResponseCurve
+from lumigraph.capture.io import read_exr
+from lumigraph.capture.render import render
+from lumigraph.hdr.response import ResponseCurve
 
 FULL_WELL, READ_NOISE = 20000.0, 100.0  # a read-noise-limited sensor, far from the defaults
 

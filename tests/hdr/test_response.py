@@ -3,12 +3,18 @@
 import numpy as np
 import pytest
 
-from capture.render import render
-from hdr.bench import ln_response_rms
-from hdr.debevec1997 import _fit_channel_sparse, _Reduced, data_weight, debevec, solve_sparse_lstsq
-from hdr.mitsunaga1999 import basis, mitsunaga_nayar
-from hdr.response import ResponseCurve
-from hdr.samples import sample_pixels
+from lumigraph.capture.render import render
+from lumigraph.hdr.bench import ln_response_rms
+from lumigraph.hdr.debevec1997 import (
+    _fit_channel_sparse,
+    _Reduced,
+    data_weight,
+    debevec,
+    solve_sparse_lstsq,
+)
+from lumigraph.hdr.mitsunaga1999 import basis, mitsunaga_nayar
+from lumigraph.hdr.response import ResponseCurve
+from lumigraph.hdr.samples import sample_pixels
 
 
 def _bracket(**kw):

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from conftest import lumigraph
 
-from capture.errors import InputError
-from capture.render import render
-from hdr.bench import ln_response_rms
-from hdr.robertson2003 import robertson
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.render import render
+from lumigraph.hdr.bench import ln_response_rms
+from lumigraph.hdr.robertson2003 import robertson
 
 
 def _bracket(**kw):

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture.render import render
-from capture.scenes.brackets import gt_log_inverse, response_forward, response_inverse
-from hdr.merge import merge
-from hdr.response import ResponseCurve
+from lumigraph.capture.render import render
+from lumigraph.capture.scenes.brackets import gt_log_inverse, response_forward, response_inverse
+from lumigraph.hdr.merge import merge
+from lumigraph.hdr.response import ResponseCurve
 
 
 def test_noise_free_bracket_merged_with_gt_response_reproduces_gt_radiance():

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture.io import read_exr, write_image
-from capture.render import render
+from lumigraph.capture.io import read_exr, write_image
+from lumigraph.capture.render import render
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +26,7 @@ def lfdir(scene_dir, tmp_path_factory):
 
 
 def test_import_from_rendered_folder_is_linear_and_exact(lfdir):
-    from lightfield.field import LightField
+    from lumigraph.lightfield.field import LightField
 
     lf = LightField.load(lfdir)
     assert lf.grid == (3, 3) and lf.size == (48, 40) and lf.focal_px == 48.0
@@ -127,7 +127,7 @@ def test_python_dash_m_and_bench_quick(tmp_path):
     import subprocess
     import sys
 
-    r = subprocess.run([sys.executable, "-m", "lightfield", "--help"], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "lumigraph.lightfield", "--help"], capture_output=True,
                        text=True)
     assert r.returncode == 0 and "refocus" in r.stdout
     r = lumigraph("bench", "lightfield", "--quick", "--out", tmp_path, "-q")

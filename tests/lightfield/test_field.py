@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from capture.errors import InputError
-from lightfield.field import LightField, from_images, srgb_to_linear
+from lumigraph.capture.errors import InputError
+from lumigraph.lightfield.field import LightField, from_images, srgb_to_linear
 
 
 def test_round_trip_is_exact(tmp_path):

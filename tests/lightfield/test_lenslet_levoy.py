@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from capture.errors import EstimationError
-from capture.render import render
-from lightfield.field import LightField
-from lightfield.lenslet import decode, estimate_grid
-from lightfield.levoy1996 import render_view
+from lumigraph.capture.errors import EstimationError
+from lumigraph.capture.render import render
+from lumigraph.lightfield.field import LightField
+from lumigraph.lightfield.lenslet import decode, estimate_grid
+from lumigraph.lightfield.levoy1996 import render_view
 
 
 def _psnr(a, b):

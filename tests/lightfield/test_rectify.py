@@ -8,9 +8,9 @@ import pytest
 from conftest import assert_clean_error, lumigraph
 from scipy.ndimage import map_coordinates
 
-from capture.render import render
-from lightfield.field import LightField
-from lightfield.refocus import shift_and_add
+from lumigraph.capture.render import render
+from lumigraph.lightfield.field import LightField
+from lumigraph.lightfield.refocus import shift_and_add
 
 M = 6   # border excluded: rotation by <= 0.5 deg moves pixels <= ~1.5 px, plus the kernels
 

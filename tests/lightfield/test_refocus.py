@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from conftest import need_shared
 
-from capture.render import render
-from lightfield import ng2005
-from lightfield.field import LightField, from_images
-from lightfield.refocus import (
+from lumigraph.capture.render import render
+from lumigraph.lightfield import ng2005
+from lumigraph.lightfield.field import LightField, from_images
+from lumigraph.lightfield.refocus import (
     all_in_focus,
     check_refocus_range,
     estimate_disparity,
@@ -93,7 +93,7 @@ def test_out_of_range_slope_is_warned_with_ngs_bound(scene):
 
 
 def test_depth_on_hci_antinous_against_gt_disparity():
-    from capture.io import read_image, read_pfm
+    from lumigraph.capture.io import read_image, read_pfm
 
     root = need_shared("data", "lightfield-real", "hci_antinous_5x5")
     crop = (slice(200, 296), slice(200, 296))

@@ -2,9 +2,14 @@
 
 import numpy as np
 
-from capture.render import render
-from capture.scenes.lightfield import build_scene, synthetic_aperture, thin_lens_image, view_offsets
-from lightfield.lenslet import LensletGrid, devignette, slice_views
+from lumigraph.capture.render import render
+from lumigraph.capture.scenes.lightfield import (
+    build_scene,
+    synthetic_aperture,
+    thin_lens_image,
+    view_offsets,
+)
+from lumigraph.lightfield.lenslet import LensletGrid, devignette, slice_views
 
 
 def _scene(disparities, size=48):

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture import io
-from capture.render import render
+from lumigraph.capture import io
+from lumigraph.capture.render import render
 
 
 @pytest.fixture(scope="module")
@@ -55,7 +55,7 @@ def test_other_methods_run_and_are_bounded(scene_dir, tmp_path, method, bound):
 
 
 def test_files_with_response_for_8bit(scene_dir, tmp_path):
-    from hdr.response import ResponseCurve
+    from lumigraph.hdr.response import ResponseCurve
 
     st = json.loads((scene_dir / "stack.json").read_text())
     files = []
@@ -110,7 +110,7 @@ def test_python_m_separation_help():
     import subprocess
     import sys
 
-    r = subprocess.run([sys.executable, "-m", "separation", "--help"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "lumigraph.separation", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "--method" in r.stdout
 
 

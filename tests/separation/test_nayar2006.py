@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from capture.patterns import checker_set, sinusoid_set
-from separation import nayar2006, separate
+from lumigraph.capture.patterns import checker_set, sinusoid_set
+from lumigraph.separation import nayar2006, separate
 
 
 @pytest.mark.parametrize("alpha,b", [(0.5, 0.0), (0.5, 0.15), (0.3, 0.0), (0.7, 0.2), (0.5, 0.6)])

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture import io
-from capture import patterns as pt
+from lumigraph.capture import io
+from lumigraph.capture import patterns as pt
 
 
 def test_checker_complements_and_shifts_visit_every_phase():

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from capture.render import render
+from lumigraph.capture.render import render
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +26,7 @@ def test_gt_direct_plus_global_matches_an_independent_full_render(scene):
     edges (where the truth's global is upsampled from 1/4 resolution); the
     image mean agrees to 1.5 %.
     """
-    from capture.scenes.projector import white_render
+    from lumigraph.capture.scenes.projector import white_render
 
     full = scene.gt_arrays["direct"] + scene.gt_arrays["global"]
     np.testing.assert_allclose(full, scene.gt_arrays["full"], rtol=1e-5, atol=1e-6)

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
-from capture.render import render
-from stereo.block_matching import match, noise_sigma, to_gray
+from lumigraph.capture.render import render
+from lumigraph.stereo.block_matching import match, noise_sigma, to_gray
 
 
 def test_rendered_pair_accuracy_bounded_on_both_sides():
@@ -134,7 +134,7 @@ def _same(a, b):
 def test_compiled_kernel_identical_to_numpy_path(window, max_disp, size, kw, monkeypatch):
     # the kernel's integer SSD and float32 decision are specified to reproduce
     # the numpy path exactly on 8-bit input: any difference is a bug
-    import stereo.block_matching as bm
+    import lumigraph.stereo.block_matching as bm
 
     assert bm._kernel() is not None, "stereo/_ssd.c was not built (pip install -e . needs a C compiler)"
     s = render("stereo-pair", size=size, textureless=True)
@@ -151,11 +151,11 @@ def test_compiled_kernel_identical_to_numpy_path(window, max_disp, size, kw, mon
 def test_missing_kernel_falls_back_with_one_warning(monkeypatch):
     import sys
 
-    import stereo.block_matching as bm
+    import lumigraph.stereo.block_matching as bm
 
     s = render("stereo-pair", size=(96, 72))
     ref = match(s.images[0], s.images[1], max_disp=16, window=5)
-    monkeypatch.setitem(sys.modules, "stereo._ssd", None)  # import fails
+    monkeypatch.setitem(sys.modules, "lumigraph.stereo._ssd", None)  # import fails
     bm._kernel.cache_clear()
     try:
         with pytest.warns(UserWarning, match="numpy path"):

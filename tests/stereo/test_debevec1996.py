@@ -8,11 +8,16 @@ import pytest
 from conftest import assert_clean_error, lumigraph
 from scipy import ndimage
 
-from calib.camera import Camera
-from calib.rig import Rig
-from capture import io
-from capture.render import render
-from stereo.debevec1996 import ModelStereo, model_in_offset_view, model_stereo, warp_offset
+from lumigraph.capture import io
+from lumigraph.capture.camera import Camera
+from lumigraph.capture.render import render
+from lumigraph.capture.rig import Rig
+from lumigraph.stereo.debevec1996 import (
+    ModelStereo,
+    model_in_offset_view,
+    model_stereo,
+    warp_offset,
+)
 
 MAX_OFFSET = 0.35  # m; the relief is 0.18-0.27 m deep along the key rays
 

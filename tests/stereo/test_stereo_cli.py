@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from conftest import assert_clean_error, lumigraph
 
-from capture import io
-from capture.render import render
+from lumigraph.capture import io
+from lumigraph.capture.render import render
 
 
 @pytest.fixture(scope="module")
@@ -114,7 +114,7 @@ def test_triangulate_json_and_text(pairs, tmp_path):
 
 
 def test_sfm_cli_recovers_camera_centres(tmp_path):
-    from stereo.sfm import align_similarity
+    from lumigraph.stereo.sfm import align_similarity
 
     s = render("stereo-views")
     folder = s.save(tmp_path / "views")

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from capture.render import render
+from lumigraph.capture.render import render
 
 
 def _warp_residual(s, xy):

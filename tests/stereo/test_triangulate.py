@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from calib.camera import Camera
-from stereo.triangulate import midpoint, triangulate
+from lumigraph.capture.camera import Camera
+from lumigraph.stereo.triangulate import midpoint, triangulate
 
 
 def _rig(n, rng, *, baseline=0.45, depth=(3, 7)):

@@ -1,9 +1,9 @@
-"""The ``lumigraph`` command and the helpers every stage's ``cli.py`` uses.
+"""The helpers every stage's ``cli.py`` uses: the parser with the project's
+error convention, :func:`run`, option parsers, progress and output checks.
 
-``lumigraph <stage> …`` imports only the chosen stage's ``cli`` module, so a
-``make`` step pays for the libraries it uses and no more. Each stage module
-provides ``main(argv=None, prog=...) -> int`` built with :func:`make_parser`
-and :func:`run`.
+A stage's ``cli.py`` builds its parser with :func:`make_parser`, adds verbs
+with :func:`add_verb`, and returns :func:`run`; the ``lumigraph`` dispatcher
+itself is :mod:`lumigraph.command` (the shell, on top of every stage).
 
 Exit status (DESIGN §5): 0 success; 2 bad input or usage, with one line
 ``error: <file>: <problem>`` on stderr (traceback only with ``--debug``);
@@ -11,36 +11,25 @@ Exit status (DESIGN §5): 0 success; 2 bad input or usage, with one line
 
 Examples
 --------
->>> main(["--version"])  # doctest: +ELLIPSIS
-lumigraph ...
+>>> p = make_parser("demo", "A demo command.")
+>>> p.add_argument("--n", type=int, default=1)  # doctest: +ELLIPSIS
+_StoreAction(...)
+>>> p.set_defaults(func=lambda args: print("n =", args.n))
+>>> run(p, ["--n", "3"])
+n = 3
 0
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 import traceback
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from capture.errors import EstimationError, InputError
-
-# stage name -> (module with main(), one-line summary). The summaries live here
-# so that `lumigraph --help` imports nothing heavy.
-STAGES: dict[str, tuple[str, str]] = {
-    "render": ("capture.cli", "render synthetic scenes with exact ground truth"),
-    "calib": ("calib.cli", "camera calibration, stereo rigs, undistortion, rectification"),
-    "hdr": ("hdr.cli", "camera response, radiance merge, alignment, tone mapping, HDR files"),
-    "flow": ("stereo.flow_cli", "optical flow and Sand-Teller video matching"),
-    "stereo": ("stereo.cli", "block-matching stereo, triangulation, depth, SfM"),
-    "lightfield": ("lightfield.cli", "light fields: import, lenslet decode, refocus, render"),
-    "separate": ("separation.cli", "direct/global separation with projected patterns"),
-    "bench": ("capture.bench_cli", "speed against error, ours beside the peers"),
-    "inspect": ("capture.inspect_cli", "describe and validate images, stacks and artifacts"),
-}
+from lumigraph.capture.errors import EstimationError, InputError
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE = 0, 1, 2
 
@@ -201,49 +190,3 @@ def check_output_dir(out: str | os.PathLike) -> Path:
     if p.exists() and not p.is_dir():
         raise InputError("--out", f"{p} exists and is not a folder")
     return p
-
-
-def _load_stage(name: str) -> Callable[..., int]:
-    module, _ = STAGES[name]
-    return importlib.import_module(module).main
-
-
-def _top_help() -> str:
-    lines = ["usage: lumigraph [--version] STAGE [VERB] ...", "",
-             "Image-based capture and reconstruction: calibration, HDR, flow and stereo,",
-             "light fields and direct/global separation, as commands that read and",
-             "write ordinary files (EXR, PFM, .flo, PLY, JSON).", "", "stages:"]
-    lines += [f"  {n:<11} {s}" for n, (_, s) in STAGES.items()]
-    lines += ["", "Each stage explains itself: lumigraph STAGE --help",
-              "Also runnable as python -m <package> (python -m hdr ...).",
-              "Exit status: 0 ok, 2 bad input or usage (one line on stderr), 1 internal fault."]
-    return "\n".join(lines)
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``lumigraph`` console script."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    if not argv or argv[0] in ("-h", "--help"):
-        print(_top_help())
-        return EXIT_OK if argv else EXIT_USAGE
-    if argv[0] == "--version":
-        from capture import __version__
-
-        print(f"lumigraph {__version__}")
-        return EXIT_OK
-    stage = argv[0]
-    if stage not in STAGES:
-        sys.stderr.write(f"error: lumigraph: unknown stage {stage!r}; choose from "
-                         f"{', '.join(STAGES)} (see 'lumigraph --help')\n")
-        return EXIT_USAGE
-    try:
-        stage_main = _load_stage(stage)
-    except ModuleNotFoundError as e:
-        sys.stderr.write(f"error: lumigraph {stage}: this installation lacks {e.name} "
-                         "(reinstall lumigraph)\n")
-        return EXIT_INTERNAL
-    return stage_main(argv[1:], prog=f"lumigraph {stage}")
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

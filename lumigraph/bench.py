@@ -5,7 +5,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from capture.command import make_parser, run, say
+from lumigraph.capture.commandline import make_parser, run, say
+
+# stage name -> module providing stage(*, quick) -> Stage (the harness is
+# lumigraph.capture.bench; each stage's bench module sits in its own folder).
+BENCH_STAGES: dict[str, str] = {
+    "io": "lumigraph.capture.bench_io",
+    "render": "lumigraph.capture.bench_render",
+    "calib": "lumigraph.calib.bench",
+    "hdr": "lumigraph.hdr.bench",
+    "flow": "lumigraph.stereo.bench_flow",
+    "stereo": "lumigraph.stereo.bench_stereo",
+    "lightfield": "lumigraph.lightfield.bench",
+    "separation": "lumigraph.separation.bench",
+}
 
 EPILOG = """\
 examples:
@@ -22,7 +35,7 @@ lines are peers). Each row's time is the median of --repeats runs (>= 3).
 
 
 def _bench(args) -> int:
-    from capture.bench import BENCH_STAGES, load_stage, run_stage, write_report
+    from lumigraph.capture.bench import run_stage, write_report
 
     names = args.stages or list(BENCH_STAGES)
     stages = {n: load_stage(n, quick=args.quick) for n in names}
@@ -37,7 +50,7 @@ def _bench(args) -> int:
                       f"err {row.error:.4g}  {row.status if row.status != 'ok' else ''}", flush=True)
 
         rows = run_stage(st, repeats=args.repeats, on_row=show)
-        from capture.bench import Results
+        from lumigraph.capture.bench import Results
 
         checks = st.checks(Results(rows), {"quick": args.quick}) if st.checks else []
         results[name] = (st, rows, checks)
@@ -50,9 +63,24 @@ def _bench(args) -> int:
     return 0
 
 
-def main(argv=None, prog="lumigraph bench") -> int:
-    from capture.bench import BENCH_STAGES
+def load_stage(name: str, *, quick: bool = False):
+    """The :class:`lumigraph.capture.bench.Stage` of bench stage ``name``."""
+    import importlib
 
+    from lumigraph.capture.errors import InputError
+
+    if name not in BENCH_STAGES:
+        raise InputError(name, f"unknown bench stage; choose from {', '.join(BENCH_STAGES)}")
+    try:
+        mod = importlib.import_module(BENCH_STAGES[name])
+    except ModuleNotFoundError as e:
+        if e.name == BENCH_STAGES[name]:
+            raise InputError(name, "this stage has no bench yet") from None
+        raise
+    return mod.stage(quick=quick)
+
+
+def main(argv=None, prog="lumigraph bench") -> int:
     p = make_parser(prog, "Speed against error: our methods and the peers on the same inputs.",
                     epilog=EPILOG)
     p.add_argument("stages", nargs="*", metavar="STAGE",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.command import make_parser, run
+from lumigraph.capture.commandline import make_parser, run
 
 EPILOG = """\
 examples:
@@ -20,7 +20,7 @@ examples:
 
 def describe(path: Path) -> dict:
     """Summary of one file read through ``capture.io``."""
-    from capture import io
+    from lumigraph.capture import io
 
     ext = path.suffix.lower()
     if ext == ".flo":
@@ -47,9 +47,9 @@ def describe(path: Path) -> dict:
 
 
 def _inspect(args) -> int:
-    from capture import io
-    from capture.artifact import make_meta, write_artifact
-    from capture.command import parse_floats
+    from lumigraph.capture import io
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.commandline import parse_floats
 
     paths = [Path(p) for p in args.inputs]
     times = parse_floats(args.times, name="--times") if args.times else None

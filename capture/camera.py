@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from capture.errors import InputError
+from lumigraph.capture.errors import InputError
 
 CAMERA_SCHEMA = "lumigraph.camera"
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
@@ -204,12 +204,12 @@ class Camera:
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``camera.json`` atomically (with a sidecar when ``meta`` is given)."""
-        from capture.artifact import save_json_artifact
+        from lumigraph.capture.artifact import save_json_artifact
 
         return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Camera:
-        from capture.artifact import load_json_artifact
+        from lumigraph.capture.artifact import load_json_artifact
 
         return cls.from_dict(load_json_artifact(path, "camera"), where=str(path))

@@ -8,7 +8,7 @@ essential and fundamental matrices ``E``, ``F`` and fit diagnostics.
 Examples
 --------
 >>> import numpy as np
->>> from calib.camera import Camera
+>>> from lumigraph.capture.camera import Camera
 >>> K = np.array([[700., 0, 320], [0, 700, 240], [0, 0, 1]])
 >>> rig = Rig.from_pose(Camera(K, np.zeros(5), (640, 480)), Camera(K, np.zeros(5), (640, 480)),
 ...                     np.eye(3), np.array([-0.1, 0, 0]))
@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from calib.camera import Camera
-from capture.errors import InputError
+from lumigraph.capture.camera import Camera
+from lumigraph.capture.errors import InputError
 
 RIG_SCHEMA = "lumigraph.rig"
 
@@ -89,13 +89,13 @@ class Rig:
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``rig.json`` atomically (with a sidecar when ``meta`` is given)."""
-        from capture.artifact import save_json_artifact
+        from lumigraph.capture.artifact import save_json_artifact
 
         return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Rig:
-        from capture.artifact import load_json_artifact
+        from lumigraph.capture.artifact import load_json_artifact
 
         d = load_json_artifact(path, "rig")
         try:

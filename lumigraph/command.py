@@ -1,0 +1,83 @@
+"""The ``lumigraph`` command: one subcommand per stage.
+
+This is the shell, the top floor (see ARCHITECTURE.md): ``lumigraph <stage> …``
+imports only the chosen stage's ``cli`` module, so a ``make`` step pays for
+the libraries it uses and no more. Each stage's ``cli`` module provides
+``main(argv=None, prog=...) -> int`` built with
+:func:`lumigraph.capture.commandline.make_parser` and
+:func:`lumigraph.capture.commandline.run`.
+
+Examples
+--------
+>>> main(["--version"])  # doctest: +ELLIPSIS
+lumigraph ...
+0
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+
+from lumigraph.capture.commandline import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE
+
+# stage name -> (module with main(), one-line summary). The summaries live here
+# so that `lumigraph --help` imports nothing heavy.
+STAGES: dict[str, tuple[str, str]] = {
+    "render": ("lumigraph.capture.cli", "render synthetic scenes with exact ground truth"),
+    "calib": ("lumigraph.calib.cli", "camera calibration, stereo rigs, undistortion, rectification"),
+    "hdr": ("lumigraph.hdr.cli", "camera response, radiance merge, alignment, tone mapping, HDR files"),
+    "flow": ("lumigraph.stereo.flow_cli", "optical flow and Sand-Teller video matching"),
+    "stereo": ("lumigraph.stereo.cli", "block-matching stereo, triangulation, depth, SfM"),
+    "lightfield": ("lumigraph.lightfield.cli", "light fields: import, lenslet decode, refocus, render"),
+    "separate": ("lumigraph.separation.cli", "direct/global separation with projected patterns"),
+    "bench": ("lumigraph.bench", "speed against error, ours beside the peers"),
+    "inspect": ("lumigraph.inspect", "describe and validate images, stacks and artifacts"),
+}
+
+
+def _load_stage(name: str) -> Callable[..., int]:
+    module, _ = STAGES[name]
+    return importlib.import_module(module).main
+
+
+def _top_help() -> str:
+    lines = ["usage: lumigraph [--version] STAGE [VERB] ...", "",
+             "Image-based capture and reconstruction: calibration, HDR, flow and stereo,",
+             "light fields and direct/global separation, as commands that read and",
+             "write ordinary files (EXR, PFM, .flo, PLY, JSON).", "", "stages:"]
+    lines += [f"  {n:<11} {s}" for n, (_, s) in STAGES.items()]
+    lines += ["", "Each stage explains itself: lumigraph STAGE --help",
+              "Also runnable as python -m <package> (python -m lumigraph.hdr ...).",
+              "Exit status: 0 ok, 2 bad input or usage (one line on stderr), 1 internal fault."]
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``lumigraph`` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_top_help())
+        return EXIT_OK if argv else EXIT_USAGE
+    if argv[0] == "--version":
+        from lumigraph import __version__
+
+        print(f"lumigraph {__version__}")
+        return EXIT_OK
+    stage = argv[0]
+    if stage not in STAGES:
+        sys.stderr.write(f"error: lumigraph: unknown stage {stage!r}; choose from "
+                         f"{', '.join(STAGES)} (see 'lumigraph --help')\n")
+        return EXIT_USAGE
+    try:
+        stage_main = _load_stage(stage)
+    except ModuleNotFoundError as e:
+        sys.stderr.write(f"error: lumigraph {stage}: this installation lacks {e.name} "
+                         "(reinstall lumigraph)\n")
+        return EXIT_INTERNAL
+    return stage_main(argv[1:], prog=f"lumigraph {stage}")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
