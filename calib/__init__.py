@@ -1,2 +1,30 @@
-"""Camera calibration: camera model, target detection, intrinsics and
-distortion (Zhang), stereo rigs, rectification and undistortion."""
+"""Camera calibration: target detection, intrinsics and distortion (Zhang),
+stereo rigs, rectification and undistortion.
+
+The camera and rig *model* (:class:`Camera`, ``camera.json``; :class:`Rig`,
+``rig.json``) lives on the ground floor, in :mod:`lumigraph.capture.camera`
+and :mod:`lumigraph.capture.rig`, because the synthetic scenes render
+through it; it is re-exported here, loaded on first use.
+
+Examples
+--------
+>>> from lumigraph.calib import Camera
+>>> Camera.__module__
+'lumigraph.capture.camera'
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_LAZY = {
+    "Camera": "lumigraph.capture.camera",
+    "Rig": "lumigraph.capture.rig",
+}
+__all__ = sorted(_LAZY)
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'lumigraph.calib' has no attribute {name!r}")

@@ -75,13 +75,50 @@ def add_verb(sp, name: str, help: str, *, description: str | None = None,
     return v
 
 
+def argument_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, str]:
+    """Library argument name -> the command-line flag that sets it.
+
+    Library errors name the function's argument (``smoothness``,
+    ``exposure_times_s``), never a flag; only the command line knows its
+    flags. Every option of the parser and of the verbs chosen in ``args``
+    maps its ``dest`` to its first long flag; a verb adds the names that
+    differ from its dests with ``set_defaults(arg_flags={"exposure_times_s":
+    "--times"})``.
+
+    Examples
+    --------
+    >>> p = make_parser("t", "t")
+    >>> _ = p.add_argument("--pixel-sigma", type=float)
+    >>> p.set_defaults(arg_flags={"exposure_times_s": "--times"})
+    >>> flags = argument_flags(p, p.parse_args([]))
+    >>> flags["pixel_sigma"], flags["exposure_times_s"]
+    ('--pixel-sigma', '--times')
+    """
+    flags: dict[str, str] = {}
+    todo = [parser]
+    while todo:
+        p = todo.pop()
+        for a in p._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                chosen = getattr(args, a.dest, None) if a.dest != argparse.SUPPRESS else None
+                if chosen in a.choices:
+                    todo.append(a.choices[chosen])
+            elif a.option_strings and a.dest not in ("help",):
+                longs = [o for o in a.option_strings if o.startswith("--")]
+                flags.setdefault(a.dest, (longs or a.option_strings)[0])
+    flags.update(getattr(args, "arg_flags", None) or {})
+    return flags
+
+
 def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
         allow_extra: bool = False) -> int:
     """Parse ``argv`` and call ``args.func(args)`` under the error convention.
 
     With ``allow_extra`` unknown ``--name VALUE`` pairs are kept, unparsed, in
     ``args.extra`` (for options only known once a positional is, such as a
-    scene's own options).
+    scene's own options). An :class:`InputError` or :class:`EstimationError`
+    whose ``where`` names a library argument is reported under the flag that
+    sets it (:func:`argument_flags`).
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
@@ -99,7 +136,8 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     except (InputError, EstimationError) as e:
         if debug:
             traceback.print_exc()
-        sys.stderr.write(f"error: {e.where}: {e.problem}\n")
+        where = argument_flags(parser, args).get(e.where, e.where)
+        sys.stderr.write(f"error: {where}: {e.problem}\n")
         return EXIT_USAGE
     except KeyboardInterrupt:
         sys.stderr.write("error: interrupted; nothing half-written was left behind\n")
