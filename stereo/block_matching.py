@@ -61,6 +61,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
+
 AUTO_WINDOWS = (5, 9, 15)
 BAND_ROWS = 64
 DEFAULTS_CHOICE = """\
@@ -159,58 +161,6 @@ class DisparityMap:
 
 
 # ------------------------------------------------------------------- helpers
-def to_gray(image: np.ndarray) -> np.ndarray:
-    """Luma ``(H, W)`` float32 in the image's own code units (Rec. 601 weights)."""
-    import cv2
-
-    a = np.asarray(image)
-    if a.ndim == 3 and a.shape[2] in (3, 4):
-        a = cv2.cvtColor(np.ascontiguousarray(a[..., :3], dtype=np.float32), cv2.COLOR_RGB2GRAY)
-    elif a.ndim == 3 and a.shape[2] == 1:
-        a = a[..., 0]
-    elif a.ndim != 2:
-        raise ValueError(f"image: expected (H, W) or (H, W, 1|3|4), got shape {a.shape}")
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
-def noise_sigma(gray: np.ndarray) -> float:
-    """Robust estimate of the sensor noise σ (code values) of one image.
-
-    The 3×3 mask ``[[1,-2,1],[-2,4,-2],[1,-2,1]]`` cancels smooth image content
-    and passes white noise with gain 6 (Immerkær 1996). Its mean absolute
-    response is taken over 8×8 blocks and the 10th percentile of the blocks
-    kept: the smoothest parts of a scene show the noise alone, where a global
-    average would count texture and edges as noise.
-
-    Examples
-    --------
-    >>> g = np.full((64, 64), 100.0) + np.random.default_rng(1).normal(0, 2, (64, 64))
-    >>> round(noise_sigma(g.astype(np.float32)), 1)
-    2.0
-    """
-    import cv2
-
-    k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    r = np.abs(cv2.filter2D(gray, cv2.CV_32F, k)[1:-1, 1:-1])
-    h, w = (r.shape[0] // 8) * 8, (r.shape[1] // 8) * 8
-    if h == 0 or w == 0:
-        return float(np.sqrt(np.pi / 2) * r.mean() / 6.0)
-    # 8x8 block means (area resampling by exactly 1/8 is the block mean)
-    blocks = cv2.resize(r[:h, :w], (w // 8, h // 8), interpolation=cv2.INTER_AREA)
-    # blocks near black or white are clipped (less noise than the sensor's):
-    # leave them out
-    level = cv2.resize(np.ascontiguousarray(gray[1:h + 1, 1:w + 1]), (w // 8, h // 8),
-                       interpolation=cv2.INTER_AREA)
-    lo, hi = float(gray.min()), float(gray.max())
-    ok = (level > lo + 0.04 * (hi - lo)) & (level < hi - 0.04 * (hi - lo))
-    if ok.sum() >= 10:
-        blocks = blocks[ok]
-    # mean |N(0, s)| = s·sqrt(2/π); the 10th percentile of 8×8 block means of
-    # pure noise sits at 0.785 of their mean (measured; the mask's responses
-    # are correlated), hence 1/0.785
-    return float(np.sqrt(np.pi / 2) * np.percentile(blocks, 10) / 6.0 / 0.785)
-
-
 _SCRATCH: queue.SimpleQueue = queue.SimpleQueue()
 
 
@@ -268,7 +218,7 @@ def _match_images(left, right, *, channels="color", prefilter="none", cap=31.0):
     every plane is replaced by its local-mean response (``cap`` in 8-bit code
     values, scaled to the input's range for other dtypes); the texture and
     noise estimates keep the plain luma."""
-    L, R = to_gray(left), to_gray(right)
+    L, R = luma_codes(left), luma_codes(right)
     gray = L
     a, b = np.asarray(left), np.asarray(right)
     integer = a.dtype == np.uint8 and b.dtype == np.uint8
@@ -309,7 +259,7 @@ def _noise_var(image, luma_sigma, nch):
         v = max(luma_sigma, 0.5) ** 2
         return v, v
     a = np.asarray(image)
-    s2 = [max(noise_sigma(np.ascontiguousarray(a[..., c], dtype=np.float32)), 0.5) ** 2 for c in range(3)]
+    s2 = [max(noise_sigma_smooth_blocks(np.ascontiguousarray(a[..., c], dtype=np.float32)), 0.5) ** 2 for c in range(3)]
     return float(np.sqrt(sum(v * v for v in s2))), float(sum(s2))
 
 
@@ -716,7 +666,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
     if texture_snr < 0 or uniqueness < 0:
         raise ValueError("texture_snr, uniqueness: expected values >= 0")
-    sigma = noise_sigma(gray)
+    sigma = noise_sigma_smooth_blocks(gray)
     noise_var, tex_var = _noise_var(left, sigma, nch)
     # texture threshold: window variance >= snr² times the noise variance of
     # what is matched (σ² of the luma, or Σσ² of R, G, B); flat areas that pass on

@@ -489,7 +489,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         Parabola refinement of the best step.
     noise_sigma : float, optional
         Noise of the key image in code values; estimated when not given
-        (:func:`stereo.block_matching.noise_sigma`, at least the 8-bit
+        (:func:`lumigraph.stereo.luma.noise_sigma_smooth_blocks`, at least the 8-bit
         quantisation noise ``1/√12``).
 
     Returns
@@ -504,8 +504,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     """
     import cv2
 
-    from lumigraph.stereo.block_matching import noise_sigma as estimate_noise
-    from lumigraph.stereo.block_matching import to_gray
+    from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
 
     t0 = time.perf_counter()
     zm = _check_model(model_depth, rig)
@@ -528,11 +527,11 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
 
     h, w = zm.shape
     size_o = rig.right.image_size
-    gk = to_gray(key)
-    go = to_gray(offset)
+    gk = luma_codes(key)
+    go = luma_codes(offset)
     quant = 1 / np.sqrt(12) * (257.0 if key.dtype == np.uint16 else 1.0)
     if noise_sigma is None:
-        sigma = max(estimate_noise(gk), quant if key.dtype.kind in "ui" else 0.0)
+        sigma = max(noise_sigma_smooth_blocks(gk), quant if key.dtype.kind in "ui" else 0.0)
     else:
         sigma = float(noise_sigma)
     warnings: list[str] = []

@@ -42,13 +42,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.stereo.luma import luma_normalised, noise_sigma_immerkaer
 from lumigraph.stereo.pyramid import (
     build_pyramid,
     choose_levels,
     estimate_max_motion,
     forward_backward,
-    noise_sigma,
-    to_gray,
     upsample_flow,
     warp,
 )
@@ -389,7 +388,7 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
         raise ValueError(f"finest_level: expected >= 0, got {finest_level}")
     if median_radius < 0:
         raise ValueError(f"median_radius: expected >= 0, got {median_radius}")
-    g0, g1 = to_gray(a), to_gray(b)
+    g0, g1 = luma_normalised(a), luma_normalised(b)
     if a.dtype.kind == "f":  # float input is taken as already in [0, 1]
         g0, g1 = g0.astype(np.float32), g1.astype(np.float32)
     reach = REACH_PX
@@ -420,7 +419,7 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
     # Texture confidence: lambda_min of J against that of pure noise. With
     # central differences a noise of sigma gives E[Ix^2] = sigma^2 / 2 per
     # image, and the averaged gradient halves that again: sigma^2 / 4.
-    sigma = max(noise_sigma(g0), 1.0 / 1024)
+    sigma = max(noise_sigma_immerkaer(g0), 1.0 / 1024)
     lam_noise = sigma ** 2 / 4
     tex = (lam / (lam + 25 * lam_noise)).astype(np.float32)
     occluded = np.zeros(g0.shape, bool)

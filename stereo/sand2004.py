@@ -51,12 +51,11 @@ import time
 
 import numpy as np
 
+from lumigraph.stereo.luma import luma_normalised, noise_sigma_immerkaer
 from lumigraph.stereo.pyramid import (
     build_pyramid,
     choose_levels,
     estimate_max_motion,
-    noise_sigma,
-    to_gray,
     upsample_flow,
 )
 from lumigraph.stereo.pyramid_flow import FlowResult
@@ -108,7 +107,7 @@ def invariant_pyramid_flow(primary: np.ndarray, secondary: np.ndarray, *,
     """
     from lumigraph.stereo.pyramid_flow import pyramid_flow
 
-    n = [np.clip(0.5 + normalise_contrast(to_gray(x)[..., None])[..., 0] / 8, 0, 1)
+    n = [np.clip(0.5 + normalise_contrast(luma_normalised(x)[..., None])[..., 0] / 8, 0, 1)
          .astype(np.float32) for x in (primary, secondary)]
     return pyramid_flow(n[0], n[1], levels=levels, max_motion_px=max_motion_px, median_radius=10,
                         consistency=False)
@@ -167,7 +166,7 @@ def _features(gray: np.ndarray, *, window: int = 5) -> np.ndarray:
     box = (window, window)
     jxx, jxy, jyy = (cv2.boxFilter(a, -1, box) for a in (gx * gx, gx * gy, gy * gy))
     lam = 0.5 * (jxx + jyy - np.sqrt((jxx - jyy) ** 2 + 4 * jxy * jxy))
-    sigma = max(noise_sigma(gray), 1.0 / 1024)
+    sigma = max(noise_sigma_immerkaer(gray), 1.0 / 1024)
     return lam > 25 * sigma * sigma / 2
 
 
@@ -317,7 +316,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
     if init not in INITS:
         raise ValueError(f"init: expected one of {INITS}, got {init!r}")
     fa, fb = _as_float(a), _as_float(b)
-    g0 = to_gray(fa)
+    g0 = luma_normalised(fa)
     start_result = None
     if init == "pyramid" and initial_flow is None:
         start_result = invariant_pyramid_flow(fa, fb, levels=levels, max_motion_px=max_motion_px)
@@ -327,7 +326,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         levels = 1
     if levels == "auto":
         if max_motion_px is None:
-            est, _tiles = estimate_max_motion(g0, to_gray(fb))
+            est, _tiles = estimate_max_motion(g0, luma_normalised(fb))
             source = "estimated"
         else:
             est, source = float(max_motion_px), "given"
@@ -353,7 +352,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         n0 = normalise_contrast(p0[lvl].reshape(p0[lvl].shape[:2] + (-1,)))
         n1 = normalise_contrast(p1[lvl].reshape(p1[lvl].shape[:2] + (-1,)))
         mx1, mn1 = _minmax(n1)
-        feat = _features(to_gray(p0[lvl]))
+        feat = _features(luma_normalised(p0[lvl]))
         top = lvl == n_levels - 1
         r = radius
         if top and est is not None:
