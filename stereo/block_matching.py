@@ -568,6 +568,172 @@ def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqu
     return disp, np.where(valid, bestc / unit, np.nan).astype(np.float32), counts
 
 
+# ------------------------------------------------------- the steps of match
+def _check_options(left, right, *, channels, prefilter, prefilter_cap):
+    """Refuse an unknown ``channels`` or ``prefilter``, a cap <= 0 and two
+    images of different shapes (before any conversion)."""
+    if channels not in CHANNELS:
+        raise ValueError(f"channels: expected one of {CHANNELS}, got {channels!r}")
+    if prefilter not in PREFILTERS:
+        raise ValueError(f"prefilter: expected one of {PREFILTERS}, got {prefilter!r}")
+    if not prefilter_cap > 0:
+        raise ValueError(f"prefilter_cap: expected a value > 0, got {prefilter_cap!r}")
+    if np.shape(left) != np.shape(right):
+        raise ValueError(f"right: expected the left image's shape {np.shape(left)}, got {np.shape(right)}")
+
+
+def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
+    """The search checked against the matched ``(C, H, W)`` planes' size:
+    ``(max_disp, windows)``, the candidate window sides (one, or
+    ``AUTO_WINDOWS`` for ``"auto"``)."""
+    _, h, w = shape
+    if not isinstance(max_disp, int | np.integer) or not 1 <= max_disp < w:
+        raise ValueError(f"max_disp: expected an integer in [1, {w - 1}] (image width {w}), got {max_disp!r}")
+    if window == "auto":
+        windows = AUTO_WINDOWS
+    elif isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63:
+        windows = (int(window),)
+    else:
+        raise ValueError(f"window: expected 'auto' or an odd integer in [3, 63], got {window!r}")
+    if min(h, w) < max(windows):
+        raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
+    if engine not in ("auto", "numpy"):
+        raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
+    if texture_snr < 0 or uniqueness < 0:
+        raise ValueError("texture_snr, uniqueness: expected values >= 0")
+    return int(max_disp), windows
+
+
+@dataclass(frozen=True)
+class _Noise:
+    """The noise the decision weighs against: ``sigma`` of the left luma
+    (code values), ``scale`` and ``variance`` of what is matched (see
+    :func:`_noise_var`) and the texture test's ``threshold`` (a window
+    variance, code values²)."""
+
+    sigma: float
+    scale: float
+    variance: float
+    threshold: float
+
+
+def _noise(left, gray, nch, *, texture_snr):
+    """Estimate the left image's noise and set the texture threshold from it."""
+    sigma = noise_sigma_smooth_blocks(gray)
+    scale, variance = _noise_var(left, sigma, nch)
+    # texture threshold: window variance >= snr² times the noise variance of
+    # what is matched (σ² of the luma, or Σσ² of R, G, B); flat areas that pass on
+    # noise alone are caught by the uniqueness and left-right tests (their
+    # cost curve is flat and random).
+    return _Noise(sigma, scale, variance, texture_snr ** 2 * variance)
+
+
+def _texture_planes(left, gray, nch):
+    """The float planes whose window variance the texture test weighs: the
+    luma, or R, G and B when colour is matched."""
+    if nch == 1:
+        return [gray]
+    return [np.ascontiguousarray(np.asarray(left)[..., c], dtype=np.float32) for c in range(3)]
+
+
+def _span(L, R):
+    """Range of the matched values over both images (at least 1): the float
+    costs' scale."""
+    return max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
+
+
+def _padded(L, R, D):
+    """Both images padded so that every disparity's view is a plain slice of
+    width ``W + D``: left with ``D`` reflected columns on its right, right
+    with ``D - 1`` replicated columns on its left and ``D`` on its right."""
+    import cv2
+
+    Lp = np.stack([cv2.copyMakeBorder(c, 0, 0, 0, D, cv2.BORDER_REFLECT) for c in L])
+    Rp = np.stack([cv2.copyMakeBorder(c, 0, 0, D - 1, D, cv2.BORDER_REPLICATE) for c in R])
+    return Lp, Rp
+
+
+def _scan_decide_c(kernel, Lp, Rp, *, D, costs, var, pick, windows, n_threads, decide):
+    """Scan and decide every row through the compiled kernel, one band of
+    rows per thread: ``(disparity, cost, rejection counts)``."""
+    _, h, wp = Lp.shape
+    w = wp - D
+    # one band per thread: each band start costs a window of rows
+    n_bands = max(1, min(n_threads, h // max(costs.wins)))
+    edges = np.linspace(0, h, n_bands + 1).astype(int)
+    out = (np.empty((h, w), np.float32), np.empty((h, w), np.float32))
+    Rr = np.ascontiguousarray(Rp[:, :, ::-1])
+    vpick = _picked_variance(var, pick) if decide["distinct"] > 0 else None
+
+    def one(i):
+        return _match_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs,
+                        pick=pick, vpick=vpick, windows=windows, **decide)
+
+    if n_threads == 1 or n_bands == 1:
+        parts = [one(i) for i in range(n_bands)]
+    else:  # ctypes releases the GIL
+        parts = list(_pool().map(one, range(n_bands)))
+    c = sum(parts)
+    counts = {"no_texture": int(c[0]), "not_unique": int(c[1]), "left_right": int(c[2])}
+    return out[0], out[1], counts
+
+
+def _scan_numpy_bands(Lp, Rp, *, D, costs, n_threads):
+    """Scan every row on numpy/OpenCV in bands of about ``BAND_ROWS`` rows:
+    the five encoded ``(H, W)`` int32 arrays :func:`_decide` reads."""
+    h = Lp.shape[1]
+    # bands of about BAND_ROWS rows keep each disparity's working set in the
+    # CPU cache; threads take bands in turn, each with its own scratch volume
+    n_bands = max(1, round(h / BAND_ROWS))
+    edges = np.linspace(0, h, n_bands + 1).astype(int)
+
+    def one(i):
+        with _scratch() as scratch:
+            return _scan_numpy(Lp, Rp, edges[i], edges[i + 1], D=D, costs=costs, scratch=scratch)
+
+    if n_threads == 1 or n_bands == 1:
+        parts = [one(i) for i in range(n_bands)]
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        import cv2
+
+        old = cv2.getNumThreads()
+        try:
+            cv2.setNumThreads(1)  # our bands are the parallelism
+            with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
+                parts = list(ex.map(one, range(n_bands)))
+        finally:
+            cv2.setNumThreads(old)
+    return [np.concatenate([p[j] for p in parts]) for j in range(5)]
+
+
+def _info(disp, pick, counts, windows, *, noise, nch, engine, timings, max_disp, window,
+          texture_snr, uniqueness, distinct, lr_tolerance, subpixel, prefilter, prefilter_cap):
+    """The result's record: parameters, the noise estimate, the share of
+    pixels each test rejected and, for ``window="auto"``, each window's share."""
+    h, w = pick.shape
+    n = h * w
+    info = {"method": "ssd-block-matching", "max_disp": max_disp, "window": window,
+            "texture_snr": texture_snr, "uniqueness": uniqueness, "distinct": distinct, "lr_tolerance": lr_tolerance,
+            "subpixel": subpixel, "channels": "rgb" if nch == 3 else "luma", "prefilter": prefilter, "prefilter_cap": prefilter_cap,
+            "noise_sigma_estimate": noise.sigma, "texture_threshold_var": noise.threshold,
+            "rejected_fraction": {k: v / n for k, v in counts.items()},
+            "valid_fraction": float(np.isfinite(disp).mean()),
+            "engine": engine, "timings_s": timings}
+    if window == "auto":
+        picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
+        info["auto"] = {"candidates": list(windows),
+                        "share_of_pixels": {str(k): float(picks[i] / n) for i, k in enumerate(windows)},
+                        "no_window_textured": float(picks[-1] / n),
+                        "rule": "smallest window whose intensity std >= texture_snr * noise sigma"
+                                + (" (summed over R, G, B)" if nch == 3 else "")}
+    return info
+
+
+# ------------------------------------------------------------------- match
+
+
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
           texture_snr: float = 1.0, uniqueness: float = 0.02, lr_tolerance: int = 3,
           distinct: float = 0.0, subpixel: bool = True, channels: str = "luma",
@@ -637,119 +803,44 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     ValueError
         Shapes differ, images too small, bad window or ``max_disp``.
     """
-    import cv2
-
     t0 = time.perf_counter()
-    if channels not in CHANNELS:
-        raise ValueError(f"channels: expected one of {CHANNELS}, got {channels!r}")
-    if prefilter not in PREFILTERS:
-        raise ValueError(f"prefilter: expected one of {PREFILTERS}, got {prefilter!r}")
-    if not prefilter_cap > 0:
-        raise ValueError(f"prefilter_cap: expected a value > 0, got {prefilter_cap!r}")
-    if np.shape(left) != np.shape(right):
-        raise ValueError(f"right: expected the left image's shape {np.shape(left)}, got {np.shape(right)}")
+    # validate, and the images as compared (planes) and as tested for texture (luma)
+    _check_options(left, right, channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
     L, R, gray, code = _match_images(left, right, channels=channels, prefilter=prefilter,
                                      cap=prefilter_cap)
-    nch, h, w = L.shape
-    if not isinstance(max_disp, int | np.integer) or not 1 <= max_disp < w:
-        raise ValueError(f"max_disp: expected an integer in [1, {w - 1}] (image width {w}), got {max_disp!r}")
-    max_disp = int(max_disp)
-    if window == "auto":
-        windows, choose = AUTO_WINDOWS, True
-    elif isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63:
-        windows, choose = (int(window),), False
-    else:
-        raise ValueError(f"window: expected 'auto' or an odd integer in [3, 63], got {window!r}")
-    if min(h, w) < max(windows):
-        raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
-    if engine not in ("auto", "numpy"):
-        raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
-    if texture_snr < 0 or uniqueness < 0:
-        raise ValueError("texture_snr, uniqueness: expected values >= 0")
-    sigma = noise_sigma_smooth_blocks(gray)
-    noise_var, tex_var = _noise_var(left, sigma, nch)
-    # texture threshold: window variance >= snr² times the noise variance of
-    # what is matched (σ² of the luma, or Σσ² of R, G, B); flat areas that pass on
-    # noise alone are caught by the uniqueness and left-right tests (their
-    # cost curve is flat and random).
-    thr = texture_snr ** 2 * tex_var
-    thresholds = tuple(thr for _ in windows)
+    nch = L.shape[0]
+    max_disp, windows = _check_search(L.shape, max_disp=max_disp, window=window, engine=engine,
+                                      texture_snr=texture_snr, uniqueness=uniqueness)
+    # noise, texture test and window choice per pixel
+    noise = _noise(left, gray, nch, texture_snr=texture_snr)
+    var, pick = _texture(_texture_planes(left, gray, nch), windows,
+                         tuple(noise.threshold for _ in windows))
+    # integer cost encoding and padded images for the scan
     D = max_disp + 1
-    span = max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
-    timings = {}
-    planes = ([gray] if nch == 1 else
-              [np.ascontiguousarray(np.asarray(left)[..., c], dtype=np.float32) for c in range(3)])
-    var, pick = _texture(planes, windows, thresholds)
-    costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=span, nch=nch, code=code)
-    # padded so that every disparity's view is a plain slice of width W + D
-    Lp = np.stack([cv2.copyMakeBorder(c, 0, 0, 0, D, cv2.BORDER_REFLECT) for c in L])
-    Rp = np.stack([cv2.copyMakeBorder(c, 0, 0, D - 1, D, cv2.BORDER_REPLICATE) for c in R])
+    costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=_span(L, R), nch=nch,
+                   code=code)
+    Lp, Rp = _padded(L, R, D)
     n_threads = threads or min(4, os.cpu_count() or 1)
     kernel = _kernel() if costs.integer and engine != "numpy" else None
     t1 = time.perf_counter()
-    timings["prepare"] = t1 - t0
+    # scan every disparity, then decide: sub-pixel, uniqueness, left-right, texture
     decide = dict(subpixel=subpixel, lr_tolerance=lr_tolerance, uniqueness=uniqueness,
-                  distinct=distinct, noise_var=noise_var, tex_var=tex_var)
-    if kernel is not None:
-        # one band per thread: each band start costs a window of rows
-        n_bands = max(1, min(n_threads, h // max(costs.wins)))
-        out = (np.empty((h, w), np.float32), np.empty((h, w), np.float32))
-        Rr = np.ascontiguousarray(Rp[:, :, ::-1])
-        vpick = _picked_variance(var, pick) if distinct > 0 else None
-
-        def one(i):
-            return _match_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs,
-                            pick=pick, vpick=vpick, windows=windows, **decide)
+                  distinct=distinct, noise_var=noise.scale, tex_var=noise.variance)
+    if kernel is not None:  # the compiled kernel fuses the decision into the scan
+        disp, cost, counts = _scan_decide_c(kernel, Lp, Rp, D=D, costs=costs, var=var, pick=pick,
+                                            windows=windows, n_threads=n_threads, decide=decide)
+        t2 = time.perf_counter()
     else:
-        # bands of about BAND_ROWS rows keep each disparity's working set in the
-        # CPU cache; threads take bands in turn, each with its own scratch volume
-        n_bands = max(1, round(h / BAND_ROWS))
-
-        def one(i):
-            with _scratch() as scratch:
-                return _scan_numpy(Lp, Rp, edges[i], edges[i + 1], D=D, costs=costs,
-                                   scratch=scratch)
-
-    edges = np.linspace(0, h, n_bands + 1).astype(int)
-    if n_threads == 1 or n_bands == 1:
-        parts = [one(i) for i in range(n_bands)]
-    elif kernel is not None:  # ctypes releases the GIL
-        parts = list(_pool().map(one, range(n_bands)))
-    else:
-        from concurrent.futures import ThreadPoolExecutor
-
-        old = cv2.getNumThreads()
-        try:
-            cv2.setNumThreads(1)  # our bands are the parallelism
-            with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
-                parts = list(ex.map(one, range(n_bands)))
-        finally:
-            cv2.setNumThreads(old)
-    t2 = time.perf_counter()
-    timings["scan"] = t2 - t1
-    if kernel is None:
-        scan = [np.concatenate([p[j] for p in parts]) for j in range(5)]
+        scan = _scan_numpy_bands(Lp, Rp, D=D, costs=costs, n_threads=n_threads)
+        t2 = time.perf_counter()
         disp, cost, counts = _decide(*scan, var=var, pick=pick, windows=windows, costs=costs,
                                      D=D, **decide)
-    else:
-        disp, cost = out
-        c = sum(parts)
-        counts = {"no_texture": int(c[0]), "not_unique": int(c[1]), "left_right": int(c[2])}
+    # the result and its record
     win = np.asarray((*windows, 0), np.uint8)[pick]
-    timings["decide"] = time.perf_counter() - t2
-    picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
-    n = h * w
-    info = {"method": "ssd-block-matching", "max_disp": max_disp, "window": window,
-            "texture_snr": texture_snr, "uniqueness": uniqueness, "distinct": distinct, "lr_tolerance": lr_tolerance,
-            "subpixel": subpixel, "channels": "rgb" if nch == 3 else "luma", "prefilter": prefilter, "prefilter_cap": prefilter_cap,
-            "noise_sigma_estimate": sigma, "texture_threshold_var": thr,
-            "rejected_fraction": {k: v / n for k, v in counts.items()},
-            "valid_fraction": float(np.isfinite(disp).mean()),
-            "engine": "numpy" if kernel is None else "c", "timings_s": timings}
-    if choose:
-        info["auto"] = {"candidates": list(windows),
-                        "share_of_pixels": {str(k): float(picks[i] / n) for i, k in enumerate(windows)},
-                        "no_window_textured": float(picks[-1] / n),
-                        "rule": "smallest window whose intensity std >= texture_snr * noise sigma"
-                                + (" (summed over R, G, B)" if nch == 3 else "")}
+    timings = {"prepare": t1 - t0, "scan": t2 - t1, "decide": time.perf_counter() - t2}
+    info = _info(disp, pick, counts, windows, noise=noise, nch=nch,
+                 engine="numpy" if kernel is None else "c", timings=timings, max_disp=max_disp,
+                 window=window, texture_snr=texture_snr, uniqueness=uniqueness, distinct=distinct,
+                 lr_tolerance=lr_tolerance, subpixel=subpixel, prefilter=prefilter,
+                 prefilter_cap=prefilter_cap)
     return DisparityMap(disp, cost, win, info)
