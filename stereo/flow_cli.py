@@ -120,7 +120,10 @@ def _flow(args) -> int:
                                 f"{i0.shape[1]}x{i0.shape[0]}; flow needs images of one size")
         if im.ndim != i0.ndim or (im.ndim == 3 and im.shape[2] != i0.shape[2]):
             raise InputError(p, "has a different number of channels than " + args.images[0])
-    fn, _ = FLOW_METHODS[args.method]
+    method = FLOW_METHODS.resolve(args.method)
+    knobs = {"levels": levels, "window": args.window, "iterations": args.iterations,
+             "finest_level": args.finest_level, "median_radius": args.median_radius}
+    options = {k: v for k, v in knobs.items() if k in method.options}
     params = {"method": args.method, "levels": args.levels, "window": args.window,
               "iterations": args.iterations, "finest_level": args.finest_level,
               "median_radius": args.median_radius}
@@ -130,9 +133,7 @@ def _flow(args) -> int:
         a, b, out = args.images[i], args.images[i + 1], outs[i]
         say(args, f"flow ({args.method}): {a} -> {b}")
         t0 = time.perf_counter()
-        res = fn(frames[i], frames[i + 1], levels=levels, window=args.window,
-                 iterations=args.iterations, finest_level=args.finest_level,
-                 median_radius=args.median_radius)
+        res = method(frames[i], frames[i + 1], **options)
         dt = time.perf_counter() - t0
         info = res.info
         quality = {**info.get("quality", {}), "occluded_fraction": float(res.occluded.mean())}
@@ -171,7 +172,7 @@ def _flow(args) -> int:
 def main(argv=None, prog="lumigraph flow") -> int:
     from lumigraph.stereo.flow_methods import FLOW_METHODS
 
-    methods = "\n".join(f"  {k:<15} {d}" for k, (_, d) in FLOW_METHODS.items())
+    methods = FLOW_METHODS.help_text()
     p = make_parser(prog, "Dense correspondence between two images: optical flow (coarse-to-fine "
                     "pyramid) or Sand-Teller video matching.\n\nmethods:\n" + methods,
                     epilog=EPILOG)
@@ -180,7 +181,7 @@ def main(argv=None, prog="lumigraph flow") -> int:
                         "consecutive frames")
     p.add_argument("--out", required=True,
                    help="output flow file (.flo) for two images; a folder for a sequence")
-    p.add_argument("--method", choices=sorted(FLOW_METHODS), default="pyramid",
+    p.add_argument("--method", choices=FLOW_METHODS.names, default="pyramid",
                    help="flow method (default: pyramid)")
     p.add_argument("--levels", default="auto",
                    help="pyramid levels, or 'auto' from the estimated largest motion (default)")

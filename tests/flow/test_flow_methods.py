@@ -144,3 +144,17 @@ def test_colour_coding_directions():
     c = flow_to_colour(f).astype(int)
     assert len({tuple(x) for x in c[0]}) == 4
     assert c[0, 0, 0] > c[0, 0, 2] and c[0, 1, 2] > c[0, 1, 0]  # Middlebury: right red, left cyan-blue
+
+
+def test_flow_registry_options_are_keywords_of_the_callables():
+    import inspect
+
+    from lumigraph.stereo.flow_methods import FLOW_METHODS
+
+    assert FLOW_METHODS.names == ("pyramid", "pyramid-dense", "video-matching")
+    for m in FLOW_METHODS.values():
+        params = inspect.signature(m.load()).parameters
+        assert set(m.options) | set(m.bound) <= set(params), m.name
+    a = np.random.default_rng(0).random((24, 32)).astype(np.float32)
+    assert np.array_equal(FLOW_METHODS["pyramid-dense"](a, a, levels=1).flow,
+                          pyramid_flow(a, a, levels=1, method="dense").flow)
