@@ -359,13 +359,13 @@ def _remap(image, px):
     return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def warp_offset(offset_image: np.ndarray, model_depth: np.ndarray, rig, *, delta: float = 0.0) -> np.ndarray:
+def warp_offset(offset: np.ndarray, model_depth: np.ndarray, rig, *, delta: float = 0.0) -> np.ndarray:
     """The offset image projected onto the model (shifted by ``delta`` along
     the key rays) and seen from the key camera (Fig. 5.12c for ``delta = 0``).
 
     Parameters
     ----------
-    offset_image : ndarray, (H', W') or (H', W', C)
+    offset : ndarray, (H', W') or (H', W', C)
         The offset view (``rig.right``), any numeric dtype.
     model_depth : ndarray, (H, W)
         Key-camera ``z`` of the rough model per key pixel (``rig.left``'s
@@ -383,9 +383,9 @@ def warp_offset(offset_image: np.ndarray, model_depth: np.ndarray, rig, *, delta
         its point falls outside the offset frame or behind the camera (no
         visibility test: see :func:`model_stereo` for that).
     """
-    img = np.asarray(offset_image)
+    img = np.asarray(offset)
     zm = _check_model(model_depth, rig)
-    _check_image("offset_image", img, rig.right.image_size)
+    _check_image("offset", img, rig.right.image_size)
     rays = key_rays(rig.left, zm.shape)
     px, zo = _project_offset(rig, rays @ rig.R.T, zm + delta)
     ok = np.isfinite(zm) & (zo > 0) & _inside(px, rig.right.image_size)

@@ -20,7 +20,8 @@ examples:
   lumigraph flow a.png b.png --median-radius 10 --out sharp.flo     # accuracy end
   lumigraph flow a.png b.png --finest-level 1 --iterations 1 --out quick.flo  # speed end
 
-Writes OUT (.flo: forward flow, I0(x, y) <-> I1(x + dx, y + dy), pixels;
+Writes OUT (.flo: forward flow, I0(x, y) <-> I1(x + dx, y + dy), pixels,
+I0 the first image (the reference), I1 the second (the moving one);
 unknown = 1e10), OUT with .flo replaced by .prob.exr (one float channel Y in
 [0, 1]: for pyramid methods the confidence = texture x forward-backward
 consistency, for video-matching the Sand-Teller matching probability), and
@@ -42,9 +43,9 @@ def _levels(text: str):
     try:
         n = int(text)
     except ValueError:
-        raise InputError("--levels", f"expected 'auto' or an integer >= 1, got {text!r}") from None
+        raise InputError("levels", f"expected 'auto' or an integer >= 1, got {text!r}") from None
     if not 1 <= n <= 12:
-        raise InputError("--levels", f"expected 1..12 levels, got {n}")
+        raise InputError("levels", f"expected 1..12 levels, got {n}")
     return n
 
 
@@ -61,15 +62,15 @@ def _load(path: str):
 def _check_knobs(args):
     levels = _levels(args.levels)
     if args.window < 3 or args.window % 2 == 0:
-        raise InputError("--window", f"expected an odd size >= 3, got {args.window}")
+        raise InputError("window", f"expected an odd size >= 3, got {args.window}")
     if args.median_radius < 0 or args.median_radius > 64:
-        raise InputError("--median-radius", f"expected 0..64 pixels, got {args.median_radius}")
+        raise InputError("median_radius", f"expected 0..64 pixels, got {args.median_radius}")
     if args.finest_level < 0:
-        raise InputError("--finest-level", f"expected a level >= 0, got {args.finest_level}")
+        raise InputError("finest_level", f"expected a level >= 0, got {args.finest_level}")
     if levels != "auto" and args.finest_level >= levels:
-        raise InputError("--finest-level", f"must be below --levels ({levels}), got {args.finest_level}")
+        raise InputError("finest_level", f"must be below --levels ({levels}), got {args.finest_level}")
     if args.method == "video-matching" and (args.median_radius or args.finest_level):
-        raise InputError("--method", "video-matching takes no --median-radius or --finest-level "
+        raise InputError("method", "video-matching takes no --median-radius or --finest-level "
                                      "(pyramid methods only)")
     return levels
 
@@ -87,11 +88,11 @@ def _outputs(args):
         viz = check_output_path(args.viz, suffixes=(".png",)) if args.viz is not None else None
         return [out], [viz]
     if Path(args.out).suffix.lower() == ".flo":
-        raise InputError("--out", f"{len(args.images)} frames give {n} flows: name a folder, "
+        raise InputError("out", f"{len(args.images)} frames give {n} flows: name a folder, "
                                   f"not one file ({args.out})")
     out = check_output_dir(args.out)
     if args.viz is not None and Path(args.viz).suffix:
-        raise InputError("--viz", f"for a sequence name a folder for the pictures, not {args.viz}")
+        raise InputError("viz", f"for a sequence name a folder for the pictures, not {args.viz}")
     viz = check_output_dir(args.viz) if args.viz is not None else None
     return ([out / f"flow_{i:03d}.flo" for i in range(n)],
             [viz / f"flow_{i:03d}.png" if viz is not None else None for i in range(n)])
@@ -177,7 +178,7 @@ def main(argv=None, prog="lumigraph flow") -> int:
                     "pyramid) or Sand-Teller video matching.\n\nmethods:\n" + methods,
                     epilog=EPILOG)
     p.add_argument("images", nargs="+", metavar="IMAGE",
-                   help="two images (primary, secondary), or a sequence: flows between "
+                   help="two images (reference, moving), or a sequence: flows between "
                         "consecutive frames")
     p.add_argument("--out", required=True,
                    help="output flow file (.flo) for two images; a folder for a sequence")

@@ -99,7 +99,7 @@ def warp(image: np.ndarray, flow: np.ndarray, *, border: str = "replicate",
          cubic: bool = True) -> np.ndarray:
     """Sample ``image`` at ``x + flow(x)`` (bicubic, or bilinear with
     ``cubic=False``): with forward flow 0 -> 1,
-    ``warp(I1, flow)`` is frame 1 pulled back onto frame 0."""
+    ``warp(moving, flow)`` is the moving image pulled back onto the reference."""
     import cv2
 
     mode = {"replicate": cv2.BORDER_REPLICATE, "constant": cv2.BORDER_CONSTANT}[border]
@@ -157,8 +157,8 @@ class LevelChoice:
                 "reach_px": self.reach_px, "candidates": [dict(c) for c in self.candidates]}
 
 
-def estimate_max_motion(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, list[dict]]:
-    """Largest motion between two gray images, px, from phase correlation of
+def estimate_max_motion(reference: np.ndarray, moving: np.ndarray) -> tuple[float, list[dict]]:
+    """Largest motion between two grey ``(H, W)`` images, reference to moving, px, from phase correlation of
     the whole frame and of 3x3 overlapping half-size tiles (each reaches a
     quarter of the frame). Peaks with a weak response are ignored.
 
@@ -173,12 +173,12 @@ def estimate_max_motion(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, li
     """
     import cv2
 
-    h, w = gray0.shape
+    h, w = reference.shape
     f = 1
     while max(h, w) / f > 160:  # half resolution and below keep this cheap
         f *= 2
-    a = cv2.resize(gray0, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else gray0
-    b = cv2.resize(gray1, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else gray1
+    a = cv2.resize(reference, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else reference
+    b = cv2.resize(moving, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else moving
     hh, ww = a.shape
     tiles = [(0, 0, hh, ww)]
     th, tw = hh // 2, ww // 2

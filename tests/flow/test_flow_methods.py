@@ -63,11 +63,11 @@ def test_bad_options_name_the_argument(kw, msg):
 
 
 def test_shape_mismatch_and_empty():
-    with pytest.raises(ValueError, match="image1"):
+    with pytest.raises(ValueError, match="moving"):
         pyramid_flow(np.zeros((20, 20)), np.zeros((20, 21)))
-    with pytest.raises(ValueError, match="image0"):
+    with pytest.raises(ValueError, match="reference"):
         pyramid_flow(np.zeros((0, 0)), np.zeros((0, 0)))
-    with pytest.raises(ValueError, match="secondary"):
+    with pytest.raises(ValueError, match="moving"):
         video_matching(np.zeros((20, 20)), np.zeros((21, 20)))
 
 
@@ -158,3 +158,10 @@ def test_flow_registry_options_are_keywords_of_the_callables():
     a = np.random.default_rng(0).random((24, 32)).astype(np.float32)
     assert np.array_equal(FLOW_METHODS["pyramid-dense"](a, a, levels=1).flow,
                           pyramid_flow(a, a, levels=1, method="dense").flow)
+
+
+def test_role_names_reference_and_moving():
+    a = np.random.default_rng(1).random((24, 32)).astype(np.float32)
+    b = np.roll(a, 1, axis=1)
+    kw = pyramid_flow(reference=a, moving=b, levels=2, consistency=False).flow
+    assert np.array_equal(kw, pyramid_flow(a, b, levels=2, consistency=False).flow)
