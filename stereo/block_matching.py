@@ -65,51 +65,7 @@ from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
 
 AUTO_WINDOWS = (5, 9, 15)
 BAND_ROWS = 64
-DEFAULTS_CHOICE = """\
-match() defaults (texture_snr 1.0, uniqueness 0.02, distinct 0.0, lr_tolerance 3) were
-chosen on rendered capture/ pairs only, scored by the mean bad-2.0 of the bench's
-stereo-pair and stereo-pair (textureless, occluders) cases (320x240) at windows 5/9/15,
-subject to the hard cases of the issue: a textureless card >= 90 % unknown (and < 10 %
-wrong) at windows 5, 9 and auto, the textured rest >= 75 % matched, and occluded pixels
-> 60 % refused at windows 5, 9 and 15 on the plain and the occluder pairs. The Middlebury
-pairs were not used for the choice.
-
-First grid: texture_snr {0.25, 0.5, 1}, uniqueness {0, 0.02, 0.05}, distinct {0, 0.2,
-0.5}, lr_tolerance {1, 2}. Best feasible: texture_snr 1, uniqueness 0, distinct 0,
-lr_tolerance 2 (0.1558); uniqueness 0.02 scored 0.1572 and was the default.
-
-Second grid (2026-11-22), lr_tolerance extended to {1, 2, 3, 4, 6} because the first
-optimum sat on the grid's edge (the extension was prompted by the held-out cones pair
-missing its target at window 5; the choice itself again used the rendered pairs only).
-Best feasible: texture_snr 1, uniqueness 0.02, distinct 0, lr_tolerance 3 (0.1543;
-occluded pixels refused: at least 61.0 %). lr_tolerance 4 scores 0.1530 and 6 scores
-0.1517 but refuse only 58.0 % / 53.2 % of the occluded pixels, so they are infeasible.
-Held out, for the record (bad-2.0 at windows 5/9/15, lr_tolerance 2 -> 3): tsukuba
-0.178/0.128/0.119 -> 0.174/0.126/0.118, venus 0.218/0.120/0.090 -> 0.214/0.118/0.089,
-teddy 0.326/0.287/0.286 -> 0.322/0.285/0.284, cones 0.315/0.232/0.230 -> 0.310/0.229/0.227.
-
-channels (2026-11-22, measured with lr_tolerance 2): "color" (SSD summed over R, G, B)
-against "luma", same defaults otherwise. Mean bad-2.0 of the rendered pairs at 5/9/15 drops (pair 0.115/0.085/0.108 ->
-0.101/0.083/0.106, pair-hard 0.211/0.198/0.225 -> 0.189/0.192/0.224), but a match takes
-up to 1.8x as long, which put pair-hard at window 9 at 3.3x StereoBM's wall time, beyond
-the issue's 3x. Default stays "luma". Held out, for the record (luma -> color at 5/9/15):
-tsukuba 0.178/0.128/0.119 -> 0.176/0.133/0.125, venus 0.218/0.120/0.090 ->
-0.297/0.182/0.125, teddy 0.326/0.287/0.286 -> 0.361/0.282/0.261, cones 0.315/0.232/0.230
--> 0.289/0.219/0.224: colour is no general gain on real pairs either (venus loses at
-every window even with channels whitened by their estimated noise covariance).
-
-prefilter (2026-11-22, measured with lr_tolerance 2): "local-mean" (each luma minus its 9x9 mean, clipped to +-cap
-code values, as StereoBM's normalised-response prefilter) against "none", same
-protocol, same defaults otherwise. Mean bad-2.0 of pair and pair-hard at windows
-5/9/15: none 0.1572; local-mean cap 15 / 31 / 63 / 127: 0.2066 / 0.2102 / 0.2126 /
-0.2126 (mean window 21 or 41 at cap 127: 0.2216 / 0.2825). The rendered views share
-one exposure and response, so there is no offset for the prefilter to remove, while
-it discards low-frequency signal and, where the mean window straddles a depth edge,
-makes the two views differ (mean abs error of estimated pixels at window 9: 0.38 ->
-0.53 px). Default stays "none". Held out, for the record only (bad-2.0 at 5/9/15,
-none -> local-mean cap 31): tsukuba 0.178/0.128/0.119 -> 0.186/0.137/0.125, venus
-0.218/0.120/0.090 -> 0.211/0.111/0.087, teddy 0.326/0.287/0.286 -> 0.269/0.244/0.257,
-cones 0.315/0.232/0.230 -> 0.250/0.223/0.233."""
+# How the defaults of match() were chosen: docs/decisions/stereo-block-matching-defaults.md
 _INT_MAX = np.iinfo(np.int32).max
 
 
@@ -763,8 +719,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     lr_tolerance : int
         Largest left–right disagreement in pixels (−1 disables the check).
         The defaults of these four were chosen on the rendered ``stereo-pair``
-        scenes only (see ``DEFAULTS_CHOICE``); the Middlebury pairs of the
-        bench are held out.
+        scenes only (``docs/decisions/stereo-block-matching-defaults.md``);
+        the Middlebury pairs of the bench are held out.
     subpixel : bool
         Parabola refinement of the integer minimum.
     channels : {"color", "luma"}
@@ -773,13 +729,14 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         per channel), which tells apart surfaces of equal luma but different
         hue. Grey inputs are luma either way. Luma is the default: colour
         lowered bad-2.0 on the rendered pairs a little but makes a match up
-        to 1.8x slower (``DEFAULTS_CHOICE``). The texture test always uses luma.
+        to 1.8x slower (``docs/decisions/stereo-block-matching-defaults.md``).
+        The texture test always uses luma.
     prefilter : {"none", "local-mean"}
         ``"local-mean"`` matches each image's difference from its 9×9 local
         mean, clipped to ``±prefilter_cap`` (the normalised-response prefilter
         of OpenCV's StereoBM): an offset between the views cancels, at the
         price of low-frequency signal. Off by default: it raised bad-2.0 on
-        the rendered pairs (``DEFAULTS_CHOICE``).
+        the rendered pairs (``docs/decisions/stereo-block-matching-defaults.md``).
     prefilter_cap : float
         Clipping of the local-mean response, in 8-bit code values (scaled to
         the input's range for other dtypes).
