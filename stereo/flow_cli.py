@@ -1,7 +1,7 @@
 """``lumigraph flow``: optical flow and Sand-Teller video matching between two
 images, written as a Middlebury ``.flo`` plus a confidence/probability EXR.
 
-Thin layer: parse, validate, load, call :mod:`stereo.flow_methods`, save.
+Thin layer: parse, validate, load, call :mod:`lumigraph.stereo.flow_methods`, save.
 """
 
 from __future__ import annotations
