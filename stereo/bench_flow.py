@@ -63,9 +63,9 @@ def _real(name: str, quick: bool):
 
 
 def _gray8(img):
-    from lumigraph.stereo.pyramid import to_gray
+    from lumigraph.stereo.luma import luma_normalised
 
-    return np.clip(np.rint(to_gray(img) * 255), 0, 255).astype(np.uint8)
+    return np.clip(np.rint(luma_normalised(img) * 255), 0, 255).astype(np.uint8)
 
 
 def _prep_gray(data):

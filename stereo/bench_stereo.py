@@ -476,9 +476,11 @@ def stage(*, quick: bool = False) -> Stage:
                          if c.name not in ("triangulation", "sfm", *MODEL_CASES))
     methods = [
         Method("ssd (ours)", _ours, "window", (*windows, "auto"), cases=stereo_names),
-        # informational: the local-mean prefilter, not the default (DEFAULTS_CHOICE)
+        # informational: the local-mean prefilter, not the default
+        # (docs/decisions/stereo-block-matching-defaults.md)
         Method("ssd local-mean (ours)", _ours_prefiltered, "window", windows, cases=stereo_names),
-        # informational: colour SSD, not the default (DEFAULTS_CHOICE)
+        # informational: colour SSD, not the default
+        # (docs/decisions/stereo-block-matching-defaults.md)
         Method("ssd color (ours)", _ours_colour, "window", windows, cases=stereo_names),
         Method("StereoBM", _bm, "window", windows, peer="opencv", cases=stereo_names,
                prepare=_bm_prepare),

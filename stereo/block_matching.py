@@ -61,53 +61,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
+
 AUTO_WINDOWS = (5, 9, 15)
 BAND_ROWS = 64
-DEFAULTS_CHOICE = """\
-match() defaults (texture_snr 1.0, uniqueness 0.02, distinct 0.0, lr_tolerance 3) were
-chosen on rendered capture/ pairs only, scored by the mean bad-2.0 of the bench's
-stereo-pair and stereo-pair (textureless, occluders) cases (320x240) at windows 5/9/15,
-subject to the hard cases of the issue: a textureless card >= 90 % unknown (and < 10 %
-wrong) at windows 5, 9 and auto, the textured rest >= 75 % matched, and occluded pixels
-> 60 % refused at windows 5, 9 and 15 on the plain and the occluder pairs. The Middlebury
-pairs were not used for the choice.
-
-First grid: texture_snr {0.25, 0.5, 1}, uniqueness {0, 0.02, 0.05}, distinct {0, 0.2,
-0.5}, lr_tolerance {1, 2}. Best feasible: texture_snr 1, uniqueness 0, distinct 0,
-lr_tolerance 2 (0.1558); uniqueness 0.02 scored 0.1572 and was the default.
-
-Second grid (2026-11-22), lr_tolerance extended to {1, 2, 3, 4, 6} because the first
-optimum sat on the grid's edge (the extension was prompted by the held-out cones pair
-missing its target at window 5; the choice itself again used the rendered pairs only).
-Best feasible: texture_snr 1, uniqueness 0.02, distinct 0, lr_tolerance 3 (0.1543;
-occluded pixels refused: at least 61.0 %). lr_tolerance 4 scores 0.1530 and 6 scores
-0.1517 but refuse only 58.0 % / 53.2 % of the occluded pixels, so they are infeasible.
-Held out, for the record (bad-2.0 at windows 5/9/15, lr_tolerance 2 -> 3): tsukuba
-0.178/0.128/0.119 -> 0.174/0.126/0.118, venus 0.218/0.120/0.090 -> 0.214/0.118/0.089,
-teddy 0.326/0.287/0.286 -> 0.322/0.285/0.284, cones 0.315/0.232/0.230 -> 0.310/0.229/0.227.
-
-channels (2026-11-22, measured with lr_tolerance 2): "color" (SSD summed over R, G, B)
-against "luma", same defaults otherwise. Mean bad-2.0 of the rendered pairs at 5/9/15 drops (pair 0.115/0.085/0.108 ->
-0.101/0.083/0.106, pair-hard 0.211/0.198/0.225 -> 0.189/0.192/0.224), but a match takes
-up to 1.8x as long, which put pair-hard at window 9 at 3.3x StereoBM's wall time, beyond
-the issue's 3x. Default stays "luma". Held out, for the record (luma -> color at 5/9/15):
-tsukuba 0.178/0.128/0.119 -> 0.176/0.133/0.125, venus 0.218/0.120/0.090 ->
-0.297/0.182/0.125, teddy 0.326/0.287/0.286 -> 0.361/0.282/0.261, cones 0.315/0.232/0.230
--> 0.289/0.219/0.224: colour is no general gain on real pairs either (venus loses at
-every window even with channels whitened by their estimated noise covariance).
-
-prefilter (2026-11-22, measured with lr_tolerance 2): "local-mean" (each luma minus its 9x9 mean, clipped to +-cap
-code values, as StereoBM's normalised-response prefilter) against "none", same
-protocol, same defaults otherwise. Mean bad-2.0 of pair and pair-hard at windows
-5/9/15: none 0.1572; local-mean cap 15 / 31 / 63 / 127: 0.2066 / 0.2102 / 0.2126 /
-0.2126 (mean window 21 or 41 at cap 127: 0.2216 / 0.2825). The rendered views share
-one exposure and response, so there is no offset for the prefilter to remove, while
-it discards low-frequency signal and, where the mean window straddles a depth edge,
-makes the two views differ (mean abs error of estimated pixels at window 9: 0.38 ->
-0.53 px). Default stays "none". Held out, for the record only (bad-2.0 at 5/9/15,
-none -> local-mean cap 31): tsukuba 0.178/0.128/0.119 -> 0.186/0.137/0.125, venus
-0.218/0.120/0.090 -> 0.211/0.111/0.087, teddy 0.326/0.287/0.286 -> 0.269/0.244/0.257,
-cones 0.315/0.232/0.230 -> 0.250/0.223/0.233."""
+# How the defaults of match() were chosen: docs/decisions/stereo-block-matching-defaults.md
 _INT_MAX = np.iinfo(np.int32).max
 
 
@@ -159,58 +117,6 @@ class DisparityMap:
 
 
 # ------------------------------------------------------------------- helpers
-def to_gray(image: np.ndarray) -> np.ndarray:
-    """Luma ``(H, W)`` float32 in the image's own code units (Rec. 601 weights)."""
-    import cv2
-
-    a = np.asarray(image)
-    if a.ndim == 3 and a.shape[2] in (3, 4):
-        a = cv2.cvtColor(np.ascontiguousarray(a[..., :3], dtype=np.float32), cv2.COLOR_RGB2GRAY)
-    elif a.ndim == 3 and a.shape[2] == 1:
-        a = a[..., 0]
-    elif a.ndim != 2:
-        raise ValueError(f"image: expected (H, W) or (H, W, 1|3|4), got shape {a.shape}")
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
-def noise_sigma(gray: np.ndarray) -> float:
-    """Robust estimate of the sensor noise σ (code values) of one image.
-
-    The 3×3 mask ``[[1,-2,1],[-2,4,-2],[1,-2,1]]`` cancels smooth image content
-    and passes white noise with gain 6 (Immerkær 1996). Its mean absolute
-    response is taken over 8×8 blocks and the 10th percentile of the blocks
-    kept: the smoothest parts of a scene show the noise alone, where a global
-    average would count texture and edges as noise.
-
-    Examples
-    --------
-    >>> g = np.full((64, 64), 100.0) + np.random.default_rng(1).normal(0, 2, (64, 64))
-    >>> round(noise_sigma(g.astype(np.float32)), 1)
-    2.0
-    """
-    import cv2
-
-    k = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    r = np.abs(cv2.filter2D(gray, cv2.CV_32F, k)[1:-1, 1:-1])
-    h, w = (r.shape[0] // 8) * 8, (r.shape[1] // 8) * 8
-    if h == 0 or w == 0:
-        return float(np.sqrt(np.pi / 2) * r.mean() / 6.0)
-    # 8x8 block means (area resampling by exactly 1/8 is the block mean)
-    blocks = cv2.resize(r[:h, :w], (w // 8, h // 8), interpolation=cv2.INTER_AREA)
-    # blocks near black or white are clipped (less noise than the sensor's):
-    # leave them out
-    level = cv2.resize(np.ascontiguousarray(gray[1:h + 1, 1:w + 1]), (w // 8, h // 8),
-                       interpolation=cv2.INTER_AREA)
-    lo, hi = float(gray.min()), float(gray.max())
-    ok = (level > lo + 0.04 * (hi - lo)) & (level < hi - 0.04 * (hi - lo))
-    if ok.sum() >= 10:
-        blocks = blocks[ok]
-    # mean |N(0, s)| = s·sqrt(2/π); the 10th percentile of 8×8 block means of
-    # pure noise sits at 0.785 of their mean (measured; the mask's responses
-    # are correlated), hence 1/0.785
-    return float(np.sqrt(np.pi / 2) * np.percentile(blocks, 10) / 6.0 / 0.785)
-
-
 _SCRATCH: queue.SimpleQueue = queue.SimpleQueue()
 
 
@@ -268,7 +174,7 @@ def _match_images(left, right, *, channels="color", prefilter="none", cap=31.0):
     every plane is replaced by its local-mean response (``cap`` in 8-bit code
     values, scaled to the input's range for other dtypes); the texture and
     noise estimates keep the plain luma."""
-    L, R = to_gray(left), to_gray(right)
+    L, R = luma_codes(left), luma_codes(right)
     gray = L
     a, b = np.asarray(left), np.asarray(right)
     integer = a.dtype == np.uint8 and b.dtype == np.uint8
@@ -309,7 +215,7 @@ def _noise_var(image, luma_sigma, nch):
         v = max(luma_sigma, 0.5) ** 2
         return v, v
     a = np.asarray(image)
-    s2 = [max(noise_sigma(np.ascontiguousarray(a[..., c], dtype=np.float32)), 0.5) ** 2 for c in range(3)]
+    s2 = [max(noise_sigma_smooth_blocks(np.ascontiguousarray(a[..., c], dtype=np.float32)), 0.5) ** 2 for c in range(3)]
     return float(np.sqrt(sum(v * v for v in s2))), float(sum(s2))
 
 
@@ -618,6 +524,172 @@ def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqu
     return disp, np.where(valid, bestc / unit, np.nan).astype(np.float32), counts
 
 
+# ------------------------------------------------------- the steps of match
+def _check_options(left, right, *, channels, prefilter, prefilter_cap):
+    """Refuse an unknown ``channels`` or ``prefilter``, a cap <= 0 and two
+    images of different shapes (before any conversion)."""
+    if channels not in CHANNELS:
+        raise ValueError(f"channels: expected one of {CHANNELS}, got {channels!r}")
+    if prefilter not in PREFILTERS:
+        raise ValueError(f"prefilter: expected one of {PREFILTERS}, got {prefilter!r}")
+    if not prefilter_cap > 0:
+        raise ValueError(f"prefilter_cap: expected a value > 0, got {prefilter_cap!r}")
+    if np.shape(left) != np.shape(right):
+        raise ValueError(f"right: expected the left image's shape {np.shape(left)}, got {np.shape(right)}")
+
+
+def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
+    """The search checked against the matched ``(C, H, W)`` planes' size:
+    ``(max_disp, windows)``, the candidate window sides (one, or
+    ``AUTO_WINDOWS`` for ``"auto"``)."""
+    _, h, w = shape
+    if not isinstance(max_disp, int | np.integer) or not 1 <= max_disp < w:
+        raise ValueError(f"max_disp: expected an integer in [1, {w - 1}] (image width {w}), got {max_disp!r}")
+    if window == "auto":
+        windows = AUTO_WINDOWS
+    elif isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63:
+        windows = (int(window),)
+    else:
+        raise ValueError(f"window: expected 'auto' or an odd integer in [3, 63], got {window!r}")
+    if min(h, w) < max(windows):
+        raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
+    if engine not in ("auto", "numpy"):
+        raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
+    if texture_snr < 0 or uniqueness < 0:
+        raise ValueError("texture_snr, uniqueness: expected values >= 0")
+    return int(max_disp), windows
+
+
+@dataclass(frozen=True)
+class _Noise:
+    """The noise the decision weighs against: ``sigma`` of the left luma
+    (code values), ``scale`` and ``variance`` of what is matched (see
+    :func:`_noise_var`) and the texture test's ``threshold`` (a window
+    variance, code values²)."""
+
+    sigma: float
+    scale: float
+    variance: float
+    threshold: float
+
+
+def _noise(left, gray, nch, *, texture_snr):
+    """Estimate the left image's noise and set the texture threshold from it."""
+    sigma = noise_sigma_smooth_blocks(gray)
+    scale, variance = _noise_var(left, sigma, nch)
+    # texture threshold: window variance >= snr² times the noise variance of
+    # what is matched (σ² of the luma, or Σσ² of R, G, B); flat areas that pass on
+    # noise alone are caught by the uniqueness and left-right tests (their
+    # cost curve is flat and random).
+    return _Noise(sigma, scale, variance, texture_snr ** 2 * variance)
+
+
+def _texture_planes(left, gray, nch):
+    """The float planes whose window variance the texture test weighs: the
+    luma, or R, G and B when colour is matched."""
+    if nch == 1:
+        return [gray]
+    return [np.ascontiguousarray(np.asarray(left)[..., c], dtype=np.float32) for c in range(3)]
+
+
+def _span(L, R):
+    """Range of the matched values over both images (at least 1): the float
+    costs' scale."""
+    return max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
+
+
+def _padded(L, R, D):
+    """Both images padded so that every disparity's view is a plain slice of
+    width ``W + D``: left with ``D`` reflected columns on its right, right
+    with ``D - 1`` replicated columns on its left and ``D`` on its right."""
+    import cv2
+
+    Lp = np.stack([cv2.copyMakeBorder(c, 0, 0, 0, D, cv2.BORDER_REFLECT) for c in L])
+    Rp = np.stack([cv2.copyMakeBorder(c, 0, 0, D - 1, D, cv2.BORDER_REPLICATE) for c in R])
+    return Lp, Rp
+
+
+def _scan_decide_c(kernel, Lp, Rp, *, D, costs, var, pick, windows, n_threads, decide):
+    """Scan and decide every row through the compiled kernel, one band of
+    rows per thread: ``(disparity, cost, rejection counts)``."""
+    _, h, wp = Lp.shape
+    w = wp - D
+    # one band per thread: each band start costs a window of rows
+    n_bands = max(1, min(n_threads, h // max(costs.wins)))
+    edges = np.linspace(0, h, n_bands + 1).astype(int)
+    out = (np.empty((h, w), np.float32), np.empty((h, w), np.float32))
+    Rr = np.ascontiguousarray(Rp[:, :, ::-1])
+    vpick = _picked_variance(var, pick) if decide["distinct"] > 0 else None
+
+    def one(i):
+        return _match_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs,
+                        pick=pick, vpick=vpick, windows=windows, **decide)
+
+    if n_threads == 1 or n_bands == 1:
+        parts = [one(i) for i in range(n_bands)]
+    else:  # ctypes releases the GIL
+        parts = list(_pool().map(one, range(n_bands)))
+    c = sum(parts)
+    counts = {"no_texture": int(c[0]), "not_unique": int(c[1]), "left_right": int(c[2])}
+    return out[0], out[1], counts
+
+
+def _scan_numpy_bands(Lp, Rp, *, D, costs, n_threads):
+    """Scan every row on numpy/OpenCV in bands of about ``BAND_ROWS`` rows:
+    the five encoded ``(H, W)`` int32 arrays :func:`_decide` reads."""
+    h = Lp.shape[1]
+    # bands of about BAND_ROWS rows keep each disparity's working set in the
+    # CPU cache; threads take bands in turn, each with its own scratch volume
+    n_bands = max(1, round(h / BAND_ROWS))
+    edges = np.linspace(0, h, n_bands + 1).astype(int)
+
+    def one(i):
+        with _scratch() as scratch:
+            return _scan_numpy(Lp, Rp, edges[i], edges[i + 1], D=D, costs=costs, scratch=scratch)
+
+    if n_threads == 1 or n_bands == 1:
+        parts = [one(i) for i in range(n_bands)]
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        import cv2
+
+        old = cv2.getNumThreads()
+        try:
+            cv2.setNumThreads(1)  # our bands are the parallelism
+            with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
+                parts = list(ex.map(one, range(n_bands)))
+        finally:
+            cv2.setNumThreads(old)
+    return [np.concatenate([p[j] for p in parts]) for j in range(5)]
+
+
+def _info(disp, pick, counts, windows, *, noise, nch, engine, timings, max_disp, window,
+          texture_snr, uniqueness, distinct, lr_tolerance, subpixel, prefilter, prefilter_cap):
+    """The result's record: parameters, the noise estimate, the share of
+    pixels each test rejected and, for ``window="auto"``, each window's share."""
+    h, w = pick.shape
+    n = h * w
+    info = {"method": "ssd-block-matching", "max_disp": max_disp, "window": window,
+            "texture_snr": texture_snr, "uniqueness": uniqueness, "distinct": distinct, "lr_tolerance": lr_tolerance,
+            "subpixel": subpixel, "channels": "rgb" if nch == 3 else "luma", "prefilter": prefilter, "prefilter_cap": prefilter_cap,
+            "noise_sigma_estimate": noise.sigma, "texture_threshold_var": noise.threshold,
+            "rejected_fraction": {k: v / n for k, v in counts.items()},
+            "valid_fraction": float(np.isfinite(disp).mean()),
+            "engine": engine, "timings_s": timings}
+    if window == "auto":
+        picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
+        info["auto"] = {"candidates": list(windows),
+                        "share_of_pixels": {str(k): float(picks[i] / n) for i, k in enumerate(windows)},
+                        "no_window_textured": float(picks[-1] / n),
+                        "rule": "smallest window whose intensity std >= texture_snr * noise sigma"
+                                + (" (summed over R, G, B)" if nch == 3 else "")}
+    return info
+
+
+# ------------------------------------------------------------------- match
+
+
 def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | str = "auto",
           texture_snr: float = 1.0, uniqueness: float = 0.02, lr_tolerance: int = 3,
           distinct: float = 0.0, subpixel: bool = True, channels: str = "luma",
@@ -647,8 +719,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     lr_tolerance : int
         Largest left–right disagreement in pixels (−1 disables the check).
         The defaults of these four were chosen on the rendered ``stereo-pair``
-        scenes only (see ``DEFAULTS_CHOICE``); the Middlebury pairs of the
-        bench are held out.
+        scenes only (``docs/decisions/stereo-block-matching-defaults.md``);
+        the Middlebury pairs of the bench are held out.
     subpixel : bool
         Parabola refinement of the integer minimum.
     channels : {"color", "luma"}
@@ -657,13 +729,14 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         per channel), which tells apart surfaces of equal luma but different
         hue. Grey inputs are luma either way. Luma is the default: colour
         lowered bad-2.0 on the rendered pairs a little but makes a match up
-        to 1.8x slower (``DEFAULTS_CHOICE``). The texture test always uses luma.
+        to 1.8x slower (``docs/decisions/stereo-block-matching-defaults.md``).
+        The texture test always uses luma.
     prefilter : {"none", "local-mean"}
         ``"local-mean"`` matches each image's difference from its 9×9 local
         mean, clipped to ``±prefilter_cap`` (the normalised-response prefilter
         of OpenCV's StereoBM): an offset between the views cancels, at the
         price of low-frequency signal. Off by default: it raised bad-2.0 on
-        the rendered pairs (``DEFAULTS_CHOICE``).
+        the rendered pairs (``docs/decisions/stereo-block-matching-defaults.md``).
     prefilter_cap : float
         Clipping of the local-mean response, in 8-bit code values (scaled to
         the input's range for other dtypes).
@@ -687,119 +760,44 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     ValueError
         Shapes differ, images too small, bad window or ``max_disp``.
     """
-    import cv2
-
     t0 = time.perf_counter()
-    if channels not in CHANNELS:
-        raise ValueError(f"channels: expected one of {CHANNELS}, got {channels!r}")
-    if prefilter not in PREFILTERS:
-        raise ValueError(f"prefilter: expected one of {PREFILTERS}, got {prefilter!r}")
-    if not prefilter_cap > 0:
-        raise ValueError(f"prefilter_cap: expected a value > 0, got {prefilter_cap!r}")
-    if np.shape(left) != np.shape(right):
-        raise ValueError(f"right: expected the left image's shape {np.shape(left)}, got {np.shape(right)}")
+    # validate, and the images as compared (planes) and as tested for texture (luma)
+    _check_options(left, right, channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
     L, R, gray, code = _match_images(left, right, channels=channels, prefilter=prefilter,
                                      cap=prefilter_cap)
-    nch, h, w = L.shape
-    if not isinstance(max_disp, int | np.integer) or not 1 <= max_disp < w:
-        raise ValueError(f"max_disp: expected an integer in [1, {w - 1}] (image width {w}), got {max_disp!r}")
-    max_disp = int(max_disp)
-    if window == "auto":
-        windows, choose = AUTO_WINDOWS, True
-    elif isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63:
-        windows, choose = (int(window),), False
-    else:
-        raise ValueError(f"window: expected 'auto' or an odd integer in [3, 63], got {window!r}")
-    if min(h, w) < max(windows):
-        raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
-    if engine not in ("auto", "numpy"):
-        raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
-    if texture_snr < 0 or uniqueness < 0:
-        raise ValueError("texture_snr, uniqueness: expected values >= 0")
-    sigma = noise_sigma(gray)
-    noise_var, tex_var = _noise_var(left, sigma, nch)
-    # texture threshold: window variance >= snr² times the noise variance of
-    # what is matched (σ² of the luma, or Σσ² of R, G, B); flat areas that pass on
-    # noise alone are caught by the uniqueness and left-right tests (their
-    # cost curve is flat and random).
-    thr = texture_snr ** 2 * tex_var
-    thresholds = tuple(thr for _ in windows)
+    nch = L.shape[0]
+    max_disp, windows = _check_search(L.shape, max_disp=max_disp, window=window, engine=engine,
+                                      texture_snr=texture_snr, uniqueness=uniqueness)
+    # noise, texture test and window choice per pixel
+    noise = _noise(left, gray, nch, texture_snr=texture_snr)
+    var, pick = _texture(_texture_planes(left, gray, nch), windows,
+                         tuple(noise.threshold for _ in windows))
+    # integer cost encoding and padded images for the scan
     D = max_disp + 1
-    span = max(float(max(L.max(), R.max())) - float(min(L.min(), R.min())), 1.0)
-    timings = {}
-    planes = ([gray] if nch == 1 else
-              [np.ascontiguousarray(np.asarray(left)[..., c], dtype=np.float32) for c in range(3)])
-    var, pick = _texture(planes, windows, thresholds)
-    costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=span, nch=nch, code=code)
-    # padded so that every disparity's view is a plain slice of width W + D
-    Lp = np.stack([cv2.copyMakeBorder(c, 0, 0, 0, D, cv2.BORDER_REFLECT) for c in L])
-    Rp = np.stack([cv2.copyMakeBorder(c, 0, 0, D - 1, D, cv2.BORDER_REPLICATE) for c in R])
+    costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=_span(L, R), nch=nch,
+                   code=code)
+    Lp, Rp = _padded(L, R, D)
     n_threads = threads or min(4, os.cpu_count() or 1)
     kernel = _kernel() if costs.integer and engine != "numpy" else None
     t1 = time.perf_counter()
-    timings["prepare"] = t1 - t0
+    # scan every disparity, then decide: sub-pixel, uniqueness, left-right, texture
     decide = dict(subpixel=subpixel, lr_tolerance=lr_tolerance, uniqueness=uniqueness,
-                  distinct=distinct, noise_var=noise_var, tex_var=tex_var)
-    if kernel is not None:
-        # one band per thread: each band start costs a window of rows
-        n_bands = max(1, min(n_threads, h // max(costs.wins)))
-        out = (np.empty((h, w), np.float32), np.empty((h, w), np.float32))
-        Rr = np.ascontiguousarray(Rp[:, :, ::-1])
-        vpick = _picked_variance(var, pick) if distinct > 0 else None
-
-        def one(i):
-            return _match_c(kernel, Lp, Rr, edges[i], edges[i + 1], out, D=D, costs=costs,
-                            pick=pick, vpick=vpick, windows=windows, **decide)
+                  distinct=distinct, noise_var=noise.scale, tex_var=noise.variance)
+    if kernel is not None:  # the compiled kernel fuses the decision into the scan
+        disp, cost, counts = _scan_decide_c(kernel, Lp, Rp, D=D, costs=costs, var=var, pick=pick,
+                                            windows=windows, n_threads=n_threads, decide=decide)
+        t2 = time.perf_counter()
     else:
-        # bands of about BAND_ROWS rows keep each disparity's working set in the
-        # CPU cache; threads take bands in turn, each with its own scratch volume
-        n_bands = max(1, round(h / BAND_ROWS))
-
-        def one(i):
-            with _scratch() as scratch:
-                return _scan_numpy(Lp, Rp, edges[i], edges[i + 1], D=D, costs=costs,
-                                   scratch=scratch)
-
-    edges = np.linspace(0, h, n_bands + 1).astype(int)
-    if n_threads == 1 or n_bands == 1:
-        parts = [one(i) for i in range(n_bands)]
-    elif kernel is not None:  # ctypes releases the GIL
-        parts = list(_pool().map(one, range(n_bands)))
-    else:
-        from concurrent.futures import ThreadPoolExecutor
-
-        old = cv2.getNumThreads()
-        try:
-            cv2.setNumThreads(1)  # our bands are the parallelism
-            with ThreadPoolExecutor(min(n_threads, n_bands)) as ex:
-                parts = list(ex.map(one, range(n_bands)))
-        finally:
-            cv2.setNumThreads(old)
-    t2 = time.perf_counter()
-    timings["scan"] = t2 - t1
-    if kernel is None:
-        scan = [np.concatenate([p[j] for p in parts]) for j in range(5)]
+        scan = _scan_numpy_bands(Lp, Rp, D=D, costs=costs, n_threads=n_threads)
+        t2 = time.perf_counter()
         disp, cost, counts = _decide(*scan, var=var, pick=pick, windows=windows, costs=costs,
                                      D=D, **decide)
-    else:
-        disp, cost = out
-        c = sum(parts)
-        counts = {"no_texture": int(c[0]), "not_unique": int(c[1]), "left_right": int(c[2])}
+    # the result and its record
     win = np.asarray((*windows, 0), np.uint8)[pick]
-    timings["decide"] = time.perf_counter() - t2
-    picks = np.bincount(pick.ravel(), minlength=len(windows) + 1)
-    n = h * w
-    info = {"method": "ssd-block-matching", "max_disp": max_disp, "window": window,
-            "texture_snr": texture_snr, "uniqueness": uniqueness, "distinct": distinct, "lr_tolerance": lr_tolerance,
-            "subpixel": subpixel, "channels": "rgb" if nch == 3 else "luma", "prefilter": prefilter, "prefilter_cap": prefilter_cap,
-            "noise_sigma_estimate": sigma, "texture_threshold_var": thr,
-            "rejected_fraction": {k: v / n for k, v in counts.items()},
-            "valid_fraction": float(np.isfinite(disp).mean()),
-            "engine": "numpy" if kernel is None else "c", "timings_s": timings}
-    if choose:
-        info["auto"] = {"candidates": list(windows),
-                        "share_of_pixels": {str(k): float(picks[i] / n) for i, k in enumerate(windows)},
-                        "no_window_textured": float(picks[-1] / n),
-                        "rule": "smallest window whose intensity std >= texture_snr * noise sigma"
-                                + (" (summed over R, G, B)" if nch == 3 else "")}
+    timings = {"prepare": t1 - t0, "scan": t2 - t1, "decide": time.perf_counter() - t2}
+    info = _info(disp, pick, counts, windows, noise=noise, nch=nch,
+                 engine="numpy" if kernel is None else "c", timings=timings, max_disp=max_disp,
+                 window=window, texture_snr=texture_snr, uniqueness=uniqueness, distinct=distinct,
+                 lr_tolerance=lr_tolerance, subpixel=subpixel, prefilter=prefilter,
+                 prefilter_cap=prefilter_cap)
     return DisparityMap(disp, cost, win, info)

@@ -124,10 +124,10 @@ def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
     """
     import cv2
 
-    from lumigraph.stereo.block_matching import to_gray
+    from lumigraph.stereo.luma import luma_codes
 
     def u8(a):
-        g = to_gray(a)
+        g = luma_codes(a)
         lo, hi = float(g.min()), float(g.max())
         return np.clip((g - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
 

@@ -359,13 +359,13 @@ def _remap(image, px):
     return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
 
-def warp_offset(offset_image: np.ndarray, model_depth: np.ndarray, rig, *, delta: float = 0.0) -> np.ndarray:
+def warp_offset(offset: np.ndarray, model_depth: np.ndarray, rig, *, delta: float = 0.0) -> np.ndarray:
     """The offset image projected onto the model (shifted by ``delta`` along
     the key rays) and seen from the key camera (Fig. 5.12c for ``delta = 0``).
 
     Parameters
     ----------
-    offset_image : ndarray, (H', W') or (H', W', C)
+    offset : ndarray, (H', W') or (H', W', C)
         The offset view (``rig.right``), any numeric dtype.
     model_depth : ndarray, (H, W)
         Key-camera ``z`` of the rough model per key pixel (``rig.left``'s
@@ -383,9 +383,9 @@ def warp_offset(offset_image: np.ndarray, model_depth: np.ndarray, rig, *, delta
         its point falls outside the offset frame or behind the camera (no
         visibility test: see :func:`model_stereo` for that).
     """
-    img = np.asarray(offset_image)
+    img = np.asarray(offset)
     zm = _check_model(model_depth, rig)
-    _check_image("offset_image", img, rig.right.image_size)
+    _check_image("offset", img, rig.right.image_size)
     rays = key_rays(rig.left, zm.shape)
     px, zo = _project_offset(rig, rays @ rig.R.T, zm + delta)
     ok = np.isfinite(zm) & (zo > 0) & _inside(px, rig.right.image_size)
@@ -414,6 +414,265 @@ def _check_model(model_depth, rig):
     if not np.isfinite(zm).any():
         raise ValueError("model_depth: no finite positive depth (the model is absent everywhere)")
     return zm
+
+
+# ------------------------------------------------- the steps of model_stereo
+def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, texture_snr,
+                  uniqueness, max_cost, left_right):
+    """Check the images against the rig, the model and every option:
+    ``(model depth with NaN where absent, key, offset, max_offset)``."""
+    zm = _check_model(model_depth, rig)
+    key = np.asarray(key)
+    offset = np.asarray(offset)
+    _check_image("key", key, rig.left.image_size)
+    _check_image("offset", offset, rig.right.image_size)
+    max_offset = float(max_offset)
+    if not (np.isfinite(max_offset) and max_offset > 0):
+        raise ValueError(f"max_offset: expected a finite value > 0, got {max_offset}")
+    if not (isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63):
+        raise ValueError(f"window: expected an odd integer in [3, 63], got {window!r}")
+    if step is not None and not (np.isfinite(step) and 0 < step <= max_offset):
+        raise ValueError(f"step: expected a value in (0, max_offset={max_offset}], got {step}")
+    for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness), ("max_cost", max_cost)):
+        if not v >= 0:
+            raise ValueError(f"{name}: expected a value >= 0, got {v}")
+    if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
+        raise ValueError(f"left_right: expected a finite value > 0 or None, got {left_right}")
+    return zm, key, offset, max_offset
+
+
+def _key_noise(key, gk, noise_sigma):
+    """The key image's noise σ (code values): as given, or estimated from its
+    luma ``gk`` and floored at the quantisation noise of integer codes."""
+    from lumigraph.stereo.luma import noise_sigma_smooth_blocks
+
+    if noise_sigma is not None:
+        return float(noise_sigma)
+    quant = 1 / np.sqrt(12) * (257.0 if key.dtype == np.uint16 else 1.0)
+    return max(noise_sigma_smooth_blocks(gk), quant if key.dtype.kind in "ui" else 0.0)
+
+
+@dataclass(frozen=True)
+class _ModelView:
+    """The model at ``δ = 0`` as the offset camera sees it, per key pixel:
+    ``a = R r`` (the key rays in the offset frame's orientation),
+    ``has_model``, the offset-image position ``px0`` (H, W, 2) and depth
+    ``zo0``, ``seen`` (in front, inside the frame, not hidden by the model)
+    and ``zz``, the model depth where seen (NaN elsewhere)."""
+
+    a: np.ndarray
+    has_model: np.ndarray
+    px0: np.ndarray
+    zo0: np.ndarray
+    seen: np.ndarray
+    zz: np.ndarray
+
+
+def _model_view(rig, zm, *, max_offset):
+    """Project the model into the offset camera and z-buffer it: which key
+    pixels' model points the offset camera sees."""
+    size_o = rig.right.image_size
+    rays = key_rays(rig.left, zm.shape)
+    a = rays @ rig.R.T
+    has_model = np.isfinite(zm)
+    px0, zo0 = _project_offset(rig, a, np.where(has_model, zm, 1.0))
+    in_front = has_model & (zo0 > 0) & np.isfinite(px0).all(axis=-1)
+    seen = in_front & _inside(px0, size_o)
+    tol = np.maximum(0.02 * np.abs(zo0), max_offset)
+    seen &= _model_visible(px0, zo0, seen, size_o, tol)
+    return _ModelView(a, has_model, px0, zo0, seen, np.where(seen, zm, np.nan))
+
+
+def _delta_steps(rig, zm, view, *, max_offset, step, warnings):
+    """The searched offsets ``δ``: ``(deltas, step, px_per_unit)``, by default
+    one step per offset-image pixel of epipolar motion (99th percentile of
+    the seen pixels), at most ``MAX_STEPS`` (a warning says when coarsened)."""
+    seen = view.seen
+    eps = 1e-3 * max_offset
+    px1, _ = _project_offset(rig, view.a, np.where(seen, zm + eps, 1.0))
+    rate = np.linalg.norm(px1 - view.px0, axis=-1)[seen] / eps  # px per unit delta
+    if not seen.any():
+        raise ValueError("model_depth: no model point is seen by the offset camera "
+                         "(check the rig and the model)")
+    px_per_unit = float(np.percentile(rate, 99))
+    if step is None:
+        step = 1.0 / max(px_per_unit, 1e-12)
+    n_half = int(np.ceil(max_offset / step))
+    if 2 * n_half + 1 > MAX_STEPS:
+        n_half = (MAX_STEPS - 1) // 2
+        warnings.append(f"delta step coarsened to {max_offset / n_half:.4g} to stay within "
+                        f"{MAX_STEPS} steps")
+    step = max_offset / n_half
+    return np.arange(-n_half, n_half + 1) * step, step, px_per_unit
+
+
+def _cost_volume(gk, go, rig, zm, view, deltas, *, window):
+    """Eq. 5.1 per ``δ`` as a masked box mean: ``(len(deltas), H, W)``
+    float32 mean squared luma difference between the key and the offset
+    image sampled at ``z_m + δ``; inf where not computed (the point unseen,
+    or under half the window seen)."""
+    import cv2
+
+    h, w = zm.shape
+    size_o = rig.right.image_size
+    seen = view.seen
+    box = (window, window)
+    gk_valid = np.where(seen, gk, 0).astype(np.float32)
+    costs = np.full((len(deltas), h, w), np.inf, np.float32)
+    zsafe = np.where(seen, zm, 1.0)
+    for i, dlt in enumerate(deltas):
+        px, zo = _project_offset(rig, view.a, zsafe + dlt)
+        m = seen & (zo > 0) & _inside(px, size_o)
+        warped = _remap(go, px)
+        diff2 = np.where(m, (gk_valid - warped) ** 2, 0).astype(np.float32)
+        mf = m.astype(np.float32)
+        num = cv2.boxFilter(diff2, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        den = cv2.boxFilter(mf, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+        ok = m & (den >= 0.5 * window * window)
+        costs[i][ok] = num[ok] / den[ok]
+    return costs
+
+
+@dataclass(frozen=True)
+class _Decision:
+    """Winner-take-all over ``δ`` and the per-pixel tests, each ``(H, W)``:
+    the ``best`` index and its ``cost``, whether a cost was ``computed``,
+    the key window's variance ``var``, and the tests ``textured``,
+    ``unique``, ``plausible`` and ``inner`` (not at either end of the
+    range); ``passed`` = all of them."""
+
+    best: np.ndarray
+    cost: np.ndarray
+    computed: np.ndarray
+    var: np.ndarray
+    textured: np.ndarray
+    unique: np.ndarray
+    plausible: np.ndarray
+    inner: np.ndarray
+    passed: np.ndarray
+
+
+def _decide(costs, gk, *, sigma, window, texture_snr, uniqueness, max_cost):
+    """Pick each pixel's best ``δ`` and run the texture, uniqueness,
+    plausible-cost and range-end tests on it."""
+    best, bestc, second = _winner(costs)
+    computed = np.isfinite(bestc)
+    var = _window_variance(gk, window)
+    textured = var >= (texture_snr * sigma) ** 2
+    with np.errstate(invalid="ignore"):
+        unique = ~(second <= (1 + uniqueness) * bestc)
+        plausible = bestc <= 2 * sigma ** 2 + max_cost * var
+    inner = (best > 0) & (best < len(costs) - 1)
+    passed = computed & textured & unique & inner & plausible
+    return _Decision(best, bestc, computed, var, textured, unique, plausible, inner, passed)
+
+
+def _winner(costs):
+    """Winner-take-all over ``δ``: each pixel's best index, its cost, and the
+    best cost more than one step from it (for the uniqueness test)."""
+    n, h, w = costs.shape
+    best = np.argmin(costs, axis=0)
+    rows, cols = np.mgrid[0:h, 0:w]
+    bestc = costs[best, rows, cols]
+    masked = costs.copy()
+    for k in (-1, 0, 1):
+        masked[np.clip(best + k, 0, n - 1), rows, cols] = np.inf
+    return best, bestc, masked.min(axis=0)
+
+
+def _window_variance(gk, window):
+    """The key luma's variance in each ``window × window`` box (code values²)."""
+    import cv2
+
+    box = (window, window)
+    mean = cv2.boxFilter(gk, -1, box, borderType=cv2.BORDER_REFLECT)
+    return np.maximum(cv2.boxFilter(gk * gk, -1, box, borderType=cv2.BORDER_REFLECT) - mean * mean, 0)
+
+
+def _subpixel_fraction(costs, best, bestc, inner):
+    """Parabola through the costs at ``best ± 1``: the fraction of a step
+    (in [-0.5, 0.5]) its minimum lies from ``best``; 0 at the range's ends."""
+    n, h, w = costs.shape
+    rows, cols = np.mgrid[0:h, 0:w]
+    i0 = np.clip(best - 1, 0, n - 1)
+    i2 = np.clip(best + 1, 0, n - 1)
+    cm, cp = costs[i0, rows, cols], costs[i2, rows, cols]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        den = cm - 2 * bestc + cp
+        frac = np.where(inner & (den > 0), 0.5 * (cm - cp) / den, 0.0)
+    return np.clip(np.nan_to_num(frac), -0.5, 0.5)
+
+
+def _half_occluded(rig, view, depth, valid, bestc, *, tolerance):
+    """Half-occlusion: a key pixel the offset camera cannot see (hidden by
+    detail the model lacks) still gets a best delta, but its recovered point
+    then lies behind another, better-matching recovered point on the same
+    offset pixel."""
+    size_o = rig.right.image_size
+    pxr, zor = _project_offset(rig, view.a, np.where(valid, depth, 1.0))
+    okr = valid & (zor > 0) & _inside(pxr, size_o)
+    return _hidden_by_better(pxr, zor, bestc, okr, size_o, tolerance)
+
+
+def _left_right(key, offset, zm, rig, view, depth, valid, *, left_right, warnings, noise_sigma,
+                **search):
+    """Left-right check: the same search with the roles swapped (the offset
+    view as key, the model re-seen from it) must send the offset pixel a key
+    point lands on back to that key pixel, within ``left_right`` round-trip
+    units. Returns the inconsistent pixels and a record of the reverse search."""
+    rev_model = model_in_offset_view(zm, rig)
+    if not np.isfinite(rev_model).any():
+        warnings.append("left-right check: no model point projects into the offset view; "
+                        "every pixel refused")
+        return valid.copy(), None
+    rev = model_stereo(offset, key, rev_model, _reverse_rig(rig), max_median_cost=None,
+                       left_right=None, noise_sigma=noise_sigma, **search)
+    back, unit = _round_trip(rig, np.where(valid, depth, np.nan), rev.depth,
+                             np.where(view.seen[..., None], view.px0, np.nan))
+    reverse_info = {"steps": rev.info["steps"], "step": rev.info["step"],
+                    "valid_fraction": rev.valid_fraction,
+                    "round_trip_px_median": float(np.nanmedian(back)) if np.isfinite(back).any()
+                    else None,
+                    "round_trip_unit_px_median": float(np.nanmedian(unit)) if np.isfinite(unit).any()
+                    else None}
+    # where the reverse search refused the offset pixel there is no verdict
+    return valid & (back > left_right * unit), reverse_info
+
+
+def _rejections(view, dec, occluded, inconsistent):
+    """How many key pixels each test refused, in this order, a pixel counted
+    under the first test it failed (pixels with no computed cost under none)."""
+    has, seen, tex, comp = view.has_model, view.seen, dec.textured, dec.computed
+    inner, unique = dec.inner, dec.unique
+    return {"no_model": int((~has).sum()),
+            "unseen_by_offset": int((has & ~seen).sum()),
+            "no_texture": int((seen & ~tex).sum()),
+            "at_range_limit": int((seen & tex & comp & ~inner).sum()),
+            "not_unique": int((seen & tex & comp & inner & ~unique).sum()),
+            "implausible_cost": int((seen & tex & comp & inner & unique & ~dec.plausible).sum()),
+            "occluded": int(occluded.sum()),
+            "left_right": int(inconsistent.sum())}
+
+
+def _median_cost_over_variance(bestc, var, judged, sigma):
+    """How well the model explains the images: the median over the judged
+    pixels of ``(best cost − 2σ²) / var(window)`` (inf when none)."""
+    if not judged.any():
+        return float("inf")
+    return float(np.median((bestc[judged] - 2 * sigma ** 2) / np.maximum(var[judged], 1e-12)))
+
+
+def _check_fit(fit, *, max_median_cost, max_offset):
+    """Refuse the result (:class:`EstimationError` on ``model_depth``) when
+    the model does not explain the images."""
+    if max_median_cost is not None and not fit <= max_median_cost:
+        from lumigraph.capture.errors import EstimationError
+
+        raise EstimationError("model_depth", f"the model does not explain the images: the median best "
+                                             f"cost is {fit:.2f} x the window variance (limit "
+                                             f"{max_median_cost:g}; chance matches cost about 1-2 x); "
+                                             "the model or the rig is wrong, or the detail lies "
+                                             f"farther than max_offset={max_offset:g} from the model")
 
 
 # ---------------------------------------------------------------- matching
@@ -489,7 +748,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         Parabola refinement of the best step.
     noise_sigma : float, optional
         Noise of the key image in code values; estimated when not given
-        (:func:`stereo.block_matching.noise_sigma`, at least the 8-bit
+        (:func:`lumigraph.stereo.luma.noise_sigma_smooth_blocks`, at least the 8-bit
         quantisation noise ``1/√12``).
 
     Returns
@@ -502,186 +761,63 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         Sizes that do not match the rig or each other, no model, a bad
         option.
     """
-    import cv2
-
-    from lumigraph.stereo.block_matching import noise_sigma as estimate_noise
-    from lumigraph.stereo.block_matching import to_gray
+    from lumigraph.stereo.luma import luma_codes
 
     t0 = time.perf_counter()
-    zm = _check_model(model_depth, rig)
-    key = np.asarray(key)
-    offset = np.asarray(offset)
-    _check_image("key", key, rig.left.image_size)
-    _check_image("offset", offset, rig.right.image_size)
-    max_offset = float(max_offset)
-    if not (np.isfinite(max_offset) and max_offset > 0):
-        raise ValueError(f"max_offset: expected a finite value > 0, got {max_offset}")
-    if not (isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63):
-        raise ValueError(f"window: expected an odd integer in [3, 63], got {window!r}")
-    if step is not None and not (np.isfinite(step) and 0 < step <= max_offset):
-        raise ValueError(f"step: expected a value in (0, max_offset={max_offset}], got {step}")
-    for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness), ("max_cost", max_cost)):
-        if not v >= 0:
-            raise ValueError(f"{name}: expected a value >= 0, got {v}")
-    if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
-        raise ValueError(f"left_right: expected a finite value > 0 or None, got {left_right}")
-
-    h, w = zm.shape
-    size_o = rig.right.image_size
-    gk = to_gray(key)
-    go = to_gray(offset)
-    quant = 1 / np.sqrt(12) * (257.0 if key.dtype == np.uint16 else 1.0)
-    if noise_sigma is None:
-        sigma = max(estimate_noise(gk), quant if key.dtype.kind in "ui" else 0.0)
-    else:
-        sigma = float(noise_sigma)
+    zm, key, offset, max_offset = _check_inputs(
+        key, offset, model_depth, rig, max_offset=max_offset, window=window, step=step,
+        texture_snr=texture_snr, uniqueness=uniqueness, max_cost=max_cost, left_right=left_right)
+    gk, go = luma_codes(key), luma_codes(offset)
+    sigma = _key_noise(key, gk, noise_sigma)
     warnings: list[str] = []
-
-    # -- the model seen from the offset camera (delta = 0): what is visible
-    rays = key_rays(rig.left, (h, w))
-    a = rays @ rig.R.T
-    has_model = np.isfinite(zm)
-    px0, zo0 = _project_offset(rig, a, np.where(has_model, zm, 1.0))
-    in_front = has_model & (zo0 > 0) & np.isfinite(px0).all(axis=-1)
-    seen = in_front & _inside(px0, size_o)
-    tol = np.maximum(0.02 * np.abs(zo0), max_offset)
-    seen &= _model_visible(px0, zo0, seen, size_o, tol)
-    zz = np.where(seen, zm, np.nan)
-
-    # -- the delta step: one offset-image pixel of epipolar motion
-    eps = 1e-3 * max_offset
-    px1, _ = _project_offset(rig, a, np.where(seen, zm + eps, 1.0))
-    rate = np.linalg.norm(px1 - px0, axis=-1)[seen] / eps  # px per unit delta
-    if not seen.any():
-        raise ValueError("model_depth: no model point is seen by the offset camera "
-                         "(check the rig and the model)")
-    px_per_unit = float(np.percentile(rate, 99))
-    if step is None:
-        step = 1.0 / max(px_per_unit, 1e-12)
-    n_half = int(np.ceil(max_offset / step))
-    if 2 * n_half + 1 > MAX_STEPS:
-        n_half = (MAX_STEPS - 1) // 2
-        warnings.append(f"delta step coarsened to {max_offset / n_half:.4g} to stay within "
-                        f"{MAX_STEPS} steps")
-    step = max_offset / n_half
-    deltas = np.arange(-n_half, n_half + 1) * step
+    # the model seen from the offset camera (δ = 0): which key pixels can match
+    view = _model_view(rig, zm, max_offset=max_offset)
+    # the δ steps: one offset-image pixel of epipolar motion each
+    deltas, step, px_per_unit = _delta_steps(rig, zm, view, max_offset=max_offset, step=step,
+                                             warnings=warnings)
     n = len(deltas)
-
-    # -- the cost volume (eq. 5.1 as a masked box mean)
-    box = (window, window)
-    gk_valid = np.where(seen, gk, 0).astype(np.float32)
     t_scan = time.perf_counter()
-    costs = np.full((n, h, w), np.inf, np.float32)
-    zsafe = np.where(seen, zm, 1.0)
-    for i, dlt in enumerate(deltas):
-        px, zo = _project_offset(rig, a, zsafe + dlt)
-        m = seen & (zo > 0) & _inside(px, size_o)
-        warped = _remap(go, px)
-        diff2 = np.where(m, (gk_valid - warped) ** 2, 0).astype(np.float32)
-        mf = m.astype(np.float32)
-        num = cv2.boxFilter(diff2, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        den = cv2.boxFilter(mf, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
-        ok = m & (den >= 0.5 * window * window)
-        costs[i][ok] = num[ok] / den[ok]
+    costs = _cost_volume(gk, go, rig, zm, view, deltas, window=window)
     t_decide = time.perf_counter()
 
-    # -- decision: winner-take-all, tests, parabola
-    best = np.argmin(costs, axis=0)
-    rows, cols = np.mgrid[0:h, 0:w]
-    bestc = costs[best, rows, cols]
-    computed = np.isfinite(bestc)
-    masked = costs.copy()
-    for k in (-1, 0, 1):
-        masked[np.clip(best + k, 0, n - 1), rows, cols] = np.inf
-    second = masked.min(axis=0)
-    del masked
-    mean = cv2.boxFilter(gk, -1, box, borderType=cv2.BORDER_REFLECT)
-    var = np.maximum(cv2.boxFilter(gk * gk, -1, box, borderType=cv2.BORDER_REFLECT) - mean * mean, 0)
-    textured = var >= (texture_snr * sigma) ** 2
-    with np.errstate(invalid="ignore"):
-        unique = ~(second <= (1 + uniqueness) * bestc)
-        plausible = bestc <= 2 * sigma ** 2 + max_cost * var
-    inner = (best > 0) & (best < n - 1)
-    valid = computed & textured & unique & inner & plausible
-
-    frac = np.zeros((h, w))
-    if subpixel:
-        i0 = np.clip(best - 1, 0, n - 1)
-        i2 = np.clip(best + 1, 0, n - 1)
-        cm, cp = costs[i0, rows, cols], costs[i2, rows, cols]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            den = cm - 2 * bestc + cp
-            frac = np.where(inner & (den > 0), 0.5 * (cm - cp) / den, 0.0)
-        frac = np.clip(np.nan_to_num(frac), -0.5, 0.5)
-    dlt = np.where(valid, deltas[best] + frac * step, np.nan)
-    depth = (zz + dlt).astype(np.float32)
+    # decision: winner-take-all, the per-pixel tests, the parabola
+    dec = _decide(costs, gk, sigma=sigma, window=window, texture_snr=texture_snr,
+                  uniqueness=uniqueness, max_cost=max_cost)
+    valid = dec.passed.copy()
+    frac = (_subpixel_fraction(costs, dec.best, dec.cost, dec.inner) if subpixel
+            else np.zeros(zm.shape))
+    dlt = np.where(valid, deltas[dec.best] + frac * step, np.nan)
+    depth = (view.zz + dlt).astype(np.float32)
     valid &= depth > 0
-    # Half-occlusion: a key pixel the offset camera cannot see (hidden by
-    # detail the model lacks) still gets a best delta, but its recovered
-    # point then lies behind another recovered point on the same offset ray.
-    occluded = np.zeros((h, w), bool)
+    # the two visibility checks: half-occlusion, then left-right
+    occluded = np.zeros(zm.shape, bool)
     if occlusion_tolerance is not None and valid.any():
-        pxr, zor = _project_offset(rig, a, np.where(valid, depth, 1.0))
-        okr = valid & (zor > 0) & _inside(pxr, size_o)
-        occluded = _hidden_by_better(pxr, zor, bestc, okr, size_o, occlusion_tolerance)
+        occluded = _half_occluded(rig, view, depth, valid, dec.cost, tolerance=occlusion_tolerance)
         valid &= ~occluded
-    # Left-right: the same search with the roles swapped (the offset view as
-    # key, the model re-seen from it) must send the offset pixel a key point
-    # lands on back to that key pixel.
     t_check = time.perf_counter()
-    inconsistent = np.zeros((h, w), bool)
+    inconsistent = np.zeros(zm.shape, bool)
     reverse_info = None
     if left_right is not None and valid.any():
-        rev_model = model_in_offset_view(zm, rig)
-        if np.isfinite(rev_model).any():
-            rev = model_stereo(offset, key, rev_model, _reverse_rig(rig), max_offset=max_offset,
-                               window=window, texture_snr=texture_snr, uniqueness=uniqueness,
-                               max_cost=max_cost, occlusion_tolerance=occlusion_tolerance,
-                               max_median_cost=None, left_right=None, subpixel=subpixel,
-                               noise_sigma=noise_sigma)
-            back, unit = _round_trip(rig, np.where(valid, depth, np.nan), rev.depth,
-                                     np.where(seen[..., None], px0, np.nan))
-            reverse_info = {"steps": rev.info["steps"], "step": rev.info["step"],
-                            "valid_fraction": rev.valid_fraction,
-                            "round_trip_px_median": float(np.nanmedian(back)) if np.isfinite(back).any()
-                            else None,
-                            "round_trip_unit_px_median": float(np.nanmedian(unit)) if np.isfinite(unit).any()
-                            else None}
-            # where the reverse search refused the offset pixel there is no verdict
-            inconsistent = valid & (back > left_right * unit)
-        else:
-            inconsistent = valid.copy()
-            warnings.append("left-right check: no model point projects into the offset view; "
-                            "every pixel refused")
+        inconsistent, reverse_info = _left_right(
+            key, offset, zm, rig, view, depth, valid, left_right=left_right, warnings=warnings,
+            max_offset=max_offset, window=window, texture_snr=texture_snr, uniqueness=uniqueness,
+            max_cost=max_cost, occlusion_tolerance=occlusion_tolerance, subpixel=subpixel,
+            noise_sigma=noise_sigma)
         valid &= ~inconsistent
     depth[~valid] = np.nan
     t_lr = time.perf_counter()
     dlt = np.where(valid, dlt, np.nan).astype(np.float32)
 
     # the warped offset image of Fig. 5.12c, every channel
-    warped0 = _remap(np.ascontiguousarray(offset, np.float32), px0)
-    warped0[~seen] = np.nan
+    warped0 = _remap(np.ascontiguousarray(offset, np.float32), view.px0)
+    warped0[~view.seen] = np.nan
 
-    counts = {"no_model": int((~has_model).sum()),
-              "unseen_by_offset": int((has_model & ~seen).sum()),
-              "no_texture": int((seen & ~textured).sum()),
-              "at_range_limit": int((seen & textured & computed & ~inner).sum()),
-              "not_unique": int((seen & textured & computed & inner & ~unique).sum()),
-              "implausible_cost": int((seen & textured & computed & inner & unique & ~plausible).sum()),
-              "occluded": int(occluded.sum()),
-              "left_right": int(inconsistent.sum())}
-    judged = seen & textured & computed
-    fit = float(np.median((bestc[judged] - 2 * sigma ** 2) / np.maximum(var[judged], 1e-12))) \
-        if judged.any() else float("inf")
-    if max_median_cost is not None and not fit <= max_median_cost:
-        from lumigraph.capture.errors import EstimationError
-
-        raise EstimationError("model_depth", f"the model does not explain the images: the median best "
-                                             f"cost is {fit:.2f} x the window variance (limit "
-                                             f"{max_median_cost:g}; chance matches cost about 1-2 x); "
-                                             "the model or the rig is wrong, or the detail lies "
-                                             f"farther than max_offset={max_offset:g} from the model")
-    limited = counts["at_range_limit"] / max(1, int((seen & textured).sum()))
+    # the record, and the refusal of a model that does not explain the images
+    seen = view.seen
+    counts = _rejections(view, dec, occluded, inconsistent)
+    fit = _median_cost_over_variance(dec.cost, dec.var, seen & dec.textured & dec.computed, sigma)
+    _check_fit(fit, max_median_cost=max_median_cost, max_offset=max_offset)
+    limited = counts["at_range_limit"] / max(1, int((seen & dec.textured).sum()))
     if limited > 0.2:
         warnings.append(f"{limited:.0%} of the textured pixels matched best at the end of the "
                         f"δ range ±{max_offset:g}: the surface is farther from the model than "
@@ -701,5 +837,5 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
             "warnings": warnings,
             "timings_s": {"prepare": t_scan - t0, "scan": t_decide - t_scan,
                           "decide": t1 - t_decide - (t_lr - t_check), "left_right": t_lr - t_check}}
-    return ModelStereo(depth, dlt, warped0, np.where(computed, bestc, np.nan).astype(np.float32),
-                       valid, info)
+    cost = np.where(dec.computed, dec.cost, np.nan).astype(np.float32)
+    return ModelStereo(depth, dlt, warped0, cost, valid, info)

@@ -1,6 +1,8 @@
-"""Reproduce the choice of ``stereo.block_matching.match`` defaults
-(``DEFAULTS_CHOICE``): a grid over the decision parameters, scored on the
-rendered capture/ pairs only, subject to the hard cases of the issue.
+"""Reproduce the choice of ``lumigraph.stereo.block_matching.match`` defaults
+(the decision, its data and its figures:
+``docs/decisions/stereo-block-matching-defaults.md``): a grid over the
+decision parameters, scored on the rendered capture/ pairs only, subject to
+the hard cases of the issue.
 
 Run ``python -m lumigraph.stereo.defaults_choice`` (about 3 minutes on 2 cores); it
 prints every grid point's score and feasibility, then the ten best feasible

@@ -1,7 +1,7 @@
 """``lumigraph flow``: optical flow and Sand-Teller video matching between two
 images, written as a Middlebury ``.flo`` plus a confidence/probability EXR.
 
-Thin layer: parse, validate, load, call :mod:`stereo.flow_methods`, save.
+Thin layer: parse, validate, load, call :mod:`lumigraph.stereo.flow_methods`, save.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ examples:
   lumigraph flow a.png b.png --median-radius 10 --out sharp.flo     # accuracy end
   lumigraph flow a.png b.png --finest-level 1 --iterations 1 --out quick.flo  # speed end
 
-Writes OUT (.flo: forward flow, I0(x, y) <-> I1(x + dx, y + dy), pixels;
+Writes OUT (.flo: forward flow, I0(x, y) <-> I1(x + dx, y + dy), pixels,
+I0 the first image (the reference), I1 the second (the moving one);
 unknown = 1e10), OUT with .flo replaced by .prob.exr (one float channel Y in
 [0, 1]: for pyramid methods the confidence = texture x forward-backward
 consistency, for video-matching the Sand-Teller matching probability), and
@@ -42,9 +43,9 @@ def _levels(text: str):
     try:
         n = int(text)
     except ValueError:
-        raise InputError("--levels", f"expected 'auto' or an integer >= 1, got {text!r}") from None
+        raise InputError("levels", f"expected 'auto' or an integer >= 1, got {text!r}") from None
     if not 1 <= n <= 12:
-        raise InputError("--levels", f"expected 1..12 levels, got {n}")
+        raise InputError("levels", f"expected 1..12 levels, got {n}")
     return n
 
 
@@ -61,15 +62,15 @@ def _load(path: str):
 def _check_knobs(args):
     levels = _levels(args.levels)
     if args.window < 3 or args.window % 2 == 0:
-        raise InputError("--window", f"expected an odd size >= 3, got {args.window}")
+        raise InputError("window", f"expected an odd size >= 3, got {args.window}")
     if args.median_radius < 0 or args.median_radius > 64:
-        raise InputError("--median-radius", f"expected 0..64 pixels, got {args.median_radius}")
+        raise InputError("median_radius", f"expected 0..64 pixels, got {args.median_radius}")
     if args.finest_level < 0:
-        raise InputError("--finest-level", f"expected a level >= 0, got {args.finest_level}")
+        raise InputError("finest_level", f"expected a level >= 0, got {args.finest_level}")
     if levels != "auto" and args.finest_level >= levels:
-        raise InputError("--finest-level", f"must be below --levels ({levels}), got {args.finest_level}")
+        raise InputError("finest_level", f"must be below --levels ({levels}), got {args.finest_level}")
     if args.method == "video-matching" and (args.median_radius or args.finest_level):
-        raise InputError("--method", "video-matching takes no --median-radius or --finest-level "
+        raise InputError("method", "video-matching takes no --median-radius or --finest-level "
                                      "(pyramid methods only)")
     return levels
 
@@ -87,11 +88,11 @@ def _outputs(args):
         viz = check_output_path(args.viz, suffixes=(".png",)) if args.viz is not None else None
         return [out], [viz]
     if Path(args.out).suffix.lower() == ".flo":
-        raise InputError("--out", f"{len(args.images)} frames give {n} flows: name a folder, "
+        raise InputError("out", f"{len(args.images)} frames give {n} flows: name a folder, "
                                   f"not one file ({args.out})")
     out = check_output_dir(args.out)
     if args.viz is not None and Path(args.viz).suffix:
-        raise InputError("--viz", f"for a sequence name a folder for the pictures, not {args.viz}")
+        raise InputError("viz", f"for a sequence name a folder for the pictures, not {args.viz}")
     viz = check_output_dir(args.viz) if args.viz is not None else None
     return ([out / f"flow_{i:03d}.flo" for i in range(n)],
             [viz / f"flow_{i:03d}.png" if viz is not None else None for i in range(n)])
@@ -120,7 +121,10 @@ def _flow(args) -> int:
                                 f"{i0.shape[1]}x{i0.shape[0]}; flow needs images of one size")
         if im.ndim != i0.ndim or (im.ndim == 3 and im.shape[2] != i0.shape[2]):
             raise InputError(p, "has a different number of channels than " + args.images[0])
-    fn, _ = FLOW_METHODS[args.method]
+    method = FLOW_METHODS.resolve(args.method)
+    knobs = {"levels": levels, "window": args.window, "iterations": args.iterations,
+             "finest_level": args.finest_level, "median_radius": args.median_radius}
+    options = {k: v for k, v in knobs.items() if k in method.options}
     params = {"method": args.method, "levels": args.levels, "window": args.window,
               "iterations": args.iterations, "finest_level": args.finest_level,
               "median_radius": args.median_radius}
@@ -130,9 +134,7 @@ def _flow(args) -> int:
         a, b, out = args.images[i], args.images[i + 1], outs[i]
         say(args, f"flow ({args.method}): {a} -> {b}")
         t0 = time.perf_counter()
-        res = fn(frames[i], frames[i + 1], levels=levels, window=args.window,
-                 iterations=args.iterations, finest_level=args.finest_level,
-                 median_radius=args.median_radius)
+        res = method(frames[i], frames[i + 1], **options)
         dt = time.perf_counter() - t0
         info = res.info
         quality = {**info.get("quality", {}), "occluded_fraction": float(res.occluded.mean())}
@@ -171,16 +173,16 @@ def _flow(args) -> int:
 def main(argv=None, prog="lumigraph flow") -> int:
     from lumigraph.stereo.flow_methods import FLOW_METHODS
 
-    methods = "\n".join(f"  {k:<15} {d}" for k, (_, d) in FLOW_METHODS.items())
+    methods = FLOW_METHODS.help_text()
     p = make_parser(prog, "Dense correspondence between two images: optical flow (coarse-to-fine "
                     "pyramid) or Sand-Teller video matching.\n\nmethods:\n" + methods,
                     epilog=EPILOG)
     p.add_argument("images", nargs="+", metavar="IMAGE",
-                   help="two images (primary, secondary), or a sequence: flows between "
+                   help="two images (reference, moving), or a sequence: flows between "
                         "consecutive frames")
     p.add_argument("--out", required=True,
                    help="output flow file (.flo) for two images; a folder for a sequence")
-    p.add_argument("--method", choices=sorted(FLOW_METHODS), default="pyramid",
+    p.add_argument("--method", choices=FLOW_METHODS.names, default="pyramid",
                    help="flow method (default: pyramid)")
     p.add_argument("--levels", default="auto",
                    help="pyramid levels, or 'auto' from the estimated largest motion (default)")

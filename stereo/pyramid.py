@@ -6,9 +6,10 @@ construction of a mip map"). A flow field found at level l is carried to level
 l-1 by doubling its vectors and resampling it (pixel centres follow OpenCV's
 half-pixel rule, which is what 2x2 averaging implies), then refined there.
 
-Also here: warping an image by a flow, the forward-backward consistency test,
-a fast noise estimate, and the choice of pyramid depth from the largest
-expected motion (``levels="auto"``).
+Also here: warping an image by a flow, the forward-backward consistency test
+and the choice of pyramid depth from the largest expected motion
+(``levels="auto"``). Grey conversion and noise estimates are in
+:mod:`lumigraph.stereo.luma`.
 
 Examples
 --------
@@ -27,36 +28,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 MIN_LEVEL_SIDE = 12  # no pyramid level is made smaller than this (pixels)
-
-
-def to_gray(image: np.ndarray) -> np.ndarray:
-    """Float32 luminance-like gray in [0, 1] from uint8/uint16/float images.
-
-    Integer codes are scaled by their container's maximum; RGB is averaged
-    with Rec. 601 weights (only relative intensities matter to matching).
-
-    Examples
-    --------
-    >>> to_gray(np.full((2, 2, 3), 255, np.uint8)).max()
-    np.float32(1.0)
-    """
-    import cv2
-
-    a = np.asarray(image)
-    if a.ndim == 3 and a.shape[2] == 1:
-        a = a[..., 0]
-    if a.ndim == 3 and a.shape[2] not in (3, 4):
-        raise ValueError(f"image: expected (H, W) or (H, W, 3|4), got {a.shape}")
-    if a.ndim not in (2, 3):
-        raise ValueError(f"image: expected (H, W) or (H, W, 3|4), got {a.shape}")
-    scale = 1.0 / float(np.iinfo(a.dtype).max) if a.dtype.kind in "ui" else 1.0
-    f = np.ascontiguousarray(a[..., :3] if a.ndim == 3 else a, np.float32)
-    if f.ndim == 3:
-        # cv2's RGB->gray uses the same Rec. 601 weights, ~10x faster than numpy.
-        f = cv2.cvtColor(f, cv2.COLOR_RGB2GRAY)
-    if scale != 1.0:
-        f = f * np.float32(scale)
-    return np.ascontiguousarray(f, np.float32)
 
 
 def build_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:
@@ -128,7 +99,7 @@ def warp(image: np.ndarray, flow: np.ndarray, *, border: str = "replicate",
          cubic: bool = True) -> np.ndarray:
     """Sample ``image`` at ``x + flow(x)`` (bicubic, or bilinear with
     ``cubic=False``): with forward flow 0 -> 1,
-    ``warp(I1, flow)`` is frame 1 pulled back onto frame 0."""
+    ``warp(moving, flow)`` is the moving image pulled back onto the reference."""
     import cv2
 
     mode = {"replicate": cv2.BORDER_REPLICATE, "constant": cv2.BORDER_CONSTANT}[border]
@@ -166,18 +137,6 @@ def forward_backward(forward: np.ndarray, backward: np.ndarray) -> tuple[np.ndar
     return bad, np.sqrt(np.where(np.isfinite(err2), err2, np.inf)).astype(np.float32)
 
 
-def noise_sigma(gray: np.ndarray) -> float:
-    """Standard deviation of white noise in an image, from the mean absolute
-    response to a Laplacian difference mask that cancels smooth structure
-    (Immerkaer 1996, doi:10.1006/cviu.1996.0060, eq. 2)."""
-    import cv2
-
-    m = np.array([[1, -2, 1], [-2, 4, -2], [1, -2, 1]], np.float32)
-    r = cv2.filter2D(np.asarray(gray, np.float32), -1, m)[1:-1, 1:-1]
-    h, w = gray.shape[:2]
-    return float(math.sqrt(math.pi / 2) / (6 * (w - 2) * (h - 2)) * np.abs(r).sum())
-
-
 @dataclass(frozen=True)
 class LevelChoice:
     """The pyramid depth chosen, and why (every candidate with its score).
@@ -198,8 +157,8 @@ class LevelChoice:
                 "reach_px": self.reach_px, "candidates": [dict(c) for c in self.candidates]}
 
 
-def estimate_max_motion(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, list[dict]]:
-    """Largest motion between two gray images, px, from phase correlation of
+def estimate_max_motion(reference: np.ndarray, moving: np.ndarray) -> tuple[float, list[dict]]:
+    """Largest motion between two grey ``(H, W)`` images, reference to moving, px, from phase correlation of
     the whole frame and of 3x3 overlapping half-size tiles (each reaches a
     quarter of the frame). Peaks with a weak response are ignored.
 
@@ -214,12 +173,12 @@ def estimate_max_motion(gray0: np.ndarray, gray1: np.ndarray) -> tuple[float, li
     """
     import cv2
 
-    h, w = gray0.shape
+    h, w = reference.shape
     f = 1
     while max(h, w) / f > 160:  # half resolution and below keep this cheap
         f *= 2
-    a = cv2.resize(gray0, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else gray0
-    b = cv2.resize(gray1, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else gray1
+    a = cv2.resize(reference, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else reference
+    b = cv2.resize(moving, (w // f, h // f), interpolation=cv2.INTER_AREA) if f > 1 else moving
     hh, ww = a.shape
     tiles = [(0, 0, hh, ww)]
     th, tw = hh // 2, ww // 2

@@ -1,8 +1,8 @@
 """Coarse-to-fine pyramid optical flow (reference §5.1.3, eq. 5.1, Fig. 5.5).
 
-At every pyramid level, from the top, frame 1 is warped by the current flow
-and the windowed sum of squared differences of eq. 5.1 is minimised by its
-Gauss-Newton (Lucas-Kanade) step: with the structure tensor
+At every pyramid level, from the top, the moving image is warped onto the
+reference by the current flow and the windowed sum of squared differences of
+eq. 5.1 is minimised by its Gauss-Newton (Lucas-Kanade) step: with the structure tensor
 ``J = sum_w [Ix^2, IxIy; IxIy, Iy^2]`` and ``b = sum_w It [Ix, Iy]`` the update
 is ``-J^-1 b`` (Lucas & Kanade 1981; Bouguet's pyramidal form). The refined
 field is doubled and copied to the next finer level (Fig. 5.5, left).
@@ -29,7 +29,7 @@ Examples
 >>> import cv2
 >>> rng = np.random.default_rng(0)
 >>> a = cv2.GaussianBlur(rng.random((64, 80)).astype(np.float32), (0, 0), 2)
->>> b = np.roll(a, (1, 3), axis=(0, 1))          # frame 1 = frame 0 moved by (3, 1)
+>>> b = np.roll(a, (1, 3), axis=(0, 1))          # moving = reference shifted by (3, 1)
 >>> r = pyramid_flow(a, b, levels="auto")
 >>> np.round(np.median(r.flow[8:-8, 8:-8], axis=(0, 1)), 1).tolist(), r.levels
 ([3.0, 1.0], 3)
@@ -42,13 +42,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.stereo.luma import luma_normalised, noise_sigma_immerkaer
 from lumigraph.stereo.pyramid import (
     build_pyramid,
     choose_levels,
     estimate_max_motion,
     forward_backward,
-    noise_sigma,
-    to_gray,
     upsample_flow,
     warp,
 )
@@ -70,7 +69,8 @@ class FlowResult:
     Attributes
     ----------
     flow : ndarray, float32, ``(H, W, 2)``
-        Forward flow (dx, dy) in pixels: ``I0(x, y) <-> I1(x + dx, y + dy)``.
+        Forward flow (dx, dy) in pixels, reference to moving:
+        ``reference(x, y) <-> moving(x + dx, y + dy)``.
     confidence : ndarray, float32, ``(H, W)``
         In [0, 1]: texture confidence times forward-backward consistency for
         pyramid flow; the matching probability for video matching.
@@ -294,7 +294,7 @@ def _one_way(g0, g1, *, levels, window, iterations, alpha, sweeps, radius, fines
                                   if median_radius > 0 else 0)
     if flow.shape[:2] != g0.shape:
         # Stopped early (DIS's "finest scale"): bilinear upsampling to full
-        # size; the texture confidence then comes from frame 0's own
+        # size; the texture confidence then comes from the reference's own
         # structure tensor at full size (gradients not averaged: noise
         # enters J twice as strongly, hence the factor 2 for lam_noise).
         flow = upsample_flow(flow, g0.shape)
@@ -313,18 +313,21 @@ def _guide_pyramid(image, levels):
     return [np.clip(np.rint(p * 255), 0, 255).astype(np.uint8) for p in build_pyramid(f, levels)]
 
 
-def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = "auto",
+def pyramid_flow(reference: np.ndarray, moving: np.ndarray, *, levels: int | str = "auto",
                  max_motion_px: float | None = None, method: str = "local", window: int = 9,
                  iterations: int = 3, finest_iterations: int | None = None,
                  finest_level: int = 0, alpha: float = 2e-3, sweeps: int = 20,
                  median_radius: int = 0,
                  consistency: bool = True) -> FlowResult:
-    """Forward optical flow from ``image0`` to ``image1`` by coarse-to-fine warping.
+    """Forward optical flow from ``reference`` to ``moving`` by coarse-to-fine warping.
 
     Parameters
     ----------
-    image0, image1 : ndarray, ``(H, W)`` or ``(H, W, 3)``
-        uint8/uint16 codes or float in [0, 1]; same shape. Converted to gray.
+    reference, moving : ndarray, ``(H, W)`` or ``(H, W, 3)``
+        The image the flow is given on, and the image it points into
+        (``reference(x) <-> moving(x + flow(x))``). uint8/uint16 codes or
+        float in [0, 1]; same shape. Converted to luma
+        (:func:`lumigraph.stereo.luma.luma_normalised`).
     levels : int or "auto"
         Pyramid levels. ``"auto"``: the fewest levels whose top level leaves at
         most ``window // 2`` px of motion, from ``max_motion_px`` when given,
@@ -370,11 +373,11 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
         Different shapes, empty images, or bad options (named, with the value).
     """
     t0 = time.perf_counter()
-    a, b = np.asarray(image0), np.asarray(image1)
+    a, b = np.asarray(reference), np.asarray(moving)
     if a.shape != b.shape:
-        raise ValueError(f"image1: expected the shape of image0 {a.shape}, got {b.shape}")
+        raise ValueError(f"moving: expected the shape of reference {a.shape}, got {b.shape}")
     if a.size == 0 or min(a.shape[:2]) < 4:
-        raise ValueError(f"image0: expected at least 4x4 pixels, got {a.shape}")
+        raise ValueError(f"reference: expected at least 4x4 pixels, got {a.shape}")
     if method not in METHODS:
         raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
     if window < 3 or window % 2 == 0:
@@ -389,7 +392,7 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
         raise ValueError(f"finest_level: expected >= 0, got {finest_level}")
     if median_radius < 0:
         raise ValueError(f"median_radius: expected >= 0, got {median_radius}")
-    g0, g1 = to_gray(a), to_gray(b)
+    g0, g1 = luma_normalised(a), luma_normalised(b)
     if a.dtype.kind == "f":  # float input is taken as already in [0, 1]
         g0, g1 = g0.astype(np.float32), g1.astype(np.float32)
     reach = REACH_PX
@@ -420,7 +423,7 @@ def pyramid_flow(image0: np.ndarray, image1: np.ndarray, *, levels: int | str = 
     # Texture confidence: lambda_min of J against that of pure noise. With
     # central differences a noise of sigma gives E[Ix^2] = sigma^2 / 2 per
     # image, and the averaged gradient halves that again: sigma^2 / 4.
-    sigma = max(noise_sigma(g0), 1.0 / 1024)
+    sigma = max(noise_sigma_immerkaer(g0), 1.0 / 1024)
     lam_noise = sigma ** 2 / 4
     tex = (lam / (lam + 25 * lam_noise)).astype(np.float32)
     occluded = np.zeros(g0.shape, bool)

@@ -2,7 +2,9 @@
 as reference §5.1.4 (Figs. 5.6, 5.7) describes it.
 
 Correspondence between two takes of a similar scene that differ in lighting,
-in added or removed objects and by a small camera shift:
+in added or removed objects and by a small camera shift. The paper's
+*primary* image is our ``reference`` (the field is given on its pixels), its
+*secondary* our ``moving``:
 
 1. **Pixel matching** against the 3x3 maximum and minimum images of the
    secondary image (Fig. 5.7): the cost of offset (u, v) at a pixel is
@@ -51,12 +53,11 @@ import time
 
 import numpy as np
 
+from lumigraph.stereo.luma import luma_normalised, noise_sigma_immerkaer
 from lumigraph.stereo.pyramid import (
     build_pyramid,
     choose_levels,
     estimate_max_motion,
-    noise_sigma,
-    to_gray,
     upsample_flow,
 )
 from lumigraph.stereo.pyramid_flow import FlowResult
@@ -91,7 +92,7 @@ def _as_float(image: np.ndarray) -> np.ndarray:
 INITS = ("pyramid", "none")
 
 
-def invariant_pyramid_flow(primary: np.ndarray, secondary: np.ndarray, *,
+def invariant_pyramid_flow(reference: np.ndarray, moving: np.ndarray, *,
                            levels: int | str = "auto", max_motion_px: float | None = None):
     """A brightness-invariant start for the matching: coarse-to-fine pyramid
     flow (:func:`stereo.pyramid_flow.pyramid_flow`, with its colour-guided
@@ -108,8 +109,8 @@ def invariant_pyramid_flow(primary: np.ndarray, secondary: np.ndarray, *,
     """
     from lumigraph.stereo.pyramid_flow import pyramid_flow
 
-    n = [np.clip(0.5 + normalise_contrast(to_gray(x)[..., None])[..., 0] / 8, 0, 1)
-         .astype(np.float32) for x in (primary, secondary)]
+    n = [np.clip(0.5 + normalise_contrast(luma_normalised(x)[..., None])[..., 0] / 8, 0, 1)
+         .astype(np.float32) for x in (reference, moving)]
     return pyramid_flow(n[0], n[1], levels=levels, max_motion_px=max_motion_px, median_radius=10,
                         consistency=False)
 
@@ -167,7 +168,7 @@ def _features(gray: np.ndarray, *, window: int = 5) -> np.ndarray:
     box = (window, window)
     jxx, jxy, jyy = (cv2.boxFilter(a, -1, box) for a in (gx * gx, gx * gy, gy * gy))
     lam = 0.5 * (jxx + jyy - np.sqrt((jxx - jyy) ** 2 + 4 * jxy * jxy))
-    sigma = max(noise_sigma(gray), 1.0 / 1024)
+    sigma = max(noise_sigma_immerkaer(gray), 1.0 / 1024)
     return lam > 25 * sigma * sigma / 2
 
 
@@ -260,17 +261,19 @@ def _match(n0, mx1, mn1, field, *, radius, region, prior_px):
     return field + off, best, mean
 
 
-def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | str = "auto",
+def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | str = "auto",
                    max_motion_px: float | None = None, region: int = 5,
                    regression_sigma: float = 9.0, max_iterations: int = 6, tol_px: float = 0.02,
                    radius: int = 2, init: str = "pyramid",
                    initial_flow: np.ndarray | None = None) -> FlowResult:
-    """Sand-Teller correspondence field from ``primary`` to ``secondary``.
+    """Sand-Teller correspondence field from ``reference`` to ``moving``.
 
     Parameters
     ----------
-    primary, secondary : ndarray, ``(H, W)`` or ``(H, W, 3)``
-        uint8/uint16 codes or float; same shape. Colour channels are matched
+    reference, moving : ndarray, ``(H, W)`` or ``(H, W, 3)``
+        The paper's primary and secondary takes: the field is given on the
+        reference's pixels and points into the moving image. uint8/uint16
+        codes or float; same shape. Colour channels are matched
         independently and their costs summed.
     levels : int or "auto"
         Pyramid levels; ``"auto"`` from ``max_motion_px`` or a phase-
@@ -298,18 +301,18 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
     Returns
     -------
     FlowResult
-        ``flow`` the correspondence field ``(H, W, 2)`` float32 (primary ->
-        secondary), ``confidence`` the per-pixel matching probability of that
+        ``flow`` the correspondence field ``(H, W, 2)`` float32 (reference ->
+        moving), ``confidence`` the per-pixel matching probability of that
         field in [0, 1], ``occluded`` where it is below 0.5.
     """
     import cv2
 
     t0 = time.perf_counter()
-    a, b = np.asarray(primary), np.asarray(secondary)
+    a, b = np.asarray(reference), np.asarray(moving)
     if a.shape != b.shape:
-        raise ValueError(f"secondary: expected the shape of primary {a.shape}, got {b.shape}")
+        raise ValueError(f"moving: expected the shape of reference {a.shape}, got {b.shape}")
     if a.size == 0 or min(a.shape[:2]) < 8:
-        raise ValueError(f"primary: expected at least 8x8 pixels, got {a.shape}")
+        raise ValueError(f"reference: expected at least 8x8 pixels, got {a.shape}")
     if region < 1 or region % 2 == 0:
         raise ValueError(f"region: expected an odd size >= 1, got {region}")
     if regression_sigma <= 0:
@@ -317,7 +320,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
     if init not in INITS:
         raise ValueError(f"init: expected one of {INITS}, got {init!r}")
     fa, fb = _as_float(a), _as_float(b)
-    g0 = to_gray(fa)
+    g0 = luma_normalised(fa)
     start_result = None
     if init == "pyramid" and initial_flow is None:
         start_result = invariant_pyramid_flow(fa, fb, levels=levels, max_motion_px=max_motion_px)
@@ -327,7 +330,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         levels = 1
     if levels == "auto":
         if max_motion_px is None:
-            est, _tiles = estimate_max_motion(g0, to_gray(fb))
+            est, _tiles = estimate_max_motion(g0, luma_normalised(fb))
             source = "estimated"
         else:
             est, source = float(max_motion_px), "given"
@@ -353,7 +356,7 @@ def video_matching(primary: np.ndarray, secondary: np.ndarray, *, levels: int | 
         n0 = normalise_contrast(p0[lvl].reshape(p0[lvl].shape[:2] + (-1,)))
         n1 = normalise_contrast(p1[lvl].reshape(p1[lvl].shape[:2] + (-1,)))
         mx1, mn1 = _minmax(n1)
-        feat = _features(to_gray(p0[lvl]))
+        feat = _features(luma_normalised(p0[lvl]))
         top = lvl == n_levels - 1
         r = radius
         if top and est is not None:

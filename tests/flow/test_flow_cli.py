@@ -147,3 +147,12 @@ def test_sequence_bad_outputs(tmp_path):
                                  tmp_path / "out.png"), "--viz")
     assert_clean_error(lumigraph("flow", frames[0], "--out", tmp_path / "out.flo"), "two images")
     assert _nothing_written(tmp_path)
+
+
+def test_method_choices_and_help_come_from_the_registry():
+    from lumigraph.stereo.flow_methods import FLOW_METHODS
+
+    r = lumigraph("flow", "--help")
+    assert r.returncode == 0 and FLOW_METHODS.help_text() in r.stdout
+    r = lumigraph("flow", "a.png", "b.png", "--out", "x.flo", "--method", "nope")
+    assert r.returncode == 2 and all(n in r.stderr for n in FLOW_METHODS.names)

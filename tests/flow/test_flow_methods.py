@@ -63,11 +63,11 @@ def test_bad_options_name_the_argument(kw, msg):
 
 
 def test_shape_mismatch_and_empty():
-    with pytest.raises(ValueError, match="image1"):
+    with pytest.raises(ValueError, match="moving"):
         pyramid_flow(np.zeros((20, 20)), np.zeros((20, 21)))
-    with pytest.raises(ValueError, match="image0"):
+    with pytest.raises(ValueError, match="reference"):
         pyramid_flow(np.zeros((0, 0)), np.zeros((0, 0)))
-    with pytest.raises(ValueError, match="secondary"):
+    with pytest.raises(ValueError, match="moving"):
         video_matching(np.zeros((20, 20)), np.zeros((21, 20)))
 
 
@@ -144,3 +144,24 @@ def test_colour_coding_directions():
     c = flow_to_colour(f).astype(int)
     assert len({tuple(x) for x in c[0]}) == 4
     assert c[0, 0, 0] > c[0, 0, 2] and c[0, 1, 2] > c[0, 1, 0]  # Middlebury: right red, left cyan-blue
+
+
+def test_flow_registry_options_are_keywords_of_the_callables():
+    import inspect
+
+    from lumigraph.stereo.flow_methods import FLOW_METHODS
+
+    assert FLOW_METHODS.names == ("pyramid", "pyramid-dense", "video-matching")
+    for m in FLOW_METHODS.values():
+        params = inspect.signature(m.load()).parameters
+        assert set(m.options) | set(m.bound) <= set(params), m.name
+    a = np.random.default_rng(0).random((24, 32)).astype(np.float32)
+    assert np.array_equal(FLOW_METHODS["pyramid-dense"](a, a, levels=1).flow,
+                          pyramid_flow(a, a, levels=1, method="dense").flow)
+
+
+def test_role_names_reference_and_moving():
+    a = np.random.default_rng(1).random((24, 32)).astype(np.float32)
+    b = np.roll(a, 1, axis=1)
+    kw = pyramid_flow(reference=a, moving=b, levels=2, consistency=False).flow
+    assert np.array_equal(kw, pyramid_flow(a, b, levels=2, consistency=False).flow)

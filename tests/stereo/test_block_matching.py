@@ -5,7 +5,8 @@ import pytest
 from scipy.ndimage import gaussian_filter
 
 from lumigraph.capture.render import render
-from lumigraph.stereo.block_matching import match, noise_sigma, to_gray
+from lumigraph.stereo.block_matching import match
+from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
 
 
 def test_rendered_pair_accuracy_bounded_on_both_sides():
@@ -60,7 +61,7 @@ def test_noise_estimate_on_known_noise():
     rng = np.random.default_rng(4)
     y, x = np.mgrid[0:120, 0:160]
     img = 80 + 0.3 * x + 40 * (y > 60) + rng.normal(0, 3, (120, 160))
-    assert 2.7 < noise_sigma(img.astype(np.float32)) < 3.3
+    assert 2.7 < noise_sigma_smooth_blocks(img.astype(np.float32)) < 3.3
 
 
 @pytest.mark.parametrize("kwargs, fragment", [
@@ -96,7 +97,7 @@ def test_integer_and_float_paths_agree(window, max_disp, channels):
     s = render("stereo-pair", size=(320, 120) if max_disp > 100 else (160, 120))
     a = match(s.images[0], s.images[1], max_disp=max_disp, window=window, channels=channels)
     if channels == "luma":
-        fl, fr = to_gray(s.images[0]), to_gray(s.images[1])
+        fl, fr = luma_codes(s.images[0]), luma_codes(s.images[1])
     else:
         fl, fr = s.images[0].astype(np.float32), s.images[1].astype(np.float32)
     b = match(fl, fr, max_disp=max_disp, window=window, channels=channels)
