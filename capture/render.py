@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from lumigraph.capture.artifact import dumps_json, write_json
+from lumigraph.capture.artifact import atomic_path, dumps_json, write_json
 from lumigraph.capture.errors import InputError
 
 # Modules that contribute scenes (each defines SCENES). A stage that needs a new
@@ -186,9 +186,8 @@ class RenderedScene:
             bd = self.bit_depth if im.dtype == np.uint16 else None
             write_image(folder / name, im, bit_depth=bd)
         for name, arr in self.gt_arrays.items():
-            tmp = folder / "gt" / f".{name}.tmp.npy"
-            np.save(tmp, np.asarray(arr), allow_pickle=False)
-            os.replace(tmp, folder / "gt" / f"{name}.npy")
+            with atomic_path(folder / "gt" / f"{name}.npy") as tmp:
+                np.save(tmp, np.asarray(arr), allow_pickle=False)
         write_json(folder / "gt.json", {"schema": GT_SCHEMA, "schema_version": 1,
                                         "scene": self.scene, "params": self.params,
                                         "arrays": sorted(self.gt_arrays), **self.gt})
