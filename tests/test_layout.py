@@ -77,6 +77,19 @@ def test_wheel_installs_only_the_lumigraph_namespace(wheel):
     assert any(n.startswith("lumigraph/stereo/_ssd") and n.endswith(".so") for n in names)
 
 
+def test_console_script_runs_the_shell(wheel):
+    # the `lumigraph` script a user (and the Makefile) runs is lumigraph.command:main
+    with zipfile.ZipFile(wheel) as z:
+        (ep,) = [n for n in z.namelist() if n.endswith(".dist-info/entry_points.txt")]
+        lines = z.read(ep).decode().splitlines()
+    scripts = lines[lines.index("[console_scripts]") + 1:]
+    target = next(ln.split("=", 1)[1].strip() for ln in scripts if ln.split("=")[0].strip() == "lumigraph")
+    module, attr = target.split(":")
+    from lumigraph import command
+
+    assert getattr(importlib.import_module(module), attr) is command.main
+
+
 def test_installed_wheel_imports_through_namespace_only(wheel, tmp_path):
     # Unpacked into its own folder and run from elsewhere: what a user of
     # `pip install lumigraph` sees, with no checkout on the path.
