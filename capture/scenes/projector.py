@@ -347,12 +347,9 @@ def _mc_noise(size, *, mirror, seed, spp, glob):
                     "between stack and truth"}
 
 
-SCENES = {
+SPECS = {
     "projector": SceneSpec(
-        "projector",
-        "projector-lit corner with interreflection and a scattering volume (Mitsuba); "
-        "checker/sinusoid/stripe/occluder stacks; direct/global truth",
-        render_projector, (128, 96),
+        "projector", (128, 96),
         (Option("alpha", float, 0.5, "lit fraction of the checker-method patterns",
                 low=0.0, high=1.0, open_low=True, open_high=True),
          Option("b", float, 0.0, "projector black level (off/on light ratio)",
