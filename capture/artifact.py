@@ -4,6 +4,11 @@ Every file a stage produces is written to a temporary file in the same folder
 and moved into place with ``os.replace``, sidecar first and primary last, so an
 interrupted run never leaves a half-written artifact for ``make`` to trust.
 
+Permissions: ``tempfile.mkstemp`` creates its file with mode 0600 whatever the
+umask; before the move the file gets ``0o666 & ~umask`` (:func:`file_mode`),
+the mode ``open()`` would have given it, so a shared render farm can read what
+a stage wrote when the umask says so.
+
 Examples
 --------
 >>> import tempfile, pathlib
@@ -23,6 +28,7 @@ import math
 import os
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -32,6 +38,40 @@ import numpy as np
 META_SCHEMA_VERSION = 1
 _VERSIONED = ("numpy", "scipy", "cv2", "OpenEXR", "rawpy", "skimage", "torch", "kornia",
               "pycolmap", "mitsuba", "PIL", "colour_hdri")
+
+
+_UMASK_LOCK = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process's umask, read without changing it where the system allows.
+
+    The umask can only be *set* portably (``os.umask`` returns the old value
+    while installing a new one), and a set-then-restore pair is not
+    thread-safe: a file another thread creates in between gets the temporary
+    mask. So: on Linux read it from ``/proc/self/status`` (``Umask:``, since
+    Linux 4.7), which changes nothing; elsewhere swap it under a module lock,
+    which keeps our own writers from racing each other (and leaves a window
+    only for foreign code creating files at that instant). It is read on every
+    write, not cached at import, so a umask set later (a daemon, a test) counts.
+    """
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    with _UMASK_LOCK:
+        mask = os.umask(0o077)
+        os.umask(mask)
+    return mask
+
+
+def file_mode() -> int:
+    """The mode of a newly written artifact: ``0o666 & ~umask`` (what ``open()``
+    gives a new file), e.g. 0644 under umask 022 and 0600 under 077."""
+    return 0o666 & ~current_umask()
 
 
 def meta_path(path: str | os.PathLike) -> Path:
@@ -44,7 +84,8 @@ def meta_path(path: str | os.PathLike) -> Path:
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` (same suffix, so writers that
     choose the format from the extension still work); on success it replaces
-    ``path``, on any exception it is removed and ``path`` is left untouched."""
+    ``path`` with the mode the umask gives (:func:`file_mode`), on any
+    exception it is removed and ``path`` is left untouched."""
     final = Path(path)
     final.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".tmp{final.suffix}",
@@ -53,6 +94,9 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        # mkstemp made it 0600; a writer may also have replaced the file: set
+        # the mode on whatever is there now, just before it becomes visible.
+        os.chmod(tmp_path, file_mode())
         os.replace(tmp_path, final)
     finally:
         if tmp_path.exists():

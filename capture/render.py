@@ -1,11 +1,15 @@
 """Synthetic scenes with exact ground truth: the registry, the result type, the cache.
 
 A scene is a function ``render_fn(*, size, seed, rng, **options) -> RenderedScene``
-in a module of ``capture.scenes``; the module lists its scenes in a
-``SCENES: dict[str, SceneSpec]``. :func:`render` validates the options against
-the spec, seeds the generator, and caches results by (scene, options, size,
-seed, scene version), in memory and on disk (``$LUMIGRAPH_CACHE``, default
-``~/.cache/lumigraph``), so tests can build their inputs on the fly.
+in a module of ``lumigraph.capture.scenes``. :data:`SCENES` is the one list of
+scenes: a :class:`~lumigraph.capture.registry.Registry` mapping the name
+``lumigraph render NAME`` takes to its renderer and a one-line summary, the
+same shape as every stage's ``--method`` registry. The scene's data (default
+size, the table of its options, cache version) is a :class:`SceneSpec` in its
+module's ``SPECS``, beside the renderer. :func:`render` validates the options
+against the spec, seeds the generator, and caches results by (scene, options,
+size, seed, scene version), in memory and on disk (``$LUMIGRAPH_CACHE``,
+default ``~/.cache/lumigraph``), so tests can build their inputs on the fly.
 
 A rendered folder holds the captured images exactly as a camera would deliver
 them (integer code values), a ``stack.json`` that every stage command accepts
@@ -32,21 +36,65 @@ from typing import Any
 
 import numpy as np
 
-from lumigraph.capture.artifact import dumps_json, write_json
+from lumigraph.capture.artifact import atomic_path, dumps_json, write_json
 from lumigraph.capture.errors import InputError
+from lumigraph.capture.registry import Method, Registry
 
-# Modules that contribute scenes (each defines SCENES). A stage that needs a new
-# kind of input adds a module here.
-SCENE_MODULES = (
-    "lumigraph.capture.scenes.sample",
-    "lumigraph.capture.scenes.boards",
-    "lumigraph.capture.scenes.brackets",
-    "lumigraph.capture.scenes.flow",
-    "lumigraph.capture.scenes.stereo",
-    "lumigraph.capture.scenes.lightfield",
-    "lumigraph.capture.scenes.projector",
-    "lumigraph.capture.scenes.model_stereo",
-)
+_S = "lumigraph.capture.scenes."
+
+# Every scene, by its command-line name: the renderer it runs (imported on
+# first use) and the summary `lumigraph render --list` prints. A new scene is a
+# line here and its SceneSpec (size, options, version) in its module's SPECS.
+SCENES = Registry("scene", [
+    Method("sample", _S + "sample:render_sample",
+           "linear radiance ramp on an ideal linear sensor (plumbing smoke test)"),
+    Method("boards", _S + "boards:render_boards",
+           "checkerboard/ChArUco calibration views, known K and distortion (fx != fy, "
+           "off-centre principal point)"),
+    Method("boards-stereo", _S + "boards:render_boards_stereo",
+           "a stereo rig (two cameras, known R, T) viewing calibration boards"),
+    Method("bracket", _S + "brackets:render_bracket",
+           "HDR room (>= 1e4:1) bracketed through a known response, exact radiance"),
+    Method("bracket_video", _S + "brackets:render_bracket_video",
+           "HDR video: alternating short/long exposures, camera pan and a moving light; "
+           "radiance per frame"),
+    Method("flow", _S + "flow:render_flow",
+           "2-frame sequence: textured plane under camera motion (homography) plus an "
+           "independently moving ellipse; exact forward flow, occlusion mask"),
+    Method("flow-large", _S + "flow:render_flow",
+           "as flow with large displacement (background 44 px, object 52 px per frame)"),
+    Method("flow-textureless", _S + "flow:render_flow",
+           "as flow with a flat (textureless) region in the background"),
+    Method("flow-brightness", _S + "flow:render_flow",
+           "as flow with a brightness/contrast change: gain 0.6, offset +0.06 and an "
+           "illumination gradient in frame 1"),
+    Method("flow-video", _S + "flow:render_flow",
+           "Sand-Teller video matching: a second take with a small camera shift, different "
+           "lighting and an added object"),
+    Method("flow-sequence", _S + "flow:render_flow",
+           "5-frame sequence of the flow scene (consecutive forward flows)"),
+    Method("stereo-pair", _S + "stereo:render_pair",
+           "left/right pair (rectified or not) of textured planes and a sphere: exact depth, "
+           "disparity, occlusion mask and rig"),
+    Method("stereo-views", _S + "stereo:render_views",
+           "N views on an arc around textured boxes and a sphere (known poses) for structure "
+           "from motion"),
+    Method("lightfield-array", _S + "lightfield:render_array",
+           "U x V camera-array light field of textured planes at several depths (occlusions); "
+           "GT views, depth, exact synthetic-aperture and thin-lens refocus images"),
+    Method("lightfield-lenslet", _S + "lightfield:render_lenslet",
+           "plenoptic raw + white image, square microlens grid rotated 1.5 deg; size = "
+           "microlens count; GT centres, grid, sub-aperture views"),
+    Method("lightfield-lenslet-hex", _S + "lightfield:render_lenslet",
+           "plenoptic raw + white image, hexagonal microlens grid rotated 1.5 deg; GT centres, "
+           "views at lattice positions and on the rectangular grid"),
+    Method("projector", _S + "projector:render_projector",
+           "projector-lit corner with interreflection and a scattering volume (Mitsuba); "
+           "checker/sinusoid/stripe/occluder stacks; direct/global truth"),
+    Method("model-stereo", _S + "model_stereo:render_facade",
+           "wide-baseline key/offset views of a facade with pillars and recessed windows, with "
+           "its rough model (the wall plane) for model-based stereo"),
+])
 GT_SCHEMA = "lumigraph.gt"
 
 
@@ -107,15 +155,25 @@ class Option:
 
 @dataclass(frozen=True)
 class SceneSpec:
-    """A registered scene: its renderer, default size, options and description."""
+    """A scene's data: default size, options and cache version. Its renderer and
+    summary are its entry in :data:`SCENES`; the spec lives in ``SPECS`` of the
+    renderer's module."""
 
     name: str
-    summary: str
-    render_fn: Callable[..., RenderedScene]
     default_size: tuple[int, int]
     options: tuple[Option, ...] = ()
     version: int = 1  # bump when the renderer's output changes (invalidates caches)
     min_size: tuple[int, int] = (16, 16)
+
+    @property
+    def summary(self) -> str:
+        """The one-line description (the scene's help in :data:`SCENES`)."""
+        return SCENES[self.name].help
+
+    @property
+    def render_fn(self) -> Callable[..., RenderedScene]:
+        """The renderer (imported on first use)."""
+        return SCENES[self.name].load()
 
     def parse_options(self, given: dict[str, Any]) -> dict[str, Any]:
         known = {o.name: o for o in self.options}
@@ -186,9 +244,8 @@ class RenderedScene:
             bd = self.bit_depth if im.dtype == np.uint16 else None
             write_image(folder / name, im, bit_depth=bd)
         for name, arr in self.gt_arrays.items():
-            tmp = folder / "gt" / f".{name}.tmp.npy"
-            np.save(tmp, np.asarray(arr), allow_pickle=False)
-            os.replace(tmp, folder / "gt" / f"{name}.npy")
+            with atomic_path(folder / "gt" / f"{name}.npy") as tmp:
+                np.save(tmp, np.asarray(arr), allow_pickle=False)
         write_json(folder / "gt.json", {"schema": GT_SCHEMA, "schema_version": 1,
                                         "scene": self.scene, "params": self.params,
                                         "arrays": sorted(self.gt_arrays), **self.gt})
@@ -217,26 +274,26 @@ class RenderedScene:
         return cls(scene, params, images, names, stack, gt, arrays)
 
 
+def _spec(method: Method) -> SceneSpec:
+    module = importlib.import_module(method.target.split(":")[0])
+    spec = module.SPECS[method.name]
+    if spec.name != method.name:
+        raise ValueError(f"SPECS[{method.name!r}] in {module.__name__} is named {spec.name!r}")
+    return spec
+
+
 def scenes() -> dict[str, SceneSpec]:
-    """All registered scenes, by name."""
-    out: dict[str, SceneSpec] = {}
-    for mod_name in SCENE_MODULES:
-        try:
-            mod = importlib.import_module(mod_name)
-        except ModuleNotFoundError as e:
-            if e.name == mod_name:  # a stage's scene module not written yet
-                continue
-            raise
-        out.update(mod.SCENES)
-    return out
+    """All registered scenes' specs, by name (imports every scene module)."""
+    return {name: _spec(method) for name, method in SCENES.items()}
 
 
 def get_scene(name: str) -> SceneSpec:
-    all_scenes = scenes()
-    if name not in all_scenes:
-        raise InputError(name, f"unknown scene; choose from {', '.join(sorted(all_scenes))} "
+    """The spec of scene ``name`` (imports its module only); InputError listing
+    the scenes when there is none of that name."""
+    if name not in SCENES:
+        raise InputError(name, f"unknown scene; choose from {', '.join(sorted(SCENES))} "
                                "(see 'lumigraph render --list')")
-    return all_scenes[name]
+    return _spec(SCENES[name])
 
 
 def cache_dir() -> Path:
@@ -289,7 +346,7 @@ def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
         except Exception:  # a damaged cache entry is re-rendered, never trusted
             pass
     rng = np.random.default_rng(seed)
-    result = spec.render_fn(size=(w, h), seed=seed, rng=rng, **opts)
+    result = SCENES[name](size=(w, h), seed=seed, rng=rng, **opts)
     result = RenderedScene(result.scene, {"size": [w, h], "seed": seed, **opts}, result.images,
                            result.image_names, result.stack, result.gt, result.gt_arrays)
     if cache:

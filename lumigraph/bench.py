@@ -6,19 +6,29 @@ from __future__ import annotations
 from pathlib import Path
 
 from lumigraph.capture.commandline import make_parser, run, say
+from lumigraph.capture.registry import Method, Registry
 
-# stage name -> module providing stage(*, quick) -> Stage (the harness is
-# lumigraph.capture.bench; each stage's bench module sits in its own folder).
-BENCH_STAGES: dict[str, str] = {
-    "io": "lumigraph.capture.bench_io",
-    "render": "lumigraph.capture.bench_render",
-    "calib": "lumigraph.calib.bench",
-    "hdr": "lumigraph.hdr.bench",
-    "flow": "lumigraph.stereo.bench_flow",
-    "stereo": "lumigraph.stereo.bench_stereo",
-    "lightfield": "lumigraph.lightfield.bench",
-    "separation": "lumigraph.separation.bench",
-}
+# bench stage name -> its stage(*, quick) -> Stage and a one-line summary, in the
+# one registry shape (the harness is lumigraph.capture.bench; each stage's bench
+# module sits in its own folder). A new bench stage is one line here.
+BENCH_STAGES = Registry("bench stage", [
+    Method("io", "lumigraph.capture.bench_io:stage",
+           "write+read round trips of linear float images (EXR, PFM; OpenCV TIFF, RGBE)"),
+    Method("render", "lumigraph.capture.bench_render:stage",
+           "render time of every synthetic scene at its default test size"),
+    Method("calib", "lumigraph.calib.bench:stage",
+           "board detection and calibration, ours beside bare OpenCV"),
+    Method("hdr", "lumigraph.hdr.bench:stage",
+           "response recovery and merging beside OpenCV, colour-hdri and pfstools"),
+    Method("flow", "lumigraph.stereo.bench_flow:stage",
+           "optical flow and video matching against exact ground truth"),
+    Method("stereo", "lumigraph.stereo.bench_stereo:stage",
+           "block matching against OpenCV, triangulation, SfM"),
+    Method("lightfield", "lumigraph.lightfield.bench:stage",
+           "refocusing, lenslet decoding, light-slab rendering, depth"),
+    Method("separation", "lumigraph.separation.bench:stage",
+           "Nayar 2006 separation against Mitsuba ground truth"),
+])
 
 EPILOG = """\
 examples:
@@ -65,19 +75,18 @@ def _bench(args) -> int:
 
 def load_stage(name: str, *, quick: bool = False):
     """The :class:`lumigraph.capture.bench.Stage` of bench stage ``name``."""
-    import importlib
-
     from lumigraph.capture.errors import InputError
 
     if name not in BENCH_STAGES:
         raise InputError(name, f"unknown bench stage; choose from {', '.join(BENCH_STAGES)}")
+    method = BENCH_STAGES[name]
     try:
-        mod = importlib.import_module(BENCH_STAGES[name])
+        stage = method.load()
     except ModuleNotFoundError as e:
-        if e.name == BENCH_STAGES[name]:
+        if e.name == method.target.split(":")[0]:
             raise InputError(name, "this stage has no bench yet") from None
         raise
-    return mod.stage(quick=quick)
+    return stage(quick=quick)
 
 
 def main(argv=None, prog="lumigraph bench") -> int:

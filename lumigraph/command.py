@@ -16,30 +16,34 @@ lumigraph ...
 
 from __future__ import annotations
 
-import importlib
 import sys
 from collections.abc import Callable, Sequence
 
 from lumigraph.capture.commandline import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE
+from lumigraph.capture.registry import Method, Registry
 
-# stage name -> (module with main(), one-line summary). The summaries live here
-# so that `lumigraph --help` imports nothing heavy.
-STAGES: dict[str, tuple[str, str]] = {
-    "render": ("lumigraph.capture.cli", "render synthetic scenes with exact ground truth"),
-    "calib": ("lumigraph.calib.cli", "camera calibration, stereo rigs, undistortion, rectification"),
-    "hdr": ("lumigraph.hdr.cli", "camera response, radiance merge, alignment, tone mapping, HDR files"),
-    "flow": ("lumigraph.stereo.flow_cli", "optical flow and Sand-Teller video matching"),
-    "stereo": ("lumigraph.stereo.cli", "block-matching stereo, triangulation, depth, SfM"),
-    "lightfield": ("lumigraph.lightfield.cli", "light fields: import, lenslet decode, refocus, render"),
-    "separate": ("lumigraph.separation.cli", "direct/global separation with projected patterns"),
-    "bench": ("lumigraph.bench", "speed against error, ours beside the peers"),
-    "inspect": ("lumigraph.inspect", "describe and validate images, stacks and artifacts"),
-}
+# stage name -> the stage's main() and its one-line summary, in the one
+# registry shape (lumigraph.capture.registry). Targets are imported on use, so
+# `lumigraph --help` imports nothing heavy.
+STAGES = Registry("stage", [
+    Method("render", "lumigraph.capture.cli:main", "render synthetic scenes with exact ground truth"),
+    Method("calib", "lumigraph.calib.cli:main",
+           "camera calibration, stereo rigs, undistortion, rectification"),
+    Method("hdr", "lumigraph.hdr.cli:main",
+           "camera response, radiance merge, alignment, tone mapping, HDR files"),
+    Method("flow", "lumigraph.stereo.flow_cli:main", "optical flow and Sand-Teller video matching"),
+    Method("stereo", "lumigraph.stereo.cli:main", "block-matching stereo, triangulation, depth, SfM"),
+    Method("lightfield", "lumigraph.lightfield.cli:main",
+           "light fields: import, lenslet decode, refocus, render"),
+    Method("separate", "lumigraph.separation.cli:main",
+           "direct/global separation with projected patterns"),
+    Method("bench", "lumigraph.bench:main", "speed against error, ours beside the peers"),
+    Method("inspect", "lumigraph.inspect:main", "describe and validate images, stacks and artifacts"),
+])
 
 
 def _load_stage(name: str) -> Callable[..., int]:
-    module, _ = STAGES[name]
-    return importlib.import_module(module).main
+    return STAGES[name].load()
 
 
 def _top_help() -> str:
@@ -47,7 +51,7 @@ def _top_help() -> str:
              "Image-based capture and reconstruction: calibration, HDR, flow and stereo,",
              "light fields and direct/global separation, as commands that read and",
              "write ordinary files (EXR, PFM, .flo, PLY, JSON).", "", "stages:"]
-    lines += [f"  {n:<11} {s}" for n, (_, s) in STAGES.items()]
+    lines += [f"  {m.name:<11} {m.help}" for m in STAGES.values()]
     lines += ["", "Each stage explains itself: lumigraph STAGE --help",
               "Also runnable as python -m <package> (python -m lumigraph.hdr ...).",
               "Exit status: 0 ok, 2 bad input or usage (one line on stderr), 1 internal fault."]

@@ -9,6 +9,7 @@ import as ``capture``, ``calib``, ``stereo`` and ``lightfield``.
 import importlib
 import importlib.metadata
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -40,12 +41,27 @@ def test_no_bare_name_of_ours_in_this_environment(name):
     assert out.stdout.strip() == "True", f"a bare {name!r} is importable"
 
 
+def _tracked_copy(dest: Path) -> Path:
+    """Copy the files git tracks (as they are in the working tree) to ``dest``:
+    building there leaves the checkout as it was (setuptools writes ``build/``
+    and ``*.egg-info`` beside the sources it builds)."""
+    r = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True)
+    for name in r.stdout.decode().split("\0"):
+        src = ROOT / name
+        if name and src.is_file():  # a tracked file deleted in the working tree is left out
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(src, dest / name)
+    return dest
+
+
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
-    """A non-editable wheel of this checkout, built without network access."""
+    """A non-editable wheel of this checkout's tracked files, built without
+    network access in a copy (nothing is written into the repository)."""
     out = tmp_path_factory.mktemp("wheel")
+    src = _tracked_copy(tmp_path_factory.mktemp("source"))
     r = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-                        "-q", "-w", str(out), str(ROOT)], capture_output=True, text=True,
+                        "-q", "-w", str(out), str(src)], capture_output=True, text=True,
                        env={**os.environ, "PIP_NO_INDEX": "1"}, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     (whl,) = out.glob("lumigraph-*.whl")
@@ -59,6 +75,19 @@ def test_wheel_installs_only_the_lumigraph_namespace(wheel):
     for stage in STAGES:
         assert f"lumigraph/{stage}/__init__.py" in names
     assert any(n.startswith("lumigraph/stereo/_ssd") and n.endswith(".so") for n in names)
+
+
+def test_console_script_runs_the_shell(wheel):
+    # the `lumigraph` script a user (and the Makefile) runs is lumigraph.command:main
+    with zipfile.ZipFile(wheel) as z:
+        (ep,) = [n for n in z.namelist() if n.endswith(".dist-info/entry_points.txt")]
+        lines = z.read(ep).decode().splitlines()
+    scripts = lines[lines.index("[console_scripts]") + 1:]
+    target = next(ln.split("=", 1)[1].strip() for ln in scripts if ln.split("=")[0].strip() == "lumigraph")
+    module, attr = target.split(":")
+    from lumigraph import command
+
+    assert getattr(importlib.import_module(module), attr) is command.main
 
 
 def test_installed_wheel_imports_through_namespace_only(wheel, tmp_path):

@@ -1,4 +1,8 @@
-"""Scene renderers, one module per family of scenes (see ``capture.render``).
+"""Scene renderers, one module per family of scenes (see ``lumigraph.capture.render``).
+
+Each scene is an entry of ``lumigraph.capture.render.SCENES`` (name -> renderer,
+summary); its module keeps the scene's data, a ``SceneSpec`` (default size,
+option table, cache version), in ``SPECS`` under the same name.
 
 =====================  ==========================================================
 module                 scenes
@@ -10,5 +14,6 @@ module                 scenes
 ``stereo``             rectified/unrectified pairs and multi-view sets with exact geometry
 ``lightfield``         camera arrays, thin-lens refocus truth, lenslet raws
 ``projector``          projector-lit stacks with direct/global truth (Mitsuba)
+``model_stereo``       a facade's key/offset views and its rough model
 =====================  ==========================================================
 """

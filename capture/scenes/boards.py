@@ -379,11 +379,9 @@ _COMMON_OPTIONS = (
     Option("supersample", int, 2, "samples per pixel side (box-filtered each)", low=1, high=8),
 )
 
-SCENES = {
+SPECS = {
     "boards": SceneSpec(
-        "boards", "checkerboard/ChArUco calibration views, known K and distortion (fx != fy, "
-                  "off-centre principal point)",
-        render_boards, (320, 240),
+        "boards", (320, 240),
         _COMMON_OPTIONS + (
             Option("views", int, 15, "number of board poses", low=1, high=60),
             Option("distortion", str, "normal", "lens: none, normal (k1..k3 + tangential) or "
@@ -392,8 +390,7 @@ SCENES = {
                    "fronto-parallel set (< 3 deg)", choices=("varied", "fronto"))),
         min_size=(96, 72), version=4),
     "boards-stereo": SceneSpec(
-        "boards-stereo", "a stereo rig (two cameras, known R, T) viewing calibration boards",
-        render_boards_stereo, (320, 240),
+        "boards-stereo", (320, 240),
         _COMMON_OPTIONS + (
             Option("views", int, 12, "number of board poses", low=1, high=60),
             Option("baseline", float, 120.0, "baseline, in board units", low=0.0, open_low=True),

@@ -285,10 +285,9 @@ _CAMERA_OPTIONS = (
            low=0.0, open_low=True),
 )
 
-SCENES = {
+SPECS = {
     "bracket": SceneSpec(
-        "bracket", "HDR room (>= 1e4:1) bracketed through a known response, exact radiance",
-        render_bracket, (160, 120),
+        "bracket", (160, 120),
         _CAMERA_OPTIONS + (
             Option("exposures", int, 7, "number of exposures P", low=1, high=32),
             Option("stops", float, 1.5, "spacing between exposures, in stops", low=0.0,
@@ -303,8 +302,7 @@ SCENES = {
                    choices=("time", "aperture")),
         ), version=1),
     "bracket_video": SceneSpec(
-        "bracket_video", "HDR video: alternating short/long exposures, camera pan and a moving "
-                         "light; radiance per frame", render_bracket_video, (160, 120),
+        "bracket_video", (160, 120),
         _CAMERA_OPTIONS + (
             Option("frames", int, 8, "number of frames", low=2, high=240),
             Option("stops", float, 3.0, "long/short exposure ratio, in stops", low=0.0,

@@ -303,25 +303,17 @@ def _options(**defaults) -> tuple[Option, ...]:
     )
 
 
-def _spec(name, summary, **defaults) -> SceneSpec:
-    return SceneSpec(name, summary, render_flow, (320, 240), _options(**defaults), version=2,
-                     min_size=(32, 24))
+def _spec(name, **defaults) -> SceneSpec:
+    """Every flow scene is render_flow with its own option defaults."""
+    return SceneSpec(name, (320, 240), _options(**defaults), version=2, min_size=(32, 24))
 
 
-SCENES = {
-    "flow": _spec("flow", "2-frame sequence: textured plane under camera motion (homography) plus "
-                  "an independently moving ellipse; exact forward flow, occlusion mask"),
-    "flow-large": _spec("flow-large", "as flow with large displacement (background 44 px, "
-                        "object 52 px per frame)", motion=44.0, object_motion=52.0),
-    "flow-textureless": _spec("flow-textureless", "as flow with a flat (textureless) region in "
-                              "the background", textureless=True),
-    "flow-brightness": _spec("flow-brightness", "as flow with a brightness/contrast change: gain "
-                             "0.6, offset +0.06 and an illumination gradient in frame 1",
-                             gain=0.6, offset=0.06, illumination=0.35),
-    "flow-video": _spec("flow-video", "Sand-Teller video matching: a second take with a small "
-                        "camera shift, different lighting and an added object",
-                        motion=3.0, moving_object=False, gain=0.7, offset=0.05, illumination=0.3,
-                        change="added"),
-    "flow-sequence": _spec("flow-sequence", "5-frame sequence of the flow scene (consecutive "
-                           "forward flows)", frames=5, motion=4.0, object_motion=6.0),
+SPECS = {
+    "flow": _spec("flow"),
+    "flow-large": _spec("flow-large", motion=44.0, object_motion=52.0),
+    "flow-textureless": _spec("flow-textureless", textureless=True),
+    "flow-brightness": _spec("flow-brightness", gain=0.6, offset=0.06, illumination=0.35),
+    "flow-video": _spec("flow-video", motion=3.0, moving_object=False, gain=0.7, offset=0.05,
+                        illumination=0.3, change="added"),
+    "flow-sequence": _spec("flow-sequence", frames=5, motion=4.0, object_motion=6.0),
 }

@@ -576,17 +576,11 @@ def _lenslet_options(lattice):
     )
 
 
-SCENES = {
+SPECS = {
     "lightfield-array": SceneSpec(
-        "lightfield-array", "U x V camera-array light field of textured planes at several depths "
-        "(occlusions); GT views, depth, exact synthetic-aperture and thin-lens refocus images",
-        render_array, (96, 96), _array_options(), version=1, min_size=(16, 16)),
+        "lightfield-array", (96, 96), _array_options(), version=1, min_size=(16, 16)),
     "lightfield-lenslet": SceneSpec(
-        "lightfield-lenslet", "plenoptic raw + white image, square microlens grid rotated 1.5 deg; "
-        "size = microlens count; GT centres, grid, sub-aperture views",
-        render_lenslet, (40, 40), _lenslet_options("square"), version=1, min_size=(8, 8)),
+        "lightfield-lenslet", (40, 40), _lenslet_options("square"), version=1, min_size=(8, 8)),
     "lightfield-lenslet-hex": SceneSpec(
-        "lightfield-lenslet-hex", "plenoptic raw + white image, hexagonal microlens grid rotated "
-        "1.5 deg; GT centres, views at lattice positions and on the rectangular grid",
-        render_lenslet, (40, 40), _lenslet_options("hex"), version=2, min_size=(8, 8)),
+        "lightfield-lenslet-hex", (40, 40), _lenslet_options("hex"), version=2, min_size=(8, 8)),
 }

@@ -221,11 +221,9 @@ def render_facade(*, size, seed, rng, angle=30.0, noise=1.0, textureless=False, 
                                            "offset_xy": offset_xy})
 
 
-SCENES = {
+SPECS = {
     "model-stereo": SceneSpec(
-        "model-stereo", "wide-baseline key/offset views of a facade with pillars and recessed "
-        "windows, with its rough model (the wall plane) for model-based stereo",
-        render_facade, (320, 240),
+        "model-stereo", (320, 240),
         (Option("angle", float, 30.0, "angle between the two viewing directions (degrees)",
                 low=5.0, high=70.0),
          Option("noise", float, 1.0, "Gaussian read noise (8-bit code values)", low=0.0),

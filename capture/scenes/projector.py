@@ -164,14 +164,10 @@ def class_renders(size, *, mirror=False, spp_direct=8, spp_global=256, seed=0):
     out = _class_renders(size, mirror=mirror, spp_direct=spp_direct, spp_global=spp_global, seed=seed)
     _BASIS[key] = out
     try:
-        import os
-        import tempfile
+        from lumigraph.capture.artifact import atomic_path
 
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-        os.close(fd)
-        np.savez(tmp, direct=out[0], glob=out[1])
-        os.replace(tmp, path)
+        with atomic_path(path) as tmp:  # same folder, umask's mode, replaced at the end
+            np.savez(tmp, direct=out[0], glob=out[1])
     except OSError:
         pass  # a read-only cache only costs speed
     return out
@@ -351,12 +347,9 @@ def _mc_noise(size, *, mirror, seed, spp, glob):
                     "between stack and truth"}
 
 
-SCENES = {
+SPECS = {
     "projector": SceneSpec(
-        "projector",
-        "projector-lit corner with interreflection and a scattering volume (Mitsuba); "
-        "checker/sinusoid/stripe/occluder stacks; direct/global truth",
-        render_projector, (128, 96),
+        "projector", (128, 96),
         (Option("alpha", float, 0.5, "lit fraction of the checker-method patterns",
                 low=0.0, high=1.0, open_low=True, open_high=True),
          Option("b", float, 0.0, "projector black level (off/on light ratio)",

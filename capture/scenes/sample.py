@@ -34,10 +34,9 @@ def render_sample(*, size, seed, rng, bit_depth=12, noise=0.0):
                          gt_arrays={"radiance": radiance.astype(np.float32)})
 
 
-SCENES = {
+SPECS = {
     "sample": SceneSpec(
-        "sample", "linear radiance ramp on an ideal linear sensor (plumbing smoke test)",
-        render_sample, (64, 48),
+        "sample", (64, 48),
         (Option("bit_depth", int, 12, "sensor bit depth", low=8, high=16),
          Option("noise", float, 0.0, "Gaussian read noise, in code values", low=0.0))),
 }

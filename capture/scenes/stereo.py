@@ -467,10 +467,9 @@ def render_views(*, size, seed, rng, views=10, arc_deg=70.0, noise=1.0, supersam
                          gt=gt, gt_arrays={"depth": np.stack(depths)})
 
 
-SCENES = {
+SPECS = {
     "stereo-pair": SceneSpec(
-        "stereo-pair", "left/right pair (rectified or not) of textured planes and a sphere: "
-        "exact depth, disparity, occlusion mask and rig", render_pair, (320, 240),
+        "stereo-pair", (320, 240),
         (Option("layout", str, "rectified", "rectified (same K, pure x baseline) or unrectified "
                 "(rotated right camera with its own K)", choices=("rectified", "unrectified")),
          Option("textureless", bool, False, "add a flat grey card (a textureless region)"),
@@ -482,8 +481,7 @@ SCENES = {
          Option("supersample", int, 3, "rays per pixel side (anti-aliasing)", low=1, high=6)),
         version=1),
     "stereo-views": SceneSpec(
-        "stereo-views", "N views on an arc around textured boxes and a sphere (known poses) "
-        "for structure from motion", render_views, (320, 240),
+        "stereo-views", (320, 240),
         (Option("views", int, 10, "number of views", low=2, high=40),
          Option("arc_deg", float, 70.0, "angle spanned by the camera arc (degrees)", low=1.0,
                 high=180.0),
