@@ -56,6 +56,7 @@ def _values(texts, name):
 def _import(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.capture.io import read_image
+    from lumigraph.capture.rig import CameraArray
     from lumigraph.capture.scenes.lightfield import parse_grid
     from lumigraph.lightfield.field import from_images
 
@@ -91,9 +92,10 @@ def _import(args) -> int:
                                    f"images, got {len(files)}")
     cameras = None
     if args.rig is not None:
-        cameras = _read_rig(Path(args.rig))
+        cameras = (CameraArray.load(args.rig), args.rig)
     elif "cameras" in info:
-        cameras = (info["cameras"], inputs[0] / "stack.json")
+        where = inputs[0] / "stack.json"
+        cameras = (CameraArray.from_dict(info["cameras"], where=f"{where}"), where)
     images = [read_image(f) for f in files]
     lf = from_images(images, grid=grid, spacing=spacing or 1.0, focal_px=focal, linear=linear,
                      bit_depth=bit_depth, names=[str(f) for f in files])
@@ -116,44 +118,18 @@ def _import(args) -> int:
     return 0
 
 
-def _read_rig(path: Path):
-    if not path.is_file():
-        raise InputError(path, "rig file not found")
-    try:
-        d = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise InputError(path, f"not JSON ({e})") from None
-    cams = d.get("cameras") if isinstance(d, dict) else d
-    if not isinstance(cams, list):
-        raise InputError(path, 'expected {"cameras": [camera.json entries with cam_from_world '
-                               '{R, t}, row-major]}')
-    return cams, path
-
-
 def _rectify(lf, cameras, args, grid, files, spacing):
-    import numpy as np
-
-    from lumigraph.capture.camera import Camera
     from lumigraph.lightfield.field import LightField
     from lumigraph.lightfield.rectify import rectify_views
 
-    entries, where = cameras
-    if len(entries) != len(files):
-        raise InputError(where, f"has {len(entries)} cameras for {len(files)} views")
-    cams, poses = [], []
-    for k, e in enumerate(entries):
-        name = f"{where}: camera {k}"
-        cams.append(Camera.from_dict(e, where=name))
-        try:
-            pose = e["cam_from_world"]
-            poses.append((np.array(pose["R"], float).reshape(3, 3),
-                          np.array(pose["t"], float).reshape(3)))
-        except (KeyError, TypeError, ValueError) as err:
-            raise InputError(name, f"needs cam_from_world {{R: 3x3, t: 3}} ({err})") from None
+    array, where = cameras
+    if len(array.cameras) != len(files):
+        raise InputError(where, f"has {len(array.cameras)} cameras for {len(files)} views")
     u, v = grid
     views = [lf.data[i, j] for i in range(u) for j in range(v)]
-    r = rectify_views(views, cams, poses, grid=grid, tolerance=args.grid_tolerance,
-                      plane_depth=args.plane_depth, names=[str(f) for f in files])
+    r = rectify_views(views, list(array.cameras), list(array.cam_from_world), grid=grid,
+                      tolerance=args.grid_tolerance, plane_depth=args.plane_depth,
+                      names=[str(f) for f in files])
     s = r.array.spacing
     if spacing is not None and abs(spacing - s) > args.grid_tolerance * s:
         raise InputError("--spacing", f"{spacing:g} disagrees with the {s:.6g} fitted to the "

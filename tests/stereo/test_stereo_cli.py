@@ -67,6 +67,61 @@ def test_unrectified_needs_rig_then_depth_matches_gt(pairs, tmp_path):
     assert 0 < np.nanmedian(rel) < 0.02
 
 
+def test_rectification_json_gives_the_same_disparity_and_points_as_the_rig(pairs, tmp_path):
+    """``calib rectify`` writes rectification.json; stereo uses it as saved, and on
+    the same inputs the outputs are byte-identical to rectifying from the rig."""
+    folder, _ = pairs["unrectified"]
+    L, R, rig = folder / "left.png", folder / "right.png", folder / "gt.json"
+    r = lumigraph("calib", "rectify", "--rig", rig, L, R, "--out", tmp_path / "rect", "-q")
+    assert r.returncode == 0, r.stderr
+    rect = tmp_path / "rect" / "rectification.json"
+    outs = {}
+    for how, src in (("rig", rig), ("rectification", rect)):
+        d, ply = tmp_path / f"d_{how}.pfm", tmp_path / f"p_{how}.ply"
+        r = lumigraph("stereo", "match", L, R, f"--{how}", src, "--max-disp", "40", "--out", d, "-q")
+        assert r.returncode == 0, r.stderr
+        r = lumigraph("stereo", "depth", d, f"--{how}", src, "--image", L, "--out", ply, "-q")
+        assert r.returncode == 0, r.stderr
+        meta = json.loads((tmp_path / f"d_{how}.pfm.meta.json").read_text())
+        assert str(src) in json.dumps(meta["inputs"])
+        outs[how] = (d.read_bytes(), ply.read_bytes())
+    assert outs["rig"][0] == outs["rectification"][0]
+    assert outs["rig"][1] == outs["rectification"][1]
+    # the rectified pair calib wrote is the pair match rectified: matching it unrectified agrees
+    d = tmp_path / "d_pre.pfm"
+    r = lumigraph("stereo", "match", tmp_path / "rect" / "left.png", tmp_path / "rect" / "right.png",
+                  "--max-disp", "40", "--out", d, "-q")
+    assert r.returncode == 0, r.stderr
+    assert d.read_bytes() == outs["rig"][0]
+
+
+def test_rectification_for_another_image_size_is_refused(pairs, tmp_path):
+    folder, _ = pairs["unrectified"]
+    r = lumigraph("calib", "rectify", "--rig", folder / "gt.json", folder / "left.png",
+                  folder / "right.png", "--out", tmp_path / "rect", "-q")
+    assert r.returncode == 0, r.stderr
+    rect = tmp_path / "rect" / "rectification.json"
+    small = [tmp_path / "l.png", tmp_path / "r.png"]
+    for f in small:
+        io.write_image(f, np.zeros((50, 60, 3), np.uint8))
+    out = tmp_path / "d.pfm"
+    r = lumigraph("stereo", "match", *small, "--rectification", rect, "--max-disp", "16", "--out", out)
+    assert_clean_error(r, "rectification.json", "rectification is for 200x150 images, the pair is 60x50")
+    assert not out.exists()
+    io.write_pfm(tmp_path / "small.pfm", np.ones((50, 60), np.float32))
+    r = lumigraph("stereo", "depth", tmp_path / "small.pfm", "--rectification", rect, "--out",
+                  tmp_path / "p.ply")
+    assert_clean_error(r, "small.pfm", "differs from the rectified size")
+    r = lumigraph("stereo", "match", *small, "--rig", folder / "gt.json", "--rectification", rect,
+                  "--max-disp", "16", "--out", out)
+    assert_clean_error(r, "--rectification", "not allowed with")
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"schema": "lumigraph.rectification"}))
+    r = lumigraph("stereo", "depth", tmp_path / "small.pfm", "--rectification", bad, "--out",
+                  tmp_path / "p.ply")
+    assert_clean_error(r, "bad.json", "missing rig")
+
+
 def test_match_bad_input(pairs, tmp_path):
     folder, _ = pairs["rectified"]
     small = tmp_path / "small.png"
