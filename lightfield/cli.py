@@ -183,9 +183,9 @@ def _refocus(args) -> int:
 
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.io import write_exr
-    from lumigraph.lightfield import ng2005
     from lumigraph.lightfield.field import LightField
-    from lumigraph.lightfield.refocus import check_refocus_range, choose_method, shift_and_add
+    from lumigraph.lightfield.methods import REFOCUS_METHODS
+    from lumigraph.lightfield.refocus import check_refocus_range, choose_method
 
     lf = LightField.load(args.lightfield)
     if args.alpha is not None:
@@ -213,15 +213,11 @@ def _refocus(args) -> int:
         method = choose_method(lf, len(slopes))
         reason = (f"auto: {len(slopes)} value(s); Fourier slice pays its one-time 4-D FFT "
                   f"back from about 6 values")
+    m = REFOCUS_METHODS.resolve(method)
+    options = {k: v for k, v in (("kernel", args.kernel),) if k in m.options}
     t0 = time.perf_counter()
-    if method == "fourier":
-        spec = ng2005.prepare(lf, max_slope=max(abs(s) for s in slopes))
-        t_fft = time.perf_counter() - t0
-        images = [ng2005.refocus(spec, s) for s in slopes]
-    else:
-        t_fft = 0.0
-        images = [shift_and_add(lf, s, kernel=args.kernel) for s in slopes]
-    timing = {"total": time.perf_counter() - t0, "fft": t_fft}
+    images = m(lf, slopes, **options)
+    timing = {"total": time.perf_counter() - t0}
     meta = make_meta("lumigraph.refocus", inputs=[Path(args.lightfield) / "lightfield.json"],
                      params={kind: given, "slopes": slopes, "kernel": args.kernel},
                      model={"method": method, "why": reason}, timings_s=timing,
@@ -349,15 +345,20 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.add_argument("--out", required=True, help="light-field folder")
     v.set_defaults(func=_decode)
 
-    v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)")
+    from lumigraph.lightfield.methods import REFOCUS_METHODS
+
+    v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)",
+                 epilog="methods:\n" + REFOCUS_METHODS.help_text() +
+                        "\n  auto       shift-add for a few values, fourier from about 6 on")
     v.add_argument("lightfield", help="light-field folder")
     g = v.add_mutually_exclusive_group(required=True)
     g.add_argument("--alpha", nargs="+", help="Ng's alpha values")
     g.add_argument("--depth", nargs="+", help="focal depths (units of spacing)")
     g.add_argument("--slope", nargs="+", help="slopes, px per view step")
-    v.add_argument("--method", choices=("shift-add", "fourier", "auto"), default="auto")
+    v.add_argument("--method", choices=(*REFOCUS_METHODS.names, "auto"), default="auto",
+                   help="refocusing method (see below; default auto)")
     v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",
-                   help="shift-and-add interpolation (default lanczos3)")
+                   help="shift-add's interpolation (default lanczos3)")
     v.add_argument("--out", required=True, help="OUT.exr for one value, a folder for several")
     v.set_defaults(func=_refocus)
 
