@@ -76,20 +76,20 @@ def _import(args) -> int:
         files = inputs
     grid_text = args.grid or ("x".join(map(str, info["grid"])) if "grid" in info else None)
     if grid_text is None:
-        raise InputError("--grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
+        raise InputError("grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
     grid = parse_grid(grid_text)
     spacing = args.spacing if args.spacing is not None else info.get("spacing")
     posed = args.rig is not None or "cameras" in info
     if spacing is None and not posed:
-        raise InputError("--spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
+        raise InputError("spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
     if spacing is not None and not spacing > 0:
-        raise InputError("--spacing", f"must be positive, got {spacing}")
+        raise InputError("spacing", f"must be positive, got {spacing}")
     focal = args.focal_px if args.focal_px is not None else info.get("focal_px")
     if focal is not None and not focal > 0:
-        raise InputError("--focal-px", f"must be positive, got {focal}")
+        raise InputError("focal_px", f"must be positive, got {focal}")
     if len(files) != grid[0] * grid[1]:
-        raise InputError("--grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
-                                   f"images, got {len(files)}")
+        raise InputError("grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
+                                 f"images, got {len(files)}")
     cameras = None
     if args.rig is not None:
         cameras = (CameraArray.load(args.rig), args.rig)
@@ -132,8 +132,8 @@ def _rectify(lf, cameras, args, grid, files, spacing):
                       names=[str(f) for f in files])
     s = r.array.spacing
     if spacing is not None and abs(spacing - s) > args.grid_tolerance * s:
-        raise InputError("--spacing", f"{spacing:g} disagrees with the {s:.6g} fitted to the "
-                                      "camera centres; omit --spacing to use the rig's")
+        raise InputError("spacing", f"{spacing:g} disagrees with the {s:.6g} fitted to the "
+                                    "camera centres; omit --spacing to use the rig's")
     warnings = []
     if r.outside.max() > 0.01:
         warnings.append(f"rectified views map up to {100 * r.outside.max():.1f}% outside their "
@@ -189,21 +189,21 @@ def _refocus(args) -> int:
 
     lf = LightField.load(args.lightfield)
     if args.alpha is not None:
-        given, kind = _values(args.alpha, "--alpha"), "alpha"
+        given, kind = _values(args.alpha, "alpha"), "alpha"
         slopes = [lf.slope_from_alpha(a) for a in given]
     elif args.depth is not None:
-        given, kind = _values(args.depth, "--depth"), "depth"
+        given, kind = _values(args.depth, "depth"), "depth"
         slopes = [lf.slope_from_depth(z) for z in given]
     else:
-        given, kind = _values(args.slope, "--slope"), "slope"
+        given, kind = _values(args.slope, "slope"), "slope"
         slopes = list(given)
     out = Path(args.out)
     single = len(slopes) == 1
     if single and out.suffix.lower() != ".exr":
-        raise InputError("--out", f"{out}: one value writes one image; name it .exr")
+        raise InputError("out", f"{out}: one value writes one image; name it .exr")
     if not single and out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder (several values write a "
-                                  "folder of refocus-NNN.exr)")
+        raise InputError("out", f"{out} exists and is not a folder (several values write a "
+                                "folder of refocus-NNN.exr)")
     warnings = check_refocus_range(lf, slopes)
     for w in warnings:
         warn(w)
@@ -249,20 +249,20 @@ def _render(args) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() != ".exr":
-        raise InputError("--out", f"{out}: the view is written as OpenEXR; name it .exr")
+        raise InputError("out", f"{out}: the view is written as OpenEXR; name it .exr")
     lf = LightField.load(args.lightfield)
     if args.focus_depth is not None:
         slope = lf.slope_from_depth(args.focus_depth)
     else:
         slope = args.focus_slope
     if args.position[2] != 0 and lf.focal_px is None:
-        raise InputError("--position", "Z != 0 needs the light field's focal_px (import with "
-                                       "--focal-px)")
+        raise InputError("position", "Z != 0 needs the light field's focal_px (import with "
+                                     "--focal-px)")
     view = render_view(lf, args.position, focus_slope=slope, interpolation=args.interpolation)
     frac = float(view.valid.mean())
     if frac == 0:
-        raise InputError("--position", f"{tuple(args.position)}: every ray leaves the light "
-                                       "slab; put the pinhole over the camera grid")
+        raise InputError("position", f"{tuple(args.position)}: every ray leaves the light "
+                                     "slab; put the pinhole over the camera grid")
     rgba = np.concatenate([view.image if view.image.shape[2] == 3 else
                            np.repeat(view.image[..., :1], 3, -1),
                            view.valid[..., None].astype(np.float32)], -1)
@@ -291,10 +291,10 @@ def _depth(args) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() != ".pfm":
-        raise InputError("--out", f"{out}: the disparity map is written as PFM; name it .pfm")
-    lo, hi, n = parse_floats(args.slopes, name="--slopes")
+        raise InputError("out", f"{out}: the disparity map is written as PFM; name it .pfm")
+    lo, hi, n = parse_floats(args.slopes, name="slopes")
     if not (hi > lo and n >= 3):
-        raise InputError("--slopes", "expected MIN,MAX,N with MAX > MIN and N >= 3")
+        raise InputError("slopes", "expected MIN,MAX,N with MAX > MIN and N >= 3")
     lf = LightField.load(args.lightfield)
     slopes = np.linspace(lo, hi, int(n))
     est = estimate_disparity(lf, slopes, window=args.window)
@@ -334,7 +334,8 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.add_argument("--grid-tolerance", type=float, default=0.1,
                    help="largest camera-centre offset from its grid node, in grid steps")
     v.add_argument("--out", required=True, help="light-field folder")
-    v.set_defaults(func=_import)
+    v.set_defaults(func=_import, arg_flags={"poses": "--rig", "cameras": "--rig",
+                                            "plane_depth": "--plane-depth"})
 
     v = add_verb(sp, "decode", "decode a lenslet raw into sub-aperture views")
     v.add_argument("raw", help="lenslet raw image (linear)")

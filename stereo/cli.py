@@ -157,12 +157,12 @@ def _match(args) -> int:
         try:
             window = int(window)
         except ValueError:
-            raise InputError("--window", f"expected 'auto' or an odd integer, got {window!r}") from None
+            raise InputError("window", f"expected 'auto' or an odd integer, got {window!r}") from None
         if window % 2 == 0 or not 3 <= window <= 63:
-            raise InputError("--window", f"expected an odd integer in [3, 63], got {window}")
+            raise InputError("window", f"expected an odd integer in [3, 63], got {window}")
     if not 1 <= args.max_disp < left.shape[1]:
-        raise InputError("--max-disp", f"expected 1..{left.shape[1] - 1} (image width "
-                                       f"{left.shape[1]}), got {args.max_disp}")
+        raise InputError("max_disp", f"expected 1..{left.shape[1] - 1} (image width "
+                                     f"{left.shape[1]}), got {args.max_disp}")
     t0 = time.perf_counter()
     params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
               "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
@@ -391,19 +391,19 @@ def _model_based(args) -> int:
     out = check_output_path(args.out, suffixes=(".pfm",))
     if args.warped:
         if Path(args.warped).suffix.lower() != ".png":
-            raise InputError("--warped", f"{args.warped}: expected a file ending in .png")
+            raise InputError("warped", f"{args.warped}: expected a file ending in .png")
     if not (np.isfinite(args.max_offset) and args.max_offset > 0):
-        raise InputError("--max-offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
+        raise InputError("max_offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
     if args.window % 2 == 0 or not 3 <= args.window <= 63:
-        raise InputError("--window", f"expected an odd integer in [3, 63], got {args.window}")
+        raise InputError("window", f"expected an odd integer in [3, 63], got {args.window}")
     if args.step is not None and not (np.isfinite(args.step) and 0 < args.step <= args.max_offset):
-        raise InputError("--step", f"expected a value in (0, --max-offset], got {args.step}")
-    for flag, v in (("--texture-snr", args.texture_snr), ("--uniqueness", args.uniqueness),
-                    ("--max-cost", args.max_cost)):
+        raise InputError("step", f"expected a value in (0, --max-offset], got {args.step}")
+    for name, v in (("texture_snr", args.texture_snr), ("uniqueness", args.uniqueness),
+                    ("max_cost", args.max_cost)):
         if not v >= 0:
-            raise InputError(flag, f"expected a value >= 0, got {v}")
+            raise InputError(name, f"expected a value >= 0, got {v}")
     if not (args.left_right >= 0 and np.isfinite(args.left_right)):
-        raise InputError("--left-right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
+        raise InputError("left_right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
     key, off = _read(args.key), _read(args.offset)
     if key.shape[:2] != off.shape[:2]:
         raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
@@ -554,5 +554,5 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--camera", help="camera.json (or a scene gt.json): known, fixed intrinsics")
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--out", required=True, help="folder for cameras.json and points.ply")
-    v.set_defaults(func=_sfm)
+    v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
     return run(p, argv)
