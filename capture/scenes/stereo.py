@@ -314,8 +314,8 @@ def pair_rig(size, *, layout: str = "rectified", baseline: float = 0.18):
     so a rig calibrated from those boards applies to the pair.
 
     >>> rig = pair_rig((320, 240), layout="unrectified", baseline=0.18)
-    >>> rig.left.focal_px, round(rig.baseline, 6)
-    ((320.0, 320.0), 0.18)
+    >>> rig.left.focal_px, (-rig.R.T @ rig.T).round(4).tolist()   # the right camera's centre
+    ((320.0, 320.0), [0.18, 0.0036, 0.009])
     """
     from lumigraph.capture.camera import Camera
     from lumigraph.capture.rig import Rig
