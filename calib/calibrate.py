@@ -392,7 +392,7 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
         raise ValueError(f"model: expected 'auto' or one of {', '.join(MODELS)}, got {model!r}")
     used, skipped = _split(detections, names)
     if not used:
-        raise InputError("images", "no calibration board found in any image; check --board "
+        raise InputError("images", "no calibration board found in any image; check the board "
                                    "(COLSxROWS counts squares) and the photos")
     if len(used) < MIN_VIEWS:
         raise InputError("images", f"only {len(used)} usable view(s) with the board found; at least "
@@ -505,7 +505,7 @@ def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, m
     from lumigraph.capture.rig import Rig
 
     if len(left) != len(right):
-        raise InputError("--right", f"expected as many right images as left ({len(left)}), got {len(right)}")
+        raise InputError("right", f"expected as many right images as left ({len(left)}), got {len(right)}")
     names = list(names) if names is not None else [f"pair {k}" for k in range(len(left))]
     lcam = left_camera or calibrate(left, model=model, names=[f"{n} (left)" for n in names], strict=strict)
     rcam = right_camera or calibrate(right, model=model, names=[f"{n} (right)" for n in names],

@@ -88,7 +88,7 @@ def _board(args, info):
 
     text = args.board or info.get("board")
     if not text:
-        raise InputError("--board", "missing; give e.g. --board checker:10x7:25 (COLSxROWS squares)")
+        raise InputError("board", "missing; give e.g. --board checker:10x7:25 (COLSxROWS squares)")
     return BoardSpec.parse(text)
 
 
@@ -199,10 +199,10 @@ def _stereo(args) -> int:
     from lumigraph.capture.artifact import make_meta
 
     out = check_output_path(args.out, suffixes=(".json",))
-    lp, linfo = _expand(args.left, "--left")
-    rp, _ = _expand(args.right, "--right")
+    lp, linfo = _expand(args.left, "left")
+    rp, _ = _expand(args.right, "right")
     if len(lp) != len(rp):
-        raise InputError("--right", f"expected as many right images as left ({len(lp)}), got {len(rp)}")
+        raise InputError("right", f"expected as many right images as left ({len(lp)}), got {len(rp)}")
     board = _board(args, linfo)
     li = _read_all(lp, args, "left images")
     ri = _read_all(rp, args, "right images")
@@ -241,7 +241,7 @@ def _rectify(args) -> int:
 
     out = check_output_dir(args.out)
     if not 0.0 <= args.alpha <= 1.0:
-        raise InputError("--alpha", f"expected a value in [0, 1], got {args.alpha}")
+        raise InputError("alpha", f"expected a value in [0, 1], got {args.alpha}")
     rig = Rig.load(args.rig)
     left, right = read_image(args.left), read_image(args.right)
     for p, im, cam in ((args.left, left, rig.left), (args.right, right, rig.right)):

@@ -85,7 +85,7 @@ class BoardSpec:
                 raise ValueError(f"dictionary: unknown cv2.aruco dictionary {self.dictionary!r}")
 
     @classmethod
-    def parse(cls, text: str, *, where: str = "--board") -> BoardSpec:
+    def parse(cls, text: str, *, where: str = "board") -> BoardSpec:
         """Parse a ``--board`` string (see the module docstring); InputError if it does not."""
         t = text.strip()
         m = _CHECKER.match(t)

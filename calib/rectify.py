@@ -34,7 +34,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lumigraph.capture.camera import Camera
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.rig import Rig
 
@@ -228,13 +227,11 @@ class Rectification:
 
     @classmethod
     def from_dict(cls, d: dict, *, where: str = "rectification") -> Rectification:
+        if not isinstance(d, dict) or "rig" not in d:
+            raise InputError(where, "not a valid rectification description (missing rig); "
+                                    "expected the rectification.json of 'lumigraph calib rectify'")
+        rig = Rig.from_dict(d["rig"], where=f"{where}:rig")
         try:
-            r = d["rig"]
-            rig = Rig(Camera.from_dict(r["left"], where=f"{where}:rig.left"),
-                      Camera.from_dict(r["right"], where=f"{where}:rig.right"),
-                      np.array(r["R"]), np.array(r["T"]), np.array(r["E"]), np.array(r["F"]),
-                      {k: v for k, v in r.items()
-                       if k not in ("left", "right", "R", "T", "E", "F", "baseline")})
             extra = {k: v for k, v in d.items() if k not in
                      ("schema", "schema_version", "rig", "R1", "R2", "P1", "P2", "Q",
                       "image_size", "focal_px", "baseline")}
@@ -253,6 +250,9 @@ class Rectification:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Rectification:
+        """Read ``rectification.json`` (as ``lumigraph calib rectify`` writes
+        it): the one parser of rectification files. The transforms are used
+        as saved, never recomputed from the rig."""
         from lumigraph.capture.artifact import load_json_artifact
 
         return cls.from_dict(load_json_artifact(path, "rectification"), where=str(path))

@@ -194,6 +194,14 @@ class Camera:
 
     @classmethod
     def from_dict(cls, d: dict, *, where: str = "camera") -> Camera:
+        """A camera from its ``camera.json`` layout; :class:`InputError` naming
+        ``where`` (the file, and the key inside it) when it is not one."""
+        if not isinstance(d, dict):
+            raise InputError(where, f"not a valid camera description (expected a JSON object with "
+                                    f"K, dist and image_size, got {type(d).__name__})")
+        missing = [k for k in ("K", "dist", "image_size") if k not in d]
+        if missing:
+            raise InputError(where, f"not a valid camera description (missing {', '.join(missing)})")
         try:
             extra = {k: v for k, v in d.items() if k not in
                      ("schema", "schema_version", "image_size", "K", "dist", "dist_names", "model")}
@@ -210,6 +218,11 @@ class Camera:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Camera:
+        """Read ``camera.json``, or a rendered scene's ``gt.json`` that holds
+        one under ``camera``: the one parser of camera files."""
         from lumigraph.capture.artifact import load_json_artifact
 
-        return cls.from_dict(load_json_artifact(path, "camera"), where=str(path))
+        d = load_json_artifact(path, "camera")
+        if "K" not in d and "camera" in d:
+            return cls.from_dict(d["camera"], where=f"{os.fspath(path)}:camera")
+        return cls.from_dict(d, where=os.fspath(path))

@@ -69,6 +69,8 @@ def _render(args) -> int:
     if args.out is None:
         raise InputError("--out", "give the output folder, e.g. --out out/" + args.scene)
     spec = get_scene(args.scene)
+    # the scene's renderer names its options; the command line reports their flags
+    args.arg_flags = {o.name: "--" + o.name.replace("_", "-") for o in spec.options}
     size = parse_size(args.size) if args.size else None
     opts = spec.parse_options(_scene_options(extra))
     out = check_output_dir(args.out)

@@ -94,17 +94,144 @@ class Rig:
         return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
+    def from_dict(cls, d: dict, *, where: str = "rig") -> Rig:
+        """A rig from its ``rig.json`` layout (``left``, ``right``, ``R``, ``T``;
+        ``E`` and ``F`` are derived from the pose when absent).
+
+        :class:`InputError` names ``where`` (the file, and the key inside it)
+        and what is missing or wrong.
+        """
+        if not isinstance(d, dict):
+            raise InputError(where, f"not a valid rig description (expected a JSON object with "
+                                    f"left, right, R and T, got {type(d).__name__})")
+        missing = [k for k in ("left", "right", "R", "T") if k not in d]
+        if missing:
+            raise InputError(where, f"not a valid rig description (missing {', '.join(missing)}); "
+                                    "expected rig.json (left, right, R, T) or a gt.json with a "
+                                    "'rig' entry")
+        left = Camera.from_dict(d["left"], where=f"{where}:left")
+        right = Camera.from_dict(d["right"], where=f"{where}:right")
+        try:
+            extra = {k: v for k, v in d.items() if k not in _RIG_KEYS}
+            if "E" in d and "F" in d:
+                return cls(left, right, np.array(d["R"], float), np.array(d["T"], float),
+                           np.array(d["E"], float), np.array(d["F"], float), extra)
+            return cls.from_pose(left, right, np.array(d["R"], float), np.array(d["T"], float),
+                                 **extra)
+        except (KeyError, TypeError, ValueError) as e:
+            raise InputError(where, f"not a valid rig description ({e})") from None
+
+    @classmethod
     def load(cls, path: str | os.PathLike) -> Rig:
+        """Read ``rig.json``, or a rendered scene's ``gt.json`` that holds one
+        under ``rig``: the one parser of rig files."""
         from lumigraph.capture.artifact import load_json_artifact
 
         d = load_json_artifact(path, "rig")
+        if "left" not in d and "rig" in d:
+            return cls.from_dict(d["rig"], where=f"{os.fspath(path)}:rig")
+        return cls.from_dict(d, where=os.fspath(path))
+
+
+_RIG_KEYS = ("schema", "schema_version", "left", "right", "R", "T", "E", "F", "baseline")
+CAMERA_ARRAY_SCHEMA = "lumigraph.camera-array"
+
+
+@dataclass(frozen=True)
+class CameraArray:
+    """N posed cameras, in order (row-major for a light-field array).
+
+    The file is ``{"cameras": [camera.json entries, each with "cam_from_world":
+    {"R": 3x3, "t": [3]}]}`` (``lumigraph lightfield import --rig``); a
+    two-camera ``rig.json`` (or a ``gt.json`` with a ``rig`` entry) reads as
+    the array ``[left, right]`` in the left camera's frame.
+
+    Attributes
+    ----------
+    cameras : tuple of Camera
+    cam_from_world : tuple of (R (3, 3) float64, t (3,) float64)
+        ``x_cam = R x_world + t`` of each camera.
+
+    Examples
+    --------
+    >>> K = np.array([[700., 0, 320], [0, 700, 240], [0, 0, 1]])
+    >>> cam = Camera(K, np.zeros(5), (640, 480))
+    >>> rig = Rig.from_pose(cam, cam, np.eye(3), [-0.1, 0, 0])
+    >>> arr = CameraArray.from_dict(rig.to_dict())
+    >>> len(arr.cameras), arr.cam_from_world[1][1].tolist()
+    (2, [-0.1, 0.0, 0.0])
+    """
+
+    cameras: tuple
+    cam_from_world: tuple
+
+    def __post_init__(self):
+        cams = tuple(self.cameras)
+        if not cams or not all(isinstance(c, Camera) for c in cams):
+            raise TypeError("cameras: expected a non-empty sequence of Camera")
+        poses = []
+        for k, pose in enumerate(self.cam_from_world):
+            R, t = (np.asarray(a, np.float64) for a in pose)
+            if R.shape != (3, 3) or t.size != 3:
+                raise ValueError(f"cam_from_world[{k}]: expected (R 3x3, t 3), got shapes "
+                                 f"{R.shape}, {t.shape}")
+            poses.append((R, t.reshape(3)))
+        if len(poses) != len(cams):
+            raise ValueError(f"cam_from_world: expected one pose per camera ({len(cams)}), got "
+                             f"{len(poses)}")
+        object.__setattr__(self, "cameras", cams)
+        object.__setattr__(self, "cam_from_world", tuple(poses))
+
+    @classmethod
+    def from_dict(cls, d, *, where: str = "cameras") -> CameraArray:
+        """From ``{"cameras": [...]}``, a bare list of camera entries, or a
+        two-camera rig description; :class:`InputError` naming ``where``."""
+        if isinstance(d, dict) and "cameras" not in d and ("left" in d or "rig" in d):
+            rig = Rig.from_dict(d, where=where) if "left" in d else \
+                Rig.from_dict(d["rig"], where=f"{where}:rig")
+            return cls((rig.left, rig.right), ((np.eye(3), np.zeros(3)), (rig.R, rig.T)))
+        entries = d.get("cameras") if isinstance(d, dict) else d
+        if not isinstance(entries, list) or not entries:
+            raise InputError(where, 'expected {"cameras": [camera.json entries with '
+                                    'cam_from_world {R, t}, row-major]} or a rig.json')
+        cams, poses = [], []
+        for k, e in enumerate(entries):
+            name = f"{where}: camera {k}"
+            cams.append(Camera.from_dict(e, where=name))
+            try:
+                pose = e["cam_from_world"]
+                poses.append((np.array(pose["R"], float).reshape(3, 3),
+                              np.array(pose["t"], float).reshape(3)))
+            except (KeyError, TypeError, ValueError) as err:
+                raise InputError(name, f"needs cam_from_world {{R: 3x3, t: 3}} ({err})") from None
+        return cls(tuple(cams), tuple(poses))
+
+    def to_dict(self) -> dict:
+        cams = []
+        for c, (R, t) in zip(self.cameras, self.cam_from_world, strict=True):
+            d = c.to_dict()
+            d.pop("schema", None)
+            d.pop("schema_version", None)
+            cams.append({**d, "cam_from_world": {"R": R.tolist(), "t": t.tolist()}})
+        return {"schema": CAMERA_ARRAY_SCHEMA, "schema_version": 1, "cameras": cams}
+
+    def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
+        """Write the camera array atomically (with a sidecar when ``meta`` is given)."""
+        from lumigraph.capture.artifact import save_json_artifact
+
+        return save_json_artifact(path, self.to_dict(), meta=meta)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> CameraArray:
+        """Read a camera-array file, a ``rig.json`` or a ``gt.json`` with a
+        ``rig`` entry: the one parser of posed-camera files."""
+        import json
+
+        p = Path(path)
+        if not p.is_file():
+            raise InputError(p, "rig file not found")
         try:
-            extra = {k: v for k, v in d.items()
-                     if k not in ("schema", "schema_version", "left", "right", "R", "T", "E", "F", "baseline")}
-            return cls(Camera.from_dict(d["left"], where=f"{path}:left"),
-                       Camera.from_dict(d["right"], where=f"{path}:right"),
-                       np.array(d["R"]), np.array(d["T"]), np.array(d["E"]), np.array(d["F"]), extra)
-        except InputError:
-            raise
-        except (KeyError, TypeError, ValueError) as e:
-            raise InputError(path, f"not a valid rig description ({e})") from None
+            d = json.loads(p.read_text())
+        except (OSError, ValueError) as e:
+            raise InputError(p, f"not JSON ({e})") from None
+        return cls.from_dict(d, where=os.fspath(path))

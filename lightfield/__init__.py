@@ -10,6 +10,7 @@ module                      what
                             all-in-focus; ``refocus(lf, s, method=...)``
 ``lightfield.ng2005``       Fourier slice digital refocusing (eqs. 5.10-5.11)
 ``lightfield.levoy1996``    light-slab rendering of novel views (§5.4.3)
+``lightfield.methods``      ``REFOCUS_METHODS``: the ``--method`` registry
 ==========================  ====================================================
 """
 

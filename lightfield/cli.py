@@ -56,6 +56,7 @@ def _values(texts, name):
 def _import(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.capture.io import read_image
+    from lumigraph.capture.rig import CameraArray
     from lumigraph.capture.scenes.lightfield import parse_grid
     from lumigraph.lightfield.field import from_images
 
@@ -75,25 +76,26 @@ def _import(args) -> int:
         files = inputs
     grid_text = args.grid or ("x".join(map(str, info["grid"])) if "grid" in info else None)
     if grid_text is None:
-        raise InputError("--grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
+        raise InputError("grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
     grid = parse_grid(grid_text)
     spacing = args.spacing if args.spacing is not None else info.get("spacing")
     posed = args.rig is not None or "cameras" in info
     if spacing is None and not posed:
-        raise InputError("--spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
+        raise InputError("spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
     if spacing is not None and not spacing > 0:
-        raise InputError("--spacing", f"must be positive, got {spacing}")
+        raise InputError("spacing", f"must be positive, got {spacing}")
     focal = args.focal_px if args.focal_px is not None else info.get("focal_px")
     if focal is not None and not focal > 0:
-        raise InputError("--focal-px", f"must be positive, got {focal}")
+        raise InputError("focal_px", f"must be positive, got {focal}")
     if len(files) != grid[0] * grid[1]:
-        raise InputError("--grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
-                                   f"images, got {len(files)}")
+        raise InputError("grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
+                                 f"images, got {len(files)}")
     cameras = None
     if args.rig is not None:
-        cameras = _read_rig(Path(args.rig))
+        cameras = (CameraArray.load(args.rig), args.rig)
     elif "cameras" in info:
-        cameras = (info["cameras"], inputs[0] / "stack.json")
+        where = inputs[0] / "stack.json"
+        cameras = (CameraArray.from_dict(info["cameras"], where=f"{where}"), where)
     images = [read_image(f) for f in files]
     lf = from_images(images, grid=grid, spacing=spacing or 1.0, focal_px=focal, linear=linear,
                      bit_depth=bit_depth, names=[str(f) for f in files])
@@ -116,48 +118,22 @@ def _import(args) -> int:
     return 0
 
 
-def _read_rig(path: Path):
-    if not path.is_file():
-        raise InputError(path, "rig file not found")
-    try:
-        d = json.loads(path.read_text())
-    except (OSError, ValueError) as e:
-        raise InputError(path, f"not JSON ({e})") from None
-    cams = d.get("cameras") if isinstance(d, dict) else d
-    if not isinstance(cams, list):
-        raise InputError(path, 'expected {"cameras": [camera.json entries with cam_from_world '
-                               '{R, t}, row-major]}')
-    return cams, path
-
-
 def _rectify(lf, cameras, args, grid, files, spacing):
-    import numpy as np
-
-    from lumigraph.capture.camera import Camera
     from lumigraph.lightfield.field import LightField
     from lumigraph.lightfield.rectify import rectify_views
 
-    entries, where = cameras
-    if len(entries) != len(files):
-        raise InputError(where, f"has {len(entries)} cameras for {len(files)} views")
-    cams, poses = [], []
-    for k, e in enumerate(entries):
-        name = f"{where}: camera {k}"
-        cams.append(Camera.from_dict(e, where=name))
-        try:
-            pose = e["cam_from_world"]
-            poses.append((np.array(pose["R"], float).reshape(3, 3),
-                          np.array(pose["t"], float).reshape(3)))
-        except (KeyError, TypeError, ValueError) as err:
-            raise InputError(name, f"needs cam_from_world {{R: 3x3, t: 3}} ({err})") from None
+    array, where = cameras
+    if len(array.cameras) != len(files):
+        raise InputError(where, f"has {len(array.cameras)} cameras for {len(files)} views")
     u, v = grid
     views = [lf.data[i, j] for i in range(u) for j in range(v)]
-    r = rectify_views(views, cams, poses, grid=grid, tolerance=args.grid_tolerance,
-                      plane_depth=args.plane_depth, names=[str(f) for f in files])
+    r = rectify_views(views, list(array.cameras), list(array.cam_from_world), grid=grid,
+                      tolerance=args.grid_tolerance, plane_depth=args.plane_depth,
+                      names=[str(f) for f in files])
     s = r.array.spacing
     if spacing is not None and abs(spacing - s) > args.grid_tolerance * s:
-        raise InputError("--spacing", f"{spacing:g} disagrees with the {s:.6g} fitted to the "
-                                      "camera centres; omit --spacing to use the rig's")
+        raise InputError("spacing", f"{spacing:g} disagrees with the {s:.6g} fitted to the "
+                                    "camera centres; omit --spacing to use the rig's")
     warnings = []
     if r.outside.max() > 0.01:
         warnings.append(f"rectified views map up to {100 * r.outside.max():.1f}% outside their "
@@ -207,27 +183,27 @@ def _refocus(args) -> int:
 
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.io import write_exr
-    from lumigraph.lightfield import ng2005
     from lumigraph.lightfield.field import LightField
-    from lumigraph.lightfield.refocus import check_refocus_range, choose_method, shift_and_add
+    from lumigraph.lightfield.methods import REFOCUS_METHODS
+    from lumigraph.lightfield.refocus import check_refocus_range, choose_method
 
     lf = LightField.load(args.lightfield)
     if args.alpha is not None:
-        given, kind = _values(args.alpha, "--alpha"), "alpha"
+        given, kind = _values(args.alpha, "alpha"), "alpha"
         slopes = [lf.slope_from_alpha(a) for a in given]
     elif args.depth is not None:
-        given, kind = _values(args.depth, "--depth"), "depth"
+        given, kind = _values(args.depth, "depth"), "depth"
         slopes = [lf.slope_from_depth(z) for z in given]
     else:
-        given, kind = _values(args.slope, "--slope"), "slope"
+        given, kind = _values(args.slope, "slope"), "slope"
         slopes = list(given)
     out = Path(args.out)
     single = len(slopes) == 1
     if single and out.suffix.lower() != ".exr":
-        raise InputError("--out", f"{out}: one value writes one image; name it .exr")
+        raise InputError("out", f"{out}: one value writes one image; name it .exr")
     if not single and out.exists() and not out.is_dir():
-        raise InputError("--out", f"{out} exists and is not a folder (several values write a "
-                                  "folder of refocus-NNN.exr)")
+        raise InputError("out", f"{out} exists and is not a folder (several values write a "
+                                "folder of refocus-NNN.exr)")
     warnings = check_refocus_range(lf, slopes)
     for w in warnings:
         warn(w)
@@ -237,15 +213,11 @@ def _refocus(args) -> int:
         method = choose_method(lf, len(slopes))
         reason = (f"auto: {len(slopes)} value(s); Fourier slice pays its one-time 4-D FFT "
                   f"back from about 6 values")
+    m = REFOCUS_METHODS.resolve(method)
+    options = {k: v for k, v in (("kernel", args.kernel),) if k in m.options}
     t0 = time.perf_counter()
-    if method == "fourier":
-        spec = ng2005.prepare(lf, max_slope=max(abs(s) for s in slopes))
-        t_fft = time.perf_counter() - t0
-        images = [ng2005.refocus(spec, s) for s in slopes]
-    else:
-        t_fft = 0.0
-        images = [shift_and_add(lf, s, kernel=args.kernel) for s in slopes]
-    timing = {"total": time.perf_counter() - t0, "fft": t_fft}
+    images = m(lf, slopes, **options)
+    timing = {"total": time.perf_counter() - t0}
     meta = make_meta("lumigraph.refocus", inputs=[Path(args.lightfield) / "lightfield.json"],
                      params={kind: given, "slopes": slopes, "kernel": args.kernel},
                      model={"method": method, "why": reason}, timings_s=timing,
@@ -277,20 +249,20 @@ def _render(args) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() != ".exr":
-        raise InputError("--out", f"{out}: the view is written as OpenEXR; name it .exr")
+        raise InputError("out", f"{out}: the view is written as OpenEXR; name it .exr")
     lf = LightField.load(args.lightfield)
     if args.focus_depth is not None:
         slope = lf.slope_from_depth(args.focus_depth)
     else:
         slope = args.focus_slope
     if args.position[2] != 0 and lf.focal_px is None:
-        raise InputError("--position", "Z != 0 needs the light field's focal_px (import with "
-                                       "--focal-px)")
+        raise InputError("position", "Z != 0 needs the light field's focal_px (import with "
+                                     "--focal-px)")
     view = render_view(lf, args.position, focus_slope=slope, interpolation=args.interpolation)
     frac = float(view.valid.mean())
     if frac == 0:
-        raise InputError("--position", f"{tuple(args.position)}: every ray leaves the light "
-                                       "slab; put the pinhole over the camera grid")
+        raise InputError("position", f"{tuple(args.position)}: every ray leaves the light "
+                                     "slab; put the pinhole over the camera grid")
     rgba = np.concatenate([view.image if view.image.shape[2] == 3 else
                            np.repeat(view.image[..., :1], 3, -1),
                            view.valid[..., None].astype(np.float32)], -1)
@@ -319,10 +291,10 @@ def _depth(args) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() != ".pfm":
-        raise InputError("--out", f"{out}: the disparity map is written as PFM; name it .pfm")
-    lo, hi, n = parse_floats(args.slopes, name="--slopes")
+        raise InputError("out", f"{out}: the disparity map is written as PFM; name it .pfm")
+    lo, hi, n = parse_floats(args.slopes, name="slopes")
     if not (hi > lo and n >= 3):
-        raise InputError("--slopes", "expected MIN,MAX,N with MAX > MIN and N >= 3")
+        raise InputError("slopes", "expected MIN,MAX,N with MAX > MIN and N >= 3")
     lf = LightField.load(args.lightfield)
     slopes = np.linspace(lo, hi, int(n))
     est = estimate_disparity(lf, slopes, window=args.window)
@@ -362,7 +334,8 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.add_argument("--grid-tolerance", type=float, default=0.1,
                    help="largest camera-centre offset from its grid node, in grid steps")
     v.add_argument("--out", required=True, help="light-field folder")
-    v.set_defaults(func=_import)
+    v.set_defaults(func=_import, arg_flags={"poses": "--rig", "cameras": "--rig",
+                                            "plane_depth": "--plane-depth"})
 
     v = add_verb(sp, "decode", "decode a lenslet raw into sub-aperture views")
     v.add_argument("raw", help="lenslet raw image (linear)")
@@ -373,15 +346,20 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.add_argument("--out", required=True, help="light-field folder")
     v.set_defaults(func=_decode)
 
-    v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)")
+    from lumigraph.lightfield.methods import REFOCUS_METHODS
+
+    v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)",
+                 epilog="methods:\n" + REFOCUS_METHODS.help_text() +
+                        "\n  auto       shift-add for a few values, fourier from about 6 on")
     v.add_argument("lightfield", help="light-field folder")
     g = v.add_mutually_exclusive_group(required=True)
     g.add_argument("--alpha", nargs="+", help="Ng's alpha values")
     g.add_argument("--depth", nargs="+", help="focal depths (units of spacing)")
     g.add_argument("--slope", nargs="+", help="slopes, px per view step")
-    v.add_argument("--method", choices=("shift-add", "fourier", "auto"), default="auto")
+    v.add_argument("--method", choices=(*REFOCUS_METHODS.names, "auto"), default="auto",
+                   help="refocusing method (see below; default auto)")
     v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",
-                   help="shift-and-add interpolation (default lanczos3)")
+                   help="shift-add's interpolation (default lanczos3)")
     v.add_argument("--out", required=True, help="OUT.exr for one value, a folder for several")
     v.set_defaults(func=_refocus)
 

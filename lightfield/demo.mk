@@ -1,5 +1,11 @@
 # lightfield/: camera-array light field -> refocus (one + focal stack) -> novel
 # view -> depth; lenslet raw -> decoded sub-aperture views. Included by the Makefile.
+# Upstream artifacts: every step after import reads the computed lightfield.json.
+# Import itself has no upstream step to use: the array's grid, spacing and focal
+# length come with the capture (the rendered folder's stack.json, as an array
+# rig's spec sheet would; the array is ideal, so no --rig), and no demo step
+# calibrates the array's cameras (calib/camera.json is another camera). The
+# lenslet decode fits its grid from the white image itself.
 
 $(OUT)/scenes/lightfield-array/stack.json: $(STAMP)
 	$(LUMI) render lightfield-array --out $(@D) --size 160x120 --quiet
@@ -27,7 +33,8 @@ $(OUT)/lightfield/disparity.pfm: $(OUT)/lightfield/array/lightfield.json
 $(OUT)/lightfield/lenslet/lightfield.json: $(OUT)/scenes/lightfield-lenslet-hex/stack.json
 	$(LUMI) lightfield decode $(<D)/raw.png --white $(<D)/white.png --out $(@D) --quiet
 
-# Real data: the HCI "antinous" 5x5 views (sRGB PNG, row-major by file name).
+# Real data: the HCI "antinous" 5x5 views (sRGB PNG, row-major by file name); the
+# data set ships no camera files, so spacing is one view step (no upstream step).
 HCI_VIEWS := $(sort $(wildcard $(SHARED)/data/lightfield-real/hci_antinous_5x5/input_Cam*.png))
 
 $(OUT)/lightfield/hci/lightfield.json: $(STAMP) $(HCI_VIEWS)

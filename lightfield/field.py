@@ -3,7 +3,7 @@
 A light field is ``data[u, v, y, x, c]``: ``(U, V)`` the camera / sub-aperture
 grid (row, column), ``(H, W)`` the views, ``C`` channels, float32 linear
 radiance. ``spacing`` is the distance between neighbouring cameras (world
-units; ``--depth`` values use the same units) and ``focal_px`` the views' focal
+units; depths use the same units) and ``focal_px`` the views' focal
 length in pixels.
 
 Refocus parameters (all equivalent):
@@ -109,16 +109,16 @@ class LightField:
     def slope_from_depth(self, depth: float) -> float:
         """Slope (px per view step) that focuses at ``depth`` (units of spacing)."""
         if self.focal_px is None:
-            raise InputError("--depth", "the light field has no focal_px; give --focal-px at "
-                                        "import or refocus by --slope")
+            raise InputError("depth", "the light field has no focal_px to turn a depth into a "
+                                      "slope; import it with its focal length or refocus by slope")
         if not depth > 0:
-            raise InputError("--depth", f"depth must be positive, got {depth}")
+            raise InputError("depth", f"depth must be positive, got {depth}")
         return float(self.focal_px * self.spacing / depth)
 
     def slope_from_alpha(self, alpha: float) -> float:
         """Slope of Ng's alpha: ``alpha_scale (1 - 1/alpha)``."""
         if not alpha > 0:
-            raise InputError("--alpha", f"alpha must be positive, got {alpha}")
+            raise InputError("alpha", f"alpha must be positive, got {alpha}")
         return float(self.alpha_scale * (1.0 - 1.0 / alpha))
 
     def alpha_from_slope(self, slope: float) -> float:
@@ -214,7 +214,7 @@ def from_images(images, *, grid: tuple[int, int], spacing: float, focal_px: floa
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(len(images))]
     if len(images) != u * v:
-        raise InputError("--grid", f"a {u}x{v} grid needs {u * v} images, got {len(images)}")
+        raise InputError("grid", f"a {u}x{v} grid needs {u * v} images, got {len(images)}")
     out = []
     for img, name in zip(images, names, strict=True):
         img = img[..., None] if img.ndim == 2 else img[..., :3]

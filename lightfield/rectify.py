@@ -127,7 +127,7 @@ def fit_array(poses, *, grid: tuple[int, int], tolerance: float = 0.1,
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(u * v)]
     if len(poses) != u * v:
-        raise InputError("--rig", f"a {u}x{v} grid needs {u * v} poses, got {len(poses)}")
+        raise InputError("poses", f"a {u}x{v} grid needs {u * v} poses, got {len(poses)}")
     Rs, Cs = [], []
     for (R, t), name in zip(poses, names, strict=True):
         R, t = np.asarray(R, float), np.asarray(t, float).reshape(3)
@@ -147,13 +147,13 @@ def fit_array(poses, *, grid: tuple[int, int], tolerance: float = 0.1,
     if dx is not None:
         x = dx - (dx @ z) * z
         if np.linalg.norm(x) < 1e-12:
-            raise InputError("--rig", "the camera centres do not spread along the grid's columns")
+            raise InputError("poses", "the camera centres do not spread along the grid's columns")
         x /= np.linalg.norm(x)
         y = np.cross(z, x)
     else:
         y = dy - (dy @ z) * z
         if np.linalg.norm(y) < 1e-12:
-            raise InputError("--rig", "the camera centres do not spread along the grid's rows")
+            raise InputError("poses", "the camera centres do not spread along the grid's rows")
         y /= np.linalg.norm(y)
         x = np.cross(y, z)
     R_ref = np.stack([x, y, z])
@@ -161,7 +161,7 @@ def fit_array(poses, *, grid: tuple[int, int], tolerance: float = 0.1,
     gu, gv = np.meshgrid(ou, ov, indexing="ij")
     s = float((p[..., 0] * gv + p[..., 1] * gu).sum() / (gv ** 2 + gu ** 2).sum())
     if not s > 0:
-        raise InputError("--rig", f"the camera centres run against the grid order (fitted "
+        raise InputError("poses", f"the camera centres run against the grid order (fitted "
                                   f"spacing {s:.4g}): views must be row-major, rows top to bottom")
     model = np.stack([s * gv, s * gu, np.zeros_like(gu)], -1)
     res = np.linalg.norm(p - model, axis=-1) / s
@@ -214,8 +214,8 @@ def rectify_views(views, cameras, poses, *, grid: tuple[int, int], tolerance: fl
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(u * v)]
     if not len(views) == len(cameras) == u * v:
-        raise InputError("--rig", f"a {u}x{v} grid needs {u * v} views and cameras, got "
-                                  f"{len(views)} and {len(cameras)}")
+        raise InputError("cameras", f"a {u}x{v} grid needs {u * v} views and cameras, got "
+                                    f"{len(views)} and {len(cameras)}")
     h, w = views[0].shape[:2]
     for img, cam, name in zip(views, cameras, names, strict=True):
         if tuple(cam.image_size) != (img.shape[1], img.shape[0]):

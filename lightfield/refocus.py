@@ -15,7 +15,9 @@ bilinear baseline; ``lanczos3`` (default) and ``cubic`` (Keys, a = -1/2) keep
 the texture's high frequencies that bilinear interpolation smooths away.
 
 The Fourier-slice method (Ng 2005, eqs. 5.10-5.11) is in
-:mod:`lightfield.ng2005`; :func:`refocus` dispatches on the CLI's names (:data:`METHODS`).
+:mod:`lightfield.ng2005`; :func:`refocus` and :func:`focal_stack` run a method
+by its CLI name from the registry :data:`METHODS`
+(:data:`lightfield.methods.REFOCUS_METHODS`).
 
 Examples
 --------
@@ -39,6 +41,7 @@ import numpy as np
 
 from lumigraph.capture.errors import InputError
 from lumigraph.lightfield.field import LightField
+from lumigraph.lightfield.methods import REFOCUS_METHODS as METHODS
 
 KERNELS = ("linear", "cubic", "lanczos3", "bspline3")
 
@@ -161,15 +164,22 @@ def check_refocus_range(lf: LightField, slopes) -> list[str]:
     return out
 
 
-def focal_stack(lf: LightField, slopes, *, method: str = "shift-add", **options) -> np.ndarray:
-    """Refocus at each slope: (N, H, W, C) float32. ``method`` as in :data:`METHODS`."""
-    slopes = [float(s) for s in slopes]
-    if method == "fourier" or (method == "auto" and choose_method(lf, len(slopes)) == "fourier"):
-        from lumigraph.lightfield import ng2005
+def shift_and_add_stack(lf: LightField, slopes, *, kernel: str = "lanczos3") -> np.ndarray:
+    """:func:`shift_and_add` at each slope: ``(N, H, W, C)`` float32 (the
+    ``shift-add`` entry of :data:`METHODS`)."""
+    return np.stack([shift_and_add(lf, float(s), kernel=kernel) for s in slopes])
 
-        spec = ng2005.prepare(lf, max_slope=max(abs(s) for s in slopes), **options)
-        return np.stack([ng2005.refocus(spec, s) for s in slopes])
-    return np.stack([shift_and_add(lf, s, **options) for s in slopes])
+
+def focal_stack(lf: LightField, slopes, *, method: str = "shift-add", **options) -> np.ndarray:
+    """Refocus at each slope: (N, H, W, C) float32.
+
+    ``method`` is a name in :data:`METHODS`, or ``"auto"`` (:func:`choose_method`);
+    ``options`` go to that method.
+    """
+    slopes = [float(s) for s in slopes]
+    if method == "auto":
+        method = choose_method(lf, len(slopes))
+    return METHODS.resolve(method)(lf, slopes, **options)
 
 
 def choose_method(lf: LightField, n_slopes: int) -> str:
@@ -281,14 +291,13 @@ def all_in_focus(stack: np.ndarray, slopes, disparity: np.ndarray) -> np.ndarray
 
 
 def refocus(lf: LightField, slope: float, *, method: str = "shift-add", **options) -> np.ndarray:
-    """Refocus by the method named as on the command line (:data:`METHODS`)."""
-    if method not in METHODS:
-        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    if method == "fourier":
-        from lumigraph.lightfield.ng2005 import refocus_lightfield
+    """One photograph refocused at ``slope`` by the method named as on the
+    command line (:data:`METHODS`); ``(H, W, C)`` float32.
 
-        return refocus_lightfield(lf, slope, **options)
-    return shift_and_add(lf, slope, **options)
-
-
-METHODS = ("shift-add", "fourier")
+    A method that prepares for a range of slopes (it takes ``max_slope``) is
+    prepared for this one, at least 1e-3.
+    """
+    m = METHODS.resolve(method)
+    if "max_slope" in m.options:
+        options.setdefault("max_slope", max(abs(slope), 1e-3))
+    return m(lf, [slope], **options)[0]

@@ -1,14 +1,17 @@
 """``lumigraph stereo``: block-matching stereo, depth, triangulation and SfM, file to file.
 
 Parses, loads, calls :mod:`stereo.block_matching`, :mod:`stereo.triangulate`,
-:mod:`stereo.sfm` and :mod:`calib.rectify`, and saves. Rig and camera files
-may be a ``rig.json``/``camera.json`` or a rendered scene's ``gt.json`` (its
-``rig``/``camera`` entry).
+:mod:`stereo.sfm` and :mod:`calib.rectify`, and saves. Every file goes through
+its artifact's one parser: :meth:`Rig.load <lumigraph.capture.rig.Rig.load>`
+(``rig.json``, or a rendered scene's ``gt.json`` with a ``rig`` entry),
+:meth:`Camera.load <lumigraph.capture.camera.Camera.load>` (``camera.json`` or a
+``gt.json`` with a ``camera`` entry) and :meth:`Rectification.load
+<lumigraph.calib.rectify.Rectification.load>` (``rectification.json`` from
+``lumigraph calib rectify``, used as saved).
 """
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -31,6 +34,9 @@ examples:
   lumigraph render stereo-pair --out out/pair
   lumigraph stereo match out/pair/left.png out/pair/right.png --max-disp 48 --out out/disparity.pfm
   lumigraph stereo match L.png R.png --rig rig.json --max-disp 64 --out d.pfm   (rectifies first)
+  lumigraph calib rectify --rig rig.json L.png R.png --out rectified
+  lumigraph stereo match L.png R.png --rectification rectified/rectification.json --max-disp 64 --out d.pfm
+  lumigraph stereo depth d.pfm --rectification rectified/rectification.json --image L.png --out points.ply
   lumigraph stereo depth out/disparity.pfm --rig out/pair/gt.json --image out/pair/left.png --out out/points.ply
   lumigraph render model-stereo --out out/facade
   lumigraph stereo model-based out/facade/key.png out/facade/offset.png --rig out/facade/gt.json \
@@ -58,45 +64,6 @@ written as directions in the .json and left out of the .ply.
 
 
 # ----------------------------------------------------------------- loading
-def _read_json(path) -> dict:
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "file not found")
-    try:
-        return json.loads(p.read_text())
-    except json.JSONDecodeError as e:
-        raise InputError(p, f"invalid JSON ({e})") from None
-
-
-def load_rig(path):
-    """A ``rig.json``, or a scene's ``gt.json`` holding one under ``rig``."""
-    from lumigraph.capture.camera import Camera
-    from lumigraph.capture.rig import Rig
-
-    d = _read_json(path)
-    if "left" not in d and isinstance(d.get("rig"), dict):
-        d = d["rig"]
-    try:
-        left = Camera.from_dict(d["left"], where=f"{path}:left")
-        right = Camera.from_dict(d["right"], where=f"{path}:right")
-        return Rig.from_pose(left, right, np.array(d["R"], float), np.array(d["T"], float))
-    except InputError:
-        raise
-    except (KeyError, TypeError, ValueError) as e:
-        raise InputError(path, f"not a rig description ({e}); expected rig.json "
-                               "(left, right, R, T) or a gt.json with a 'rig' entry") from None
-
-
-def load_camera(path):
-    """A ``camera.json``, or a scene's ``gt.json`` holding one under ``camera``."""
-    from lumigraph.capture.camera import Camera
-
-    d = _read_json(path)
-    if "K" not in d and isinstance(d.get("camera"), dict):
-        d = d["camera"]
-    return Camera.from_dict(d, where=str(path))
-
-
 def _read(path):
     from lumigraph.capture.io import read_image
 
@@ -106,13 +73,31 @@ def _read(path):
     return img
 
 
-def _rectify(rig, where):
-    from lumigraph.calib.rectify import rectify
+def _rectification(args, left_shape=None, right_shape=None):
+    """The rectification of ``--rectification`` (used as saved) or computed
+    from ``--rig``, and the file it came from. With image shapes given, the
+    pair must be the size the rig was calibrated for."""
+    from lumigraph.calib.rectify import Rectification, rectify
+    from lumigraph.capture.rig import Rig
 
-    try:
-        return rectify(rig)
-    except ValueError as e:
-        raise InputError(where, str(e)) from None
+    if getattr(args, "rectification", None):
+        src, what = args.rectification, "rectification"
+        rect = Rectification.load(src)
+        rig = rect.rig
+    else:
+        src, what = args.rig, "rig"
+        rig = Rig.load(src)
+        rect = None
+    for cam, shape in ((rig.left, left_shape), (rig.right, right_shape)):
+        if shape is not None and tuple(cam.image_size) != (shape[1], shape[0]):
+            raise InputError(src, f"{what} is for {cam.image_size[0]}x{cam.image_size[1]} "
+                                  f"images, the pair is {shape[1]}x{shape[0]}")
+    if rect is None:
+        try:
+            rect = rectify(rig)
+        except ValueError as e:
+            raise InputError(src, str(e)) from None
+    return rect, src
 
 
 # ------------------------------------------------------- rectification check
@@ -172,29 +157,25 @@ def _match(args) -> int:
         try:
             window = int(window)
         except ValueError:
-            raise InputError("--window", f"expected 'auto' or an odd integer, got {window!r}") from None
+            raise InputError("window", f"expected 'auto' or an odd integer, got {window!r}") from None
         if window % 2 == 0 or not 3 <= window <= 63:
-            raise InputError("--window", f"expected an odd integer in [3, 63], got {window}")
+            raise InputError("window", f"expected an odd integer in [3, 63], got {window}")
     if not 1 <= args.max_disp < left.shape[1]:
-        raise InputError("--max-disp", f"expected 1..{left.shape[1] - 1} (image width "
-                                       f"{left.shape[1]}), got {args.max_disp}")
+        raise InputError("max_disp", f"expected 1..{left.shape[1] - 1} (image width "
+                                     f"{left.shape[1]}), got {args.max_disp}")
     t0 = time.perf_counter()
     params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
               "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
               "channels": args.channels, "prefilter": args.prefilter}
     model: dict = {}
     inputs = [args.left, args.right]
-    if args.rig:
-        rig = load_rig(args.rig)
-        inputs.append(args.rig)
-        if tuple(rig.left.image_size) != (left.shape[1], left.shape[0]):
-            raise InputError(args.rig, f"rig is for {rig.left.image_size[0]}x{rig.left.image_size[1]} "
-                                       f"images, the pair is {left.shape[1]}x{left.shape[0]}")
-        rect = _rectify(rig, args.rig)
+    if args.rig or args.rectification:
+        rect, src = _rectification(args, left.shape, right.shape)
+        inputs.append(src)
         left, right = rect.apply(left, right)
         model["rectification"] = {"R1": rect.R1, "P1": rect.P1, "P2": rect.P2, "Q": rect.Q,
                                   "focal_px": rect.focal_px, "baseline": rect.baseline}
-        say(args, f"rectified with {args.rig} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
+        say(args, f"rectified with {src} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
     else:
         off = vertical_offsets(left, right)
         model["rectification_check"] = off
@@ -235,8 +216,8 @@ def _depth(args) -> int:
     disp = read_pfm(args.disparity)
     if disp.ndim != 2:
         raise InputError(args.disparity, f"expected a one-channel disparity PFM, got shape {disp.shape}")
-    rig = load_rig(args.rig)
-    rect = _rectify(rig, args.rig)
+    rect, src = _rectification(args)
+    rig = rect.rig
     if disp.shape[::-1] != tuple(rect.image_size):
         raise InputError(args.disparity, f"size {disp.shape[1]}x{disp.shape[0]} differs from the "
                                          f"rectified size {rect.image_size[0]}x{rect.image_size[1]}")
@@ -263,7 +244,7 @@ def _depth(args) -> int:
         colors = img[..., :3][ok].astype(np.uint8)
     if not ok.any():
         raise EstimationError(args.disparity, "no valid disparity: nothing to reproject")
-    meta = make_meta("lumigraph.points", inputs=[args.disparity, args.rig] + ([args.image] if args.image else []),
+    meta = make_meta("lumigraph.points", inputs=[args.disparity, src] + ([args.image] if args.image else []),
                      params={"frame": frame, "max_depth": args.max_depth},
                      quality={"points": int(ok.sum()), "of_pixels": int(disp.size)},
                      extra={"focal_px": rect.focal_px, "baseline": rect.baseline})
@@ -273,11 +254,13 @@ def _depth(args) -> int:
 
 
 def _load_tracks(args):
+    from lumigraph.capture.artifact import load_json_artifact
     from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import Rig
 
     p = Path(args.correspondences)
     if p.suffix.lower() == ".json":
-        d = _read_json(p)
+        d = load_json_artifact(p, "tracks")
         try:
             cams, poses = [], []
             for i, v in enumerate(d["views"]):
@@ -312,7 +295,7 @@ def _load_tracks(args):
         raise InputError(p, f"cannot read matches ({e}); expected 'x_left y_left x_right y_right' per line") from None
     if rows.shape[1] != 4 or len(rows) == 0:
         raise InputError(p, f"expected 4 columns per line and at least one line, got shape {rows.shape}")
-    rig = load_rig(args.rig)
+    rig = Rig.load(args.rig)
     px = np.stack([rows[:, :2], rows[:, 2:]])
     return [rig.left, rig.right], [(np.eye(3), np.zeros(3)), (rig.R, rig.T)], px, None
 
@@ -360,11 +343,12 @@ def _triangulate(args) -> int:
 
 def _sfm(args) -> int:
     from lumigraph.capture.artifact import make_meta
+    from lumigraph.capture.camera import Camera
     from lumigraph.stereo.sfm import reconstruct
 
     out = check_output_dir(args.out)
     images = [_read(p) for p in args.images]
-    camera = load_camera(args.camera) if args.camera else None
+    camera = Camera.load(args.camera) if args.camera else None
     rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
     meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
                      params={"seed": args.seed, "fixed_intrinsics": camera is not None},
@@ -401,24 +385,25 @@ def _read_model(path):
 def _model_based(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_image
+    from lumigraph.capture.rig import Rig
     from lumigraph.stereo.debevec1996 import model_stereo
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     if args.warped:
         if Path(args.warped).suffix.lower() != ".png":
-            raise InputError("--warped", f"{args.warped}: expected a file ending in .png")
+            raise InputError("warped", f"{args.warped}: expected a file ending in .png")
     if not (np.isfinite(args.max_offset) and args.max_offset > 0):
-        raise InputError("--max-offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
+        raise InputError("max_offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
     if args.window % 2 == 0 or not 3 <= args.window <= 63:
-        raise InputError("--window", f"expected an odd integer in [3, 63], got {args.window}")
+        raise InputError("window", f"expected an odd integer in [3, 63], got {args.window}")
     if args.step is not None and not (np.isfinite(args.step) and 0 < args.step <= args.max_offset):
-        raise InputError("--step", f"expected a value in (0, --max-offset], got {args.step}")
-    for flag, v in (("--texture-snr", args.texture_snr), ("--uniqueness", args.uniqueness),
-                    ("--max-cost", args.max_cost)):
+        raise InputError("step", f"expected a value in (0, --max-offset], got {args.step}")
+    for name, v in (("texture_snr", args.texture_snr), ("uniqueness", args.uniqueness),
+                    ("max_cost", args.max_cost)):
         if not v >= 0:
-            raise InputError(flag, f"expected a value >= 0, got {v}")
+            raise InputError(name, f"expected a value >= 0, got {v}")
     if not (args.left_right >= 0 and np.isfinite(args.left_right)):
-        raise InputError("--left-right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
+        raise InputError("left_right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
     key, off = _read(args.key), _read(args.offset)
     if key.shape[:2] != off.shape[:2]:
         raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
@@ -429,7 +414,7 @@ def _model_based(args) -> int:
                                      f"image's {key.shape[1]}x{key.shape[0]}")
     if not (model > 0).any():  # NaN compares False
         raise InputError(args.model, "no finite positive depth: the model is absent everywhere")
-    rig = load_rig(args.rig)
+    rig = Rig.load(args.rig)
     for cam, name in ((rig.left, "left (key)"), (rig.right, "right (offset)")):
         if tuple(cam.image_size) != (key.shape[1], key.shape[0]):
             raise InputError(args.rig, f"the {name} camera is for {cam.image_size[0]}x{cam.image_size[1]} "
@@ -482,13 +467,17 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     sp = subparsers(p)
 
     v = add_verb(sp, "match", "dense disparity of a stereo pair (SSD block matching, eq. 5.1)",
-                 epilog="A pair without --rig must already be rectified (checked from matched "
-                        "features: vertical offsets > 1 px are refused).\n"
+                 epilog="A pair without --rig or --rectification must already be rectified "
+                        "(checked from matched features: vertical offsets > 1 px are refused).\n"
                         "--window auto picks per pixel the smallest of 5, 9, 15 whose texture "
                         "passes --texture-snr; the choice is recorded in the .meta.json.")
     v.add_argument("left")
     v.add_argument("right")
-    v.add_argument("--rig", help="rig.json (or a scene gt.json): rectify the pair first")
+    g = v.add_mutually_exclusive_group()
+    g.add_argument("--rig", help="rig.json (or a scene gt.json): rectify the pair first")
+    g.add_argument("--rectification",
+                   help="rectification.json from 'lumigraph calib rectify': rectify the pair "
+                        "with it, as saved")
     v.add_argument("--max-disp", type=int, required=True, help="largest disparity searched (px)")
     v.add_argument("--window", default="auto", help="odd window side, or auto (default)")
     v.add_argument("--texture-snr", type=float, default=1.0,
@@ -508,7 +497,9 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)")
     v.add_argument("disparity", help="disparity .pfm from 'stereo match'")
-    v.add_argument("--rig", required=True, help="the rig the pair was rectified with (rig.json or gt.json)")
+    g = v.add_mutually_exclusive_group(required=True)
+    g.add_argument("--rig", help="the rig the pair was rectified with (rig.json or gt.json)")
+    g.add_argument("--rectification", help="the rectification.json the pair was rectified with")
     v.add_argument("--image", help="the ORIGINAL left image, for point colours")
     v.add_argument("--frame", choices=("left", "rectified"), default="left",
                    help="points in the original left camera frame (default) or the rectified one")
@@ -563,5 +554,5 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--camera", help="camera.json (or a scene gt.json): known, fixed intrinsics")
     v.add_argument("--seed", type=int, default=0)
     v.add_argument("--out", required=True, help="folder for cameras.json and points.ply")
-    v.set_defaults(func=_sfm)
+    v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
     return run(p, argv)

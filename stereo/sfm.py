@@ -146,7 +146,7 @@ def align_similarity(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarra
 def check_views(images, names) -> None:
     """Refuse inputs COLMAP would fail on obscurely (see the module docstring)."""
     if len(images) < 2:
-        raise InputError("IMAGES", f"structure from motion needs at least 2 images, got {len(images)}")
+        raise InputError("images", f"structure from motion needs at least 2 images, got {len(images)}")
     shape0 = images[0].shape[:2]
     for im, n in zip(images, names, strict=True):
         if im.size == 0:
@@ -205,12 +205,12 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
 
     names = [os.path.basename(str(n)) for n in names]
     if len(set(names)) != len(names):
-        raise InputError("IMAGES", "two images share a file name; rename one")
+        raise InputError("images", "two images share a file name; rename one")
     check_views(images, names)
     h, w = images[0].shape[:2]
     if camera is not None and tuple(camera.image_size) != (w, h):
-        raise InputError("--camera", f"camera is for {camera.image_size[0]}x{camera.image_size[1]} "
-                                     f"images, the views are {w}x{h}")
+        raise InputError("camera", f"camera is for {camera.image_size[0]}x{camera.image_size[1]} "
+                                   f"images, the views are {w}x{h}")
     t0 = time.perf_counter()
     # COLMAP logs every step to stderr; a pipeline stage keeps stderr for
     # warnings and errors
@@ -288,11 +288,11 @@ def _result(models, files, names, camera, size, seed, marks):
     w, h = size
     t0, t_feat, t_match, t_map = marks
     if not models:
-        raise EstimationError("IMAGES", "COLMAP registered no image pair: too little overlap or "
+        raise EstimationError("images", "COLMAP registered no image pair: too little overlap or "
                                         "texture between the views")
     rec = max(models.values(), key=lambda r: r.num_reg_images())
     if rec.num_reg_images() < 2:
-        raise EstimationError("IMAGES", "fewer than two views could be registered")
+        raise EstimationError("images", "fewer than two views could be registered")
     n = len(names)
     Rs = np.full((n, 3, 3), np.nan)
     ts = np.full((n, 3), np.nan)

@@ -50,10 +50,11 @@ def test_docstring_examples(name, monkeypatch, tmp_path):
         runner.run(t, out=lambda s: None)
     failed, attempted = runner.summarize(verbose=False)
     if failed:
-        # run again to show the report of what failed
+        # run again, on freshly found examples (the first run cleared their
+        # globals), to show the report of what failed
         report = []
         runner2 = doctest.DocTestRunner(optionflags=0)
-        for t in tests:
+        for t in _examples(name):
             runner2.run(t, out=report.append)
         pytest.fail("".join(report))
     assert attempted > 0

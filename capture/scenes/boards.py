@@ -13,7 +13,12 @@ Two scenes:
 ``boards-stereo``
     The same targets seen by two cameras (each with its own K and
     distortion), the right one ``x_right = R x_left + T`` with a horizontal
-    baseline of ``--baseline`` board units and a small rotation.
+    baseline of ``--baseline`` board units and a small rotation. ``--rig
+    stereo-pair-rectified`` (or ``stereo-pair-unrectified``) renders them
+    instead with the cameras and pose of the ``stereo-pair`` scene in that
+    layout (:func:`capture.scenes.stereo.pair_rig`), so the calibration chain
+    can end in that pair; give ``--baseline`` and ``--square`` in the pair's
+    metres.
 
 The camera is deliberately asymmetric (``fx != fy``, principal point off the
 image centre in both axes) so a swapped argument or a transposed matrix shows.
@@ -54,6 +59,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 # lenses, as distortion (k1, k2, p1, p2, k3)
@@ -296,19 +302,31 @@ def _pose_dict(R, t):
     return {"R": np.asarray(R).tolist(), "t": np.asarray(t).tolist()}
 
 
-def _common(size, rng, board, cols, rows, square, views, distortion, poses, ss, stereo, baseline):
+def _common(size, rng, board, cols, rows, square, views, distortion, poses, ss, stereo, baseline,
+            rig_from="boards"):
     from lumigraph.capture.rig import Rig
 
     spec = board_spec(board, cols, rows, square)
     left = camera_for(size, distortion)
-    cams = [(left, np.eye(3), np.zeros(3))]
     rig = None
-    if stereo:
+    if stereo and rig_from != "boards":
+        from lumigraph.capture.scenes.stereo import pair_rig
+
+        if distortion != "none":
+            raise InputError("distortion", f"the {rig_from} rig's cameras have no lens distortion, "
+                                           f"got {distortion!r}; render it with distortion none")
+        layout = "unrectified" if rig_from.endswith("unrectified") else "rectified"
+        rig = pair_rig(size, layout=layout, baseline=baseline)
+        left = rig.left
+    cams = [(left, np.eye(3), np.zeros(3))]
+    if stereo and rig is None:
         right = camera_for(size, distortion, which="right")
         R_rl = _rot([0.3, -1.0, 0.2], np.deg2rad(1.6))
         T_rl = np.array([-baseline, 0.012 * baseline, 0.006 * baseline])
         rig = Rig.from_pose(left, right, R_rl, T_rl)
         cams.append((right, R_rl, T_rl))
+    elif stereo:
+        cams.append((rig.right, rig.R, rig.T))
     pose_list = _sample_poses(rng, cams, spec, views, poses)
     return spec, cams, rig, pose_list
 
@@ -349,10 +367,12 @@ def render_boards(*, size, seed, rng, board="checker", views=15, cols=10, rows=7
 
 def render_boards_stereo(*, size, seed, rng, board="checker", views=12, cols=10, rows=7,
                          square=30.0, baseline=120.0, distortion="normal", noise=1.0, blur=0.6,
-                         supersample=2):
-    """Stereo-rig calibration views (see the module docstring)."""
+                         supersample=2, rig="boards"):
+    """Stereo-rig calibration views (see the module docstring); ``rig`` names
+    whose cameras and pose render them."""
+    rig_from = rig
     spec, cams, rig, pose_list = _common(size, rng, board, cols, rows, square, views, distortion,
-                                         "varied", supersample, True, baseline)
+                                         "varied", supersample, True, baseline, rig_from)
     images, corners, obj = _render_all(cams, pose_list, spec, supersample, rng, blur, noise)
     names = tuple(f"left_{k:02d}.png" for k in range(views)) + \
         tuple(f"right_{k:02d}.png" for k in range(views))
@@ -395,6 +415,11 @@ SPECS = {
             Option("views", int, 12, "number of board poses", low=1, high=60),
             Option("baseline", float, 120.0, "baseline, in board units", low=0.0, open_low=True),
             Option("distortion", str, "normal", "lens of both cameras",
-                   choices=("none", "normal", "strong"))),
+                   choices=("none", "normal", "strong")),
+            Option("rig", str, "boards", "the cameras and their pose: this scene's own (boards), or "
+                   "those the stereo-pair scene renders with in its --layout rectified or "
+                   "unrectified at the same --size and --baseline (needs --distortion none), so "
+                   "the rig calibrated from these boards is that pair's",
+                   choices=("boards", "stereo-pair-rectified", "stereo-pair-unrectified"))),
         min_size=(96, 72), version=4),
 }

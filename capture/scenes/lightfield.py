@@ -61,7 +61,7 @@ TEXTURES = ("astronaut", "coffee", "rocket", "chelsea")
 THIN_LENS_SAMPLES = 256  # midpoint rule per aperture axis
 
 
-def parse_grid(text: str, *, name: str = "--grid") -> tuple[int, int]:
+def parse_grid(text: str, *, name: str = "grid") -> tuple[int, int]:
     """``"5x7"`` -> ``(5, 7)`` = (U rows, V columns) of a camera grid.
 
     >>> parse_grid("2x9")
@@ -461,8 +461,8 @@ def render_lenslet(*, size, seed, rng, lattice="square", views=5, pitch=22.4, ro
     n = views
     half = n * view_step_px / 2
     if half * math.sqrt(2) > pitch / 2 - 0.5:
-        raise InputError("--view-step-px", f"{n} views of {view_step_px} px do not fit a "
-                                           f"microlens of pitch {pitch} px")
+        raise InputError("view_step_px", f"{n} views of {view_step_px} px do not fit a "
+                                         f"microlens of pitch {pitch} px")
     pos = lattice_positions(rows, cols, lattice)
     theta = math.radians(rotation_deg)
     rot = np.array([[math.cos(theta), -math.sin(theta)], [math.sin(theta), math.cos(theta)]])

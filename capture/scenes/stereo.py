@@ -287,6 +287,44 @@ def _pair_scene(size, rng, textureless, occluders):
     return prims
 
 
+def _pair_geometry(size, layout, baseline):
+    """``f``, ``K_l``, ``K_r``, ``R`` (right from left) and the right camera's
+    centre ``c_r`` (left frame) of the stereo-pair scene (see :func:`render_pair`)."""
+    w, h = size
+    f = float(w)
+    K_l = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+    if layout == "rectified":
+        K_r = K_l.copy()
+        R = np.eye(3)
+        c_r = np.array([baseline, 0.0, 0.0])
+    else:
+        K_r = np.array([[1.02 * f, 0, (w - 1) / 2 + 0.03 * w], [0, 1.02 * f, (h - 1) / 2 - 0.02 * h],
+                        [0, 0, 1]])
+        R = _rot(-2.5, 1.2, 1.5)
+        c_r = np.array([baseline, 0.02 * baseline, 0.05 * baseline])
+    return f, K_l, K_r, R, c_r
+
+
+def pair_rig(size, *, layout: str = "rectified", baseline: float = 0.18):
+    """The rig the ``stereo-pair`` scene renders with at ``size`` (w, h):
+    distortion-free cameras, ``x_right = R x_left + T`` with ``T = -R c_right``.
+
+    The ``boards-stereo`` scene can render its calibration boards with this
+    very rig (``--rig stereo-pair-rectified`` or ``stereo-pair-unrectified``),
+    so a rig calibrated from those boards applies to the pair.
+
+    >>> rig = pair_rig((320, 240), layout="unrectified", baseline=0.18)
+    >>> rig.left.focal_px, (-rig.R.T @ rig.T).round(4).tolist()   # the right camera's centre
+    ((320.0, 320.0), [0.18, 0.0036, 0.009])
+    """
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import Rig
+
+    _, K_l, K_r, R, c_r = _pair_geometry(size, layout, baseline)
+    return Rig.from_pose(Camera(K_l, np.zeros(5), size, "none"), Camera(K_r, np.zeros(5), size, "none"),
+                         R, -R @ c_r)
+
+
 def render_pair(*, size, seed, rng, layout="rectified", textureless=False, occluders=0,
                 baseline=0.18, noise=1.0, supersample=3):
     """Left/right views with exact depth, disparity and right-image positions.
@@ -316,17 +354,7 @@ def render_pair(*, size, seed, rng, layout="rectified", textureless=False, occlu
     True
     """
     w, h = size
-    f = float(w)
-    K_l = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
-    if layout == "rectified":
-        K_r = K_l.copy()
-        R = np.eye(3)
-        c_r = np.array([baseline, 0.0, 0.0])
-    else:
-        K_r = np.array([[1.02 * f, 0, (w - 1) / 2 + 0.03 * w], [0, 1.02 * f, (h - 1) / 2 - 0.02 * h],
-                        [0, 0, 1]])
-        R = _rot(-2.5, 1.2, 1.5)
-        c_r = np.array([baseline, 0.02 * baseline, 0.05 * baseline])
+    f, K_l, K_r, R, c_r = _pair_geometry(size, layout, baseline)
     T = -R @ c_r
     prims = _pair_scene(size, rng, textureless, occluders)
     left = _render_view(prims, K_l, np.eye(3), np.zeros(3), size, supersample, rng, noise)
@@ -358,12 +386,7 @@ def render_pair(*, size, seed, rng, layout="rectified", textureless=False, occlu
     else:
         disparity = np.full((h, w), np.nan, np.float32)
 
-    from lumigraph.capture.camera import Camera
-    from lumigraph.capture.rig import Rig
-
-    full = Rig.from_pose(Camera(K_l, np.zeros(5), size, "none"), Camera(K_r, np.zeros(5), size, "none"),
-                         R, T)
-    rig = full.to_dict()
+    rig = pair_rig(size, layout=layout, baseline=baseline).to_dict()
     d_lo = f * baseline / np.nanmax(np.where(finite, Z, np.nan))
     d_hi = f * baseline / np.nanmin(np.where(finite, Z, np.nan))
     gt = {"rig": rig, "layout": layout, "focal_px": f, "baseline_m": baseline,

@@ -39,3 +39,21 @@ def test_scene_renders_fast_deterministically_and_round_trips(name, tmp_path):
     for k, v in a.gt_arrays.items():
         assert np.array_equal(np.asarray(v), back.gt_arrays[k], equal_nan=True)
 
+
+
+def test_boards_can_share_the_stereo_pair_rig():
+    """``boards-stereo --rig stereo-pair-*`` renders its boards with the very
+    cameras and pose the ``stereo-pair`` scene renders with."""
+    from lumigraph.capture.errors import InputError
+
+    for layout in ("rectified", "unrectified"):
+        b = render("boards-stereo", size=(160, 120), views=2, rig=f"stereo-pair-{layout}",
+                   distortion="none", square=0.05, baseline=0.18, cache=False)
+        p = render("stereo-pair", size=(160, 120), layout=layout, supersample=1, cache=False)
+        for key in ("R", "T"):
+            np.testing.assert_array_equal(b.gt["rig"][key], p.gt["rig"][key])
+        for cam in ("left", "right"):
+            np.testing.assert_array_equal(b.gt["rig"][cam]["K"], p.gt["rig"][cam]["K"])
+            assert b.gt["rig"][cam]["dist"] == p.gt["rig"][cam]["dist"] == [0.0] * 5
+    with pytest.raises(InputError, match="^distortion: .*no lens distortion"):
+        render("boards-stereo", size=(160, 120), views=2, rig="stereo-pair-rectified", cache=False)

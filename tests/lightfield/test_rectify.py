@@ -92,3 +92,10 @@ def test_off_grid_camera_is_refused(jittered, tmp_path):
                   "--out", tmp_path / "lf")
     assert_clean_error(r, "rig.json", "4 cameras")
     assert not (tmp_path / "lf").exists()
+    # the library names its argument (poses); the command line reports the flag that set it
+    one_place = [dict(c, cam_from_world=cams[4]["cam_from_world"]) for c in cams]
+    rig.write_text(json.dumps({"cameras": one_place}))
+    r = lumigraph("lightfield", "import", *files, "--grid", "3x3", "--linear", "--rig", rig,
+                  "--out", tmp_path / "lf")
+    assert_clean_error(r, "error: --rig: ", "do not spread along the grid's columns")
+    assert not (tmp_path / "lf").exists()

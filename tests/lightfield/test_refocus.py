@@ -105,3 +105,26 @@ def test_depth_on_hci_antinous_against_gt_disparity():
     # 8-bit views, a 0.1 px candidate step and no regularisation: the bound is
     # what a plain correspondence cost achieves here (HCI 'bad-0.3' scale).
     assert 0 < np.median(err) < 0.1 and (err > 0.3).mean() < 0.2
+
+
+def test_refocus_methods_come_from_one_registry(scene):
+    """``--method`` names, ``refocus`` and ``focal_stack`` all go through
+    ``REFOCUS_METHODS``, and running a method through it changes no number."""
+    from lumigraph.capture.errors import InputError
+    from lumigraph.capture.registry import Registry
+    from lumigraph.lightfield.methods import REFOCUS_METHODS
+    from lumigraph.lightfield.refocus import METHODS, refocus
+
+    _, lf = scene
+    assert isinstance(REFOCUS_METHODS, Registry) and METHODS is REFOCUS_METHODS
+    assert REFOCUS_METHODS.names == ("shift-add", "fourier")
+    np.testing.assert_array_equal(refocus(lf, 0.35, kernel="cubic"),
+                                  shift_and_add(lf, 0.35, kernel="cubic"))
+    np.testing.assert_array_equal(refocus(lf, 0.35, method="fourier"),
+                                  ng2005.refocus_lightfield(lf, 0.35))
+    slopes = [0.0, 0.35, 0.7]
+    spec = ng2005.prepare(lf, max_slope=0.7)
+    np.testing.assert_array_equal(focal_stack(lf, slopes, method="fourier"),
+                                  np.stack([ng2005.refocus(spec, s) for s in slopes]))
+    with pytest.raises(InputError, match="^method: unknown refocus method 'nearest'"):
+        focal_stack(lf, slopes, method="nearest")

@@ -67,6 +67,97 @@ def test_unrectified_needs_rig_then_depth_matches_gt(pairs, tmp_path):
     assert 0 < np.nanmedian(rel) < 0.02
 
 
+def test_rectification_json_gives_the_same_disparity_and_points_as_the_rig(pairs, tmp_path):
+    """``calib rectify`` writes rectification.json; stereo uses it as saved, and on
+    the same inputs the outputs are byte-identical to rectifying from the rig."""
+    folder, _ = pairs["unrectified"]
+    L, R, rig = folder / "left.png", folder / "right.png", folder / "gt.json"
+    r = lumigraph("calib", "rectify", "--rig", rig, L, R, "--out", tmp_path / "rect", "-q")
+    assert r.returncode == 0, r.stderr
+    rect = tmp_path / "rect" / "rectification.json"
+    outs = {}
+    for how, src in (("rig", rig), ("rectification", rect)):
+        d, ply = tmp_path / f"d_{how}.pfm", tmp_path / f"p_{how}.ply"
+        r = lumigraph("stereo", "match", L, R, f"--{how}", src, "--max-disp", "40", "--out", d, "-q")
+        assert r.returncode == 0, r.stderr
+        r = lumigraph("stereo", "depth", d, f"--{how}", src, "--image", L, "--out", ply, "-q")
+        assert r.returncode == 0, r.stderr
+        meta = json.loads((tmp_path / f"d_{how}.pfm.meta.json").read_text())
+        assert str(src) in json.dumps(meta["inputs"])
+        outs[how] = (d.read_bytes(), ply.read_bytes())
+    assert outs["rig"][0] == outs["rectification"][0]
+    assert outs["rig"][1] == outs["rectification"][1]
+    # the rectified pair calib wrote is the pair match rectified: matching it unrectified agrees
+    d = tmp_path / "d_pre.pfm"
+    r = lumigraph("stereo", "match", tmp_path / "rect" / "left.png", tmp_path / "rect" / "right.png",
+                  "--max-disp", "40", "--out", d, "-q")
+    assert r.returncode == 0, r.stderr
+    assert d.read_bytes() == outs["rig"][0]
+
+
+def test_calibrated_rig_chain_through_files(tmp_path):
+    """Boards -> calib stereo -> rig.json -> calib rectify -> stereo match -> stereo
+    depth on the files a user would have: no ground truth goes in, and the depth
+    of the pair (rendered with the rig the boards were) is close to the truth."""
+    boards, pair = tmp_path / "boards", tmp_path / "pair"
+    render("boards-stereo", size=(320, 240), rig="stereo-pair-unrectified", distortion="none",
+           square=0.06, baseline=0.18).save(boards)
+    s = render("stereo-pair", size=(320, 240), layout="unrectified", baseline=0.18)
+    s.save(pair)
+    rig = tmp_path / "rig.json"
+    r = lumigraph("calib", "stereo", "--left", *sorted(boards.glob("left_*.png")), "--right",
+                  *sorted(boards.glob("right_*.png")), "--board", "checker:10x7:0.06", "--out", rig, "-q")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph("calib", "rectify", "--rig", rig, pair / "left.png", pair / "right.png", "--out",
+                  tmp_path / "rect", "-q")
+    assert r.returncode == 0, r.stderr
+    rect = tmp_path / "rect" / "rectification.json"
+    d, ply = tmp_path / "d.pfm", tmp_path / "p.ply"
+    r = lumigraph("stereo", "match", pair / "left.png", pair / "right.png", "--rectification", rect,
+                  "--max-disp", "47", "--out", d, "-q")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph("stereo", "depth", d, "--rectification", rect, "--out", ply, "-q")
+    assert r.returncode == 0, r.stderr
+    pts, _ = io.read_ply(ply)
+    K = np.array(s.gt["rig"]["left"]["K"])
+    uv = pts @ K.T
+    uv = np.round(uv[:, :2] / uv[:, 2:]).astype(int)
+    h, w = s.gt_arrays["depth"].shape
+    ok = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    Z = s.gt_arrays["depth"][uv[ok, 1], uv[ok, 0]]
+    rel = np.abs(pts[ok, 2] - Z) / Z
+    # as with the true rig (~1 % from ~0.2 px of disparity error), plus the
+    # calibration's own error (0.05 px RMS, baseline within ~0.3 %)
+    assert ok.mean() > 0.9 and 0 < np.nanmedian(rel) < 0.02
+
+
+def test_rectification_for_another_image_size_is_refused(pairs, tmp_path):
+    folder, _ = pairs["unrectified"]
+    r = lumigraph("calib", "rectify", "--rig", folder / "gt.json", folder / "left.png",
+                  folder / "right.png", "--out", tmp_path / "rect", "-q")
+    assert r.returncode == 0, r.stderr
+    rect = tmp_path / "rect" / "rectification.json"
+    small = [tmp_path / "l.png", tmp_path / "r.png"]
+    for f in small:
+        io.write_image(f, np.zeros((50, 60, 3), np.uint8))
+    out = tmp_path / "d.pfm"
+    r = lumigraph("stereo", "match", *small, "--rectification", rect, "--max-disp", "16", "--out", out)
+    assert_clean_error(r, "rectification.json", "rectification is for 200x150 images, the pair is 60x50")
+    assert not out.exists()
+    io.write_pfm(tmp_path / "small.pfm", np.ones((50, 60), np.float32))
+    r = lumigraph("stereo", "depth", tmp_path / "small.pfm", "--rectification", rect, "--out",
+                  tmp_path / "p.ply")
+    assert_clean_error(r, "small.pfm", "differs from the rectified size")
+    r = lumigraph("stereo", "match", *small, "--rig", folder / "gt.json", "--rectification", rect,
+                  "--max-disp", "16", "--out", out)
+    assert_clean_error(r, "--rectification", "not allowed with")
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"schema": "lumigraph.rectification"}))
+    r = lumigraph("stereo", "depth", tmp_path / "small.pfm", "--rectification", bad, "--out",
+                  tmp_path / "p.ply")
+    assert_clean_error(r, "bad.json", "missing rig")
+
+
 def test_match_bad_input(pairs, tmp_path):
     folder, _ = pairs["rectified"]
     small = tmp_path / "small.png"
