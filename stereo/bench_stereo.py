@@ -173,13 +173,12 @@ def _model_case(angle, size=(320, 240)):
     """The model-stereo facade (views ``angle`` degrees apart) with its rough
     model, and what the plain baseline needs: the rectification and the
     disparity range."""
-    from lumigraph.capture.camera import Camera
     from lumigraph.capture.render import render
     from lumigraph.capture.rig import Rig
 
     s = render("model-stereo", size=size, angle=float(angle))
     g = s.gt["rig"]
-    rig = Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
+    rig = Rig.from_dict(g)
     gt = s.gt_arrays["depth"]
     seen = np.isfinite(s.gt_arrays["offset_xy"][..., 0]) & np.isfinite(gt)
     h, w = gt.shape

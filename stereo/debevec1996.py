@@ -60,11 +60,10 @@ A pixel is left unknown (NaN) when
 Examples
 --------
 >>> from lumigraph.capture.scenes.model_stereo import render_facade
->>> from lumigraph.capture.camera import Camera
 >>> from lumigraph.capture.rig import Rig
 >>> s = render_facade(size=(128, 96), seed=0, rng=np.random.default_rng(0), supersample=2, noise=0.5)
 >>> g = s.gt["rig"]
->>> rig = Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
+>>> rig = Rig.from_dict(g)
 >>> res = model_stereo(s.images[0], s.images[1], s.gt_arrays["model_depth"], rig, max_offset=0.35,
 ...                    window=7)
 >>> err = np.abs(res.depth - s.gt_arrays["depth"])   # metres; the relief is 0.18-0.27 m deep

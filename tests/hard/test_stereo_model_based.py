@@ -8,7 +8,6 @@ from conftest import assert_clean_error, lumigraph
 from scipy import ndimage
 
 from lumigraph.capture import io
-from lumigraph.capture.camera import Camera
 from lumigraph.capture.errors import EstimationError
 from lumigraph.capture.render import render
 from lumigraph.capture.rig import Rig
@@ -17,7 +16,7 @@ from lumigraph.stereo.debevec1996 import model_stereo
 
 def rig_of(s):
     g = s.gt["rig"]
-    return Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
+    return Rig.from_dict(g)
 
 
 def test_textureless_sign_is_unknown_not_garbage():

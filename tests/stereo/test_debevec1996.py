@@ -9,7 +9,6 @@ from conftest import assert_clean_error, lumigraph
 from scipy import ndimage
 
 from lumigraph.capture import io
-from lumigraph.capture.camera import Camera
 from lumigraph.capture.render import render
 from lumigraph.capture.rig import Rig
 from lumigraph.stereo.debevec1996 import (
@@ -24,7 +23,7 @@ MAX_OFFSET = 0.35  # m; the relief is 0.18-0.27 m deep along the key rays
 
 def rig_of(s):
     g = s.gt["rig"]
-    return Rig.from_pose(Camera.from_dict(g["left"]), Camera.from_dict(g["right"]), g["R"], g["T"])
+    return Rig.from_dict(g)
 
 
 def interior(s, radius):
