@@ -38,6 +38,10 @@ as 1/250 are fine). Every output gets a <output>.meta.json sidecar.
 """
 
 
+# The library names the times by its argument; --times sets them.
+TIMES_FLAG = {"exposure_times_s": "--times"}
+
+
 def _times(args):
     return parse_floats(args.times, name="--times") if args.times else None
 
@@ -370,7 +374,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--samples", type=int,
                    help="pixels sampled (default 600; robertson 5000, for its per-code means)")
     v.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling")
-    v.set_defaults(func=_response)
+    v.set_defaults(func=_response, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
     v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
     v.add_argument("--response", required=True, help="response.json from 'hdr response'")
@@ -381,7 +385,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
-    v.set_defaults(func=_merge)
+    v.set_defaults(func=_merge, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)")
     v.add_argument("images", nargs="+")
     v.add_argument("--out", required=True, help="output folder (aligned PNGs + stack.json)")
@@ -412,7 +416,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--consistency-sigma", type=float, default=sigma,
                    help="reject warped neighbours further than this many noise sigma (default "
                         f"{sigma:g}, chosen by the protocol in hdr.kang2003.DEFAULTS_CHOICE)")
-    v.set_defaults(func=_video)
+    v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input")
     v.add_argument("output")

@@ -398,7 +398,7 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
     if lam_given:
         lam = float(smoothness)
         if not math.isfinite(lam) or lam < 0:
-            raise InputError("--smoothness", f"expected λ >= 0, got {smoothness}")
+            raise InputError("smoothness", f"expected λ >= 0, got {smoothness}")
         grid = (lam,)
     else:
         grid = LAMBDA_GRID

@@ -159,20 +159,21 @@ class TonemappedVideo:
 
 
 # ------------------------------------------------------------- validation
-def _check(frames, times, response):
+def _check(frames, exposure_times_s, response):
     if not isinstance(response, ResponseCurve):
         raise TypeError(f"response: expected a ResponseCurve, got {type(response).__name__}")
-    z, t, _ = check_stack(frames, times, bit_depth=response.bit_depth, where="frames",
+    z, t, _ = check_stack(frames, exposure_times_s, bit_depth=response.bit_depth, where="frames",
                           distinct_times=False)
     if z.shape[0] < 2:
         raise InputError("frames", f"HDR video needs at least 2 frames, got {z.shape[0]}")
     if response.channels not in (1, z.shape[-1]):
-        raise InputError("--response", f"curve has {response.channels} channels, frames have "
-                                       f"{z.shape[-1]}")
+        raise InputError("response", f"curve has {response.channels} channels, frames have "
+                                     f"{z.shape[-1]}")
     if float(t.max() / t.min()) < 1.0 + 1e-3:
-        raise InputError("--times", f"every frame has the same exposure ({t[0]:g} s): HDR video "
-                                    "needs alternating exposures (neighbours would clip where "
-                                    "the current frame does); use a plain merge or tone map")
+        raise InputError("exposure_times_s",
+                         f"every frame has the same exposure ({t[0]:g} s): HDR video needs "
+                         "alternating exposures (neighbours would clip where the current frame "
+                         "does); use a plain merge or tone map")
     return z, t
 
 
@@ -224,7 +225,7 @@ class Radiometry:
         self.hi = int(math.floor((1 - clip_margin) * self.zmax))
         ok = np.nonzero(self.reliable.all(axis=0))[0]
         if ok.size == 0:
-            raise InputError("--response", "no code value is reliable at this clip margin")
+            raise InputError("response", "no code value is reliable at this clip margin")
         self.lo, self.hi = int(ok[0]), int(ok[-1])
         self.var = np.where(np.isfinite(var), var, 0.0)
         self.var_lo = var[:, self.lo]
@@ -381,7 +382,7 @@ def _box_mean(a, k):
 
 
 # --------------------------------------------------------------- the method
-def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int = 9,
+def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, window: int = 9,
               flow_method: str = "dense", consistency_sigma: float = 6.0,
               neighbourhood: int = 7, outlier_share: float = 0.25,
               bidirectional: bool = True, max_motion_px: float | None = None,
@@ -393,7 +394,7 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
     ----------
     frames : ndarray, ``(N, H, W, C)`` uint8/uint16 codes, ``N >= 2``
         In time order; consecutive frames should differ in exposure.
-    times : sequence of float, ``(N,)``
+    exposure_times_s : sequence of float, ``(N,)``
         Exposure time of each frame, seconds (not all equal).
     response : ResponseCurve
         The camera's curve (bit depth of the codes).
@@ -436,7 +437,7 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
     """
     import time as _time
 
-    z, t = _check(frames, times, response)
+    z, t = _check(frames, exposure_times_s, response)
     if flow_method not in ("dense", "local"):
         raise ValueError(f"flow_method: expected 'dense' or 'local', got {flow_method!r}")
     if not consistency_sigma > 0:
@@ -585,7 +586,7 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
                     tuple(warnings))
 
 
-def unaligned_merge(frames: np.ndarray, times, response: ResponseCurve, index: int, *,
+def unaligned_merge(frames: np.ndarray, exposure_times_s, response: ResponseCurve, index: int, *,
                     full_well_e: float = 10000.0, read_noise_e: float = 5.0,
                     clip_margin: float = 0.02) -> np.ndarray:
     """The naive baseline: frame ``index`` and its neighbours merged without registration.
@@ -606,7 +607,7 @@ def unaligned_merge(frames: np.ndarray, times, response: ResponseCurve, index: i
     >>> round(float(unaligned_merge(z, [1.0, 2.0, 1.0], r, 1)[0, 0, 0]), 4)  # 100/255 per second
     0.3922
     """
-    z, t = _check(frames, times, response)
+    z, t = _check(frames, exposure_times_s, response)
     if not 0 <= index < z.shape[0]:
         raise ValueError(f"index: expected 0..{z.shape[0] - 1}, got {index}")
     rad = Radiometry(response, z.shape[-1], full_well_e=full_well_e, read_noise_e=read_noise_e,

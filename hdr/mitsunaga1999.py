@@ -337,7 +337,7 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
     if order != "auto" and (not isinstance(order, int | np.integer) or not 1 <= order <= MAX_ORDER):
-        raise InputError("--order", f"expected 1..{MAX_ORDER} or auto, got {order!r}")
+        raise InputError("order", f"expected 1..{MAX_ORDER} or auto, got {order!r}")
     rng = np.random.default_rng(0) if rng is None else rng
     perm = np.argsort(t)
     z, t = z[perm], t[perm]

@@ -54,16 +54,18 @@ def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
     if z.size and int(z.max()) >= 2 ** bd:
         raise InputError(where, f"codes up to {int(z.max())} exceed bit depth {bd}")
     if exposure_times_s is None:
-        raise InputError("--times", "exposure times are needed (EXIF, stack.json or --times)")
+        raise InputError("exposure_times_s", "exposure times are needed (EXIF, stack.json or given)")
     t = np.asarray(exposure_times_s, dtype=np.float64).ravel()
     if t.size != z.shape[0]:
-        raise InputError("--times", f"{t.size} exposure times for {z.shape[0]} images")
+        raise InputError("exposure_times_s", f"{t.size} exposure times for {z.shape[0]} images")
     if not np.all(np.isfinite(t)) or np.any(t <= 0):
-        raise InputError("--times", f"exposure times must be positive and finite, got {t.tolist()}")
+        raise InputError("exposure_times_s", f"exposure times must be positive and finite, got "
+                                             f"{t.tolist()}")
     if distinct_times and np.unique(t).size != t.size:
         dup = sorted({float(x) for x in t if np.sum(t == x) > 1})
-        raise InputError("--times", f"duplicated exposure times {dup}: each image of a bracket "
-                                    "needs its own exposure (drop the duplicate frames)")
+        raise InputError("exposure_times_s", f"duplicated exposure times {dup}: each image of a "
+                                             "bracket needs its own exposure (drop the duplicate "
+                                             "frames)")
     return z, t, bd
 
 

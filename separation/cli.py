@@ -105,10 +105,6 @@ def _separate(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.separation import separate
 
-    if args.alpha is not None and not 0.0 < args.alpha < 1.0:
-        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {args.alpha}")
-    if args.b is not None and not 0.0 <= args.b < 1.0:
-        raise InputError("--b", f"black level must lie in [0, 1), got {args.b}")
     if args.tile < 2:
         raise InputError("--tile", f"expected at least 2 pixels, got {args.tile}")
     out = check_output_dir(args.out)

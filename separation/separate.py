@@ -74,9 +74,9 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
                                           f"image(s), got {len(a)}")
     names = list(names) if names is not None else [f"image {i}" for i in range(len(a))]
     if alpha is not None and not 0.0 < alpha < 1.0:
-        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {alpha}")
+        raise InputError("alpha", f"lit fraction must lie in (0, 1), got {alpha}")
     if b is not None and not 0.0 <= b < 1.0:
-        raise InputError("--b", f"black level must lie in [0, 1), got {b}")
+        raise InputError("b", f"black level must lie in [0, 1), got {b}")
     quant = quant_step / np.sqrt(12.0)
     floor = 3.0 * np.hypot(noise_sigma, quant) + 1e-7
     # a strided look first (cheap); the full image only when that one looks dark
@@ -92,7 +92,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         b = nayar2006.black_level(black, white, floor=floor)
         params["b_source"] = "measured from the all-black/all-white frames"
         if not 0.0 <= b < 1.0:
-            raise EstimationError("--black", f"measured black level {b:.3f} is not in [0, 1)")
+            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
     elif b is None:
         b = 0.0
         params["b_source"] = "assumed 0 (no --b and no black/white frames)"

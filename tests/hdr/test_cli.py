@@ -84,3 +84,39 @@ def test_quick_bench_through_cli(tmp_path):
     names = {row["method"] for row in js["stages"]["hdr"]["rows"]}
     assert {"debevec (ours)", "CalibrateDebevec (OpenCV)", "merge (ours)"} <= names
     assert js["stages"]["hdr"]["checks"]
+
+
+def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
+    import re
+    from pathlib import Path
+
+    import pytest
+
+    from lumigraph.capture.errors import InputError
+    from lumigraph.hdr.debevec1997 import debevec
+    from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
+    from lumigraph.hdr.samples import check_stack
+
+    s = render("bracket", size=(48, 36), exposures=3)
+    z, t = np.stack(s.images), s.stack["exposure_times_s"]
+    with pytest.raises(InputError) as e:
+        debevec(z, t, smoothness=-1.0)
+    assert e.value.where == "smoothness"
+    with pytest.raises(InputError) as e:
+        mitsunaga_nayar(z, t, order=11)
+    assert e.value.where == "order"
+    with pytest.raises(InputError) as e:
+        check_stack(z, [t[0], t[0], t[2]], bit_depth=8)
+    assert e.value.where == "exposure_times_s"
+    # No library module of the stage names a command-line flag.
+    root = Path(__file__).resolve().parents[2]
+    for f in [*(root / "hdr").glob("*.py"), *(root / "separation").glob("*.py")]:
+        if f.name != "cli.py":
+            assert not re.search(r"Error\(\s*f?[\"']--", f.read_text()), f
+    d = _bracket_folder(tmp_path, exposures=3)
+    out = tmp_path / "r.json"
+    assert_clean_error(lumigraph("hdr", "response", d, "--smoothness", "-1", "--out", out),
+                       "--smoothness", "λ >= 0")
+    assert_clean_error(lumigraph("hdr", "response", d, "--method", "mitsunaga-nayar", "--order",
+                                 "11", "--out", out), "--order")
+    assert not out.exists()
