@@ -47,21 +47,15 @@ def _times(args):
 
 
 def _load(args, *, need_times=True):
-    import numpy as np
-
+    """The bracket and its exposures: the stack reader's effective exposure
+    (an aperture bracket's f-numbers applied), as every HDR verb uses them."""
     from lumigraph.capture.io import read_stack
 
     stack = read_stack(args.images, times=_times(args), need_times=need_times)
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float images are already linear; merge needs code values "
                                          "(integer PNG/TIFF/JPEG/RAW)")
-    times = stack.exposure_times_s
-    if times is not None and "f_numbers" in stack.info and not args.times:
-        # Aperture bracket: relative exposure t · (N_ref / N)².
-        fn = np.asarray(stack.info["f_numbers"], dtype=np.float64)
-        ref = float(stack.info.get("f_number_ref", fn.min()))
-        times = tuple(float(t) * (ref / n) ** 2 for t, n in zip(times, fn, strict=True))
-    return stack, times
+    return stack, stack.effective_exposure_times_s
 
 
 def _response(args) -> int:
@@ -311,11 +305,9 @@ def _video(args) -> int:
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float frames are already linear; HDR video needs "
                                          "code values (integer PNG/TIFF)")
-    if stack.exposure_times_s is None:
-        raise InputError(where, "no exposure times (stack.json, EXIF or --times)")
     _check_curve(curve, stack, args.response, "frames")
     t0 = time.perf_counter()
-    v = hdr_video(stack.images, stack.exposure_times_s, curve, window=args.window,
+    v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=args.window,
                   consistency_sigma=args.consistency_sigma,
                   progress=lambda it: progress(it, total=stack.images.shape[0],
                                                description="hdr video", quiet=args.quiet))

@@ -4,6 +4,7 @@ import json
 import shutil
 
 import numpy as np
+import pytest
 from conftest import assert_clean_error, lumigraph
 
 from lumigraph.capture.io import read_exr
@@ -90,8 +91,6 @@ def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
     import re
     from pathlib import Path
 
-    import pytest
-
     from lumigraph.capture.errors import InputError
     from lumigraph.hdr.debevec1997 import debevec
     from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
@@ -120,3 +119,35 @@ def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
     assert_clean_error(lumigraph("hdr", "response", d, "--method", "mitsunaga-nayar", "--order",
                                  "11", "--out", out), "--order")
     assert not out.exists()
+
+
+def test_aperture_bracket_means_the_same_to_merge_and_video(tmp_path):
+    # One shutter time, three f-numbers: every HDR verb works with the effective
+    # exposure t·(N_ref/N)² of the stack reader (without it, video would see three
+    # equal exposures and refuse).
+    from lumigraph.capture.io import read_stack
+    from lumigraph.hdr.response import ResponseCurve
+
+    s = render("bracket", size=(64, 48), exposures=3, vary="aperture")
+    d = tmp_path / "ap"
+    s.save(d)
+    ResponseCurve("gt", 8, s.gt_arrays["g"]).save(tmp_path / "r.json")
+    stack = read_stack([d])
+    assert len(set(stack.exposure_times_s)) == 1
+    expected = list(stack.effective_exposure_times_s)
+    assert expected == pytest.approx(s.gt["relative_exposure_exact"], rel=1e-12)
+    r = lumigraph("hdr", "merge", d, "--response", tmp_path / "r.json", "--out",
+                  tmp_path / "rad.exr", "-q")
+    assert r.returncode == 0, r.stderr
+    merged = json.loads((tmp_path / "rad.exr.meta.json").read_text())["params"]["times_s"]
+    r = lumigraph("hdr", "video", d, "--response", tmp_path / "r.json", "--out",
+                  tmp_path / "vid", "-q")
+    assert r.returncode == 0, r.stderr
+    video = json.loads((tmp_path / "vid" / "video.meta.json").read_text())["params"]["times_s"]
+    assert merged == video == expected
+    # Times given on the command line are the exposures themselves, for every verb.
+    r = lumigraph("hdr", "video", d, "--times", "1,2,4", "--response", tmp_path / "r.json",
+                  "--out", tmp_path / "vid2", "-q")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "vid2" / "video.meta.json").read_text())["params"]["times_s"] \
+        == [1.0, 2.0, 4.0]
