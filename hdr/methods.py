@@ -8,7 +8,7 @@ Examples
 >>> sorted(RESPONSE_METHODS)
 ['debevec', 'linear', 'mitsunaga-nayar', 'robertson']
 >>> resolve(RESPONSE_METHODS, "debevec").__name__
-'debevec'
+'response_debevec1997'
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from __future__ import annotations
 import importlib
 
 RESPONSE_METHODS = {
-    "debevec": "lumigraph.hdr.debevec1997:debevec",
-    "mitsunaga-nayar": "lumigraph.hdr.mitsunaga1999:mitsunaga_nayar",
-    "robertson": "lumigraph.hdr.robertson2003:robertson",
+    "debevec": "lumigraph.hdr.debevec1997:response_debevec1997",
+    "mitsunaga-nayar": "lumigraph.hdr.mitsunaga1999:response_mitsunaga1999",
+    "robertson": "lumigraph.hdr.robertson2003:response_robertson2003",
     "linear": "lumigraph.hdr.methods:linear_response",
 }
 TONEMAP_METHODS = {

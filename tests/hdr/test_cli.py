@@ -92,17 +92,17 @@ def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
     from pathlib import Path
 
     from lumigraph.capture.errors import InputError
-    from lumigraph.hdr.debevec1997 import debevec
-    from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
+    from lumigraph.hdr.debevec1997 import response_debevec1997
+    from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
     from lumigraph.hdr.samples import check_stack
 
     s = render("bracket", size=(48, 36), exposures=3)
     z, t = np.stack(s.images), s.stack["exposure_times_s"]
     with pytest.raises(InputError) as e:
-        debevec(z, t, smoothness=-1.0)
+        response_debevec1997(z, t, smoothness=-1.0)
     assert e.value.where == "smoothness"
     with pytest.raises(InputError) as e:
-        mitsunaga_nayar(z, t, order=11)
+        response_mitsunaga1999(z, t, order=11)
     assert e.value.where == "order"
     with pytest.raises(InputError) as e:
         check_stack(z, [t[0], t[0], t[2]], bit_depth=8)
