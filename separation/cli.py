@@ -193,12 +193,14 @@ def main(argv=None, prog="lumigraph separate") -> int:
         p.add_argument("--out", required=True, help="output folder")
         p.set_defaults(func=_patterns)
         return run(p, argv[1:])
-    from lumigraph.separation.separate import METHODS
+    from lumigraph.separation.methods import METHODS
 
     p = make_parser(prog, "Separate direct and global light from captures under high-frequency "
-                    "projector patterns (Nayar et al. 2006).", epilog=EPILOG)
+                    "projector patterns (Nayar et al. 2006).",
+                    epilog=f"{EPILOG}\nmethods:\n{METHODS.help_text()}\n")
     p.add_argument("images", nargs="+", help="captures (files, or a folder with stack.json)")
-    p.add_argument("--method", default="checker", choices=sorted(METHODS))
+    p.add_argument("--method", default="checker", choices=METHODS.names,
+                   help="separation method (listed below)")
     p.add_argument("--alpha", type=float, default=None, help="lit fraction of the patterns (default 0.5)")
     p.add_argument("--b", type=float, default=None, help="projector black level in [0, 1)")
     p.add_argument("--black", help="capture under an all-black projector frame (to measure b)")

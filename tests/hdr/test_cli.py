@@ -151,3 +151,20 @@ def test_aperture_bracket_means_the_same_to_merge_and_video(tmp_path):
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "vid2" / "video.meta.json").read_text())["params"]["times_s"] \
         == [1.0, 2.0, 4.0]
+
+
+@pytest.mark.parametrize("verb,registry", [("response", "RESPONSE_METHODS"),
+                                           ("tonemap", "TONEMAP_METHODS"),
+                                           ("align", "ALIGN_METHODS")])
+def test_method_choices_and_help_come_from_the_registries(verb, registry):
+    from lumigraph.capture.registry import Registry
+    from lumigraph.hdr import methods
+
+    reg = getattr(methods, registry)
+    assert isinstance(reg, Registry)
+    r = lumigraph("hdr", verb, "--help")
+    assert r.returncode == 0, r.stderr
+    assert "{" + ",".join(reg.names) + "}" in r.stdout
+    for m in reg.values():
+        assert m.help in r.stdout
+        assert callable(m.load())
