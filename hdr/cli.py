@@ -418,7 +418,8 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     sigma = inspect.signature(_hv).parameters["consistency_sigma"].default
     v.add_argument("--consistency-sigma", type=float, default=sigma,
                    help="reject warped neighbours further than this many noise sigma (default "
-                        f"{sigma:g}, chosen by the protocol in hdr.kang2003.DEFAULTS_CHOICE)")
+                        f"{sigma:g}, chosen as docs/decisions/hdr-video-consistency-sigma.md "
+                        "records)")
     v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input")
