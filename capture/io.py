@@ -53,7 +53,10 @@ from lumigraph.capture.exposure import check_exposure_times, effective_exposure_
 LDR_EXTS = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm"}
 RAW_EXTS = {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}
 EXR_EXTS = {".exr"}
-FLOAT_EXTS = EXR_EXTS | {".pfm", ".hdr"}
+FLOAT_EXTS = EXR_EXTS | {".pfm"}
+# Radiance RGBE has one codec, lumigraph.hdr.formats (HDR exchange formats
+# belong to the hdr stage; this ground floor cannot import it).
+RGBE_EXTS = {".hdr", ".pic"}
 STACK_SCHEMA = "lumigraph.stack"
 
 
@@ -118,14 +121,16 @@ def read_image(path) -> np.ndarray:
     Parameters
     ----------
     path : path-like
-        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM, Radiance ``.hdr`` or a RAW file.
+        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM or a RAW file. Radiance RGBE
+        (``.hdr``) is refused: its one codec is the hdr stage's
+        (``hdr.formats.read_rgbe``), above this floor.
 
     Returns
     -------
     ndarray
         ``(H, W)`` or ``(H, W, 3|4)``; ``uint8``/``uint16`` code values for LDR
         and RAW files (RAW: linear 16-bit, see :func:`read_raw`), ``float32``
-        linear values for EXR/PFM/HDR.
+        linear values for EXR/PFM.
 
     Raises
     ------
@@ -141,7 +146,11 @@ def read_image(path) -> np.ndarray:
         return img
     if ext in RAW_EXTS:
         return read_raw(p).codes
-    if ext not in LDR_EXTS | {".hdr"}:
+    if ext in RGBE_EXTS:
+        raise InputError(p, "Radiance RGBE is read by the hdr stage (hdr.formats.read_rgbe), not "
+                            "as a plain image; convert it with 'lumigraph hdr convert IN.hdr "
+                            "OUT.exr'")
+    if ext not in LDR_EXTS:
         raise InputError(p, f"unsupported image extension {p.suffix!r}; expected one of "
                             + ", ".join(sorted(LDR_EXTS | FLOAT_EXTS | RAW_EXTS)))
     if ext in {".jpg", ".jpeg"}:
