@@ -48,11 +48,15 @@ import numpy as np
 
 from lumigraph.capture.artifact import atomic_path, dumps_json
 from lumigraph.capture.errors import InputError
+from lumigraph.capture.exposure import check_exposure_times, effective_exposure_times
 
 LDR_EXTS = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm"}
 RAW_EXTS = {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}
 EXR_EXTS = {".exr"}
-FLOAT_EXTS = EXR_EXTS | {".pfm", ".hdr"}
+FLOAT_EXTS = EXR_EXTS | {".pfm"}
+# Radiance RGBE has one codec, lumigraph.hdr.formats (HDR exchange formats
+# belong to the hdr stage; this ground floor cannot import it).
+RGBE_EXTS = {".hdr", ".pic"}
 STACK_SCHEMA = "lumigraph.stack"
 
 
@@ -117,14 +121,16 @@ def read_image(path) -> np.ndarray:
     Parameters
     ----------
     path : path-like
-        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM, Radiance ``.hdr`` or a RAW file.
+        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM or a RAW file. Radiance RGBE
+        (``.hdr``) is refused: its one codec is the hdr stage's
+        (``hdr.formats.read_rgbe``), above this floor.
 
     Returns
     -------
     ndarray
         ``(H, W)`` or ``(H, W, 3|4)``; ``uint8``/``uint16`` code values for LDR
         and RAW files (RAW: linear 16-bit, see :func:`read_raw`), ``float32``
-        linear values for EXR/PFM/HDR.
+        linear values for EXR/PFM.
 
     Raises
     ------
@@ -140,7 +146,11 @@ def read_image(path) -> np.ndarray:
         return img
     if ext in RAW_EXTS:
         return read_raw(p).codes
-    if ext not in LDR_EXTS | {".hdr"}:
+    if ext in RGBE_EXTS:
+        raise InputError(p, "Radiance RGBE is read by the hdr stage (hdr.formats.read_rgbe), not "
+                            "as a plain image; convert it with 'lumigraph hdr convert IN.hdr "
+                            "OUT.exr'")
+    if ext not in LDR_EXTS:
         raise InputError(p, f"unsupported image extension {p.suffix!r}; expected one of "
                             + ", ".join(sorted(LDR_EXTS | FLOAT_EXTS | RAW_EXTS)))
     if ext in {".jpg", ".jpeg"}:
@@ -557,11 +567,14 @@ class Stack:
     bit_depth : int or None
         True bit depth of integer codes (``None`` for float data).
     exposure_times_s : tuple of float or None
-        Per-image exposure times (EXIF, stack.json or ``--times``), or ``None``.
+        Per-image exposure times (EXIF, stack.json or given), or ``None``.
     linear : bool
         True for RAW-developed or float data (no response curve needed).
     info : dict
         Everything else ``stack.json`` carried (scene-specific keys).
+    times_given : bool
+        The times were given to :func:`read_stack` (``--times``), overriding
+        EXIF and stack.json: they are the exposures, whatever the apertures.
     """
 
     images: np.ndarray
@@ -570,14 +583,25 @@ class Stack:
     exposure_times_s: tuple[float, ...] | None = None
     linear: bool = False
     info: dict = field(default_factory=dict)
+    times_given: bool = False
 
     def __post_init__(self):
         if self.images.ndim != 4:
             raise ValueError(f"images: expected (N, H, W, C), got {self.images.shape}")
         if len(self.paths) != len(self.images):
             raise ValueError(f"paths: {len(self.paths)} paths for {len(self.images)} images")
-        if self.exposure_times_s is not None and len(self.exposure_times_s) != len(self.images):
-            raise ValueError("exposure_times_s: one time per image expected")
+        if self.exposure_times_s is not None:
+            check_exposure_times(self.exposure_times_s, len(self.images))
+
+    @property
+    def effective_exposure_times_s(self) -> tuple[float, ...] | None:
+        """The relative exposure of each image, what HDR works with: the times,
+        or for an aperture bracket (``f_numbers`` in stack.json, times not
+        given) ``Δt · (N_ref / N)²`` (:func:`capture.exposure.effective_exposure_times`)."""
+        if self.exposure_times_s is None or self.times_given or "f_numbers" not in self.info:
+            return self.exposure_times_s
+        return effective_exposure_times(self.exposure_times_s, self.info["f_numbers"],
+                                        f_number_ref=self.info.get("f_number_ref"))
 
 
 def _stack_files(inputs: Sequence[str | os.PathLike]) -> tuple[list[Path], dict, Path | None]:
@@ -608,7 +632,8 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
     inputs : sequence of path-like
         Image files in stack order, or a single folder (or its ``stack.json``).
     times : sequence of float, optional
-        Exposure times in seconds; override EXIF and stack.json.
+        Exposure times in seconds; override EXIF and stack.json (and, for an
+        aperture bracket, its f-numbers: see :attr:`Stack.effective_exposure_times_s`).
     need_times : bool
         Raise InputError (naming the file) when an exposure time is missing.
 
@@ -616,7 +641,8 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
     ------
     InputError
         Missing/unreadable files, mixed sizes, channels or dtypes, missing or
-        non-positive exposure times.
+        non-positive exposure times (:func:`capture.exposure.check_exposure_times`),
+        f-numbers not one per image.
     """
     files, info, sj = _stack_files(inputs)
     imgs, bit_depths, linear = [], [], False
@@ -641,13 +667,10 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
         bit_depths.append(bd)
     bit_depth = info.get("bit_depth", None if bit_depths[0] is None else max(bit_depths))
     if times is not None:
-        if len(times) != len(files):
-            raise InputError("--times", f"{len(times)} times given for {len(files)} images")
-        t = tuple(float(x) for x in times)
+        t = tuple(float(x) for x in check_exposure_times(times, len(files), where="times"))
     elif "exposure_times_s" in info:
-        t = tuple(float(x) for x in info["exposure_times_s"])
-        if len(t) != len(files):
-            raise InputError(sj, f"{len(t)} exposure_times_s for {len(files)} images")
+        t = tuple(float(x) for x in check_exposure_times(info["exposure_times_s"], len(files),
+                                                         where=sj))
     else:
         found = []
         for f in files:
@@ -658,12 +681,14 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
                                     "or a folder with stack.json")
             found.append(et)
         t = tuple(found) if all(x is not None for x in found) else None
-    if t is not None:
-        for f, x in zip(files, t, strict=True):
-            if not np.isfinite(x) or x <= 0:
-                raise InputError(f, f"exposure time must be positive and finite, got {x}")
+        if t is not None:  # EXIF: an implausible time names its file
+            for f, x in zip(files, t, strict=True):
+                check_exposure_times([x], 1, where=f)
+    if t is not None and times is None and "f_numbers" in info:
+        effective_exposure_times(t, info["f_numbers"], f_number_ref=info.get("f_number_ref"),
+                                 where=sj)
     return Stack(np.stack(imgs), tuple(str(f) for f in files), bit_depth, t,
-                 bool(info.get("linear", linear)), info)
+                 bool(info.get("linear", linear)), info, times_given=times is not None)
 
 
 def write_stack_json(folder, images: Sequence[str], **info) -> Path:

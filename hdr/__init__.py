@@ -1,10 +1,11 @@
 """HDR imaging: camera-response recovery (one module per method), radiance
 merge, exposure alignment, tone mapping and HDR file formats.
 
-``from hdr import debevec, mitsunaga_nayar, tonemap, ResponseCurve`` works
-(and ``hdr_video``, ``tonemap_video`` for HDR video);
-the names load their modules on first use so ``import hdr`` stays cheap. The
-merge is ``from hdr.merge import merge``: ``hdr.merge`` is the module's name,
+``from lumigraph.hdr import response_debevec1997, response_mitsunaga1999,
+response_robertson2003, tonemap, ResponseCurve`` works (and ``hdr_video``,
+``tonemap_video`` for HDR video); the names load their modules on first use so
+``import lumigraph.hdr`` stays cheap. The merge is ``from lumigraph.hdr.merge
+import merge``: ``lumigraph.hdr.merge`` is the module's name,
 and a package attribute of the same name would be the function or the module
 depending on what had been imported before.
 """
@@ -15,8 +16,9 @@ import importlib
 
 _LAZY = {
     "ResponseCurve": "lumigraph.hdr.response",
-    "debevec": "lumigraph.hdr.debevec1997",
-    "mitsunaga_nayar": "lumigraph.hdr.mitsunaga1999",
+    "response_debevec1997": "lumigraph.hdr.debevec1997",
+    "response_mitsunaga1999": "lumigraph.hdr.mitsunaga1999",
+    "response_robertson2003": "lumigraph.hdr.robertson2003",
     "RadianceMap": "lumigraph.hdr.merge",
     "tonemap": "lumigraph.hdr.reinhard2002",
     "align": "lumigraph.hdr.ward2003",
@@ -38,4 +40,4 @@ __all__ = sorted(_LAZY)
 def __getattr__(name):
     if name in _LAZY:
         return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'hdr' has no attribute {name!r}")
+    raise AttributeError(f"module 'lumigraph.hdr' has no attribute {name!r}")

@@ -94,29 +94,29 @@ def _big(quick):
 
 # ------------------------------------------------------------------ methods
 def _ours_debevec(d, samples):
-    from lumigraph.hdr.debevec1997 import debevec
+    from lumigraph.hdr.debevec1997 import response_debevec1997
 
     t = d["exact"] if "exact_only" in d else d["times"]
-    return debevec(d["z"], t, bit_depth=d["bit_depth"], samples=samples).g
+    return response_debevec1997(d["z"], t, bit_depth=d["bit_depth"], samples=samples).g
 
 
 def _ours_debevec_exact(d, samples):
-    from lumigraph.hdr.debevec1997 import debevec
+    from lumigraph.hdr.debevec1997 import response_debevec1997
 
-    return debevec(d["z"], d["exact"], bit_depth=d["bit_depth"], samples=samples).g
+    return response_debevec1997(d["z"], d["exact"], bit_depth=d["bit_depth"], samples=samples).g
 
 
 def _ours_mn(d, order):
-    from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
+    from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
 
-    r = mitsunaga_nayar(d["z"], d["times"], bit_depth=d["bit_depth"], order=order)
+    r = response_mitsunaga1999(d["z"], d["times"], bit_depth=d["bit_depth"], order=order)
     return r.g, np.array(r.exposure_times_s)
 
 
 def _ours_robertson(d, samples):
-    from lumigraph.hdr.robertson2003 import robertson
+    from lumigraph.hdr.robertson2003 import response_robertson2003
 
-    return robertson(d["z"], d["times"], bit_depth=d["bit_depth"], samples=samples).g
+    return response_robertson2003(d["z"], d["times"], bit_depth=d["bit_depth"], samples=samples).g
 
 
 def _bgr(d):
@@ -196,10 +196,10 @@ def _read_pfs_response(path) -> np.ndarray:
 def _merge_prepare(d):
     import cv2
 
-    from lumigraph.hdr.debevec1997 import debevec
+    from lumigraph.hdr.debevec1997 import response_debevec1997
 
     out = dict(d)
-    out["curve"] = debevec(d["z"], d["times"], bit_depth=d["bit_depth"])
+    out["curve"] = response_debevec1997(d["z"], d["times"], bit_depth=d["bit_depth"])
     out["cv_curve"] = cv2.createCalibrateDebevec().process(_bgr(d), d["times"].astype(np.float32))
     out["bgr"] = _bgr(d)
     return out

@@ -19,7 +19,7 @@ from lumigraph.capture.commandline import (
     warn,
 )
 from lumigraph.capture.errors import InputError
-from lumigraph.hdr.methods import RESPONSE_METHODS, TONEMAP_METHODS
+from lumigraph.hdr.methods import ALIGN_METHODS, RESPONSE_METHODS, TONEMAP_METHODS
 
 EPILOG = """\
 examples:
@@ -38,33 +38,30 @@ as 1/250 are fine). Every output gets a <output>.meta.json sidecar.
 """
 
 
+# The library names the times by its argument; --times sets them.
+TIMES_FLAG = {"exposure_times_s": "--times"}
+
+
 def _times(args):
     return parse_floats(args.times, name="--times") if args.times else None
 
 
 def _load(args, *, need_times=True):
-    import numpy as np
-
+    """The bracket and its exposures: the stack reader's effective exposure
+    (an aperture bracket's f-numbers applied), as every HDR verb uses them."""
     from lumigraph.capture.io import read_stack
 
     stack = read_stack(args.images, times=_times(args), need_times=need_times)
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float images are already linear; merge needs code values "
                                          "(integer PNG/TIFF/JPEG/RAW)")
-    times = stack.exposure_times_s
-    if times is not None and "f_numbers" in stack.info and not args.times:
-        # Aperture bracket: relative exposure t · (N_ref / N)².
-        fn = np.asarray(stack.info["f_numbers"], dtype=np.float64)
-        ref = float(stack.info.get("f_number_ref", fn.min()))
-        times = tuple(float(t) * (ref / n) ** 2 for t, n in zip(times, fn, strict=True))
-    return stack, times
+    return stack, stack.effective_exposure_times_s
 
 
 def _response(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.hdr.methods import resolve
 
     out = check_output_path(args.out, suffixes=(".json",))
     if args.plot:
@@ -74,21 +71,24 @@ def _response(args) -> int:
     if method == "linear" and args.method != "linear":
         say(args, "input is linear (RAW, float or declared linear in stack.json): no response "
                   "curve is needed; writing the identity response")
+    m = RESPONSE_METHODS.resolve(method)
+    fn = m.load()
     opts = {"bit_depth": stack.bit_depth}
-    # Robertson's per-code means need many more pixels than a smoothness-
-    # regularised fit: 600 leaves codes unvisited
-    samples = args.samples if args.samples is not None else (5000 if method == "robertson" else 600)
-    if samples < 2:
+    # Default: the method's own (Robertson's per-code means need 5000 pixels
+    # where a smoothness-regularised fit needs 600).
+    default = inspect.signature(fn).parameters.get("samples")
+    samples = args.samples if args.samples is not None else (
+        None if default is None else default.default)
+    if samples is not None and samples < 2:
         raise InputError("--samples", f"expected at least 2 pixels, got {samples}")
-    if method == "debevec":
+    if "smoothness" in m.options:
         opts["smoothness"] = "auto" if args.smoothness == "auto" else _num(args.smoothness,
                                                                             "--smoothness")
-    elif method == "mitsunaga-nayar":
+    if "order" in m.options:
         opts["order"] = "auto" if args.order == "auto" else int(_num(args.order, "--order"))
-    if method != "linear":
+    if "samples" in m.options:
         opts["samples"] = samples
         opts["rng"] = np.random.default_rng(args.seed)
-    fn = resolve(RESPONSE_METHODS, method)
     t0 = time.perf_counter()
     curve = fn(stack.images, times, **opts)
     dt = time.perf_counter() - t0
@@ -96,7 +96,7 @@ def _response(args) -> int:
         warn(w)
     meta = make_meta("lumigraph.response", inputs=stack.paths,
                      params={"method": method, "times_s": times,
-                             "samples": samples if method != "linear" else None,
+                             "samples": samples if "samples" in m.options else None,
                              "seed": args.seed, "bit_depth": stack.bit_depth},
                      model={"method": curve.method, "selection": curve.selection},
                      quality=curve.fit, timings_s={"fit": dt}, warnings=curve.warnings)
@@ -220,13 +220,13 @@ def _align(args) -> int:
 
     from lumigraph.capture.artifact import make_meta, write_json
     from lumigraph.capture.io import read_stack, write_image, write_stack_json
-    from lumigraph.hdr.ward2003 import align
 
     out = check_output_dir(args.out)
     stack = read_stack(args.images, times=_times(args))
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "align works on code values (PNG/TIFF/JPEG)")
-    aligned, shifts = align(stack.images, reference=args.reference, levels=args.levels)
+    aligned, shifts = ALIGN_METHODS.resolve(args.method)(stack.images, reference=args.reference,
+                                                         levels=args.levels)
     out.mkdir(parents=True, exist_ok=True)
     names = []
     for img, src in zip(aligned, stack.paths, strict=True):
@@ -252,7 +252,6 @@ def _tonemap(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_image
     from lumigraph.hdr.formats import read_hdr_image
-    from lumigraph.hdr.methods import resolve
 
     out = check_output_path(args.out, suffixes=(".png", ".tif", ".tiff"))
     img = read_hdr_image(args.input)
@@ -262,8 +261,7 @@ def _tonemap(args) -> int:
 
     if not np.isfinite(img).all():
         raise InputError(args.input, "contains NaN/inf; tone mapping needs finite radiance")
-    fn = resolve(TONEMAP_METHODS, args.method)
-    ldr = fn(img, method=args.method, key=args.key, bit_depth=args.bit_depth)
+    ldr = TONEMAP_METHODS.resolve(args.method)(img, key=args.key, bit_depth=args.bit_depth)
     meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
                      params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth})
     write_artifact(out, lambda p: write_image(p, ldr), meta=meta)
@@ -307,11 +305,9 @@ def _video(args) -> int:
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float frames are already linear; HDR video needs "
                                          "code values (integer PNG/TIFF)")
-    if stack.exposure_times_s is None:
-        raise InputError(where, "no exposure times (stack.json, EXIF or --times)")
     _check_curve(curve, stack, args.response, "frames")
     t0 = time.perf_counter()
-    v = hdr_video(stack.images, stack.exposure_times_s, curve, window=args.window,
+    v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=args.window,
                   consistency_sigma=args.consistency_sigma,
                   progress=lambda it: progress(it, total=stack.images.shape[0],
                                                description="hdr video", quiet=args.quiet))
@@ -354,13 +350,19 @@ def _video(args) -> int:
     return 0
 
 
+def _methods_epilog(registry) -> str:
+    return f"{registry.kind} methods:\n{registry.help_text()}"
+
+
 def main(argv=None, prog="lumigraph hdr") -> int:
     p = make_parser(prog, "HDR imaging: response curves, radiance maps, alignment, tone mapping.",
                     epilog=EPILOG)
     sp = subparsers(p)
-    v = add_verb(sp, "response", "recover the camera response from a bracket")
+    v = add_verb(sp, "response", "recover the camera response from a bracket",
+                 epilog=_methods_epilog(RESPONSE_METHODS))
     v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
-    v.add_argument("--method", choices=sorted(RESPONSE_METHODS), default="debevec")
+    v.add_argument("--method", choices=RESPONSE_METHODS.names, default="debevec",
+                   help="response method (listed below)")
     v.add_argument("--times", help="exposure times T1,T2,... (seconds; default EXIF/stack.json)")
     v.add_argument("--out", required=True, help="response.json")
     v.add_argument("--plot", help="also plot the curve to this PNG")
@@ -370,7 +372,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--samples", type=int,
                    help="pixels sampled (default 600; robertson 5000, for its per-code means)")
     v.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling")
-    v.set_defaults(func=_response)
+    v.set_defaults(func=_response, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
     v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
     v.add_argument("--response", required=True, help="response.json from 'hdr response'")
@@ -381,17 +383,22 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
-    v.set_defaults(func=_merge)
-    v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)")
+    v.set_defaults(func=_merge, arg_flags=TIMES_FLAG)
+    v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
+                 epilog=_methods_epilog(ALIGN_METHODS))
     v.add_argument("images", nargs="+")
+    v.add_argument("--method", choices=ALIGN_METHODS.names, default="mtb",
+                   help="alignment method (listed below)")
     v.add_argument("--out", required=True, help="output folder (aligned PNGs + stack.json)")
     v.add_argument("--times", help="exposure times T1,T2,... to record in stack.json")
     v.add_argument("--reference", type=int, default=None, help="reference image index")
     v.add_argument("--levels", type=int, default=6, help="pyramid levels (shift <= 2**levels)")
     v.set_defaults(func=_align)
-    v = add_verb(sp, "tonemap", "tone-map a radiance map to an sRGB image")
+    v = add_verb(sp, "tonemap", "tone-map a radiance map to an sRGB image",
+                 epilog=_methods_epilog(TONEMAP_METHODS))
     v.add_argument("input", help="radiance (.exr, .hdr, LogLuv .tif, .pfm)")
-    v.add_argument("--method", choices=sorted(TONEMAP_METHODS), default="reinhard")
+    v.add_argument("--method", choices=TONEMAP_METHODS.names, default="reinhard",
+                   help="tone-mapping operator (listed below)")
     v.add_argument("--key", type=float, default=0.18, help="scene key (0.18 middle grey)")
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
     v.add_argument("--out", required=True, help="image.png")
@@ -411,8 +418,9 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     sigma = inspect.signature(_hv).parameters["consistency_sigma"].default
     v.add_argument("--consistency-sigma", type=float, default=sigma,
                    help="reject warped neighbours further than this many noise sigma (default "
-                        f"{sigma:g}, chosen by the protocol in hdr.kang2003.DEFAULTS_CHOICE)")
-    v.set_defaults(func=_video)
+                        f"{sigma:g}, chosen as docs/decisions/hdr-video-consistency-sigma.md "
+                        "records)")
+    v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input")
     v.add_argument("output")

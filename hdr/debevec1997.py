@@ -34,7 +34,7 @@ Examples
 >>> t = np.array([0.05, 0.2, 0.8, 3.2])
 >>> z = np.stack([np.clip(np.round(255 * np.sqrt(np.clip(e * ti, 0, 1))), 0, 255)
 ...               for ti in t]).astype(np.uint8)
->>> r = debevec(z, t, rng=rng)
+>>> r = response_debevec1997(z, t, rng=rng)
 >>> x = r.exposure_table()[0]
 >>> bool(abs(x[200] / x[100] - 4.0) < 0.1)   # f⁻¹(z) = (z/255)²
 True
@@ -338,7 +338,7 @@ def _monotone(gk, counts):
     return np.asarray(res.x, dtype=np.float64)
 
 
-def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
+def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
             smoothness: float | str = "auto", samples: int = 600, knots: int | None = None,
             clip_margin: float = 0.03, rng: np.random.Generator | None = None) -> ResponseCurve:
     """Recover ``g = ln f⁻¹`` per channel from a bracket (eq. 6.5).
@@ -398,7 +398,7 @@ def debevec(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = Non
     if lam_given:
         lam = float(smoothness)
         if not math.isfinite(lam) or lam < 0:
-            raise InputError("--smoothness", f"expected λ >= 0, got {smoothness}")
+            raise InputError("smoothness", f"expected λ >= 0, got {smoothness}")
         grid = (lam,)
     else:
         grid = LAMBDA_GRID

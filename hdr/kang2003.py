@@ -50,6 +50,7 @@ Examples
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,33 +60,7 @@ from lumigraph.hdr.merge import BLACK, CLIPPED, GHOST, variance_weight_table
 from lumigraph.hdr.response import ResponseCurve
 from lumigraph.hdr.samples import check_stack
 
-DEFAULTS_CHOICE = """\
-consistency_sigma (2026-11-23) was chosen on bracket_video renders the bench and the
-tests do not use, scored by the mean log-radiance RMS over the clipped, recoverable
-pixel-channels (clipped in the frame, recorded a factor 2 / 1.5 inside a neighbour's
-reliable range, 6 px borders excluded), subject to the hard case: at large motion the
-warped pixel-channels' log RMS must stay below 0.75x the better of the frame's own
-bound and the unaligned merge on the same pixels (tests/hard/test_hdr_video_hard.py).
-Tuning scenes: 160x120, 6 frames, 3 stops, light 2 px/frame, seeds {3, 4, 6} x pan
-{0.75, 3.0} px/frame. Hard scenes: 160x120, 4 frames, light 10 px/frame, seeds
-{7, 8} x pan {30, 60} px/frame. Grid {2, 3, 4, 6, 8, 12, 16}, then {5, 7} around the
-feasibility edge. Measured with the end-frame and round-trip-radius registration of
-this module.
-
-    sigma   tuning mean   per scene (s3 .75, s3 3, s4 .75, s4 3, s6 .75, s6 3)   worst hard ratio
-      2       0.2527      0.295 0.204 0.297 0.208 0.301 0.211                    0.684
-      3       0.1854      0.229 0.138 0.229 0.142 0.234 0.139                    0.663
-      4       0.1604      0.195 0.125 0.193 0.129 0.195 0.125                    0.674
-      5       0.1489      0.178 0.117 0.176 0.123 0.180 0.120                    0.671
-      6       0.1405      0.166 0.112 0.164 0.119 0.167 0.115                    0.668
-      7       0.1356      0.158 0.110 0.157 0.118 0.158 0.112                    0.791 (infeasible)
-      8       0.1319      0.152 0.109 0.152 0.115 0.154 0.110                    0.848 (infeasible)
-     12       0.1234      0.141 0.104 0.139 0.110 0.142 0.105                    1.551 (infeasible)
-     16       0.1201      0.135 0.103 0.134 0.109 0.136 0.104                    1.610 (infeasible)
-
-The error falls monotonically with sigma (a looser test fills more clipped pixels with
-mostly right values), but from 7 sigma on the 60 px/frame scenes accept ghosts (the
-worst ratio is seed 7 at 60 px/frame). Best feasible: 6 sigma, the default."""
+# consistency_sigma's default (6): docs/decisions/hdr-video-consistency-sigma.md
 
 WARPED = 8  # the value comes from registered neighbours
 FALLBACK = 16  # unreliable in the current frame and no consistent neighbour: its bound
@@ -159,20 +134,21 @@ class TonemappedVideo:
 
 
 # ------------------------------------------------------------- validation
-def _check(frames, times, response):
+def _check(frames, exposure_times_s, response):
     if not isinstance(response, ResponseCurve):
         raise TypeError(f"response: expected a ResponseCurve, got {type(response).__name__}")
-    z, t, _ = check_stack(frames, times, bit_depth=response.bit_depth, where="frames",
+    z, t, _ = check_stack(frames, exposure_times_s, bit_depth=response.bit_depth, where="frames",
                           distinct_times=False)
     if z.shape[0] < 2:
         raise InputError("frames", f"HDR video needs at least 2 frames, got {z.shape[0]}")
     if response.channels not in (1, z.shape[-1]):
-        raise InputError("--response", f"curve has {response.channels} channels, frames have "
-                                       f"{z.shape[-1]}")
+        raise InputError("response", f"curve has {response.channels} channels, frames have "
+                                     f"{z.shape[-1]}")
     if float(t.max() / t.min()) < 1.0 + 1e-3:
-        raise InputError("--times", f"every frame has the same exposure ({t[0]:g} s): HDR video "
-                                    "needs alternating exposures (neighbours would clip where "
-                                    "the current frame does); use a plain merge or tone map")
+        raise InputError("exposure_times_s",
+                         f"every frame has the same exposure ({t[0]:g} s): HDR video needs "
+                         "alternating exposures (neighbours would clip where the current frame "
+                         "does); use a plain merge or tone map")
     return z, t
 
 
@@ -224,7 +200,7 @@ class Radiometry:
         self.hi = int(math.floor((1 - clip_margin) * self.zmax))
         ok = np.nonzero(self.reliable.all(axis=0))[0]
         if ok.size == 0:
-            raise InputError("--response", "no code value is reliable at this clip margin")
+            raise InputError("response", "no code value is reliable at this clip margin")
         self.lo, self.hi = int(ok[0]), int(ok[-1])
         self.var = np.where(np.isfinite(var), var, 0.0)
         self.var_lo = var[:, self.lo]
@@ -381,7 +357,7 @@ def _box_mean(a, k):
 
 
 # --------------------------------------------------------------- the method
-def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int = 9,
+def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, window: int = 9,
               flow_method: str = "dense", consistency_sigma: float = 6.0,
               neighbourhood: int = 7, outlier_share: float = 0.25,
               bidirectional: bool = True, max_motion_px: float | None = None,
@@ -393,7 +369,7 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
     ----------
     frames : ndarray, ``(N, H, W, C)`` uint8/uint16 codes, ``N >= 2``
         In time order; consecutive frames should differ in exposure.
-    times : sequence of float, ``(N,)``
+    exposure_times_s : sequence of float, ``(N,)``
         Exposure time of each frame, seconds (not all equal).
     response : ResponseCurve
         The camera's curve (bit depth of the codes).
@@ -405,7 +381,7 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
         ``k``: a warped neighbour further than ``k`` noise σ from what the
         current frame says (its bound, or the other neighbour) is rejected.
         6 was chosen on held-out renders subject to the large-motion hard
-        case (:data:`DEFAULTS_CHOICE`).
+        case (``docs/decisions/hdr-video-consistency-sigma.md``).
     neighbourhood : int
         Side (px) of the window of well-exposed current pixels a warped
         neighbour must agree with.
@@ -433,10 +409,60 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
     InputError
         Fewer than 2 frames, times not one per frame / not positive, all
         frames at one exposure, codes beyond the curve's bit depth.
-    """
-    import time as _time
 
-    z, t = _check(frames, times, response)
+    Notes
+    -----
+    The steps, each a function below: check the inputs (:func:`_check`,
+    :func:`_check_options`); every frame through the response
+    (:func:`_linearise`); then per frame: the frame to complete and its
+    clipping bounds (:func:`_current_frame`), register its neighbours
+    (:func:`_register`, boosting each pair with :func:`equalise`), warp them
+    (:func:`_warp_neighbour`), test each against the frame
+    (:func:`_consistency`), accept by the pair's agreement (:func:`_accept`),
+    fill and flag (:func:`_fill`), and account for the sources
+    (:func:`_sources`).
+    """
+    z, t = _check(frames, exposure_times_s, response)
+    _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share)
+    n, h, w, c = z.shape
+    rad = Radiometry(response, c, full_well_e=full_well_e, read_noise_e=read_noise_e,
+                      clip_margin=clip_margin)
+    tests = _Tests(k2=float(consistency_sigma) ** 2, neighbourhood=neighbourhood,
+                   outlier_share=outlier_share)
+    flow_opts = dict(window=window, method=flow_method, max_motion_px=max_motion_px)
+    grid = _grid(h, w)
+    video = _linearise(z, t, rad)
+
+    out = np.empty((n, h, w, c), np.float32)
+    flags = np.zeros((n, h, w, c), np.uint8)
+    diags = []
+    steps = range(n) if progress is None else progress(range(n))
+    for i in steps:
+        t0 = time.perf_counter()
+        cur = _current_frame(i, z, t, video, rad)
+        maps, occ, unc, fdiag = _register(i, video.x, t, rad, grid, flow_opts,
+                                          bidirectional=bidirectional)
+        warped = {j: _warp_neighbour(video, j, maps[j]) for j in cur.neighbours}
+        checked = {j: _consistency(cur, warped[j], occ[j], unc[j], tests)
+                   for j in cur.neighbours}
+        accepted, rejected = _accept(cur, warped, checked, tests)
+        out[i], flags[i], used, fallback = _fill(cur, warped, accepted)
+        diags.append({"frame": i, "exposure_s": float(t[i]),
+                      "sources": _sources(cur, used, fallback),
+                      "rejected": rejected, "flow": fdiag,
+                      "time_s": time.perf_counter() - t0})
+    params = {"window": window, "flow_method": flow_method,
+              "consistency_sigma": float(consistency_sigma), "neighbourhood": neighbourhood,
+              "outlier_share": float(outlier_share), "bidirectional": bool(bidirectional),
+              "max_motion_px": max_motion_px, "full_well_e": full_well_e,
+              "read_noise_e": read_noise_e, "clip_margin": clip_margin}
+    return HDRVideo(out, flags, tuple(float(x) for x in t), tuple(diags), params,
+                    tuple(_fallback_warnings(diags)))
+
+
+# ------------------------------------------------------- the method's steps
+def _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share):
+    """Step 0: the options (the frames, times and curve are :func:`_check`'s)."""
     if flow_method not in ("dense", "local"):
         raise ValueError(f"flow_method: expected 'dense' or 'local', got {flow_method!r}")
     if not consistency_sigma > 0:
@@ -445,147 +471,227 @@ def hdr_video(frames: np.ndarray, times, response: ResponseCurve, *, window: int
         raise ValueError(f"neighbourhood: expected an odd size >= 1, got {neighbourhood}")
     if not 0 < outlier_share <= 1:
         raise ValueError(f"outlier_share: expected in (0, 1], got {outlier_share}")
-    n, h, w, c = z.shape
-    rad = Radiometry(response, c, full_well_e=full_well_e, read_noise_e=read_noise_e,
-                      clip_margin=clip_margin)
-    k2 = float(consistency_sigma) ** 2
-    flow_opts = dict(window=window, method=flow_method, max_motion_px=max_motion_px)
-    grid = _grid(h, w)
 
-    x_all = [rad.lookup(rad.x, z[i]) / np.float32(t[i]) for i in range(n)]
-    rel_all = [rad.lookup(rad.reliable.astype(np.float32), z[i]) > 0 for i in range(n)]
-    var_all = [rad.lookup(rad.var, z[i]) / np.float32(t[i] ** 2) for i in range(n)]
 
-    out = np.empty((n, h, w, c), np.float32)
-    flags = np.zeros((n, h, w, c), np.uint8)
-    diags = []
-    warnings = []
-    steps = range(n) if progress is None else progress(range(n))
-    for i in steps:
-        t0 = _time.perf_counter()
-        xc, rc, vc = x_all[i], rel_all[i], var_all[i]
-        unrel = ~rc
-        sat = unrel & (z[i] > rad.hi)
-        nbrs = [j for j in (i - 1, i + 1) if 0 <= j < n]
-        maps, occ, unc, fdiag = _register(i, x_all, t, rad, grid, flow_opts,
-                                          bidirectional=bidirectional)
-        # Bounds the clipped current pixel puts on the truth (per channel).
-        bound_hi = (rad.x[:, rad.hi] / t[i]).astype(np.float32)
-        bound_lo = (rad.x[:, rad.lo] / t[i]).astype(np.float32)
-        var_bhi = (rad.var_hi / t[i] ** 2).astype(np.float32)
-        var_blo = (rad.var_lo / t[i] ** 2).astype(np.float32)
+@dataclass(frozen=True)
+class _Tests:
+    """The consistency tests' settings: ``k²`` (``consistency_sigma²``), the side of
+    the well-exposed window and the outlier share that rejects a neighbour there."""
 
-        base, occls, relws, warped, rejected = {}, {}, {}, {}, {}
-        nu = max(int(unrel.sum()), 1)
+    k2: float
+    neighbourhood: int
+    outlier_share: float
+
+
+@dataclass(frozen=True)
+class _Linear:
+    """Every frame through the response (eq. 6.4): radiance ``x = f⁻¹(z)/Δt``, its
+    variance and whether its code is reliable, ``(H, W, C)`` per frame."""
+
+    x: list
+    reliable: list
+    var: list
+
+
+def _linearise(z, t, rad: Radiometry) -> _Linear:
+    """Step 1: radiance, reliability and variance of every frame."""
+    n = len(z)
+    return _Linear(x=[rad.lookup(rad.x, z[i]) / np.float32(t[i]) for i in range(n)],
+                   reliable=[rad.lookup(rad.reliable.astype(np.float32), z[i]) > 0
+                             for i in range(n)],
+                   var=[rad.lookup(rad.var, z[i]) / np.float32(t[i] ** 2) for i in range(n)])
+
+
+@dataclass(frozen=True)
+class _Current:
+    """Frame ``i`` as the one to complete: its own values, where it is unreliable
+    (saturated or black), and the bounds its clipped pixels put on the truth."""
+
+    index: int
+    neighbours: tuple[int, ...]
+    x: np.ndarray
+    reliable: np.ndarray
+    var: np.ndarray
+    unreliable: np.ndarray
+    saturated: np.ndarray
+    bound_hi: np.ndarray  # (C,): saturated => radiance >= f^-1(z_hi)/Δt
+    bound_lo: np.ndarray  # (C,): black => radiance <= f^-1(z_lo)/Δt
+    var_bound_hi: np.ndarray
+    var_bound_lo: np.ndarray
+
+    @property
+    def unreliable_count(self) -> int:
+        """Unreliable pixel-channels (at least 1: the shares' denominator)."""
+        return max(int(self.unreliable.sum()), 1)
+
+
+def _current_frame(i, z, t, video: _Linear, rad: Radiometry) -> _Current:
+    """Step 2: frame ``i``, its neighbours and its clipping bounds."""
+    unrel = ~video.reliable[i]
+    return _Current(index=i, neighbours=tuple(j for j in (i - 1, i + 1) if 0 <= j < len(z)),
+                    x=video.x[i], reliable=video.reliable[i], var=video.var[i],
+                    unreliable=unrel, saturated=unrel & (z[i] > rad.hi),
+                    bound_hi=(rad.x[:, rad.hi] / t[i]).astype(np.float32),
+                    bound_lo=(rad.x[:, rad.lo] / t[i]).astype(np.float32),
+                    var_bound_hi=(rad.var_hi / t[i] ** 2).astype(np.float32),
+                    var_bound_lo=(rad.var_lo / t[i] ** 2).astype(np.float32))
+
+
+@dataclass(frozen=True)
+class _Warped:
+    """A neighbour pulled onto the current frame: radiance, variance, and where
+    its interpolation footprint was mostly reliable."""
+
+    x: np.ndarray
+    var: np.ndarray
+    reliable: np.ndarray
+
+
+def _warp_neighbour(video: _Linear, j, sampling_map) -> _Warped:
+    """Step 4 (after registration, step 3 :func:`_register`): neighbour ``j``
+    resampled at ``sampling_map``.
+
+    Normalised interpolation: only the neighbour's reliable pixels contribute,
+    so one clipped pixel in a footprint does not void it."""
+    rw = _remap(video.reliable[j].astype(np.float32), sampling_map, border_value=0.0)
+    rws = np.maximum(rw, 1e-6)
+    return _Warped(x=_remap(np.where(video.reliable[j], video.x[j], 0.0), sampling_map) / rws,
+                   var=_remap(np.where(video.reliable[j], video.var[j], 0.0), sampling_map) / rws,
+                   reliable=rw > 0.5)
+
+
+@dataclass(frozen=True)
+class _Checked:
+    """The single-neighbour tests' outcome: ``passed`` (reliable, within the current
+    frame's bound, no misregistration nearby), ``occluded`` (the flow's round trip
+    disowns the sample and the neighbour is not flat there) and the shares of the
+    current frame's unreliable pixel-channels each test refused."""
+
+    passed: np.ndarray
+    occluded: np.ndarray
+    rejected: dict
+
+
+def _consistency(cur: _Current, nb: _Warped, occ, unc, tests: _Tests) -> _Checked:
+    """Step 5: test a warped neighbour against the current frame."""
+    k2, c = tests.k2, cur.x.shape[-1]
+    xw, vw, relw = nb.x, nb.var, nb.reliable
+    unrel, sat, nu = cur.unreliable, cur.saturated, cur.unreliable_count
+    # A flow the round trip disowns only matters where the neighbour has
+    # structure within the flow's uncertainty; flat there, the value is the
+    # same wherever it was sampled. The uncertainty is the round-trip error
+    # (a 90 px pan the pyramid cannot follow leaves errors of tens of px,
+    # where a fixed 5 px window let flat-but-wrong dark areas through).
+    flat = _flat_within(np.where(relw, xw, np.nan), unc, k2 * vw)
+    occl = np.repeat(occ[..., None], c, axis=2) & ~flat
+    # Clipped current pixel: the truth is above (saturated) / below (black) its bound.
+    low = sat & ((cur.bound_hi - xw) ** 2 > k2 * (vw + cur.var_bound_hi)) & (xw < cur.bound_hi)
+    high = ((unrel & ~sat) & ((xw - cur.bound_lo) ** 2 > k2 * (vw + cur.var_bound_lo))
+            & (xw > cur.bound_lo))
+    # Misregistration shows where both frames are well exposed nearby.
+    n = tests.neighbourhood
+    both = cur.reliable & relw
+    r2 = np.where(both, (xw - cur.x) ** 2 / np.maximum(vw + cur.var, 1e-30), 0.0)
+    cnt = _box_mean(both.astype(np.float32), n)
+    bad = _box_mean((both & (r2 > k2)).astype(np.float32), n)
+    ghost_near = (cnt * n ** 2 >= 3) & (bad > tests.outlier_share * cnt)
+    return _Checked(passed=relw & ~low & ~high & ~ghost_near, occluded=occl,
+                    rejected={"neighbour_unreliable": float((unrel & ~relw).sum() / nu),
+                              "bound": float((unrel & (low | high)).sum() / nu),
+                              "neighbourhood": float((unrel & ghost_near).sum() / nu)})
+
+
+def _accept(cur: _Current, warped, checked, tests: _Tests):
+    """Step 6: the pixel-channels each neighbour may fill, and the rejection shares.
+
+    With two neighbours, both warped independently and agreeing within noise
+    outvote a flow round trip that did not close; disagreeing, neither is used."""
+    i, nbrs, unrel, nu = cur.index, cur.neighbours, cur.unreliable, cur.unreliable_count
+    rejected = {f"{j - i:+d}": dict(checked[j].rejected) for j in nbrs}
+    accepted = {}
+    if len(nbrs) == 2:
+        p, q = nbrs
+        a, b = warped[p], warped[q]
+        pair = checked[p].passed & checked[q].passed
+        agree = pair & ((a.x - b.x) ** 2 <= tests.k2 * (a.var + b.var))
+        disagree = pair & ~agree
         for j in nbrs:
-            m = maps[j]
-            # Normalised interpolation: only the neighbour's reliable pixels
-            # contribute, so one clipped pixel in a footprint does not void it.
-            rw = _remap(rel_all[j].astype(np.float32), m, border_value=0.0)
-            relw = rw > 0.5
-            rws = np.maximum(rw, 1e-6)
-            xw = _remap(np.where(rel_all[j], x_all[j], 0.0), m) / rws
-            vw = _remap(np.where(rel_all[j], var_all[j], 0.0), m) / rws
-            # A flow the round trip disowns only matters where the neighbour has
-            # structure within the flow's uncertainty; flat there, the value is the
-            # same wherever it was sampled. The uncertainty is the round-trip error
-            # (a 90 px pan the pyramid cannot follow leaves errors of tens of px,
-            # where a fixed 5 px window let flat-but-wrong dark areas through).
-            flat = _flat_within(np.where(relw, xw, np.nan), unc[j], k2 * vw)
-            occl = np.repeat(occ[j][..., None], c, axis=2) & ~flat
-            # Clipped current pixel: the truth is above (saturated) / below (black) its bound.
-            low = sat & ((bound_hi - xw) ** 2 > k2 * (vw + var_bhi)) & (xw < bound_hi)
-            high = (unrel & ~sat) & ((xw - bound_lo) ** 2 > k2 * (vw + var_blo)) & (xw > bound_lo)
-            # Misregistration shows where both frames are well exposed nearby.
-            both = rc & relw
-            r2 = np.where(both, (xw - xc) ** 2 / np.maximum(vw + vc, 1e-30), 0.0)
-            cnt = _box_mean(both.astype(np.float32), neighbourhood)
-            bad = _box_mean((both & (r2 > k2)).astype(np.float32), neighbourhood)
-            ghost_near = (cnt * neighbourhood ** 2 >= 3) & (bad > outlier_share * cnt)
-            base[j] = relw & ~low & ~high & ~ghost_near
-            occls[j] = occl
-            relws[j] = relw
-            warped[j] = (xw, vw)
-            rejected[f"{j - i:+d}"] = {
-                "neighbour_unreliable": float((unrel & ~relw).sum() / nu),
-                "bound": float((unrel & (low | high)).sum() / nu),
-                "neighbourhood": float((unrel & ghost_near).sum() / nu)}
-        accepted = {}
-        if len(nbrs) == 2:
-            p, q = nbrs
-            (xa, va), (xb, vb) = warped[p], warped[q]
-            pair = base[p] & base[q]
-            agree = pair & ((xa - xb) ** 2 <= k2 * (va + vb))
-            disagree = pair & ~agree
-            # Two neighbours warped independently and agreeing within noise
-            # outvote a flow round trip that did not close.
-            for j in nbrs:
-                accepted[j] = base[j] & ~disagree & (~occls[j] | agree)
-            rejected["disagree"] = float((unrel & disagree).sum() / nu)
-        else:
-            for j in nbrs:
-                accepted[j] = base[j] & ~occls[j]
+            accepted[j] = checked[j].passed & ~disagree & (~checked[j].occluded | agree)
+        rejected["disagree"] = float((unrel & disagree).sum() / nu)
+    else:
         for j in nbrs:
-            rejected[f"{j - i:+d}"]["occluded"] = float(
-                (unrel & base[j] & occls[j] & ~accepted[j]).sum() / nu)
-        inconsistent = {j: unrel & relws[j] & ~accepted[j] for j in nbrs}
-        num = np.zeros((h, w, c), np.float32)
-        den = np.zeros((h, w, c), np.float32)
-        used = {}
-        for j in nbrs:
-            xw, vw = warped[j]
-            ok = accepted[j] & unrel
-            used[j] = ok
-            wgt = np.where(ok, 1.0 / np.maximum(vw, 1e-30), 0.0).astype(np.float32)
-            num += wgt * np.where(ok, xw, 0.0)
-            den += wgt
-        filled = unrel & (den > 0)
-        fallback = unrel & ~filled
-        res = xc.copy()
-        res[filled] = num[filled] / den[filled]
-        # No consistent neighbour: the current frame's own bound, as merge() does.
-        res[fallback & sat] = np.broadcast_to(bound_hi, res.shape)[fallback & sat]
-        fb_dark = fallback & ~sat
-        res[fb_dark] = np.broadcast_to(bound_lo, res.shape)[fb_dark]
-        f = np.zeros((h, w, c), np.uint8)
-        f[filled] |= WARPED
-        f[fallback] |= FALLBACK
-        f[fallback & sat] |= CLIPPED
-        f[fb_dark] |= BLACK
-        any_rej = np.zeros((h, w, c), bool)
-        for j in nbrs:
-            any_rej |= unrel & inconsistent[j]
-        f[any_rej] |= GHOST
-        out[i] = res
-        flags[i] = f
-        total = float(h * w * c)
-        prev_u = used.get(i - 1, np.zeros_like(unrel))
-        next_u = used.get(i + 1, np.zeros_like(unrel))
-        sources = {"current": float(rc.sum() / total),
-                   "previous": float((prev_u & ~next_u).sum() / total),
-                   "next": float((next_u & ~prev_u).sum() / total),
-                   "both": float((prev_u & next_u).sum() / total),
-                   "fallback": float(fallback.sum() / total)}
-        diags.append({"frame": i, "exposure_s": float(t[i]), "sources": sources,
-                      "rejected": rejected, "flow": fdiag,
-                      "time_s": _time.perf_counter() - t0})
+            accepted[j] = checked[j].passed & ~checked[j].occluded
+    for j in nbrs:
+        rejected[f"{j - i:+d}"]["occluded"] = float(
+            (unrel & checked[j].passed & checked[j].occluded & ~accepted[j]).sum() / nu)
+    return accepted, rejected
+
+
+def _fill(cur: _Current, warped, accepted):
+    """Step 7 (§6.3.2 step 3): the frame's radiance and flags.
+
+    Reliable pixel-channels keep the current frame's value; unreliable ones the
+    inverse-variance mean of the accepted neighbours (:data:`WARPED`), or with
+    none the frame's own clipping bound as :func:`hdr.merge.merge` gives it
+    (:data:`FALLBACK` with :data:`CLIPPED` / :data:`BLACK`). :data:`GHOST`
+    marks a neighbour that was rejected there."""
+    h, w, c = cur.x.shape
+    unrel, sat = cur.unreliable, cur.saturated
+    num = np.zeros((h, w, c), np.float32)
+    den = np.zeros((h, w, c), np.float32)
+    used = {}
+    for j in cur.neighbours:
+        xw, vw = warped[j].x, warped[j].var
+        ok = accepted[j] & unrel
+        used[j] = ok
+        wgt = np.where(ok, 1.0 / np.maximum(vw, 1e-30), 0.0).astype(np.float32)
+        num += wgt * np.where(ok, xw, 0.0)
+        den += wgt
+    filled = unrel & (den > 0)
+    fallback = unrel & ~filled
+    res = cur.x.copy()
+    res[filled] = num[filled] / den[filled]
+    res[fallback & sat] = np.broadcast_to(cur.bound_hi, res.shape)[fallback & sat]
+    fb_dark = fallback & ~sat
+    res[fb_dark] = np.broadcast_to(cur.bound_lo, res.shape)[fb_dark]
+    f = np.zeros((h, w, c), np.uint8)
+    f[filled] |= WARPED
+    f[fallback] |= FALLBACK
+    f[fallback & sat] |= CLIPPED
+    f[fb_dark] |= BLACK
+    any_rej = np.zeros((h, w, c), bool)
+    for j in cur.neighbours:
+        any_rej |= unrel & warped[j].reliable & ~accepted[j]  # inconsistent neighbour
+    f[any_rej] |= GHOST
+    return res, f, used, fallback
+
+
+def _sources(cur: _Current, used, fallback) -> dict:
+    """Step 8: the share of pixel-channels each source gave."""
+    i, rc = cur.index, cur.reliable
+    total = float(rc.size)
+    prev_u = used.get(i - 1, np.zeros_like(cur.unreliable))
+    next_u = used.get(i + 1, np.zeros_like(cur.unreliable))
+    return {"current": float(rc.sum() / total),
+            "previous": float((prev_u & ~next_u).sum() / total),
+            "next": float((next_u & ~prev_u).sum() / total),
+            "both": float((prev_u & next_u).sum() / total),
+            "fallback": float(fallback.sum() / total)}
+
+
+def _fallback_warnings(diags) -> list[str]:
+    """What the caller must hear: much of the video kept its clipping bounds."""
     fb = [d["sources"]["fallback"] for d in diags]
-    if max(fb) > 0.05:
-        warnings.append(f"{100 * float(np.mean(fb)):.1f} % of pixel-channels (up to "
-                        f"{100 * max(fb):.1f} % in frame {int(np.argmax(fb))}) are unreliable in "
-                        "their frame with no consistent neighbour: kept the frame's clipping "
-                        "bound, flagged (the exposures are too close for this scene's range, or "
-                        "the motion too large)")
-    params = {"window": window, "flow_method": flow_method,
-              "consistency_sigma": float(consistency_sigma), "neighbourhood": neighbourhood,
-              "outlier_share": float(outlier_share), "bidirectional": bool(bidirectional),
-              "max_motion_px": max_motion_px, "full_well_e": full_well_e,
-              "read_noise_e": read_noise_e, "clip_margin": clip_margin}
-    return HDRVideo(out, flags, tuple(float(x) for x in t), tuple(diags), params,
-                    tuple(warnings))
+    if max(fb) <= 0.05:
+        return []
+    return [f"{100 * float(np.mean(fb)):.1f} % of pixel-channels (up to "
+            f"{100 * max(fb):.1f} % in frame {int(np.argmax(fb))}) are unreliable in "
+            "their frame with no consistent neighbour: kept the frame's clipping "
+            "bound, flagged (the exposures are too close for this scene's range, or "
+            "the motion too large)"]
 
 
-def unaligned_merge(frames: np.ndarray, times, response: ResponseCurve, index: int, *,
+def unaligned_merge(frames: np.ndarray, exposure_times_s, response: ResponseCurve, index: int, *,
                     full_well_e: float = 10000.0, read_noise_e: float = 5.0,
                     clip_margin: float = 0.02) -> np.ndarray:
     """The naive baseline: frame ``index`` and its neighbours merged without registration.
@@ -606,7 +712,7 @@ def unaligned_merge(frames: np.ndarray, times, response: ResponseCurve, index: i
     >>> round(float(unaligned_merge(z, [1.0, 2.0, 1.0], r, 1)[0, 0, 0]), 4)  # 100/255 per second
     0.3922
     """
-    z, t = _check(frames, times, response)
+    z, t = _check(frames, exposure_times_s, response)
     if not 0 <= index < z.shape[0]:
         raise ValueError(f"index: expected 0..{z.shape[0] - 1}, got {index}")
     rad = Radiometry(response, z.shape[-1], full_well_e=full_well_e, read_noise_e=read_noise_e,

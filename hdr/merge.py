@@ -162,7 +162,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         raise ValueError(f"weights: expected 'variance' or 'hat', got {weights!r}")
     p, h, w, c = z.shape
     if response.channels not in (1, c):
-        raise InputError("--response", f"curve has {response.channels} channels, images have {c}")
+        raise InputError("response", f"curve has {response.channels} channels, images have {c}")
     x_tab = response.exposure_table()
     if response.channels == 1:
         x_tab = np.repeat(x_tab, c, axis=0)

@@ -51,7 +51,7 @@ Examples
 >>> e = np.exp(rng.uniform(-5, 0, (40, 40, 1)))
 >>> t = np.array([0.1, 0.3, 0.9, 2.7])
 >>> z = np.stack([np.round(255 * np.clip(e * ti, 0, 1) ** 0.5) for ti in t]).astype(np.uint8)
->>> r = mitsunaga_nayar(z, t * [1.0, 1.08, 0.95, 1.0], samples=300, rng=rng)
+>>> r = response_mitsunaga1999(z, t * [1.0, 1.08, 0.95, 1.0], samples=300, rng=rng)
 >>> x = r.exposure_table()[0]
 >>> bool(abs(x[200] / x[100] - 4.0) < 0.1)
 True
@@ -302,7 +302,7 @@ def table_from_poly(a: np.ndarray, bit_depth: int) -> np.ndarray:
     return np.maximum(f, 1e-12)
 
 
-def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
+def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
                     order: int | str = "auto", samples: int = 600, clip_margin: float = 0.03,
                     rng: np.random.Generator | None = None) -> ResponseCurve:
     """Recover the inverse response as a polynomial and refine the exposure ratios.
@@ -337,7 +337,7 @@ def mitsunaga_nayar(images: np.ndarray, exposure_times_s, *, bit_depth: int | No
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
     if order != "auto" and (not isinstance(order, int | np.integer) or not 1 <= order <= MAX_ORDER):
-        raise InputError("--order", f"expected 1..{MAX_ORDER} or auto, got {order!r}")
+        raise InputError("order", f"expected 1..{MAX_ORDER} or auto, got {order!r}")
     rng = np.random.default_rng(0) if rng is None else rng
     perm = np.argsort(t)
     z, t = z[perm], t[perm]

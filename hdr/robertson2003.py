@@ -64,7 +64,7 @@ Examples
 >>> t = np.array([0.05, 0.2, 0.8, 3.2])
 >>> z = np.stack([np.clip(np.round(255 * np.sqrt(np.clip(e * ti, 0, 1))), 0, 255)
 ...               for ti in t]).astype(np.uint8)
->>> r = robertson(z, t, rng=rng)
+>>> r = response_robertson2003(z, t, rng=rng)
 >>> x = r.exposure_table()[0]
 >>> c = r.fit["convergence"][0]
 >>> bool(abs(x[200] / x[100] - 4.0) < 0.1), c["objective_last"] < c["objective_first"]
@@ -107,7 +107,7 @@ def _fill(ln_i: np.ndarray, centres: np.ndarray, known: np.ndarray, at: np.ndarr
     return out
 
 
-def robertson(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
+def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
               samples: int = 5000, bins: int | None = None, max_iter: int = 2000,
               tol: float = 1e-6, clip_margin: float = 0.03,
               rng: np.random.Generator | None = None) -> ResponseCurve:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from lumigraph.capture.errors import InputError
+from lumigraph.capture.exposure import check_exposure_times
 
 
 def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
@@ -30,8 +31,9 @@ def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
     """Validate a bracket: ``(P, H, W, C)`` integer codes and ``P`` times.
 
     Returns the stack (as given, with a channel axis), the times as float64
-    and the bit depth (inferred from the dtype when ``None``). A bracket
-    needs every time distinct; a video of alternating exposures repeats them
+    and the bit depth (inferred from the dtype when ``None``). The times are
+    checked by :func:`capture.exposure.check_exposure_times`: a bracket needs
+    every time distinct; a video of alternating exposures repeats them
     (``distinct_times=False``).
 
     Raises
@@ -39,7 +41,8 @@ def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
     TypeError
         Non-integer codes.
     InputError
-        Wrong shape, times not one per image, not positive, or duplicated.
+        Wrong shape, codes beyond the bit depth; times (naming
+        ``exposure_times_s``) not one per image, not positive, or duplicated.
     """
     z = np.asarray(images)
     if z.ndim == 3:
@@ -53,17 +56,7 @@ def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
         raise InputError(where, f"bit depth must be 1..16, got {bd}")
     if z.size and int(z.max()) >= 2 ** bd:
         raise InputError(where, f"codes up to {int(z.max())} exceed bit depth {bd}")
-    if exposure_times_s is None:
-        raise InputError("--times", "exposure times are needed (EXIF, stack.json or --times)")
-    t = np.asarray(exposure_times_s, dtype=np.float64).ravel()
-    if t.size != z.shape[0]:
-        raise InputError("--times", f"{t.size} exposure times for {z.shape[0]} images")
-    if not np.all(np.isfinite(t)) or np.any(t <= 0):
-        raise InputError("--times", f"exposure times must be positive and finite, got {t.tolist()}")
-    if distinct_times and np.unique(t).size != t.size:
-        dup = sorted({float(x) for x in t if np.sum(t == x) > 1})
-        raise InputError("--times", f"duplicated exposure times {dup}: each image of a bracket "
-                                    "needs its own exposure (drop the duplicate frames)")
+    t = check_exposure_times(exposure_times_s, z.shape[0], distinct=distinct_times)
     return z, t, bd
 
 

@@ -15,15 +15,22 @@ examples:
   lumigraph inspect out/bracket                       a folder with stack.json
   lumigraph inspect img-*.png --times 1/30,1/8,1/2 --need-times
   lumigraph inspect flow.flo disparity.pfm radiance.exr --out summary.json
+  lumigraph inspect memorial.hdr                      Radiance RGBE (hdr.formats)
 """
 
 
 def describe(path: Path) -> dict:
-    """Summary of one file read through ``capture.io``."""
+    """Summary of one file read through ``capture.io``, or for Radiance RGBE
+    through its one codec, ``hdr.formats``."""
     from lumigraph.capture import io
 
     ext = path.suffix.lower()
-    if ext == ".flo":
+    fmt = None
+    if ext in io.RGBE_EXTS:
+        from lumigraph.hdr.formats import read_rgbe
+
+        arr, fmt = read_rgbe(path), "Radiance RGBE"
+    elif ext == ".flo":
         arr = io.read_flo(path)
     elif ext == ".pfm":
         arr = io.read_pfm(path)  # disparity: unknown (NaN) is legitimate
@@ -38,6 +45,8 @@ def describe(path: Path) -> dict:
             "min": float(finite.min()) if finite.size else None,
             "max": float(finite.max()) if finite.size else None,
             "unknown": int((~np.isfinite(arr)).sum()) if arr.dtype.kind == "f" else 0}
+    if fmt is not None:
+        info["format"] = fmt
     if ext == ".png" and arr.dtype == np.uint16:
         info["bit_depth"] = io.png_significant_bits(path) or 16
     if ext in {".jpg", ".jpeg", ".tif", ".tiff"}:
@@ -54,7 +63,7 @@ def _inspect(args) -> int:
     paths = [Path(p) for p in args.inputs]
     times = parse_floats(args.times, name="--times") if args.times else None
     is_stack = len(paths) > 1 or (len(paths) == 1 and (paths[0].is_dir() or paths[0].name == "stack.json"))
-    if is_stack and all(p.suffix.lower() not in {".flo", ".ply"} for p in paths):
+    if is_stack and all(p.suffix.lower() not in {".flo", ".ply"} | io.RGBE_EXTS for p in paths):
         st = io.read_stack(paths, times=times, need_times=args.need_times)
         summary = {"kind": "stack", "count": len(st.paths), "shape": list(st.images.shape[1:]),
                    "dtype": str(st.images.dtype), "bit_depth": st.bit_depth,

@@ -2,8 +2,9 @@
 
 ``separation.separate(images, method=...)`` returns a :class:`Separation`
 (direct, global, mask) from linear images under projected patterns; the
-methods live in :mod:`separation.nayar2006` and are listed in :data:`METHODS`
-(the CLI's ``--method`` choices come from here).
+methods live in :mod:`separation.nayar2006` and are registered in
+:data:`separation.methods.METHODS` (the CLI's ``--method`` choices and help
+come from there).
 
 ========== ================================================== ==============
 method     input                                              images
@@ -15,7 +16,8 @@ occluder   a shadow sweep (thin occluder moved across)         >= 3
 ========== ================================================== ==============
 """
 
+from lumigraph.separation.methods import METHODS, MIN_IMAGES
 from lumigraph.separation.result import Separation
-from lumigraph.separation.separate import METHODS, MIN_IMAGES, separate
+from lumigraph.separation.separate import separate
 
 __all__ = ["METHODS", "MIN_IMAGES", "Separation", "separate"]

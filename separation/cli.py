@@ -105,10 +105,6 @@ def _separate(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.separation import separate
 
-    if args.alpha is not None and not 0.0 < args.alpha < 1.0:
-        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {args.alpha}")
-    if args.b is not None and not 0.0 <= args.b < 1.0:
-        raise InputError("--b", f"black level must lie in [0, 1), got {args.b}")
     if args.tile < 2:
         raise InputError("--tile", f"expected at least 2 pixels, got {args.tile}")
     out = check_output_dir(args.out)
@@ -197,12 +193,14 @@ def main(argv=None, prog="lumigraph separate") -> int:
         p.add_argument("--out", required=True, help="output folder")
         p.set_defaults(func=_patterns)
         return run(p, argv[1:])
-    from lumigraph.separation.separate import METHODS
+    from lumigraph.separation.methods import METHODS
 
     p = make_parser(prog, "Separate direct and global light from captures under high-frequency "
-                    "projector patterns (Nayar et al. 2006).", epilog=EPILOG)
+                    "projector patterns (Nayar et al. 2006).",
+                    epilog=f"{EPILOG}\nmethods:\n{METHODS.help_text()}\n")
     p.add_argument("images", nargs="+", help="captures (files, or a folder with stack.json)")
-    p.add_argument("--method", default="checker", choices=sorted(METHODS))
+    p.add_argument("--method", default="checker", choices=METHODS.names,
+                   help="separation method (listed below)")
     p.add_argument("--alpha", type=float, default=None, help="lit fraction of the patterns (default 0.5)")
     p.add_argument("--b", type=float, default=None, help="projector black level in [0, 1)")
     p.add_argument("--black", help="capture under an all-black projector frame (to measure b)")

@@ -419,5 +419,5 @@ def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:
     wh = np.asarray(white, np.float64)
     ok = wh > max(10.0 * floor, 0.05 * float(np.percentile(wh, 99)))
     if ok.sum() < 16:
-        raise EstimationError("--white", "the all-white frame is too dark to measure the black level")
+        raise EstimationError("white", "the all-white frame is too dark to measure the black level")
     return float(np.median(bl[ok] / wh[ok]))

@@ -18,16 +18,10 @@ import numpy as np
 
 from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.separation import nayar2006
+from lumigraph.separation.methods import EXACT_IMAGES, METHODS, MIN_IMAGES
 from lumigraph.separation.result import Separation
 
-METHODS = {
-    "checker": nayar2006.checker,
-    "sinusoid": nayar2006.sinusoid,
-    "single": nayar2006.single,
-    "occluder": nayar2006.occluder,
-}
-MIN_IMAGES = {"checker": 2, "sinusoid": 3, "single": 1, "occluder": 3}
-EXACT_IMAGES = {"sinusoid": 3, "single": 1}
+__all__ = ["EXACT_IMAGES", "METHODS", "MIN_IMAGES", "separate"]
 RESIDUE_WARN_FRACTION = 0.10
 
 
@@ -44,6 +38,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         Linear captures under the method's patterns, in the order of
         ``capture.patterns``.
     method : {"checker", "sinusoid", "single", "occluder"}
+        A name of :data:`separation.methods.METHODS`.
     alpha : float in (0, 1), optional
         Lit fraction of the patterns (default ½; occluder ``1 − 1/N``).
     b : float in [0, 1), optional
@@ -66,17 +61,16 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     names : sequence of str, optional
         Image names for error messages.
     """
-    if method not in METHODS:
-        raise ValueError(f"method: expected one of {sorted(METHODS)}, got {method!r}")
+    fn = METHODS.resolve(method)
     a = nayar2006.validate_stack(images, need=MIN_IMAGES[method], method=method)
     if method in EXACT_IMAGES and len(a) != EXACT_IMAGES[method]:
         raise EstimationError("<images>", f"method {method!r} takes exactly {EXACT_IMAGES[method]} "
                                           f"image(s), got {len(a)}")
     names = list(names) if names is not None else [f"image {i}" for i in range(len(a))]
     if alpha is not None and not 0.0 < alpha < 1.0:
-        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {alpha}")
+        raise InputError("alpha", f"lit fraction must lie in (0, 1), got {alpha}")
     if b is not None and not 0.0 <= b < 1.0:
-        raise InputError("--b", f"black level must lie in [0, 1), got {b}")
+        raise InputError("b", f"black level must lie in [0, 1), got {b}")
     quant = quant_step / np.sqrt(12.0)
     floor = 3.0 * np.hypot(noise_sigma, quant) + 1e-7
     # a strided look first (cheap); the full image only when that one looks dark
@@ -92,14 +86,13 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         b = nayar2006.black_level(black, white, floor=floor)
         params["b_source"] = "measured from the all-black/all-white frames"
         if not 0.0 <= b < 1.0:
-            raise EstimationError("--black", f"measured black level {b:.3f} is not in [0, 1)")
+            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
     elif b is None:
         b = 0.0
         params["b_source"] = "assumed 0 (no --b and no black/white frames)"
     else:
         params["b_source"] = "given"
     params["b"] = float(b)
-    fn = METHODS[method]
     # Noise model: quantisation + given + (checker pairs) measured from pair sums.
     var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
     comp = None

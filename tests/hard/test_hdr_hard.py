@@ -8,9 +8,9 @@ from conftest import assert_clean_error, lumigraph, need_shared
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.render import render
 from lumigraph.hdr.bench import ln_response_rms
-from lumigraph.hdr.debevec1997 import debevec
+from lumigraph.hdr.debevec1997 import response_debevec1997
 from lumigraph.hdr.merge import merge
-from lumigraph.hdr.mitsunaga1999 import mitsunaga_nayar
+from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
 from lumigraph.hdr.response import ResponseCurve
 
 
@@ -23,7 +23,7 @@ def test_two_exposures_only():
     # Two exposures 3 stops apart overlap over ~ half the code range: the curve
     # is pinned there; bound it over the whole 5-95 % range at 3x the 7-exposure bound.
     s, z, t = _b(exposures=2, stops=3.0, min_time=1 / 100)
-    r = debevec(z, t)
+    r = response_debevec1997(z, t)
     assert 0 < ln_response_rms(r.g, s.gt_arrays["g"], 8) < 0.05
 
 
@@ -31,15 +31,15 @@ def test_exposures_four_stops_apart_is_flagged_as_poorly_constrained():
     # Four stops (x16) leave few pixels well exposed in two frames of a film
     # curve with a 3 % clip margin: the fit cannot meet the 0.05 bound, and says so.
     s, z, t = _b(exposures=4, stops=4.0)
-    r = debevec(z, t)
+    r = response_debevec1997(z, t)
     err = ln_response_rms(r.g, s.gt_arrays["g"], 8)
     assert err < 0.05 or any("poorly constrained" in w for w in r.warnings)
 
 
 def test_heavy_noise_picks_a_larger_lambda_and_warns():
     s, z, t = _b(full_well=1500.0, read_noise=20.0)
-    r = debevec(z, t)
-    calm = debevec(*_b()[1:])
+    r = response_debevec1997(z, t)
+    calm = response_debevec1997(*_b()[1:])
     assert min(r.selection["chosen"]) >= max(calm.selection["chosen"])
     # sigma(ln X) ~ 1/sqrt(0.03 * 1500) = 15 % per observation at the darkest used
     # codes, and clipping truncates that noise: the error is bounded at 0.2 and
@@ -67,10 +67,10 @@ def test_pixels_clipped_or_black_everywhere_are_flagged_bounds():
 def test_duplicated_times_refused_unsorted_times_fine():
     s, z, t = _b(exposures=4)
     with pytest.raises(InputError, match="duplicated"):
-        debevec(z, [t[0], t[0], t[2], t[3]])
+        response_debevec1997(z, [t[0], t[0], t[2], t[3]])
     perm = [2, 0, 3, 1]
-    a = debevec(z, t)
-    b = debevec(z[perm], [t[i] for i in perm])
+    a = response_debevec1997(z, t)
+    b = response_debevec1997(z[perm], [t[i] for i in perm])
     assert np.allclose(a.g, b.g)
 
 
@@ -86,17 +86,17 @@ def test_one_image_of_a_different_size(tmp_path):
 
 def test_sixteen_bit_data():
     s, z, t = _b(bit_depth=16, exposures=5, stops=2.0)
-    r = debevec(z, t, bit_depth=16)
+    r = response_debevec1997(z, t, bit_depth=16)
     assert r.g.shape == (3, 65536) and r.selection["knots"] == 256
     assert 0 < ln_response_rms(r.g, s.gt_arrays["g"], 16) < 0.02
 
 
 def test_lambda_zero_and_lambda_huge():
     s, z, t = _b()
-    r0 = debevec(z, t, smoothness=0.0)
+    r0 = response_debevec1997(z, t, smoothness=0.0)
     assert any("λ = 0" in w for w in r0.warnings)
     assert 0 < ln_response_rms(r0.g, s.gt_arrays["g"], 8) < 0.1  # noisy, but sane
-    big = debevec(z, t, smoothness=1e6)
+    big = response_debevec1997(z, t, smoothness=1e6)
     # A huge λ forces g'' = 0: a straight line in code, which the film curve is
     # not; the fit says so through its residual instead of failing silently.
     assert max(big.fit["residual_rms_ln"]) > 5 * max(r0.fit["residual_rms_ln"])
@@ -104,10 +104,10 @@ def test_lambda_zero_and_lambda_huge():
 
 def test_order_ten_mitsunaga_nayar_on_noisy_data_is_finite_monotone_and_warned():
     s, z, t = _b(full_well=2000.0, read_noise=15.0)
-    r = mitsunaga_nayar(z, t, order=10, samples=400)
+    r = response_mitsunaga1999(z, t, order=10, samples=400)
     assert np.isfinite(r.g).all() and np.all(np.diff(r.g, axis=1) >= 0)
     err = ln_response_rms(r.g, s.gt_arrays["g"], 8)
-    auto = mitsunaga_nayar(z, t, samples=400)
+    auto = response_mitsunaga1999(z, t, samples=400)
     assert err < 0.05 or any("order 10 does not fit" in w for w in r.warnings)
     assert ln_response_rms(auto.g, s.gt_arrays["g"], 8) <= err
 
@@ -121,7 +121,7 @@ def test_memorial_church_real_film_scans():
     names = [f"memorial{n:04d}.png" for n in range(61, 77, 2)]
     times = [32.0 / 4 ** k for k in range(8)]
     z = np.stack([read_image(d / n)[::4, ::4] for n in names])
-    r = debevec(z, times, samples=400)
+    r = response_debevec1997(z, times, samples=400)
     assert np.all(np.diff(r.g, axis=1) >= 0)
     m = merge(z, times, r)
     ref = read_rgbe(d / "memorial.hdr")[::4, ::4]
@@ -149,6 +149,6 @@ def test_iphone_jpegs_with_exif_times():
     from lumigraph.hdr.ward2003 import align
 
     z, shifts = align(z)
-    r = debevec(z, times)
+    r = response_debevec1997(z, times)
     assert np.all(np.diff(r.g, axis=1) >= 0)
     assert all(abs(dx) <= 4 and abs(dy) <= 4 for dx, dy in shifts)

@@ -4,6 +4,7 @@ import json
 import shutil
 
 import numpy as np
+import pytest
 from conftest import assert_clean_error, lumigraph
 
 from lumigraph.capture.io import read_exr
@@ -84,3 +85,86 @@ def test_quick_bench_through_cli(tmp_path):
     names = {row["method"] for row in js["stages"]["hdr"]["rows"]}
     assert {"debevec (ours)", "CalibrateDebevec (OpenCV)", "merge (ours)"} <= names
     assert js["stages"]["hdr"]["checks"]
+
+
+def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
+    import re
+    from pathlib import Path
+
+    from lumigraph.capture.errors import InputError
+    from lumigraph.hdr.debevec1997 import response_debevec1997
+    from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
+    from lumigraph.hdr.samples import check_stack
+
+    s = render("bracket", size=(48, 36), exposures=3)
+    z, t = np.stack(s.images), s.stack["exposure_times_s"]
+    with pytest.raises(InputError) as e:
+        response_debevec1997(z, t, smoothness=-1.0)
+    assert e.value.where == "smoothness"
+    with pytest.raises(InputError) as e:
+        response_mitsunaga1999(z, t, order=11)
+    assert e.value.where == "order"
+    with pytest.raises(InputError) as e:
+        check_stack(z, [t[0], t[0], t[2]], bit_depth=8)
+    assert e.value.where == "exposure_times_s"
+    # No library module of the stage names a command-line flag.
+    root = Path(__file__).resolve().parents[2]
+    for f in [*(root / "hdr").glob("*.py"), *(root / "separation").glob("*.py")]:
+        if f.name != "cli.py":
+            assert not re.search(r"Error\(\s*f?[\"']--", f.read_text()), f
+    d = _bracket_folder(tmp_path, exposures=3)
+    out = tmp_path / "r.json"
+    assert_clean_error(lumigraph("hdr", "response", d, "--smoothness", "-1", "--out", out),
+                       "--smoothness", "λ >= 0")
+    assert_clean_error(lumigraph("hdr", "response", d, "--method", "mitsunaga-nayar", "--order",
+                                 "11", "--out", out), "--order")
+    assert not out.exists()
+
+
+def test_aperture_bracket_means_the_same_to_merge_and_video(tmp_path):
+    # One shutter time, three f-numbers: every HDR verb works with the effective
+    # exposure t·(N_ref/N)² of the stack reader (without it, video would see three
+    # equal exposures and refuse).
+    from lumigraph.capture.io import read_stack
+    from lumigraph.hdr.response import ResponseCurve
+
+    s = render("bracket", size=(64, 48), exposures=3, vary="aperture")
+    d = tmp_path / "ap"
+    s.save(d)
+    ResponseCurve("gt", 8, s.gt_arrays["g"]).save(tmp_path / "r.json")
+    stack = read_stack([d])
+    assert len(set(stack.exposure_times_s)) == 1
+    expected = list(stack.effective_exposure_times_s)
+    assert expected == pytest.approx(s.gt["relative_exposure_exact"], rel=1e-12)
+    r = lumigraph("hdr", "merge", d, "--response", tmp_path / "r.json", "--out",
+                  tmp_path / "rad.exr", "-q")
+    assert r.returncode == 0, r.stderr
+    merged = json.loads((tmp_path / "rad.exr.meta.json").read_text())["params"]["times_s"]
+    r = lumigraph("hdr", "video", d, "--response", tmp_path / "r.json", "--out",
+                  tmp_path / "vid", "-q")
+    assert r.returncode == 0, r.stderr
+    video = json.loads((tmp_path / "vid" / "video.meta.json").read_text())["params"]["times_s"]
+    assert merged == video == expected
+    # Times given on the command line are the exposures themselves, for every verb.
+    r = lumigraph("hdr", "video", d, "--times", "1,2,4", "--response", tmp_path / "r.json",
+                  "--out", tmp_path / "vid2", "-q")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "vid2" / "video.meta.json").read_text())["params"]["times_s"] \
+        == [1.0, 2.0, 4.0]
+
+
+@pytest.mark.parametrize("verb,registry", [("response", "RESPONSE_METHODS"),
+                                           ("tonemap", "TONEMAP_METHODS"),
+                                           ("align", "ALIGN_METHODS")])
+def test_method_choices_and_help_come_from_the_registries(verb, registry):
+    from lumigraph.capture.registry import Registry
+    from lumigraph.hdr import methods
+
+    reg = getattr(methods, registry)
+    assert isinstance(reg, Registry)
+    r = lumigraph("hdr", verb, "--help")
+    assert r.returncode == 0, r.stderr
+    assert "{" + ",".join(reg.names) + "}" in r.stdout
+    for m in reg.values():
+        assert m.help in r.stdout
+        assert callable(m.load())

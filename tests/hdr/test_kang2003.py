@@ -204,7 +204,7 @@ def test_cli_bad_inputs_write_nothing(folder, tmp_path):
     assert_clean_error(r, "resp12.json", "12-bit")
     r = lumigraph("hdr", "video", *frames[:3], "--times", "0.002,0.002,0.002", "--response", resp,
                   "--out", out)
-    assert_clean_error(r, "same exposure")
+    assert_clean_error(r, "--times", "same exposure")
     r = lumigraph("hdr", "video", vid, "--response", resp, "--out", out, "--temporal", "4")
     assert_clean_error(r, "--temporal")
     assert not out.exists()

@@ -1,10 +1,11 @@
 """Merging and HDR file formats (interop with OpenCV and libtiff)."""
 
+import json
 import subprocess
 
 import numpy as np
 import pytest
-from conftest import need_shared, need_tool
+from conftest import assert_clean_error, lumigraph, need_shared, need_tool
 
 from lumigraph.capture.render import render
 from lumigraph.hdr.formats import (
@@ -75,6 +76,37 @@ def test_rgbe_interop_with_opencv(tmp_path):
 def test_reads_debevecs_memorial_hdr():
     m = read_rgbe(need_shared("data", "hdr-real", "memorial", "memorial.hdr"))
     assert m.shape == (768, 512, 3) and np.isfinite(m).all() and m.max() / m[m > 0].min() > 1e4
+
+
+def test_inspect_convert_and_tonemap_share_the_one_rgbe_codec(tmp_path):
+    # inspect, convert and tonemap read RGBE through hdr.formats; the ground-floor
+    # image reader refuses it and says where to go.
+    from lumigraph.capture import io
+    from lumigraph.capture.errors import InputError
+
+    memorial = need_shared("data", "hdr-real", "memorial", "memorial.hdr")
+    r = lumigraph("inspect", memorial)
+    assert r.returncode == 0, r.stderr
+    (info,) = json.loads(r.stdout)["files"]
+    ref = read_rgbe(memorial)
+    assert info["format"] == "Radiance RGBE" and info["shape"] == [768, 512, 3]
+    assert info["dtype"] == "float32" and info["unknown"] == 0
+    assert info["min"] == float(ref.min()) and info["max"] == float(ref.max())
+    # a file of ours, and two RGBE files are described one by one (not read as a stack)
+    write_rgbe(tmp_path / "a.hdr", np.full((4, 9, 3), 2.0, np.float32))
+    r = lumigraph("inspect", tmp_path / "a.hdr", memorial)
+    assert r.returncode == 0, r.stderr
+    assert [f["shape"] for f in json.loads(r.stdout)["files"]] == [[4, 9, 3], [768, 512, 3]]
+    assert json.loads(r.stdout)["files"][0]["max"] == float(read_rgbe(tmp_path / "a.hdr").max())
+    for verb in (("convert", memorial, tmp_path / "m.exr"),
+                 ("tonemap", memorial, "--out", tmp_path / "m.png")):
+        r = lumigraph("hdr", *verb, "-q")
+        assert r.returncode == 0, r.stderr
+    assert np.array_equal(io.read_exr(tmp_path / "m.exr"), ref)
+    with pytest.raises(InputError, match="hdr.formats.read_rgbe"):
+        io.read_image(memorial)
+    assert_clean_error(lumigraph("inspect", tmp_path / "a.hdr", tmp_path / "b.hdr"), "b.hdr",
+                       "not found")
 
 
 def _lum(x):

@@ -9,7 +9,7 @@ from conftest import lumigraph
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.render import render
 from lumigraph.hdr.bench import ln_response_rms
-from lumigraph.hdr.robertson2003 import robertson
+from lumigraph.hdr.robertson2003 import response_robertson2003
 
 
 def _bracket(**kw):
@@ -25,7 +25,7 @@ def test_recovers_film_response_and_records_convergence(bit_depth):
     # the darkest used code down to 1/sqrt(0.2 * 20000) = 1.6 % at mid exposure, an RMS
     # over the codes below 3 %. Measured (seed 3, 160x120): 0.024 / 0.021 / 0.021.
     s, z, t = _bracket(bit_depth=bit_depth, seed=3)
-    r = robertson(z, t, bit_depth=bit_depth)
+    r = response_robertson2003(z, t, bit_depth=bit_depth)
     err = ln_response_rms(r.g, s.gt_arrays["g"], bit_depth)
     assert 0 < err < 0.03, err
     assert r.method == "robertson" and r.g.shape == (3, 2 ** bit_depth)
@@ -42,7 +42,7 @@ def test_noise_free_bracket_is_quantisation_limited():
     # that is 2.2 / 128 / sqrt(12) = 0.005 ln per observation at mid-code, and the
     # per-code means average it down. Bound 2x that. Measured 0.0041.
     s, z, t = _bracket(noise=0.0, response="gamma", seed=0)
-    err = ln_response_rms(robertson(z, t).g, s.gt_arrays["g"], 8)
+    err = ln_response_rms(response_robertson2003(z, t).g, s.gt_arrays["g"], 8)
     assert 0 < err < 0.01, err
 
 
@@ -55,7 +55,7 @@ def test_beats_opencv_robertson_run_to_convergence():
     import cv2
 
     s, z, t = _bracket(seed=3)
-    ours = ln_response_rms(robertson(z, t).g, s.gt_arrays["g"], 8)
+    ours = ln_response_rms(response_robertson2003(z, t).g, s.gt_arrays["g"], 8)
     bgr = [np.ascontiguousarray(im[..., ::-1]) for im in z]
     crv = cv2.createCalibrateRobertson(1000, 1e-7).process(bgr, np.float32(t))
     cv = ln_response_rms(np.log(np.maximum(crv[:, 0, ::-1].T.astype(np.float64), 1e-12)),
@@ -66,18 +66,18 @@ def test_beats_opencv_robertson_run_to_convergence():
 def test_bad_arguments():
     _, z, t = _bracket(exposures=3, seed=0)
     with pytest.raises(InputError, match="two exposures"):
-        robertson(z[:1], t[:1])
+        response_robertson2003(z[:1], t[:1])
     with pytest.raises(ValueError, match="bins"):
-        robertson(z, t, bins=2)
+        response_robertson2003(z, t, bins=2)
     with pytest.raises(ValueError, match="max_iter"):
-        robertson(z, t, max_iter=0)
+        response_robertson2003(z, t, max_iter=0)
     with pytest.raises(InputError, match="duplicated"):
-        robertson(z, [t[0], t[0], t[2]])
+        response_robertson2003(z, [t[0], t[0], t[2]])
 
 
 def test_not_converged_is_said():
     _, z, t = _bracket(seed=0)
-    r = robertson(z, t, max_iter=5)
+    r = response_robertson2003(z, t, max_iter=5)
     assert not any(c["converged"] for c in r.fit["convergence"])
     assert any("not converged after 5 iterations" in w for w in r.warnings)
 

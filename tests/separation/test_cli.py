@@ -8,7 +8,9 @@ import pytest
 from conftest import assert_clean_error, lumigraph
 
 from lumigraph.capture import io
+from lumigraph.capture.errors import InputError
 from lumigraph.capture.render import render
+from lumigraph.separation import separate
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +91,9 @@ def test_bad_inputs_exit_2_and_write_nothing(scene_dir, tmp_path):
     assert_clean_error(lumigraph("separate", *ck, "--alpha", "1.5", "--out", out), "--alpha")
     assert_clean_error(lumigraph("separate", *ck, "--alpha", "0", "--out", out), "--alpha")
     assert_clean_error(lumigraph("separate", *ck, "--b", "1", "--out", out), "--b")
+    with pytest.raises(InputError) as e:  # the library names its argument, the CLI the flag
+        separate(np.stack([io.read_image(p) for p in ck])[..., None] / 65535.0, alpha=1.5)
+    assert e.value.where == "alpha"
     dark = tmp_path / "dark.png"
     io.write_image(dark, np.zeros_like(io.read_image(ck[0])), bit_depth=16)
     assert_clean_error(lumigraph("separate", dark, *ck[1:], "--out", out), "dark.png", "all-dark")

@@ -92,3 +92,18 @@ def test_bad_arguments():
         separate(np.zeros((2, 4, 4, 1), np.float32), method="checker", quant_step=1 / 255)
     with pytest.raises(ValueError, match="method"):
         separate(ims, method="nope")
+
+
+def test_one_registry_drives_dispatch_help_and_image_counts(run_cli):
+    from lumigraph.capture.errors import InputError
+    from lumigraph.capture.registry import Registry
+    from lumigraph.separation import METHODS, MIN_IMAGES
+
+    assert isinstance(METHODS, Registry) and set(MIN_IMAGES) == set(METHODS.names)
+    with pytest.raises(InputError) as e:
+        separate(np.ones((2, 4, 4, 1), np.float32), method="nope")
+    assert e.value.where == "method" and "checker" in e.value.problem
+    r = run_cli("separate", "--help")
+    assert r.returncode == 0
+    for m in METHODS.values():
+        assert m.help in r.stdout
