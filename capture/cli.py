@@ -70,9 +70,11 @@ def _render(args) -> int:
         raise InputError("--out", "give the output folder, e.g. --out out/" + args.scene)
     spec = get_scene(args.scene)
     # the scene's renderer names its options; the command line reports their flags
-    args.arg_flags = {o.name: "--" + o.name.replace("_", "-") for o in spec.options}
+    given = _scene_options(extra)
+    args.arg_flags = {k.replace("-", "_"): "--" + k.replace("_", "-")
+                      for k in [*(o.name for o in spec.options), *given]}
     size = parse_size(args.size) if args.size else None
-    opts = spec.parse_options(_scene_options(extra))
+    opts = spec.parse_options(given)
     out = check_output_dir(args.out)
     if show_progress(args.quiet):  # on a terminal only: piped stderr keeps to one error line
         say(args, f"rendering {args.scene} -> {out}")

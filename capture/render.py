@@ -181,9 +181,9 @@ class SceneSpec:
         for k, v in given.items():
             key = k.replace("-", "_")
             if key not in known:
-                names = ", ".join("--" + n.replace("_", "-") for n in known) or "none"
-                raise InputError("--" + key.replace("_", "-"),
-                                 f"scene {self.name!r} has no such option (its options: {names})")
+                names = ", ".join(known) or "none"
+                raise InputError(key, f"scene {self.name!r} has no such option (its options: "
+                                      f"{names})")
             out[key] = known[key].parse(v)
         return out
 
@@ -330,10 +330,10 @@ def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
     opts = spec.parse_options(options)
     w, h = size if size is not None else spec.default_size
     if w < spec.min_size[0] or h < spec.min_size[1] or w > 20000 or h > 20000:
-        raise InputError("--size", f"impossible size {w}x{h} for scene {name!r} "
+        raise InputError("size", f"impossible size {w}x{h} for scene {name!r} "
                                    f"(at least {spec.min_size[0]}x{spec.min_size[1]})")
     if not isinstance(seed, int) or seed < 0:
-        raise InputError("--seed", f"expected a non-negative integer, got {seed!r}")
+        raise InputError("seed", f"expected a non-negative integer, got {seed!r}")
     key = _key(spec, opts, (w, h), seed)
     if cache and key in _MEMORY:
         return _MEMORY[key]

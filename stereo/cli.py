@@ -28,6 +28,7 @@ from lumigraph.capture.commandline import (
     warn,
 )
 from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.stereo.triangulate import METHODS as TRIANGULATION_METHODS
 
 EPILOG = """\
 examples:
@@ -543,7 +544,8 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
                  epilog=TRIANGULATE_EPILOG)
     v.add_argument("correspondences", help="tracks .json, or a matches text file with --rig")
     v.add_argument("--rig", help="rig.json for a two-view matches text file")
-    v.add_argument("--method", choices=("refined", "dlt", "midpoint"), default="refined")
+    v.add_argument("--method", choices=TRIANGULATION_METHODS.names, default="refined",
+                   help="; ".join(f"{m.name}: {m.help}" for m in TRIANGULATION_METHODS.values()))
     v.add_argument("--pixel-sigma", type=float, help="pixel noise std for the covariance (default 0.5)")
     v.add_argument("--min-angle", type=float, default=0.5, help="flag rays closer to parallel (deg)")
     v.add_argument("--out", required=True, help="points .ply or .json")

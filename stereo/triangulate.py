@@ -45,7 +45,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-METHODS = ("refined", "dlt", "midpoint")
+from lumigraph.capture.registry import Method, Registry
+
+# The --method choices of `lumigraph stereo triangulate`: three modes of the one
+# pipeline in triangulate() (they share the rays, the angle test and the
+# covariance), so each entry binds triangulate's own ``method``.
+_OPTIONS = ("pixel_sigma", "min_angle_deg", "iterations")
+METHODS = Registry("triangulation", [
+    Method("refined", "lumigraph.stereo.triangulate:triangulate",
+           "DLT, then Gauss-Newton on the reprojection error (default)", _OPTIONS,
+           {"method": "refined"}),
+    Method("dlt", "lumigraph.stereo.triangulate:triangulate",
+           "linear (DLT) solution in normalised coordinates", _OPTIONS, {"method": "dlt"}),
+    Method("midpoint", "lumigraph.stereo.triangulate:triangulate",
+           "midpoint of the two rays' common perpendicular (two views only)", _OPTIONS,
+           {"method": "midpoint"}),
+])
 
 
 @dataclass(frozen=True)

@@ -80,3 +80,46 @@ def test_top_help_lists_every_stage_once():
     assert r.returncode == 0, r.stderr
     for name, method in command.STAGES.items():
         assert f"  {name:<11} {method.help}" in r.stdout.splitlines()
+
+
+def _method_options():
+    """(file, line, choices node) of every ``add_argument("--method", …)`` in the CLIs."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    for path in sorted([*root.glob("*/cli.py"), *root.glob("*/*_cli.py")]):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "add_argument"
+                    and node.args and isinstance(node.args[0], ast.Constant)
+                    and node.args[0].value == "--method"):
+                choices = next((k.value for k in node.keywords if k.arg == "choices"), None)
+                yield path.relative_to(root), node.lineno, choices
+
+
+def test_every_method_option_takes_its_choices_from_a_registry():
+    import ast
+
+    found = list(_method_options())
+    assert len(found) >= 6, found  # hdr x3, flow, lightfield, separation, triangulate
+    for path, line, choices in found:
+        names = [n for n in ast.walk(choices) if isinstance(n, ast.Attribute) and n.attr == "names"]
+        assert names, f"{path}:{line}: --method choices are not a registry's .names"
+
+
+def test_triangulation_methods_are_one_pipeline_in_three_modes():
+    import numpy as np
+
+    from lumigraph.capture.camera import Camera
+    from lumigraph.stereo.triangulate import METHODS, triangulate
+
+    K = np.array([[500.0, 0, 160], [0, 480, 120], [0, 0, 1]])
+    cams = [Camera(K, np.zeros(5), (320, 240))] * 2
+    poses = [(np.eye(3), np.zeros(3)), (np.eye(3), np.array([-0.2, 0.0, 0.0]))]
+    X = np.array([[0.1, -0.05, 2.0], [-0.3, 0.2, 3.0]])
+    px = np.stack([cams[0].project(X + t) for _, t in poses])
+    for name, m in METHODS.items():
+        via_registry = m(px, cams, poses)
+        direct = triangulate(px, cams, poses, method=name)
+        np.testing.assert_array_equal(via_registry.points, direct.points)
+        np.testing.assert_allclose(via_registry.points, X, atol=1e-9)
