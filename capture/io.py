@@ -49,14 +49,15 @@ import numpy as np
 from lumigraph.capture.artifact import atomic_path, dumps_json
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.exposure import check_exposure_times, effective_exposure_times
+from lumigraph.capture.rgbe import RGBE_EXTS as _RGBE_EXTS
 
 LDR_EXTS = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm"}
 RAW_EXTS = {".dng", ".cr2", ".cr3", ".nef", ".arw", ".orf", ".rw2", ".raf", ".pef", ".srw"}
 EXR_EXTS = {".exr"}
-FLOAT_EXTS = EXR_EXTS | {".pfm"}
-# Radiance RGBE has one codec, lumigraph.hdr.formats (HDR exchange formats
-# belong to the hdr stage; this ground floor cannot import it).
-RGBE_EXTS = {".hdr", ".pic"}
+# Radiance RGBE has one codec, lumigraph.capture.rgbe (re-exported by
+# lumigraph.hdr.formats); read_image decodes .hdr through it.
+RGBE_EXTS = set(_RGBE_EXTS)
+FLOAT_EXTS = EXR_EXTS | {".pfm"} | RGBE_EXTS
 STACK_SCHEMA = "lumigraph.stack"
 
 
@@ -121,16 +122,16 @@ def read_image(path) -> np.ndarray:
     Parameters
     ----------
     path : path-like
-        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM or a RAW file. Radiance RGBE
-        (``.hdr``) is refused: its one codec is the hdr stage's
-        (``hdr.formats.read_rgbe``), above this floor.
+        PNG/TIFF (8 or 16 bit), JPEG, EXR, PFM, Radiance RGBE ``.hdr``
+        (through the one codec, :func:`lumigraph.capture.rgbe.read_rgbe`) or a
+        RAW file.
 
     Returns
     -------
     ndarray
         ``(H, W)`` or ``(H, W, 3|4)``; ``uint8``/``uint16`` code values for LDR
         and RAW files (RAW: linear 16-bit, see :func:`read_raw`), ``float32``
-        linear values for EXR/PFM.
+        linear values for EXR/PFM/RGBE.
 
     Raises
     ------
@@ -147,9 +148,9 @@ def read_image(path) -> np.ndarray:
     if ext in RAW_EXTS:
         return read_raw(p).codes
     if ext in RGBE_EXTS:
-        raise InputError(p, "Radiance RGBE is read by the hdr stage (hdr.formats.read_rgbe), not "
-                            "as a plain image; convert it with 'lumigraph hdr convert IN.hdr "
-                            "OUT.exr'")
+        from lumigraph.capture.rgbe import read_rgbe
+
+        return read_rgbe(p)  # RGBE cannot hold NaN/inf
     if ext not in LDR_EXTS:
         raise InputError(p, f"unsupported image extension {p.suffix!r}; expected one of "
                             + ", ".join(sorted(LDR_EXTS | FLOAT_EXTS | RAW_EXTS)))

@@ -1,5 +1,6 @@
-"""HDR exchange formats: Radiance RGBE ``.hdr`` (with RLE) and LogLuv TIFF
-(32-bit ``SGILOG`` and 24-bit ``SGILOG24``), encoded and decoded here.
+"""HDR exchange formats: Radiance RGBE ``.hdr`` (with RLE; its one codec is
+:mod:`lumigraph.capture.rgbe`, re-exported here) and LogLuv TIFF (32-bit
+``SGILOG`` and 24-bit ``SGILOG24``), encoded and decoded here.
 
 Reference ch. 6.2 (RGBE: three 8-bit mantissas sharing an 8-bit exponent,
 bias 128; LogLuv 32: sign, 15-bit ``Le = ⌊256 (log2 Y + 64)⌋``, 8-bit
@@ -32,7 +33,6 @@ True
 from __future__ import annotations
 
 import os
-import re
 import struct
 from pathlib import Path
 
@@ -40,6 +40,13 @@ import numpy as np
 
 from lumigraph.capture.artifact import atomic_path
 from lumigraph.capture.errors import InputError
+from lumigraph.capture.rgbe import (  # noqa: F401  (re-exported: hdr's format surface)
+    as_radiance_rgb,
+    float_to_rgbe,
+    read_rgbe,
+    rgbe_to_float,
+    write_rgbe,
+)
 
 # ------------------------------------------------------------------ colour
 RGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
@@ -48,157 +55,10 @@ RGB_TO_XYZ = np.array([[0.4124564, 0.3575761, 0.1804375],
 XYZ_TO_RGB = np.linalg.inv(RGB_TO_XYZ)
 
 
-def _as_rgb(img, where) -> np.ndarray:
-    a = np.asarray(img)
-    if a.dtype.kind != "f":
-        raise TypeError(f"img: expected float linear radiance, got {a.dtype}")
-    if a.ndim == 2:
-        a = np.repeat(a[..., None], 3, axis=2)
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise ValueError(f"img: expected (H, W) or (H, W, 3), got {np.shape(img)}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"img: {where} cannot store NaN/inf")
-    return a.astype(np.float64)
-
-
 # -------------------------------------------------------------------- RGBE
-def float_to_rgbe(img: np.ndarray) -> np.ndarray:
-    """``(H, W, 3)`` float -> ``(H, W, 4)`` uint8 RGBE (negative values become 0).
-
-    Examples
-    --------
-    >>> float_to_rgbe(np.array([[[1.0, 0.5, 0.0]]])).tolist()
-    [[[128, 64, 0, 129]]]
-    """
-    a = np.maximum(np.asarray(img, dtype=np.float64), 0.0)
-    m = a.max(axis=2)
-    mant, ex = np.frexp(m)
-    out = np.zeros(a.shape[:2] + (4,), np.uint8)
-    ok = m > 1e-38
-    scale = np.where(ok, mant * 256.0 / np.where(ok, m, 1.0), 0.0)
-    out[..., :3] = np.clip(np.floor(a * scale[..., None]), 0, 255).astype(np.uint8)
-    out[..., 3] = np.where(ok, ex + 128, 0).astype(np.uint8)
-    return out
-
-
-def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
-    """``(H, W, 4)`` uint8 -> ``(H, W, 3)`` float32; mantissas decode at their
-    centres (``(m + 0.5)·2^(e−136)``), as Radiance does."""
-    e = rgbe[..., 3].astype(np.int32)
-    f = np.where(e > 0, np.ldexp(1.0, e - 136), 0.0)
-    return ((rgbe[..., :3].astype(np.float64) + 0.5) * f[..., None]).astype(np.float32)
-
-
-def _rle_bytes(row: np.ndarray) -> bytes:
-    """Radiance's new RLE for one component of one scanline: runs (``128 + n``,
-    value; ``n`` ≤ 127) for 3+ repeats, literal dumps (``n`` ≤ 128) otherwise."""
-    out = bytearray()
-    n = row.size
-    change = np.flatnonzero(np.diff(row.astype(np.int16))) + 1
-    starts = np.concatenate([[0], change])
-    lens = np.diff(np.concatenate([starts, [n]]))
-    lit = bytearray()
-
-    def flush():
-        for k in range(0, len(lit), 128):
-            chunk = lit[k:k + 128]
-            out.append(len(chunk))
-            out.extend(chunk)
-        lit.clear()
-
-    for s, ln in zip(starts.tolist(), lens.tolist(), strict=True):
-        v = int(row[s])
-        if ln >= 3:
-            flush()
-            while ln > 0:
-                k = min(ln, 127)
-                if k < 3:
-                    lit.extend([v] * k)
-                else:
-                    out.extend((128 + k, v))
-                ln -= k
-        else:
-            lit.extend([v] * ln)
-    flush()
-    return bytes(out)
-
-
-def write_rgbe(path, img: np.ndarray) -> None:
-    """Write Radiance RGBE (``-Y H +X W``, top row first, new-style RLE).
-
-    Parameters
-    ----------
-    img : ndarray, ``(H, W, 3)`` or ``(H, W)`` float, linear, finite.
-    """
-    a = _as_rgb(img, "RGBE")
-    h, w = a.shape[:2]
-    rgbe = float_to_rgbe(a)
-    parts = [b"#?RADIANCE\n# lumigraph\nFORMAT=32-bit_rle_rgbe\n\n", f"-Y {h} +X {w}\n".encode()]
-    if 8 <= w <= 0x7FFF:
-        head = bytes([2, 2, w >> 8, w & 0xFF])
-        for y in range(h):
-            parts.append(head)
-            for c in range(4):
-                parts.append(_rle_bytes(rgbe[y, :, c]))
-    else:  # flat scanlines: RLE is only defined for widths 8..32767
-        parts.append(rgbe.tobytes())
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(b"".join(parts))
-
-
-def read_rgbe(path) -> np.ndarray:
-    """Read Radiance RGBE (flat or RLE scanlines) as ``(H, W, 3)`` float32,
-    top row first. Tolerates header lines before ``#?RADIANCE`` (some files,
-    such as Debevec's ``memorial.hdr``, start with ``VIEW=``)."""
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(p, "file not found")
-    data = p.read_bytes()
-    m = re.search(rb"\n\n([-+][YX]) (\d+) ([-+][YX]) (\d+)\n", data[:65536])
-    head = data[:m.start()] if m else b""
-    if m is None or not (b"#?RADIANCE" in head or b"#?RGBE" in head or b"FORMAT=" in head):
-        raise InputError(p, "not a Radiance RGBE file (no header with a resolution line)")
-    if b"FORMAT=" in head and b"32-bit_rle_rgbe" not in head:
-        raise InputError(p, "only FORMAT=32-bit_rle_rgbe is supported (not XYZE)")
-    if (m.group(1), m.group(3)) != (b"-Y", b"+X"):
-        raise InputError(p, f"unsupported orientation {m.group(0).strip().decode()}; expected -Y H +X W")
-    h, w = int(m.group(2)), int(m.group(4))
-    pos = m.end()
-    out = np.empty((h, w, 4), np.uint8)
-    buf = np.frombuffer(data, np.uint8)
-    try:
-        for y in range(h):
-            if 8 <= w <= 0x7FFF and buf[pos] == 2 and buf[pos + 1] == 2 and buf[pos + 2] < 128:
-                if (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) != w:
-                    raise InputError(p, f"scanline {y}: width mismatch in RLE header")
-                pos += 4
-                for c in range(4):
-                    x = 0
-                    while x < w:
-                        n = int(buf[pos])
-                        if n > 128:
-                            n -= 128
-                            if x + n > w:
-                                raise InputError(p, f"scanline {y}: run overflows the line")
-                            out[y, x:x + n, c] = buf[pos + 1]
-                            pos += 2
-                        else:
-                            if n == 0 or x + n > w:
-                                raise InputError(p, f"scanline {y}: bad literal count {n}")
-                            out[y, x:x + n, c] = buf[pos + 1:pos + 1 + n]
-                            pos += 1 + n
-                        x += n
-            else:
-                seg = buf[pos:pos + 4 * w]
-                if seg.size < 4 * w:
-                    raise InputError(p, f"truncated at scanline {y} of {h}")
-                out[y] = seg.reshape(w, 4)
-                pos += 4 * w
-    except IndexError:
-        raise InputError(p, f"truncated RGBE data (height {h})") from None
-    return rgbe_to_float(out)
-
-
+# The one RGBE codec is on the ground floor (lumigraph.capture.rgbe), so every
+# reader of images (capture.io, inspect, the hdr verbs) decodes .hdr alike; it
+# is part of this module's public surface.
 # ------------------------------------------------------------------ LogLuv
 UV_SQSIZ = 0.0035
 UV_VSTART = 0.016940
@@ -284,7 +144,7 @@ def uv_from_index(c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def encode_logluv32(rgb: np.ndarray) -> np.ndarray:
     """Linear RGB ``(H, W, 3)`` -> LogLuv 32 words ``(H, W)`` uint32."""
-    xyz = _as_rgb(rgb, "LogLuv") @ RGB_TO_XYZ.T
+    xyz = as_radiance_rgb(rgb, "LogLuv") @ RGB_TO_XYZ.T
     y = xyz[..., 1]
     with np.errstate(divide="ignore"):
         le = np.floor(256.0 * (np.log2(np.abs(y)) + 64.0))
@@ -309,7 +169,7 @@ def decode_logluv32(words: np.ndarray) -> np.ndarray:
 
 def encode_logluv24(rgb: np.ndarray) -> np.ndarray:
     """Linear RGB -> LogLuv 24 words ``(H, W)`` uint32 (low 24 bits)."""
-    xyz = np.maximum(_as_rgb(rgb, "LogLuv") @ RGB_TO_XYZ.T, 0.0)
+    xyz = np.maximum(as_radiance_rgb(rgb, "LogLuv") @ RGB_TO_XYZ.T, 0.0)
     y = xyz[..., 1]
     with np.errstate(divide="ignore"):
         le = np.floor(64.0 * (np.log2(y) + 12.0))
@@ -393,7 +253,7 @@ def write_logluv_tiff(path, img: np.ndarray, *, bits: int = 32) -> None:
     """
     if bits not in (24, 32):
         raise ValueError(f"bits: expected 24 or 32, got {bits}")
-    a = _as_rgb(img, "LogLuv")
+    a = as_radiance_rgb(img, "LogLuv")
     h, w = a.shape[:2]
     if bits == 32:
         words = encode_logluv32(a)

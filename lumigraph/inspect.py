@@ -15,21 +15,19 @@ examples:
   lumigraph inspect out/bracket                       a folder with stack.json
   lumigraph inspect img-*.png --times 1/30,1/8,1/2 --need-times
   lumigraph inspect flow.flo disparity.pfm radiance.exr --out summary.json
-  lumigraph inspect memorial.hdr                      Radiance RGBE (hdr.formats)
+  lumigraph inspect memorial.hdr                      Radiance RGBE
 """
 
 
 def describe(path: Path) -> dict:
-    """Summary of one file read through ``capture.io``, or for Radiance RGBE
-    through its one codec, ``hdr.formats``."""
+    """Summary of one file read through ``capture.io`` (Radiance RGBE through
+    its one codec, ``lumigraph.capture.rgbe``)."""
     from lumigraph.capture import io
 
     ext = path.suffix.lower()
     fmt = None
     if ext in io.RGBE_EXTS:
-        from lumigraph.hdr.formats import read_rgbe
-
-        arr, fmt = read_rgbe(path), "Radiance RGBE"
+        arr, fmt = io.read_image(path), "Radiance RGBE"
     elif ext == ".flo":
         arr = io.read_flo(path)
     elif ext == ".pfm":
