@@ -9,17 +9,18 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-# library code whose errors have been moved to argument names (the list grows
-# as each stage follows; a cli.py may name its own flags)
-LIBRARY = ["calib", "lightfield", "capture/scenes", "stereo/sfm.py", "stereo/triangulate.py"]
-FLAG_ERROR = re.compile(r"""(InputError|EstimationError)\(\s*f?["']--""")
+# every library module of every stage; only the command line (a stage's cli.py
+# or *_cli.py, and the CLI plumbing in capture/commandline.py) names flags
+LIBRARY = ["capture", "calib", "stereo", "hdr", "lightfield", "separation"]
+CLI = {"cli.py", "commandline.py"}
+FLAG_ERROR = re.compile(
+    r"""(InputError|EstimationError|ValueError|TypeError)\(\s*f?["']--""")
 
 
 def _modules():
     for entry in LIBRARY:
-        path = ROOT / entry
-        for f in sorted([path] if path.is_file() else path.rglob("*.py")):
-            if f.name != "cli.py":
+        for f in sorted((ROOT / entry).rglob("*.py")):
+            if f.name not in CLI and not f.name.endswith("_cli.py"):
                 yield f
 
 
