@@ -15,16 +15,10 @@ Examples
 
 from __future__ import annotations
 
-import importlib
+from lumigraph.capture.lazy import attach
 
 _LAZY = {
     "Camera": "lumigraph.capture.camera",
     "Rig": "lumigraph.capture.rig",
 }
-__all__ = sorted(_LAZY)
-
-
-def __getattr__(name):
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'lumigraph.calib' has no attribute {name!r}")
+__getattr__, __dir__, __all__ = attach(__name__, _LAZY)

@@ -12,7 +12,7 @@ depending on what had been imported before.
 
 from __future__ import annotations
 
-import importlib
+from lumigraph.capture.lazy import attach
 
 _LAZY = {
     "ResponseCurve": "lumigraph.hdr.response",
@@ -34,10 +34,4 @@ _LAZY = {
     "TonemappedVideo": "lumigraph.hdr.kang2003",
     "Radiometry": "lumigraph.hdr.kang2003",
 }
-__all__ = sorted(_LAZY)
-
-
-def __getattr__(name):
-    if name in _LAZY:
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'lumigraph.hdr' has no attribute {name!r}")
+__getattr__, __dir__, __all__ = attach(__name__, _LAZY)
