@@ -53,7 +53,7 @@ def _top_help() -> str:
              "write ordinary files (EXR, PFM, .flo, PLY, JSON).", "", "stages:"]
     lines += [f"  {m.name:<11} {m.help}" for m in STAGES.values()]
     lines += ["", "Each stage explains itself: lumigraph STAGE --help",
-              "Also runnable as python -m <package> (python -m lumigraph.hdr ...).",
+              "Also runnable as python -m lumigraph (a stage: python -m lumigraph.hdr ...).",
               "Exit status: 0 ok, 2 bad input or usage (one line on stderr), 1 internal fault."]
     return "\n".join(lines)
 
