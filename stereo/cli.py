@@ -101,69 +101,33 @@ def _rectification(args, left_shape=None, right_shape=None):
     return rect, src
 
 
-# ------------------------------------------------------- rectification check
-def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
-    """Matched-feature offsets of a pair: median |Δy| and median Δx (px).
-
-    ORB features matched with a cross-check and Lowe's ratio; a rectified
-    pair has |Δy| ≈ 0 and Δx = d > 0.
-    """
-    import cv2
-
-    from lumigraph.stereo.luma import luma_codes
-
-    def u8(a):
-        g = luma_codes(a)
-        lo, hi = float(g.min()), float(g.max())
-        return np.clip((g - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
-
-    orb = cv2.ORB_create(max_features)
-    k1, d1 = orb.detectAndCompute(u8(left), None)
-    k2, d2 = orb.detectAndCompute(u8(right), None)
-    if d1 is None or d2 is None or len(k1) < 2 or len(k2) < 2:
-        return {"matches": 0}
-    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
-    good = []
-    for pair in bf.knnMatch(d1, d2, k=2):
-        if len(pair) == 2 and pair[0].distance < 0.75 * pair[1].distance:
-            good.append(pair[0])
-    if len(good) < 8:
-        return {"matches": len(good)}
-    p1 = np.array([k1[m.queryIdx].pt for m in good])
-    p2 = np.array([k2[m.trainIdx].pt for m in good])
-    # keep matches consistent with one fundamental matrix (drops repeats)
-    if len(good) >= 12:
-        _, inl = cv2.findFundamentalMat(p1, p2, cv2.FM_RANSAC, 1.5, 0.999)
-        if inl is not None and inl.sum() >= 8:
-            keep = inl.ravel().astype(bool)
-            p1, p2 = p1[keep], p2[keep]
-    dy = p1[:, 1] - p2[:, 1]
-    dx = p1[:, 0] - p2[:, 0]
-    return {"matches": len(p1), "median_abs_dy": float(np.median(np.abs(dy))),
-            "p90_abs_dy": float(np.percentile(np.abs(dy), 90)), "median_dx": float(np.median(dx))}
-
-
 # ------------------------------------------------------------------ verbs
 def _match(args) -> int:
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.stereo.block_matching import match
+    from lumigraph.stereo.block_matching import (
+        RECTIFIED_MIN_MATCHES,
+        check_match_options,
+        check_rectified,
+        match,
+    )
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     left, right = _read(args.left), _read(args.right)
     if left.shape[:2] != right.shape[:2]:
         raise InputError(args.right, f"size {right.shape[1]}x{right.shape[0]} differs from the left "
                                      f"image's {left.shape[1]}x{left.shape[0]}")
+    # the library names the images "left" and "right": report their files
+    args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "left": args.left, "right": args.right}
     window = args.window
     if window != "auto":
         try:
             window = int(window)
         except ValueError:
             raise InputError("window", f"expected 'auto' or an odd integer, got {window!r}") from None
-        if window % 2 == 0 or not 3 <= window <= 63:
-            raise InputError("window", f"expected an odd integer in [3, 63], got {window}")
-    if not 1 <= args.max_disp < left.shape[1]:
-        raise InputError("max_disp", f"expected 1..{left.shape[1] - 1} (image width "
-                                     f"{left.shape[1]}), got {args.max_disp}")
+    # the library's rules, before the pair is rectified and checked
+    check_match_options(left.shape, max_disp=args.max_disp, window=window,
+                        texture_snr=args.texture_snr, uniqueness=args.uniqueness,
+                        channels=args.channels, prefilter=args.prefilter)
     t0 = time.perf_counter()
     params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
               "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
@@ -178,18 +142,9 @@ def _match(args) -> int:
                                   "focal_px": rect.focal_px, "baseline": rect.baseline}
         say(args, f"rectified with {src} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
     else:
-        off = vertical_offsets(left, right)
+        off = check_rectified(left, right, remedy="give the rig with --rig rig.json")
         model["rectification_check"] = off
-        if off["matches"] >= 12:
-            if off["median_abs_dy"] > 1.0:
-                raise InputError(args.right, "the pair is not rectified: matched features are offset "
-                                             f"vertically by {off['median_abs_dy']:.1f} px (median "
-                                             f"over {off['matches']}); give the rig with --rig rig.json")
-            if off["median_dx"] < -0.5:
-                raise InputError(args.right, "matched features lie to the right in the right image "
-                                             f"(median x_left - x_right = {off['median_dx']:.1f} px): "
-                                             "are left and right swapped?")
-        else:
+        if off["matches"] < RECTIFIED_MIN_MATCHES:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
     res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
                 uniqueness=args.uniqueness, lr_tolerance=args.lr_tolerance, channels=args.channels,
