@@ -342,24 +342,17 @@ def _model_based(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_image
     from lumigraph.capture.rig import Rig
-    from lumigraph.stereo.debevec1996 import model_stereo
+    from lumigraph.stereo.debevec1996 import check_model_stereo_options, model_stereo
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     if args.warped:
         if Path(args.warped).suffix.lower() != ".png":
             raise InputError("warped", f"{args.warped}: expected a file ending in .png")
-    if not (np.isfinite(args.max_offset) and args.max_offset > 0):
-        raise InputError("max_offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
-    if args.window % 2 == 0 or not 3 <= args.window <= 63:
-        raise InputError("window", f"expected an odd integer in [3, 63], got {args.window}")
-    if args.step is not None and not (np.isfinite(args.step) and 0 < args.step <= args.max_offset):
-        raise InputError("step", f"expected a value in (0, --max-offset], got {args.step}")
-    for name, v in (("texture_snr", args.texture_snr), ("uniqueness", args.uniqueness),
-                    ("max_cost", args.max_cost)):
-        if not v >= 0:
-            raise InputError(name, f"expected a value >= 0, got {v}")
-    if not (args.left_right >= 0 and np.isfinite(args.left_right)):
-        raise InputError("left_right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
+    left_right = args.left_right or None  # the flag's 0 turns the check off
+    # the library's rules, before any file is read
+    check_model_stereo_options(max_offset=args.max_offset, window=args.window, step=args.step,
+                               texture_snr=args.texture_snr, uniqueness=args.uniqueness,
+                               max_cost=args.max_cost, left_right=left_right)
     key, off = _read(args.key), _read(args.offset)
     if key.shape[:2] != off.shape[:2]:
         raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
@@ -368,20 +361,21 @@ def _model_based(args) -> int:
     if model.shape != key.shape[:2]:
         raise InputError(args.model, f"size {model.shape[1]}x{model.shape[0]} differs from the key "
                                      f"image's {key.shape[1]}x{key.shape[0]}")
-    if not (model > 0).any():  # NaN compares False
-        raise InputError(args.model, "no finite positive depth: the model is absent everywhere")
     rig = Rig.load(args.rig)
     for cam, name in ((rig.left, "left (key)"), (rig.right, "right (offset)")):
         if tuple(cam.image_size) != (key.shape[1], key.shape[0]):
             raise InputError(args.rig, f"the {name} camera is for {cam.image_size[0]}x{cam.image_size[1]} "
                                        f"images, the pair is {key.shape[1]}x{key.shape[0]}")
+    # the library names its inputs: report their files
+    args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "key": args.key,
+                      "offset": args.offset, "model_depth": args.model, "rig": args.rig}
     t0 = time.perf_counter()
     try:
         res = model_stereo(key, off, model, rig, max_offset=args.max_offset, window=args.window,
                            step=args.step, texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                           max_cost=args.max_cost, left_right=args.left_right or None)
-    except EstimationError as e:
-        raise EstimationError(args.model, e.problem) from None
+                           max_cost=args.max_cost, left_right=left_right)
+    except (InputError, EstimationError):
+        raise
     except ValueError as e:
         raise InputError(args.model, str(e)) from None
     dt = time.perf_counter() - t0
@@ -389,7 +383,7 @@ def _model_based(args) -> int:
         warn(w)
     params = {"max_offset": args.max_offset, "window": args.window, "step": args.step,
               "texture_snr": args.texture_snr, "uniqueness": args.uniqueness,
-              "max_cost": args.max_cost, "left_right": args.left_right or None}
+              "max_cost": args.max_cost, "left_right": left_right}
     info = {k: v for k, v in res.info.items() if k not in ("warnings", "timings_s")}
     meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig],
                      params=params, model={"model_based_stereo": info},
