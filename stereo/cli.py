@@ -264,9 +264,14 @@ def _triangulate(args) -> int:
     out = check_output_path(args.out, suffixes=(".ply", ".json"))
     cams, poses, px, sigma = _load_tracks(args)
     sigma = args.pixel_sigma or sigma or 0.5
+    if not args.pixel_sigma:  # the tracks file's pixel_sigma: report that file
+        args.arg_flags = {**(getattr(args, "arg_flags", None) or {}),
+                          "pixel_sigma": args.correspondences}
     try:
         tri = triangulate(px, cams, poses, method=args.method, pixel_sigma=float(sigma),
                           min_angle_deg=args.min_angle)
+    except InputError:
+        raise  # pixel_sigma: run() reports --pixel-sigma, or the tracks file
     except ValueError as e:
         raise InputError(args.correspondences, str(e)) from None
     for w in tri.warnings:
