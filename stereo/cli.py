@@ -263,8 +263,10 @@ def _triangulate(args) -> int:
 
     out = check_output_path(args.out, suffixes=(".ply", ".json"))
     cams, poses, px, sigma = _load_tracks(args)
-    sigma = args.pixel_sigma or sigma or 0.5
-    if not args.pixel_sigma:  # the tracks file's pixel_sigma: report that file
+    if args.pixel_sigma is not None:
+        sigma = args.pixel_sigma
+    else:  # the tracks file's pixel_sigma, else the default; a bad one is that file's
+        sigma = 0.5 if sigma is None else sigma
         args.arg_flags = {**(getattr(args, "arg_flags", None) or {}),
                           "pixel_sigma": args.correspondences}
     try:

@@ -322,4 +322,10 @@ def test_triangulate_pixel_sigma_is_checked_by_the_library(pairs, tmp_path):
                        "error: --pixel-sigma: expected > 0, got -1.0")
     assert_clean_error(lumigraph("stereo", "triangulate", js, "--out", out),
                        f"error: {js}: expected > 0, got -2")
+    # 0 is refused like any value the library refuses (it no longer falls back to the default)
+    assert_clean_error(lumigraph("stereo", "triangulate", js, "--pixel-sigma", "0", "--out", out),
+                       "error: --pixel-sigma: expected > 0, got 0.0")
+    tracks["pixel_sigma"] = 0
+    js.write_text(json.dumps(tracks))
+    assert_clean_error(lumigraph("stereo", "triangulate", js, "--out", out), f"error: {js}: expected > 0, got 0")
     assert not out.exists()
