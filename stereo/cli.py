@@ -8,6 +8,16 @@ its artifact's one parser: :meth:`Rig.load <lumigraph.capture.rig.Rig.load>`
 ``gt.json`` with a ``camera`` entry) and :meth:`Rectification.load
 <lumigraph.calib.rectify.Rectification.load>` (``rectification.json`` from
 ``lumigraph calib rectify``, used as saved).
+
+The library checks every value it takes and names the argument; where files
+would be read first, the command calls its ``check_*`` function early
+(:func:`~lumigraph.stereo.block_matching.check_match_options`,
+:func:`~lumigraph.stereo.block_matching.check_rectified`,
+:func:`~lumigraph.stereo.debevec1996.check_model_stereo_options`). The command
+line keeps the text parsing, what concerns files (an empty image, images of
+different sizes, images against the rig or rectification file, the tracks and
+model files) and output names, and maps each library argument to its flag or
+to the file it came from.
 """
 
 from __future__ import annotations
