@@ -480,6 +480,20 @@ def view_points(detections: Sequence[Detection]):
             [d.image_points for d in detections if len(d)])
 
 
+def check_stereo_pairs(left: Sequence, right: Sequence) -> None:
+    """Check that :func:`calibrate_stereo` gets its views in pairs: as many
+    ``right`` as ``left`` (detections, or the image files before they are
+    read); :class:`InputError` naming ``right`` otherwise.
+
+    >>> check_stereo_pairs(["l0.png", "l1.png"], ["r0.png"])
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: right: expected as many right images as left (2), got 1
+    """
+    if len(left) != len(right):
+        raise InputError("right", f"expected as many right images as left ({len(left)}), got {len(right)}")
+
+
 def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, model: str = "auto",
                      names: Sequence[str] | None = None, left_camera: Camera | None = None,
                      right_camera: Camera | None = None, strict: bool = False):
@@ -504,8 +518,7 @@ def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, m
 
     from lumigraph.capture.rig import Rig
 
-    if len(left) != len(right):
-        raise InputError("right", f"expected as many right images as left ({len(left)}), got {len(right)}")
+    check_stereo_pairs(left, right)
     names = list(names) if names is not None else [f"pair {k}" for k in range(len(left))]
     lcam = left_camera or calibrate(left, model=model, names=[f"{n} (left)" for n in names], strict=strict)
     rcam = right_camera or calibrate(right, model=model, names=[f"{n} (right)" for n in names],

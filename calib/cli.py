@@ -1,9 +1,13 @@
 """``lumigraph calib``: calibrate, undistort, stereo, rectify.
 
-A thin layer: parse, load images, call :mod:`calib.calibrate` /
-:mod:`calib.undistort` / :mod:`calib.rectify`, save artifacts atomically with
-their ``.meta.json`` sidecars. Every input is checked before anything is
-written, so a bad input leaves no output behind.
+A thin layer: parse, load images, call :mod:`lumigraph.calib.calibrate` /
+:mod:`lumigraph.calib.undistort` / :mod:`lumigraph.calib.rectify`, save artifacts
+atomically with their ``.meta.json`` sidecars. Every input is checked before
+anything is written, so a bad input leaves no output behind. Options are
+checked by the library (early, by its ``check_*`` functions, where images would
+be read first); the command line keeps only what concerns the files: folders
+and stack.json, one image size per camera, images against the camera or rig
+file, and the board found in at least one image.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import json
 import time
 from pathlib import Path
 
+from lumigraph.calib.zhang2000 import MODELS
 from lumigraph.capture.commandline import (
     add_verb,
     check_output_dir,
@@ -25,7 +30,7 @@ from lumigraph.capture.commandline import (
 )
 from lumigraph.capture.errors import InputError
 
-MODEL_CHOICES = ("auto", "none", "k1", "k1k2", "k1k2p1p2", "k1k2p1p2k3", "rational")
+MODEL_CHOICES = ("auto", *MODELS)  # the models calibrate() accepts
 
 EPILOG = """\
 examples:
@@ -195,14 +200,13 @@ def _undistort(args) -> int:
 
 
 def _stereo(args) -> int:
-    from lumigraph.calib.calibrate import calibrate_stereo
+    from lumigraph.calib.calibrate import calibrate_stereo, check_stereo_pairs
     from lumigraph.capture.artifact import make_meta
 
     out = check_output_path(args.out, suffixes=(".json",))
     lp, linfo = _expand(args.left, "left")
     rp, _ = _expand(args.right, "right")
-    if len(lp) != len(rp):
-        raise InputError("right", f"expected as many right images as left ({len(lp)}), got {len(rp)}")
+    check_stereo_pairs(lp, rp)  # the library's rule, before any image is read
     board = _board(args, linfo)
     li = _read_all(lp, args, "left images")
     ri = _read_all(rp, args, "right images")
@@ -234,14 +238,13 @@ def _stereo(args) -> int:
 
 
 def _rectify(args) -> int:
-    from lumigraph.calib.rectify import rectify
+    from lumigraph.calib.rectify import check_rectify_options, rectify
     from lumigraph.capture.artifact import atomic_path, make_meta
     from lumigraph.capture.io import read_image, write_image
     from lumigraph.capture.rig import Rig
 
     out = check_output_dir(args.out)
-    if not 0.0 <= args.alpha <= 1.0:
-        raise InputError("alpha", f"expected a value in [0, 1], got {args.alpha}")
+    check_rectify_options(alpha=args.alpha)  # the library's rule, before the rig and images load
     rig = Rig.load(args.rig)
     left, right = read_image(args.left), read_image(args.right)
     for p, im, cam in ((args.left, left, rig.left), (args.right, right, rig.right)):
@@ -250,7 +253,9 @@ def _rectify(args) -> int:
                                 f"{cam.image_size[0]}x{cam.image_size[1]}")
     try:
         rect = rectify(rig, alpha=args.alpha)
-    except ValueError as e:
+    except InputError:
+        raise
+    except ValueError as e:  # the rig itself cannot be rectified
         raise InputError(args.rig, str(e)) from None
     lr, rr = rect.apply(left, right)
     lx, ly, rx, ry = rect.maps()

@@ -258,6 +258,23 @@ class Rectification:
         return cls.from_dict(load_json_artifact(path, "rectification"), where=str(path))
 
 
+def check_rectify_options(*, alpha: float) -> float:
+    """Check :func:`rectify`'s options before any input is loaded; ``alpha`` as
+    a float, or :class:`InputError` naming it.
+
+    >>> check_rectify_options(alpha=1)
+    1.0
+    >>> check_rectify_options(alpha=1.5)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: alpha: expected a value in [0, 1], got 1.5
+    """
+    alpha = float(alpha)
+    if not 0.0 <= alpha <= 1.0:
+        raise InputError("alpha", f"expected a value in [0, 1], got {alpha}")
+    return alpha
+
+
 def rectify(rig: Rig, *, alpha: float = 0.0, image_size: tuple[int, int] | None = None) -> Rectification:
     """Rectify a horizontal stereo rig (Bouguet's method, OpenCV ``stereoRectify``
     with ``CALIB_ZERO_DISPARITY`` so both rectified principal points coincide).
@@ -277,14 +294,19 @@ def rectify(rig: Rig, *, alpha: float = 0.0, image_size: tuple[int, int] | None 
     -------
     Rectification
         Disparity convention: ``x_right = x_left - d`` with ``d = f B / Z > 0``.
+
+    Raises
+    ------
+    InputError
+        ``alpha`` outside [0, 1] (:func:`check_rectify_options`).
+    ValueError, TypeError
+        A rig that is not horizontal, or whose cameras differ in image size.
     """
     import cv2
 
     if not isinstance(rig, Rig):
         raise TypeError(f"rig: expected a capture.rig.Rig, got {type(rig).__name__}")
-    alpha = float(alpha)
-    if not 0.0 <= alpha <= 1.0:
-        raise ValueError(f"alpha: expected a value in [0, 1], got {alpha}")
+    alpha = check_rectify_options(alpha=alpha)
     T = rig.T
     if not (T[0] < 0 and abs(T[0]) > abs(T[1])):
         raise ValueError("rig: expected a horizontal rig with the right camera to the right of the left "

@@ -1,6 +1,8 @@
 """``lumigraph render``: synthetic scenes with exact ground truth, written to a folder.
 
-A thin layer over :mod:`capture.render`: parse, validate, render, save.
+A thin layer over :mod:`lumigraph.capture.render`: parse, render, save. The
+library validates the scene, its options, the size and the seed; the command
+line only turns text into values and maps each argument to its flag.
 """
 
 from __future__ import annotations
@@ -73,7 +75,8 @@ def _render(args) -> int:
     given = _scene_options(extra)
     args.arg_flags = {k.replace("-", "_"): "--" + k.replace("_", "-")
                       for k in [*(o.name for o in spec.options), *given]}
-    size = parse_size(args.size) if args.size else None
+    # text -> values here; the scene checks them (early: before any output exists)
+    size = spec.check_size(parse_size(args.size, limits=None)) if args.size else None
     opts = spec.parse_options(given)
     out = check_output_dir(args.out)
     if show_progress(args.quiet):  # on a terminal only: piped stderr keeps to one error line

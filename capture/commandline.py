@@ -167,14 +167,19 @@ def parse_floats(text: str, *, name: str) -> list[float]:
     return out
 
 
-def parse_size(text: str, *, name: str = "--size") -> tuple[int, int]:
-    """``"640x480"`` -> ``(640, 480)`` (width, height)."""
+def parse_size(text: str, *, name: str = "--size",
+               limits: tuple[int, int] | None = (8, 20000)) -> tuple[int, int]:
+    """``"640x480"`` -> ``(640, 480)`` (width, height), each side within
+    ``limits``; ``limits=None`` only parses, for a library function that checks
+    the size itself (``lumigraph.capture.render.render``)."""
     try:
         w, h = (int(x) for x in text.lower().split("x"))
     except ValueError:
         raise InputError(name, f"expected WIDTHxHEIGHT such as 640x480, got {text!r}") from None
-    if w < 8 or h < 8 or w > 20000 or h > 20000:
-        raise InputError(name, f"impossible size {w}x{h}; each side must be 8..20000 pixels")
+    if limits is not None:
+        lo, hi = limits
+        if w < lo or h < lo or w > hi or h > hi:
+            raise InputError(name, f"impossible size {w}x{h}; each side must be {lo}..{hi} pixels")
     return w, h
 
 

@@ -118,7 +118,9 @@ class Option:
     open_high: bool = False
 
     def parse(self, value: Any) -> Any:
-        flag = "--" + self.name.replace("_", "-")
+        """``value`` (text or a value) as this option's kind, checked against its
+        choices and bounds; :class:`InputError` naming the option otherwise
+        (the command line reports its flag)."""
         try:
             if self.kind is bool and isinstance(value, str):
                 if value.lower() not in ("1", "0", "true", "false", "yes", "no"):
@@ -129,14 +131,14 @@ class Option:
             else:
                 v = self.kind(value)
         except (TypeError, ValueError):
-            raise InputError(flag, f"expected {self.kind.__name__}, got {value!r}") from None
+            raise InputError(self.name, f"expected {self.kind.__name__}, got {value!r}") from None
         if self.choices is not None and v not in self.choices:
-            raise InputError(flag, f"{v!r} is not one of {', '.join(map(str, self.choices))}")
+            raise InputError(self.name, f"{v!r} is not one of {', '.join(map(str, self.choices))}")
         if self.kind in (int, float):
             if self.low is not None and (v < self.low or (self.open_low and v == self.low)):
-                raise InputError(flag, f"{v} is out of range: {self._range()}")
+                raise InputError(self.name, f"{v} is out of range: {self._range()}")
             if self.high is not None and (v > self.high or (self.open_high and v == self.high)):
-                raise InputError(flag, f"{v} is out of range: {self._range()}")
+                raise InputError(self.name, f"{v} is out of range: {self._range()}")
         return v
 
     def _range(self) -> str:
@@ -174,6 +176,16 @@ class SceneSpec:
     def render_fn(self) -> Callable[..., RenderedScene]:
         """The renderer (imported on first use)."""
         return SCENES[self.name].load()
+
+    def check_size(self, size: tuple[int, int] | None) -> tuple[int, int]:
+        """``size`` ``(width, height)``, or the default size for ``None``; each
+        side from ``min_size`` to 20000 pixels, else :class:`InputError` naming
+        ``size``."""
+        w, h = size if size is not None else self.default_size
+        if w < self.min_size[0] or h < self.min_size[1] or w > 20000 or h > 20000:
+            raise InputError("size", f"impossible size {w}x{h} for scene {self.name!r} "
+                                     f"(at least {self.min_size[0]}x{self.min_size[1]})")
+        return w, h
 
     def parse_options(self, given: dict[str, Any]) -> dict[str, Any]:
         known = {o.name: o for o in self.options}
@@ -328,10 +340,7 @@ def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
     """
     spec = get_scene(name)
     opts = spec.parse_options(options)
-    w, h = size if size is not None else spec.default_size
-    if w < spec.min_size[0] or h < spec.min_size[1] or w > 20000 or h > 20000:
-        raise InputError("size", f"impossible size {w}x{h} for scene {name!r} "
-                                   f"(at least {spec.min_size[0]}x{spec.min_size[1]})")
+    w, h = spec.check_size(size)
     if not isinstance(seed, int) or seed < 0:
         raise InputError("seed", f"expected a non-negative integer, got {seed!r}")
     key = _key(spec, opts, (w, h), seed)

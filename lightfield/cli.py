@@ -1,5 +1,13 @@
 """``lumigraph lightfield``: import, decode, refocus, render and depth (thin layer:
-parse, load, call the library, save)."""
+parse, load, call the library, save).
+
+The library checks every value it takes (spacing, focal length, the grid's
+view count, refocus values, the render position, the depth candidates), early
+through its ``check_*`` functions where files would be read first; the
+command line keeps the text parsing, what concerns files (a folder without
+stack.json, a rig with the wrong number of cameras, a white image of another
+size, output names), flags that disagree (--spacing against the rig's), and
+refuses to write a view whose every ray leaves the slab."""
 
 from __future__ import annotations
 
@@ -58,7 +66,7 @@ def _import(args) -> int:
     from lumigraph.capture.io import read_image
     from lumigraph.capture.rig import CameraArray
     from lumigraph.capture.scenes.lightfield import parse_grid
-    from lumigraph.lightfield.field import from_images
+    from lumigraph.lightfield.field import check_from_images, from_images
 
     inputs = [Path(p) for p in args.images]
     out = check_output_dir(args.out)
@@ -82,14 +90,10 @@ def _import(args) -> int:
     posed = args.rig is not None or "cameras" in info
     if spacing is None and not posed:
         raise InputError("spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
-    if spacing is not None and not spacing > 0:
-        raise InputError("spacing", f"must be positive, got {spacing}")
     focal = args.focal_px if args.focal_px is not None else info.get("focal_px")
-    if focal is not None and not focal > 0:
-        raise InputError("focal_px", f"must be positive, got {focal}")
-    if len(files) != grid[0] * grid[1]:
-        raise InputError("grid", f"a {grid[0]}x{grid[1]} grid needs {grid[0] * grid[1]} "
-                                 f"images, got {len(files)}")
+    # the library's rules, before any view is read (posed: the spacing is fitted below)
+    check_from_images(len(files), grid=grid, spacing=1.0 if spacing is None else spacing,
+                      focal_px=focal)
     cameras = None
     if args.rig is not None:
         cameras = (CameraArray.load(args.rig), args.rig)
@@ -255,9 +259,6 @@ def _render(args) -> int:
         slope = lf.slope_from_depth(args.focus_depth)
     else:
         slope = args.focus_slope
-    if args.position[2] != 0 and lf.focal_px is None:
-        raise InputError("position", "Z != 0 needs the light field's focal_px (import with "
-                                     "--focal-px)")
     view = render_view(lf, args.position, focus_slope=slope, interpolation=args.interpolation)
     frac = float(view.valid.mean())
     if frac == 0:
@@ -287,16 +288,23 @@ def _depth(args) -> int:
     from lumigraph.capture.commandline import parse_floats
     from lumigraph.capture.io import write_exr, write_pfm
     from lumigraph.lightfield.field import LightField
-    from lumigraph.lightfield.refocus import all_in_focus, estimate_disparity, focal_stack
+    from lumigraph.lightfield.refocus import (
+        all_in_focus,
+        check_disparity_slopes,
+        estimate_disparity,
+        focal_stack,
+    )
 
     out = Path(args.out)
     if out.suffix.lower() != ".pfm":
         raise InputError("out", f"{out}: the disparity map is written as PFM; name it .pfm")
-    lo, hi, n = parse_floats(args.slopes, name="slopes")
-    if not (hi > lo and n >= 3):
-        raise InputError("slopes", "expected MIN,MAX,N with MAX > MIN and N >= 3")
+    values = parse_floats(args.slopes, name="slopes")
+    if len(values) != 3 or not (np.isfinite(values[2]) and values[2] >= 0):
+        raise InputError("slopes", f"expected MIN,MAX,N (N candidates), got {args.slopes!r}")
+    lo, hi, n = values
+    # the library's rule (at least 3, increasing), before the light field loads
+    slopes = check_disparity_slopes(np.linspace(lo, hi, int(n)))
     lf = LightField.load(args.lightfield)
-    slopes = np.linspace(lo, hi, int(n))
     est = estimate_disparity(lf, slopes, window=args.window)
     write_artifact(out, lambda p: write_pfm(p, est.disparity), meta=make_meta(
         "lumigraph.disparity", inputs=[Path(args.lightfield) / "lightfield.json"],

@@ -82,10 +82,7 @@ class LightField:
         if d.dtype != np.float32:
             d = d.astype(np.float32)
         object.__setattr__(self, "data", d)
-        if not (np.isfinite(self.spacing) and self.spacing > 0):
-            raise ValueError(f"spacing: expected a positive number, got {self.spacing}")
-        if self.focal_px is not None and not (np.isfinite(self.focal_px) and self.focal_px > 0):
-            raise ValueError(f"focal_px: expected a positive number, got {self.focal_px}")
+        _check_geometry(spacing=self.spacing, focal_px=self.focal_px)
         if self.alpha_scale is None:
             object.__setattr__(self, "alpha_scale", float(max(d.shape[:2])))
         elif not self.alpha_scale > 0:
@@ -183,8 +180,11 @@ class LightField:
                 raise InputError(js.parent / n, f"size {views[-1].shape} differs from "
                                                 f"{names[0]} {views[0].shape}")
         data = np.stack(views).reshape(u, v, *views[0].shape)
-        return cls(data, spacing=float(body.get("spacing", 1.0)), focal_px=body.get("focal_px"),
-                   alpha_scale=body.get("alpha_scale"), info=body.get("info", {}))
+        try:
+            return cls(data, spacing=float(body.get("spacing", 1.0)), focal_px=body.get("focal_px"),
+                       alpha_scale=body.get("alpha_scale"), info=body.get("info", {}))
+        except (ValueError, TypeError) as e:  # the geometry it records: a fault of the file
+            raise InputError(js, f"invalid lightfield.json ({e})") from None
 
 
 def view_name(u: int, v: int) -> str:
@@ -203,18 +203,50 @@ def srgb_to_linear(codes: np.ndarray) -> np.ndarray:
     return np.where(a <= 0.04045, a / 12.92, ((a + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
+def _check_geometry(*, spacing, focal_px):
+    if not (np.isfinite(spacing) and spacing > 0):
+        raise InputError("spacing", f"expected a positive number, got {spacing}")
+    if focal_px is not None and not (np.isfinite(focal_px) and focal_px > 0):
+        raise InputError("focal_px", f"expected a positive number, got {focal_px}")
+
+
+def check_from_images(n_images: int, *, grid: tuple[int, int], spacing: float,
+                      focal_px: float | None = None) -> None:
+    """The checks of :func:`from_images` that need no pixels, for a caller
+    that has not read the ``n_images`` views yet: ``spacing`` and
+    ``focal_px`` finite and positive, one view per grid node.
+
+    Raises
+    ------
+    InputError
+        Naming ``spacing``, ``focal_px`` or ``grid``.
+
+    Examples
+    --------
+    >>> check_from_images(6, grid=(2, 3), spacing=0.05, focal_px=800)
+    >>> check_from_images(5, grid=(2, 3), spacing=0.05)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: grid: a 2x3 grid needs 6 images, got 5
+    """
+    _check_geometry(spacing=spacing, focal_px=focal_px)
+    u, v = grid
+    if n_images != u * v:
+        raise InputError("grid", f"a {u}x{v} grid needs {u * v} images, got {n_images}")
+
+
 def from_images(images, *, grid: tuple[int, int], spacing: float, focal_px: float | None = None,
                 linear: bool = False, bit_depth: int | None = None, names=None) -> LightField:
     """Build a light field from row-major views (a list of (H, W[, C]) arrays).
 
     Integer views are sRGB-decoded to linear radiance unless ``linear``, in
-    which case codes are divided by ``2**bit_depth - 1``. Raises InputError
-    naming the view when sizes differ or the count does not match the grid.
+    which case codes are divided by ``2**bit_depth - 1``. ``spacing`` and
+    ``focal_px`` must be finite and positive. Raises InputError naming the
+    argument (:func:`check_from_images`), or the view when sizes differ.
     """
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(len(images))]
-    if len(images) != u * v:
-        raise InputError("grid", f"a {u}x{v} grid needs {u * v} images, got {len(images)}")
+    check_from_images(len(images), grid=grid, spacing=spacing, focal_px=focal_px)
     out = []
     for img, name in zip(images, names, strict=True):
         img = img[..., None] if img.ndim == 2 else img[..., :3]

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.lightfield.field import LightField
 
 INTERPOLATIONS = ("quadrilinear", "uv-bilinear")
@@ -64,7 +65,7 @@ def render_view(lf: LightField, position, *, focus_slope: float = 0.0,
         Needs ``focal_px`` when ``position`` has Z != 0.
     position : (X, Y, Z)
         Pinhole centre in world units (X right, Y down, Z forward), relative to
-        the grid centre.
+        the grid centre; ``Z != 0`` needs ``lf.focal_px``.
     focus_slope : float
         Disparity (px per view step) of the slab's (s, t) plane; put it at the
         scene's mean depth to keep ghosting least.
@@ -73,6 +74,13 @@ def render_view(lf: LightField, position, *, focus_slope: float = 0.0,
     Returns
     -------
     NovelView
+
+    Raises
+    ------
+    InputError
+        ``position`` with ``Z != 0`` for a light field without ``focal_px``.
+    ValueError
+        An unknown ``interpolation``.
     """
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation: expected one of {', '.join(INTERPOLATIONS)}, "
@@ -84,7 +92,8 @@ def render_view(lf: LightField, position, *, focus_slope: float = 0.0,
     f = lf.focal_px
     if f is None:
         if pz != 0.0:
-            raise ValueError("position: Z != 0 needs the light field's focal_px")
+            raise InputError("position", "Z != 0 needs the light field's focal_px (give it when "
+                                         "the light field is imported)")
         f = float(w)
     ppx, ppy = (w - 1) / 2, (h - 1) / 2
     sp = lf.spacing

@@ -195,7 +195,7 @@ def rectify_views(views, cameras, poses, *, grid: tuple[int, int], tolerance: fl
         See :func:`fit_array`.
     plane_depth : float
         Depth of the reference plane in the virtual-array frame (world
-        units); ``inf``: the plane at infinity.
+        units), > 0; ``inf``: the plane at infinity.
     interpolation : {"lanczos4", "cubic", "linear"}
 
     Returns
@@ -210,7 +210,7 @@ def rectify_views(views, cameras, poses, *, grid: tuple[int, int], tolerance: fl
         raise ValueError(f"interpolation: expected one of {', '.join(flags)}, got "
                          f"{interpolation!r}")
     if not plane_depth > 0:
-        raise ValueError(f"plane_depth: expected > 0, got {plane_depth}")
+        raise InputError("plane_depth", f"expected > 0, got {plane_depth}")
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(u * v)]
     if not len(views) == len(cameras) == u * v:

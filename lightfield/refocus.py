@@ -223,6 +223,25 @@ class DisparityEstimate:
         return z.astype(np.float32)
 
 
+def check_disparity_slopes(slopes) -> np.ndarray:
+    """The candidate disparities of :func:`estimate_disparity`, checked before
+    the light field is at hand: at least 3, strictly increasing (float64).
+
+    >>> check_disparity_slopes(np.linspace(-1, 1, 5)).tolist()
+    [-1.0, -0.5, 0.0, 0.5, 1.0]
+    >>> check_disparity_slopes([1.0, 0.5, 0.0])
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: slopes: expected increasing candidates, got 1 .. 0
+    """
+    slopes = np.asarray(slopes, np.float64)
+    if slopes.ndim != 1 or len(slopes) < 3:
+        raise InputError("slopes", f"expected at least 3 candidates, got {slopes}")
+    if not np.all(np.diff(slopes) > 0):
+        raise InputError("slopes", f"expected increasing candidates, got {slopes[0]:g} .. {slopes[-1]:g}")
+    return slopes
+
+
 def estimate_disparity(lf: LightField, slopes, *, window: int = 7,
                        kernel: str = "linear") -> DisparityEstimate:
     """Depth from the light field by angular consistency (the correspondence cue
@@ -233,7 +252,8 @@ def estimate_disparity(lf: LightField, slopes, *, window: int = 7,
     ----------
     lf : LightField
     slopes : sequence of float
-        Candidate disparities, increasing, evenly spaced.
+        Candidate disparities, evenly spaced; at least 3, strictly increasing
+        (:func:`check_disparity_slopes`).
     window : int
         Side of the box over which the cost is aggregated (odd).
 
@@ -243,9 +263,7 @@ def estimate_disparity(lf: LightField, slopes, *, window: int = 7,
     """
     from scipy.ndimage import uniform_filter
 
-    slopes = np.asarray(slopes, np.float64)
-    if slopes.ndim != 1 or len(slopes) < 3:
-        raise ValueError(f"slopes: expected at least 3 candidates, got {slopes}")
+    slopes = check_disparity_slopes(slopes)
     u, v = lf.grid
     uc, vc = lf.center
     cost = np.empty((len(slopes),) + lf.data.shape[2:4], np.float32)

@@ -61,6 +61,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
 
 AUTO_WINDOWS = (5, 9, 15)
@@ -524,18 +525,109 @@ def _decide(best, em, ep, second, best_r, *, var, pick, windows, costs, D, uniqu
     return disp, np.where(valid, bestc / unit, np.nan).astype(np.float32), counts
 
 
+# ------------------------------------------- the precondition: a rectified pair
+RECTIFIED_MIN_MATCHES = 12  # fewer feature matches confirm nothing
+
+
+def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
+    """Matched-feature offsets of a pair: median |Δy| and median Δx (px).
+
+    ORB features matched with a cross-check and Lowe's ratio; a rectified
+    pair has |Δy| ≈ 0 and Δx = d > 0.
+
+    Returns
+    -------
+    dict
+        ``matches`` (how many), and with at least 8 matches
+        ``median_abs_dy``, ``p90_abs_dy`` and ``median_dx``.
+    """
+    import cv2
+
+    def u8(a):
+        g = luma_codes(a)
+        lo, hi = float(g.min()), float(g.max())
+        return np.clip((g - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
+
+    orb = cv2.ORB_create(max_features)
+    k1, d1 = orb.detectAndCompute(u8(left), None)
+    k2, d2 = orb.detectAndCompute(u8(right), None)
+    if d1 is None or d2 is None or len(k1) < 2 or len(k2) < 2:
+        return {"matches": 0}
+    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
+    good = []
+    for pair in bf.knnMatch(d1, d2, k=2):
+        if len(pair) == 2 and pair[0].distance < 0.75 * pair[1].distance:
+            good.append(pair[0])
+    if len(good) < 8:
+        return {"matches": len(good)}
+    p1 = np.array([k1[m.queryIdx].pt for m in good])
+    p2 = np.array([k2[m.trainIdx].pt for m in good])
+    # keep matches consistent with one fundamental matrix (drops repeats)
+    if len(good) >= 12:
+        _, inl = cv2.findFundamentalMat(p1, p2, cv2.FM_RANSAC, 1.5, 0.999)
+        if inl is not None and inl.sum() >= 8:
+            keep = inl.ravel().astype(bool)
+            p1, p2 = p1[keep], p2[keep]
+    dy = p1[:, 1] - p2[:, 1]
+    dx = p1[:, 0] - p2[:, 0]
+    return {"matches": len(p1), "median_abs_dy": float(np.median(np.abs(dy))),
+            "p90_abs_dy": float(np.percentile(np.abs(dy), 90)), "median_dx": float(np.median(dx))}
+
+
+def check_rectified(left, right, *, remedy: str = "rectify the pair first") -> dict:
+    """Refuse a pair that :func:`match` cannot use: not rectified (matched
+    features offset vertically by more than 1 px, median) or swapped (the
+    median ``x_left - x_right`` below -0.5 px).
+
+    Parameters
+    ----------
+    left, right : ndarray, (H, W) or (H, W, C)
+        The pair as it would be matched.
+    remedy : str
+        What to do about an unrectified pair, ending its message (a caller
+        that can rectify says how).
+
+    Returns
+    -------
+    dict
+        :func:`vertical_offsets`; with fewer than ``RECTIFIED_MIN_MATCHES``
+        matches nothing is confirmed (and nothing refused).
+
+    Raises
+    ------
+    InputError
+        Naming ``right``.
+    """
+    off = vertical_offsets(left, right)
+    if off["matches"] >= RECTIFIED_MIN_MATCHES:
+        if off["median_abs_dy"] > 1.0:
+            raise InputError("right", "the pair is not rectified: matched features are offset "
+                                      f"vertically by {off['median_abs_dy']:.1f} px (median "
+                                      f"over {off['matches']}); {remedy}")
+        if off["median_dx"] < -0.5:
+            raise InputError("right", "matched features lie to the right in the right image "
+                                      f"(median x_left - x_right = {off['median_dx']:.1f} px): "
+                                      "are left and right swapped?")
+    return off
+
+
 # ------------------------------------------------------- the steps of match
+def _check_modes(*, channels, prefilter, prefilter_cap):
+    """Refuse an unknown ``channels`` or ``prefilter`` and a cap <= 0."""
+    if channels not in CHANNELS:
+        raise InputError("channels", f"expected one of {CHANNELS}, got {channels!r}")
+    if prefilter not in PREFILTERS:
+        raise InputError("prefilter", f"expected one of {PREFILTERS}, got {prefilter!r}")
+    if not prefilter_cap > 0:
+        raise InputError("prefilter_cap", f"expected a value > 0, got {prefilter_cap!r}")
+
+
 def _check_options(left, right, *, channels, prefilter, prefilter_cap):
     """Refuse an unknown ``channels`` or ``prefilter``, a cap <= 0 and two
     images of different shapes (before any conversion)."""
-    if channels not in CHANNELS:
-        raise ValueError(f"channels: expected one of {CHANNELS}, got {channels!r}")
-    if prefilter not in PREFILTERS:
-        raise ValueError(f"prefilter: expected one of {PREFILTERS}, got {prefilter!r}")
-    if not prefilter_cap > 0:
-        raise ValueError(f"prefilter_cap: expected a value > 0, got {prefilter_cap!r}")
+    _check_modes(channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
     if np.shape(left) != np.shape(right):
-        raise ValueError(f"right: expected the left image's shape {np.shape(left)}, got {np.shape(right)}")
+        raise InputError("right", f"expected the left image's shape {np.shape(left)}, got {np.shape(right)}")
 
 
 def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
@@ -544,20 +636,57 @@ def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
     ``AUTO_WINDOWS`` for ``"auto"``)."""
     _, h, w = shape
     if not isinstance(max_disp, int | np.integer) or not 1 <= max_disp < w:
-        raise ValueError(f"max_disp: expected an integer in [1, {w - 1}] (image width {w}), got {max_disp!r}")
+        raise InputError("max_disp", f"expected an integer in [1, {w - 1}] (image width {w}), "
+                                     f"got {max_disp!r}")
     if window == "auto":
         windows = AUTO_WINDOWS
     elif isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63:
         windows = (int(window),)
     else:
-        raise ValueError(f"window: expected 'auto' or an odd integer in [3, 63], got {window!r}")
+        raise InputError("window", f"expected 'auto' or an odd integer in [3, 63], got {window!r}")
     if min(h, w) < max(windows):
-        raise ValueError(f"left: image {w}x{h} is smaller than the window {max(windows)}")
+        raise InputError("left", f"image {w}x{h} is smaller than the window {max(windows)}")
     if engine not in ("auto", "numpy"):
-        raise ValueError(f"engine: expected 'auto' or 'numpy', got {engine!r}")
-    if texture_snr < 0 or uniqueness < 0:
-        raise ValueError("texture_snr, uniqueness: expected values >= 0")
+        raise InputError("engine", f"expected 'auto' or 'numpy', got {engine!r}")
+    for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness)):
+        if v < 0:
+            raise InputError(name, f"expected a value >= 0, got {v!r}")
     return int(max_disp), windows
+
+
+def check_match_options(image_shape, *, max_disp: int, window: int | str = "auto",
+                        texture_snr: float = 1.0, uniqueness: float = 0.02,
+                        channels: str = "luma", prefilter: str = "none",
+                        prefilter_cap: float = 31.0, engine: str = "auto") -> None:
+    """Check :func:`match`'s options for images of ``image_shape`` before the
+    pair is rectified or matched (``match`` checks them again itself).
+
+    Parameters
+    ----------
+    image_shape : tuple
+        ``(H, W)`` or ``(H, W, C)`` of the left image.
+    max_disp, window, texture_snr, uniqueness, channels, prefilter, prefilter_cap, engine
+        As for :func:`match`.
+
+    Raises
+    ------
+    InputError
+        Naming the argument: ``max_disp`` outside ``[1, W - 1]``, ``window``
+        not ``"auto"`` or odd in [3, 63], an image smaller than the window,
+        negative ``texture_snr``/``uniqueness``, an unknown mode.
+
+    Examples
+    --------
+    >>> check_match_options((48, 64), max_disp=16, window=9)
+    >>> check_match_options((48, 64), max_disp=64)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: max_disp: expected an integer in [1, 63] (image width 64), got 64
+    """
+    _check_modes(channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
+    h, w = tuple(image_shape)[:2]
+    _check_search((1, h, w), max_disp=max_disp, window=window, engine=engine,
+                  texture_snr=texture_snr, uniqueness=uniqueness)
 
 
 @dataclass(frozen=True)
@@ -757,8 +886,10 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
 
     Raises
     ------
-    ValueError
-        Shapes differ, images too small, bad window or ``max_disp``.
+    InputError
+        Naming the argument: shapes differ, images too small, bad window or
+        ``max_disp`` (:func:`check_match_options` checks the options alone,
+        before the images are at hand).
     """
     t0 = time.perf_counter()
     # validate, and the images as compared (planes) and as tested for texture (luma)

@@ -8,6 +8,16 @@ its artifact's one parser: :meth:`Rig.load <lumigraph.capture.rig.Rig.load>`
 ``gt.json`` with a ``camera`` entry) and :meth:`Rectification.load
 <lumigraph.calib.rectify.Rectification.load>` (``rectification.json`` from
 ``lumigraph calib rectify``, used as saved).
+
+The library checks every value it takes and names the argument; where files
+would be read first, the command calls its ``check_*`` function early
+(:func:`~lumigraph.stereo.block_matching.check_match_options`,
+:func:`~lumigraph.stereo.block_matching.check_rectified`,
+:func:`~lumigraph.stereo.debevec1996.check_model_stereo_options`). The command
+line keeps the text parsing, what concerns files (an empty image, images of
+different sizes, images against the rig or rectification file, the tracks and
+model files) and output names, and maps each library argument to its flag or
+to the file it came from.
 """
 
 from __future__ import annotations
@@ -101,69 +111,33 @@ def _rectification(args, left_shape=None, right_shape=None):
     return rect, src
 
 
-# ------------------------------------------------------- rectification check
-def vertical_offsets(left, right, *, max_features: int = 1500) -> dict:
-    """Matched-feature offsets of a pair: median |Δy| and median Δx (px).
-
-    ORB features matched with a cross-check and Lowe's ratio; a rectified
-    pair has |Δy| ≈ 0 and Δx = d > 0.
-    """
-    import cv2
-
-    from lumigraph.stereo.luma import luma_codes
-
-    def u8(a):
-        g = luma_codes(a)
-        lo, hi = float(g.min()), float(g.max())
-        return np.clip((g - lo) * (255.0 / max(hi - lo, 1e-9)), 0, 255).astype(np.uint8)
-
-    orb = cv2.ORB_create(max_features)
-    k1, d1 = orb.detectAndCompute(u8(left), None)
-    k2, d2 = orb.detectAndCompute(u8(right), None)
-    if d1 is None or d2 is None or len(k1) < 2 or len(k2) < 2:
-        return {"matches": 0}
-    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
-    good = []
-    for pair in bf.knnMatch(d1, d2, k=2):
-        if len(pair) == 2 and pair[0].distance < 0.75 * pair[1].distance:
-            good.append(pair[0])
-    if len(good) < 8:
-        return {"matches": len(good)}
-    p1 = np.array([k1[m.queryIdx].pt for m in good])
-    p2 = np.array([k2[m.trainIdx].pt for m in good])
-    # keep matches consistent with one fundamental matrix (drops repeats)
-    if len(good) >= 12:
-        _, inl = cv2.findFundamentalMat(p1, p2, cv2.FM_RANSAC, 1.5, 0.999)
-        if inl is not None and inl.sum() >= 8:
-            keep = inl.ravel().astype(bool)
-            p1, p2 = p1[keep], p2[keep]
-    dy = p1[:, 1] - p2[:, 1]
-    dx = p1[:, 0] - p2[:, 0]
-    return {"matches": len(p1), "median_abs_dy": float(np.median(np.abs(dy))),
-            "p90_abs_dy": float(np.percentile(np.abs(dy), 90)), "median_dx": float(np.median(dx))}
-
-
 # ------------------------------------------------------------------ verbs
 def _match(args) -> int:
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.stereo.block_matching import match
+    from lumigraph.stereo.block_matching import (
+        RECTIFIED_MIN_MATCHES,
+        check_match_options,
+        check_rectified,
+        match,
+    )
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     left, right = _read(args.left), _read(args.right)
     if left.shape[:2] != right.shape[:2]:
         raise InputError(args.right, f"size {right.shape[1]}x{right.shape[0]} differs from the left "
                                      f"image's {left.shape[1]}x{left.shape[0]}")
+    # the library names the images "left" and "right": report their files
+    args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "left": args.left, "right": args.right}
     window = args.window
     if window != "auto":
         try:
             window = int(window)
         except ValueError:
             raise InputError("window", f"expected 'auto' or an odd integer, got {window!r}") from None
-        if window % 2 == 0 or not 3 <= window <= 63:
-            raise InputError("window", f"expected an odd integer in [3, 63], got {window}")
-    if not 1 <= args.max_disp < left.shape[1]:
-        raise InputError("max_disp", f"expected 1..{left.shape[1] - 1} (image width "
-                                     f"{left.shape[1]}), got {args.max_disp}")
+    # the library's rules, before the pair is rectified and checked
+    check_match_options(left.shape, max_disp=args.max_disp, window=window,
+                        texture_snr=args.texture_snr, uniqueness=args.uniqueness,
+                        channels=args.channels, prefilter=args.prefilter)
     t0 = time.perf_counter()
     params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
               "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
@@ -178,18 +152,9 @@ def _match(args) -> int:
                                   "focal_px": rect.focal_px, "baseline": rect.baseline}
         say(args, f"rectified with {src} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
     else:
-        off = vertical_offsets(left, right)
+        off = check_rectified(left, right, remedy="give the rig with --rig rig.json")
         model["rectification_check"] = off
-        if off["matches"] >= 12:
-            if off["median_abs_dy"] > 1.0:
-                raise InputError(args.right, "the pair is not rectified: matched features are offset "
-                                             f"vertically by {off['median_abs_dy']:.1f} px (median "
-                                             f"over {off['matches']}); give the rig with --rig rig.json")
-            if off["median_dx"] < -0.5:
-                raise InputError(args.right, "matched features lie to the right in the right image "
-                                             f"(median x_left - x_right = {off['median_dx']:.1f} px): "
-                                             "are left and right swapped?")
-        else:
+        if off["matches"] < RECTIFIED_MIN_MATCHES:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
     res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
                 uniqueness=args.uniqueness, lr_tolerance=args.lr_tolerance, channels=args.channels,
@@ -308,10 +273,17 @@ def _triangulate(args) -> int:
 
     out = check_output_path(args.out, suffixes=(".ply", ".json"))
     cams, poses, px, sigma = _load_tracks(args)
-    sigma = args.pixel_sigma or sigma or 0.5
+    if args.pixel_sigma is not None:
+        sigma = args.pixel_sigma
+    else:  # the tracks file's pixel_sigma, else the default; a bad one is that file's
+        sigma = 0.5 if sigma is None else sigma
+        args.arg_flags = {**(getattr(args, "arg_flags", None) or {}),
+                          "pixel_sigma": args.correspondences}
     try:
         tri = triangulate(px, cams, poses, method=args.method, pixel_sigma=float(sigma),
                           min_angle_deg=args.min_angle)
+    except InputError:
+        raise  # pixel_sigma: run() reports --pixel-sigma, or the tracks file
     except ValueError as e:
         raise InputError(args.correspondences, str(e)) from None
     for w in tri.warnings:
@@ -387,24 +359,17 @@ def _model_based(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_image
     from lumigraph.capture.rig import Rig
-    from lumigraph.stereo.debevec1996 import model_stereo
+    from lumigraph.stereo.debevec1996 import check_model_stereo_options, model_stereo
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     if args.warped:
         if Path(args.warped).suffix.lower() != ".png":
             raise InputError("warped", f"{args.warped}: expected a file ending in .png")
-    if not (np.isfinite(args.max_offset) and args.max_offset > 0):
-        raise InputError("max_offset", f"expected a distance > 0 in the rig's unit, got {args.max_offset}")
-    if args.window % 2 == 0 or not 3 <= args.window <= 63:
-        raise InputError("window", f"expected an odd integer in [3, 63], got {args.window}")
-    if args.step is not None and not (np.isfinite(args.step) and 0 < args.step <= args.max_offset):
-        raise InputError("step", f"expected a value in (0, --max-offset], got {args.step}")
-    for name, v in (("texture_snr", args.texture_snr), ("uniqueness", args.uniqueness),
-                    ("max_cost", args.max_cost)):
-        if not v >= 0:
-            raise InputError(name, f"expected a value >= 0, got {v}")
-    if not (args.left_right >= 0 and np.isfinite(args.left_right)):
-        raise InputError("left_right", f"expected a tolerance >= 0 (0 disables), got {args.left_right}")
+    left_right = args.left_right or None  # the flag's 0 turns the check off
+    # the library's rules, before any file is read
+    check_model_stereo_options(max_offset=args.max_offset, window=args.window, step=args.step,
+                               texture_snr=args.texture_snr, uniqueness=args.uniqueness,
+                               max_cost=args.max_cost, left_right=left_right)
     key, off = _read(args.key), _read(args.offset)
     if key.shape[:2] != off.shape[:2]:
         raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
@@ -413,20 +378,21 @@ def _model_based(args) -> int:
     if model.shape != key.shape[:2]:
         raise InputError(args.model, f"size {model.shape[1]}x{model.shape[0]} differs from the key "
                                      f"image's {key.shape[1]}x{key.shape[0]}")
-    if not (model > 0).any():  # NaN compares False
-        raise InputError(args.model, "no finite positive depth: the model is absent everywhere")
     rig = Rig.load(args.rig)
     for cam, name in ((rig.left, "left (key)"), (rig.right, "right (offset)")):
         if tuple(cam.image_size) != (key.shape[1], key.shape[0]):
             raise InputError(args.rig, f"the {name} camera is for {cam.image_size[0]}x{cam.image_size[1]} "
                                        f"images, the pair is {key.shape[1]}x{key.shape[0]}")
+    # the library names its inputs: report their files
+    args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "key": args.key,
+                      "offset": args.offset, "model_depth": args.model, "rig": args.rig}
     t0 = time.perf_counter()
     try:
         res = model_stereo(key, off, model, rig, max_offset=args.max_offset, window=args.window,
                            step=args.step, texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                           max_cost=args.max_cost, left_right=args.left_right or None)
-    except EstimationError as e:
-        raise EstimationError(args.model, e.problem) from None
+                           max_cost=args.max_cost, left_right=left_right)
+    except (InputError, EstimationError):
+        raise
     except ValueError as e:
         raise InputError(args.model, str(e)) from None
     dt = time.perf_counter() - t0
@@ -434,7 +400,7 @@ def _model_based(args) -> int:
         warn(w)
     params = {"max_offset": args.max_offset, "window": args.window, "step": args.step,
               "texture_snr": args.texture_snr, "uniqueness": args.uniqueness,
-              "max_cost": args.max_cost, "left_right": args.left_right or None}
+              "max_cost": args.max_cost, "left_right": left_right}
     info = {k: v for k, v in res.info.items() if k not in ("warnings", "timings_s")}
     meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig],
                      params=params, model={"model_based_stereo": info},

@@ -78,6 +78,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
+
 MAX_STEPS = 257
 
 
@@ -396,8 +398,8 @@ def warp_offset(offset: np.ndarray, model_depth: np.ndarray, rig, *, delta: floa
 # -------------------------------------------------------------- validation
 def _check_image(name, img, size):
     if img.ndim not in (2, 3) or img.shape[1::-1] != tuple(size):
-        raise ValueError(f"{name}: expected an image of {size[0]}x{size[1]} (the rig's), "
-                         f"got array shape {img.shape}")
+        raise InputError(name, f"expected an image of {size[0]}x{size[1]} (the rig's), "
+                               f"got array shape {img.shape}")
 
 
 def _check_model(model_depth, rig):
@@ -408,11 +410,49 @@ def _check_model(model_depth, rig):
     zm = np.asarray(model_depth, np.float64)
     w, h = rig.left.image_size
     if zm.shape != (h, w):
-        raise ValueError(f"model_depth: expected shape ({h}, {w}) (the key camera's), got {zm.shape}")
+        raise InputError("model_depth", f"expected shape ({h}, {w}) (the key camera's), got {zm.shape}")
     zm = np.where(zm > 0, zm, np.nan)  # NaN compares False: absent stays absent
     if not np.isfinite(zm).any():
-        raise ValueError("model_depth: no finite positive depth (the model is absent everywhere)")
+        raise InputError("model_depth", "no finite positive depth (the model is absent everywhere)")
     return zm
+
+
+def check_model_stereo_options(*, max_offset: float, window: int = 9, step: float | None = None,
+                               texture_snr: float = 1.0, uniqueness: float = 0.02,
+                               max_cost: float = 1.0, left_right: float | None = 1.25) -> float:
+    """Check :func:`model_stereo`'s options before any image is loaded
+    (``model_stereo`` checks them again itself); ``max_offset`` as a float.
+
+    Raises
+    ------
+    InputError
+        Naming the argument: ``max_offset`` not finite and > 0, ``window`` not
+        an odd integer in [3, 63], ``step`` outside ``(0, max_offset]``,
+        ``texture_snr``/``uniqueness``/``max_cost`` below 0 (or NaN),
+        ``left_right`` not finite and > 0 (``None`` disables the check).
+
+    Examples
+    --------
+    >>> check_model_stereo_options(max_offset=0.35)
+    0.35
+    >>> check_model_stereo_options(max_offset=0.35, window=8)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: window: expected an odd integer in [3, 63], got 8
+    """
+    max_offset = float(max_offset)
+    if not (np.isfinite(max_offset) and max_offset > 0):
+        raise InputError("max_offset", f"expected a finite value > 0, got {max_offset}")
+    if not (isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63):
+        raise InputError("window", f"expected an odd integer in [3, 63], got {window!r}")
+    if step is not None and not (np.isfinite(step) and 0 < step <= max_offset):
+        raise InputError("step", f"expected a value in (0, max_offset={max_offset}], got {step}")
+    for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness), ("max_cost", max_cost)):
+        if not v >= 0:
+            raise InputError(name, f"expected a value >= 0, got {v}")
+    if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
+        raise InputError("left_right", f"expected a finite value > 0 or None, got {left_right}")
+    return max_offset
 
 
 # ------------------------------------------------- the steps of model_stereo
@@ -425,18 +465,9 @@ def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, te
     offset = np.asarray(offset)
     _check_image("key", key, rig.left.image_size)
     _check_image("offset", offset, rig.right.image_size)
-    max_offset = float(max_offset)
-    if not (np.isfinite(max_offset) and max_offset > 0):
-        raise ValueError(f"max_offset: expected a finite value > 0, got {max_offset}")
-    if not (isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63):
-        raise ValueError(f"window: expected an odd integer in [3, 63], got {window!r}")
-    if step is not None and not (np.isfinite(step) and 0 < step <= max_offset):
-        raise ValueError(f"step: expected a value in (0, max_offset={max_offset}], got {step}")
-    for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness), ("max_cost", max_cost)):
-        if not v >= 0:
-            raise ValueError(f"{name}: expected a value >= 0, got {v}")
-    if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
-        raise ValueError(f"left_right: expected a finite value > 0 or None, got {left_right}")
+    max_offset = check_model_stereo_options(
+        max_offset=max_offset, window=window, step=step, texture_snr=texture_snr,
+        uniqueness=uniqueness, max_cost=max_cost, left_right=left_right)
     return zm, key, offset, max_offset
 
 
@@ -491,8 +522,8 @@ def _delta_steps(rig, zm, view, *, max_offset, step, warnings):
     px1, _ = _project_offset(rig, view.a, np.where(seen, zm + eps, 1.0))
     rate = np.linalg.norm(px1 - view.px0, axis=-1)[seen] / eps  # px per unit delta
     if not seen.any():
-        raise ValueError("model_depth: no model point is seen by the offset camera "
-                         "(check the rig and the model)")
+        raise InputError("model_depth", "no model point is seen by the offset camera "
+                                        "(check the rig and the model)")
     px_per_unit = float(np.percentile(rate, 99))
     if step is None:
         step = 1.0 / max(px_per_unit, 1e-12)
@@ -756,9 +787,15 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
 
     Raises
     ------
-    ValueError, TypeError
-        Sizes that do not match the rig or each other, no model, a bad
-        option.
+    InputError
+        Naming the argument: sizes that do not match the rig, no model (or
+        none the offset camera sees), a bad option
+        (:func:`check_model_stereo_options` checks the options alone, before
+        the images are loaded).
+    TypeError
+        ``rig`` is not a :class:`~lumigraph.capture.rig.Rig`.
+    EstimationError
+        The model does not explain the images (``max_median_cost``).
     """
     from lumigraph.stereo.luma import luma_codes
 

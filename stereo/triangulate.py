@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.capture.registry import Method, Registry
 
 # The --method choices of `lumigraph stereo triangulate`: three modes of the one
@@ -225,7 +226,7 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
     method : {"refined", "dlt", "midpoint"}
         ``midpoint`` needs exactly two views.
     pixel_sigma : float
-        Standard deviation of the pixel noise (px), for the covariance.
+        Standard deviation of the pixel noise (px), for the covariance; > 0.
     min_angle_deg : float
         Tracks whose largest ray angle is below this are flagged ``near_parallel``.
     iterations : int
@@ -237,6 +238,8 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
 
     Raises
     ------
+    InputError
+        ``pixel_sigma`` not > 0 (naming it).
     ValueError
         Inconsistent shapes, unknown method, a track seen in fewer than 2 views.
     """
@@ -252,7 +255,7 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
     if method == "midpoint" and V != 2:
         raise ValueError(f"method: midpoint triangulates two views, got {V}")
     if not pixel_sigma > 0:
-        raise ValueError(f"pixel_sigma: expected > 0, got {pixel_sigma}")
+        raise InputError("pixel_sigma", f"expected > 0, got {pixel_sigma}")
     poses = [(np.asarray(R, np.float64), np.asarray(t, np.float64).ravel()) for R, t in poses]
     seen = np.isfinite(px).all(axis=2)
     if np.any(seen.sum(axis=0) < 2):

@@ -108,3 +108,29 @@ def test_stereo_and_rectify_through_files(tmp_path):
     assert io.read_image(out / "left.png").shape == (240, 320)
     assert np.load(out / "maps_left.npy").shape == (240, 320, 2)
     assert json.loads((out / "rectification.json").read_text())["focal_px"] > 0
+
+
+def test_option_checks_live_in_the_library_and_the_cli_names_flags(boards, tmp_path):
+    # the library checks its own arguments, naming them ...
+    from lumigraph.calib.calibrate import calibrate_stereo, check_stereo_pairs
+    from lumigraph.calib.rectify import check_rectify_options
+    from lumigraph.capture.errors import InputError
+
+    with pytest.raises(InputError, match=r"^alpha: expected a value in \[0, 1\], got 1.5"):
+        check_rectify_options(alpha=1.5)
+    with pytest.raises(InputError, match="^right: expected as many right images as left"):
+        check_stereo_pairs(["a", "b"], ["c"])
+    with pytest.raises(InputError, match="^right: expected as many"):
+        calibrate_stereo([None, None], [None])
+    # ... and the command line reports the flag, before reading any file
+    gone = tmp_path / "gone.png"
+    for alpha in ("1.5", "-0.1", "nan"):
+        r = lumigraph("calib", "rectify", "--rig", tmp_path / "no-rig.json", gone, gone, "--alpha", alpha,
+                      "--out", tmp_path / "rect")
+        assert_clean_error(r, "error: --alpha: expected a value in [0, 1]")
+    r = lumigraph("calib", "stereo", "--left", boards / "view_00.png", boards / "view_01.png",
+                  "--right", boards / "view_00.png", "--board", "checker:10x7:30", "--out", tmp_path / "rig.json")
+    assert_clean_error(r, "error: --right: expected as many right images as left (2), got 1")
+    r = lumigraph("calib", "calibrate", boards, "--model", "k9", "--out", tmp_path / "c.json")
+    assert r.returncode == 2 and "--model" in r.stderr
+    assert not (tmp_path / "rect").exists() and not (tmp_path / "rig.json").exists()

@@ -4,6 +4,7 @@ errors naming the file, nothing half-written; and the artifact sidecars (§4).""
 import json
 
 import numpy as np
+import pytest
 from conftest import assert_clean_error, lumigraph
 
 from lumigraph.capture import io
@@ -63,6 +64,27 @@ def test_render_bad_options(tmp_path):
     # validated late (after the options parse), still one line
     assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--size", "10x10"),
                        "--size", "impossible size")
+    assert not (tmp_path / "x").exists()
+
+
+def test_render_checks_live_in_the_library_and_the_cli_names_flags(tmp_path):
+    # the scene validates its size and options, naming the argument ...
+    from lumigraph.capture.errors import InputError
+    from lumigraph.capture.render import get_scene, render
+
+    with pytest.raises(InputError, match="^bit_depth: 7 is out of range"):
+        render("sample", bit_depth=7, cache=False)
+    with pytest.raises(InputError, match="^size: impossible size 3x2 for scene 'sample'"):
+        get_scene("sample").check_size((3, 2))
+    with pytest.raises(InputError, match="^size: impossible size 12x12"):
+        render("sample", size=(12, 12), cache=False)
+    # ... and the command line reports the flag that set it
+    r = lumigraph("render", "sample", "--out", tmp_path / "x", "--size", "3x2")
+    assert_clean_error(r, "error: --size: impossible size 3x2 for scene 'sample' (at least 16x16)")
+    assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--size", "3by2"),
+                       "error: --size: expected WIDTHxHEIGHT")
+    assert_clean_error(lumigraph("render", "sample", "--out", tmp_path / "x", "--bit-depth", "7"),
+                       "error: --bit-depth: 7 is out of range")
     assert not (tmp_path / "x").exists()
 
 

@@ -136,3 +136,55 @@ def test_python_dash_m_and_bench_quick(tmp_path):
     checks = {c["target"]: c for c in js["stages"]["lightfield"]["checks"]}
     assert any("lenslet hex" in t and c["passed"] for t, c in checks.items())
     assert (tmp_path / "lightfield.png").exists()
+
+
+def test_value_checks_live_in_the_library_and_the_cli_names_flags(lfdir, tmp_path):
+    # the library checks the values it takes, naming the argument ...
+    from lumigraph.capture.errors import InputError
+    from lumigraph.lightfield.field import LightField, check_from_images
+    from lumigraph.lightfield.levoy1996 import render_view
+    from lumigraph.lightfield.refocus import check_disparity_slopes, estimate_disparity
+
+    with pytest.raises(InputError, match="^spacing: expected a positive number, got 0"):
+        check_from_images(4, grid=(2, 2), spacing=0)
+    with pytest.raises(InputError, match="^focal_px: expected a positive number, got inf"):
+        check_from_images(4, grid=(2, 2), spacing=1, focal_px=float("inf"))
+    with pytest.raises(InputError, match="^grid: a 2x2 grid needs 4 images, got 3"):
+        check_from_images(3, grid=(2, 2), spacing=1)
+    lf = LightField(np.zeros((2, 2, 4, 5, 1), np.float32))
+    with pytest.raises(InputError, match="^spacing"):
+        LightField(lf.data, spacing=-1.0)
+    with pytest.raises(InputError, match="^position: Z != 0 needs the light field's focal_px"):
+        render_view(lf, (0, 0, 1))
+    with pytest.raises(InputError, match="^slopes: expected at least 3"):
+        check_disparity_slopes([0.0, 1.0])
+    with pytest.raises(InputError, match="^slopes: expected increasing"):
+        estimate_disparity(lf, [0.0, 0.0, 0.0])
+    # ... and the command line names the flag, checked before any file is read
+    gone = [tmp_path / f"v{k}.png" for k in range(4)]
+    out = tmp_path / "lf"
+    for extra, line in ((("--spacing", "0"), "error: --spacing: expected a positive number, got 0.0"),
+                        (("--spacing", "inf"), "error: --spacing: expected a positive number, got inf"),
+                        (("--spacing", "1", "--focal-px", "-5"), "error: --focal-px: expected a positive"),
+                        (("--spacing", "1", "--grid", "3x3"), "error: --grid: a 3x3 grid needs 9 images")):
+        r = lumigraph("lightfield", "import", *gone, "--grid", "2x2", *extra, "--out", out)
+        assert_clean_error(r, line)
+    assert not out.exists()
+    for slopes, line in (("1,0,5", "error: --slopes: expected increasing candidates, got 1 .. 0"),
+                         ("0,1,2", "error: --slopes: expected at least 3 candidates"),
+                         ("0,1", "error: --slopes: expected MIN,MAX,N"),
+                         ("0,1,nan", "error: --slopes: expected MIN,MAX,N"),
+                         ("0,1,-4", "error: --slopes: expected MIN,MAX,N")):
+        r = lumigraph("lightfield", "depth", tmp_path / "no-lf", f"--slopes={slopes}",
+                      "--out", tmp_path / "d.pfm")
+        assert_clean_error(r, line)
+    # a light field imported without a focal length cannot move the pinhole off the plane
+    views = []
+    for k in range(4):
+        views.append(tmp_path / f"w{k}.png")
+        write_image(views[-1], np.full((8, 10, 3), 40 * k, np.uint8))
+    r = lumigraph("lightfield", "import", *views, "--grid", "2x2", "--spacing", "1", "--out", out)
+    assert r.returncode == 0, r.stderr
+    r = lumigraph("lightfield", "render", out, "--position", "0", "0", "1", "--out", tmp_path / "v.exr")
+    assert_clean_error(r, "error: --position: Z != 0 needs the light field's focal_px")
+    assert not (tmp_path / "v.exr").exists() and not (tmp_path / "d.pfm").exists()

@@ -99,3 +99,16 @@ def test_off_grid_camera_is_refused(jittered, tmp_path):
                   "--out", tmp_path / "lf")
     assert_clean_error(r, "error: --rig: ", "do not spread along the grid's columns")
     assert not (tmp_path / "lf").exists()
+
+
+def test_plane_depth_is_checked_by_the_library(jittered, tmp_path):
+    from lumigraph.capture.errors import InputError
+    from lumigraph.lightfield.rectify import rectify_views
+
+    with pytest.raises(InputError, match="^plane_depth: expected > 0, got -1"):
+        rectify_views([], [], [], grid=(1, 2), plane_depth=-1.0)
+    folder = tmp_path / "scene"
+    jittered.save(folder)
+    r = lumigraph("lightfield", "import", folder, "--plane-depth", "-1", "--out", tmp_path / "lf")
+    assert_clean_error(r, "error: --plane-depth: expected > 0, got -1.0")
+    assert not (tmp_path / "lf").exists()

@@ -276,3 +276,34 @@ def test_cli_left_right_flag(scene_dir, tmp_path):
     assert off[1]["model"]["model_based_stereo"]["rejected"]["left_right"] == 0
     assert on[1]["model"]["model_based_stereo"]["rejected"]["left_right"] > 0
     assert np.isfinite(on[0]).sum() < np.isfinite(off[0]).sum()
+
+
+def test_options_are_checked_by_the_library_before_any_file_is_read(scene_dir, tmp_path):
+    from lumigraph.capture.errors import InputError
+    from lumigraph.stereo.debevec1996 import check_model_stereo_options
+
+    assert check_model_stereo_options(max_offset=1) == 1.0
+    for kwargs, name in ((dict(max_offset=float("inf")), "max_offset"),
+                         (dict(max_offset=0.3, window=65), "window"),
+                         (dict(max_offset=0.3, step=0.5), "step"),
+                         (dict(max_offset=0.3, max_cost=float("nan")), "max_cost"),
+                         (dict(max_offset=0.3, uniqueness=-1), "uniqueness"),
+                         (dict(max_offset=0.3, left_right=-1.0), "left_right")):
+        with pytest.raises(InputError, match=f"^{name}: expected"):
+            check_model_stereo_options(**kwargs)
+    folder, model, s = scene_dir
+    zm = s.gt_arrays["model_depth"]
+    with pytest.raises(InputError, match=r"^model_depth: no finite positive depth"):
+        model_stereo(s.images[0], s.images[1], np.zeros_like(zm), rig_of(s), max_offset=0.3)
+    # the command line names the flag, checked before the (missing) files are read
+    gone = tmp_path / "gone"
+    out = tmp_path / "d.pfm"
+    for extra, flag in ((("--max-offset", "0.3", "--step", "0.5"), "--step"),
+                        (("--max-offset", "0.3", "--max-cost", "-1"), "--max-cost"),
+                        (("--max-offset", "0.3", "--texture-snr", "nan"), "--texture-snr"),
+                        (("--max-offset", "0.3", "--window", "2"), "--window"),
+                        (("--max-offset", "0", "--left-right", "0"), "--max-offset")):
+        r = lumigraph("stereo", "model-based", gone / "k.png", gone / "o.png", "--rig", gone / "r.json",
+                      "--model", gone / "m.pfm", "--out", out, *extra)
+        assert_clean_error(r, f"error: {flag}: expected")
+    assert not out.exists()

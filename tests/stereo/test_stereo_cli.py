@@ -250,3 +250,82 @@ def test_match_channels_and_prefilter_flags(pairs, tmp_path):
                                  "--max-disp", "40", "--channels", "hsv", "--out", tmp_path / "x.pfm"),
                        "--channels")
     assert not (tmp_path / "x.pfm").exists()
+
+
+def test_match_option_checks_live_in_the_library(pairs, tmp_path):
+    # block_matching checks its own arguments and names them ...
+    from lumigraph.capture.errors import InputError
+    from lumigraph.stereo.block_matching import check_match_options, check_rectified, match
+
+    with pytest.raises(InputError, match=r"^max_disp: expected an integer in \[1, 199\]"):
+        check_match_options((150, 200), max_disp=200)
+    with pytest.raises(InputError, match="^window: expected 'auto' or an odd integer"):
+        check_match_options((150, 200), max_disp=16, window=4)
+    with pytest.raises(InputError, match="^texture_snr: expected a value >= 0"):
+        check_match_options((150, 200), max_disp=16, texture_snr=-1.0)
+    with pytest.raises(InputError, match="^left: image 10x8 is smaller than the window 15"):
+        check_match_options((8, 10), max_disp=4)
+    a = np.zeros((20, 30), np.float32)
+    with pytest.raises(InputError, match="^max_disp"):
+        match(a, a, max_disp=0)
+    folder, s = pairs["unrectified"]
+    with pytest.raises(InputError, match="^right: the pair is not rectified.*; do this"):
+        check_rectified(io.read_image(folder / "left.png"), io.read_image(folder / "right.png"),
+                        remedy="do this")
+    # ... and the command line reports the flag (or the image's file), writing nothing
+    folder, _ = pairs["rectified"]
+    out = tmp_path / "d.pfm"
+
+    def run(*extra, left=folder / "left.png", right=folder / "right.png"):
+        return lumigraph("stereo", "match", left, right, "--out", out, *extra)
+
+    assert_clean_error(run("--max-disp", "0"), "error: --max-disp: expected an integer in [1, 199]")
+    assert_clean_error(run("--max-disp", "200"), "error: --max-disp:")
+    assert_clean_error(run("--max-disp", "16", "--window", "65"),
+                       "error: --window: expected 'auto' or an odd integer in [3, 63], got 65")
+    assert_clean_error(run("--max-disp", "16", "--window", "wide"), "error: --window:")
+    assert_clean_error(run("--max-disp", "16", "--uniqueness", "-0.5"),
+                       "error: --uniqueness: expected a value >= 0")
+    tiny = tmp_path / "tiny.png"
+    io.write_image(tiny, np.zeros((8, 10), np.uint8))
+    assert_clean_error(run("--max-disp", "4", left=tiny, right=tiny),
+                       f"error: {tiny}: image 10x8 is smaller than the window 15")
+    # checked before rectifying: a bad option wins over a rig that does not fit
+    unrect, _ = pairs["unrectified"]
+    assert_clean_error(run("--max-disp", "0", "--rig", tmp_path / "missing.json"), "error: --max-disp:")
+    assert_clean_error(run("--max-disp", "16", left=unrect / "left.png", right=unrect / "right.png"),
+                       f"error: {unrect / 'right.png'}: the pair is not rectified", "--rig rig.json")
+    assert not out.exists()
+
+
+def test_triangulate_pixel_sigma_is_checked_by_the_library(pairs, tmp_path):
+    from lumigraph.capture.errors import InputError
+    from lumigraph.stereo.triangulate import triangulate
+
+    folder, s = pairs["unrectified"]
+    g = s.gt["rig"]
+    from lumigraph.capture.rig import Rig
+
+    rig = Rig.from_dict(g)
+    px = np.array([[[50.0, 60.0]], [[40.0, 61.0]]])
+    poses = [(np.eye(3), np.zeros(3)), (rig.R, rig.T)]
+    with pytest.raises(InputError, match="^pixel_sigma: expected > 0, got -1"):
+        triangulate(px, [rig.left, rig.right], poses, pixel_sigma=-1.0)
+    tracks = {"views": [{"camera": g["left"]},
+                        {"camera": g["right"], "cam_from_world": {"R": g["R"], "t": g["T"]}}],
+              "tracks": [px[:, 0].tolist()], "pixel_sigma": -2}
+    js = tmp_path / "t.json"
+    js.write_text(json.dumps(tracks))
+    out = tmp_path / "p.json"
+    # from the flag: the flag is named; from the tracks file: the file is
+    assert_clean_error(lumigraph("stereo", "triangulate", js, "--pixel-sigma", "-1", "--out", out),
+                       "error: --pixel-sigma: expected > 0, got -1.0")
+    assert_clean_error(lumigraph("stereo", "triangulate", js, "--out", out),
+                       f"error: {js}: expected > 0, got -2")
+    # 0 is refused like any value the library refuses (it no longer falls back to the default)
+    assert_clean_error(lumigraph("stereo", "triangulate", js, "--pixel-sigma", "0", "--out", out),
+                       "error: --pixel-sigma: expected > 0, got 0.0")
+    tracks["pixel_sigma"] = 0
+    js.write_text(json.dumps(tracks))
+    assert_clean_error(lumigraph("stereo", "triangulate", js, "--out", out), f"error: {js}: expected > 0, got 0")
+    assert not out.exists()
