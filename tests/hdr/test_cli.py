@@ -217,3 +217,19 @@ def test_method_choices_and_help_come_from_the_registries(verb, registry):
     for m in reg.values():
         assert m.help in r.stdout
         assert callable(m.load())
+
+
+def test_tonemap_refuses_nan_in_the_library_and_the_cli_names_the_file(tmp_path):
+    from lumigraph.capture.errors import InputError
+    from lumigraph.capture.io import write_exr
+    from lumigraph.hdr.reinhard2002 import tonemap
+
+    rad = np.ones((8, 8, 3), np.float32)
+    rad[2, 2, 1] = np.nan
+    with pytest.raises(InputError) as e:
+        tonemap(rad)
+    assert e.value.where == "radiance"
+    write_exr(tmp_path / "nan.exr", rad)
+    r = lumigraph("hdr", "tonemap", tmp_path / "nan.exr", "--out", tmp_path / "t.png")
+    assert_clean_error(r, "nan.exr", "NaN/inf")
+    assert not (tmp_path / "t.png").exists()
