@@ -43,7 +43,33 @@ from pathlib import Path
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
+
 KINDS = ("checker", "block", "sinusoid", "stripe", "occluder", "flat")
+
+
+def check_lit_fraction(alpha: float) -> float:
+    """A lit fraction ``alpha`` (of a pattern, or of the patterns a separation
+    assumes): strictly between 0 and 1.
+
+    Raises
+    ------
+    InputError
+        Naming ``alpha``.
+
+    Examples
+    --------
+    >>> check_lit_fraction(0.25)
+    0.25
+    >>> try:
+    ...     check_lit_fraction(1.0)
+    ... except InputError as e:
+    ...     print(e)
+    alpha: lit fraction must lie in (0, 1), got 1.0
+    """
+    if not 0.0 < alpha < 1.0:
+        raise InputError("alpha", f"lit fraction must lie in (0, 1), got {alpha}")
+    return alpha
 
 
 @dataclass(frozen=True)
@@ -128,10 +154,16 @@ def checker_set(size, *, square: int = 8, shifts: int = 3) -> PatternSet:
     size : (width, height)
         Projector resolution in pixels.
     square : int
-        Checker square side in projector pixels; a multiple of ``shifts``.
+        Checker square side in projector pixels; a positive multiple of
+        ``shifts``.
     shifts : int
-        Shift steps per axis; the step is ``square // shifts`` pixels, so the
-        ``shifts²`` shifted boards plus complements visit every phase.
+        Shift steps per axis, >= 1; the step is ``square // shifts`` pixels,
+        so the ``shifts²`` shifted boards plus complements visit every phase.
+
+    Raises
+    ------
+    InputError
+        Naming ``shifts`` (< 1) or ``square`` (not a positive multiple of it).
 
     Returns
     -------
@@ -144,9 +176,11 @@ def checker_set(size, *, square: int = 8, shifts: int = 3) -> PatternSet:
     >>> ps.images[0].astype(int).tolist()[0], ps.lit_fraction
     ([1, 1, 0, 0, 1, 1, 0, 0], (0.5, 0.5))
     """
-    if square < 1 or shifts < 1 or square % shifts:
-        raise ValueError(f"square, shifts: square must be a positive multiple of shifts, "
-                         f"got square={square}, shifts={shifts}")
+    if shifts < 1:
+        raise InputError("shifts", f"expected at least 1 shift step, got {shifts}")
+    if square < 1 or square % shifts:
+        raise InputError("square", f"must be a positive multiple of shifts, got square={square}, "
+                                   f"shifts={shifts}")
     x, y, w, h = _grid(size)
     step = square // shifts
     boards, names, offs = [], [], []
@@ -172,16 +206,33 @@ def block_set(size, *, alpha: float, tile: int = 8, cell: int = 1) -> PatternSet
     all ``tile²`` cyclic shifts by one cell, so every pixel is on in some images
     and off in others (the general-α case of eqs. 8.13–8.14).
 
+    Parameters
+    ----------
+    size : (width, height)
+        Projector resolution in pixels.
+    alpha : float
+        Lit fraction, in (0, 1) (:func:`check_lit_fraction`).
+    tile : int
+        Tile side in cells, >= 2.
+    cell : int
+        Cell side in projector pixels, >= 1.
+
+    Raises
+    ------
+    InputError
+        Naming the argument out of range.
+
     Examples
     --------
     >>> ps = block_set((8, 8), alpha=0.25, tile=4)
     >>> len(ps), ps.lit_fraction[0], ps.complement_of[0]
     (16, 0.25, -1)
     """
-    if not 0.0 < alpha < 1.0:
-        raise ValueError(f"alpha: expected 0 < alpha < 1, got {alpha}")
-    if tile < 2 or cell < 1:
-        raise ValueError(f"tile, cell: expected tile >= 2 and cell >= 1, got {tile}, {cell}")
+    check_lit_fraction(alpha)
+    if tile < 2:
+        raise InputError("tile", f"expected a tile of at least 2 cells, got {tile}")
+    if cell < 1:
+        raise InputError("cell", f"expected a cell of at least 1 pixel, got {cell}")
     m = int(round(alpha * tile * tile))
     m = min(max(m, 1), tile * tile - 1)
     ci, cj = np.meshgrid(np.arange(tile), np.arange(tile))
@@ -210,14 +261,20 @@ def sinusoid_set(size, *, period: int = 8, cell: int = 1) -> PatternSet:
     (reference §8.3.4), constant over ``cell``-pixel columns (``x`` is the cell
     centre), so a pixel inside a cell sees an exact sinusoid in k.
 
+    ``period`` (pixels) is at least 3 and a multiple of ``cell`` (>= 1);
+    :class:`InputError` names the one out of range.
+
     Examples
     --------
     >>> ps = sinusoid_set((6, 2), period=6)
     >>> np.allclose(ps.images.sum(axis=0), 1.5)
     True
     """
-    if period < 3 or cell < 1 or period % cell:
-        raise ValueError(f"period, cell: expected period >= 3, a multiple of cell, got {period}, {cell}")
+    if cell < 1:
+        raise InputError("cell", f"expected a cell of at least 1 pixel, got {cell}")
+    if period < 3 or period % cell:
+        raise InputError("period", f"expected >= 3 pixels, a multiple of cell, got period={period}, "
+                                   f"cell={cell}")
     x, y, w, h = _grid(size)
     xc = (x // cell) * cell + (cell - 1) / 2.0
     imgs = [np.broadcast_to(0.5 + 0.5 * np.cos(2 * np.pi * xc / period + 2 * np.pi * k / 3),
@@ -229,7 +286,8 @@ def sinusoid_set(size, *, period: int = 8, cell: int = 1) -> PatternSet:
 
 def stripe_set(size, *, period: int = 8) -> PatternSet:
     """One image of vertical stripes, ``period // 2`` pixels on, the rest off
-    (the single-image method, reference §8.3.4, Fig. 8.47).
+    (the single-image method, reference §8.3.4, Fig. 8.47). ``period`` is at
+    least 2 pixels (:class:`InputError` naming it otherwise).
 
     Examples
     --------
@@ -237,7 +295,7 @@ def stripe_set(size, *, period: int = 8) -> PatternSet:
     [1, 1, 0, 0, 1, 1, 0, 0]
     """
     if period < 2:
-        raise ValueError(f"period: expected >= 2, got {period}")
+        raise InputError("period", f"expected >= 2 pixels, got {period}")
     x, y, w, h = _grid(size)
     on = np.broadcast_to((x % period) < period // 2, (h, w)).astype(np.float32)
     return PatternSet("stripe", on[None], ("stripe",), (float(on.mean()),), (-1,),
@@ -248,6 +306,8 @@ def occluder_set(size, *, period: int = 8, width: int = 1) -> PatternSet:
     """A shadow sweep: thin dark vertical bars ``width`` pixels wide, one every
     ``period`` pixels (a comb of thin occluders), moved one ``width`` step per
     image until every pixel has been in shadow once (reference §8.3.4, Fig. 8.46).
+    ``width`` is at least 1 pixel and ``period`` a multiple of it, at least
+    ``2·width``; :class:`InputError` names the one out of range.
 
     Examples
     --------
@@ -255,9 +315,11 @@ def occluder_set(size, *, period: int = 8, width: int = 1) -> PatternSet:
     >>> len(ps), ps.images[:, 0].astype(int).tolist()[1]
     (4, [1, 0, 1, 1])
     """
-    if width < 1 or period < 2 * width or period % width:
-        raise ValueError(f"period, width: expected period >= 2*width, a multiple of width, "
-                         f"got {period}, {width}")
+    if width < 1:
+        raise InputError("width", f"expected at least 1 pixel, got {width}")
+    if period < 2 * width or period % width:
+        raise InputError("period", f"expected >= 2*width, a multiple of width, got period={period}, "
+                                   f"width={width}")
     x, y, w, h = _grid(size)
     imgs = [np.broadcast_to(((x - k * width) % period) >= width, (h, w)).astype(np.float32)
             for k in range(period // width)]

@@ -40,6 +40,8 @@ as 1/250 are fine). Every output gets a <output>.meta.json sidecar.
 
 # The library names the times by its argument; --times sets them.
 TIMES_FLAG = {"exposure_times_s": "--times"}
+# ... and the noise model by its two arguments; --noise sets both.
+NOISE_FLAG = {"full_well_e": "--noise", "read_noise_e": "--noise"}
 
 
 def _times(args):
@@ -62,10 +64,13 @@ def _response(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta
+    from lumigraph.hdr.samples import check_samples
 
     out = check_output_path(args.out, suffixes=(".json",))
     if args.plot:
         check_output_path(args.plot, suffixes=(".png",))
+    if args.samples is not None:
+        check_samples(args.samples)  # the fits' own range, before the bracket is read
     stack, times = _load(args, need_times=args.method != "linear" and not args.linear)
     method = "linear" if (args.linear or stack.linear) else args.method
     if method == "linear" and args.method != "linear":
@@ -79,8 +84,6 @@ def _response(args) -> int:
     default = inspect.signature(fn).parameters.get("samples")
     samples = args.samples if args.samples is not None else (
         None if default is None else default.default)
-    if samples is not None and samples < 2:
-        raise InputError("--samples", f"expected at least 2 pixels, got {samples}")
     if "smoothness" in m.options:
         opts["smoothness"] = "auto" if args.smoothness == "auto" else _num(args.smoothness,
                                                                             "--smoothness")
@@ -149,29 +152,24 @@ def _check_curve(curve, stack, path, what):
         raise InputError(path, f"curve has {curve.channels} channels, the {what} "
                                f"{stack.images.shape[-1]}")
 
-def _noise(args) -> dict:
+def _noise(args) -> tuple[dict, dict]:
     """The variance weights' sensor noise: ``--noise FULL_WELL_E,READ_NOISE_E`` or the
-    library's defaults (not estimated from the stack), with where it came from."""
-    import math
-
-    from lumigraph.hdr.merge import merge
+    library's defaults (not estimated from the stack). Returns the arguments
+    for ``merge`` (none when not given) and the record of what was used and
+    where it came from; the library checks them before any image is read."""
+    from lumigraph.hdr.merge import check_noise
 
     if args.noise is None:
-        d = inspect.signature(merge).parameters
-        return {"full_well_e": d["full_well_e"].default, "read_noise_e": d["read_noise_e"].default,
-                "source": "library default (not estimated from the images)"}
-    if args.weights != "variance":
-        raise InputError("--noise", "applies to --weights variance only")
+        fw, rn = check_noise(args.weights)
+        return {}, {"full_well_e": fw, "read_noise_e": rn,
+                    "source": "library default (not estimated from the images)"}
     vals = parse_floats(args.noise, name="--noise")
     if len(vals) != 2:
         raise InputError("--noise", f"expected FULL_WELL_E,READ_NOISE_E (two numbers), got "
                                     f"{args.noise!r}")
-    fw, rn = vals
-    if not (math.isfinite(fw) and fw > 0):
-        raise InputError("--noise", f"full well must be a positive number of electrons, got {fw}")
-    if not (math.isfinite(rn) and rn >= 0):
-        raise InputError("--noise", f"read noise must be >= 0 electrons RMS, got {rn}")
-    return {"full_well_e": float(fw), "read_noise_e": float(rn), "source": "given (--noise)"}
+    fw, rn = check_noise(args.weights, *vals)
+    given = {"full_well_e": fw, "read_noise_e": rn}
+    return given, {**given, "source": "given (--noise)"}
 
 
 def _merge(args) -> int:
@@ -183,13 +181,12 @@ def _merge(args) -> int:
     from lumigraph.hdr.response import ResponseCurve
 
     out = check_output_path(args.out, suffixes=(".exr", ".hdr", ".tif", ".tiff", ".pfm"))
-    noise = _noise(args)
+    given, noise = _noise(args)
     curve = ResponseCurve.load(args.response)
     stack, times = _load(args)
     _check_curve(curve, stack, args.response, "images")
     t0 = time.perf_counter()
-    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost,
-              **{k: v for k, v in noise.items() if k != "source"})
+    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost, **given)
     dt = time.perf_counter() - t0
     for w in m.warnings:
         warn(w)
@@ -257,10 +254,7 @@ def _tonemap(args) -> int:
     img = read_hdr_image(args.input)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
-    import numpy as np
-
-    if not np.isfinite(img).all():
-        raise InputError(args.input, "contains NaN/inf; tone mapping needs finite radiance")
+    args.arg_flags = {"radiance": args.input}  # the library checks it; name the file it came from
     ldr = TONEMAP_METHODS.resolve(args.method)(img, key=args.key, bit_depth=args.bit_depth)
     meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
                      params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth})
@@ -291,17 +285,17 @@ def _video(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.commandline import progress
     from lumigraph.capture.io import read_stack, write_exr, write_image
-    from lumigraph.hdr.kang2003 import hdr_video, tonemap_video
+    from lumigraph.hdr.kang2003 import check_temporal, hdr_video, tonemap_video
     from lumigraph.hdr.response import ResponseCurve
 
     out = check_output_dir(args.out)
-    if args.temporal < 1 or args.temporal % 2 == 0:
-        raise InputError("--temporal", f"expected an odd number of frames >= 1, got {args.temporal}")
+    check_temporal(args.temporal)  # tonemap_video's own range, before the frames are read
     curve = ResponseCurve.load(args.response)
     stack = read_stack(args.frames, times=_times(args), need_times=True)
-    where = stack.paths[0] if len(stack.paths) == 1 else str(args.frames[0])
-    if stack.images.shape[0] < 2:
-        raise InputError(where, f"HDR video needs at least 2 frames, got {stack.images.shape[0]}")
+    # hdr_video checks its frames (at least 2 of them); an error about them
+    # names the input they came from
+    args.arg_flags = {**TIMES_FLAG,
+                      "frames": stack.paths[0] if len(stack.paths) == 1 else str(args.frames[0])}
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float frames are already linear; HDR video needs "
                                          "code values (integer PNG/TIFF)")
@@ -383,7 +377,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
-    v.set_defaults(func=_merge, arg_flags=TIMES_FLAG)
+    v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG})
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
                  epilog=_methods_epilog(ALIGN_METHODS))
     v.add_argument("images", nargs="+")

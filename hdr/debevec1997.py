@@ -47,7 +47,7 @@ import math
 import numpy as np
 
 from lumigraph.hdr.response import ResponseCurve, normalise_g
-from lumigraph.hdr.samples import check_stack, hat_weight, sample_pixels
+from lumigraph.hdr.samples import check_samples, check_stack, hat_weight, sample_pixels
 
 LAMBDA_GRID = tuple(10.0 ** (k / 4) for k in range(-40, -11))
 
@@ -355,7 +355,8 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         λ of eq. 6.5 (scaled as in the module docstring); ``"auto"`` chooses
         it from :data:`LAMBDA_GRID` at the L-curve corner.
     samples : int
-        Pixels sampled per fit (:func:`hdr.samples.sample_pixels`).
+        Pixels sampled per fit (:func:`hdr.samples.sample_pixels`), at least 2
+        (:func:`hdr.samples.check_samples`).
     knots : int, optional
         Unknowns per channel; default ``min(2**bit_depth, 256)``.
     clip_margin : float
@@ -381,6 +382,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     p, h, w_, c = z.shape
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
+    check_samples(samples)
     rng = np.random.default_rng(0) if rng is None else rng
     n_knots = int(knots) if knots is not None else min(2 ** bd, 256)
     if not 4 <= n_knots <= 2 ** bd:

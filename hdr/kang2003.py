@@ -735,6 +735,29 @@ def unaligned_merge(frames: np.ndarray, exposure_times_s, response: ResponseCurv
 
 
 # ------------------------------------------------------------ tone mapping
+def check_temporal(temporal: int) -> int:
+    """:func:`tonemap_video`'s ``temporal``: an odd number of frames >= 1.
+
+    Raises
+    ------
+    InputError
+        Naming ``temporal``.
+
+    Examples
+    --------
+    >>> check_temporal(5)
+    5
+    >>> try:
+    ...     check_temporal(4)
+    ... except InputError as e:
+    ...     print(e)
+    temporal: expected an odd number of frames >= 1, got 4
+    """
+    if not isinstance(temporal, int | np.integer) or temporal < 1 or temporal % 2 == 0:
+        raise InputError("temporal", f"expected an odd number of frames >= 1, got {temporal!r}")
+    return temporal
+
+
 def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5,
                   bit_depth: int = 8, delta: float = 1e-6) -> TonemappedVideo:
     """Temporally coherent Reinhard global tone mapping of a radiance video.
@@ -749,9 +772,10 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     ----------
     radiances : ndarray, ``(N, H, W, 3)`` float, linear, finite, ≥ 0
     key : float
-        Reinhard's key ``a``.
+        Reinhard's key ``a``, > 0.
     temporal : int
-        Odd window length in frames; 1 is per-frame tone mapping.
+        Odd window length in frames, >= 1 (:func:`check_temporal`); 1 is
+        per-frame tone mapping.
     bit_depth : {8, 16}
 
     Returns
@@ -774,12 +798,11 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
         raise ValueError(f"radiances: expected (N, H, W, 3), got {np.shape(radiances)}")
     if not np.isfinite(v).all():
         raise ValueError("radiances: expected finite values, got NaN/inf")
-    if not isinstance(temporal, int | np.integer) or temporal < 1 or temporal % 2 == 0:
-        raise ValueError(f"temporal: expected an odd number of frames >= 1, got {temporal!r}")
+    check_temporal(temporal)
     if bit_depth not in (8, 16):
-        raise ValueError(f"bit_depth: expected 8 or 16, got {bit_depth}")
+        raise InputError("bit_depth", f"expected 8 or 16, got {bit_depth}")
     if not key > 0:
-        raise ValueError(f"key: expected > 0, got {key}")
+        raise InputError("key", f"expected > 0, got {key}")
     n = v.shape[0]
     v = np.maximum(v, 0.0)
     lum = v @ LUMA

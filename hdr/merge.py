@@ -52,6 +52,11 @@ from lumigraph.hdr.samples import check_stack, hat_weight
 CLIPPED = 1  # saturated in every exposure: the value is a lower bound
 BLACK = 2  # black in every exposure: the value is an upper bound
 GHOST = 4  # an exposure disagreed with the reference and was left out
+WEIGHTS = ("variance", "hat")
+# The variance weights' sensor when none is given: electrons at saturation and
+# read noise in electrons RMS (a default, not estimated from the images).
+FULL_WELL_E = 10000.0
+READ_NOISE_E = 5.0
 
 
 @dataclass(frozen=True)
@@ -90,8 +95,8 @@ class RadianceMap:
         return (self.flags & (CLIPPED | BLACK)).any(axis=2)
 
 
-def variance_weight_table(exposure_table: np.ndarray, *, full_well_e: float = 10000.0,
-                          read_noise_e: float = 5.0, clip_margin: float = 0.02) -> np.ndarray:
+def variance_weight_table(exposure_table: np.ndarray, *, full_well_e: float = FULL_WELL_E,
+                          read_noise_e: float = READ_NOISE_E, clip_margin: float = 0.02) -> np.ndarray:
     """``1 / Var(f⁻¹(z))`` per channel and code (before the ``Δt²`` factor).
 
     Parameters
@@ -122,8 +127,48 @@ def variance_weight_table(exposure_table: np.ndarray, *, full_well_e: float = 10
     return w
 
 
+def check_noise(weights: str = "variance", full_well_e: float | None = None,
+                read_noise_e: float | None = None) -> tuple[float, float]:
+    """Check :func:`merge`'s weights and noise model (before any image is
+    read); returns ``(full_well_e, read_noise_e)`` as floats, the defaults
+    :data:`FULL_WELL_E` and :data:`READ_NOISE_E` where ``None``.
+
+    Raises
+    ------
+    InputError
+        Naming ``weights`` (not ``"variance"`` or ``"hat"``), ``full_well_e``
+        (not finite and > 0) or ``read_noise_e`` (not finite and >= 0), or the
+        one given with ``weights="hat"`` (the noise model is the variance
+        weights').
+
+    Examples
+    --------
+    >>> check_noise(), check_noise("variance", 20000, 4)
+    ((10000.0, 5.0), (20000.0, 4.0))
+    >>> try:
+    ...     check_noise("hat", 20000, 4)
+    ... except InputError as e:
+    ...     print(e)
+    full_well_e: applies to weights 'variance' only
+    """
+    if weights not in WEIGHTS:
+        raise InputError("weights", f"expected 'variance' or 'hat', got {weights!r}")
+    given = [n for n, v in (("full_well_e", full_well_e), ("read_noise_e", read_noise_e))
+             if v is not None]
+    if given and weights != "variance":
+        raise InputError(given[0], "applies to weights 'variance' only")
+    fw = FULL_WELL_E if full_well_e is None else full_well_e
+    rn = READ_NOISE_E if read_noise_e is None else read_noise_e
+    if not (math.isfinite(fw) and fw > 0):
+        raise InputError("full_well_e", f"full well must be a positive number of electrons, got {fw}")
+    if not (math.isfinite(rn) and rn >= 0):
+        raise InputError("read_noise_e", f"read noise must be >= 0 electrons RMS, got {rn}")
+    return float(fw), float(rn)
+
+
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
-          weights: str = "variance", full_well_e: float = 10000.0, read_noise_e: float = 5.0,
+          weights: str = "variance", full_well_e: float | None = None,
+          read_noise_e: float | None = None,
           clip_margin: float = 0.02, deghost: bool = False, deghost_sigma: float = 4.0,
           reference: int | None = None, block_rows: int = 8,
           workers: int | None = None) -> RadianceMap:
@@ -138,9 +183,11 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         Its bit depth is the codes'; one channel or ``C``.
     weights : {"variance", "hat"}
         Variance-optimal (noise- and saturation-aware) or Debevec's hat.
-    full_well_e, read_noise_e : float
-        Noise model of the variance weights (electrons at saturation, read
-        noise RMS); only their ratio to each other and the response matter.
+    full_well_e, read_noise_e : float, optional
+        Noise model of the variance weights (electrons at saturation, > 0;
+        read noise RMS, >= 0; both finite); only their ratio to each other and
+        the response matter. Default :data:`FULL_WELL_E`, :data:`READ_NOISE_E`;
+        given only with ``weights="variance"`` (:func:`check_noise`).
     clip_margin : float
         Fraction of the code range at each end that counts as clipped.
     deghost : bool
@@ -156,10 +203,15 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     Returns
     -------
     RadianceMap
+
+    Raises
+    ------
+    InputError
+        A bad bracket (:func:`hdr.samples.check_stack`), weights or noise model
+        (:func:`check_noise`), or a curve whose channels do not fit.
     """
     z, t, bd = check_stack(images, exposure_times_s, bit_depth=response.bit_depth)
-    if weights not in ("variance", "hat"):
-        raise ValueError(f"weights: expected 'variance' or 'hat', got {weights!r}")
+    full_well_e, read_noise_e = check_noise(weights, full_well_e, read_noise_e)
     p, h, w, c = z.shape
     if response.channels not in (1, c):
         raise InputError("response", f"curve has {response.channels} channels, images have {c}")

@@ -65,7 +65,7 @@ import numpy as np
 import scipy.linalg
 
 from lumigraph.hdr.response import ResponseCurve, normalise_g
-from lumigraph.hdr.samples import check_stack, sample_pixels
+from lumigraph.hdr.samples import check_samples, check_stack, sample_pixels
 
 MAX_ORDER = 10
 
@@ -317,7 +317,8 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     order : int or "auto"
         Polynomial order ``N`` (1..10); ``"auto"`` chooses by held-out error.
     samples : int
-        Pixels sampled (:func:`hdr.samples.sample_pixels`).
+        Pixels sampled (:func:`hdr.samples.sample_pixels`), at least 2
+        (:func:`hdr.samples.check_samples`).
     clip_margin : float
         Codes within this fraction of either end are masked.
     rng : numpy.random.Generator, optional
@@ -336,6 +337,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     p, h, w_, c = z.shape
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
+    check_samples(samples)
     if order != "auto" and (not isinstance(order, int | np.integer) or not 1 <= order <= MAX_ORDER):
         raise InputError("order", f"expected 1..{MAX_ORDER} or auto, got {order!r}")
     rng = np.random.default_rng(0) if rng is None else rng

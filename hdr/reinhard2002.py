@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
+
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -87,6 +89,11 @@ def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18
     Returns
     -------
     ndarray, ``(H, W, 3)`` uint8 or uint16, sRGB-encoded.
+
+    Raises
+    ------
+    InputError
+        Naming ``radiance`` when it is not ``(H, W[, 3])`` or holds NaN/inf.
     """
     if method not in ("reinhard", "reinhard-local"):
         raise ValueError(f"method: expected 'reinhard' or 'reinhard-local', got {method!r}")
@@ -96,9 +103,9 @@ def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18
     if rgb.ndim == 2:
         rgb = np.repeat(rgb[..., None], 3, axis=2)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"radiance: expected (H, W, 3), got {np.shape(radiance)}")
+        raise InputError("radiance", f"expected (H, W, 3), got {np.shape(radiance)}")
     if not np.isfinite(rgb).all():
-        raise ValueError("radiance: expected finite values, got NaN/inf")
+        raise InputError("radiance", "contains NaN/inf; tone mapping needs finite radiance")
     rgb = np.maximum(rgb, 0.0)
     lum = _luminance(rgb)
     ld = global_operator(lum, key=key, white=white) if method == "reinhard" else \

@@ -78,7 +78,7 @@ import math
 import numpy as np
 
 from lumigraph.hdr.response import ResponseCurve, normalise_g
-from lumigraph.hdr.samples import check_stack, sample_pixels
+from lumigraph.hdr.samples import check_samples, check_stack, sample_pixels
 
 
 def certainty_weight(z: np.ndarray, bit_depth: int) -> np.ndarray:
@@ -122,7 +122,8 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
     bit_depth : int, optional
         True bit depth of the codes (default: the dtype's).
     samples : int
-        Pixels used (:func:`hdr.samples.sample_pixels`).
+        Pixels used (:func:`hdr.samples.sample_pixels`), at least 2
+        (:func:`hdr.samples.check_samples`).
     bins : int, optional
         Response unknowns per channel; default ``min(2**bit_depth, 256)``
         (one per code up to 8 bits, equal-width code bins above).
@@ -159,6 +160,7 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
     p, h, w_, c = z.shape
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
+    check_samples(samples)
     n_codes = 2 ** bd
     n_bins = int(bins) if bins is not None else min(n_codes, 256)
     if not 4 <= n_bins <= n_codes:

@@ -60,6 +60,33 @@ def check_stack(images: np.ndarray, exposure_times_s, *, bit_depth: int | None,
     return z, t, bd
 
 
+MIN_SAMPLES = 2  # pixels a response fit samples at least
+
+
+def check_samples(samples: int) -> int:
+    """The number of pixels a response fit samples (its ``samples``
+    argument): at least :data:`MIN_SAMPLES`.
+
+    Raises
+    ------
+    InputError
+        Naming ``samples``.
+
+    Examples
+    --------
+    >>> check_samples(600)
+    600
+    >>> try:
+    ...     check_samples(1)
+    ... except InputError as e:
+    ...     print(e)
+    samples: expected at least 2 pixels, got 1
+    """
+    if samples < MIN_SAMPLES:
+        raise InputError("samples", f"expected at least {MIN_SAMPLES} pixels, got {samples}")
+    return samples
+
+
 def hat_weight(z: np.ndarray, bit_depth: int) -> np.ndarray:
     """Debevec–Malik's triangle weight ω(z) (reference ch. 6, after eq. 6.5),
     normalised to peak 1, zero at codes 0 and ``z_max``.

@@ -104,9 +104,9 @@ def _load(args):
 def _separate(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.separation import separate
+    from lumigraph.separation.separate import check_options
 
-    if args.tile < 2:
-        raise InputError("--tile", f"expected at least 2 pixels, got {args.tile}")
+    check_options(alpha=args.alpha, b=args.b, tile=args.tile)  # before any capture is read
     out = check_output_dir(args.out)
     response = None
     if args.response:
@@ -146,27 +146,24 @@ def _patterns(args) -> int:
 
     size = parse_size(args.size)
     kinds = ["checker", "sinusoid", "stripe", "occluder", "flat"] if args.kind == "all" else [args.kind]
-    if args.alpha is not None and not 0.0 < args.alpha < 1.0:
-        raise InputError("--alpha", f"lit fraction must lie in (0, 1), got {args.alpha}")
+    if args.alpha is not None:
+        pt.check_lit_fraction(args.alpha)  # whatever the kind
     out = Path(args.out)
-    try:
-        sets = []
-        for k in kinds:
-            if k == "checker":
-                sets.append(pt.checker_set(size, square=args.square, shifts=args.shifts))
-            elif k == "block":
-                sets.append(pt.block_set(size, alpha=0.5 if args.alpha is None else args.alpha,
-                                         tile=args.tile_cells, cell=args.square))
-            elif k == "sinusoid":
-                sets.append(pt.sinusoid_set(size, period=args.period))
-            elif k == "stripe":
-                sets.append(pt.stripe_set(size, period=args.period))
-            elif k == "occluder":
-                sets.append(pt.occluder_set(size, period=args.period, width=args.width))
-            else:
-                sets.append(pt.flat_set(size))
-    except ValueError as e:
-        raise InputError("--" + ("square" if "square" in str(e) else "period"), str(e)) from None
+    sets = []
+    for k in kinds:
+        if k == "checker":
+            sets.append(pt.checker_set(size, square=args.square, shifts=args.shifts))
+        elif k == "block":
+            sets.append(pt.block_set(size, alpha=0.5 if args.alpha is None else args.alpha,
+                                     tile=args.tile_cells, cell=args.square))
+        elif k == "sinusoid":
+            sets.append(pt.sinusoid_set(size, period=args.period))
+        elif k == "stripe":
+            sets.append(pt.stripe_set(size, period=args.period))
+        elif k == "occluder":
+            sets.append(pt.occluder_set(size, period=args.period, width=args.width))
+        else:
+            sets.append(pt.flat_set(size))
     for ps in sets:
         dest = out / ps.kind if len(sets) > 1 else out
         ps.save(dest)
@@ -191,7 +188,8 @@ def main(argv=None, prog="lumigraph separate") -> int:
         p.add_argument("--alpha", type=float, default=None, help="lit fraction of 'block' patterns")
         p.add_argument("--tile-cells", type=int, default=4, help="block tile size in cells")
         p.add_argument("--out", required=True, help="output folder")
-        p.set_defaults(func=_patterns)
+        # the pattern functions' arguments that differ from the flags' dests
+        p.set_defaults(func=_patterns, arg_flags={"tile": "--tile-cells", "cell": "--square"})
         return run(p, argv[1:])
     from lumigraph.separation.methods import METHODS
 

@@ -17,12 +17,41 @@ from __future__ import annotations
 import numpy as np
 
 from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.capture.patterns import check_lit_fraction
 from lumigraph.separation import nayar2006
 from lumigraph.separation.methods import EXACT_IMAGES, METHODS, MIN_IMAGES
 from lumigraph.separation.result import Separation
 
-__all__ = ["EXACT_IMAGES", "METHODS", "MIN_IMAGES", "separate"]
+__all__ = ["EXACT_IMAGES", "METHODS", "MIN_IMAGES", "check_options", "separate"]
 RESIDUE_WARN_FRACTION = 0.10
+
+
+def check_options(*, alpha: float | None = None, b: float | None = None, tile: int = 16) -> None:
+    """Check :func:`separate`'s scalar options (ranges in its Parameters),
+    so a caller can do it before any capture is read.
+
+    Raises
+    ------
+    InputError
+        Naming ``alpha`` (not in (0, 1),
+        :func:`capture.patterns.check_lit_fraction`), ``b`` (not in [0, 1))
+        or ``tile`` (below 2).
+
+    Examples
+    --------
+    >>> check_options(alpha=0.5, b=0.1, tile=8)
+    >>> try:
+    ...     check_options(tile=1)
+    ... except InputError as e:
+    ...     print(e)
+    tile: expected at least 2 pixels, got 1
+    """
+    if alpha is not None:
+        check_lit_fraction(alpha)
+    if b is not None and not 0.0 <= b < 1.0:
+        raise InputError("b", f"black level must lie in [0, 1), got {b}")
+    if tile < 2:
+        raise InputError("tile", f"expected at least 2 pixels, got {tile}")
 
 
 def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None = None,
@@ -57,9 +86,20 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     saturation : float, optional
         Linear value at and above which a capture is clipped.
     tile : int
-        Tile size in pixels for ``single``.
+        Tile size in pixels, at least 2: the tiles of ``single``, and the
+        scale of the spatial residue check of methods without complement
+        pairs.
     names : sequence of str, optional
         Image names for error messages.
+
+    Raises
+    ------
+    InputError
+        An option out of range (:func:`check_options`, naming it), or an
+        all-dark capture (naming it).
+    EstimationError
+        Too few or too many images for the method, or a measured black
+        level outside [0, 1).
     """
     fn = METHODS.resolve(method)
     a = nayar2006.validate_stack(images, need=MIN_IMAGES[method], method=method)
@@ -67,10 +107,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         raise EstimationError("<images>", f"method {method!r} takes exactly {EXACT_IMAGES[method]} "
                                           f"image(s), got {len(a)}")
     names = list(names) if names is not None else [f"image {i}" for i in range(len(a))]
-    if alpha is not None and not 0.0 < alpha < 1.0:
-        raise InputError("alpha", f"lit fraction must lie in (0, 1), got {alpha}")
-    if b is not None and not 0.0 <= b < 1.0:
-        raise InputError("b", f"black level must lie in [0, 1), got {b}")
+    check_options(alpha=alpha, b=b, tile=tile)
     quant = quant_step / np.sqrt(12.0)
     floor = 3.0 * np.hypot(noise_sigma, quant) + 1e-7
     # a strided look first (cheap); the full image only when that one looks dark

@@ -1,7 +1,8 @@
 """``lumigraph flow``: optical flow and Sand-Teller video matching between two
 images, written as a Middlebury ``.flo`` plus a confidence/probability EXR.
 
-Thin layer: parse, validate, load, call :mod:`lumigraph.stereo.flow_methods`, save.
+Thin layer: parse, load, call :mod:`lumigraph.stereo.flow_methods` (which checks
+the options, before any image is read), save.
 """
 
 from __future__ import annotations
@@ -38,15 +39,13 @@ with its .prob.exr and .meta.json, plus index.json summarising every pair;
 
 
 def _levels(text: str):
+    """``--levels`` text -> ``"auto"`` or an int (its range is the library's)."""
     if text == "auto":
         return "auto"
     try:
-        n = int(text)
+        return int(text)
     except ValueError:
         raise InputError("levels", f"expected 'auto' or an integer >= 1, got {text!r}") from None
-    if not 1 <= n <= 12:
-        raise InputError("levels", f"expected 1..12 levels, got {n}")
-    return n
 
 
 def _load(path: str):
@@ -57,22 +56,6 @@ def _load(path: str):
     if img.size == 0 or min(img.shape[:2]) < 8:
         raise InputError(p, f"image is empty or too small ({img.shape}); need at least 8x8 pixels")
     return img
-
-
-def _check_knobs(args):
-    levels = _levels(args.levels)
-    if args.window < 3 or args.window % 2 == 0:
-        raise InputError("window", f"expected an odd size >= 3, got {args.window}")
-    if args.median_radius < 0 or args.median_radius > 64:
-        raise InputError("median_radius", f"expected 0..64 pixels, got {args.median_radius}")
-    if args.finest_level < 0:
-        raise InputError("finest_level", f"expected a level >= 0, got {args.finest_level}")
-    if levels != "auto" and args.finest_level >= levels:
-        raise InputError("finest_level", f"must be below --levels ({levels}), got {args.finest_level}")
-    if args.method == "video-matching" and (args.median_radius or args.finest_level):
-        raise InputError("method", "video-matching takes no --median-radius or --finest-level "
-                                     "(pyramid methods only)")
-    return levels
 
 
 def _outputs(args):
@@ -106,13 +89,15 @@ def _flow(args) -> int:
     from lumigraph.capture import io
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.commandline import progress
-    from lumigraph.stereo.flow_methods import FLOW_METHODS
+    from lumigraph.stereo.flow_methods import FLOW_METHODS, check_options
     from lumigraph.stereo.pyramid_flow import prob_path
 
     if len(args.images) < 2:
         raise InputError(args.images[0], "flow needs at least two images")
     outs, vizs = _outputs(args)
-    levels = _check_knobs(args)
+    options = check_options(args.method, levels=_levels(args.levels), window=args.window,
+                            iterations=args.iterations, finest_level=args.finest_level,
+                            median_radius=args.median_radius)
     frames = [_load(p) for p in args.images]
     for p, im in zip(args.images[1:], frames[1:], strict=True):
         i0 = frames[0]
@@ -122,9 +107,6 @@ def _flow(args) -> int:
         if im.ndim != i0.ndim or (im.ndim == 3 and im.shape[2] != i0.shape[2]):
             raise InputError(p, "has a different number of channels than " + args.images[0])
     method = FLOW_METHODS.resolve(args.method)
-    knobs = {"levels": levels, "window": args.window, "iterations": args.iterations,
-             "finest_level": args.finest_level, "median_radius": args.median_radius}
-    options = {k: v for k, v in knobs.items() if k in method.options}
     params = {"method": args.method, "levels": args.levels, "window": args.window,
               "iterations": args.iterations, "finest_level": args.finest_level,
               "median_radius": args.median_radius}

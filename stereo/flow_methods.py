@@ -7,16 +7,21 @@ Each method is called as ``method(reference, moving, **options) -> FlowResult``
 ``Method.options``; ``pyramid`` and ``pyramid-dense`` are one function in two
 modes (``bound``).
 
+:func:`check_options` checks a method's options before any image is read.
+
 Examples
 --------
 >>> FLOW_METHODS.names
 ('pyramid', 'pyramid-dense', 'video-matching')
 >>> FLOW_METHODS["video-matching"].options
 ('levels',)
+>>> check_options("video-matching", levels=2, window=9, median_radius=0)
+{'levels': 2}
 """
 
 from __future__ import annotations
 
+from lumigraph.capture.errors import InputError
 from lumigraph.capture.registry import Method, Registry
 
 PYRAMID_OPTIONS = ("levels", "window", "iterations", "finest_level", "median_radius")
@@ -32,3 +37,43 @@ FLOW_METHODS = Registry("flow", [
            "Sand & Teller 2004: robust to lighting change, added/removed objects, small camera "
            "shifts", options=("levels",)),
 ])
+
+# Refinements only the pyramid methods have; 0 is "off".
+PYRAMID_ONLY = ("finest_level", "median_radius")
+
+
+def check_options(method: str, **options) -> dict:
+    """Check the options of flow ``method`` before any image is read; returns
+    those the method takes.
+
+    Every option among :data:`PYRAMID_OPTIONS` given is checked against its
+    range (:func:`stereo.pyramid_flow.check_options`, whichever the method),
+    and a method without the pyramid-only refinements (:data:`PYRAMID_ONLY`)
+    must be given them off (0).
+
+    Raises
+    ------
+    InputError
+        Naming the option out of range, or ``method`` when it takes no
+        ``finest_level``/``median_radius`` and one was given.
+
+    Examples
+    --------
+    >>> check_options("pyramid", levels="auto", finest_level=1)
+    {'levels': 'auto', 'finest_level': 1}
+    >>> try:
+    ...     check_options("video-matching", median_radius=5)
+    ... except InputError as e:
+    ...     print(e.where)
+    method
+    """
+    from lumigraph.stereo.pyramid_flow import check_options as check_pyramid_options
+
+    m = FLOW_METHODS.resolve(method)
+    levels = check_pyramid_options(**options)
+    if "levels" in options:
+        options["levels"] = levels
+    if any(options.get(k) and k not in m.options for k in PYRAMID_ONLY):
+        raise InputError("method", f"{method} takes no median_radius or finest_level "
+                                   "(pyramid methods only)")
+    return {k: v for k, v in options.items() if k in m.options}

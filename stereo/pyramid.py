@@ -27,7 +27,37 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
+
 MIN_LEVEL_SIDE = 12  # no pyramid level is made smaller than this (pixels)
+MAX_LEVELS = 12  # the deepest pyramid a caller may ask for (4096x smaller)
+
+
+def check_levels(levels) -> int | str:
+    """The pyramid depth a coarse-to-fine method is given: ``"auto"`` or an
+    integer ``1..MAX_LEVELS``, returned as ``"auto"`` or an ``int``.
+
+    Raises
+    ------
+    InputError
+        Naming ``levels``: not ``"auto"``, not an integer, or out of range.
+
+    Examples
+    --------
+    >>> check_levels("auto"), check_levels(np.int64(3))
+    ('auto', 3)
+    >>> check_levels(13)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: levels: expected 1..12 levels, got 13
+    """
+    if isinstance(levels, str) and levels == "auto":
+        return "auto"
+    if not isinstance(levels, int | np.integer) or isinstance(levels, bool):
+        raise InputError("levels", f"expected 'auto' or an integer >= 1, got {levels!r}")
+    if not 1 <= levels <= MAX_LEVELS:
+        raise InputError("levels", f"expected 1..{MAX_LEVELS} levels, got {levels}")
+    return int(levels)
 
 
 def build_pyramid(image: np.ndarray, levels: int) -> list[np.ndarray]:

@@ -42,9 +42,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.stereo.luma import luma_normalised, noise_sigma_immerkaer
 from lumigraph.stereo.pyramid import (
     build_pyramid,
+    check_levels,
     choose_levels,
     estimate_max_motion,
     forward_backward,
@@ -53,6 +55,7 @@ from lumigraph.stereo.pyramid import (
 )
 
 METHODS = ("local", "dense")
+MAX_MEDIAN_RADIUS = 64  # px; the weighted median costs O(radius²) per pixel
 # Range sigma (uint8 guide levels) of the weighted median: neighbours differing
 # by more than ~2 sigma in colour get little weight.
 WMF_SIGMA = 25.5
@@ -313,6 +316,43 @@ def _guide_pyramid(image, levels):
     return [np.clip(np.rint(p * 255), 0, 255).astype(np.uint8) for p in build_pyramid(f, levels)]
 
 
+def check_options(*, levels: int | str = "auto", window: int = 9, iterations: int = 3,
+                  finest_iterations: int | None = None, finest_level: int = 0,
+                  median_radius: int = 0) -> int | str:
+    """Check :func:`pyramid_flow`'s options (their ranges are documented
+    there) before any image is read; returns ``levels`` as ``"auto"`` or an
+    ``int`` (:func:`stereo.pyramid.check_levels`).
+
+    Raises
+    ------
+    InputError
+        Naming the first option out of its range.
+
+    Examples
+    --------
+    >>> check_options(levels=3, finest_level=1)
+    3
+    >>> check_options(levels=2, finest_level=2)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: finest_level: must be below levels (2), got 2
+    """
+    levels = check_levels(levels)
+    if window < 3 or window % 2 == 0:
+        raise InputError("window", f"expected an odd size >= 3, got {window}")
+    if iterations < 1:
+        raise InputError("iterations", f"expected >= 1, got {iterations}")
+    if finest_iterations is not None and finest_iterations < 1:
+        raise InputError("finest_iterations", f"expected >= 1, got {finest_iterations}")
+    if not 0 <= median_radius <= MAX_MEDIAN_RADIUS:
+        raise InputError("median_radius", f"expected 0..{MAX_MEDIAN_RADIUS} pixels, got {median_radius}")
+    if finest_level < 0:
+        raise InputError("finest_level", f"expected a level >= 0, got {finest_level}")
+    if levels != "auto" and finest_level >= levels:
+        raise InputError("finest_level", f"must be below levels ({levels}), got {finest_level}")
+    return levels
+
+
 def pyramid_flow(reference: np.ndarray, moving: np.ndarray, *, levels: int | str = "auto",
                  max_motion_px: float | None = None, method: str = "local", window: int = 9,
                  iterations: int = 3, finest_iterations: int | None = None,
@@ -329,36 +369,40 @@ def pyramid_flow(reference: np.ndarray, moving: np.ndarray, *, levels: int | str
         float in [0, 1]; same shape. Converted to luma
         (:func:`lumigraph.stereo.luma.luma_normalised`).
     levels : int or "auto"
-        Pyramid levels. ``"auto"``: the fewest levels whose top level leaves at
-        most ``window // 2`` px of motion, from ``max_motion_px`` when given,
-        else estimated by tiled phase correlation; every candidate's score is
-        in ``info["level_choice"]``.
+        Pyramid levels, 1..12 (:data:`stereo.pyramid.MAX_LEVELS`). ``"auto"``:
+        the fewest levels whose top level leaves at most ``window // 2`` px of
+        motion, from ``max_motion_px`` when given, else estimated by tiled
+        phase correlation; every candidate's score is in
+        ``info["level_choice"]``.
     max_motion_px : float, optional
         Expected largest motion (pixels) for ``levels="auto"``.
     method : {"local", "dense"}
         Local Lucas-Kanade solve, or the regularised (combined local-global)
         solve that fills textureless areas from their surroundings.
     window : int
-        Odd side of the square window of eq. 5.1 (pixels, at every level).
+        Odd side of the square window of eq. 5.1 (pixels, at every level),
+        at least 3.
     iterations : int
-        Warps per level.
+        Warps per level, at least 1.
     finest_iterations : int, optional
         Warps at the finest (full-size) level, where each costs 4x the level
         above; default ``iterations``. One is usually enough there, the
         coarser levels having done the large steps.
     finest_level : int
-        Pyramid level at which refinement stops (0: full size). At 1 the
-        flow is solved at half size and upsampled, for about a quarter of the
-        cost (the "finest scale" of DIS, Kroeger et al. 2016).
+        Pyramid level at which refinement stops (0: full size), ``>= 0`` and,
+        when ``levels`` is given as a number, below it. At 1 the flow is
+        solved at half size and upsampled, for about a quarter of the cost
+        (the "finest scale" of DIS, Kroeger et al. 2016).
     alpha : float
         Smoothness weight of ``"dense"`` (intensities in [0, 1]).
     sweeps : int
         Jacobi sweeps per warp for ``"dense"``.
     median_radius : int
-        0: a 3x3 median after each warp. > 0: after each level's last warp,
-        the colour-guided weighted median of Sun, Roth & Black (radius in
-        full-size pixels, halved per level), which pulls vectors smeared
-        across a motion boundary back to their own surface; slower.
+        0..64 (:data:`MAX_MEDIAN_RADIUS`). 0: a 3x3 median after each warp.
+        > 0: after each level's last warp, the colour-guided weighted median
+        of Sun, Roth & Black (radius in full-size pixels, halved per level),
+        which pulls vectors smeared across a motion boundary back to their
+        own surface; slower.
     consistency : bool
         Also compute the backward flow and mark forward-backward inconsistent
         pixels as occluded (doubles the cost).
@@ -370,7 +414,9 @@ def pyramid_flow(reference: np.ndarray, moving: np.ndarray, *, levels: int | str
     Raises
     ------
     ValueError
-        Different shapes, empty images, or bad options (named, with the value).
+        Different shapes or empty images (named, with the value).
+    InputError
+        An option out of its range (:func:`check_options`, naming it).
     """
     t0 = time.perf_counter()
     a, b = np.asarray(reference), np.asarray(moving)
@@ -379,19 +425,12 @@ def pyramid_flow(reference: np.ndarray, moving: np.ndarray, *, levels: int | str
     if a.size == 0 or min(a.shape[:2]) < 4:
         raise ValueError(f"reference: expected at least 4x4 pixels, got {a.shape}")
     if method not in METHODS:
-        raise ValueError(f"method: expected one of {METHODS}, got {method!r}")
-    if window < 3 or window % 2 == 0:
-        raise ValueError(f"window: expected an odd size >= 3, got {window}")
-    if iterations < 1:
-        raise ValueError(f"iterations: expected >= 1, got {iterations}")
+        raise InputError("method", f"expected one of {METHODS}, got {method!r}")
     if finest_iterations is None:
         finest_iterations = iterations
-    if finest_iterations < 1:
-        raise ValueError(f"finest_iterations: expected >= 1, got {finest_iterations}")
-    if finest_level < 0:
-        raise ValueError(f"finest_level: expected >= 0, got {finest_level}")
-    if median_radius < 0:
-        raise ValueError(f"median_radius: expected >= 0, got {median_radius}")
+    levels = check_options(levels=levels, window=window, iterations=iterations,
+                           finest_iterations=finest_iterations, finest_level=finest_level,
+                           median_radius=median_radius)
     g0, g1 = luma_normalised(a), luma_normalised(b)
     if a.dtype.kind == "f":  # float input is taken as already in [0, 1]
         g0, g1 = g0.astype(np.float32), g1.astype(np.float32)
@@ -405,11 +444,9 @@ def pyramid_flow(reference: np.ndarray, moving: np.ndarray, *, levels: int | str
             choice = choose_levels(g0.shape, max_motion_px=float(max_motion_px), reach_px=reach)
             choice_d = choice.to_dict()
         n_levels = choice.levels
-    elif isinstance(levels, int | np.integer) and not isinstance(levels, bool) and levels >= 1:
-        n_levels = int(levels)
-        choice_d = {"levels": n_levels, "source": "given"}
     else:
-        raise ValueError(f"levels: expected 'auto' or an integer >= 1, got {levels!r}")
+        n_levels = levels
+        choice_d = {"levels": n_levels, "source": "given"}
     # Search radius at the top level: the motion left there, plus a margin.
     top_motion = choice_d.get("max_motion_px", 2.0 * 2 ** (n_levels - 1)) / 2 ** (n_levels - 1)
     radius = int(min(6, max(1, np.ceil(top_motion) + 1)))

@@ -56,6 +56,7 @@ import numpy as np
 from lumigraph.stereo.luma import luma_normalised, noise_sigma_immerkaer
 from lumigraph.stereo.pyramid import (
     build_pyramid,
+    check_levels,
     choose_levels,
     estimate_max_motion,
     upsample_flow,
@@ -276,8 +277,9 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
         codes or float; same shape. Colour channels are matched
         independently and their costs summed.
     levels : int or "auto"
-        Pyramid levels; ``"auto"`` from ``max_motion_px`` or a phase-
-        correlation estimate, as :func:`stereo.pyramid_flow.pyramid_flow`.
+        Pyramid levels, 1..12 (:func:`stereo.pyramid.check_levels`);
+        ``"auto"`` from ``max_motion_px`` or a phase-correlation estimate, as
+        :func:`stereo.pyramid_flow.pyramid_flow`.
     region : int
         Side of the region R of the matching cost, pixels.
     regression_sigma : float
@@ -319,6 +321,7 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
         raise ValueError(f"regression_sigma: expected > 0, got {regression_sigma}")
     if init not in INITS:
         raise ValueError(f"init: expected one of {INITS}, got {init!r}")
+    levels = check_levels(levels)
     fa, fb = _as_float(a), _as_float(b)
     g0 = luma_normalised(fa)
     start_result = None
@@ -336,11 +339,9 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
             est, source = float(max_motion_px), "given"
         choice = choose_levels(g0.shape, max_motion_px=est, reach_px=5.0, source=source)
         n_levels, choice_d = choice.levels, choice.to_dict()
-    elif isinstance(levels, int | np.integer) and not isinstance(levels, bool) and levels >= 1:
-        n_levels, est = int(levels), None
-        choice_d = {"levels": n_levels, "source": "given"}
     else:
-        raise ValueError(f"levels: expected 'auto' or an integer >= 1, got {levels!r}")
+        n_levels, est = levels, None
+        choice_d = {"levels": n_levels, "source": "given"}
     p0, p1 = build_pyramid(fa, n_levels), build_pyramid(fb, n_levels)
     field = np.zeros(p0[-1].shape[:2] + (2,), np.float32)
     start = None

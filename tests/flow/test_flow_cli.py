@@ -106,13 +106,46 @@ def test_median_radius_and_finest_level_reach_the_method(pair, tmp_path, flags, 
 
 
 @pytest.mark.parametrize("flags, fragment", [(["--median-radius", "-1"], "--median-radius"),
+                                             (["--median-radius", "65"], "--median-radius"),
                                              (["--finest-level", "3", "--levels", "2"], "--finest-level"),
+                                             (["--levels", "13"], "--levels"),
+                                             (["--method", "video-matching", "--window", "4"],
+                                              "--window"),
+                                             (["--iterations", "0"], "--iterations"),
                                              (["--method", "video-matching", "--median-radius", "5"],
                                               "--method")])
 def test_bad_flow_knobs(pair, tmp_path, flags, fragment):
     assert_clean_error(lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out",
                                  tmp_path / "out.flo", *flags), fragment)
     assert _nothing_written(tmp_path)
+
+
+@pytest.mark.parametrize("kw, where", [(dict(levels=13), "levels"), (dict(levels=0), "levels"),
+                                       (dict(window=4), "window"), (dict(iterations=0), "iterations"),
+                                       (dict(median_radius=65), "median_radius"),
+                                       (dict(median_radius=-1), "median_radius"),
+                                       (dict(finest_level=-1), "finest_level"),
+                                       (dict(levels=2, finest_level=2), "finest_level")])
+def test_the_library_checks_the_flow_options_naming_the_argument(kw, where):
+    # the ranges the command line enforces are the library's own (validation once)
+    from lumigraph.capture.errors import InputError
+    from lumigraph.stereo.flow_methods import check_options
+    from lumigraph.stereo.pyramid_flow import pyramid_flow
+    from lumigraph.stereo.sand2004 import video_matching
+
+    a = np.zeros((16, 16), np.float32)
+    for call in (lambda: pyramid_flow(a, a, **kw), lambda: check_options("pyramid", **kw)):
+        with pytest.raises(InputError) as e:
+            call()
+        assert e.value.where == where and not e.value.problem.startswith("--")
+    if set(kw) == {"levels"}:
+        with pytest.raises(InputError) as e:
+            video_matching(a, a, **kw)
+        assert e.value.where == "levels"
+    with pytest.raises(InputError) as e:
+        check_options("video-matching", finest_level=1)
+    assert e.value.where == "method"
+    assert check_options("video-matching", levels=3, window=9, finest_level=0) == {"levels": 3}
 
 
 def test_sequence_writes_one_flow_per_consecutive_pair(tmp_path):

@@ -121,6 +121,55 @@ def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
     assert not out.exists()
 
 
+def test_the_library_checks_samples_noise_and_temporal_and_the_cli_names_the_flags(tmp_path):
+    # The ranges 'hdr response/merge/video' enforce are the library's own:
+    # each function refuses a bad value naming its argument, and the command
+    # line reports it under the flag that sets it.
+    from lumigraph.capture.errors import InputError
+    from lumigraph.hdr.kang2003 import hdr_video, tonemap_video
+    from lumigraph.hdr.merge import merge
+    from lumigraph.hdr.methods import RESPONSE_METHODS
+    from lumigraph.hdr.response import ResponseCurve
+
+    s = render("bracket", size=(48, 36), exposures=3)
+    z, t = np.stack(s.images), s.stack["exposure_times_s"]
+    curve = ResponseCurve.linear(8)
+    for m in RESPONSE_METHODS.values():
+        if "samples" in m.options:
+            with pytest.raises(InputError) as e:
+                m.load()(z, t, samples=1)
+            assert e.value.where == "samples", m.name
+    for kw, where in ((dict(full_well_e=0.0), "full_well_e"),
+                      (dict(full_well_e=float("inf")), "full_well_e"),
+                      (dict(read_noise_e=-1.0), "read_noise_e"),
+                      (dict(read_noise_e=float("nan")), "read_noise_e"),
+                      (dict(weights="hat", read_noise_e=4.0), "read_noise_e"),
+                      (dict(weights="hat", full_well_e=2e4, read_noise_e=4.0), "full_well_e")):
+        with pytest.raises(InputError) as e:
+            merge(z, t, curve, **kw)
+        assert e.value.where == where, kw
+    # the default noise model is the same number whether given or not
+    assert np.array_equal(merge(z, t, curve).radiance,
+                          merge(z, t, curve, full_well_e=1e4, read_noise_e=5.0).radiance)
+    with pytest.raises(InputError) as e:
+        tonemap_video(np.ones((2, 4, 4, 3), np.float32), temporal=4)
+    assert e.value.where == "temporal"
+    with pytest.raises(InputError) as e:
+        hdr_video(z[:1], t[:1], curve)
+    assert e.value.where == "frames"
+    d = tmp_path / "b"
+    s.save(d)
+    out = tmp_path / "r.json"
+    for method in ("debevec", "linear"):
+        assert_clean_error(lumigraph("hdr", "response", d, "--method", method, "--samples", "1",
+                                     "--out", out), "--samples", "at least 2")
+    assert_clean_error(lumigraph("hdr", "merge", d, "--response", tmp_path / "none.json",
+                                 "--noise", "0,4", "--out", tmp_path / "x.exr"), "--noise", "full well")
+    assert_clean_error(lumigraph("hdr", "video", d, "--response", tmp_path / "none.json",
+                                 "--temporal", "2", "--out", tmp_path / "v"), "--temporal")
+    assert not out.exists() and not (tmp_path / "x.exr").exists() and not (tmp_path / "v").exists()
+
+
 def test_aperture_bracket_means_the_same_to_merge_and_video(tmp_path):
     # One shutter time, three f-numbers: every HDR verb works with the effective
     # exposure t·(N_ref/N)² of the stack reader (without it, video would see three
@@ -168,3 +217,19 @@ def test_method_choices_and_help_come_from_the_registries(verb, registry):
     for m in reg.values():
         assert m.help in r.stdout
         assert callable(m.load())
+
+
+def test_tonemap_refuses_nan_in_the_library_and_the_cli_names_the_file(tmp_path):
+    from lumigraph.capture.errors import InputError
+    from lumigraph.capture.io import write_exr
+    from lumigraph.hdr.reinhard2002 import tonemap
+
+    rad = np.ones((8, 8, 3), np.float32)
+    rad[2, 2, 1] = np.nan
+    with pytest.raises(InputError) as e:
+        tonemap(rad)
+    assert e.value.where == "radiance"
+    write_exr(tmp_path / "nan.exr", rad)
+    r = lumigraph("hdr", "tonemap", tmp_path / "nan.exr", "--out", tmp_path / "t.png")
+    assert_clean_error(r, "nan.exr", "NaN/inf")
+    assert not (tmp_path / "t.png").exists()

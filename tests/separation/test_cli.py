@@ -94,6 +94,15 @@ def test_bad_inputs_exit_2_and_write_nothing(scene_dir, tmp_path):
     with pytest.raises(InputError) as e:  # the library names its argument, the CLI the flag
         separate(np.stack([io.read_image(p) for p in ck])[..., None] / 65535.0, alpha=1.5)
     assert e.value.where == "alpha"
+    for method in ("checker", "single"):  # --tile's range is separate()'s, whatever the method
+        assert_clean_error(lumigraph("separate", *ck, "--method", method, "--tile", "1", "--out",
+                                     out), "--tile", "at least 2")
+        with pytest.raises(InputError) as e:
+            separate(np.ones((2, 8, 8, 1), np.float32), method="checker", tile=1)
+        assert e.value.where == "tile"
+    # checked before any capture is read: a missing file is not reached
+    assert_clean_error(lumigraph("separate", tmp_path / "nope.png", "--tile", "0", "--out", out),
+                       "--tile")
     dark = tmp_path / "dark.png"
     io.write_image(dark, np.zeros_like(io.read_image(ck[0])), bit_depth=16)
     assert_clean_error(lumigraph("separate", dark, *ck[1:], "--out", out), "dark.png", "all-dark")

@@ -54,3 +54,33 @@ def test_patterns_cli_writes_pngs_and_stack(tmp_path):
     assert_clean_error(lumigraph("separate", "patterns", "--square", "7", "--shifts", "2",
                                  "--out", tmp_path / "q"), "square")
     assert not (tmp_path / "q").exists()
+
+
+@pytest.mark.parametrize("make, kw, where, flags, flag", [
+    (pt.checker_set, dict(square=7, shifts=2), "square", ["--square", "7", "--shifts", "2"], "--square"),
+    (pt.checker_set, dict(square=8, shifts=0), "shifts", ["--shifts", "0"], "--shifts"),
+    (pt.block_set, dict(alpha=1.5), "alpha", ["--kind", "block", "--alpha", "1.5"], "--alpha"),
+    (pt.block_set, dict(alpha=0.3, tile=1), "tile",
+     ["--kind", "block", "--alpha", "0.3", "--tile-cells", "1"], "--tile-cells"),
+    (pt.block_set, dict(alpha=0.3, cell=0), "cell",
+     ["--kind", "block", "--alpha", "0.3", "--square", "0"], "--square"),
+    (pt.sinusoid_set, dict(period=2), "period", ["--kind", "sinusoid", "--period", "2"], "--period"),
+    (pt.stripe_set, dict(period=1), "period", ["--kind", "stripe", "--period", "1"], "--period"),
+    (pt.occluder_set, dict(period=5, width=2), "period",
+     ["--kind", "occluder", "--period", "5", "--width", "2"], "--period"),
+    (pt.occluder_set, dict(width=0), "width", ["--kind", "occluder", "--width", "0"], "--width")])
+def test_pattern_library_names_the_argument_and_the_cli_the_flag(tmp_path, make, kw, where,
+                                                                 flags, flag):
+    from lumigraph.capture.errors import InputError
+
+    with pytest.raises(InputError) as e:
+        make((16, 12), **kw)
+    assert e.value.where == where
+    assert_clean_error(lumigraph("separate", "patterns", *flags, "--out", tmp_path / "q"), flag)
+    assert not (tmp_path / "q").exists()
+
+
+def test_patterns_alpha_is_checked_whatever_the_kind(tmp_path):
+    assert_clean_error(lumigraph("separate", "patterns", "--kind", "checker", "--alpha", "0",
+                                 "--out", tmp_path / "q"), "--alpha", "lit fraction")
+    assert not (tmp_path / "q").exists()
