@@ -128,3 +128,23 @@ def test_stage_imports_stay_cheap():
 
 def test_no_utils_grab_bag():
     assert not list(ROOT.glob("*/utils.py"))
+
+
+def test_unrelated_packages_of_our_folder_names_coexist(tmp_path):
+    # What broke for a user: an unrelated `lightfield` (an API client on PyPI)
+    # and ours fought over one name. Now each keeps its own.
+    for name in ("lightfield", "capture", "calib", "stereo"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "__init__.py").write_text(f"WHO = 'theirs-{name}'\n")
+    code = ("import importlib, lightfield, capture, calib, stereo\n"
+            "import lumigraph.lightfield, lumigraph.capture, lumigraph.calib, lumigraph.stereo\n"
+            "theirs = [m.WHO for m in (lightfield, capture, calib, stereo)]\n"
+            "ours = [hasattr(importlib.import_module('lumigraph.' + n), 'WHO')\n"
+            "        for n in ('lightfield', 'capture', 'calib', 'stereo')]\n"
+            "print(theirs, ours, lumigraph.lightfield.LightField.__module__)\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(tmp_path)}, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == ("['theirs-lightfield', 'theirs-capture', 'theirs-calib', "
+                                "'theirs-stereo'] [False, False, False, False] "
+                                "lumigraph.lightfield.field")
