@@ -22,6 +22,8 @@ from lumigraph.capture.commandline import (
     check_output_dir,
     check_output_path,
     make_parser,
+    output_dir,
+    output_file,
     progress,
     run,
     say,
@@ -288,9 +290,9 @@ def build_parser(prog: str = "lumigraph calib"):
                                    "(COLSxROWS = squares); default: the stack.json 'board'")
     c.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model (default auto)")
     c.add_argument("--strict", action="store_true", help="refuse (exit 2) instead of warning on a degenerate view set")
-    c.add_argument("--yaml", help="also write an OpenCV FileStorage YAML file")
-    c.add_argument("--colmap", help="also write a COLMAP cameras.txt")
-    c.add_argument("--out", required=True, help="camera.json to write")
+    c.add_argument("--yaml", type=output_file(".yml", ".yaml"), help="also write an OpenCV FileStorage YAML file")
+    c.add_argument("--colmap", type=output_file(".txt"), help="also write a COLMAP cameras.txt")
+    c.add_argument("--out", required=True, type=output_file(".json"), help="camera.json to write")
     c.set_defaults(func=_calibrate)
 
     u = add_verb(sp, "undistort", "remove lens distortion from images",
@@ -299,7 +301,7 @@ def build_parser(prog: str = "lumigraph calib"):
     u.add_argument("--camera", required=True, help="camera.json of the camera that took the images")
     u.add_argument("--keep-all", action="store_true", help="keep every source pixel (black corners) "
                                                             "instead of cropping to valid pixels")
-    u.add_argument("--out", required=True, help="output folder (undistorted PNGs + camera.json)")
+    u.add_argument("--out", required=True, type=output_dir, help="output folder (undistorted PNGs + camera.json)")
     u.set_defaults(func=_undistort)
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",
@@ -309,9 +311,9 @@ def build_parser(prog: str = "lumigraph calib"):
     s.add_argument("--board", help="board spec (see calibrate)")
     s.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model of both cameras")
     s.add_argument("--strict", action="store_true", help="refuse instead of warning on degenerate views")
-    s.add_argument("--yaml", help="also write OpenCV YAML (K1 D1 K2 D2 R T E F)")
-    s.add_argument("--colmap", help="also write a COLMAP cameras.txt (camera 1 left, 2 right)")
-    s.add_argument("--out", required=True, help="rig.json to write")
+    s.add_argument("--yaml", type=output_file(".yml", ".yaml"), help="also write OpenCV YAML (K1 D1 K2 D2 R T E F)")
+    s.add_argument("--colmap", type=output_file(".txt"), help="also write a COLMAP cameras.txt (camera 1 left, 2 right)")
+    s.add_argument("--out", required=True, type=output_file(".json"), help="rig.json to write")
     s.set_defaults(func=_stereo)
 
     r = add_verb(sp, "rectify", "rectify a stereo pair so epipolar lines are rows",
@@ -320,7 +322,7 @@ def build_parser(prog: str = "lumigraph calib"):
     r.add_argument("right", help="right image")
     r.add_argument("--rig", required=True, help="rig.json")
     r.add_argument("--alpha", type=float, default=0.0, help="0 crops to valid pixels (default), 1 keeps all")
-    r.add_argument("--out", required=True, help="output folder: left.png, right.png, maps_left/right.npy, "
+    r.add_argument("--out", required=True, type=output_dir, help="output folder: left.png, right.png, maps_left/right.npy, "
                                                 "rectification.json")
     r.set_defaults(func=_rectify)
     return p

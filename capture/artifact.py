@@ -22,10 +22,12 @@ Examples
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import hashlib
 import json
 import math
 import os
+import re
 import sys
 import tempfile
 import threading
@@ -80,27 +82,309 @@ def meta_path(path: str | os.PathLike) -> Path:
     return p.with_name(p.name + ".meta.json")
 
 
+# Result sets (one commit per command). A command's writes are staged as
+# temporary files beside their final paths; when the command succeeds they are
+# made visible together: a journal naming every (temporary, final) pair is
+# written atomically -- the commit point -- then each is renamed into place,
+# sidecars before their primaries, and the journal removed. A run killed before
+# the journal leaves the previous set untouched (its temporaries are removed by
+# the next run on those outputs); one killed after it leaves a journal that the
+# next run on that folder completes (:func:`recover_commits`). See
+# docs/decisions/result-sets.md.
+_SET: contextvars.ContextVar[ResultSet | None] = contextvars.ContextVar("lumigraph_result_set",
+                                                                       default=None)
+_GUARD: contextvars.ContextVar[OutputGuard | None] = contextvars.ContextVar("lumigraph_guard",
+                                                                           default=None)
+_TEMPS: set[str] = set()  # our own temporaries: a writer nested in another replaces them directly
+JOURNAL_PREFIX = ".lumigraph-commit."
+
+
+def _temp_pattern(final: Path) -> re.Pattern:
+    """Temporaries of ``final`` made by :func:`atomic_path`: ``.NAME.XXXXXXXX.tmpSUFFIX``."""
+    return re.compile(rf"^\.{re.escape(final.name)}\.[A-Za-z0-9_]+\.tmp{re.escape(final.suffix)}$")
+
+
+class ResultSet:
+    """The files one command writes, staged and then committed together."""
+
+    def __init__(self, outputs: Iterable[tuple[str | os.PathLike, str]] = ()):
+        self.staged: list[tuple[Path, Path]] = []
+        # (path, "file" | "dir"): what the command declared it writes; other
+        # writes (a scratch file, a cache) are not part of the set
+        self.files = {os.path.abspath(p) for p, k in outputs if k == "file"}
+        self.dirs = [os.path.abspath(p) for p, k in outputs if k == "dir"]
+
+    def covers(self, final: Path) -> bool:
+        """Whether ``final`` is one of the declared outputs, a sidecar of one, or
+        inside a declared output folder."""
+        f = os.path.abspath(final)
+        if f in self.files or (f.endswith(".meta.json") and f[: -len(".meta.json")] in self.files):
+            return True
+        return any(f.startswith(d.rstrip(os.sep) + os.sep) for d in self.dirs)
+
+    def add(self, tmp: Path, final: Path) -> None:
+        self.staged = [(t, f) for t, f in self.staged if f != final]  # a rewrite: the last wins
+        self.staged.append((tmp, final))
+
+    def abort(self) -> None:
+        for tmp, _ in self.staged:
+            _TEMPS.discard(str(tmp))
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+        self.staged = []
+
+    def commit(self) -> None:
+        if not self.staged:
+            return
+        import fcntl
+
+        moves = [(str(t), str(f)) for t, f in self.staged]
+        folder = self.staged[-1][1].parent
+        fd, jtmp = tempfile.mkstemp(prefix=JOURNAL_PREFIX, suffix=".json.tmp", dir=folder)
+        try:
+            # locked before it becomes visible, so a recovering run sees it live
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            os.write(fd, json.dumps({"version": 1, "pid": os.getpid(), "moves": moves}).encode())
+            os.fsync(fd)
+            journal = Path(jtmp[: -len(".tmp")])
+            os.replace(jtmp, journal)  # the commit point
+            _fsync_dir(folder)
+            for tmp, final in moves:
+                os.replace(tmp, final)
+                _TEMPS.discard(tmp)
+            journal.unlink()
+        finally:
+            os.close(fd)
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(jtmp)
+        self.staged = []
+
+
+def _fsync_dir(folder: Path) -> None:
+    with contextlib.suppress(OSError):
+        dfd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+
+
 @contextlib.contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+def result_set(outputs: Iterable[tuple[str | os.PathLike, str]]) -> Iterator[ResultSet]:
+    """Stage every artifact written inside the block to one of ``outputs``
+    (``(path, "file" | "dir")`` pairs: a file, or anything in a folder);
+    commit them together at the block's end, or discard them all if it raises.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> with result_set([(d, "dir")]):
+    ...     write_json(d / "a.json", {"n": 1})
+    ...     (d / "a.json").exists()
+    False
+    >>> (d / "a.json").exists()
+    True
+    """
+    if _SET.get() is not None:  # nested: the outer set commits
+        yield _SET.get()
+        return
+    rs = ResultSet(outputs)
+    token = _SET.set(rs)
+    try:
+        yield rs
+    except BaseException:
+        rs.abort()
+        raise
+    finally:
+        _SET.reset(token)
+    rs.commit()
+
+
+def recover_commits(folder: str | os.PathLike) -> int:
+    """Complete the commits that a killed run left in ``folder``: every journal
+    whose writer is gone has its remaining temporaries renamed into place.
+    Returns how many journals were completed. Called before a run writes into
+    ``folder`` (:func:`lumigraph.capture.commandline.check_output_path`)."""
+    import fcntl
+
+    done = 0
+    folder = Path(folder)
+    if not folder.is_dir():
+        return 0
+    for journal in sorted(folder.glob(JOURNAL_PREFIX + "*.json")):
+        try:
+            fd = os.open(journal, os.O_RDONLY)
+        except FileNotFoundError:
+            continue
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                continue  # its writer is alive and committing
+            if not journal.exists():
+                continue
+            try:
+                moves = json.loads(journal.read_text())["moves"]
+            except (ValueError, KeyError, TypeError):
+                moves = []  # not ours to complete; a journal is written whole or not at all
+            for tmp, final in moves:
+                if os.path.exists(tmp):
+                    os.replace(tmp, final)
+            journal.unlink()
+            done += 1
+        finally:
+            os.close(fd)
+    return done
+
+
+def remove_stale_temps(final: str | os.PathLike) -> list[Path]:
+    """Remove temporaries of ``final`` (and of its sidecar) left by a killed run.
+    Only safe while this process holds the output's lock."""
+    final = Path(final)
+    gone = []
+    if not final.parent.is_dir():
+        return gone
+    pats = [_temp_pattern(final), _temp_pattern(meta_path(final))]
+    for f in final.parent.iterdir():
+        if any(p.match(f.name) for p in pats) and str(f) not in _TEMPS:
+            with contextlib.suppress(FileNotFoundError):
+                f.unlink()
+                gone.append(f)
+    return gone
+
+
+class OutputGuard:
+    """What a command must not overwrite: its input files, and files in its
+    input folders that are not its own earlier outputs (``force`` allows those,
+    never an input). Installed by :func:`guard`; checked on every write."""
+
+    def __init__(self, inputs: Iterable[str | os.PathLike], *, producer: str, force: bool = False):
+        self.files: set[Path] = set()
+        self.folders: set[Path] = set()
+        for p in inputs:
+            p = Path(p)
+            if p.is_dir():
+                self.folders.add(p.resolve())
+            elif p.exists():
+                self.files.add(p.resolve())
+                self.folders.add(p.resolve().parent)
+        self.producer = producer
+        self.force = force
+
+    def problem(self, final: Path) -> str | None:
+        """Why writing ``final`` is refused, or None."""
+        real = final.resolve()
+        if real in self.files or (final.exists() and any(_same(final, f) for f in self.files)):
+            return "is one of this command's inputs; choose another output"
+        if final.exists() and real.parent in self.folders:
+            if self.force and producer_of(final) == self.producer:
+                return None
+            who = producer_of(final)
+            if who == self.producer:
+                return ("holds an earlier output of this command beside its inputs; add --force to "
+                        "replace it")
+            return ("exists in an input folder and was not written by this command; choose "
+                    "another output (files beside the inputs are never replaced)")
+        return None
+
+    def check(self, final: str | os.PathLike, *, where: str | None = None) -> None:
+        from lumigraph.capture.errors import InputError
+
+        why = self.problem(Path(final))
+        if why:
+            raise InputError(where or final, f"{final} {why}" if where else why)
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def producer_of(path: str | os.PathLike) -> str | None:
+    """The command that wrote ``path`` (``"lumigraph hdr merge"``), from its
+    sidecar, or None when it has none (not ours)."""
+    p = Path(path)
+    side = p if p.name.endswith(".meta.json") else meta_path(p)  # a sidecar speaks for itself
+    try:
+        return json.loads(side.read_text()).get("producer")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+@contextlib.contextmanager
+def guard(inputs: Iterable[str | os.PathLike], *, producer: str, force: bool = False):
+    """Refuse, for the block's duration, any write over ``inputs`` (see
+    :class:`OutputGuard`); ``producer`` is recorded in every sidecar written."""
+    g = OutputGuard(inputs, producer=producer, force=force)
+    token = _GUARD.set(g)
+    try:
+        yield g
+    finally:
+        _GUARD.reset(token)
+
+
+def current_guard() -> OutputGuard | None:
+    return _GUARD.get()
+
+
+@contextlib.contextmanager
+def unstaged():
+    """Write immediately inside the block even within a result set (a cache
+    that is not part of the command's results)."""
+    token = _SET.set(None)
+    gtoken = _GUARD.set(None)
+    try:
+        yield
+    finally:
+        _GUARD.reset(gtoken)
+        _SET.reset(token)
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, *, immediate: bool = False) -> Iterator[Path]:
     """Yield a temporary path beside ``path`` (same suffix, so writers that
     choose the format from the extension still work); on success it replaces
     ``path`` with the mode the umask gives (:func:`file_mode`), on any
-    exception it is removed and ``path`` is left untouched."""
+    exception it is removed and ``path`` is left untouched.
+
+    Inside :func:`result_set` the replacement waits for the set's commit;
+    ``immediate=True`` (caches) replaces at once. Under :func:`guard`, a path
+    the guard protects is refused before anything is written.
+    """
     final = Path(path)
+    nested = str(final) in _TEMPS  # a writer called on another writer's temporary
+    if not nested:
+        g = _GUARD.get()
+        if g is not None:
+            g.check(final)
     final.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{final.stem}.", suffix=f".tmp{final.suffix}",
+    fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=f".tmp{final.suffix}",
                                dir=final.parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    _TEMPS.add(tmp)
+    rs = None if (immediate or nested) else _SET.get()
+    if rs is not None and not rs.covers(final):
+        rs = None
+    staged = False
     try:
         yield tmp_path
         # mkstemp made it 0600; a writer may also have replaced the file: set
         # the mode on whatever is there now, just before it becomes visible.
         os.chmod(tmp_path, file_mode())
-        os.replace(tmp_path, final)
+        if rs is not None:
+            rs.add(tmp_path, final)
+            staged = True
+        else:
+            os.replace(tmp_path, final)
     finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+        if not staged:
+            _TEMPS.discard(tmp)
+            if tmp_path.exists():
+                tmp_path.unlink()
 
 
 def _json_default(obj):
@@ -220,6 +504,9 @@ def make_meta(schema: str, *, inputs: Iterable[str | os.PathLike] = (), params: 
         "warnings": list(warnings),
         "versions": library_versions(),
     }
+    g = _GUARD.get()
+    if g is not None:  # which command wrote it: an earlier output it may replace (OutputGuard)
+        meta["producer"] = g.producer
     if extra:
         meta.update(extra)
     return meta

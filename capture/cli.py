@@ -11,6 +11,7 @@ from lumigraph.capture.artifact import make_meta, write_json
 from lumigraph.capture.commandline import (
     check_output_dir,
     make_parser,
+    output_dir,
     parse_size,
     run,
     say,
@@ -92,7 +93,7 @@ def _render(args) -> int:
 def main(argv=None, prog="lumigraph render") -> int:
     p = make_parser(prog, "Render a synthetic scene with exact ground truth.", epilog=EPILOG)
     p.add_argument("scene", nargs="?", help="scene name (see --list)")
-    p.add_argument("--out", help="output folder")
+    p.add_argument("--out", type=output_dir, help="output folder")
     p.add_argument("--size", help="image size WIDTHxHEIGHT (default: the scene's test size)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--list", action="store_true", help="list every scene and its options")

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from lumigraph.capture.artifact import atomic_path, dumps_json, write_json
+from lumigraph.capture.artifact import atomic_path, dumps_json, unstaged, write_json
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.registry import Method, Registry
 
@@ -361,7 +361,8 @@ def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
     if cache:
         _MEMORY[key] = result
         try:
-            result.save(disk)
+            with unstaged():  # the cache is not part of a command's result set
+                result.save(disk)
         except OSError:
             pass  # a read-only cache only costs speed
     return result

@@ -12,6 +12,8 @@ from lumigraph.capture.commandline import (
     check_output_dir,
     check_output_path,
     make_parser,
+    output_dir,
+    output_file,
     parse_floats,
     run,
     say,
@@ -42,6 +44,11 @@ as 1/250 are fine). Every output gets a <output>.meta.json sidecar.
 TIMES_FLAG = {"exposure_times_s": "--times"}
 # ... and the noise model by its two arguments; --noise sets both.
 NOISE_FLAG = {"full_well_e": "--noise", "read_noise_e": "--noise"}
+
+
+def _mask_path(out) -> Path:
+    """The flags PNG that ``hdr merge`` writes beside its radiance map."""
+    return Path(out).with_name(Path(out).stem + ".mask.png")
 
 
 def _times(args):
@@ -198,7 +205,7 @@ def _merge(args) -> int:
                      extra={"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
                             "mask": "flags PNG beside the output: 1 clipped everywhere (lower "
                                     "bound), 2 black everywhere (upper bound), 4 ghost"})
-    mask_path = out.with_name(out.stem + ".mask.png")
+    mask_path = _mask_path(out)
     flags = np.bitwise_or.reduce(m.flags, axis=2).astype(np.uint8)
     write_artifact(mask_path, lambda p: write_image(p, flags),
                    meta=make_meta("lumigraph.radiance_mask", inputs=stack.paths))
@@ -358,8 +365,8 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("--method", choices=RESPONSE_METHODS.names, default="debevec",
                    help="response method (listed below)")
     v.add_argument("--times", help="exposure times T1,T2,... (seconds; default EXIF/stack.json)")
-    v.add_argument("--out", required=True, help="response.json")
-    v.add_argument("--plot", help="also plot the curve to this PNG")
+    v.add_argument("--out", required=True, type=output_file(".json"), help="response.json")
+    v.add_argument("--plot", type=output_file(".png"), help="also plot the curve to this PNG")
     v.add_argument("--linear", action="store_true", help="the data are linear: identity response")
     v.add_argument("--smoothness", default="auto", help="Debevec λ, or auto (the L-curve corner; the discrepancy principle under heavy noise)")
     v.add_argument("--order", default="auto", help="Mitsunaga-Nayar order 1..10, or auto")
@@ -371,19 +378,20 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
     v.add_argument("--response", required=True, help="response.json from 'hdr response'")
     v.add_argument("--times", help="exposure times T1,T2,... (seconds)")
-    v.add_argument("--out", required=True, help="radiance.exr (or .hdr, .tif LogLuv, .pfm)")
+    v.add_argument("--out", required=True, type=output_file(".exr", ".hdr", ".tif", ".tiff", ".pfm"), help="radiance.exr (or .hdr, .tif LogLuv, .pfm)")
     v.add_argument("--weights", choices=("variance", "hat"), default="variance")
     v.add_argument("--deghost", action="store_true", help="leave out moving content")
     v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
-    v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG})
+    v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
+                   derived_outputs=lambda a: [("--out", _mask_path(a.out))])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
                  epilog=_methods_epilog(ALIGN_METHODS))
     v.add_argument("images", nargs="+")
     v.add_argument("--method", choices=ALIGN_METHODS.names, default="mtb",
                    help="alignment method (listed below)")
-    v.add_argument("--out", required=True, help="output folder (aligned PNGs + stack.json)")
+    v.add_argument("--out", required=True, type=output_dir, help="output folder (aligned PNGs + stack.json)")
     v.add_argument("--times", help="exposure times T1,T2,... to record in stack.json")
     v.add_argument("--reference", type=int, default=None, help="reference image index")
     v.add_argument("--levels", type=int, default=6, help="pyramid levels (shift <= 2**levels)")
@@ -395,13 +403,13 @@ def main(argv=None, prog="lumigraph hdr") -> int:
                    help="tone-mapping operator (listed below)")
     v.add_argument("--key", type=float, default=0.18, help="scene key (0.18 middle grey)")
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
-    v.add_argument("--out", required=True, help="image.png")
+    v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"), help="image.png")
     v.set_defaults(func=_tonemap)
     v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
     v.add_argument("frames", nargs="+", help="frames in time order, or a folder with stack.json")
     v.add_argument("--response", required=True, help="response.json from 'hdr response'")
     v.add_argument("--times", help="exposure time of each frame T1,T2,... (seconds)")
-    v.add_argument("--out", required=True, help="output folder (frame_NNN.exr [+ .png])")
+    v.add_argument("--out", required=True, type=output_dir, help="output folder (frame_NNN.exr [+ .png])")
     v.add_argument("--tonemap", action="store_true", help="also write tone-mapped frame_NNN.png")
     v.add_argument("--key", type=float, default=0.18, help="tone-mapping key (0.18 middle grey)")
     v.add_argument("--temporal", type=int, default=5,
@@ -417,7 +425,7 @@ def main(argv=None, prog="lumigraph hdr") -> int:
     v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input")
-    v.add_argument("output")
+    v.add_argument("output", type=output_file(".exr", ".hdr", ".pic", ".rgbe", ".tif", ".tiff", ".pfm"))
     v.add_argument("--logluv-bits", type=int, choices=(24, 32), default=32)
     v.add_argument("--half", action="store_true", help="EXR: half floats")
     v.set_defaults(func=_convert)

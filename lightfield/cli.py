@@ -19,6 +19,9 @@ from lumigraph.capture.commandline import (
     add_verb,
     check_output_dir,
     make_parser,
+    output_dir,
+    output_file,
+    output_file_or_dir,
     run,
     say,
     subparsers,
@@ -341,7 +344,7 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
                    help="reference plane depth for --rig (world units; default inf)")
     v.add_argument("--grid-tolerance", type=float, default=0.1,
                    help="largest camera-centre offset from its grid node, in grid steps")
-    v.add_argument("--out", required=True, help="light-field folder")
+    v.add_argument("--out", required=True, type=output_dir, help="light-field folder")
     v.set_defaults(func=_import, arg_flags={"poses": "--rig", "cameras": "--rig",
                                             "plane_depth": "--plane-depth"})
 
@@ -351,7 +354,7 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.add_argument("--views", type=int, help="views per microimage side "
                                              "(default: stack.json beside RAW, else 1 per px)")
     v.add_argument("--lattice", choices=("auto", "square", "hex"), default="auto")
-    v.add_argument("--out", required=True, help="light-field folder")
+    v.add_argument("--out", required=True, type=output_dir, help="light-field folder")
     v.set_defaults(func=_decode)
 
     from lumigraph.lightfield.methods import REFOCUS_METHODS
@@ -368,7 +371,7 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
                    help="refocusing method (see below; default auto)")
     v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",
                    help="shift-add's interpolation (default lanczos3)")
-    v.add_argument("--out", required=True, help="OUT.exr for one value, a folder for several")
+    v.add_argument("--out", required=True, type=output_file_or_dir(".exr"), help="OUT.exr for one value, a folder for several")
     v.set_defaults(func=_refocus)
 
     v = add_verb(sp, "render", "render a novel pinhole view from the light slab")
@@ -381,14 +384,14 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     fg.add_argument("--focus-depth", type=float, help="depth of the (s, t) plane")
     v.add_argument("--interpolation", choices=("quadrilinear", "uv-bilinear"),
                    default="quadrilinear")
-    v.add_argument("--out", required=True, help="view.exr (RGBA, A = valid ray)")
+    v.add_argument("--out", required=True, type=output_file(".exr"), help="view.exr (RGBA, A = valid ray)")
     v.set_defaults(func=_render)
 
     v = add_verb(sp, "depth", "disparity (and all-in-focus image) from the light field")
     v.add_argument("lightfield", help="light-field folder")
     v.add_argument("--slopes", default="-2,2,41", help="MIN,MAX,N candidate disparities")
     v.add_argument("--window", type=int, default=7, help="cost aggregation window")
-    v.add_argument("--all-in-focus", help="also write the all-in-focus image (EXR)")
-    v.add_argument("--out", required=True, help="disparity.pfm")
+    v.add_argument("--all-in-focus", type=output_file(".exr"), help="also write the all-in-focus image (EXR)")
+    v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity.pfm")
     v.set_defaults(func=_depth)
     return run(p, argv)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lumigraph.capture.commandline import make_parser, run, say
+from lumigraph.capture.commandline import make_parser, output_dir, run, say
 from lumigraph.capture.registry import Method, Registry
 
 # bench stage name -> its stage(*, quick) -> Stage and a one-line summary, in the
@@ -94,7 +94,7 @@ def main(argv=None, prog="lumigraph bench") -> int:
                     epilog=EPILOG)
     p.add_argument("stages", nargs="*", metavar="STAGE",
                    help=f"stages to run (default all): {', '.join(BENCH_STAGES)}")
-    p.add_argument("--out", required=True, help="report folder")
+    p.add_argument("--out", required=True, type=output_dir, help="report folder")
     p.add_argument("--repeats", type=int, default=3, help="timed runs per row, median kept (>= 3)")
     p.add_argument("--quick", action="store_true", help="small inputs (smoke test)")
     p.set_defaults(func=_bench)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lumigraph.capture.commandline import make_parser, run
+from lumigraph.capture.commandline import make_parser, output_file, run
 
 EPILOG = """\
 examples:
@@ -85,6 +85,6 @@ def main(argv=None, prog="lumigraph inspect") -> int:
     p.add_argument("--times", help="exposure times in seconds, comma-separated (1/30 allowed)")
     p.add_argument("--need-times", action="store_true",
                    help="fail unless every image has an exposure time")
-    p.add_argument("--out", help="write the summary as JSON here (atomically) instead of stdout")
+    p.add_argument("--out", type=output_file(".json"), help="write the summary as JSON here (atomically) instead of stdout")
     p.set_defaults(func=_inspect)
     return run(p, argv)

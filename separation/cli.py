@@ -11,7 +11,15 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from lumigraph.capture.commandline import check_output_dir, make_parser, parse_size, run, say, warn
+from lumigraph.capture.commandline import (
+    check_output_dir,
+    make_parser,
+    output_dir,
+    parse_size,
+    run,
+    say,
+    warn,
+)
 from lumigraph.capture.errors import InputError
 
 EPILOG = """\
@@ -187,7 +195,7 @@ def main(argv=None, prog="lumigraph separate") -> int:
         p.add_argument("--width", type=int, default=2, help="occluder bar width (px)")
         p.add_argument("--alpha", type=float, default=None, help="lit fraction of 'block' patterns")
         p.add_argument("--tile-cells", type=int, default=4, help="block tile size in cells")
-        p.add_argument("--out", required=True, help="output folder")
+        p.add_argument("--out", required=True, type=output_dir, help="output folder")
         # the pattern functions' arguments that differ from the flags' dests
         p.set_defaults(func=_patterns, arg_flags={"tile": "--tile-cells", "cell": "--square"})
         return run(p, argv[1:])
@@ -209,6 +217,6 @@ def main(argv=None, prog="lumigraph separate") -> int:
     p.add_argument("--noise", type=float, default=0.0, help="known noise std per capture (linear)")
     p.add_argument("--saturation", type=float, default=None, help="linear clip level")
     p.add_argument("--tile", type=int, default=16, help="tile size for --method single (px)")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, type=output_dir, help="output folder")
     p.set_defaults(func=_separate)
     return run(p, argv)

@@ -32,6 +32,8 @@ from lumigraph.capture.commandline import (
     check_output_dir,
     check_output_path,
     make_parser,
+    output_dir,
+    output_file,
     run,
     say,
     subparsers,
@@ -459,7 +461,7 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--prefilter", choices=("none", "local-mean"), default="none",
                    help="local-mean: match each image minus its 9x9 mean, clipped (StereoBM's "
                         "normalised response); cancels a gain/offset between the views")
-    v.add_argument("--out", required=True, help="disparity .pfm (unknown stored as inf)")
+    v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)")
@@ -471,7 +473,7 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.add_argument("--frame", choices=("left", "rectified"), default="left",
                    help="points in the original left camera frame (default) or the rectified one")
     v.add_argument("--max-depth", type=float, help="drop points farther than this (rig units)")
-    v.add_argument("--out", required=True, help="points .ply")
+    v.add_argument("--out", required=True, type=output_file(".ply"), help="points .ply")
     v.set_defaults(func=_depth)
 
     v = add_verb(sp, "model-based", "depth of a key view as detail on a rough model, from a "
@@ -502,8 +504,8 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
                    help="left-right check: the same search from the offset view must map back "
                         "within this many units of 1 + (key px per offset px) (default 1.25, which "
                         "covers a correct pair; 0 disables it, about 3x faster)")
-    v.add_argument("--warped", help="also write the warped offset image (PNG)")
-    v.add_argument("--out", required=True, help="depth .pfm (key camera z; unknown stored as inf)")
+    v.add_argument("--warped", type=output_file(".png"), help="also write the warped offset image (PNG)")
+    v.add_argument("--out", required=True, type=output_file(".pfm"), help="depth .pfm (key camera z; unknown stored as inf)")
     v.set_defaults(func=_model_based)
 
     v = add_verb(sp, "triangulate", "3-D points with uncertainty from correspondences",
@@ -514,13 +516,13 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
                    help="; ".join(f"{m.name}: {m.help}" for m in TRIANGULATION_METHODS.values()))
     v.add_argument("--pixel-sigma", type=float, help="pixel noise std for the covariance (default 0.5)")
     v.add_argument("--min-angle", type=float, default=0.5, help="flag rays closer to parallel (deg)")
-    v.add_argument("--out", required=True, help="points .ply or .json")
+    v.add_argument("--out", required=True, type=output_file(".ply", ".json"), help="points .ply or .json")
     v.set_defaults(func=_triangulate)
 
     v = add_verb(sp, "sfm", "unordered multi-view reconstruction (pycolmap)")
     v.add_argument("images", nargs="+")
     v.add_argument("--camera", help="camera.json (or a scene gt.json): known, fixed intrinsics")
     v.add_argument("--seed", type=int, default=0)
-    v.add_argument("--out", required=True, help="folder for cameras.json and points.ply")
+    v.add_argument("--out", required=True, type=output_dir, help="folder for cameras.json and points.ply")
     v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
     return run(p, argv)

@@ -9,7 +9,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lumigraph.capture.commandline import check_output_path, make_parser, run, say
+from lumigraph.capture.commandline import (
+    check_output_path,
+    make_parser,
+    output_file_or_dir,
+    run,
+    say,
+)
 from lumigraph.capture.errors import InputError
 
 EPILOG = """\
@@ -162,7 +168,7 @@ def main(argv=None, prog="lumigraph flow") -> int:
     p.add_argument("images", nargs="+", metavar="IMAGE",
                    help="two images (reference, moving), or a sequence: flows between "
                         "consecutive frames")
-    p.add_argument("--out", required=True,
+    p.add_argument("--out", required=True, type=output_file_or_dir(".flo"),
                    help="output flow file (.flo) for two images; a folder for a sequence")
     p.add_argument("--method", choices=FLOW_METHODS.names, default="pyramid",
                    help="flow method (default: pyramid)")
@@ -177,7 +183,7 @@ def main(argv=None, prog="lumigraph flow") -> int:
     p.add_argument("--finest-level", type=int, default=0,
                    help="stop refining at this pyramid level and upsample (1: half size, about "
                         "4x faster, a little less accurate; default 0: full size)")
-    p.add_argument("--viz", help="(a folder, for a sequence) also write a Middlebury colour-coded picture (.png)")
+    p.add_argument("--viz", type=output_file_or_dir(".png"), help="(a folder, for a sequence) also write a Middlebury colour-coded picture (.png)")
     p.add_argument("--mask-viz", action="store_true",
                    help="paint occluded/unreliable pixels black in --viz")
     p.set_defaults(func=_flow)

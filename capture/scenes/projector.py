@@ -166,7 +166,7 @@ def class_renders(size, *, mirror=False, spp_direct=8, spp_global=256, seed=0):
     try:
         from lumigraph.capture.artifact import atomic_path
 
-        with atomic_path(path) as tmp:  # same folder, umask's mode, replaced at the end
+        with atomic_path(path, immediate=True) as tmp:  # same folder, umask's mode, replaced at the end
             np.savez(tmp, direct=out[0], glob=out[1])
     except OSError:
         pass  # a read-only cache only costs speed
