@@ -736,3 +736,17 @@ def check_output_dir(out: str | os.PathLike) -> Path:
     if p.exists() and not p.is_dir():
         raise InputError("--out", f"{p} exists and is not a folder")
     return p
+
+
+def check_planned(paths: Iterable[str | os.PathLike], *, where: str = "--out") -> None:
+    """Check, before any work, files a command will write whose names are
+    known only once its inputs are (an output folder's contents): none may
+    replace an input or a file beside the inputs that this command did not
+    write (:class:`lumigraph.capture.artifact.OutputGuard`). Outside
+    :func:`run` there is no guard and nothing to check."""
+    from lumigraph.capture.artifact import current_guard
+
+    g = current_guard()
+    if g is not None:
+        for p in paths:
+            g.check(p, where=where)
