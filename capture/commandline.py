@@ -111,7 +111,7 @@ class Number:
             out.append(f"{self.hi + (0 if self.hi_open else 1)}")
         if self.odd:
             out.append(str(2 * int(self.lo or 1) + 2))
-        return out
+        return [b for b in out if b not in self.allow]  # "inf" is fine where allowed
 
     def __repr__(self):
         return f"number({self.range_text})"
