@@ -62,6 +62,7 @@ True
 
 from __future__ import annotations
 
+import os
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -76,6 +77,9 @@ MIN_VIEWS = 3
 OUTLIER_FACTOR = 3.0
 SIGNIFICANCE = 0.05
 FOLDS = 4
+# a baseline below this fraction of the board's extent is no rig: the same
+# views on both sides (a real rig's baseline is a sizeable part of its field)
+ZERO_BASELINE = 1e-6
 
 
 def _split(detections: Sequence[Detection], names):
@@ -480,6 +484,13 @@ def view_points(detections: Sequence[Detection]):
             [d.image_points for d in detections if len(d)])
 
 
+def _same_file(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def check_stereo_pairs(left: Sequence, right: Sequence) -> None:
     """Check that :func:`calibrate_stereo` gets its views in pairs: as many
     ``right`` as ``left`` (detections, or the image files before they are
@@ -489,9 +500,20 @@ def check_stereo_pairs(left: Sequence, right: Sequence) -> None:
     Traceback (most recent call last):
     ...
     lumigraph.capture.errors.InputError: right: expected as many right images as left (2), got 1
+    >>> check_stereo_pairs(["l0.png"], ["l0.png"])
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: right: l0.png is also the left image of pair 0; a rig's two cameras see the board from two places: give the right camera's images
     """
     if len(left) != len(right):
         raise InputError("right", f"expected as many right images as left ({len(left)}), got {len(right)}")
+    for k, (a, b) in enumerate(zip(left, right, strict=True)):
+        # the same image on both sides calibrates a rig of zero baseline
+        if isinstance(a, str | os.PathLike) and isinstance(b, str | os.PathLike) and (
+                os.fspath(a) == os.fspath(b) or _same_file(a, b)):
+            raise InputError("right", f"{os.fspath(b)} is also the left image of pair {k}; a rig's "
+                                      "two cameras see the board from two places: give the right "
+                                      "camera's images")
 
 
 def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, model: str = "auto",
@@ -546,6 +568,12 @@ def calibrate_stereo(left: Sequence[Detection], right: Sequence[Detection], *, m
     warnings = [f"left: {w}" for w in lcam.extra.get("warnings", [])] + \
                [f"right: {w}" for w in rcam.extra.get("warnings", [])]
     T = np.asarray(T, np.float64).ravel()
+    # identical left and right views fit T ~ 1e-9: no rig, whatever the RMS says
+    extent = max(float(np.ptp(np.concatenate([o.reshape(-1, 3) for o in obj]), axis=0).max()), 1e-300)
+    if not np.linalg.norm(T) > ZERO_BASELINE * extent:
+        raise EstimationError("right", f"the right camera sits where the left one does (baseline "
+                                       f"{np.linalg.norm(T):.3g} for a board {extent:.3g} across): "
+                                       "are the same images given as left and right?")
     return Rig.from_pose(lcam, rcam, np.asarray(R, np.float64), T, rms_px=float(rms),
                          pairs=[{"name": n, "rms_px_left": float(e[0]), "rms_px_right": float(e[1])}
                                 for n, e in zip(pairs, per_view, strict=True)],

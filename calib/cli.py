@@ -12,16 +12,21 @@ file, and the board found in at least one image.
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 from pathlib import Path
 
+from lumigraph.calib.rectify import ALPHA_RANGE
 from lumigraph.calib.zhang2000 import MODELS
 from lumigraph.capture.commandline import (
     add_verb,
     check_output_dir,
     check_output_path,
+    check_planned,
+    input_path,
     make_parser,
+    number,
     output_dir,
     output_file,
     progress,
@@ -51,6 +56,20 @@ worse than the best; every candidate's score is in camera.json.
 """
 
 
+def board_spec(text: str):
+    """``--board`` text -> a :class:`~lumigraph.calib.detect.BoardSpec`,
+    by the board's own parser (an argparse ``type``)."""
+    from lumigraph.calib.detect import BoardSpec
+
+    try:
+        return BoardSpec.parse(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(e.problem) from None
+
+
+board_spec.range_text = "checker:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT"
+
+
 def _expand(inputs: list[str], where: str) -> tuple[list[Path], dict]:
     """Image files from a list, or from a folder's stack.json (with its extra info)."""
     if not inputs:
@@ -63,7 +82,7 @@ def _expand(inputs: list[str], where: str) -> tuple[list[Path], dict]:
             raise InputError(folder, "folder has no stack.json; pass the image files instead")
         try:
             info = json.loads(sj.read_text())
-            return [folder / n for n in info["images"]], info
+            return [folder / n for n in info["images"]], {**info, "_stack": str(sj)}
         except (json.JSONDecodeError, KeyError, TypeError) as e:
             raise InputError(sj, f"not a stack description ({e})") from None
     for p in paths:
@@ -93,10 +112,11 @@ def _check_sizes(paths, images):
 def _board(args, info):
     from lumigraph.calib.detect import BoardSpec
 
-    text = args.board or info.get("board")
-    if not text:
+    if args.board is not None:
+        return args.board
+    if not info.get("board"):
         raise InputError("board", "missing; give e.g. --board checker:10x7:25 (COLSxROWS squares)")
-    return BoardSpec.parse(text)
+    return BoardSpec.parse(str(info["board"]), where=info.get("_stack", "board"))
 
 
 def _detect_all(paths, images, board, args, what="images"):
@@ -174,6 +194,13 @@ def _undistort(args) -> int:
     out = check_output_dir(args.out)
     cam = Camera.load(args.camera)
     paths, _ = _expand(args.images, "IMAGES")
+    names = [p.stem + ".png" for p in paths]
+    for k, (p, name) in enumerate(zip(paths, names, strict=True)):
+        if name in names[:k]:
+            raise InputError(p, f"would be written as {out / name}, like "
+                                f"{paths[names.index(name)]}; rename one")
+    # none of the folder's files may replace a photograph (--out = the input folder)
+    check_planned([out / n for n in (*names, "camera.json", "undistorted.json")])
     images = _read_all(paths, args, "images")
     for p, im in zip(paths, images, strict=True):
         if im.shape[1::-1] != tuple(cam.image_size):
@@ -181,17 +208,14 @@ def _undistort(args) -> int:
                                 f"{cam.image_size[0]}x{cam.image_size[1]}; use that camera's images")
     u = undistorter(cam, keep_all=args.keep_all)
     out.mkdir(parents=True, exist_ok=True)
-    names = []
-    for p, im in progress(list(zip(paths, images, strict=True)), total=len(paths),
-                          description="undistorting", quiet=args.quiet):
-        name = p.stem + ".png"
+    for p, im, name in progress(list(zip(paths, images, names, strict=True)), total=len(paths),
+                                description="undistorting", quiet=args.quiet):
         bd = None
         if im.dtype.kind == "u" and im.dtype.itemsize == 2:
             from lumigraph.capture.io import png_significant_bits
             bd = png_significant_bits(p) if p.suffix.lower() == ".png" else 16
         with atomic_path(out / name) as tmp:
             write_image(tmp, u.apply(im), bit_depth=bd)
-        names.append(name)
     meta = make_meta("lumigraph.camera", inputs=[Path(args.camera), *paths],
                      params={"keep_all": args.keep_all})
     u.camera.save(out / "camera.json", meta=meta)
@@ -239,6 +263,10 @@ def _stereo(args) -> int:
     return 0
 
 
+RECTIFY_FILES = ("left.png", "right.png", "maps_left.npy", "maps_right.npy",
+                 "rectification.json")
+
+
 def _rectify(args) -> int:
     from lumigraph.calib.rectify import check_rectify_options, rectify
     from lumigraph.capture.artifact import atomic_path, make_meta
@@ -247,6 +275,9 @@ def _rectify(args) -> int:
 
     out = check_output_dir(args.out)
     check_rectify_options(alpha=args.alpha)  # the library's rule, before the rig and images load
+    if Path(args.left).resolve() == Path(args.right).resolve():
+        raise InputError(args.right, "is also the left image; give the right camera's image")
+    check_planned([out / n for n in RECTIFY_FILES])
     rig = Rig.load(args.rig)
     left, right = read_image(args.left), read_image(args.right)
     for p, im, cam in ((args.left, left, rig.left), (args.right, right, rig.right)):
@@ -285,8 +316,8 @@ def build_parser(prog: str = "lumigraph calib"):
 
     c = add_verb(sp, "calibrate", "calibrate one camera from photos of a board",
                  epilog="example:\n  lumigraph calib calibrate shots/*.png --board checker:10x7:25 --out camera.json")
-    c.add_argument("images", nargs="+", help="image files, or a folder with stack.json")
-    c.add_argument("--board", help="checker:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT "
+    c.add_argument("images", nargs="+", type=input_path, help="image files, or a folder with stack.json")
+    c.add_argument("--board", type=board_spec, help="checker:COLSxROWS:SQUARE or charuco:COLSxROWS:SQUARE:MARKER:DICT "
                                    "(COLSxROWS = squares); default: the stack.json 'board'")
     c.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model (default auto)")
     c.add_argument("--strict", action="store_true", help="refuse (exit 2) instead of warning on a degenerate view set")
@@ -297,8 +328,8 @@ def build_parser(prog: str = "lumigraph calib"):
 
     u = add_verb(sp, "undistort", "remove lens distortion from images",
                  epilog="example:\n  lumigraph calib undistort --camera camera.json shots/*.png --out undistorted/")
-    u.add_argument("images", nargs="+", help="image files, or a folder with stack.json")
-    u.add_argument("--camera", required=True, help="camera.json of the camera that took the images")
+    u.add_argument("images", nargs="+", type=input_path, help="image files, or a folder with stack.json")
+    u.add_argument("--camera", required=True, type=input_path, help="camera.json of the camera that took the images")
     u.add_argument("--keep-all", action="store_true", help="keep every source pixel (black corners) "
                                                             "instead of cropping to valid pixels")
     u.add_argument("--out", required=True, type=output_dir, help="output folder (undistorted PNGs + camera.json)")
@@ -306,9 +337,10 @@ def build_parser(prog: str = "lumigraph calib"):
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",
                  epilog="example:\n  lumigraph calib stereo --left L*.jpg --right R*.jpg --board checker:10x7:1 --out rig.json")
-    s.add_argument("--left", nargs="+", required=True, help="left images (pairwise with --right)")
-    s.add_argument("--right", nargs="+", required=True, help="right images")
-    s.add_argument("--board", help="board spec (see calibrate)")
+    s.add_argument("--left", nargs="+", required=True, type=input_path,
+                   help="left images (pairwise with --right)")
+    s.add_argument("--right", nargs="+", required=True, type=input_path, help="right images")
+    s.add_argument("--board", type=board_spec, help="board spec (see calibrate)")
     s.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model of both cameras")
     s.add_argument("--strict", action="store_true", help="refuse instead of warning on degenerate views")
     s.add_argument("--yaml", type=output_file(".yml", ".yaml"), help="also write OpenCV YAML (K1 D1 K2 D2 R T E F)")
@@ -318,10 +350,11 @@ def build_parser(prog: str = "lumigraph calib"):
 
     r = add_verb(sp, "rectify", "rectify a stereo pair so epipolar lines are rows",
                  epilog="example:\n  lumigraph calib rectify --rig rig.json left.png right.png --out rectified/")
-    r.add_argument("left", help="left image")
-    r.add_argument("right", help="right image")
-    r.add_argument("--rig", required=True, help="rig.json")
-    r.add_argument("--alpha", type=float, default=0.0, help="0 crops to valid pixels (default), 1 keeps all")
+    r.add_argument("left", type=input_path, help="left image")
+    r.add_argument("right", type=input_path, help="right image")
+    r.add_argument("--rig", required=True, type=input_path, help="rig.json")
+    r.add_argument("--alpha", type=number(float, lo=ALPHA_RANGE[0], hi=ALPHA_RANGE[1]), default=0.0,
+                   help="0 crops to valid pixels (default), 1 keeps all")
     r.add_argument("--out", required=True, type=output_dir, help="output folder: left.png, right.png, maps_left/right.npy, "
                                                 "rectification.json")
     r.set_defaults(func=_rectify)

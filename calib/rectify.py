@@ -38,6 +38,7 @@ from lumigraph.capture.errors import InputError
 from lumigraph.capture.rig import Rig
 
 RECTIFICATION_SCHEMA = "lumigraph.rectification"
+ALPHA_RANGE = (0.0, 1.0)  # rectify's alpha: 0 crops to valid pixels, 1 keeps all
 
 
 def _mat(name: str, a, shape: tuple[int, ...]) -> np.ndarray:
@@ -270,7 +271,7 @@ def check_rectify_options(*, alpha: float) -> float:
     lumigraph.capture.errors.InputError: alpha: expected a value in [0, 1], got 1.5
     """
     alpha = float(alpha)
-    if not 0.0 <= alpha <= 1.0:
+    if not ALPHA_RANGE[0] <= alpha <= ALPHA_RANGE[1]:
         raise InputError("alpha", f"expected a value in [0, 1], got {alpha}")
     return alpha
 

@@ -127,7 +127,7 @@ def test_option_checks_live_in_the_library_and_the_cli_names_flags(boards, tmp_p
     for alpha in ("1.5", "-0.1", "nan"):
         r = lumigraph("calib", "rectify", "--rig", tmp_path / "no-rig.json", gone, gone, "--alpha", alpha,
                       "--out", tmp_path / "rect")
-        assert_clean_error(r, "error: --alpha: expected a value in [0, 1]")
+        assert_clean_error(r, "error: --alpha: expected a number >= 0 and <= 1")
     r = lumigraph("calib", "stereo", "--left", boards / "view_00.png", boards / "view_01.png",
                   "--right", boards / "view_00.png", "--board", "checker:10x7:30", "--out", tmp_path / "rig.json")
     assert_clean_error(r, "error: --right: expected as many right images as left (2), got 1")
