@@ -65,6 +65,7 @@ from lumigraph.capture.errors import InputError
 from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
 
 AUTO_WINDOWS = (5, 9, 15)
+WINDOW_RANGE = (3, 63)  # odd window sides match accepts
 BAND_ROWS = 64
 # How the defaults of match() were chosen: docs/decisions/stereo-block-matching-defaults.md
 _INT_MAX = np.iinfo(np.int32).max
@@ -622,6 +623,13 @@ def _check_modes(*, channels, prefilter, prefilter_cap):
         raise InputError("prefilter_cap", f"expected a value > 0, got {prefilter_cap!r}")
 
 
+def _check_lr_tolerance(lr_tolerance):
+    if isinstance(lr_tolerance, bool) or not isinstance(lr_tolerance, int | np.integer) \
+            or lr_tolerance < -1:
+        raise InputError("lr_tolerance", f"expected an integer >= -1 (-1 disables the check), "
+                                         f"got {lr_tolerance!r}")
+
+
 def _check_options(left, right, *, channels, prefilter, prefilter_cap):
     """Refuse an unknown ``channels`` or ``prefilter``, a cap <= 0 and two
     images of different shapes (before any conversion)."""
@@ -640,7 +648,8 @@ def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
                                      f"got {max_disp!r}")
     if window == "auto":
         windows = AUTO_WINDOWS
-    elif isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63:
+    elif (isinstance(window, int | np.integer) and window % 2 == 1
+          and WINDOW_RANGE[0] <= window <= WINDOW_RANGE[1]):
         windows = (int(window),)
     else:
         raise InputError("window", f"expected 'auto' or an odd integer in [3, 63], got {window!r}")
@@ -649,7 +658,7 @@ def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
     if engine not in ("auto", "numpy"):
         raise InputError("engine", f"expected 'auto' or 'numpy', got {engine!r}")
     for name, v in (("texture_snr", texture_snr), ("uniqueness", uniqueness)):
-        if v < 0:
+        if not v >= 0:  # NaN too
             raise InputError(name, f"expected a value >= 0, got {v!r}")
     return int(max_disp), windows
 
@@ -657,7 +666,8 @@ def _check_search(shape, *, max_disp, window, engine, texture_snr, uniqueness):
 def check_match_options(image_shape, *, max_disp: int, window: int | str = "auto",
                         texture_snr: float = 1.0, uniqueness: float = 0.02,
                         channels: str = "luma", prefilter: str = "none",
-                        prefilter_cap: float = 31.0, engine: str = "auto") -> None:
+                        prefilter_cap: float = 31.0, engine: str = "auto",
+                        lr_tolerance: int = 3) -> None:
     """Check :func:`match`'s options for images of ``image_shape`` before the
     pair is rectified or matched (``match`` checks them again itself).
 
@@ -673,7 +683,8 @@ def check_match_options(image_shape, *, max_disp: int, window: int | str = "auto
     InputError
         Naming the argument: ``max_disp`` outside ``[1, W - 1]``, ``window``
         not ``"auto"`` or odd in [3, 63], an image smaller than the window,
-        negative ``texture_snr``/``uniqueness``, an unknown mode.
+        negative ``texture_snr``/``uniqueness``, an unknown mode,
+        ``lr_tolerance`` not an integer >= -1.
 
     Examples
     --------
@@ -684,6 +695,7 @@ def check_match_options(image_shape, *, max_disp: int, window: int | str = "auto
     lumigraph.capture.errors.InputError: max_disp: expected an integer in [1, 63] (image width 64), got 64
     """
     _check_modes(channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
+    _check_lr_tolerance(lr_tolerance)
     h, w = tuple(image_shape)[:2]
     _check_search((1, h, w), max_disp=max_disp, window=window, engine=engine,
                   texture_snr=texture_snr, uniqueness=uniqueness)
@@ -894,6 +906,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     t0 = time.perf_counter()
     # validate, and the images as compared (planes) and as tested for texture (luma)
     _check_options(left, right, channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
+    _check_lr_tolerance(lr_tolerance)
     L, R, gray, code = _match_images(left, right, channels=channels, prefilter=prefilter,
                                      cap=prefilter_cap)
     nch = L.shape[0]

@@ -22,16 +22,22 @@ to the file it came from.
 
 from __future__ import annotations
 
+import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 from lumigraph.capture.commandline import (
+    EXIT_UNUSABLE,
     add_verb,
     check_output_dir,
     check_output_path,
+    check_planned,
+    input_path,
     make_parser,
+    number,
     output_dir,
     output_file,
     run,
@@ -40,6 +46,9 @@ from lumigraph.capture.commandline import (
     warn,
 )
 from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.stereo.block_matching import WINDOW_RANGE
+from lumigraph.stereo.debevec1996 import WINDOW_RANGE as MODEL_WINDOW_RANGE
+from lumigraph.stereo.triangulate import ANGLE_RANGE_DEG
 from lumigraph.stereo.triangulate import METHODS as TRIANGULATION_METHODS
 
 EPILOG = """\
@@ -86,10 +95,12 @@ def _read(path):
     return img
 
 
-def _rectification(args, left_shape=None, right_shape=None):
+def _rectification(args, pair=None):
     """The rectification of ``--rectification`` (used as saved) or computed
-    from ``--rig``, and the file it came from. With image shapes given, the
-    pair must be the size the rig was calibrated for."""
+    from ``--rig``, and the file it came from. With ``pair`` given, ``((left
+    file, image), (right file, image))``, the images must be the size the rig
+    was calibrated for: one image off is that image's fault, both off the
+    rig's (or the rectification's)."""
     from lumigraph.calib.rectify import Rectification, rectify
     from lumigraph.capture.rig import Rig
 
@@ -101,16 +112,34 @@ def _rectification(args, left_shape=None, right_shape=None):
         src, what = args.rig, "rig"
         rig = Rig.load(src)
         rect = None
-    for cam, shape in ((rig.left, left_shape), (rig.right, right_shape)):
-        if shape is not None and tuple(cam.image_size) != (shape[1], shape[0]):
-            raise InputError(src, f"{what} is for {cam.image_size[0]}x{cam.image_size[1]} "
-                                  f"images, the pair is {shape[1]}x{shape[0]}")
+    if pair is not None:
+        off = [(f, im) for (f, im), cam in zip(pair, (rig.left, rig.right), strict=True)
+               if tuple(cam.image_size) != im.shape[1::-1]]
+        w, h = rig.left.image_size
+        if len(off) == 1:
+            f, im = off[0]
+            raise InputError(f, f"is {im.shape[1]}x{im.shape[0]} but the {what} ({src}) is for "
+                                f"{w}x{h} images, like the other image of the pair")
+        if off:
+            sizes = sorted({f"{im.shape[1]}x{im.shape[0]}" for _, im in pair})
+            raise InputError(src, f"{what} is for {w}x{h} images, the pair is "
+                                  f"{' and '.join(sizes)}")
     if rect is None:
         try:
             rect = rectify(rig)
         except ValueError as e:
             raise InputError(src, str(e)) from None
     return rect, src
+
+
+def _distinct_files(left, right) -> None:
+    """The same file as both views gives nothing to match: refused, naming the second."""
+    try:
+        same = Path(left).samefile(right)
+    except OSError:
+        return  # the reader names a missing file
+    if same:
+        raise InputError(right, "is also the left image; give the other view of the pair")
 
 
 # ------------------------------------------------------------------ verbs
@@ -124,30 +153,28 @@ def _match(args) -> int:
     )
 
     out = check_output_path(args.out, suffixes=(".pfm",))
+    _distinct_files(args.left, args.right)
     left, right = _read(args.left), _read(args.right)
-    if left.shape[:2] != right.shape[:2]:
+    rectifying = bool(args.rig or args.rectification)
+    if left.shape[:2] != right.shape[:2] and not rectifying:  # with a rig, it says who is off
         raise InputError(args.right, f"size {right.shape[1]}x{right.shape[0]} differs from the left "
                                      f"image's {left.shape[1]}x{left.shape[0]}")
     # the library names the images "left" and "right": report their files
     args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "left": args.left, "right": args.right}
-    window = args.window
-    if window != "auto":
-        try:
-            window = int(window)
-        except ValueError:
-            raise InputError("window", f"expected 'auto' or an odd integer, got {window!r}") from None
+    window = args.window  # an odd integer or "auto" (the parser's)
     # the library's rules, before the pair is rectified and checked
     check_match_options(left.shape, max_disp=args.max_disp, window=window,
                         texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                        channels=args.channels, prefilter=args.prefilter)
+                        channels=args.channels, prefilter=args.prefilter,
+                        lr_tolerance=args.lr_tolerance)
     t0 = time.perf_counter()
     params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
               "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
               "channels": args.channels, "prefilter": args.prefilter}
     model: dict = {}
     inputs = [args.left, args.right]
-    if args.rig or args.rectification:
-        rect, src = _rectification(args, left.shape, right.shape)
+    if rectifying:
+        rect, src = _rectification(args, ((args.left, left), (args.right, right)))
         inputs.append(src)
         left, right = rect.apply(left, right)
         model["rectification"] = {"R1": rect.R1, "P1": rect.P1, "P2": rect.P2, "Q": rect.Q,
@@ -195,7 +222,7 @@ def _depth(args) -> int:
         pts = pts @ rect.R1  # rect_from_cam = R1, so cam = R1^T rect (row vectors)
         frame = "original left camera"
     ok = np.isfinite(pts).all(axis=2)
-    if args.max_depth:
+    if args.max_depth is not None:  # > 0, the parser's
         ok &= pts[..., 2] <= args.max_depth
     colors = None
     if args.image:
@@ -211,6 +238,9 @@ def _depth(args) -> int:
             img = np.repeat(img[..., None], 3, axis=2)
         colors = img[..., :3][ok].astype(np.uint8)
     if not ok.any():
+        if args.max_depth is not None and np.isfinite(pts).all(axis=2).any():
+            raise EstimationError("max_depth", f"no point is nearer than {args.max_depth:g} (rig "
+                                               "units); nothing to write")
         raise EstimationError(args.disparity, "no valid disparity: nothing to reproject")
     meta = make_meta("lumigraph.points", inputs=[args.disparity, src] + ([args.image] if args.image else []),
                      params={"frame": frame, "max_depth": args.max_depth},
@@ -322,11 +352,24 @@ def _sfm(args) -> int:
     from lumigraph.stereo.sfm import reconstruct
 
     out = check_output_dir(args.out)
+    check_planned([out / "cameras.json", out / "points.ply"])
     images = [_read(p) for p in args.images]
     camera = Camera.load(args.camera) if args.camera else None
-    rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
+    n = len(images)
+    need = max(2, math.ceil(args.min_registered * n))
+    try:
+        rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
+    except EstimationError as e:  # COLMAP ran and registered fewer than two views
+        return _unusable(f"registered fewer than 2 of {n} views ({e.problem}); nothing written")
+    got = rec.info["registered"]
+    if got < need:
+        return _unusable(f"registered {got} of {n} views, fewer than --min-registered "
+                         f"{args.min_registered:g} asks ({need}); nothing written")
+    if got < n:
+        warn(f"registered {got} of {n} views; cameras.json marks the others")
     meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
-                     params={"seed": args.seed, "fixed_intrinsics": camera is not None},
+                     params={"seed": args.seed, "fixed_intrinsics": camera is not None,
+                             "min_registered": args.min_registered},
                      quality={k: rec.info[k] for k in ("registered", "images", "points",
                                                        "mean_reprojection_error_px")},
                      timings_s=rec.info["timings_s"], model=rec.info,
@@ -336,6 +379,12 @@ def _sfm(args) -> int:
     say(args, f"registered {rec.info['registered']}/{len(images)} views, {rec.info['points']} points "
               f"-> {out}/cameras.json, {out}/points.ply")
     return 0
+
+
+def _unusable(problem: str) -> int:
+    """Exit 3, one line: the work ran but its result is not usable (nothing is written)."""
+    sys.stderr.write(f"error: IMAGES: {problem}\n")
+    return EXIT_UNUSABLE
 
 
 def _read_model(path):
@@ -364,14 +413,13 @@ def _model_based(args) -> int:
     from lumigraph.stereo.debevec1996 import check_model_stereo_options, model_stereo
 
     out = check_output_path(args.out, suffixes=(".pfm",))
-    if args.warped:
-        if Path(args.warped).suffix.lower() != ".png":
-            raise InputError("warped", f"{args.warped}: expected a file ending in .png")
     left_right = args.left_right or None  # the flag's 0 turns the check off
+    max_cost = float(args.max_cost)  # "inf" (the parser allows it) disables the test
     # the library's rules, before any file is read
     check_model_stereo_options(max_offset=args.max_offset, window=args.window, step=args.step,
                                texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                               max_cost=args.max_cost, left_right=left_right)
+                               max_cost=max_cost, left_right=left_right)
+    _distinct_files(args.key, args.offset)
     key, off = _read(args.key), _read(args.offset)
     if key.shape[:2] != off.shape[:2]:
         raise InputError(args.offset, f"size {off.shape[1]}x{off.shape[0]} differs from the key image's "
@@ -392,7 +440,7 @@ def _model_based(args) -> int:
     try:
         res = model_stereo(key, off, model, rig, max_offset=args.max_offset, window=args.window,
                            step=args.step, texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                           max_cost=args.max_cost, left_right=left_right)
+                           max_cost=max_cost, left_right=left_right)
     except (InputError, EstimationError):
         raise
     except ValueError as e:
@@ -402,7 +450,7 @@ def _model_based(args) -> int:
         warn(w)
     params = {"max_offset": args.max_offset, "window": args.window, "step": args.step,
               "texture_snr": args.texture_snr, "uniqueness": args.uniqueness,
-              "max_cost": args.max_cost, "left_right": left_right}
+              "max_cost": max_cost, "left_right": left_right}
     info = {k: v for k, v in res.info.items() if k not in ("warnings", "timings_s")}
     meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig],
                      params=params, model={"model_based_stereo": info},
@@ -430,7 +478,8 @@ def _model_based(args) -> int:
     return 0
 
 
-def main(argv=None, prog: str = "lumigraph stereo") -> int:
+def build_parser(prog: str = "lumigraph stereo"):
+    positive = number(float, lo=0, lo_open=True)
     p = make_parser(prog, "Block-matching stereo, depth from disparity, triangulation and "
                           "structure from motion.", epilog=EPILOG)
     sp = subparsers(p)
@@ -440,20 +489,23 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
                         "(checked from matched features: vertical offsets > 1 px are refused).\n"
                         "--window auto picks per pixel the smallest of 5, 9, 15 whose texture "
                         "passes --texture-snr; the choice is recorded in the .meta.json.")
-    v.add_argument("left")
-    v.add_argument("right")
+    v.add_argument("left", type=input_path, help="left image (the reference)")
+    v.add_argument("right", type=input_path, help="right image")
     g = v.add_mutually_exclusive_group()
-    g.add_argument("--rig", help="rig.json (or a scene gt.json): rectify the pair first")
-    g.add_argument("--rectification",
+    g.add_argument("--rig", type=input_path, help="rig.json (or a scene gt.json): rectify the pair first")
+    g.add_argument("--rectification", type=input_path,
                    help="rectification.json from 'lumigraph calib rectify': rectify the pair "
                         "with it, as saved")
-    v.add_argument("--max-disp", type=int, required=True, help="largest disparity searched (px)")
-    v.add_argument("--window", default="auto", help="odd window side, or auto (default)")
-    v.add_argument("--texture-snr", type=float, default=1.0,
+    v.add_argument("--max-disp", type=number(int, lo=1), required=True,
+                   help="largest disparity searched (px), below the image width")
+    v.add_argument("--window", type=number(int, lo=WINDOW_RANGE[0], hi=WINDOW_RANGE[1], odd=True,
+                                           allow=("auto",)),
+                   default="auto", help="odd window side, or auto (default)")
+    v.add_argument("--texture-snr", type=number(float, lo=0), default=1.0,
                    help="minimum window signal std in units of the noise sigma (default 1.0)")
-    v.add_argument("--uniqueness", type=float, default=0.02,
+    v.add_argument("--uniqueness", type=number(float, lo=0), default=0.02,
                    help="second-best must cost (1+u) times the best (default 0.02)")
-    v.add_argument("--lr-tolerance", type=int, default=3,
+    v.add_argument("--lr-tolerance", type=number(int, lo=-1), default=3,
                    help="left-right check tolerance in px, -1 disables (default 3)")
     v.add_argument("--channels", choices=("luma", "color"), default="luma",
                    help="compare luma (default) or the sum over R, G, B (slower; helps "
@@ -465,14 +517,16 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)")
-    v.add_argument("disparity", help="disparity .pfm from 'stereo match'")
+    v.add_argument("disparity", type=input_path, help="disparity .pfm from 'stereo match'")
     g = v.add_mutually_exclusive_group(required=True)
-    g.add_argument("--rig", help="the rig the pair was rectified with (rig.json or gt.json)")
-    g.add_argument("--rectification", help="the rectification.json the pair was rectified with")
-    v.add_argument("--image", help="the ORIGINAL left image, for point colours")
+    g.add_argument("--rig", type=input_path,
+                   help="the rig the pair was rectified with (rig.json or gt.json)")
+    g.add_argument("--rectification", type=input_path,
+                   help="the rectification.json the pair was rectified with")
+    v.add_argument("--image", type=input_path, help="the ORIGINAL left image, for point colours")
     v.add_argument("--frame", choices=("left", "rectified"), default="left",
                    help="points in the original left camera frame (default) or the rectified one")
-    v.add_argument("--max-depth", type=float, help="drop points farther than this (rig units)")
+    v.add_argument("--max-depth", type=positive, help="drop points farther than this (rig units)")
     v.add_argument("--out", required=True, type=output_file(".ply"), help="points .ply")
     v.set_defaults(func=_depth)
 
@@ -483,24 +537,28 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
                         "is searched in [-M, M] by SSD window matching (eq. 5.1). Unknown pixels "
                         "(no model, unseen by the offset camera, no texture, ambiguous, at the end of "
                         "the range, occluded) are inf in the PFM.")
-    v.add_argument("key", help="key image (the reference view, the rig's left camera)")
-    v.add_argument("offset", help="offset image (the rig's right camera)")
-    v.add_argument("--rig", required=True, help="rig.json or a scene gt.json: left = key, right = offset")
-    v.add_argument("--model", required=True,
+    v.add_argument("key", type=input_path, help="key image (the reference view, the rig's left camera)")
+    v.add_argument("offset", type=input_path, help="offset image (the rig's right camera)")
+    v.add_argument("--rig", required=True, type=input_path,
+                   help="rig.json or a scene gt.json: left = key, right = offset")
+    v.add_argument("--model", required=True, type=input_path,
                    help="the rough model's depth seen from the key camera (.pfm, inf = no model, "
                         "or .npy, NaN = no model), z in the rig's unit")
-    v.add_argument("--max-offset", type=float, required=True,
+    v.add_argument("--max-offset", type=positive, required=True,
                    help="largest offset of the detail from the model searched (rig's unit)")
-    v.add_argument("--window", type=int, default=9, help="odd SSD window side (default 9)")
-    v.add_argument("--step", type=float, help="offset step (default: one offset-image pixel)")
-    v.add_argument("--texture-snr", type=float, default=1.0,
+    v.add_argument("--window", type=number(int, lo=MODEL_WINDOW_RANGE[0], hi=MODEL_WINDOW_RANGE[1],
+                                           odd=True),
+                   default=9, help="odd SSD window side (default 9)")
+    v.add_argument("--step", type=positive,
+                   help="offset step, at most --max-offset (default: one offset-image pixel)")
+    v.add_argument("--texture-snr", type=number(float, lo=0), default=1.0,
                    help="minimum window signal std in units of the noise sigma (default 1.0)")
-    v.add_argument("--uniqueness", type=float, default=0.02,
+    v.add_argument("--uniqueness", type=number(float, lo=0), default=0.02,
                    help="every other offset must cost (1+u) times the best (default 0.02)")
-    v.add_argument("--max-cost", type=float, default=1.0,
+    v.add_argument("--max-cost", type=number(float, lo=0, allow=("inf",)), default=1.0,
                    help="refuse matches costing more than 2 sigma^2 + this x window variance "
                         "(default 1.0; inf disables)")
-    v.add_argument("--left-right", type=float, default=1.25,
+    v.add_argument("--left-right", type=number(float, lo=0), default=1.25,
                    help="left-right check: the same search from the offset view must map back "
                         "within this many units of 1 + (key px per offset px) (default 1.25, which "
                         "covers a correct pair; 0 disables it, about 3x faster)")
@@ -510,19 +568,35 @@ def main(argv=None, prog: str = "lumigraph stereo") -> int:
 
     v = add_verb(sp, "triangulate", "3-D points with uncertainty from correspondences",
                  epilog=TRIANGULATE_EPILOG)
-    v.add_argument("correspondences", help="tracks .json, or a matches text file with --rig")
-    v.add_argument("--rig", help="rig.json for a two-view matches text file")
+    v.add_argument("correspondences", type=input_path,
+                   help="tracks .json, or a matches text file with --rig")
+    v.add_argument("--rig", type=input_path, help="rig.json for a two-view matches text file")
     v.add_argument("--method", choices=TRIANGULATION_METHODS.names, default="refined",
                    help="; ".join(f"{m.name}: {m.help}" for m in TRIANGULATION_METHODS.values()))
-    v.add_argument("--pixel-sigma", type=float, help="pixel noise std for the covariance (default 0.5)")
-    v.add_argument("--min-angle", type=float, default=0.5, help="flag rays closer to parallel (deg)")
+    v.add_argument("--pixel-sigma", type=positive,
+                   help="pixel noise std for the covariance (default: the tracks file's, else 0.5)")
+    v.add_argument("--min-angle", type=number(float, lo=ANGLE_RANGE_DEG[0], hi=ANGLE_RANGE_DEG[1]),
+                   default=0.5, help="flag rays closer to parallel (deg)")
     v.add_argument("--out", required=True, type=output_file(".ply", ".json"), help="points .ply or .json")
     v.set_defaults(func=_triangulate)
 
-    v = add_verb(sp, "sfm", "unordered multi-view reconstruction (pycolmap)")
-    v.add_argument("images", nargs="+")
-    v.add_argument("--camera", help="camera.json (or a scene gt.json): known, fixed intrinsics")
-    v.add_argument("--seed", type=int, default=0)
+    v = add_verb(sp, "sfm", "unordered multi-view reconstruction (pycolmap)",
+                 epilog="Exit status 3 (nothing written): COLMAP ran but registered fewer than "
+                        "two views, or fewer than --min-registered of them; the one line says how "
+                        "many of how many. Views left out above that are listed in cameras.json "
+                        "(registered: false) and in the .meta.json warnings.")
+    v.add_argument("images", nargs="+", type=input_path, help="the views (one camera, one size)")
+    v.add_argument("--camera", type=input_path,
+                   help="camera.json (or a scene gt.json): known, fixed intrinsics")
+    v.add_argument("--seed", type=number(int, lo=0, hi=2**31 - 1), default=0,
+                   help="COLMAP's random seed (default 0)")
+    v.add_argument("--min-registered", type=number(float, lo=0, hi=1), default=0.5,
+                   help="fraction of the views that must register for a usable result "
+                        "(default 0.5; at least two views always)")
     v.add_argument("--out", required=True, type=output_dir, help="folder for cameras.json and points.ply")
     v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
-    return run(p, argv)
+    return p
+
+
+def main(argv=None, prog: str = "lumigraph stereo") -> int:
+    return run(build_parser(prog), argv)

@@ -81,6 +81,7 @@ import numpy as np
 from lumigraph.capture.errors import InputError
 
 MAX_STEPS = 257
+WINDOW_RANGE = (3, 63)  # odd SSD window sides model_stereo accepts
 
 
 @dataclass(frozen=True)
@@ -443,7 +444,8 @@ def check_model_stereo_options(*, max_offset: float, window: int = 9, step: floa
     max_offset = float(max_offset)
     if not (np.isfinite(max_offset) and max_offset > 0):
         raise InputError("max_offset", f"expected a finite value > 0, got {max_offset}")
-    if not (isinstance(window, int | np.integer) and window % 2 == 1 and 3 <= window <= 63):
+    if not (isinstance(window, int | np.integer) and window % 2 == 1
+            and WINDOW_RANGE[0] <= window <= WINDOW_RANGE[1]):
         raise InputError("window", f"expected an odd integer in [3, 63], got {window!r}")
     if step is not None and not (np.isfinite(step) and 0 < step <= max_offset):
         raise InputError("step", f"expected a value in (0, max_offset={max_offset}], got {step}")

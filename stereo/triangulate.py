@@ -52,6 +52,7 @@ from lumigraph.capture.registry import Method, Registry
 # pipeline in triangulate() (they share the rays, the angle test and the
 # covariance), so each entry binds triangulate's own ``method``.
 _OPTIONS = ("pixel_sigma", "min_angle_deg", "iterations")
+ANGLE_RANGE_DEG = (0.0, 180.0)  # the angle between two rays
 METHODS = Registry("triangulation", [
     Method("refined", "lumigraph.stereo.triangulate:triangulate",
            "DLT, then Gauss-Newton on the reprojection error (default)", _OPTIONS,
@@ -239,7 +240,8 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
     Raises
     ------
     InputError
-        ``pixel_sigma`` not > 0 (naming it).
+        ``pixel_sigma`` not finite and > 0, ``min_angle_deg`` outside [0, 180]
+        (naming it).
     ValueError
         Inconsistent shapes, unknown method, a track seen in fewer than 2 views.
     """
@@ -254,8 +256,11 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
         raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if method == "midpoint" and V != 2:
         raise ValueError(f"method: midpoint triangulates two views, got {V}")
-    if not pixel_sigma > 0:
+    if not (np.isfinite(pixel_sigma) and pixel_sigma > 0):
         raise InputError("pixel_sigma", f"expected > 0, got {pixel_sigma}")
+    if not ANGLE_RANGE_DEG[0] <= min_angle_deg <= ANGLE_RANGE_DEG[1]:  # NaN too
+        raise InputError("min_angle_deg", f"expected an angle in [0, 180] degrees, got "
+                                          f"{min_angle_deg}")
     poses = [(np.asarray(R, np.float64), np.asarray(t, np.float64).ravel()) for R, t in poses]
     seen = np.isfinite(px).all(axis=2)
     if np.any(seen.sum(axis=0) < 2):
