@@ -11,12 +11,17 @@ from pathlib import Path
 
 from lumigraph.capture.commandline import (
     check_output_path,
+    check_planned,
+    input_path,
     make_parser,
+    number,
     output_file_or_dir,
     run,
     say,
 )
 from lumigraph.capture.errors import InputError
+from lumigraph.stereo.pyramid import MAX_LEVELS
+from lumigraph.stereo.pyramid_flow import MAX_MEDIAN_RADIUS
 
 EPILOG = """\
 examples:
@@ -42,16 +47,6 @@ with its .prob.exr and .meta.json, plus index.json summarising every pair;
   lumigraph render flow-sequence --out out/scenes/seq
   lumigraph flow out/scenes/seq/frame*.png --out out/flow/seq --viz out/flow/seq-viz
 """
-
-
-def _levels(text: str):
-    """``--levels`` text -> ``"auto"`` or an int (its range is the library's)."""
-    if text == "auto":
-        return "auto"
-    try:
-        return int(text)
-    except ValueError:
-        raise InputError("levels", f"expected 'auto' or an integer >= 1, got {text!r}") from None
 
 
 def _load(path: str):
@@ -83,8 +78,25 @@ def _outputs(args):
     if args.viz is not None and Path(args.viz).suffix:
         raise InputError("viz", f"for a sequence name a folder for the pictures, not {args.viz}")
     viz = check_output_dir(args.viz) if args.viz is not None else None
-    return ([out / f"flow_{i:03d}.flo" for i in range(n)],
-            [viz / f"flow_{i:03d}.png" if viz is not None else None for i in range(n)])
+    flows = [out / f"flow_{i:03d}.flo" for i in range(n)]
+    pictures = [viz / f"flow_{i:03d}.png" if viz is not None else None for i in range(n)]
+    # the folders' files, before any work: none may replace an input (--out = the frames' folder)
+    from lumigraph.stereo.pyramid_flow import prob_path
+
+    check_planned([*flows, *map(prob_path, flows), out / "index.json"])
+    if viz is not None:
+        check_planned(pictures, where="--viz")
+    return flows, pictures
+
+
+def _derived(args):
+    """The probability image written beside a two-image --out (a sequence's
+    lie in its --out folder)."""
+    from lumigraph.stereo.pyramid_flow import prob_path
+
+    if len(args.images) == 2 and Path(args.out).suffix.lower() == ".flo":
+        return [("--out", prob_path(args.out))]
+    return []
 
 
 def _flow(args) -> int:
@@ -101,7 +113,7 @@ def _flow(args) -> int:
     if len(args.images) < 2:
         raise InputError(args.images[0], "flow needs at least two images")
     outs, vizs = _outputs(args)
-    options = check_options(args.method, levels=_levels(args.levels), window=args.window,
+    options = check_options(args.method, levels=args.levels, window=args.window,
                             iterations=args.iterations, finest_level=args.finest_level,
                             median_radius=args.median_radius)
     frames = [_load(p) for p in args.images]
@@ -158,33 +170,38 @@ def _flow(args) -> int:
     return 0
 
 
-def main(argv=None, prog="lumigraph flow") -> int:
+def build_parser(prog: str = "lumigraph flow"):
     from lumigraph.stereo.flow_methods import FLOW_METHODS
 
     methods = FLOW_METHODS.help_text()
     p = make_parser(prog, "Dense correspondence between two images: optical flow (coarse-to-fine "
                     "pyramid) or Sand-Teller video matching.\n\nmethods:\n" + methods,
                     epilog=EPILOG)
-    p.add_argument("images", nargs="+", metavar="IMAGE",
+    p.add_argument("images", nargs="+", metavar="IMAGE", type=input_path,
                    help="two images (reference, moving), or a sequence: flows between "
                         "consecutive frames")
     p.add_argument("--out", required=True, type=output_file_or_dir(".flo"),
                    help="output flow file (.flo) for two images; a folder for a sequence")
     p.add_argument("--method", choices=FLOW_METHODS.names, default="pyramid",
                    help="flow method (default: pyramid)")
-    p.add_argument("--levels", default="auto",
+    p.add_argument("--levels", type=number(int, lo=1, hi=MAX_LEVELS, allow=("auto",)), default="auto",
                    help="pyramid levels, or 'auto' from the estimated largest motion (default)")
-    p.add_argument("--window", type=int, default=9, help="matching window side, odd (default 9)")
-    p.add_argument("--iterations", type=int, default=3, help="warps per level (default 3)")
-    p.add_argument("--median-radius", type=int, default=0,
+    p.add_argument("--window", type=number(int, lo=3, odd=True), default=9,
+                   help="matching window side, odd (default 9)")
+    p.add_argument("--iterations", type=number(int, lo=1), default=3, help="warps per level (default 3)")
+    p.add_argument("--median-radius", type=number(int, lo=0, hi=MAX_MEDIAN_RADIUS), default=0,
                    help="0: a 3x3 median after each warp (default). R > 0: a colour-guided "
                         "weighted median of radius R px after each level (Sun, Roth & Black): "
                         "sharper motion boundaries, slower; the bench's accuracy end uses 10")
-    p.add_argument("--finest-level", type=int, default=0,
+    p.add_argument("--finest-level", type=number(int, lo=0, hi=MAX_LEVELS - 1), default=0,
                    help="stop refining at this pyramid level and upsample (1: half size, about "
                         "4x faster, a little less accurate; default 0: full size)")
     p.add_argument("--viz", type=output_file_or_dir(".png"), help="(a folder, for a sequence) also write a Middlebury colour-coded picture (.png)")
     p.add_argument("--mask-viz", action="store_true",
                    help="paint occluded/unreliable pixels black in --viz")
-    p.set_defaults(func=_flow)
-    return run(p, argv)
+    p.set_defaults(func=_flow, derived_outputs=_derived)
+    return p
+
+
+def main(argv=None, prog: str = "lumigraph flow") -> int:
+    return run(build_parser(prog), argv)
