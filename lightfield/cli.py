@@ -11,14 +11,20 @@ refuses to write a view whose every ray leaves the slab."""
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
+    NumberList,
     add_verb,
     check_output_dir,
+    check_planned,
+    input_path,
     make_parser,
+    number,
+    numbers,
     output_dir,
     output_file,
     output_file_or_dir,
@@ -49,18 +55,56 @@ slope = alpha_scale * (1 - 1/alpha)).
 """
 
 
-def _values(texts, name):
-    out = []
-    for t in texts:
-        for part in str(t).split(","):
-            if part.strip():
-                try:
-                    out.append(float(part))
-                except ValueError:
-                    raise InputError(name, f"cannot read {part!r} as a number") from None
-    if not out:
-        raise InputError(name, "give at least one value")
-    return out
+def grid_text(text: str) -> tuple[int, int]:
+    """``--grid`` text -> ``(rows, cols)`` by the grid's own parser (an argparse ``type``)."""
+    from lumigraph.capture.scenes.lightfield import parse_grid
+
+    try:
+        return parse_grid(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(e.problem) from None
+
+
+grid_text.range_text = "ROWSxCOLS, 1..64 each, at least 2 views"
+
+
+class SlopeRange(NumberList):
+    """``MIN,MAX,N``: N evenly spaced candidate disparities from MIN to MAX
+    (MIN < MAX, N an integer, at least the library's
+    :data:`~lumigraph.lightfield.refocus.MIN_DISPARITY_CANDIDATES`)."""
+
+    def __init__(self):
+        from lumigraph.lightfield.refocus import MIN_DISPARITY_CANDIDATES
+
+        super().__init__(number(float), length=3)
+        self.min_n = MIN_DISPARITY_CANDIDATES
+
+    @property
+    def range_text(self) -> str:
+        return f"MIN,MAX,N with MIN < MAX and N an integer >= {self.min_n}"
+
+    def __call__(self, text: str):
+        lo, hi, n = super().__call__(text)
+        if not lo < hi or n != int(n) or n < self.min_n:
+            raise argparse.ArgumentTypeError(f"expected {self.range_text}, got {text!r}")
+        return lo, hi, int(n)
+
+    def bad_examples(self) -> list[str]:
+        return [*super().bad_examples(), "1,-1,5", "-1,1,2.5", f"-1,1,{self.min_n - 1}"]
+
+
+def _values(groups) -> list[float]:
+    """The values of a repeated ``numbers`` option (``--slope 1 2,3``), flattened."""
+    return [v for g in groups for v in g]
+
+
+def _lightfield_files(folder: Path, grid) -> list[Path]:
+    """The files :meth:`LightField.save` writes into ``folder`` for ``grid``."""
+    from lumigraph.lightfield.field import view_name
+
+    u, v = grid
+    return [folder / view_name(i, j) for i in range(u) for j in range(v)] + [
+        folder / "lightfield.json"]
 
 
 # ---------------------------------------------------------------------- import
@@ -73,6 +117,7 @@ def _import(args) -> int:
 
     inputs = [Path(p) for p in args.images]
     out = check_output_dir(args.out)
+    args.plane_depth = float(args.plane_depth)  # the parser lets "inf" through as it is
     info, linear, bit_depth = {}, args.linear, None
     if len(inputs) == 1 and inputs[0].is_dir():
         sj = inputs[0] / "stack.json"
@@ -85,10 +130,12 @@ def _import(args) -> int:
         bit_depth = stack.get("bit_depth")
     else:
         files = inputs
-    grid_text = args.grid or ("x".join(map(str, info["grid"])) if "grid" in info else None)
-    if grid_text is None:
+    if args.grid is not None:
+        grid = args.grid
+    elif "grid" in info:
+        grid = parse_grid("x".join(map(str, info["grid"])), name=str(inputs[0] / "stack.json"))
+    else:
         raise InputError("grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
-    grid = parse_grid(grid_text)
     spacing = args.spacing if args.spacing is not None else info.get("spacing")
     posed = args.rig is not None or "cameras" in info
     if spacing is None and not posed:
@@ -97,6 +144,7 @@ def _import(args) -> int:
     # the library's rules, before any view is read (posed: the spacing is fitted below)
     check_from_images(len(files), grid=grid, spacing=1.0 if spacing is None else spacing,
                       focal_px=focal)
+    check_planned(_lightfield_files(out, grid))  # --out = the views' folder: none replaced
     cameras = None
     if args.rig is not None:
         cameras = (CameraArray.load(args.rig), args.rig)
@@ -171,9 +219,13 @@ def _decode(args) -> int:
     if views is None and sj.exists():
         lens = json.loads(sj.read_text()).get("lenslet", {})
         views = lens.get("views", [None])[0]
+        args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "views": str(sj)}
+    check_planned([out / "lightfield.json"] + (_lightfield_files(out, (views, views))
+                                               if isinstance(views, int) else []))
     t0 = time.perf_counter()
     result = decode(raw, white, views=views, lattice=args.lattice)
     g = result.grid
+    check_planned(_lightfield_files(out, result.lightfield.grid))
     result.lightfield.save(out, meta=make_meta(
         "lumigraph.lightfield", inputs=[args.raw, args.white],
         params={"views": views, "lattice": args.lattice}, model={"grid": g.to_dict()},
@@ -194,23 +246,25 @@ def _refocus(args) -> int:
     from lumigraph.lightfield.methods import REFOCUS_METHODS
     from lumigraph.lightfield.refocus import check_refocus_range, choose_method
 
-    lf = LightField.load(args.lightfield)
-    if args.alpha is not None:
-        given, kind = _values(args.alpha, "alpha"), "alpha"
-        slopes = [lf.slope_from_alpha(a) for a in given]
-    elif args.depth is not None:
-        given, kind = _values(args.depth, "depth"), "depth"
-        slopes = [lf.slope_from_depth(z) for z in given]
-    else:
-        given, kind = _values(args.slope, "slope"), "slope"
-        slopes = list(given)
+    given, kind = next((_values(g), k) for g, k in ((args.alpha, "alpha"), (args.depth, "depth"),
+                                                    (args.slope, "slope")) if g is not None)
     out = Path(args.out)
-    single = len(slopes) == 1
+    single = len(given) == 1
     if single and out.suffix.lower() != ".exr":
         raise InputError("out", f"{out}: one value writes one image; name it .exr")
-    if not single and out.exists() and not out.is_dir():
-        raise InputError("out", f"{out} exists and is not a folder (several values write a "
-                                "folder of refocus-NNN.exr)")
+    if not single and out.suffix.lower() == ".exr":
+        raise InputError("out", f"{out}: {len(given)} values write a folder of refocus-NNN.exr "
+                                "and index.json; name a folder")
+    if not single:
+        check_planned([out / f"refocus-{k:03d}.exr" for k in range(len(given))]
+                      + [out / "index.json"])
+    lf = LightField.load(args.lightfield)
+    if kind == "alpha":
+        slopes = [lf.slope_from_alpha(a) for a in given]
+    elif kind == "depth":
+        slopes = [lf.slope_from_depth(z) for z in given]
+    else:
+        slopes = list(given)
     warnings = check_refocus_range(lf, slopes)
     for w in warnings:
         warn(w)
@@ -254,9 +308,7 @@ def _render(args) -> int:
     from lumigraph.lightfield.field import LightField
     from lumigraph.lightfield.levoy1996 import render_view
 
-    out = Path(args.out)
-    if out.suffix.lower() != ".exr":
-        raise InputError("out", f"{out}: the view is written as OpenEXR; name it .exr")
+    out = Path(args.out)  # .exr, the parser's
     lf = LightField.load(args.lightfield)
     if args.focus_depth is not None:
         slope = lf.slope_from_depth(args.focus_depth)
@@ -288,25 +340,21 @@ def _depth(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta, write_artifact
-    from lumigraph.capture.commandline import parse_floats
     from lumigraph.capture.io import write_exr, write_pfm
     from lumigraph.lightfield.field import LightField
     from lumigraph.lightfield.refocus import (
         all_in_focus,
         check_disparity_slopes,
+        check_disparity_window,
         estimate_disparity,
         focal_stack,
     )
 
-    out = Path(args.out)
-    if out.suffix.lower() != ".pfm":
-        raise InputError("out", f"{out}: the disparity map is written as PFM; name it .pfm")
-    values = parse_floats(args.slopes, name="slopes")
-    if len(values) != 3 or not (np.isfinite(values[2]) and values[2] >= 0):
-        raise InputError("slopes", f"expected MIN,MAX,N (N candidates), got {args.slopes!r}")
-    lo, hi, n = values
-    # the library's rule (at least 3, increasing), before the light field loads
-    slopes = check_disparity_slopes(np.linspace(lo, hi, int(n)))
+    out = Path(args.out)  # .pfm, the parser's
+    lo, hi, n = args.slopes  # MIN < MAX, N an integer (the parser's)
+    # the library's rules, before the light field loads
+    slopes = check_disparity_slopes(np.linspace(lo, hi, n))
+    check_disparity_window(args.window)
     lf = LightField.load(args.lightfield)
     est = estimate_disparity(lf, slopes, window=args.window)
     write_artifact(out, lambda p: write_pfm(p, est.disparity), meta=make_meta(
@@ -323,36 +371,43 @@ def _depth(args) -> int:
     return 0
 
 
-def main(argv=None, prog="lumigraph lightfield") -> int:
+def build_parser(prog: str = "lumigraph lightfield"):
+    positive = number(float, lo=0, lo_open=True)
     p = make_parser(prog, "Light fields: import camera arrays, decode lenslet raws, refocus "
                           "(shift-and-add, Fourier slice), render novel views, estimate depth.",
                     epilog=EPILOG)
     sp = subparsers(p)
 
     v = add_verb(sp, "import", "build a light-field folder from row-major views")
-    v.add_argument("images", nargs="+", help="view images (row-major), or a rendered folder")
-    v.add_argument("--grid", help="ROWSxCOLS, e.g. 5x5")
-    v.add_argument("--spacing", type=float, help="camera spacing (world units)")
-    v.add_argument("--focal-px", type=float, help="focal length of the views in pixels")
+    v.add_argument("images", nargs="+", type=input_path,
+                   help="view images (row-major), or a rendered folder")
+    v.add_argument("--grid", type=grid_text, help="ROWSxCOLS, e.g. 5x5")
+    v.add_argument("--spacing", type=positive, help="camera spacing (world units)")
+    v.add_argument("--focal-px", type=positive, help="focal length of the views in pixels")
     v.add_argument("--linear", action="store_true",
                    help="integer views are linear codes (default: sRGB, decoded to linear)")
-    v.add_argument("--rig", help="camera poses: JSON {\"cameras\": [camera.json entries with "
+    v.add_argument("--rig", type=input_path, help="camera poses: JSON {\"cameras\": [camera.json entries with "
                                  "cam_from_world {R, t}], row-major}; the views are undistorted "
                                  "and rectified onto a regular planar array (default: the "
                                  "cameras in a rendered folder's stack.json, if any)")
-    v.add_argument("--plane-depth", type=float, default=float("inf"),
+    v.add_argument("--plane-depth", type=number(float, lo=0, lo_open=True, allow=("inf",)),
+                   default=float("inf"),
                    help="reference plane depth for --rig (world units; default inf)")
-    v.add_argument("--grid-tolerance", type=float, default=0.1,
+    v.add_argument("--grid-tolerance", type=positive, default=0.1,
                    help="largest camera-centre offset from its grid node, in grid steps")
     v.add_argument("--out", required=True, type=output_dir, help="light-field folder")
     v.set_defaults(func=_import, arg_flags={"poses": "--rig", "cameras": "--rig",
-                                            "plane_depth": "--plane-depth"})
+                                            "plane_depth": "--plane-depth",
+                                            "tolerance": "--grid-tolerance"})
 
     v = add_verb(sp, "decode", "decode a lenslet raw into sub-aperture views")
-    v.add_argument("raw", help="lenslet raw image (linear)")
-    v.add_argument("--white", required=True, help="white image of the same camera")
-    v.add_argument("--views", type=int, help="views per microimage side "
-                                             "(default: stack.json beside RAW, else 1 per px)")
+    from lumigraph.lightfield.lenslet import MIN_VIEWS
+
+    v.add_argument("raw", type=input_path, help="lenslet raw image (linear)")
+    v.add_argument("--white", required=True, type=input_path, help="white image of the same camera")
+    v.add_argument("--views", type=number(int, lo=MIN_VIEWS),
+                   help="views per microimage side, at most its width in pixels "
+                        "(default: stack.json beside RAW, else 1 per px)")
     v.add_argument("--lattice", choices=("auto", "square", "hex"), default="auto")
     v.add_argument("--out", required=True, type=output_dir, help="light-field folder")
     v.set_defaults(func=_decode)
@@ -362,11 +417,12 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)",
                  epilog="methods:\n" + REFOCUS_METHODS.help_text() +
                         "\n  auto       shift-add for a few values, fourier from about 6 on")
-    v.add_argument("lightfield", help="light-field folder")
+    v.add_argument("lightfield", type=input_path, help="light-field folder")
     g = v.add_mutually_exclusive_group(required=True)
-    g.add_argument("--alpha", nargs="+", help="Ng's alpha values")
-    g.add_argument("--depth", nargs="+", help="focal depths (units of spacing)")
-    g.add_argument("--slope", nargs="+", help="slopes, px per view step")
+    g.add_argument("--alpha", nargs="+", type=numbers(positive), help="Ng's alpha values")
+    g.add_argument("--depth", nargs="+", type=numbers(positive),
+                   help="focal depths (units of spacing)")
+    g.add_argument("--slope", nargs="+", type=numbers(number(float)), help="slopes, px per view step")
     v.add_argument("--method", choices=(*REFOCUS_METHODS.names, "auto"), default="auto",
                    help="refocusing method (see below; default auto)")
     v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",
@@ -375,23 +431,30 @@ def main(argv=None, prog="lumigraph lightfield") -> int:
     v.set_defaults(func=_refocus)
 
     v = add_verb(sp, "render", "render a novel pinhole view from the light slab")
-    v.add_argument("lightfield", help="light-field folder")
-    v.add_argument("--position", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
+    v.add_argument("lightfield", type=input_path, help="light-field folder")
+    v.add_argument("--position", nargs=3, type=number(float), required=True, metavar=("X", "Y", "Z"),
                    help="pinhole position (world units, relative to the grid centre)")
     fg = v.add_mutually_exclusive_group()
-    fg.add_argument("--focus-slope", type=float, default=0.0,
+    fg.add_argument("--focus-slope", type=number(float), default=0.0,
                     help="disparity of the slab's (s, t) plane (default 0: infinity)")
-    fg.add_argument("--focus-depth", type=float, help="depth of the (s, t) plane")
+    fg.add_argument("--focus-depth", type=positive, help="depth of the (s, t) plane")
     v.add_argument("--interpolation", choices=("quadrilinear", "uv-bilinear"),
                    default="quadrilinear")
     v.add_argument("--out", required=True, type=output_file(".exr"), help="view.exr (RGBA, A = valid ray)")
     v.set_defaults(func=_render)
 
     v = add_verb(sp, "depth", "disparity (and all-in-focus image) from the light field")
-    v.add_argument("lightfield", help="light-field folder")
-    v.add_argument("--slopes", default="-2,2,41", help="MIN,MAX,N candidate disparities")
-    v.add_argument("--window", type=int, default=7, help="cost aggregation window")
+    v.add_argument("lightfield", type=input_path, help="light-field folder")
+    v.add_argument("--slopes", type=SlopeRange(), default=(-2.0, 2.0, 41),
+                   help="MIN,MAX,N: N candidate disparities from MIN to MAX (px per view step; "
+                        "default -2,2,41)")
+    v.add_argument("--window", type=number(int, lo=1, odd=True), default=7,
+                   help="cost aggregation window side (px)")
     v.add_argument("--all-in-focus", type=output_file(".exr"), help="also write the all-in-focus image (EXR)")
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity.pfm")
     v.set_defaults(func=_depth)
-    return run(p, argv)
+    return p
+
+
+def main(argv=None, prog: str = "lumigraph lightfield") -> int:
+    return run(build_parser(prog), argv)

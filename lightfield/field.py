@@ -179,12 +179,30 @@ class LightField:
             if views[-1].shape != views[0].shape:
                 raise InputError(js.parent / n, f"size {views[-1].shape} differs from "
                                                 f"{names[0]} {views[0].shape}")
+            check_finite_view(views[-1], js.parent / n)
         data = np.stack(views).reshape(u, v, *views[0].shape)
         try:
             return cls(data, spacing=float(body.get("spacing", 1.0)), focal_px=body.get("focal_px"),
                        alpha_scale=body.get("alpha_scale"), info=body.get("info", {}))
         except (ValueError, TypeError) as e:  # the geometry it records: a fault of the file
             raise InputError(js, f"invalid lightfield.json ({e})") from None
+
+
+def check_finite_view(view: np.ndarray, where) -> None:
+    """Refuse a view holding NaN or infinity (``InputError`` naming ``where``,
+    its file): one such sample spreads through every refocused pixel and
+    every disparity cost it enters.
+
+    >>> check_finite_view(np.array([[0.5, np.nan]]), "view-00-01.exr")
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: view-00-01.exr: 1 of 2 samples are not finite (NaN or inf); a light field's views must hold finite radiance
+    """
+    if view.dtype.kind == "f":
+        bad = int(np.count_nonzero(~np.isfinite(view)))
+        if bad:
+            raise InputError(where, f"{bad} of {view.size} samples are not finite (NaN or inf); "
+                                    "a light field's views must hold finite radiance")
 
 
 def view_name(u: int, v: int) -> str:
@@ -242,7 +260,8 @@ def from_images(images, *, grid: tuple[int, int], spacing: float, focal_px: floa
     Integer views are sRGB-decoded to linear radiance unless ``linear``, in
     which case codes are divided by ``2**bit_depth - 1``. ``spacing`` and
     ``focal_px`` must be finite and positive. Raises InputError naming the
-    argument (:func:`check_from_images`), or the view when sizes differ.
+    argument (:func:`check_from_images`), or the view when sizes differ or
+    a float view holds NaN or infinity (:func:`check_finite_view`).
     """
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(len(images))]
@@ -255,6 +274,7 @@ def from_images(images, *, grid: tuple[int, int], spacing: float, focal_px: floa
                                    f"{names[0]} is {out[0].shape[1]}x{out[0].shape[0]}x"
                                    f"{out[0].shape[2]}; all views need one size")
         if img.dtype.kind == "f":
+            check_finite_view(img, name)
             lin = img.astype(np.float32)
         elif linear:
             top = 2 ** (bit_depth or 8 * img.dtype.itemsize) - 1

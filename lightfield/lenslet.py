@@ -40,8 +40,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lumigraph.capture.errors import EstimationError
+from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.lightfield.field import LightField
+
+MIN_VIEWS = 2  # views per microimage side: a light field has at least 2
 
 SQRT3_2 = math.sqrt(3.0) / 2.0
 
@@ -287,7 +289,9 @@ def decode(raw: np.ndarray, white: np.ndarray, *, views: int | None = None,
     raw, white : ndarray (H, W[, C])
         Raw and white images, same size, linear codes or floats.
     views : int, optional
-        Views per microimage side; default one per pixel of the lit square.
+        Views per microimage side, ``MIN_VIEWS`` up to one per pixel of the
+        lit square (the default); more is refused (``InputError`` naming
+        ``views``) before any view is sliced.
     lattice : {"auto", "square", "hex"}
     grid : LensletGrid, optional
         Use this grid instead of estimating it (e.g. the ground truth).
@@ -300,8 +304,19 @@ def decode(raw: np.ndarray, white: np.ndarray, *, views: int | None = None,
     """
     if raw.shape[:2] != white.shape[:2]:
         raise ValueError(f"white: size {white.shape[:2]} differs from raw {raw.shape[:2]}")
+    if views is not None and (isinstance(views, bool) or not isinstance(views, int | np.integer)
+                              or views < MIN_VIEWS):
+        raise InputError("views", f"expected an integer >= {MIN_VIEWS} views per microimage side, "
+                                  f"got {views!r}")
     g = grid if grid is not None else estimate_grid(white, lattice=lattice)
-    n = int(views) if views is not None else max(2, int(math.floor(g.extent_px)))
+    most = max(MIN_VIEWS, int(math.floor(g.extent_px)))
+    if views is not None and views > most:
+        # more views than pixels under a lenslet resample nothing new (and a
+        # thousand would allocate N² views of the sensor: refused before that)
+        raise InputError("views", f"{views} views per side, but the white image's microimages "
+                                  f"are {g.extent_px:.1f} px wide (lenslet pitch {g.pitch_px:.1f} "
+                                  f"px): at most {most}")
+    n = int(views) if views is not None else most
     lin = devignette(raw, white)
     v = slice_views(lin, g, n)
     if g.lattice == "hex":

@@ -78,7 +78,8 @@ def render_view(lf: LightField, position, *, focus_slope: float = 0.0,
     Raises
     ------
     InputError
-        ``position`` with ``Z != 0`` for a light field without ``focal_px``.
+        ``position`` with ``Z != 0`` for a light field without ``focal_px``,
+        or not finite; ``focus_slope`` not finite.
     ValueError
         An unknown ``interpolation``.
     """
@@ -86,6 +87,10 @@ def render_view(lf: LightField, position, *, focus_slope: float = 0.0,
         raise ValueError(f"interpolation: expected one of {', '.join(INTERPOLATIONS)}, "
                          f"got {interpolation!r}")
     px_, py_, pz = (float(c) for c in position)
+    if not np.all(np.isfinite([px_, py_, pz])):
+        raise InputError("position", f"expected a finite (X, Y, Z), got {tuple(position)}")
+    if not np.isfinite(focus_slope):
+        raise InputError("focus_slope", f"expected a finite slope, got {focus_slope}")
     u, v = lf.grid
     _, _, h, w, c = lf.data.shape
     uc, vc = lf.center

@@ -126,6 +126,8 @@ def fit_array(poses, *, grid: tuple[int, int], tolerance: float = 0.1,
     """
     u, v = grid
     names = list(names) if names is not None else [f"view {k}" for k in range(u * v)]
+    if not (np.isfinite(tolerance) and tolerance > 0):
+        raise InputError("tolerance", f"expected a finite number of grid steps > 0, got {tolerance}")
     if len(poses) != u * v:
         raise InputError("poses", f"a {u}x{v} grid needs {u * v} poses, got {len(poses)}")
     Rs, Cs = [], []

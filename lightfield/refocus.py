@@ -151,9 +151,12 @@ def refocusable_slopes(lf: LightField) -> float:
 
 def check_refocus_range(lf: LightField, slopes) -> list[str]:
     """Warnings for slopes outside Ng's exact refocusing range (Ng 2005, §6:
-    ``|1 - 1/alpha| <= dx/du``): beyond it the refocused image aliases."""
+    ``|1 - 1/alpha| <= dx/du``): beyond it the refocused image aliases.
+    A slope that is not finite is refused (``InputError`` naming ``slopes``)."""
     lo, hi = lf.alpha_range()
     out = []
+    if not np.all(np.isfinite(np.asarray(slopes, np.float64))):
+        raise InputError("slopes", f"expected finite slopes, got {list(slopes)}")
     for s in slopes:
         if abs(s) > refocusable_slopes(lf) + 1e-12:
             a = lf.alpha_from_slope(s)
@@ -223,6 +226,27 @@ class DisparityEstimate:
         return z.astype(np.float32)
 
 
+# the parabola refining the best candidate needs a neighbour on each side
+MIN_DISPARITY_CANDIDATES = 3
+
+
+def check_disparity_window(window) -> int:
+    """The cost aggregation window of :func:`estimate_disparity`: an odd
+    integer >= 1 (pixels), or ``InputError`` naming ``window``.
+
+    >>> check_disparity_window(7)
+    7
+    >>> check_disparity_window(4)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: window: expected an odd integer >= 1 (pixels), got 4
+    """
+    if isinstance(window, bool) or not isinstance(window, int | np.integer) \
+            or window < 1 or window % 2 == 0:
+        raise InputError("window", f"expected an odd integer >= 1 (pixels), got {window!r}")
+    return int(window)
+
+
 def check_disparity_slopes(slopes) -> np.ndarray:
     """The candidate disparities of :func:`estimate_disparity`, checked before
     the light field is at hand: at least 3, strictly increasing (float64).
@@ -235,8 +259,11 @@ def check_disparity_slopes(slopes) -> np.ndarray:
     lumigraph.capture.errors.InputError: slopes: expected increasing candidates, got 1 .. 0
     """
     slopes = np.asarray(slopes, np.float64)
-    if slopes.ndim != 1 or len(slopes) < 3:
-        raise InputError("slopes", f"expected at least 3 candidates, got {slopes}")
+    if slopes.ndim != 1 or len(slopes) < MIN_DISPARITY_CANDIDATES:
+        raise InputError("slopes", f"expected at least {MIN_DISPARITY_CANDIDATES} candidates, "
+                                   f"got {slopes}")
+    if not np.all(np.isfinite(slopes)):
+        raise InputError("slopes", f"expected finite candidates, got {slopes}")
     if not np.all(np.diff(slopes) > 0):
         raise InputError("slopes", f"expected increasing candidates, got {slopes[0]:g} .. {slopes[-1]:g}")
     return slopes
@@ -255,7 +282,8 @@ def estimate_disparity(lf: LightField, slopes, *, window: int = 7,
         Candidate disparities, evenly spaced; at least 3, strictly increasing
         (:func:`check_disparity_slopes`).
     window : int
-        Side of the box over which the cost is aggregated (odd).
+        Side of the box over which the cost is aggregated (odd, >= 1;
+        :func:`check_disparity_window`).
 
     Returns
     -------
@@ -264,6 +292,7 @@ def estimate_disparity(lf: LightField, slopes, *, window: int = 7,
     from scipy.ndimage import uniform_filter
 
     slopes = check_disparity_slopes(slopes)
+    window = check_disparity_window(window)
     u, v = lf.grid
     uc, vc = lf.center
     cost = np.empty((len(slopes),) + lf.data.shape[2:4], np.float32)

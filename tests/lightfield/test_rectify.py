@@ -110,5 +110,5 @@ def test_plane_depth_is_checked_by_the_library(jittered, tmp_path):
     folder = tmp_path / "scene"
     jittered.save(folder)
     r = lumigraph("lightfield", "import", folder, "--plane-depth", "-1", "--out", tmp_path / "lf")
-    assert_clean_error(r, "error: --plane-depth: expected > 0, got -1.0")
+    assert_clean_error(r, "error: --plane-depth: expected a number > 0 or inf, got '-1'")
     assert not (tmp_path / "lf").exists()
