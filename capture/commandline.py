@@ -386,7 +386,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             if debug:
                 traceback.print_exc()
             where = argument_flags(parser, args).get(e.where, e.where)
-            said.error(f"error: {where}: {e.problem}")
+            said.error(f"error: {where}: {_one_line(e.problem)}")
             return EXIT_USAGE
         except KeyboardInterrupt:
             said.error("error: interrupted; nothing half-written was left behind")
@@ -411,9 +411,14 @@ def _internal(e: BaseException, debug: bool, said) -> int:
     if debug:
         traceback.print_exc()
     else:
-        said.error(f"error: internal: {type(e).__name__}: {e} "
+        said.error(f"error: internal: {type(e).__name__}: {_one_line(str(e))} "
                    "(rerun with --debug for the traceback, and report it)")
     return EXIT_INTERNAL
+
+
+def _one_line(text: str) -> str:
+    """A message on one line (foreign libraries' messages span several)."""
+    return " ".join(str(text).split())
 
 
 _ENVIRONMENT_ERRNOS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC, errno.EDQUOT,
