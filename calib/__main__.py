@@ -1,5 +1,5 @@
 """``python -m lumigraph.calib …`` is ``lumigraph calib …``."""
 
-from lumigraph.calib.cli import main
+from lumigraph.capture.commandline import module_main
 
-raise SystemExit(main(prog="python -m lumigraph.calib"))
+raise SystemExit(module_main("lumigraph.calib.cli", "python -m lumigraph.calib"))

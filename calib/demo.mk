@@ -24,15 +24,16 @@ $(OUT)/scenes/boards-stereo/stack.json: $(STAMP)
 	  $(STEREO_PAIR_GEOMETRY) --distortion none --square $(lastword $(subst :, ,$(STEREO_BOARD))) \
 	  --quiet
 
-$(OUT)/calib/camera.json: $(OUT)/scenes/boards/stack.json
-	$(LUMI) calib calibrate $(<D) --out $@ --yaml $(@D)/camera.yml --colmap $(@D)/cameras.txt --quiet
+$(OUT)/calib/camera.json $(OUT)/calib/camera.yml $(OUT)/calib/cameras.txt &: $(OUT)/scenes/boards/stack.json
+	$(LUMI) calib calibrate $(<D) --out $(OUT)/calib/camera.json --yaml $(OUT)/calib/camera.yml \
+	  --colmap $(OUT)/calib/cameras.txt --quiet
 
 $(OUT)/calib/undistorted/undistorted.json: $(OUT)/calib/camera.json $(OUT)/scenes/boards/stack.json
 	$(LUMI) calib undistort --camera $< $(OUT)/scenes/boards --out $(@D) --quiet
 
-$(OUT)/calib/rig.json: $(OUT)/scenes/boards-stereo/stack.json
-	$(LUMI) calib stereo --left $(<D)/left_*.png --right $(<D)/right_*.png --out $@ \
-	  --board $(STEREO_BOARD) --yaml $(@D)/rig.yml --quiet
+$(OUT)/calib/rig.json $(OUT)/calib/rig.yml &: $(OUT)/scenes/boards-stereo/stack.json
+	$(LUMI) calib stereo --left $(<D)/left_*.png --right $(<D)/right_*.png --out $(OUT)/calib/rig.json \
+	  --board $(STEREO_BOARD) --yaml $(OUT)/calib/rig.yml --quiet
 
 $(OUT)/calib/rectified/rectification.json: $(OUT)/calib/rig.json $(OUT)/scenes/stereo-pair/stack.json
 	$(LUMI) calib rectify --rig $< $(OUT)/scenes/stereo-pair/left.png \
@@ -40,3 +41,5 @@ $(OUT)/calib/rectified/rectification.json: $(OUT)/calib/rig.json $(OUT)/scenes/s
 
 DEMO_OUTPUTS += $(OUT)/calib/camera.json $(OUT)/calib/undistorted/undistorted.json \
   $(OUT)/calib/rectified/rectification.json
+# every file a grouped step writes, so a rerun rebuilds whichever a kill left missing
+DEMO_OUTPUTS += $(OUT)/calib/camera.yml $(OUT)/calib/cameras.txt $(OUT)/calib/rig.yml

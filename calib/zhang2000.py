@@ -35,6 +35,8 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,6 +55,29 @@ FREE = {
 }
 # order of OpenCV's stdDeviationsIntrinsics
 STD_NAMES = ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
+
+
+@contextmanager
+def _one_opencv_thread() -> Iterator[None]:
+    """Run OpenCV on one thread inside the block, then restore the caller's count.
+
+    With several threads OpenCV's (5.0) ``calibrateCamera[Extended]`` returns
+    K, distortion and poses that differ in their last bits from run to run on
+    the same points (5 distinct results in 6 runs on 2 threads, one on one
+    thread: its parallel parts depend on the threads' timing), and
+    ``--model auto``'s choice and every figure in camera.json follow them. ``solvePnP``, ``projectPoints`` and ``stereoCalibrate`` with
+    fixed intrinsics were stable, so only the calibration solve is pinned; it
+    takes milliseconds either way. ``setNumThreads`` is process-wide: OpenCV
+    work on other Python threads meanwhile also runs on one thread.
+    """
+    import cv2
+
+    previous = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(previous)
 
 
 def model_flags(model: str) -> int:
@@ -182,13 +207,14 @@ def calibrate_fixed(object_points, image_points, image_size, *, model: str,
         tv = [np.asarray(t, np.float64).reshape(3, 1) for t in tvecs0]
         flags |= cv2.CALIB_USE_EXTRINSIC_GUESS
     try:
-        if uncertainties:
-            rms, K, dist, rv, tv, std_i, _, per_view = cv2.calibrateCameraExtended(
-                obj, img, size, K, dist, rv, tv, flags=flags, criteria=criteria)
-        else:
-            rms, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, K, dist, rv, tv, flags=flags,
-                                                       criteria=criteria)
-            std_i, per_view = np.zeros(18), np.full(len(obj), np.nan)
+        with _one_opencv_thread():  # byte-stable results (see _one_opencv_thread)
+            if uncertainties:
+                rms, K, dist, rv, tv, std_i, _, per_view = cv2.calibrateCameraExtended(
+                    obj, img, size, K, dist, rv, tv, flags=flags, criteria=criteria)
+            else:
+                rms, K, dist, rv, tv = cv2.calibrateCamera(obj, img, size, K, dist, rv, tv, flags=flags,
+                                                           criteria=criteria)
+                std_i, per_view = np.zeros(18), np.full(len(obj), np.nan)
     except cv2.error as e:
         raise EstimationError("calibration", f"model {model}: OpenCV failed ({str(e).strip().splitlines()[-1]})") from None
     K = np.asarray(K, np.float64)

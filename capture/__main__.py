@@ -1,5 +1,5 @@
 """``python -m lumigraph.capture …`` is ``lumigraph render …``."""
 
-from lumigraph.capture.cli import main
+from lumigraph.capture.commandline import module_main
 
-raise SystemExit(main(prog="python -m lumigraph.capture"))
+raise SystemExit(module_main("lumigraph.capture.cli", "python -m lumigraph.capture"))

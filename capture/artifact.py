@@ -100,8 +100,14 @@ JOURNAL_PREFIX = ".lumigraph-commit."
 
 
 def _temp_pattern(final: Path) -> re.Pattern:
-    """Temporaries of ``final`` made by :func:`atomic_path`: ``.NAME.XXXXXXXX.tmpSUFFIX``."""
-    return re.compile(rf"^\.{re.escape(final.name)}\.[A-Za-z0-9_]+\.tmp{re.escape(final.suffix)}$")
+    """Temporaries of ``final`` made by :func:`atomic_path`: ``.NAME.XXXXXXXX.tmpSUFFIX``,
+    and those of a writer nested in it (a temporary of that temporary)."""
+    one = rf"\.[A-Za-z0-9_]+\.tmp{re.escape(final.suffix)}"
+    return re.compile(rf"^\.+{re.escape(final.name)}{one}(?:{one})*$")
+
+
+# Any temporary of ours: hidden, a random part, ".tmp" and the final's suffix.
+_ANY_TEMP = re.compile(r"^\.+.+\.[A-Za-z0-9_]{8}\.tmp(\.[^.]+)?$")
 
 
 class ResultSet:
@@ -111,8 +117,12 @@ class ResultSet:
         self.staged: list[tuple[Path, Path]] = []
         # (path, "file" | "dir"): what the command declared it writes; other
         # writes (a scratch file, a cache) are not part of the set
+        outputs = list(outputs)
         self.files = {os.path.abspath(p) for p, k in outputs if k == "file"}
         self.dirs = [os.path.abspath(p) for p, k in outputs if k == "dir"]
+        # the first declared file (a command's --out) is what make checks: it
+        # goes into place last, so its presence means the whole set is there
+        self.primary = next((os.path.abspath(p) for p, k in outputs if k == "file"), None)
 
     def covers(self, final: Path) -> bool:
         """Whether ``final`` is one of the declared outputs, a sidecar of one, or
@@ -138,8 +148,13 @@ class ResultSet:
             return
         import fcntl
 
-        moves = [(str(t), str(f)) for t, f in self.staged]
-        folder = self.staged[-1][1].parent
+        def last(move):
+            f = os.path.abspath(move[1])
+            return self.primary is not None and f in (self.primary, self.primary + ".meta.json")
+
+        ordered = [m for m in self.staged if not last(m)] + [m for m in self.staged if last(m)]
+        moves = [(os.path.abspath(t), os.path.abspath(f)) for t, f in ordered]
+        folder = ordered[-1][1].parent
         fd, jtmp = tempfile.mkstemp(prefix=JOURNAL_PREFIX, suffix=".json.tmp", dir=folder)
         try:
             # locked before it becomes visible, so a recovering run sees it live
@@ -149,15 +164,30 @@ class ResultSet:
             journal = Path(jtmp[: -len(".tmp")])
             os.replace(jtmp, journal)  # the commit point
             _fsync_dir(folder)
-            for tmp, final in moves:
+            crash_at = _failpoint("commit")
+            for i, (tmp, final) in enumerate(moves):
+                if i == crash_at:
+                    os.kill(os.getpid(), 9)  # tests: a crash between two renames
                 os.replace(tmp, final)
                 _TEMPS.discard(tmp)
+            if crash_at == len(moves):
+                os.kill(os.getpid(), 9)
             journal.unlink()
         finally:
             os.close(fd)
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(jtmp)
         self.staged = []
+
+
+def _failpoint(name: str) -> int | None:
+    """``LUMIGRAPH_FAILPOINT=commit:N``: die by SIGKILL before the N-th rename of
+    a commit (the kill tests' way to land inside the commit's short window)."""
+    spec = os.environ.get("LUMIGRAPH_FAILPOINT", "")
+    if spec.startswith(name + ":"):
+        with contextlib.suppress(ValueError):
+            return int(spec.split(":", 1)[1])
+    return None
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -212,6 +242,16 @@ def recover_commits(folder: str | os.PathLike) -> int:
     folder = Path(folder)
     if not folder.is_dir():
         return 0
+    for jtmp in folder.glob(JOURNAL_PREFIX + "*.json.tmp"):  # a writer killed before its commit point
+        with contextlib.suppress(OSError):
+            fd = os.open(jtmp, os.O_RDONLY)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                jtmp.unlink()
+            except BlockingIOError:
+                pass  # alive
+            finally:
+                os.close(fd)
     for journal in sorted(folder.glob(JOURNAL_PREFIX + "*.json")):
         try:
             fd = os.open(journal, os.O_RDONLY)
@@ -238,16 +278,18 @@ def recover_commits(folder: str | os.PathLike) -> int:
     return done
 
 
-def remove_stale_temps(final: str | os.PathLike) -> list[Path]:
-    """Remove temporaries of ``final`` (and of its sidecar) left by a killed run.
-    Only safe while this process holds the output's lock."""
+def remove_stale_temps(final: str | os.PathLike, *, kind: str = "file") -> list[Path]:
+    """Remove temporaries that a killed run left: those of the file ``final``
+    (and of its sidecar), or, for an output folder, every temporary of ours in
+    it. Only safe while this process holds the output's lock."""
     final = Path(final)
     gone = []
-    if not final.parent.is_dir():
+    folder = final if kind == "dir" else final.parent
+    if not folder.is_dir():
         return gone
-    pats = [_temp_pattern(final), _temp_pattern(meta_path(final))]
-    for f in final.parent.iterdir():
-        if any(p.match(f.name) for p in pats) and str(f) not in _TEMPS:
+    pats = [_ANY_TEMP] if kind == "dir" else [_temp_pattern(final), _temp_pattern(meta_path(final))]
+    for f in folder.iterdir():
+        if any(p.match(f.name) for p in pats) and str(f) not in _TEMPS and f.is_file():
             with contextlib.suppress(FileNotFoundError):
                 f.unlink()
                 gone.append(f)

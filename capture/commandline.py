@@ -372,6 +372,10 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     with _foreign_messages(debug) as said:
         try:
             inputs, outputs = declared_paths(parser, args)
+            for folder in {Path(i) if os.path.isdir(i) else Path(i).parent for i in inputs}:
+                # an input written by a run that was killed while committing its
+                # results: finish that commit first, so we never read a mixed set
+                artifact.recover_commits(folder)
             with artifact.guard(inputs, producer=producer, force=getattr(args, "force", False)) as g:
                 for where, path, kind in outputs:
                     locks.append(prepare_output(path, kind=kind, where=where, guard=g))
@@ -382,7 +386,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             if debug:
                 traceback.print_exc()
             where = argument_flags(parser, args).get(e.where, e.where)
-            said.error(f"error: {where}: {e.problem}")
+            said.error(f"error: {where}: {_one_line(e.problem)}")
             return EXIT_USAGE
         except KeyboardInterrupt:
             said.error("error: interrupted; nothing half-written was left behind")
@@ -407,9 +411,14 @@ def _internal(e: BaseException, debug: bool, said) -> int:
     if debug:
         traceback.print_exc()
     else:
-        said.error(f"error: internal: {type(e).__name__}: {e} "
+        said.error(f"error: internal: {type(e).__name__}: {_one_line(str(e))} "
                    "(rerun with --debug for the traceback, and report it)")
     return EXIT_INTERNAL
+
+
+def _one_line(text: str) -> str:
+    """A message on one line (foreign libraries' messages span several)."""
+    return " ".join(str(text).split())
 
 
 _ENVIRONMENT_ERRNOS = {errno.EACCES, errno.EPERM, errno.EROFS, errno.ENOSPC, errno.EDQUOT,
@@ -550,10 +559,8 @@ def check_writable(path: str | os.PathLike, *, where: str, kind: str = "file") -
         probe = probe.parent
     if not probe.is_dir():
         raise InputError(where, f"{p}: cannot create it, because {probe} is a file, not a folder")
-    try:
-        fd, name = tempfile.mkstemp(prefix=".lumigraph-probe.", dir=probe)
-        os.close(fd)
-        os.unlink(name)
+    try:  # an unnamed file where the system allows (O_TMPFILE): nothing to leave behind
+        tempfile.TemporaryFile(prefix=".lumigraph-probe.", dir=probe).close()
     except OSError as e:
         raise InputError(where, f"{p}: cannot write in {probe} ({e.strerror}); choose a writable "
                                 "folder") from None
@@ -578,8 +585,7 @@ def prepare_output(path: str | os.PathLike, *, kind: str = "file", where: str = 
     lock = _Lock(p, where)
     folder = p if kind == "dir" else p.parent
     artifact.recover_commits(folder)
-    if kind == "file":
-        artifact.remove_stale_temps(p)
+    artifact.remove_stale_temps(p, kind=kind)
     return lock
 
 
@@ -750,3 +756,15 @@ def check_planned(paths: Iterable[str | os.PathLike], *, where: str = "--out") -
     if g is not None:
         for p in paths:
             g.check(p, where=where)
+
+
+def module_main(module: str, prog: str) -> int:
+    """``python -m lumigraph.<stage>``: import the stage's command and run it,
+    with Ctrl-C during the (slow) imports ending as cleanly as during the work."""
+    try:
+        import importlib
+
+        return importlib.import_module(module).main(prog=prog)
+    except KeyboardInterrupt:
+        sys.stderr.write("error: interrupted; nothing was written\n")
+        return EXIT_INTERRUPTED

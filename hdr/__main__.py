@@ -1,5 +1,5 @@
 """``python -m lumigraph.hdr …`` is ``lumigraph hdr …``."""
 
-from lumigraph.hdr.cli import main
+from lumigraph.capture.commandline import module_main
 
-raise SystemExit(main(prog="python -m lumigraph.hdr"))
+raise SystemExit(module_main("lumigraph.hdr.cli", "python -m lumigraph.hdr"))

@@ -9,8 +9,8 @@ $(HDR_OUT)/response.json $(HDR_OUT)/curve.png &: $(OUT)/scenes/bracket/stack.jso
 	$(LUMI) hdr response $(OUT)/scenes/bracket --method debevec --out $(HDR_OUT)/response.json \
 	  --plot $(HDR_OUT)/curve.png --quiet
 
-$(HDR_OUT)/radiance.exr: $(HDR_OUT)/response.json
-	$(LUMI) hdr merge $(OUT)/scenes/bracket --response $< --out $@ --quiet
+$(HDR_OUT)/radiance.exr $(HDR_OUT)/radiance.mask.png &: $(HDR_OUT)/response.json
+	$(LUMI) hdr merge $(OUT)/scenes/bracket --response $< --out $(HDR_OUT)/radiance.exr --quiet
 
 $(HDR_OUT)/tonemapped.png: $(HDR_OUT)/radiance.exr
 	$(LUMI) hdr tonemap $< --method reinhard-local --out $@ --quiet
@@ -30,3 +30,5 @@ $(HDR_OUT)/video/video.meta.json: $(OUT)/scenes/bracket_video/stack.json $(HDR_O
 	  --out $(HDR_OUT)/video --tonemap --quiet
 
 DEMO_OUTPUTS += $(HDR_OUT)/video/video.meta.json
+# every file a grouped step writes, so a rerun rebuilds whichever a kill left missing
+DEMO_OUTPUTS += $(HDR_OUT)/radiance.mask.png

@@ -1,3 +1,3 @@
-from lumigraph.lightfield.cli import main
+from lumigraph.capture.commandline import module_main
 
-raise SystemExit(main(prog="python -m lumigraph.lightfield"))
+raise SystemExit(module_main("lumigraph.lightfield.cli", "python -m lumigraph.lightfield"))

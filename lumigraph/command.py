@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Sequence
 
-from lumigraph.capture.commandline import EXIT_INTERNAL, EXIT_OK, EXIT_USAGE
+from lumigraph.capture.commandline import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_OK, EXIT_USAGE
 from lumigraph.capture.registry import Method, Registry
 
 # stage name -> the stage's main() and its one-line summary, in the one
@@ -60,6 +60,14 @@ def _top_help() -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lumigraph`` console script."""
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C while the stage's libraries load: no traceback
+        sys.stderr.write("error: interrupted; nothing was written\n")
+        return EXIT_INTERRUPTED
+
+
+def _main(argv: Sequence[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help"):
         print(_top_help())

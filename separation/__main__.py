@@ -1,5 +1,5 @@
 """``python -m lumigraph.separation …`` is ``lumigraph separate …``."""
 
-from lumigraph.separation.cli import main
+from lumigraph.capture.commandline import module_main
 
-raise SystemExit(main(prog="python -m lumigraph.separation"))
+raise SystemExit(module_main("lumigraph.separation.cli", "python -m lumigraph.separation"))

@@ -1,5 +1,5 @@
 """``python -m lumigraph.stereo …`` is ``lumigraph stereo …``."""
 
-from lumigraph.stereo.cli import main
+from lumigraph.capture.commandline import module_main
 
-raise SystemExit(main(prog="python -m lumigraph.stereo"))
+raise SystemExit(module_main("lumigraph.stereo.cli", "python -m lumigraph.stereo"))

@@ -24,9 +24,12 @@ DEMO_OUTPUTS += $(OUT)/stereo/disparity.pfm $(OUT)/stereo/points.ply
 $(OUT)/scenes/model-stereo/stack.json: $(STAMP)
 	$(LUMI) render model-stereo --out $(OUT)/scenes/model-stereo --quiet
 
-$(OUT)/stereo/facade_depth.pfm: $(OUT)/scenes/model-stereo/stack.json
+$(OUT)/stereo/facade_depth.pfm $(OUT)/stereo/facade_warped.png &: $(OUT)/scenes/model-stereo/stack.json
 	$(LUMI) stereo model-based $(OUT)/scenes/model-stereo/key.png $(OUT)/scenes/model-stereo/offset.png \
 	  --rig $(OUT)/scenes/model-stereo/gt.json --model $(OUT)/scenes/model-stereo/gt/model_depth.npy \
-	  --max-offset 0.35 --warped $(OUT)/stereo/facade_warped.png --out $@ --quiet
+	  --max-offset 0.35 --warped $(OUT)/stereo/facade_warped.png --out $(OUT)/stereo/facade_depth.pfm \
+	  --quiet
 
 DEMO_OUTPUTS += $(OUT)/stereo/facade_depth.pfm
+# every file a grouped step writes, so a rerun rebuilds whichever a kill left missing
+DEMO_OUTPUTS += $(OUT)/stereo/facade_warped.png

@@ -7,12 +7,12 @@ $(OUT)/scenes/flow/stack.json: $(STAMP)
 $(OUT)/scenes/flow-video/stack.json: $(STAMP)
 	$(LUMI) render flow-video --out $(@D) --quiet
 
-$(OUT)/flow/flow.flo: $(OUT)/scenes/flow/stack.json
-	$(LUMI) flow $(<D)/frame00.png $(<D)/frame01.png --out $@ --viz $(@D)/flow.png --quiet
+$(OUT)/flow/flow.flo $(OUT)/flow/flow.png &: $(OUT)/scenes/flow/stack.json
+	$(LUMI) flow $(<D)/frame00.png $(<D)/frame01.png --out $(OUT)/flow/flow.flo --viz $(OUT)/flow/flow.png --quiet
 
-$(OUT)/flow/video-match.flo: $(OUT)/scenes/flow-video/stack.json
+$(OUT)/flow/video-match.flo $(OUT)/flow/video-match.png &: $(OUT)/scenes/flow-video/stack.json
 	$(LUMI) flow $(<D)/frame00.png $(<D)/frame01.png --method video-matching \
-	  --out $@ --viz $(@D)/video-match.png --quiet
+	  --out $(OUT)/flow/video-match.flo --viz $(OUT)/flow/video-match.png --quiet
 
 DEMO_OUTPUTS += $(OUT)/flow/flow.flo $(OUT)/flow/video-match.flo
 
@@ -24,3 +24,5 @@ $(OUT)/flow/sequence/index.json: $(OUT)/scenes/flow-sequence/stack.json
 	$(LUMI) flow $(<D)/frame0*.png --out $(@D) --viz $(@D)/pictures --quiet
 
 DEMO_OUTPUTS += $(OUT)/flow/sequence/index.json
+# every file a grouped step writes, so a rerun rebuilds whichever a kill left missing
+DEMO_OUTPUTS += $(OUT)/flow/flow.png $(OUT)/flow/video-match.png

@@ -224,6 +224,11 @@ def _median(flow, guide, radius):
     if radius <= 0 or guide is None:
         return cv2.medianBlur(flow, 3)
     three = np.dstack([flow, np.zeros(flow.shape[:2], np.float32)])
+    # The filter draws from OpenCV's global generator (theRNG): unseeded, the
+    # flow would depend on how much of the stream earlier calls in the process
+    # used (two runs on the same frames differed). A fixed seed makes it depend
+    # on its inputs alone; the caller's OpenCV stream restarts as a side effect.
+    cv2.setRNGSeed(0)
     return np.ascontiguousarray(cv2.ximgproc.weightedMedianFilter(
         guide, three, radius, sigma=WMF_SIGMA)[..., :2])
 

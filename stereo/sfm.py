@@ -180,9 +180,14 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
         Known intrinsics: held fixed in bundle adjustment. Without it COLMAP
         estimates a SIMPLE_RADIAL camera from a focal guess.
     seed : int
-        COLMAP's random seed (RANSAC, initial pair).
+        COLMAP's random seed (every RANSAC: two-view verification, initial
+        pair, registration). Same images, camera and seed: the same bytes,
+        whatever ``threads`` is.
     threads : int
-        CPU threads for extraction, matching and mapping.
+        CPU threads for feature extraction and matching. Mapping runs on one
+        thread: multi-threaded bundle adjustment (Ceres) is not reproducible
+        run to run, by COLMAP's own account; COLMAP only threads it above
+        50 000 residuals, so small sets lose nothing.
     max_features : int
         SIFT features per image.
 
@@ -260,16 +265,28 @@ def _run_colmap(images, names, camera, seed, threads, max_features, t0):
         eo.sift.max_num_features = max_features
         pycolmap.set_random_seed(seed)
         db = tmp / "database.db"
+        # The extractor's threads store each image when its features are done,
+        # and the image ids (which order matching and mapping) would follow
+        # that race; importing the images first, one thread in input order,
+        # fixes the ids, and the threads then only fill in the features.
+        pycolmap.Database.open(db).close()
+        pycolmap.import_images(db, img_dir, camera_mode=pycolmap.CameraMode.SINGLE, image_names=files,
+                               options=ro)
         pycolmap.extract_features(db, img_dir, image_names=files, camera_mode=pycolmap.CameraMode.SINGLE,
                                   reader_options=ro, extraction_options=eo, device=pycolmap.Device.cpu)
         t_feat = time.perf_counter()
         mo = pycolmap.FeatureMatchingOptions()
         mo.num_threads = threads
-        pycolmap.match_exhaustive(db, matching_options=mo, device=pycolmap.Device.cpu)
+        # a seeded RANSAC per image pair: without it the pairs share one
+        # generator, drawn from in whatever order the threads take the pairs
+        vo = pycolmap.TwoViewGeometryOptions()
+        vo.ransac.random_seed = seed
+        pycolmap.match_exhaustive(db, matching_options=mo, verification_options=vo,
+                                  device=pycolmap.Device.cpu)
         t_match = time.perf_counter()
         opts = pycolmap.IncrementalPipelineOptions()
         opts.random_seed = seed
-        opts.num_threads = threads
+        opts.num_threads = 1  # see `threads` in reconstruct()'s docstring
         if camera is not None:
             opts.ba_refine_focal_length = False
             opts.ba_refine_principal_point = False
