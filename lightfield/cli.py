@@ -11,7 +11,6 @@ refuses to write a view whose every ray leaves the slab."""
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -66,7 +65,7 @@ def _values(texts, name):
 # ---------------------------------------------------------------------- import
 def _import(args) -> int:
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.capture.io import read_image
+    from lumigraph.capture.io import read_image, read_stack_json
     from lumigraph.capture.rig import CameraArray
     from lumigraph.capture.scenes.lightfield import parse_grid
     from lumigraph.lightfield.field import check_from_images, from_images
@@ -78,7 +77,7 @@ def _import(args) -> int:
         sj = inputs[0] / "stack.json"
         if not sj.exists():
             raise InputError(inputs[0], "folder has no stack.json; pass the view files instead")
-        stack = json.loads(sj.read_text())
+        stack = read_stack_json(sj)
         info = stack.get("lightfield", {})
         files = [inputs[0] / n for n in stack.get("images", [])]
         linear = linear or bool(stack.get("linear", False))
@@ -102,7 +101,8 @@ def _import(args) -> int:
         cameras = (CameraArray.load(args.rig), args.rig)
     elif "cameras" in info:
         where = inputs[0] / "stack.json"
-        cameras = (CameraArray.from_dict(info["cameras"], where=f"{where}"), where)
+        cameras = (CameraArray.from_dict(info["cameras"], where=where, key="lightfield.cameras"),
+                   where)
     images = [read_image(f) for f in files]
     lf = from_images(images, grid=grid, spacing=spacing or 1.0, focal_px=focal, linear=linear,
                      bit_depth=bit_depth, names=[str(f) for f in files])
@@ -157,7 +157,7 @@ def _rectify(lf, cameras, args, grid, files, spacing):
 # ---------------------------------------------------------------------- decode
 def _decode(args) -> int:
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.capture.io import read_image
+    from lumigraph.capture.io import read_image, read_stack_json
     from lumigraph.lightfield.lenslet import decode
 
     out = check_output_dir(args.out)
@@ -169,7 +169,7 @@ def _decode(args) -> int:
     views = args.views
     sj = Path(args.raw).parent / "stack.json"
     if views is None and sj.exists():
-        lens = json.loads(sj.read_text()).get("lenslet", {})
+        lens = read_stack_json(sj).get("lenslet", {})
         views = lens.get("views", [None])[0]
     t0 = time.perf_counter()
     result = decode(raw, white, views=views, lattice=args.lattice)
