@@ -13,7 +13,6 @@ file, and the board found in at least one image.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -80,11 +79,11 @@ def _expand(inputs: list[str], where: str) -> tuple[list[Path], dict]:
         sj = folder / "stack.json"
         if not sj.is_file():
             raise InputError(folder, "folder has no stack.json; pass the image files instead")
-        try:
-            info = json.loads(sj.read_text())
-            return [folder / n for n in info["images"]], {**info, "_stack": str(sj)}
-        except (json.JSONDecodeError, KeyError, TypeError) as e:
-            raise InputError(sj, f"not a stack description ({e})") from None
+        from lumigraph.capture.io import read_stack_json
+
+        info = read_stack_json(sj)
+        # where a bad board in it is reported
+        return [folder / n for n in info["images"]], {**info, "_stack": str(sj)}
     for p in paths:
         if not p.is_file():
             raise InputError(p, "file not found")

@@ -227,21 +227,42 @@ class Rectification:
                 "focal_px": self.focal_px, "baseline": self.baseline, **self.extra}
 
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "rectification") -> Rectification:
-        if not isinstance(d, dict) or "rig" not in d:
-            raise InputError(where, "not a valid rectification description (missing rig); "
-                                    "expected the rectification.json of 'lumigraph calib rectify'")
-        rig = Rig.from_dict(d["rig"], where=f"{where}:rig")
+    def from_dict(cls, d: dict, *, where: str | os.PathLike = "rectification",
+                  key: str = "") -> Rectification:
+        """From a ``rectification.json`` body; :class:`InputError` naming
+        ``where`` (the file) and the key at fault: the rig
+        (:meth:`Rig.from_dict`), ``R1``/``R2`` not finite 3x3 rotations,
+        ``P1``/``P2`` not finite 3x4 with a positive focal length and the
+        right camera to the right (``P2[0][3] < 0``), ``Q`` not a finite 4x4,
+        ``image_size`` not two positive integers."""
+        from lumigraph.capture.camera import MAX_IMAGE_SIDE
+        from lumigraph.capture.rig import require_rotation
+        from lumigraph.capture.schema import fail, key_path, require, require_object
+
+        require_object(d, path=where, where=key, keys=("rig", "R1", "R2", "P1", "P2", "Q",
+                                                       "image_size"),
+                       what="the rectification.json of 'lumigraph calib rectify' (rig, R1, R2, "
+                            "P1, P2, Q, image_size)")
+        rig = Rig.from_dict(d["rig"], where=where, key=key_path(key, "rig"))
+        R1, R2 = (require_rotation(d, n, path=where, where=key) for n in ("R1", "R2"))
+        P1, P2 = (require(d, n, "matrix", shape=(3, 4), path=where, where=key)
+                  for n in ("P1", "P2"))
+        Q = require(d, "Q", "matrix", shape=(4, 4), path=where, where=key)
+        size = require(d, "image_size", "list", length=2, items="integer", low=1,
+                       high=MAX_IMAGE_SIDE, path=where, where=key)
+        if not P1[0, 0] > 0:
+            raise fail(where, key_path(key, "P1", 0, 0), f"expected the rectified focal length "
+                                                          f"(positive), got {P1[0, 0]}")
+        if not P2[0, 3] < 0:
+            raise fail(where, key_path(key, "P2", 0, 3), f"expected -f B < 0 (the right camera "
+                                                          f"to the right), got {P2[0, 3]}")
+        extra = {k: v for k, v in d.items() if k not in
+                 ("schema", "schema_version", "rig", "R1", "R2", "P1", "P2", "Q",
+                  "image_size", "focal_px", "baseline")}
         try:
-            extra = {k: v for k, v in d.items() if k not in
-                     ("schema", "schema_version", "rig", "R1", "R2", "P1", "P2", "Q",
-                      "image_size", "focal_px", "baseline")}
-            return cls(rig, np.array(d["R1"]), np.array(d["R2"]), np.array(d["P1"]),
-                       np.array(d["P2"]), np.array(d["Q"]), tuple(d["image_size"]), extra)
-        except InputError:
-            raise
-        except (KeyError, TypeError, ValueError) as e:
-            raise InputError(where, f"not a valid rectification description ({e})") from None
+            return cls(rig, R1, R2, P1, P2, Q, tuple(size), extra)
+        except (TypeError, ValueError) as e:  # the checks above should leave none
+            raise fail(where, key, f"not a valid rectification description ({e})") from None
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``rectification.json`` atomically (with a sidecar when ``meta`` is given)."""
@@ -256,7 +277,8 @@ class Rectification:
         as saved, never recomputed from the rig."""
         from lumigraph.capture.artifact import load_json_artifact
 
-        return cls.from_dict(load_json_artifact(path, "rectification"), where=str(path))
+        return cls.from_dict(load_json_artifact(path, "rectification",
+                                                schemas=(RECTIFICATION_SCHEMA,)), where=str(path))
 
 
 def check_rectify_options(*, alpha: float) -> float:

@@ -472,20 +472,75 @@ def save_json_artifact(path: str | os.PathLike, body: dict, *, meta: dict | None
     return write_artifact(path, lambda tmp: tmp.write_text(dumps_json(body)), meta=meta)
 
 
-def load_json_artifact(path: str | os.PathLike, what: str) -> dict:
-    """Read a JSON artifact, raising InputError naming the file when it is
-    missing or not valid JSON (``what`` names the kind, e.g. ``"camera"``)."""
+def load_json_artifact(path: str | os.PathLike, what: str, *,
+                       schemas: tuple[str, ...] | None = None,
+                       versions: tuple[int, ...] = (1,)) -> dict:
+    """Read a JSON artifact: a JSON object in UTF-8, standard JSON (no NaN or
+    infinity anywhere), of one of ``schemas`` (its ``schema`` key, when it
+    has one) at a ``schema_version`` this version reads.
+
+    Parameters
+    ----------
+    path : path-like
+        The file.
+    what : str
+        The kind, for messages (``"camera"``, ``"rig"``, ``"stack"``).
+    schemas : tuple of str, optional
+        The ``schema`` values accepted (``("lumigraph.rig", "lumigraph.gt")``);
+        any, when None.
+    versions : tuple of int
+        The ``schema_version`` values accepted.
+
+    Raises
+    ------
+    InputError
+        Naming the file (and the key, for a non-finite number or the schema):
+        missing, unreadable, not UTF-8, not JSON, not an object, or of
+        another kind or version.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "camera.json"
+    >>> _ = p.write_text('{"K": [[NaN, 0, 1]]}')
+    >>> from lumigraph.capture.errors import InputError
+    >>> try:
+    ...     load_json_artifact(p, "camera")
+    ... except InputError as e:
+    ...     print(e.problem)
+    key 'K[0][0]': JSON has no NaN or infinity; write a number (or null where the file allows one)
+    """
     from lumigraph.capture.errors import InputError
+    from lumigraph.capture.schema import check_schema, fail, first_non_finite, shown
 
     p = Path(path)
     if not p.is_file():
-        raise InputError(p, f"{what} file not found")
+        raise InputError(p, f"{what} file not found" if not p.exists()
+                         else f"expected a {what} file, found a folder or device")
     try:
-        body = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raw = p.read_bytes()
+    except OSError as e:
+        raise InputError(p, f"cannot read the {what} file ({e.strerror or e})") from None
+    try:
+        text = raw.decode("utf-8-sig")  # a byte-order mark (Windows editors) is harmless
+    except UnicodeDecodeError as e:
+        raise InputError(p, f"not UTF-8 text (byte 0x{raw[e.start]:02x} at offset {e.start}); "
+                            f"save the {what} file as UTF-8 JSON") from None
+    try:
+        body = json.loads(text)
+    except json.JSONDecodeError as e:
         raise InputError(p, f"invalid JSON in the {what} file ({e})") from None
+    except (ValueError, RecursionError) as e:  # an integer of > 4300 digits, absurd nesting
+        raise InputError(p, f"invalid JSON in the {what} file ({type(e).__name__}: "
+                            f"{str(e)[:80]})") from None
     if not isinstance(body, dict):
-        raise InputError(p, f"expected a JSON object describing a {what}")
+        raise InputError(p, f"expected a JSON object describing a {what}, got {shown(body)}")
+    bad = first_non_finite(body)
+    if bad is not None:
+        raise fail(p, bad, "JSON has no NaN or infinity; write a number (or null where the "
+                           "file allows one)")
+    if schemas is not None:
+        check_schema(body, path=p, schemas=schemas, versions=versions)
     return body
 
 

@@ -32,9 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lumigraph.capture.errors import InputError
-
 CAMERA_SCHEMA = "lumigraph.camera"
+GT_SCHEMA = "lumigraph.gt"  # a rendered scene's gt.json (capture.render writes it)
+MAX_IMAGE_SIDE = 100_000  # pixels: a larger width or height in a file is a typo
 DIST_NAMES = ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")
 
 
@@ -193,22 +193,51 @@ class Camera:
                 "model": self.model, **self.extra}
 
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "camera") -> Camera:
-        """A camera from its ``camera.json`` layout; :class:`InputError` naming
-        ``where`` (the file, and the key inside it) when it is not one."""
-        if not isinstance(d, dict):
-            raise InputError(where, f"not a valid camera description (expected a JSON object with "
-                                    f"K, dist and image_size, got {type(d).__name__})")
-        missing = [k for k in ("K", "dist", "image_size") if k not in d]
-        if missing:
-            raise InputError(where, f"not a valid camera description (missing {', '.join(missing)})")
+    def from_dict(cls, d: dict, *, where: str | os.PathLike = "camera", key: str = "") -> Camera:
+        """A camera from its ``camera.json`` layout.
+
+        ``where`` is the file (or the argument) ``d`` came from and ``key`` its
+        key path inside it (``"left"`` in a ``rig.json``). :class:`InputError`
+        names both, and the key at fault: a missing ``K``, ``dist`` or
+        ``image_size``; a ``K`` that is not a finite upper-triangular 3x3 with
+        last row ``[0, 0, 1]`` and positive focal lengths; other than 0, 4, 5
+        or 8 finite distortion coefficients; an image size that is not two
+        positive integers (at most :data:`MAX_IMAGE_SIDE`).
+
+        >>> Camera.from_dict({"K": [[0, 0, 1], [0, 1, 1], [0, 0, 1]], "dist": [],
+        ...                   "image_size": [4, 3]}, where="rig.json", key="left")
+        Traceback (most recent call last):
+        ...
+        lumigraph.capture.errors.InputError: rig.json: key 'left.K[0][0]': expected a positive focal length in pixels, got 0.0
+        """
+        from lumigraph.capture.schema import check, fail, key_path, require, require_object
+
+        require_object(d, path=where, where=key, what="a camera (K, dist, image_size)",
+                       keys=("K", "dist", "image_size"))
+        K = require(d, "K", "matrix", shape=(3, 3), path=where, where=key)
+        if not np.allclose(K[2], [0, 0, 1]):
+            raise fail(where, key_path(key, "K", 2), f"expected [0, 0, 1], got {K[2].tolist()}")
+        if K[1, 0] != 0:
+            raise fail(where, key_path(key, "K", 1, 0), f"expected 0 (K is upper-triangular), "
+                                                         f"got {K[1, 0]}")
+        for i in (0, 1):
+            if not K[i, i] > 0:
+                raise fail(where, key_path(key, "K", i, i), f"expected a positive focal length "
+                                                              f"in pixels, got {K[i, i]}")
+        dist = require(d, "dist", "list", items="number", path=where, where=key)
+        if len(dist) not in (0, 4, 5, 8):
+            raise fail(where, key_path(key, "dist"), f"expected 0, 4, 5 or 8 coefficients in "
+                                                      f"OpenCV order {DIST_NAMES}, got {len(dist)}")
+        size = require(d, "image_size", "list", length=2, items="integer", low=1,
+                       high=MAX_IMAGE_SIDE, path=where, where=key)
+        model = require(d, "model", "string", default="k1k2p1p2k3", path=where, where=key)
+        check(d.get("dist_names", []), "list", path=where, key=key_path(key, "dist_names"))
+        extra = {k: v for k, v in d.items() if k not in
+                 ("schema", "schema_version", "image_size", "K", "dist", "dist_names", "model")}
         try:
-            extra = {k: v for k, v in d.items() if k not in
-                     ("schema", "schema_version", "image_size", "K", "dist", "dist_names", "model")}
-            return cls(np.array(d["K"], float), np.array(d["dist"], float),
-                       tuple(d["image_size"]), d.get("model", "k1k2p1p2k3"), extra)
-        except (KeyError, TypeError, ValueError) as e:
-            raise InputError(where, f"not a valid camera description ({e})") from None
+            return cls(K, np.array(dist, float), tuple(size), model, extra)
+        except (TypeError, ValueError) as e:  # the checks above should leave none
+            raise fail(where, key, f"not a valid camera description ({e})") from None
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
         """Write ``camera.json`` atomically (with a sidecar when ``meta`` is given)."""
@@ -219,10 +248,11 @@ class Camera:
     @classmethod
     def load(cls, path: str | os.PathLike) -> Camera:
         """Read ``camera.json``, or a rendered scene's ``gt.json`` that holds
-        one under ``camera``: the one parser of camera files."""
+        one under ``camera``: the one parser of camera files. InputError
+        names the file and the key at fault (:meth:`from_dict`)."""
         from lumigraph.capture.artifact import load_json_artifact
 
-        d = load_json_artifact(path, "camera")
+        d = load_json_artifact(path, "camera", schemas=(CAMERA_SCHEMA, GT_SCHEMA))
         if "K" not in d and "camera" in d:
-            return cls.from_dict(d["camera"], where=f"{os.fspath(path)}:camera")
+            return cls.from_dict(d["camera"], where=os.fspath(path), key="camera")
         return cls.from_dict(d, where=os.fspath(path))

@@ -35,7 +35,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import os
 import struct
 import zlib
@@ -605,6 +604,84 @@ class Stack:
                                         f_number_ref=self.info.get("f_number_ref"))
 
 
+def read_stack_json(path: str | os.PathLike) -> dict:
+    """Read and check ``stack.json``: the one parser of its keys.
+
+    Every key a command reads is checked here, once, so a hand-edited file
+    with wrong content is refused naming the key: ``images`` (a non-empty
+    list of file names); optional ``bit_depth`` (1..16 or null), ``linear``
+    (true/false), ``exposure_times_s`` and ``f_numbers`` (one positive
+    number per image), ``f_number_ref`` (positive), ``scene``, ``kind`` and
+    ``board`` (strings); a projector capture's ``sets`` (named lists of file
+    names, ``flat`` a black and a white one) and ``patterns`` (per set,
+    ``complement_of`` an index into the set or -1, ``lit_fraction`` in
+    [0, 1]); a light-field array's ``lightfield`` (``grid`` [U, V],
+    ``spacing`` and ``focal_px`` positive; its ``cameras`` are read by
+    :meth:`capture.rig.CameraArray.from_dict`); a lenslet capture's
+    ``lenslet`` (``views`` per side, 2..64). Other keys are kept unchecked.
+
+    Returns
+    -------
+    dict
+        The body as read.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key at fault.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (d / "stack.json").write_text('{"images": ["a.png", 42]}')
+    >>> try:
+    ...     read_stack_json(d / "stack.json")
+    ... except InputError as e:
+    ...     print(e.problem)
+    key 'images[1]': expected a file name (string), got 42
+    """
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.capture.schema import check, fail, key_path, require
+
+    body = load_json_artifact(path, "stack", schemas=(STACK_SCHEMA,))
+    n = len(require(body, "images", "list", items="file name", min_length=1, path=path))
+    require(body, "bit_depth", "integer", low=1, high=16, nullable=True, default=None, path=path)
+    require(body, "linear", "boolean", default=False, path=path)
+    for name, what in (("exposure_times_s", "exposure times"), ("f_numbers", "f-numbers")):
+        values = require(body, name, "list", items="number", above=0, default=None, path=path)
+        if values is not None and len(values) != n:
+            raise fail(path, name, f"{len(values)} {what} for {n} images")
+    require(body, "f_number_ref", "number", above=0, default=None, path=path)
+    for name in ("scene", "kind", "board"):
+        require(body, name, "string", default=None, path=path)
+    sets = require(body, "sets", "object", default={}, path=path)
+    for name, files in sets.items():
+        check(files, "list", items="file name", min_length=1, path=path,
+              key=key_path("sets", name))
+    if "flat" in sets and len(sets["flat"]) != 2:
+        raise fail(path, "sets.flat", f"expected a black and a white image, got "
+                                      f"{len(sets['flat'])} files")
+    for name, pattern in require(body, "patterns", "object", default={}, path=path).items():
+        where = key_path("patterns", name)
+        check(pattern, "object", path=path, key=where)
+        size = len(sets[name]) if name in sets else None
+        require(pattern, "complement_of", "list", items="integer", low=-1,
+                high=None if size is None else size - 1, length=size, default=None, path=path,
+                where=where)
+        require(pattern, "lit_fraction", "list", items="number", low=0, high=1, default=None,
+                path=path, where=where)
+    lightfield = require(body, "lightfield", "object", default={}, path=path)
+    require(lightfield, "grid", "list", length=2, items="integer", low=1, default=None,
+            path=path, where="lightfield")
+    for name in ("spacing", "focal_px"):
+        require(lightfield, name, "number", above=0, default=None, path=path, where="lightfield")
+    lenslet = require(body, "lenslet", "object", default={}, path=path)
+    require(lenslet, "views", "list", items="integer", low=2, high=64, min_length=1,
+            default=None, path=path, where="lenslet")
+    return body
+
+
 def _stack_files(inputs: Sequence[str | os.PathLike]) -> tuple[list[Path], dict, Path | None]:
     inputs = [Path(i) for i in inputs]
     if not inputs:
@@ -614,12 +691,10 @@ def _stack_files(inputs: Sequence[str | os.PathLike]) -> tuple[list[Path], dict,
         sj = folder / "stack.json"
         if not sj.exists():
             raise InputError(folder, "folder has no stack.json; pass the image files instead")
-        try:
-            info = json.loads(sj.read_text())
-        except json.JSONDecodeError as e:
-            raise InputError(sj, f"invalid JSON ({e})") from None
-        if not isinstance(info, dict) or not isinstance(info.get("images"), list) or not info["images"]:
-            raise InputError(sj, "expected an object with a non-empty 'images' list")
+        info = read_stack_json(sj)
+        for i, name in enumerate(info["images"]):
+            if not (folder / name).is_file():
+                raise InputError(sj, f"key 'images[{i}]': {name} is not a file in {folder}")
         return [folder / f for f in info["images"]], info, sj
     return inputs, {}, None
 
@@ -667,6 +742,12 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
         imgs.append(img)
         bit_depths.append(bd)
     bit_depth = info.get("bit_depth", None if bit_depths[0] is None else max(bit_depths))
+    if info.get("bit_depth") is not None and imgs[0].dtype.kind in "ui":
+        # stack.json's bit depth is a claim about the codes: check it against them
+        top = max(int(im.max()) for im in imgs)
+        if bit_depth > 8 * imgs[0].dtype.itemsize or top >= 2 ** bit_depth:
+            raise InputError(sj, f"key 'bit_depth': {bit_depth} bits, but the images are "
+                                 f"{imgs[0].dtype} with codes up to {top}")
     if times is not None:
         t = tuple(float(x) for x in check_exposure_times(times, len(files), where="times"))
     elif "exposure_times_s" in info:

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lumigraph.capture.camera import Camera
-from lumigraph.capture.errors import InputError
+from lumigraph.capture.camera import GT_SCHEMA, Camera
+from lumigraph.capture.schema import fail, key_path, require, require_object, shown
 
 RIG_SCHEMA = "lumigraph.rig"
 
@@ -94,43 +94,72 @@ class Rig:
         return save_json_artifact(path, self.to_dict(), meta=meta)
 
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "rig") -> Rig:
+    def from_dict(cls, d: dict, *, where: str | os.PathLike = "rig", key: str = "") -> Rig:
         """A rig from its ``rig.json`` layout (``left``, ``right``, ``R``, ``T``;
         ``E`` and ``F`` are derived from the pose when absent).
 
-        :class:`InputError` names ``where`` (the file, and the key inside it)
-        and what is missing or wrong.
+        ``where`` is the file (or the argument) and ``key`` the key path of
+        ``d`` inside it (``"rig"`` in a ``gt.json``); :class:`InputError`
+        names both and the key at fault: a missing key, a camera that is not
+        one (:meth:`Camera.from_dict`), an ``R`` that is not a finite 3x3
+        rotation, a ``T`` that is not a finite non-zero 3-vector, an ``E`` or
+        ``F`` that is not a finite 3x3.
         """
-        if not isinstance(d, dict):
-            raise InputError(where, f"not a valid rig description (expected a JSON object with "
-                                    f"left, right, R and T, got {type(d).__name__})")
-        missing = [k for k in ("left", "right", "R", "T") if k not in d]
-        if missing:
-            raise InputError(where, f"not a valid rig description (missing {', '.join(missing)}); "
-                                    "expected rig.json (left, right, R, T) or a gt.json with a "
-                                    "'rig' entry")
-        left = Camera.from_dict(d["left"], where=f"{where}:left")
-        right = Camera.from_dict(d["right"], where=f"{where}:right")
+        what = "a rig (left, right, R, T)"
+        if not key:
+            what += ": a rig.json, or a gt.json with a 'rig' entry"
+        require_object(d, path=where, where=key, what=what, keys=("left", "right", "R", "T"))
+        left = Camera.from_dict(d["left"], where=where, key=key_path(key, "left"))
+        right = Camera.from_dict(d["right"], where=where, key=key_path(key, "right"))
+        R = require_rotation(d, "R", path=where, where=key)
+        T = require(d, "T", "matrix", shape=(3,), path=where, where=key)
+        with np.errstate(over="ignore"):
+            baseline = np.linalg.norm(T)
+        if not 0 < baseline < np.inf:
+            raise fail(where, key_path(key, "T"), f"expected a non-zero 3-vector of finite length "
+                                                  f"(the right camera's position), got {T.tolist()}")
+        E = require(d, "E", "matrix", shape=(3, 3), default=None, path=where, where=key)
+        F = require(d, "F", "matrix", shape=(3, 3), default=None, path=where, where=key)
+        extra = {k: v for k, v in d.items() if k not in _RIG_KEYS}
         try:
-            extra = {k: v for k, v in d.items() if k not in _RIG_KEYS}
-            if "E" in d and "F" in d:
-                return cls(left, right, np.array(d["R"], float), np.array(d["T"], float),
-                           np.array(d["E"], float), np.array(d["F"], float), extra)
-            return cls.from_pose(left, right, np.array(d["R"], float), np.array(d["T"], float),
-                                 **extra)
-        except (KeyError, TypeError, ValueError) as e:
-            raise InputError(where, f"not a valid rig description ({e})") from None
+            with np.errstate(all="ignore"):  # extreme K or T: refused just below
+                rig = cls(left, right, R, T, E, F, extra) if E is not None and F is not None \
+                    else cls.from_pose(left, right, R, T, **extra)
+        except (TypeError, ValueError) as e:  # the checks above should leave none
+            raise fail(where, key, f"not a valid rig description ({e})") from None
+        if not (np.isfinite(rig.E).all() and np.isfinite(rig.F).all()):
+            raise fail(where, key, "the cameras' K and the pose T give no finite essential and "
+                                   "fundamental matrices; check their magnitudes")
+        return rig
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Rig:
         """Read ``rig.json``, or a rendered scene's ``gt.json`` that holds one
-        under ``rig``: the one parser of rig files."""
+        under ``rig``: the one parser of rig files. InputError names the file
+        and the key at fault (:meth:`from_dict`)."""
         from lumigraph.capture.artifact import load_json_artifact
 
-        d = load_json_artifact(path, "rig")
+        d = load_json_artifact(path, "rig", schemas=(RIG_SCHEMA, GT_SCHEMA))
         if "left" not in d and "rig" in d:
-            return cls.from_dict(d["rig"], where=f"{os.fspath(path)}:rig")
+            return cls.from_dict(d["rig"], where=os.fspath(path), key="rig")
         return cls.from_dict(d, where=os.fspath(path))
+
+
+def require_rotation(body: dict, name: str, *, path: str | os.PathLike, where: str = "") -> np.ndarray:
+    """``body[name]`` as a 3x3 rotation (finite, ``R Rᵀ = I`` to 1e-6,
+    ``det R = +1``), or :class:`InputError` naming ``path`` and the key.
+
+    >>> require_rotation({"R": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}, "R", path="rig.json")
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: rig.json: key 'R': expected a rotation matrix (R R^T = I, det R = +1)
+    """
+    R = require(body, name, "matrix", shape=(3, 3), path=path, where=where)
+    with np.errstate(all="ignore"):  # entries near 1e308 overflow: not a rotation either
+        ok = np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0
+    if not ok:
+        raise fail(path, key_path(where, name), "expected a rotation matrix (R R^T = I, det R = +1)")
+    return R
 
 
 _RIG_KEYS = ("schema", "schema_version", "left", "right", "R", "T", "E", "F", "baseline")
@@ -183,27 +212,29 @@ class CameraArray:
         object.__setattr__(self, "cam_from_world", tuple(poses))
 
     @classmethod
-    def from_dict(cls, d, *, where: str = "cameras") -> CameraArray:
+    def from_dict(cls, d, *, where: str | os.PathLike = "cameras", key: str = "") -> CameraArray:
         """From ``{"cameras": [...]}``, a bare list of camera entries, or a
-        two-camera rig description; :class:`InputError` naming ``where``."""
+        two-camera rig description; :class:`InputError` naming ``where`` (the
+        file) and the key at fault (``key`` is the key path of ``d`` in it)."""
         if isinstance(d, dict) and "cameras" not in d and ("left" in d or "rig" in d):
-            rig = Rig.from_dict(d, where=where) if "left" in d else \
-                Rig.from_dict(d["rig"], where=f"{where}:rig")
+            rig = Rig.from_dict(d, where=where, key=key) if "left" in d else \
+                Rig.from_dict(d["rig"], where=where, key=key_path(key, "rig"))
             return cls((rig.left, rig.right), ((np.eye(3), np.zeros(3)), (rig.R, rig.T)))
-        entries = d.get("cameras") if isinstance(d, dict) else d
-        if not isinstance(entries, list) or not entries:
-            raise InputError(where, 'expected {"cameras": [camera.json entries with '
-                                    'cam_from_world {R, t}, row-major]} or a rig.json')
+        if isinstance(d, dict):
+            key = key_path(key, "cameras")
+            d = d.get("cameras")
+        if not isinstance(d, list) or not d:
+            raise fail(where, key, f'expected {{"cameras": [camera.json entries with '
+                                   f'cam_from_world {{R, t}}, row-major]}} or a rig.json, got '
+                                   f"{shown(d)}")
         cams, poses = [], []
-        for k, e in enumerate(entries):
-            name = f"{where}: camera {k}"
-            cams.append(Camera.from_dict(e, where=name))
-            try:
-                pose = e["cam_from_world"]
-                poses.append((np.array(pose["R"], float).reshape(3, 3),
-                              np.array(pose["t"], float).reshape(3)))
-            except (KeyError, TypeError, ValueError) as err:
-                raise InputError(name, f"needs cam_from_world {{R: 3x3, t: 3}} ({err})") from None
+        for k, e in enumerate(d):
+            name = key_path(key, k)
+            cams.append(Camera.from_dict(e, where=where, key=name))
+            pose = require(e, "cam_from_world", "object", path=where, where=name)
+            poses.append((require_rotation(pose, "R", path=where, where=key_path(name, "cam_from_world")),
+                          require(pose, "t", "matrix", shape=(3,), path=where,
+                                  where=key_path(name, "cam_from_world"))))
         return cls(tuple(cams), tuple(poses))
 
     def to_dict(self) -> dict:
@@ -225,13 +256,7 @@ class CameraArray:
     def load(cls, path: str | os.PathLike) -> CameraArray:
         """Read a camera-array file, a ``rig.json`` or a ``gt.json`` with a
         ``rig`` entry: the one parser of posed-camera files."""
-        import json
+        from lumigraph.capture.artifact import load_json_artifact
 
-        p = Path(path)
-        if not p.is_file():
-            raise InputError(p, "rig file not found")
-        try:
-            d = json.loads(p.read_text())
-        except (OSError, ValueError) as e:
-            raise InputError(p, f"not JSON ({e})") from None
+        d = load_json_artifact(path, "rig", schemas=(CAMERA_ARRAY_SCHEMA, RIG_SCHEMA, GT_SCHEMA))
         return cls.from_dict(d, where=os.fspath(path))

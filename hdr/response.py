@@ -195,18 +195,45 @@ class ResponseCurve:
                 "selection": self.selection, "warnings": list(self.warnings), "fit": self.fit}
 
     @classmethod
-    def from_dict(cls, d: dict, *, where: str = "response") -> ResponseCurve:
-        """Build from a ``response.json`` body; InputError naming ``where`` if malformed."""
-        if not isinstance(d, dict):
-            raise InputError(where, "expected a JSON object (a response.json)")
-        missing = [k for k in ("method", "bit_depth", "g") if k not in d]
-        if missing:
-            raise InputError(where, f"not a response curve: missing {', '.join(missing)}")
+    def from_dict(cls, d: dict, *, where: str | os.PathLike = "response") -> ResponseCurve:
+        """Build from a ``response.json`` body; :class:`InputError` naming
+        ``where`` (the file) and the key at fault: ``method`` not a name,
+        ``bit_depth`` not an integer in 1..16, ``g`` not ``C`` rows of
+        ``2**bit_depth`` finite numbers (``channels`` when given), the
+        exposure times not positive numbers, ``selection``/``fit`` not
+        objects, ``warnings`` not strings.
+
+        >>> body = ResponseCurve.linear(2, channels=1).to_dict()
+        >>> body["g"][0][3] = "dark"
+        >>> ResponseCurve.from_dict(body, where="response.json")
+        Traceback (most recent call last):
+        ...
+        lumigraph.capture.errors.InputError: response.json: key 'g[0][3]': expected a number, got 'dark'
+        """
+        from lumigraph.capture.schema import fail, require, require_object
+
+        require_object(d, path=where, where="", keys=("method", "bit_depth", "g"),
+                       what="a response curve (method, bit_depth, g)")
+        method = require(d, "method", "string", path=where)
+        bit_depth = require(d, "bit_depth", "integer", low=1, high=16, path=where)
+        n = 2 ** bit_depth
+        g = d["g"]
+        if isinstance(g, list) and g and not isinstance(g[0], list):  # one channel, flat
+            g = [g]
+        g = require({"g": g}, "g", "matrix", shape=(None, n), path=where)
+        channels = require(d, "channels", "integer", low=1, default=len(g), path=where)
+        if channels != len(g):
+            raise fail(where, "channels", f"{channels} channels, but g has {len(g)} rows")
+        times = require(d, "exposure_times", "list", items="number", above=0, min_length=1,
+                        nullable=True, default=None, path=where)
+        selection = require(d, "selection", "object", nullable=True, default=None, path=where)
+        warnings = require(d, "warnings", "list", items="string", nullable=True, default=None,
+                           path=where)
+        fit = require(d, "fit", "object", nullable=True, default=None, path=where)
         try:
-            return cls(d["method"], int(d["bit_depth"]), np.asarray(d["g"], dtype=np.float64),
-                       d.get("exposure_times"), d.get("selection") or {},
-                       tuple(d.get("warnings") or ()), d.get("fit") or {})
-        except (TypeError, ValueError) as e:
+            return cls(method, bit_depth, g, times, selection or {}, tuple(warnings or ()),
+                       fit or {})
+        except (TypeError, ValueError) as e:  # the checks above should leave none
             raise InputError(where, f"invalid response curve ({e})") from None
 
     def save(self, path: str | os.PathLike, *, meta: dict | None = None) -> Path:
@@ -227,9 +254,10 @@ class ResponseCurve:
         """Read a ``response.json``; InputError naming the file if it is not one."""
         from lumigraph.capture.artifact import load_json_artifact
 
-        if not Path(path).is_file():
+        if not Path(path).exists():
             raise InputError(path, "response file not found (make one with 'lumigraph hdr response')")
-        return cls.from_dict(load_json_artifact(path, "response curve"), where=str(path))
+        return cls.from_dict(load_json_artifact(path, "response curve", schemas=(SCHEMA,),
+                                                versions=(SCHEMA_VERSION,)), where=str(path))
 
     @classmethod
     def linear(cls, bit_depth: int, channels: int = 3, *, reason: str = "") -> ResponseCurve:

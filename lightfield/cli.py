@@ -12,7 +12,6 @@ refuses to write a view whose every ray leaves the slab."""
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -110,7 +109,7 @@ def _lightfield_files(folder: Path, grid) -> list[Path]:
 # ---------------------------------------------------------------------- import
 def _import(args) -> int:
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.capture.io import read_image
+    from lumigraph.capture.io import read_image, read_stack_json
     from lumigraph.capture.rig import CameraArray
     from lumigraph.capture.scenes.lightfield import parse_grid
     from lumigraph.lightfield.field import check_from_images, from_images
@@ -123,7 +122,7 @@ def _import(args) -> int:
         sj = inputs[0] / "stack.json"
         if not sj.exists():
             raise InputError(inputs[0], "folder has no stack.json; pass the view files instead")
-        stack = json.loads(sj.read_text())
+        stack = read_stack_json(sj)
         info = stack.get("lightfield", {})
         files = [inputs[0] / n for n in stack.get("images", [])]
         linear = linear or bool(stack.get("linear", False))
@@ -150,7 +149,8 @@ def _import(args) -> int:
         cameras = (CameraArray.load(args.rig), args.rig)
     elif "cameras" in info:
         where = inputs[0] / "stack.json"
-        cameras = (CameraArray.from_dict(info["cameras"], where=f"{where}"), where)
+        cameras = (CameraArray.from_dict(info["cameras"], where=where, key="lightfield.cameras"),
+                   where)
     images = [read_image(f) for f in files]
     lf = from_images(images, grid=grid, spacing=spacing or 1.0, focal_px=focal, linear=linear,
                      bit_depth=bit_depth, names=[str(f) for f in files])
@@ -205,7 +205,7 @@ def _rectify(lf, cameras, args, grid, files, spacing):
 # ---------------------------------------------------------------------- decode
 def _decode(args) -> int:
     from lumigraph.capture.artifact import make_meta
-    from lumigraph.capture.io import read_image
+    from lumigraph.capture.io import read_image, read_stack_json
     from lumigraph.lightfield.lenslet import decode
 
     out = check_output_dir(args.out)
@@ -217,7 +217,7 @@ def _decode(args) -> int:
     views = args.views
     sj = Path(args.raw).parent / "stack.json"
     if views is None and sj.exists():
-        lens = json.loads(sj.read_text()).get("lenslet", {})
+        lens = read_stack_json(sj).get("lenslet", {})
         views = lens.get("views", [None])[0]
         args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "views": str(sj)}
     # the views' names wait for the decode, which bounds their number by the lenslets

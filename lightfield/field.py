@@ -35,7 +35,6 @@ Examples
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -156,7 +155,14 @@ class LightField:
 
     @classmethod
     def load(cls, folder: str | os.PathLike) -> LightField:
-        """Read a folder written by :meth:`save`."""
+        """Read a folder written by :meth:`save` (or its ``lightfield.json``).
+
+        Raises
+        ------
+        InputError
+            Naming ``lightfield.json`` and the key at fault (:func:`read_lightfield_json`),
+            or a view that is missing, unreadable or of another size.
+        """
         from lumigraph.capture.io import read_exr
 
         folder = Path(folder)
@@ -164,14 +170,11 @@ class LightField:
         if not js.exists():
             raise InputError(folder, "not a light-field folder (no lightfield.json); make one "
                                      "with 'lumigraph lightfield import' or 'decode'")
-        try:
-            body = json.loads(js.read_text())
-            u, v = body["grid"]
-            names = body["views"]
-        except (json.JSONDecodeError, KeyError, ValueError, TypeError) as e:
-            raise InputError(js, f"invalid lightfield.json ({e})") from None
-        if len(names) != u * v:
-            raise InputError(js, f"{len(names)} views listed for a {u}x{v} grid")
+        body = read_lightfield_json(js)
+        (u, v), names = body["grid"], body["views"]
+        for i, n in enumerate(names):
+            if not (js.parent / n).is_file():
+                raise InputError(js, f"key 'views[{i}]': {n} is not a file in {js.parent}")
         views = []
         for n in names:
             img = read_exr(js.parent / n)
@@ -180,12 +183,52 @@ class LightField:
                 raise InputError(js.parent / n, f"size {views[-1].shape} differs from "
                                                 f"{names[0]} {views[0].shape}")
             check_finite_view(views[-1], js.parent / n)
+        h, w, c = views[0].shape
+        for key, found in (("size", [w, h]), ("channels", c)):
+            if key in body and body[key] != found:
+                raise InputError(js, f"key '{key}': the file says {body[key]}, but the views are "
+                                     f"{w}x{h} with {c} channels")
         data = np.stack(views).reshape(u, v, *views[0].shape)
-        try:
-            return cls(data, spacing=float(body.get("spacing", 1.0)), focal_px=body.get("focal_px"),
-                       alpha_scale=body.get("alpha_scale"), info=body.get("info", {}))
-        except (ValueError, TypeError) as e:  # the geometry it records: a fault of the file
-            raise InputError(js, f"invalid lightfield.json ({e})") from None
+        return cls(data, spacing=body["spacing"], focal_px=body["focal_px"],
+                   alpha_scale=body["alpha_scale"], info=body["info"])
+
+
+def read_lightfield_json(path: str | os.PathLike) -> dict:
+    """Read and check ``lightfield.json``: the one parser of its keys.
+
+    Returns the body with ``grid`` ``[U, V]`` (positive integers, at least 2
+    views), ``views`` (``U * V`` file names), ``spacing`` (positive, default
+    1), ``focal_px`` and ``alpha_scale`` (positive or None), ``info`` (an
+    object) filled in; ``size`` ``[W, H]`` and ``channels``, when present,
+    are positive integers.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key at fault.
+    """
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.capture.schema import fail, require
+
+    body = load_json_artifact(path, "light-field description", schemas=(SCHEMA,))
+    u, v = require(body, "grid", "list", length=2, items="integer", low=1, path=path)
+    if u * v < 2:
+        raise fail(path, "grid", f"a light field needs at least 2 views, got a {u}x{v} grid")
+    names = require(body, "views", "list", items="file name", path=path)
+    if len(names) != u * v:
+        raise fail(path, "views", f"{len(names)} views listed for a {u}x{v} grid")
+    out = dict(body, grid=[u, v], views=names,
+               spacing=require(body, "spacing", "number", above=0, default=1.0, path=path),
+               focal_px=require(body, "focal_px", "number", above=0, nullable=True,
+                                default=None, path=path),
+               alpha_scale=require(body, "alpha_scale", "number", above=0, nullable=True,
+                                   default=None, path=path),
+               info=require(body, "info", "object", default={}, path=path))
+    if "size" in body:
+        out["size"] = require(body, "size", "list", length=2, items="integer", low=1, path=path)
+    if "channels" in body:
+        out["channels"] = require(body, "channels", "integer", low=1, path=path)
+    return out
 
 
 def check_finite_view(view: np.ndarray, where) -> None:

@@ -70,9 +70,7 @@ def _linear(stack, response, where):
 
 
 def _load(args):
-    import json
-
-    from lumigraph.capture.io import read_stack
+    from lumigraph.capture.io import read_stack, read_stack_json
 
     inputs = [Path(p) for p in args.images]
     black = white = None
@@ -80,7 +78,7 @@ def _load(args):
     alpha = args.alpha
     folder = inputs[0] if len(inputs) == 1 and inputs[0].is_dir() else None
     if folder is not None and (folder / "stack.json").exists():
-        info = json.loads((folder / "stack.json").read_text())
+        info = read_stack_json(folder / "stack.json")
         sets = info.get("sets")
         if sets:
             if args.method not in sets:

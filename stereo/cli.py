@@ -252,37 +252,12 @@ def _depth(args) -> int:
 
 
 def _load_tracks(args):
-    from lumigraph.capture.artifact import load_json_artifact
-    from lumigraph.capture.camera import Camera
     from lumigraph.capture.rig import Rig
+    from lumigraph.stereo.triangulate import read_tracks
 
     p = Path(args.correspondences)
     if p.suffix.lower() == ".json":
-        d = load_json_artifact(p, "tracks")
-        try:
-            cams, poses = [], []
-            for i, v in enumerate(d["views"]):
-                cams.append(Camera.from_dict(v["camera"], where=f"{p}:views[{i}].camera"))
-                pose = v.get("cam_from_world", {"R": np.eye(3).tolist(), "t": [0, 0, 0]})
-                R = np.array(pose["R"], float)
-                if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
-                    raise ValueError(f"views[{i}].cam_from_world.R is not a rotation")
-                poses.append((R, np.array(pose["t"], float).reshape(3)))
-            tracks = d["tracks"]
-            V = len(cams)
-            px = np.full((V, len(tracks), 2), np.nan)
-            for j, tr in enumerate(tracks):
-                if len(tr) != V:
-                    raise ValueError(f"tracks[{j}] has {len(tr)} entries for {V} views")
-                for v, xy in enumerate(tr):
-                    if xy is not None:
-                        px[v, j] = xy
-        except InputError:
-            raise
-        except (KeyError, TypeError, ValueError) as e:
-            raise InputError(p, f"not a tracks file ({e}); see 'lumigraph stereo triangulate --help'") from None
-        sigma = d.get("pixel_sigma")
-        return cams, poses, px, sigma
+        return read_tracks(p)
     if not args.rig:
         raise InputError(p, "a text file of matches needs --rig rig.json (or give a tracks .json)")
     if not p.is_file():

@@ -343,3 +343,57 @@ def triangulate(pixels, cameras, poses, *, method: str = "refined", pixel_sigma:
     info = {"method": method, "pixel_sigma": pixel_sigma, "min_angle_deg": min_angle_deg,
             "views": V, "tracks": N, "near_parallel": int(near.sum()), "at_infinity": int(at_inf.sum())}
     return Triangulation(X, Xh, cov, angle, rms, near, at_inf, info)
+
+
+def read_tracks(path) -> tuple[list, list, np.ndarray, float | None]:
+    """Read a ``tracks.json``: the one parser of track files.
+
+    The file is ``{"views": [{"camera": <camera.json body>, "cam_from_world":
+    {"R": 3x3, "t": [3]}}, ...], "tracks": [[[x, y] or null per view], ...],
+    "pixel_sigma": s}``; a view without ``cam_from_world`` is at the origin,
+    ``pixel_sigma`` is optional (its range is :func:`triangulate`'s rule).
+
+    Returns
+    -------
+    cameras : list of Camera, length V
+    poses : list of (R (3, 3), t (3,)) float64, ``cam_from_world``
+    pixels : ndarray, (V, N, 2) float64
+        NaN where a view does not see the track.
+    pixel_sigma : float or None
+
+    Raises
+    ------
+    InputError
+        Naming the file and the key at fault (``views[1].camera.K``,
+        ``tracks[3][0]``, ...).
+    """
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import require_rotation
+    from lumigraph.capture.schema import check, key_path, require
+
+    body = load_json_artifact(path, "tracks")
+    views = require(body, "views", "list", min_length=2, path=path)
+    cameras, poses = [], []
+    for i, view in enumerate(views):
+        where = key_path("views", i)
+        check(view, "object", path=path, key=where)
+        cameras.append(Camera.from_dict(require(view, "camera", "object", path=path, where=where),
+                                        where=path, key=key_path(where, "camera")))
+        pose = require(view, "cam_from_world", "object", default=None, path=path, where=where)
+        if pose is None:
+            poses.append((np.eye(3), np.zeros(3)))
+        else:
+            at = key_path(where, "cam_from_world")
+            poses.append((require_rotation(pose, "R", path=path, where=at),
+                          require(pose, "t", "matrix", shape=(3,), path=path, where=at)))
+    tracks = require(body, "tracks", "list", min_length=1, path=path)
+    px = np.full((len(views), len(tracks), 2), np.nan)
+    for j, track in enumerate(tracks):
+        check(track, "list", length=len(views), path=path, key=key_path("tracks", j))
+        for v, xy in enumerate(track):
+            if xy is not None:
+                px[v, j] = check(xy, "matrix", shape=(2,), path=path,
+                                 key=key_path("tracks", j, v))
+    sigma = require(body, "pixel_sigma", "number", nullable=True, default=None, path=path)
+    return cameras, poses, px, sigma

@@ -156,7 +156,7 @@ def test_rectification_for_another_image_size_is_refused(pairs, tmp_path):
     bad.write_text(json.dumps({"schema": "lumigraph.rectification"}))
     r = lumigraph("stereo", "depth", tmp_path / "small.pfm", "--rectification", bad, "--out",
                   tmp_path / "p.ply")
-    assert_clean_error(r, "bad.json", "missing rig")
+    assert_clean_error(r, "bad.json", "missing keys 'rig'")
 
 
 def test_match_bad_input(pairs, tmp_path):
