@@ -370,9 +370,10 @@ def _read_model(path):
     if p.suffix.lower() == ".npy":
         if not p.is_file():
             raise InputError(p, "file not found")
-        try:
-            z = np.load(p, allow_pickle=False)
-        except (ValueError, OSError) as e:
+        try:  # mapped, not read: a header claiming a huge array costs nothing until the
+            # size check against the key image (the file holds fewer bytes: refused here)
+            z = np.load(p, mmap_mode="r", allow_pickle=False)
+        except (ValueError, OSError, EOFError) as e:
             raise InputError(p, f"not a .npy array ({e})") from None
     else:
         z = read_pfm(p)
