@@ -17,7 +17,8 @@ would be read first, the command calls its ``check_*`` function early
 line keeps the text parsing, what concerns files (an empty image, images of
 different sizes, images against the rig or rectification file, the tracks and
 model files) and output names, and maps each library argument to its flag or
-to the file it came from.
+to the file it came from. An SfM that registers too few views ran but has no
+usable result: exit 3 (``EXIT_UNUSABLE``), one line, nothing written.
 """
 
 from __future__ import annotations

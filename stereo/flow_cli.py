@@ -69,7 +69,9 @@ def _outputs(args):
     n = len(args.images) - 1
     if n == 1:
         out = check_output_path(args.out, suffixes=(".flo",))
-        viz = check_output_path(args.viz, suffixes=(".png",)) if args.viz is not None else None
+        viz = None if args.viz is None else Path(args.viz)
+        if viz is not None and viz.suffix.lower() != ".png":
+            raise InputError("viz", f"{viz}: two images give one picture; name it .png")
         return [out], [viz]
     if Path(args.out).suffix.lower() == ".flo":
         raise InputError("out", f"{len(args.images)} frames give {n} flows: name a folder, "

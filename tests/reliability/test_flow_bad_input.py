@@ -48,3 +48,10 @@ def test_the_probability_image_beside_out_is_declared(pair, tmp_path, capsys):
     io.write_exr(d / "f.prob.exr", np.zeros((4, 4), np.float32))
     assert_refused(main, [d / "frame00.png", d / "frame01.png", "--out", d / "f.flo"],
                    "--out", capsys, outputs=[d / "f.flo"], inputs=[d], fragments=["f.prob.exr"])
+
+
+def test_a_picture_folder_for_two_images_is_named_viz(pair, tmp_path, capsys):
+    out = tmp_path / "f.flo"
+    assert_refused(main, [pair / "frame00.png", pair / "frame01.png", "--out", out,
+                          "--viz", tmp_path / "pics"], "--viz", capsys,
+                   outputs=[out, tmp_path / "pics"], inputs=[pair], fragments=[".png"])
