@@ -252,6 +252,9 @@ def _cv2():
     # OpenCV's own stderr warnings would break the one-line error convention;
     # our readers report every problem themselves.
     os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
+    # OpenCV's own pixel limit (2**30, read once) would contradict ours when
+    # LUMIGRAPH_MAX_PIXELS is raised past it; ours is checked before every decode
+    os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(1 << 40))
     import cv2  # imported lazily: `import capture` must stay cheap
 
     return cv2
@@ -323,8 +326,10 @@ def read_image(path) -> np.ndarray:
     Raises
     ------
     InputError
-        Missing, empty, truncated or undecodable file, unknown extension, or
-        NaN/inf in a float image.
+        Missing, empty, truncated or undecodable file, unknown extension or
+        content, a header claiming more than :func:`max_pixels` pixels or more
+        than the file can hold (checked before decoding), or NaN/inf in a
+        float image.
     """
     p = _existing(path)
     ext = p.suffix.lower()
