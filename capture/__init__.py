@@ -5,6 +5,8 @@ import it, it imports none of them. It holds
 
 - ``capture.io``: image and artifact formats (PNG/TIFF/JPEG with EXIF, RAW,
   OpenEXR, PFM, Middlebury ``.flo``, binary PLY) and image stacks;
+- ``capture.headers``: image sizes read from file headers, checked against
+  the pixel limit (``LUMIGRAPH_MAX_PIXELS``) before any decoder allocates;
 - ``capture.artifact``: atomic writes and the ``<output>.meta.json`` sidecar;
 - ``capture.errors``: the exceptions the command line turns into exit 2;
 - ``capture.commandline``: the ``lumigraph`` command and the CLI helpers;

@@ -4,6 +4,13 @@ Every reader validates what it reads and raises :class:`capture.errors.InputErro
 naming the file and the problem (missing, truncated, wrong kind, NaN/inf where
 finite values are required). Every writer is atomic (see ``capture.artifact``).
 
+Every reader checks the size a header claims before it allocates anything:
+at most :func:`max_pixels` pixels (``LUMIGRAPH_MAX_PIXELS``, default
+``DEFAULT_MAX_PIXELS`` = 2²⁸ ≈ 268 MP, 16384²), and no more than the file's
+bytes can hold (:mod:`lumigraph.capture.headers`). A decoder's own failure
+(libpng, libtiff, OpenEXR, Pillow) becomes an InputError naming the file, and
+what the C libraries print is kept off the terminal.
+
 Conventions (DESIGN §3): images are ``H×W`` or ``H×W×C`` in **RGB** order;
 captured code values stay integers (``uint8``/``uint16``) with their true bit
 depth recorded; linear data are ``float32``. OpenCV's BGR order is converted
@@ -35,8 +42,12 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import os
 import struct
+import sys
+import tempfile
+import threading
 import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -46,8 +57,10 @@ from pathlib import Path
 import numpy as np
 
 from lumigraph.capture.artifact import atomic_path, dumps_json
+from lumigraph.capture.commandline import DEFAULT_MAX_PIXELS  # beside --max-pixels
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.exposure import check_exposure_times, effective_exposure_times
+from lumigraph.capture.headers import exr_header, image_header
 from lumigraph.capture.rgbe import RGBE_EXTS as _RGBE_EXTS
 
 LDR_EXTS = {".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm"}
@@ -60,10 +73,187 @@ FLOAT_EXTS = EXR_EXTS | {".pfm"} | RGBE_EXTS
 STACK_SCHEMA = "lumigraph.stack"
 
 
+# ---------------------------------------------------------------- pixel limit
+MAX_PIXELS_ENV = "LUMIGRAPH_MAX_PIXELS"
+
+
+def max_pixels() -> int:
+    """The most pixels a reader accepts: ``LUMIGRAPH_MAX_PIXELS`` (read at each
+    call, so ``--max-pixels`` and tests can set it), else ``DEFAULT_MAX_PIXELS``.
+
+    Raises
+    ------
+    InputError
+        ``LUMIGRAPH_MAX_PIXELS`` is not a positive whole number.
+
+    Examples
+    --------
+    >>> max_pixels() == int(os.environ.get("LUMIGRAPH_MAX_PIXELS", DEFAULT_MAX_PIXELS))
+    True
+    """
+    raw = os.environ.get(MAX_PIXELS_ENV, "").strip()
+    if not raw:
+        return DEFAULT_MAX_PIXELS
+    try:
+        n = int(raw)
+    except ValueError:
+        try:
+            f = float(raw)  # 1e9 is a whole number too
+        except ValueError:
+            f = float("nan")
+        n = int(f) if f == f and f not in (float("inf"), float("-inf")) and f.is_integer() else 0
+    if n <= 0:
+        raise InputError(MAX_PIXELS_ENV, f"expected a positive whole number of pixels, got {raw!r}")
+    return n
+
+
+def check_pixel_count(path, width: int, height: int, *, what: str = "image") -> int:
+    """Refuse a size a header claims before anything is allocated for it.
+
+    Parameters
+    ----------
+    path : path-like
+        The file, named in the error.
+    width, height : int
+        The claimed size in pixels.
+    what : str
+        What claims it (``"PNG header"``, ``"TIFF page 2"``, …).
+
+    Returns
+    -------
+    int
+        ``width * height``.
+
+    Raises
+    ------
+    InputError
+        ``width`` or ``height`` ≤ 0, or more than :func:`max_pixels` pixels.
+
+    Examples
+    --------
+    >>> check_pixel_count("a.png", 640, 480)
+    307200
+    >>> try:
+    ...     check_pixel_count("bomb.png", 60000, 60000, what="PNG header")
+    ... except InputError as e:
+    ...     print(e.problem.partition(" (set")[0])
+    PNG header claims 60000x60000 = 3600000000 pixels, over the limit of 268435456
+    """
+    w, h = int(width), int(height)
+    if w <= 0 or h <= 0:
+        raise InputError(path, f"{what} claims a size of {w}x{h}; width and height must be "
+                               "positive (corrupt file?)")
+    n = w * h
+    limit = max_pixels()
+    if n > limit:
+        raise InputError(path, f"{what} claims {w}x{h} = {n} pixels, over the limit of {limit} "
+                               f"(set {MAX_PIXELS_ENV} or --max-pixels to read larger images)")
+    return n
+
+
+def _check_header(path, header) -> None:
+    """The limit for every size a header claims, then whether the file can hold it."""
+    check_pixel_count(path, header.width, header.height, what=f"{header.kind} header")
+    for what, w, h in header.pages:
+        check_pixel_count(path, w, h, what=what)
+    if header.short:
+        raise InputError(path, header.short)
+
+
+# ------------------------------------------------------- C libraries' messages
+_FD_LOCK = threading.Lock()
+_FD_STATE: dict = {}  # 2 or "stdout" -> {"depth", "saved", "file"} while redirected
+
+
+def _flush_c_stdio() -> None:
+    # C stdio buffers what a library prints (fully, when not on a terminal):
+    # flush it while the redirection is in place, so it lands where we look
+    import ctypes
+
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):
+        pass
+
+
+@contextlib.contextmanager
+def _c_messages(*, python_stdout: bool = False):
+    """Route file descriptor 2 into a temporary file while a C library decodes
+    (libpng, libtiff and OpenEXR print their complaints there, and the command
+    line promises one error line); with ``python_stdout`` also ``sys.stdout``
+    (OpenEXR's binding prints a warning there and returns what it has). Yields
+    a list that receives the captured text, to quote in an error. Nested and
+    concurrent uses share one redirection (what another thread prints
+    meanwhile is captured too)."""
+    import io as _textio
+
+    with _FD_LOCK:
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (AttributeError, ValueError, OSError):
+                pass
+        _flush_c_stdio()
+        st = _FD_STATE.get(2)
+        if st is None:
+            tmp = tempfile.TemporaryFile()
+            st = _FD_STATE[2] = {"depth": 0, "saved": os.dup(2), "file": tmp}
+            os.dup2(tmp.fileno(), 2)
+        st["depth"] += 1
+        start = os.fstat(st["file"].fileno()).st_size
+        py = None
+        if python_stdout:
+            py = _FD_STATE.get("stdout")
+            if py is None:
+                py = _FD_STATE["stdout"] = {"depth": 0, "saved": sys.stdout,
+                                            "file": _textio.StringIO()}
+                sys.stdout = py["file"]
+            py["depth"] += 1
+            py_start = py["file"].tell()
+    text: list[str] = []
+    try:
+        yield text
+    finally:
+        with _FD_LOCK:
+            _flush_c_stdio()
+            f = st["file"].fileno()
+            end = os.fstat(f).st_size
+            text.append(os.pread(f, min(end - start, 4096), start).decode("utf-8", "replace"))
+            st["depth"] -= 1
+            if st["depth"] == 0:
+                os.dup2(st["saved"], 2)
+                os.close(st["saved"])
+                st["file"].close()
+                del _FD_STATE[2]
+            if py is not None:
+                text.append(py["file"].getvalue()[py_start:py_start + 4096])
+                py["depth"] -= 1
+                if py["depth"] == 0:
+                    sys.stdout = py["saved"]
+                    del _FD_STATE["stdout"]
+
+
+def _decoder_failed(path, what: str, exc: BaseException | None, messages: list[str]) -> InputError:
+    """An InputError for a decoder's failure, quoting the library's last words.
+    Memory exhaustion is not the file's fault: it propagates."""
+    said = " ".join(" ".join(messages).split())
+    text = f"{exc}" if exc is not None else ""
+    if isinstance(exc, MemoryError) or "insufficient memory" in text.lower() \
+            or "failed to allocate" in text.lower():
+        raise MemoryError(f"{path}: {text}") from exc
+    reason = said or " ".join(text.split()) or "undecodable data"
+    if len(reason) > 200:
+        reason = reason[:200] + "…"
+    return InputError(path, f"cannot decode {what} (truncated or corrupt file?): {reason}")
+
+
 def _cv2():
     # OpenCV's own stderr warnings would break the one-line error convention;
     # our readers report every problem themselves.
     os.environ.setdefault("OPENCV_LOG_LEVEL", "OFF")
+    # OpenCV's own pixel limit (2**30, read once) would contradict ours when
+    # LUMIGRAPH_MAX_PIXELS is raised past it; ours is checked before every decode
+    os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(1 << 40))
     import cv2  # imported lazily: `import capture` must stay cheap
 
     return cv2
@@ -135,8 +325,10 @@ def read_image(path) -> np.ndarray:
     Raises
     ------
     InputError
-        Missing, empty, truncated or undecodable file, unknown extension, or
-        NaN/inf in a float image.
+        Missing, empty, truncated or undecodable file, unknown extension or
+        content, a header claiming more than :func:`max_pixels` pixels or more
+        than the file can hold (checked before decoding), or NaN/inf in a
+        float image.
     """
     p = _existing(path)
     ext = p.suffix.lower()
@@ -153,16 +345,28 @@ def read_image(path) -> np.ndarray:
     if ext not in LDR_EXTS:
         raise InputError(p, f"unsupported image extension {p.suffix!r}; expected one of "
                             + ", ".join(sorted(LDR_EXTS | FLOAT_EXTS | RAW_EXTS)))
-    if ext in {".jpg", ".jpeg"}:
-        img = _read_jpeg(p)
+    data = p.read_bytes()
+    # the header is checked before any decoder sees the file; the content,
+    # not the extension, says which decoder that is
+    header = image_header(data, p)
+    _check_header(p, header)
+    if header.kind == "JPEG":
+        img = _read_jpeg(p, data, header.width * header.height)
     else:
-        cv2 = _cv2()
-        buf = np.fromfile(p, np.uint8)
-        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
-        if img is None:
-            raise InputError(p, "cannot decode image (truncated or corrupt file?)")
-        if ext == ".png" and not _png_complete(buf):
+        if header.kind == "TIFF" and not _tiff_channels_ok(data, p):
+            raise InputError(p, "TIFF has more than 4 samples per pixel; read_image reads "
+                                "grey, RGB and RGBA")
+        if header.kind == "PNG" and not _png_complete(data):
             raise InputError(p, "PNG is truncated (no IEND chunk)")
+        cv2 = _cv2()
+        with _c_messages() as said:
+            try:
+                img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+                failure = None
+            except cv2.error as e:
+                img, failure = None, e
+        if img is None:
+            raise _decoder_failed(p, header.kind, failure, said)
         if img.ndim == 3:
             img = img[..., ::-1] if img.shape[2] == 3 else img[..., [2, 1, 0, 3]]
         img = np.ascontiguousarray(img)
@@ -172,21 +376,60 @@ def read_image(path) -> np.ndarray:
     return img
 
 
-def _png_complete(buf: np.ndarray) -> bool:
-    return bytes(buf[-12:]).find(b"IEND") >= 0
+def _png_complete(data: bytes) -> bool:
+    return data[-12:].find(b"IEND") >= 0
 
 
-def _read_jpeg(p: Path) -> np.ndarray:
+def _tiff_channels_ok(data: bytes, p: Path) -> bool:
+    from lumigraph.capture.headers import tiff_pages
+
+    return tiff_pages(data, p)[0].get(277, [1])[0] <= 4
+
+
+_PIL_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _pil_allows(pixels: int):
+    """Pillow has its own bomb limit (a warning past 89 MP, an error past twice
+    that); ours has been checked already, so Pillow's must not contradict it.
+    Pillow also warns and logs what it skips in a corrupt file; the error we
+    raise says it once."""
+    import logging
+    import warnings
+
+    from PIL import Image
+
+    log = logging.getLogger("PIL")
+    with _PIL_LOCK:
+        before, level = Image.MAX_IMAGE_PIXELS, log.level
+        if before is not None and pixels > before // 2:
+            Image.MAX_IMAGE_PIXELS = 2 * pixels
+        log.setLevel(logging.CRITICAL + 1)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                yield
+        finally:
+            Image.MAX_IMAGE_PIXELS = before
+            log.setLevel(level)
+
+
+def _read_jpeg(p: Path, data: bytes, pixels: int) -> np.ndarray:
+    import io as _bytesio
+
     from PIL import Image
 
     try:
-        with Image.open(p) as im:
+        with _pil_allows(pixels), Image.open(_bytesio.BytesIO(data)) as im:
             im.load()  # Pillow raises on truncated JPEG data; OpenCV would not
             if im.mode not in ("L", "RGB"):
                 im = im.convert("RGB")
             return np.asarray(im).copy()
-    except OSError as e:
-        raise InputError(p, f"cannot decode JPEG ({e})") from None
+    except MemoryError:
+        raise
+    except Exception as e:  # Pillow raises OSError, ValueError, SyntaxError, …
+        raise InputError(p, f"cannot decode JPEG ({' '.join(str(e).split())[:200]})") from None
 
 
 def write_image(path, img: np.ndarray, *, bit_depth: int | None = None) -> None:
@@ -203,6 +446,9 @@ def write_image(path, img: np.ndarray, *, bit_depth: int | None = None) -> None:
     ext = p.suffix.lower()
     if ext not in {".png", ".tif", ".tiff"}:
         raise InputError(p, "write_image writes PNG or TIFF; use write_exr for linear float data")
+    if img.dtype.kind == "f" and not np.isfinite(img).all():
+        raise InputError("img", f"{ext[1:].upper()} code values are integers and cannot hold "
+                                "NaN/inf; fill or mask them, then convert to uint8/uint16")
     if img.dtype not in (np.uint8, np.uint16):
         raise TypeError(f"img: expected uint8 or uint16 code values, got {img.dtype}")
     if img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] not in (1, 3, 4)):
@@ -264,8 +510,13 @@ def read_exif(path) -> Exif:
     if p.suffix.lower() in RAW_EXTS:
         import exifread
 
-        with open(p, "rb") as f:
-            tags = exifread.process_file(f, details=False)
+        try:
+            with open(p, "rb") as f:
+                tags = exifread.process_file(f, details=False)
+        except MemoryError:
+            raise
+        except Exception as e:  # exifread raises whatever its parser trips on
+            raise InputError(p, f"cannot read EXIF ({type(e).__name__}: {e})") from None
 
         def tag(name):
             t = tags.get(name)
@@ -277,12 +528,14 @@ def read_exif(path) -> Exif:
         return Exif(tag("EXIF ExposureTime"), tag("EXIF FNumber"), tag("EXIF ISOSpeedRatings"))
     from PIL import Image
 
-    try:
-        with Image.open(p) as im:
+    try:  # Image.open parses the header only; no pixel is decoded here
+        with _pil_allows(max_pixels()), Image.open(p) as im:
             exif = im.getexif()
             sub = exif.get_ifd(0x8769)
-    except OSError as e:
-        raise InputError(p, f"cannot read EXIF ({e})") from None
+    except MemoryError:
+        raise
+    except Exception as e:  # OSError, SyntaxError, struct.error, … from Pillow's parsers
+        raise InputError(p, f"cannot read EXIF ({' '.join(str(e).split())[:200]})") from None
     iso = sub.get(0x8827)
     if isinstance(iso, tuple):
         iso = iso[0]
@@ -327,12 +580,17 @@ def read_raw(path, *, color: str = "srgb") -> RawImage:
     import rawpy
 
     try:
-        with rawpy.imread(str(p)) as raw:
+        with _c_messages(), rawpy.imread(str(p)) as raw:
+            sizes = raw.sizes  # known once the file is opened, before unpacking
+            check_pixel_count(p, sizes.raw_width, sizes.raw_height, what="RAW sensor")
+            check_pixel_count(p, sizes.width, sizes.height, what="RAW image")
             white = float(raw.white_level)
             black = float(np.mean(raw.black_level_per_channel))
             space = rawpy.ColorSpace.sRGB if color == "srgb" else rawpy.ColorSpace.raw
             rgb = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16,
                                   use_camera_wb=True, user_flip=0, output_color=space)
+    except (InputError, MemoryError):
+        raise
     except Exception as e:  # rawpy raises a family of LibRaw errors
         raise InputError(p, f"cannot decode RAW file ({type(e).__name__}: {e})") from None
     bit_depth = max(8, int(np.ceil(np.log2(max(white - black, 2.0) + 1))))
@@ -347,13 +605,41 @@ def read_exr(path) -> np.ndarray:
     """Read an OpenEXR file as float32, ``(H, W)`` for one channel, ``(H, W, 3)``
     for RGB, ``(H, W, 4)`` for RGBA; other channel sets in sorted name order."""
     p = _existing(path)
+    size, n = p.stat().st_size, 1 << 20
+    while True:  # the header, not the file: a larger head only for a long header
+        with open(p, "rb") as fh:
+            head = fh.read(n)
+        try:
+            header = exr_header(head, p, file_size=size)
+            break
+        except InputError:
+            if len(head) >= size:
+                raise
+            n *= 16
+    check_pixel_count(p, header.width, header.height, what="OpenEXR header")
+    for what, w, h in header.pages:
+        check_pixel_count(p, w, h, what=what)
+    if header.samples > 4 * max_pixels():
+        raise InputError(p, f"OpenEXR header claims {header.samples} values (pixels x channels), "
+                            f"over 4 x the limit of {max_pixels()} pixels (set {MAX_PIXELS_ENV} "
+                            "or --max-pixels to read larger images)")
+    if header.short:
+        raise InputError(p, header.short)
     import OpenEXR
 
-    try:
-        with OpenEXR.File(str(p), separate_channels=True) as f:
-            chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
-    except Exception as e:
-        raise InputError(p, f"cannot read OpenEXR file ({e})") from None
+    with _c_messages(python_stdout=True) as said:
+        try:
+            with OpenEXR.File(str(p), separate_channels=True) as f:
+                chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+            failure = None
+        except MemoryError:
+            raise
+        except Exception as e:  # OpenEXR raises RuntimeError, ValueError, TypeError, …
+            failure = e
+    # OpenEXR's File catches a failure while reading pixels, prints a warning
+    # (on stdout) and returns what it has: a corrupt file read as zeros
+    if failure is not None or "Exception raised reading pixel data" in "".join(said):
+        raise _decoder_failed(p, "OpenEXR file", failure, said)
     if not chans:
         raise InputError(p, "OpenEXR file has no channels")
     order = [c for c in ("R", "G", "B", "A") if c in chans]
@@ -405,22 +691,32 @@ def read_pfm(path) -> np.ndarray:
     """Read a PFM file top-row-first as float32; ``inf`` (unknown) becomes NaN."""
     p = _existing(path)
     with open(p, "rb") as f:
-        kind = f.readline().strip()
+        kind = f.readline(8).strip()
         if kind not in (b"PF", b"Pf"):
             raise InputError(p, "not a PFM file (header must start with PF or Pf)")
-        try:
-            dims = f.readline().split()
+        try:  # header lines are short; a line of megabytes is not a header
+            dims = f.readline(256).split()
+            if len(dims) != 2:
+                raise ValueError
             w, h = int(dims[0]), int(dims[1])
-            scale = float(f.readline().strip())
+            scale = float(f.readline(256).strip())
         except (ValueError, IndexError):
-            raise InputError(p, "malformed PFM header") from None
+            raise InputError(p, "malformed PFM header (expected 'PF' or 'Pf', 'W H', "
+                                "then a scale)") from None
+        if not np.isfinite(scale):
+            raise InputError(p, f"malformed PFM header: scale {scale} (must be a finite "
+                                "number; its sign gives the byte order)")
+        check_pixel_count(p, w, h, what="PFM header")
         c = 3 if kind == b"PF" else 1
         endian = "<" if scale < 0 else ">"
-        raw = f.read()
-    need = w * h * c * 4
+        need = w * h * c * 4
+        have = os.fstat(f.fileno()).st_size - f.tell()
+        if have < need:  # said before a buffer of `need` bytes is asked for
+            raise InputError(p, f"PFM is truncated: {have} of {need} data bytes")
+        raw = f.read(need)
     if len(raw) < need:
         raise InputError(p, f"PFM is truncated: {len(raw)} of {need} data bytes")
-    arr = np.frombuffer(raw[:need], dtype=endian + "f4").reshape(h, w, c)
+    arr = np.frombuffer(raw, dtype=endian + "f4").reshape(h, w, c)
     arr = np.flipud(arr).astype(np.float32)
     if c == 1:
         arr = arr[..., 0]
@@ -453,16 +749,20 @@ FLO_UNKNOWN = 1e10  # Middlebury: components above 1e9 mean unknown
 def read_flo(path) -> np.ndarray:
     """Read Middlebury ``.flo`` as ``(H, W, 2)`` float32 ``(dx, dy)``; unknown -> NaN."""
     p = _existing(path)
-    raw = p.read_bytes()
-    if len(raw) < 12 or struct.unpack("<f", raw[:4])[0] != FLO_MAGIC:
-        raise InputError(p, "not a Middlebury .flo file (bad magic number)")
-    w, h = struct.unpack("<ii", raw[4:12])
-    if w <= 0 or h <= 0 or w > 1 << 16 or h > 1 << 16:
-        raise InputError(p, f"implausible .flo size {w}x{h}")
-    need = w * h * 2 * 4
-    if len(raw) - 12 < need:
-        raise InputError(p, f".flo is truncated: {len(raw) - 12} of {need} data bytes")
-    flow = np.frombuffer(raw[12:12 + need], "<f4").reshape(h, w, 2).astype(np.float32)
+    with open(p, "rb") as f:
+        head = f.read(12)
+        if len(head) < 12 or struct.unpack("<f", head[:4])[0] != FLO_MAGIC:
+            raise InputError(p, "not a Middlebury .flo file (bad magic number)")
+        w, h = struct.unpack("<ii", head[4:12])
+        check_pixel_count(p, w, h, what=".flo header")
+        need = w * h * 2 * 4
+        have = os.fstat(f.fileno()).st_size - 12
+        if have < need:  # said before a buffer of `need` bytes is asked for
+            raise InputError(p, f".flo is truncated: {have} of {need} data bytes")
+        raw = f.read(need)
+    if len(raw) < need:
+        raise InputError(p, f".flo is truncated: {len(raw)} of {need} data bytes")
+    flow = np.frombuffer(raw, "<f4").reshape(h, w, 2).astype(np.float32)
     unknown = (np.abs(flow) > 1e9).any(axis=2) | ~np.isfinite(flow).all(axis=2)
     flow[unknown] = np.nan
     return flow
@@ -524,23 +824,35 @@ def read_ply(path) -> tuple[np.ndarray, np.ndarray | None]:
     colors (N,3) uint8 or None)``."""
     p = _existing(path)
     raw = p.read_bytes()
-    end = raw.find(b"end_header\n")
+    end = raw.find(b"end_header\n", 0, 1 << 16)
     if not raw.startswith(b"ply\n") or end < 0:
         raise InputError(p, "not a PLY file (missing 'ply' magic or end_header)")
     lines = raw[:end].decode("ascii", "replace").splitlines()
     if "format binary_little_endian 1.0" not in lines:
         raise InputError(p, "only binary_little_endian PLY is supported")
-    n, fields, in_vertex = 0, [], False
+    n, fields, element, seen = None, [], None, []
     for line in lines:
         parts = line.split()
         if parts[:1] == ["element"]:
-            in_vertex = parts[1] == "vertex"
-            if in_vertex:
+            if len(parts) != 3 or not (parts[2].isascii() and parts[2].isdigit()):
+                raise InputError(p, f"malformed PLY header line: {line!r}")
+            element = parts[1]
+            if element == "vertex":
+                if any(c > 0 for c in seen):  # their data would come first: not read here
+                    raise InputError(p, "PLY vertex element must come first (before elements "
+                                        "with data)")
                 n = int(parts[2])
-        elif parts[:1] == ["property"] and in_vertex:
-            if parts[1] == "list" or parts[1] not in _PLY_TYPES:
-                raise InputError(p, f"unsupported PLY property: {line}")
+            seen.append(int(parts[2]) if element != "vertex" else 0)
+        elif parts[:1] == ["property"] and element == "vertex":
+            if len(parts) != 3 or parts[1] not in _PLY_TYPES:
+                raise InputError(p, f"unsupported PLY vertex property: {line!r}")
             fields.append((parts[2], _PLY_TYPES[parts[1]]))
+    names = [f[0] for f in fields]
+    if n is None or not {"x", "y", "z"} <= set(names) or len(set(names)) != len(names):
+        raise InputError(p, "PLY has no vertex element with x, y, z properties (each once)")
+    if n > max_pixels():  # one point per pixel of the largest image we read
+        raise InputError(p, f"PLY header claims {n} vertices, over the limit of {max_pixels()} "
+                            f"(set {MAX_PIXELS_ENV} or --max-pixels to read larger files)")
     dtype = np.dtype(fields)
     body = raw[end + len(b"end_header\n"):]
     if len(body) < n * dtype.itemsize:

@@ -37,16 +37,26 @@ RGBE_EXTS = frozenset({".hdr", ".pic"})
 
 def as_radiance_rgb(img, where: str) -> np.ndarray:
     """``(H, W)`` or ``(H, W, 3)`` finite float radiance as ``(H, W, 3)`` float64;
-    ``where`` names the format that cannot store NaN/inf."""
+    ``where`` names the format that cannot store NaN/inf (an InputError naming
+    ``img`` says so).
+
+    >>> as_radiance_rgb(np.array([[np.nan]]), "RGBE")
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: img: RGBE cannot store NaN/inf (1 values); fill or \
+mask them first, or write OpenEXR/PFM
+    """
     a = np.asarray(img)
     if a.dtype.kind != "f":
         raise TypeError(f"img: expected float linear radiance, got {a.dtype}")
-    if a.ndim == 2:
-        a = np.repeat(a[..., None], 3, axis=2)
-    if a.ndim != 3 or a.shape[2] != 3:
+    if a.ndim not in (2, 3) or (a.ndim == 3 and a.shape[2] != 3):
         raise ValueError(f"img: expected (H, W) or (H, W, 3), got {np.shape(img)}")
     if not np.isfinite(a).all():
-        raise ValueError(f"img: {where} cannot store NaN/inf")
+        bad = int((~np.isfinite(a)).sum())
+        raise InputError("img", f"{where} cannot store NaN/inf ({bad} values); fill or mask "
+                                "them first, or write OpenEXR/PFM")
+    if a.ndim == 2:
+        a = np.repeat(a[..., None], 3, axis=2)
     return a.astype(np.float64)
 
 
@@ -72,9 +82,15 @@ def float_to_rgbe(img: np.ndarray) -> np.ndarray:
 def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
     """``(H, W, 4)`` uint8 -> ``(H, W, 3)`` float32; mantissas decode at their
     centres (``(m + 0.5)·2^(e−136)``), as Radiance does."""
+    # float32 throughout: (m + 0.5) has 9 significant bits and 2^(e-136) is a
+    # power of two no smaller than 2^-135, so every product is exact in float32
+    # (and a large image needs no float64 temporaries)
     e = rgbe[..., 3].astype(np.int32)
-    f = np.where(e > 0, np.ldexp(1.0, e - 136), 0.0)
-    return ((rgbe[..., :3].astype(np.float64) + 0.5) * f[..., None]).astype(np.float32)
+    f = np.where(e > 0, np.ldexp(np.float32(1.0), e - 136), np.float32(0.0)).astype(np.float32)
+    out = rgbe[..., :3].astype(np.float32)
+    out += np.float32(0.5)
+    out *= f[..., None]
+    return out
 
 
 def _rle_bytes(row: np.ndarray) -> bytes:
@@ -137,12 +153,20 @@ def write_rgbe(path, img: np.ndarray) -> None:
 def read_rgbe(path) -> np.ndarray:
     """Read Radiance RGBE (flat or RLE scanlines) as ``(H, W, 3)`` float32,
     top row first. Tolerates header lines before ``#?RADIANCE`` (some files,
-    such as Debevec's ``memorial.hdr``, start with ``VIEW=``)."""
+    such as Debevec's ``memorial.hdr``, start with ``VIEW=``).
+
+    The size the resolution line claims is checked against the pixel limit
+    (:func:`lumigraph.capture.io.check_pixel_count`) and against the bytes
+    that follow (a flat scanline takes ``4 W`` bytes, an RLE one at least
+    ``4 + 8 ⌈W/127⌉``) before anything is allocated.
+    """
+    from lumigraph.capture.io import check_pixel_count
+
     p = Path(path)
     if not p.is_file():
         raise InputError(p, "file not found")
     data = p.read_bytes()
-    m = re.search(rb"\n\n([-+][YX]) (\d+) ([-+][YX]) (\d+)\n", data[:65536])
+    m = re.search(rb"\n\n([-+][YX]) (\d{1,18}) ([-+][YX]) (\d{1,18})\n", data[:65536])
     head = data[:m.start()] if m else b""
     if m is None or not (b"#?RADIANCE" in head or b"#?RGBE" in head or b"FORMAT=" in head):
         raise InputError(p, "not a Radiance RGBE file (no header with a resolution line)")
@@ -151,37 +175,44 @@ def read_rgbe(path) -> np.ndarray:
     if (m.group(1), m.group(3)) != (b"-Y", b"+X"):
         raise InputError(p, f"unsupported orientation {m.group(0).strip().decode()}; expected -Y H +X W")
     h, w = int(m.group(2)), int(m.group(4))
+    check_pixel_count(p, w, h, what="RGBE header")
     pos = m.end()
+    rle = 8 <= w <= 0x7FFF
+    line_min = min(4 * w, 4 + 8 * -(-w // 127)) if rle else 4 * w
+    if h * line_min > len(data) - pos:
+        raise InputError(p, f"RGBE data ({len(data) - pos} bytes) cannot hold {w}x{h} pixels: "
+                            "truncated or corrupt")
     out = np.empty((h, w, 4), np.uint8)
     buf = np.frombuffer(data, np.uint8)
-    try:
-        for y in range(h):
-            if 8 <= w <= 0x7FFF and buf[pos] == 2 and buf[pos + 1] == 2 and buf[pos + 2] < 128:
-                if (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) != w:
-                    raise InputError(p, f"scanline {y}: width mismatch in RLE header")
-                pos += 4
-                for c in range(4):
-                    x = 0
-                    while x < w:
-                        n = int(buf[pos])
-                        if n > 128:
-                            n -= 128
-                            if x + n > w:
-                                raise InputError(p, f"scanline {y}: run overflows the line")
-                            out[y, x:x + n, c] = buf[pos + 1]
-                            pos += 2
-                        else:
-                            if n == 0 or x + n > w:
-                                raise InputError(p, f"scanline {y}: bad literal count {n}")
-                            out[y, x:x + n, c] = buf[pos + 1:pos + 1 + n]
-                            pos += 1 + n
-                        x += n
-            else:
-                seg = buf[pos:pos + 4 * w]
-                if seg.size < 4 * w:
-                    raise InputError(p, f"truncated at scanline {y} of {h}")
-                out[y] = seg.reshape(w, 4)
-                pos += 4 * w
-    except IndexError:
-        raise InputError(p, f"truncated RGBE data (height {h})") from None
+    n = buf.size
+    for y in range(h):
+        if rle and pos + 4 <= n and buf[pos] == 2 and buf[pos + 1] == 2 and buf[pos + 2] < 128:
+            if (int(buf[pos + 2]) << 8 | int(buf[pos + 3])) != w:
+                raise InputError(p, f"scanline {y}: width mismatch in RLE header")
+            pos += 4
+            for c in range(4):
+                x = 0
+                while x < w:
+                    if pos >= n:
+                        raise InputError(p, f"truncated RGBE data at scanline {y} of {h}")
+                    k = int(buf[pos])
+                    if k > 128:
+                        k -= 128
+                        if x + k > w or pos + 1 >= n:
+                            raise InputError(p, f"scanline {y}: run overflows the line")
+                        out[y, x:x + k, c] = buf[pos + 1]
+                        pos += 2
+                    else:
+                        if k == 0 or x + k > w:
+                            raise InputError(p, f"scanline {y}: bad literal count {k}")
+                        if pos + 1 + k > n:
+                            raise InputError(p, f"truncated RGBE data at scanline {y} of {h}")
+                        out[y, x:x + k, c] = buf[pos + 1:pos + 1 + k]
+                        pos += 1 + k
+                    x += k
+        else:
+            if pos + 4 * w > n:
+                raise InputError(p, f"truncated at scanline {y} of {h}")
+            out[y] = buf[pos:pos + 4 * w].reshape(w, 4)
+            pos += 4 * w
     return rgbe_to_float(out)

@@ -227,6 +227,9 @@ def _rle32_row(words: np.ndarray) -> bytes:
 
 
 def _unrle32_row(buf: np.ndarray, pos: int, w: int, where) -> tuple[np.ndarray, int]:
+    """Decode one SGILOG row from ``buf[pos:]``; a run or literal that passes
+    the row's end or the data's end is corrupt (libtiff's encoder never
+    writes one)."""
     words = np.zeros(w, np.uint32)
     for shift in (24, 16, 8, 0):
         x = 0
@@ -236,13 +239,14 @@ def _unrle32_row(buf: np.ndarray, pos: int, w: int, where) -> tuple[np.ndarray, 
             n = int(buf[pos])
             if n >= 128:
                 n -= 126
+                if x + n > w or pos + 1 >= buf.size:
+                    raise InputError(where, "corrupt SGILOG run (past the end of its row)")
                 words[x:x + n] |= np.uint32(int(buf[pos + 1]) << shift)
                 pos += 2
             else:
-                seg = buf[pos + 1:pos + 1 + n].astype(np.uint32)
-                if n == 0 or seg.size < n:
-                    raise InputError(where, "corrupt SGILOG literal")
-                words[x:x + n] |= seg[:max(0, min(n, w - x))] << np.uint32(shift)
+                if n == 0 or x + n > w or pos + 1 + n > buf.size:
+                    raise InputError(where, "corrupt or truncated SGILOG literal")
+                words[x:x + n] |= buf[pos + 1:pos + 1 + n].astype(np.uint32) << np.uint32(shift)
                 pos += 1 + n
             x += n
     return words, pos
@@ -289,49 +293,48 @@ def write_logluv_tiff(path, img: np.ndarray, *, bits: int = 32) -> None:
         tmp.write_bytes(b"II*\x00" + struct.pack("<I", ifd_off) + ifd + extra + body)
 
 
-def _tiff_tags(data: bytes, where) -> tuple[dict, str]:
-    if data[:4] not in (b"II*\x00", b"MM\x00*"):
-        raise InputError(where, "not a TIFF file")
-    e = "<" if data[:2] == b"II" else ">"
-    (off,) = struct.unpack(e + "I", data[4:8])
-    (n,) = struct.unpack(e + "H", data[off:off + 2])
-    sizes = {1: 1, 3: 2, 4: 4, 16: 8}
-    fmt = {1: "B", 3: "H", 4: "I", 16: "Q"}
-    tags = {}
-    for k in range(n):
-        tag, typ, cnt = struct.unpack(e + "HHI", data[off + 2 + 12 * k:off + 10 + 12 * k])
-        if typ not in sizes:
-            continue
-        size = sizes[typ] * cnt
-        vo = off + 10 + 12 * k
-        if size > 4:
-            (vo,) = struct.unpack(e + "I", data[vo:vo + 4])
-        tags[tag] = list(struct.unpack(e + fmt[typ] * cnt, data[vo:vo + size]))
-    return tags, e
-
-
 def read_logluv_tiff(path) -> np.ndarray:
     """Read a LogLuv TIFF (``SGILOG`` or ``SGILOG24``, strips, contiguous) as
-    linear RGB ``(H, W, 3)`` float32."""
+    linear RGB ``(H, W, 3)`` float32.
+
+    The header is parsed by :func:`lumigraph.capture.headers.tiff_pages`; its
+    size is checked against the pixel limit
+    (:func:`lumigraph.capture.io.check_pixel_count`) and against the strip
+    bytes (3 per pixel for SGILOG24, at least 8 per 129 pixels of a row for
+    SGILOG) before anything is allocated.
+    """
+    from lumigraph.capture.headers import tiff_pages, tiff_strips
+    from lumigraph.capture.io import check_pixel_count
+
     p = Path(path)
     if not p.is_file():
         raise InputError(p, "file not found")
     data = p.read_bytes()
-    tags, _ = _tiff_tags(data, p)
+    tags = tiff_pages(data, p)[0]
     if tags.get(262, [None])[0] != TAG_PHOTOMETRIC_LOGLUV:
         raise InputError(p, "not a LogLuv TIFF (Photometric is not 32845)")
     comp = tags.get(259, [1])[0]
     if comp not in (COMPRESSION_SGILOG, COMPRESSION_SGILOG24):
         raise InputError(p, f"LogLuv compression {comp} unsupported (expected SGILOG 34676 or "
                             "SGILOG24 34677)")
-    if 322 in tags:
+    if 322 in tags or 324 in tags:
         raise InputError(p, "tiled LogLuv TIFF is not supported; convert with tiffcp -s")
+    if tags.get(284, [1])[0] != 1:
+        raise InputError(p, "planar LogLuv TIFF is not supported; convert with tiffcp -p contig")
+    if 256 not in tags or 257 not in tags or 273 not in tags or 279 not in tags:
+        raise InputError(p, "corrupt TIFF: no ImageWidth, ImageLength or strips")
     w, h = tags[256][0], tags[257][0]
-    body = b"".join(data[o:o + c] for o, c in zip(tags[273], tags[279], strict=True))
+    check_pixel_count(p, w, h, what="LogLuv TIFF header")
+    offsets, counts = tiff_strips(tags, p)
+    if any(o + c > len(data) for o, c in zip(offsets.tolist(), counts.tolist(), strict=True)):
+        raise InputError(p, "truncated TIFF: a strip lies past the end of the file")
+    body = b"".join(data[o:o + c] for o, c in zip(offsets.tolist(), counts.tolist(), strict=True))
     buf = np.frombuffer(body, np.uint8)
+    need = 3 * w * h if comp == COMPRESSION_SGILOG24 else h * 8 * -(-w // 129)
+    if buf.size < need:
+        raise InputError(p, f"truncated {'SGILOG24' if comp == COMPRESSION_SGILOG24 else 'SGILOG'} "
+                            f"data: {buf.size} bytes cannot hold {w}x{h} pixels")
     if comp == COMPRESSION_SGILOG24:
-        if buf.size < 3 * w * h:
-            raise InputError(p, f"truncated SGILOG24 data: {buf.size} of {3 * w * h} bytes")
         b3 = buf[:3 * w * h].reshape(h, w, 3).astype(np.uint32)
         return decode_logluv24((b3[..., 0] << 16) | (b3[..., 1] << 8) | b3[..., 2])
     words = np.empty((h, w), np.uint32)
