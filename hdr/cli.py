@@ -3,6 +3,7 @@ HDR file conversion. Parses, loads, calls the library, saves."""
 
 from __future__ import annotations
 
+import argparse
 import inspect
 import time
 from pathlib import Path
@@ -158,6 +159,30 @@ def _check_curve(curve, stack, path, what):
     if curve.channels not in (1, stack.images.shape[-1]):
         raise InputError(path, f"curve has {curve.channels} channels, the {what} "
                                f"{stack.images.shape[-1]}")
+
+def _noise_pair(text: str) -> list[float]:
+    """``--noise FULL_WELL_E,READ_NOISE_E``: two numbers, each within
+    :func:`lumigraph.hdr.merge.check_noise`'s range (its message, naming which)."""
+    from lumigraph.hdr.merge import check_noise
+
+    parts = [t.strip() for t in text.split(",")]
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected FULL_WELL_E,READ_NOISE_E (two numbers), got "
+                                         f"{text!r}")
+    vals = []
+    for t in parts:
+        try:
+            vals.append(float(t))  # NaN and inf too: check_noise says which one is wrong
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"cannot read {t!r} as a number") from None
+    try:  # the library's ranges (and messages): a full well > 0, a read noise >= 0, finite
+        return list(check_noise("variance", *vals))
+    except InputError as e:
+        raise argparse.ArgumentTypeError(e.problem) from None
+
+
+_noise_pair.__name__ = "noise"
+
 
 def _noise(args) -> tuple[dict, dict]:
     """The variance weights' sensor noise: ``--noise FULL_WELL_E,READ_NOISE_E`` or the
@@ -429,9 +454,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                         "NAME.mask.png is written beside it")
     v.add_argument("--weights", choices=WEIGHTS, default="variance")
     v.add_argument("--deghost", action="store_true", help="leave out moving content")
-    # both >= 0 here; the full well's own bound (> 0) is check_noise's, which names it
-    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
-                   type=numbers(number(float, lo=0), length=2),
+    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E", type=_noise_pair,
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},

@@ -134,6 +134,25 @@ def test_align_into_its_input_folder_is_refused_before_aligning(capsys, data, tm
              ["hdr", "align", "{B}", "--out", "{O}", "--reference", "3"])
 
 
+def test_video_into_its_input_folder_is_refused_before_the_video(capsys, data, tmp_path,
+                                                                 monkeypatch):
+    # a rendered video's frames are frame_NNN.png: --tonemap would write over them
+    import lumigraph.hdr.kang2003 as kang
+    from lumigraph.capture.render import render
+
+    def never(*a, consistency_sigma=6.0, **k):  # (--help shows the real default)
+        raise AssertionError("computed before the outputs were checked")
+
+    monkeypatch.setattr(kang, "hdr_video", never)
+    d = tmp_path / "video"
+    render("bracket_video", size=(32, 24), frames=2).save(d)
+    before = snapshot(d)
+    r = cli(capsys, "hdr", "video", d, "--response", data / "response.json", "--tonemap",
+            "--out", d)
+    assert_refused(r, "--out", "frame_000.png")
+    assert snapshot(d) == before
+
+
 def test_response_into_its_input_folder_is_refused(capsys, data, tmp_path):
     d = data / "bracket"
     before = snapshot(data)
