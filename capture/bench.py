@@ -36,6 +36,8 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lumigraph.capture.errors import InputError
+
 
 def shared_data(*parts: str) -> Path:
     """A path in the shared real-data folder: ``$LUMIGRAPH_SHARED`` or the
@@ -163,11 +165,40 @@ def _is_number(x) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
 
+MIN_REPEATS = 3  # timed runs per row: the median of fewer is not a median of anything
+
+
+def check_repeats(repeats: int) -> int:
+    """Timed runs per row: an integer >= :data:`MIN_REPEATS`.
+
+    Raises
+    ------
+    InputError
+        Naming ``repeats``.
+
+    Examples
+    --------
+    >>> check_repeats(5)
+    5
+    >>> try:
+    ...     check_repeats(0)
+    ... except InputError as e:
+    ...     print(e)
+    repeats: expected an integer >= 3 (the median of the timed runs), got 0
+    """
+    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < MIN_REPEATS:
+        raise InputError("repeats", f"expected an integer >= {MIN_REPEATS} (the median of the "
+                                    f"timed runs), got {repeats!r}")
+    return repeats
+
+
 def run_stage(stage: Stage, *, repeats: int | None = None,
               on_row: Callable[[Row], None] | None = None) -> list[Row]:
     """Run every (case, method, knob value) of ``stage``; never raises for a
-    method's failure (the row's status says what went wrong)."""
-    repeats = max(3, repeats or stage.repeats)
+    method's failure (the row's status says what went wrong). ``repeats``
+    (default the stage's, at least :data:`MIN_REPEATS`) is checked by
+    :func:`check_repeats`."""
+    repeats = max(MIN_REPEATS, stage.repeats) if repeats is None else check_repeats(repeats)
     rows: list[Row] = []
 
     def emit(row: Row) -> None:

@@ -7,10 +7,13 @@ line only turns text into values and maps each argument to its flag.
 
 from __future__ import annotations
 
+import argparse
+from pathlib import Path
+
 from lumigraph.capture.artifact import make_meta, write_json
 from lumigraph.capture.commandline import (
-    check_output_dir,
     make_parser,
+    number,
     output_dir,
     parse_size,
     run,
@@ -45,6 +48,31 @@ def _list(args) -> int:
     return 0
 
 
+def _size(text: str) -> tuple[int, int]:
+    """``--size WxH`` as ``(width, height)``; the scene checks the range
+    (:meth:`lumigraph.capture.render.SceneSpec.check_size`)."""
+    try:
+        return parse_size(text, limits=None)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(e.problem) from None
+
+
+_size.__name__ = "size"
+
+
+def _scene(text: str) -> str:
+    """A scene name of :data:`lumigraph.capture.render.SCENES`."""
+    from lumigraph.capture.render import SCENES
+
+    if text not in SCENES:
+        raise argparse.ArgumentTypeError(f"unknown scene {text!r}; choose from "
+                                         f"{', '.join(sorted(SCENES))} (see --list)")
+    return text
+
+
+_scene.__name__ = "scene"
+
+
 def _scene_options(extra: list[str]) -> dict[str, str]:
     opts, i = {}, 0
     while i < len(extra):
@@ -76,10 +104,11 @@ def _render(args) -> int:
     given = _scene_options(extra)
     args.arg_flags = {k.replace("-", "_"): "--" + k.replace("_", "-")
                       for k in [*(o.name for o in spec.options), *given]}
-    # text -> values here; the scene checks them (early: before any output exists)
-    size = spec.check_size(parse_size(args.size, limits=None)) if args.size else None
+    # text -> values and the scene's own checks (names, kinds, ranges, finite),
+    # all before anything is rendered or written
+    size = spec.check_size(args.size) if args.size else None
     opts = spec.parse_options(given)
-    out = check_output_dir(args.out)
+    out = Path(args.out)
     if show_progress(args.quiet):  # on a terminal only: piped stderr keeps to one error line
         say(args, f"rendering {args.scene} -> {out}")
     result = render(args.scene, size=size, seed=args.seed, cache=not args.no_cache, **opts)
@@ -90,14 +119,23 @@ def _render(args) -> int:
     return 0
 
 
-def main(argv=None, prog="lumigraph render") -> int:
+def build_parser(prog: str = "lumigraph render"):
+    """The ``lumigraph render`` parser. A scene's own options are not in it:
+    they are known once the scene is, and :func:`main` hands them over
+    unparsed to the scene's spec (:meth:`SceneSpec.parse_options`)."""
     p = make_parser(prog, "Render a synthetic scene with exact ground truth.", epilog=EPILOG)
-    p.add_argument("scene", nargs="?", help="scene name (see --list)")
+    p.add_argument("scene", nargs="?", type=_scene, metavar="SCENE",
+                   help="scene name (see --list)")
     p.add_argument("--out", type=output_dir, help="output folder")
-    p.add_argument("--size", help="image size WIDTHxHEIGHT (default: the scene's test size)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--size", type=_size, metavar="WxH",
+                   help="image size WIDTHxHEIGHT (default: the scene's test size)")
+    p.add_argument("--seed", type=number(int, lo=0), default=0, help="random seed (default 0)")
     p.add_argument("--list", action="store_true", help="list every scene and its options")
     p.add_argument("--no-cache", action="store_true", help="render afresh, bypass the cache")
     p.set_defaults(func=lambda args: _list(args) if args.list else _render(args))
+    return p
+
+
+def main(argv=None, prog="lumigraph render") -> int:
     # Scene options are only known once the scene is: run() hands them over unparsed.
-    return run(p, argv, allow_extra=True)
+    return run(build_parser(prog), argv, allow_extra=True)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import hashlib
 import importlib
 import json
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -102,9 +103,10 @@ GT_SCHEMA = "lumigraph.gt"
 class Option:
     """One scene option: ``--name VALUE`` on the command line.
 
-    ``kind`` is ``int``, ``float``, ``str`` or ``bool``; ``choices`` restricts
-    values; ``low``/``high`` bound numbers (``open_low``/``open_high`` make a
-    bound exclusive, e.g. α ∈ (0, 1)).
+    ``kind`` is ``int``, ``float``, ``str``, ``bool`` or ``tuple`` (of floats,
+    ``"1,2,3"``); ``choices`` restricts values; ``low``/``high`` bound numbers,
+    each number of a tuple (``open_low``/``open_high`` make a bound exclusive,
+    e.g. α ∈ (0, 1)). NaN and infinities are refused whatever the bounds.
     """
 
     name: str
@@ -132,13 +134,18 @@ class Option:
                 v = self.kind(value)
         except (TypeError, ValueError):
             raise InputError(self.name, f"expected {self.kind.__name__}, got {value!r}") from None
+        # NaN passes every comparison with a bound, and inf breaks the scene's
+        # arithmetic (black images, null exposure times): refused whatever the bounds
+        nums = v if self.kind is tuple else (v,) if self.kind in (int, float) else ()
+        if any(not math.isfinite(x) for x in nums):
+            raise InputError(self.name, f"expected a finite number, got {value!r}")
         if self.choices is not None and v not in self.choices:
             raise InputError(self.name, f"{v!r} is not one of {', '.join(map(str, self.choices))}")
-        if self.kind in (int, float):
-            if self.low is not None and (v < self.low or (self.open_low and v == self.low)):
-                raise InputError(self.name, f"{v} is out of range: {self._range()}")
-            if self.high is not None and (v > self.high or (self.open_high and v == self.high)):
-                raise InputError(self.name, f"{v} is out of range: {self._range()}")
+        for x in nums:  # a tuple's bounds hold for each of its numbers
+            if self.low is not None and (x < self.low or (self.open_low and x == self.low)):
+                raise InputError(self.name, f"{x} is out of range: {self._range()}")
+            if self.high is not None and (x > self.high or (self.open_high and x == self.high)):
+                raise InputError(self.name, f"{x} is out of range: {self._range()}")
         return v
 
     def _range(self) -> str:

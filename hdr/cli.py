@@ -3,18 +3,20 @@ HDR file conversion. Parses, loads, calls the library, saves."""
 
 from __future__ import annotations
 
+import argparse
 import inspect
 import time
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
     add_verb,
-    check_output_dir,
-    check_output_path,
+    check_planned,
+    input_path,
     make_parser,
+    number,
+    numbers,
     output_dir,
     output_file,
-    parse_floats,
     run,
     say,
     subparsers,
@@ -51,8 +53,11 @@ def _mask_path(out) -> Path:
     return Path(out).with_name(Path(out).stem + ".mask.png")
 
 
+MERGE_EXTS = (".exr", ".hdr", ".tif", ".tiff", ".pfm")  # what 'hdr merge' writes
+
+
 def _times(args):
-    return parse_floats(args.times, name="--times") if args.times else None
+    return list(args.times) if args.times else None
 
 
 def _load(args, *, need_times=True):
@@ -71,11 +76,15 @@ def _response(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta
+    from lumigraph.hdr.debevec1997 import check_smoothness
+    from lumigraph.hdr.mitsunaga1999 import check_order
     from lumigraph.hdr.samples import check_samples
 
-    out = check_output_path(args.out, suffixes=(".json",))
-    if args.plot:
-        check_output_path(args.plot, suffixes=(".png",))
+    # --out and --plot were checked by run() before this (suffix, writable,
+    # not an input, not a folder), each under its own flag
+    out = Path(args.out)
+    check_smoothness(args.smoothness)
+    check_order(args.order)
     if args.samples is not None:
         check_samples(args.samples)  # the fits' own range, before the bracket is read
     stack, times = _load(args, need_times=args.method != "linear" and not args.linear)
@@ -92,10 +101,9 @@ def _response(args) -> int:
     samples = args.samples if args.samples is not None else (
         None if default is None else default.default)
     if "smoothness" in m.options:
-        opts["smoothness"] = "auto" if args.smoothness == "auto" else _num(args.smoothness,
-                                                                            "--smoothness")
+        opts["smoothness"] = args.smoothness
     if "order" in m.options:
-        opts["order"] = "auto" if args.order == "auto" else int(_num(args.order, "--order"))
+        opts["order"] = args.order
     if "samples" in m.options:
         opts["samples"] = samples
         opts["rng"] = np.random.default_rng(args.seed)
@@ -115,13 +123,6 @@ def _response(args) -> int:
         plot_curve(curve, args.plot)
     say(args, f"wrote {out} ({curve.method}, {curve.bit_depth}-bit, {dt:.2f} s)")
     return 0
-
-
-def _num(text, name):
-    try:
-        return float(text)
-    except ValueError:
-        raise InputError(name, f"expected a number or 'auto', got {text!r}") from None
 
 
 def plot_curve(curve, path) -> None:
@@ -159,6 +160,30 @@ def _check_curve(curve, stack, path, what):
         raise InputError(path, f"curve has {curve.channels} channels, the {what} "
                                f"{stack.images.shape[-1]}")
 
+def _noise_pair(text: str) -> list[float]:
+    """``--noise FULL_WELL_E,READ_NOISE_E``: two numbers, each within
+    :func:`lumigraph.hdr.merge.check_noise`'s range (its message, naming which)."""
+    from lumigraph.hdr.merge import check_noise
+
+    parts = [t.strip() for t in text.split(",")]
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"expected FULL_WELL_E,READ_NOISE_E (two numbers), got "
+                                         f"{text!r}")
+    vals = []
+    for t in parts:
+        try:
+            vals.append(float(t))  # NaN and inf too: check_noise says which one is wrong
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"cannot read {t!r} as a number") from None
+    try:  # the library's ranges (and messages): a full well > 0, a read noise >= 0, finite
+        return list(check_noise("variance", *vals))
+    except InputError as e:
+        raise argparse.ArgumentTypeError(e.problem) from None
+
+
+_noise_pair.__name__ = "noise"
+
+
 def _noise(args) -> tuple[dict, dict]:
     """The variance weights' sensor noise: ``--noise FULL_WELL_E,READ_NOISE_E`` or the
     library's defaults (not estimated from the stack). Returns the arguments
@@ -170,11 +195,7 @@ def _noise(args) -> tuple[dict, dict]:
         fw, rn = check_noise(args.weights)
         return {}, {"full_well_e": fw, "read_noise_e": rn,
                     "source": "library default (not estimated from the images)"}
-    vals = parse_floats(args.noise, name="--noise")
-    if len(vals) != 2:
-        raise InputError("--noise", f"expected FULL_WELL_E,READ_NOISE_E (two numbers), got "
-                                    f"{args.noise!r}")
-    fw, rn = check_noise(args.weights, *vals)
+    fw, rn = check_noise(args.weights, *args.noise)  # two numbers: the parser's type
     given = {"full_well_e": fw, "read_noise_e": rn}
     return given, {**given, "source": "given (--noise)"}
 
@@ -187,7 +208,7 @@ def _merge(args) -> int:
     from lumigraph.hdr.merge import merge
     from lumigraph.hdr.response import ResponseCurve
 
-    out = check_output_path(args.out, suffixes=(".exr", ".hdr", ".tif", ".tiff", ".pfm"))
+    out = Path(args.out)
     given, noise = _noise(args)
     curve = ResponseCurve.load(args.response)
     stack, times = _load(args)
@@ -224,20 +245,30 @@ def _align(args) -> int:
 
     from lumigraph.capture.artifact import make_meta, write_json
     from lumigraph.capture.io import read_stack, write_image, write_stack_json
+    from lumigraph.hdr.ward2003 import check_align_options
 
-    out = check_output_dir(args.out)
+    out = Path(args.out)
+    check_align_options(reference=args.reference, levels=args.levels)
     stack = read_stack(args.images, times=_times(args))
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "align works on code values (PNG/TIFF/JPEG)")
+    check_align_options(reference=args.reference, levels=args.levels, count=len(stack.paths))
+    names = [Path(src).stem + ".png" for src in stack.paths]
+    seen: dict[str, str] = {}
+    for name, src in zip(names, stack.paths, strict=True):
+        if name in seen:  # two inputs would be written to one file
+            raise InputError(src, f"has the same name as {seen[name]}; the aligned images are "
+                                  f"named after their inputs ({name}): rename one")
+        seen[name] = src
+    # every file of the folder, before the (slow) alignment: 'align D --out D'
+    # would replace the original exposures
+    check_planned([out / n for n in (*names, "stack.json", "stack.json.meta.json")])
     aligned, shifts = ALIGN_METHODS.resolve(args.method)(stack.images, reference=args.reference,
                                                          levels=args.levels)
     out.mkdir(parents=True, exist_ok=True)
-    names = []
-    for img, src in zip(aligned, stack.paths, strict=True):
-        name = Path(src).stem + ".png"
+    for img, name in zip(aligned, names, strict=True):
         write_image(out / name, img if img.shape[-1] > 1 else img[..., 0],
                     bit_depth=stack.bit_depth if img.dtype == np.uint16 else None)
-        names.append(name)
     info = {k: v for k, v in stack.info.items() if k not in ("images", "schema", "schema_version")}
     if stack.exposure_times_s is not None:
         info["exposure_times_s"] = list(stack.exposure_times_s)
@@ -256,8 +287,10 @@ def _tonemap(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_image
     from lumigraph.hdr.formats import read_hdr_image
+    from lumigraph.hdr.reinhard2002 import check_key
 
-    out = check_output_path(args.out, suffixes=(".png", ".tif", ".tiff"))
+    out = Path(args.out)
+    check_key(args.key)  # before the radiance is read
     img = read_hdr_image(args.input)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
@@ -272,9 +305,9 @@ def _tonemap(args) -> int:
 
 def _convert(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
-    from lumigraph.hdr.formats import HDR_EXTS, read_hdr_image, write_hdr_image
+    from lumigraph.hdr.formats import read_hdr_image, write_hdr_image
 
-    out = check_output_path(args.output, suffixes=HDR_EXTS)
+    out = Path(args.output)
     img = read_hdr_image(args.input)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
@@ -292,11 +325,20 @@ def _video(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.commandline import progress
     from lumigraph.capture.io import read_stack, write_exr, write_image
-    from lumigraph.hdr.kang2003 import check_temporal, hdr_video, tonemap_video
+    from lumigraph.hdr.kang2003 import (
+        check_temporal,
+        check_video_options,
+        hdr_video,
+        tonemap_video,
+    )
+    from lumigraph.hdr.reinhard2002 import check_key
     from lumigraph.hdr.response import ResponseCurve
 
-    out = check_output_dir(args.out)
-    check_temporal(args.temporal)  # tonemap_video's own range, before the frames are read
+    out = Path(args.out)
+    # the library's own ranges, before the frames are read
+    check_temporal(args.temporal)
+    check_key(args.key)
+    check_video_options(window=args.window, consistency_sigma=args.consistency_sigma)
     curve = ResponseCurve.load(args.response)
     stack = read_stack(args.frames, times=_times(args), need_times=True)
     # hdr_video checks its frames (at least 2 of them); an error about them
@@ -307,6 +349,11 @@ def _video(args) -> int:
         raise InputError(stack.paths[0], "float frames are already linear; HDR video needs "
                                          "code values (integer PNG/TIFF)")
     _check_curve(curve, stack, args.response, "frames")
+    planned = [f"frame_{i:03d}.exr" for i in range(len(stack.paths))]
+    if args.tonemap:
+        planned += [f"frame_{i:03d}.png" for i in range(len(stack.paths))]
+    check_planned([out / n for n in (*planned, *(n + ".meta.json" for n in planned),
+                                     "video.meta.json")])
     t0 = time.perf_counter()
     v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=args.window,
                   consistency_sigma=args.consistency_sigma,
@@ -355,78 +402,116 @@ def _methods_epilog(registry) -> str:
     return f"{registry.kind} methods:\n{registry.help_text()}"
 
 
-def main(argv=None, prog="lumigraph hdr") -> int:
+# The ranges below are the library's own (its check_* functions and constants):
+# the parser refuses a bad value before any file is read, the library again.
+TIMES = numbers(number(float, lo=0, lo_open=True), length=(1, None))
+
+
+def build_parser(prog: str = "lumigraph hdr"):
+    """The ``lumigraph hdr`` parser: every verb, every option typed."""
+    from lumigraph.hdr.formats import HDR_EXTS
+    from lumigraph.hdr.kang2003 import MIN_WINDOW
+    from lumigraph.hdr.kang2003 import hdr_video as _hv
+    from lumigraph.hdr.merge import WEIGHTS
+    from lumigraph.hdr.mitsunaga1999 import MAX_ORDER, MIN_ORDER
+    from lumigraph.hdr.samples import MIN_SAMPLES
+    from lumigraph.hdr.ward2003 import MAX_LEVELS, MIN_LEVELS
+
+    key = number(float, lo=0, lo_open=True)
     p = make_parser(prog, "HDR imaging: response curves, radiance maps, alignment, tone mapping.",
                     epilog=EPILOG)
     sp = subparsers(p)
     v = add_verb(sp, "response", "recover the camera response from a bracket",
                  epilog=_methods_epilog(RESPONSE_METHODS))
-    v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
+    v.add_argument("images", nargs="+", type=input_path,
+                   help="bracket images, or a folder with stack.json")
     v.add_argument("--method", choices=RESPONSE_METHODS.names, default="debevec",
                    help="response method (listed below)")
-    v.add_argument("--times", help="exposure times T1,T2,... (seconds; default EXIF/stack.json)")
+    v.add_argument("--times", type=TIMES,
+                   help="exposure times T1,T2,... (seconds; default EXIF/stack.json)")
     v.add_argument("--out", required=True, type=output_file(".json"), help="response.json")
     v.add_argument("--plot", type=output_file(".png"), help="also plot the curve to this PNG")
     v.add_argument("--linear", action="store_true", help="the data are linear: identity response")
-    v.add_argument("--smoothness", default="auto", help="Debevec λ, or auto (the L-curve corner; the discrepancy principle under heavy noise)")
-    v.add_argument("--order", default="auto", help="Mitsunaga-Nayar order 1..10, or auto")
-    v.add_argument("--samples", type=int,
+    v.add_argument("--smoothness", default="auto", type=number(float, lo=0, allow=("auto",)),
+                   help="Debevec λ, or auto (the L-curve corner; the discrepancy principle under "
+                        "heavy noise)")
+    v.add_argument("--order", default="auto",
+                   type=number(int, lo=MIN_ORDER, hi=MAX_ORDER, allow=("auto",)),
+                   help="Mitsunaga-Nayar polynomial order, or auto")
+    v.add_argument("--samples", type=number(int, lo=MIN_SAMPLES),
                    help="pixels sampled (default 600; robertson 5000, for its per-code means)")
-    v.add_argument("--seed", type=int, default=0, help="seed of the pixel sampling")
+    v.add_argument("--seed", type=number(int, lo=0), default=0,
+                   help="seed of the pixel sampling")
     v.set_defaults(func=_response, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
-    v.add_argument("images", nargs="+", help="bracket images, or a folder with stack.json")
-    v.add_argument("--response", required=True, help="response.json from 'hdr response'")
-    v.add_argument("--times", help="exposure times T1,T2,... (seconds)")
-    v.add_argument("--out", required=True, type=output_file(".exr", ".hdr", ".tif", ".tiff", ".pfm"), help="radiance.exr (or .hdr, .tif LogLuv, .pfm)")
-    v.add_argument("--weights", choices=("variance", "hat"), default="variance")
+    v.add_argument("images", nargs="+", type=input_path,
+                   help="bracket images, or a folder with stack.json")
+    v.add_argument("--response", required=True, type=input_path,
+                   help="response.json from 'hdr response'")
+    v.add_argument("--times", type=TIMES, help="exposure times T1,T2,... (seconds)")
+    v.add_argument("--out", required=True, type=output_file(*MERGE_EXTS),
+                   help="radiance.exr (or .hdr, .tif LogLuv, .pfm); the flags PNG "
+                        "NAME.mask.png is written beside it")
+    v.add_argument("--weights", choices=WEIGHTS, default="variance")
     v.add_argument("--deghost", action="store_true", help="leave out moving content")
-    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E",
+    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E", type=_noise_pair,
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
                    derived_outputs=lambda a: [("--out", _mask_path(a.out))])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
                  epilog=_methods_epilog(ALIGN_METHODS))
-    v.add_argument("images", nargs="+")
+    v.add_argument("images", nargs="+", type=input_path,
+                   help="bracket images, or a folder with stack.json")
     v.add_argument("--method", choices=ALIGN_METHODS.names, default="mtb",
                    help="alignment method (listed below)")
-    v.add_argument("--out", required=True, type=output_dir, help="output folder (aligned PNGs + stack.json)")
-    v.add_argument("--times", help="exposure times T1,T2,... to record in stack.json")
-    v.add_argument("--reference", type=int, default=None, help="reference image index")
-    v.add_argument("--levels", type=int, default=6, help="pyramid levels (shift <= 2**levels)")
+    v.add_argument("--out", required=True, type=output_dir,
+                   help="output folder (aligned PNGs + stack.json)")
+    v.add_argument("--times", type=TIMES, help="exposure times T1,T2,... to record in stack.json")
+    v.add_argument("--reference", type=number(int, lo=0), default=None,
+                   help="reference image index (default the middle one)")
+    v.add_argument("--levels", type=number(int, lo=MIN_LEVELS, hi=MAX_LEVELS), default=6,
+                   help="pyramid levels (shift <= 2**levels)")
     v.set_defaults(func=_align)
     v = add_verb(sp, "tonemap", "tone-map a radiance map to an sRGB image",
                  epilog=_methods_epilog(TONEMAP_METHODS))
-    v.add_argument("input", help="radiance (.exr, .hdr, LogLuv .tif, .pfm)")
+    v.add_argument("input", type=input_path, help="radiance (.exr, .hdr, LogLuv .tif, .pfm)")
     v.add_argument("--method", choices=TONEMAP_METHODS.names, default="reinhard",
                    help="tone-mapping operator (listed below)")
-    v.add_argument("--key", type=float, default=0.18, help="scene key (0.18 middle grey)")
+    v.add_argument("--key", type=key, default=0.18, help="scene key (0.18 middle grey)")
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
-    v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"), help="image.png")
+    v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"),
+                   help="image.png")
     v.set_defaults(func=_tonemap)
     v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
-    v.add_argument("frames", nargs="+", help="frames in time order, or a folder with stack.json")
-    v.add_argument("--response", required=True, help="response.json from 'hdr response'")
-    v.add_argument("--times", help="exposure time of each frame T1,T2,... (seconds)")
-    v.add_argument("--out", required=True, type=output_dir, help="output folder (frame_NNN.exr [+ .png])")
+    v.add_argument("frames", nargs="+", type=input_path,
+                   help="frames in time order, or a folder with stack.json")
+    v.add_argument("--response", required=True, type=input_path,
+                   help="response.json from 'hdr response'")
+    v.add_argument("--times", type=TIMES, help="exposure time of each frame T1,T2,... (seconds)")
+    v.add_argument("--out", required=True, type=output_dir,
+                   help="output folder (frame_NNN.exr [+ .png], video.meta.json)")
     v.add_argument("--tonemap", action="store_true", help="also write tone-mapped frame_NNN.png")
-    v.add_argument("--key", type=float, default=0.18, help="tone-mapping key (0.18 middle grey)")
-    v.add_argument("--temporal", type=int, default=5,
-                   help="frames the tone-mapping log-average is smoothed over (odd; 1 = none)")
-    v.add_argument("--window", type=int, default=9, help="flow window, odd px (default 9)")
-    from lumigraph.hdr.kang2003 import hdr_video as _hv
-
+    v.add_argument("--key", type=key, default=0.18, help="tone-mapping key (0.18 middle grey)")
+    v.add_argument("--temporal", type=number(int, lo=1, odd=True), default=5,
+                   help="frames the tone-mapping log-average is smoothed over (1 = none)")
+    v.add_argument("--window", type=number(int, lo=MIN_WINDOW, odd=True), default=9,
+                   help="flow window, px (default 9)")
     sigma = inspect.signature(_hv).parameters["consistency_sigma"].default
-    v.add_argument("--consistency-sigma", type=float, default=sigma,
+    v.add_argument("--consistency-sigma", type=number(float, lo=0, lo_open=True), default=sigma,
                    help="reject warped neighbours further than this many noise sigma (default "
                         f"{sigma:g}, chosen as docs/decisions/hdr-video-consistency-sigma.md "
                         "records)")
     v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
-    v.add_argument("input")
-    v.add_argument("output", type=output_file(".exr", ".hdr", ".pic", ".rgbe", ".tif", ".tiff", ".pfm"))
+    v.add_argument("input", type=input_path, help="an HDR image (.exr, .hdr, LogLuv .tif, .pfm)")
+    v.add_argument("output", type=output_file(*HDR_EXTS),
+                   help="the converted image; its extension chooses the format")
     v.add_argument("--logluv-bits", type=int, choices=(24, 32), default=32)
     v.add_argument("--half", action="store_true", help="EXR: half floats")
     v.set_defaults(func=_convert)
-    return run(p, argv)
+    return p
+
+
+def main(argv=None, prog="lumigraph hdr") -> int:
+    return run(build_parser(prog), argv)

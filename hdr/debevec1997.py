@@ -46,10 +46,42 @@ import math
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.hdr.response import ResponseCurve, normalise_g
 from lumigraph.hdr.samples import check_samples, check_stack, hat_weight, sample_pixels
 
 LAMBDA_GRID = tuple(10.0 ** (k / 4) for k in range(-40, -11))
+MIN_SMOOTHNESS = 0.0  # λ = 0 is allowed (no smoothness term; see the warning it gives)
+
+
+def check_smoothness(smoothness: float | str) -> float | str:
+    """:func:`response_debevec1997`'s ``smoothness``: a finite λ >= 0, or
+    ``"auto"``.
+
+    Raises
+    ------
+    InputError
+        Naming ``smoothness``.
+
+    Examples
+    --------
+    >>> check_smoothness(0.5), check_smoothness("auto")
+    (0.5, 'auto')
+    >>> try:
+    ...     check_smoothness(float("nan"))
+    ... except InputError as e:
+    ...     print(e)
+    smoothness: expected λ >= 0 or auto, got nan
+    """
+    if isinstance(smoothness, str) and smoothness == "auto":
+        return smoothness
+    try:
+        lam = float(smoothness)
+    except (TypeError, ValueError):
+        lam = math.nan
+    if not math.isfinite(lam) or lam < MIN_SMOOTHNESS:
+        raise InputError("smoothness", f"expected λ >= {MIN_SMOOTHNESS:g} or auto, got {smoothness}")
+    return lam
 
 
 def knot_basis(codes: np.ndarray, n_knots: int, bit_depth: int) -> tuple[np.ndarray, np.ndarray]:
@@ -383,6 +415,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
     check_samples(samples)
+    smoothness = check_smoothness(smoothness)
     rng = np.random.default_rng(0) if rng is None else rng
     n_knots = int(knots) if knots is not None else min(2 ** bd, 256)
     if not 4 <= n_knots <= 2 ** bd:
@@ -399,8 +432,6 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     lam_given = smoothness != "auto"
     if lam_given:
         lam = float(smoothness)
-        if not math.isfinite(lam) or lam < 0:
-            raise InputError("smoothness", f"expected λ >= 0, got {smoothness}")
         grid = (lam,)
     else:
         grid = LAMBDA_GRID

@@ -423,7 +423,7 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
     (:func:`_sources`).
     """
     z, t = _check(frames, exposure_times_s, response)
-    _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share)
+    _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share, window)
     n, h, w, c = z.shape
     rad = Radiometry(response, c, full_well_e=full_well_e, read_noise_e=read_noise_e,
                       clip_margin=clip_margin)
@@ -461,12 +461,48 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
 
 
 # ------------------------------------------------------- the method's steps
-def _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share):
+MIN_WINDOW = 3  # the flow's own least window (stereo.pyramid_flow.check_options)
+
+
+def check_video_options(*, window: int = 9, consistency_sigma: float = 6.0) -> None:
+    """:func:`hdr_video`'s ``window`` (odd, >= :data:`MIN_WINDOW` px: the
+    flow's, :func:`stereo.pyramid_flow.check_options`) and
+    ``consistency_sigma`` (a finite number > 0), checked before any frame is
+    read.
+
+    Raises
+    ------
+    InputError
+        Naming ``window`` or ``consistency_sigma``.
+
+    Examples
+    --------
+    >>> check_video_options(window=9, consistency_sigma=6.0)
+    >>> try:
+    ...     check_video_options(window=0)
+    ... except InputError as e:
+    ...     print(e)
+    window: expected an odd size >= 3, got 0
+    """
+    from lumigraph.stereo.pyramid_flow import check_options
+
+    if isinstance(window, bool) or not isinstance(window, int | np.integer):
+        raise InputError("window", f"expected an odd integer >= {MIN_WINDOW}, got {window!r}")
+    check_options(window=int(window))
+    try:
+        ok = math.isfinite(consistency_sigma) and consistency_sigma > 0
+    except TypeError:
+        ok = False
+    if not ok:
+        raise InputError("consistency_sigma", f"expected a finite number > 0, got "
+                                              f"{consistency_sigma!r}")
+
+
+def _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share, window=9):
     """Step 0: the options (the frames, times and curve are :func:`_check`'s)."""
+    check_video_options(window=window, consistency_sigma=consistency_sigma)
     if flow_method not in ("dense", "local"):
         raise ValueError(f"flow_method: expected 'dense' or 'local', got {flow_method!r}")
-    if not consistency_sigma > 0:
-        raise ValueError(f"consistency_sigma: expected > 0, got {consistency_sigma}")
     if neighbourhood < 1 or neighbourhood % 2 == 0:
         raise ValueError(f"neighbourhood: expected an odd size >= 1, got {neighbourhood}")
     if not 0 < outlier_share <= 1:
@@ -791,7 +827,7 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     >>> bool(b.flicker < a.flicker), a.images.shape
     (True, (6, 8, 8, 3))
     """
-    from lumigraph.hdr.reinhard2002 import LUMA, global_operator, srgb_encode
+    from lumigraph.hdr.reinhard2002 import LUMA, check_key, global_operator, srgb_encode
 
     v = np.asarray(radiances, dtype=np.float64)
     if v.ndim != 4 or v.shape[-1] != 3:
@@ -801,8 +837,7 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     check_temporal(temporal)
     if bit_depth not in (8, 16):
         raise InputError("bit_depth", f"expected 8 or 16, got {bit_depth}")
-    if not key > 0:
-        raise InputError("key", f"expected > 0, got {key}")
+    key = check_key(key)
     n = v.shape[0]
     v = np.maximum(v, 0.0)
     lum = v @ LUMA

@@ -64,10 +64,39 @@ import math
 import numpy as np
 import scipy.linalg
 
+from lumigraph.capture.errors import InputError
 from lumigraph.hdr.response import ResponseCurve, normalise_g
 from lumigraph.hdr.samples import check_samples, check_stack, sample_pixels
 
 MAX_ORDER = 10
+MIN_ORDER = 1
+
+
+def check_order(order: int | str) -> int | str:
+    """:func:`response_mitsunaga1999`'s ``order``: an integer
+    :data:`MIN_ORDER`..:data:`MAX_ORDER`, or ``"auto"``.
+
+    Raises
+    ------
+    InputError
+        Naming ``order``.
+
+    Examples
+    --------
+    >>> check_order(3), check_order("auto")
+    (3, 'auto')
+    >>> try:
+    ...     check_order(2.5)
+    ... except InputError as e:
+    ...     print(e)
+    order: expected 1..10 or auto, got 2.5
+    """
+    if isinstance(order, str) and order == "auto":
+        return order
+    if isinstance(order, bool) or not isinstance(order, int | np.integer) \
+            or not MIN_ORDER <= order <= MAX_ORDER:
+        raise InputError("order", f"expected {MIN_ORDER}..{MAX_ORDER} or auto, got {order!r}")
+    return int(order)
 
 
 def basis(m: np.ndarray, order: int) -> np.ndarray:
@@ -338,8 +367,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     if p < 2:
         raise InputError("images", "a response needs at least two exposures")
     check_samples(samples)
-    if order != "auto" and (not isinstance(order, int | np.integer) or not 1 <= order <= MAX_ORDER):
-        raise InputError("order", f"expected 1..{MAX_ORDER} or auto, got {order!r}")
+    order = check_order(order)
     rng = np.random.default_rng(0) if rng is None else rng
     perm = np.argsort(t)
     z, t = z[perm], t[perm]

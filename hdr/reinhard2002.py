@@ -29,6 +29,34 @@ from lumigraph.capture.errors import InputError
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
+def check_key(key: float) -> float:
+    """The key ``a`` of :func:`tonemap` (and :func:`hdr.kang2003.tonemap_video`):
+    a finite number > 0 (0 maps every pixel to black, NaN too).
+
+    Raises
+    ------
+    InputError
+        Naming ``key``.
+
+    Examples
+    --------
+    >>> check_key(0.18)
+    0.18
+    >>> try:
+    ...     check_key(0)
+    ... except InputError as e:
+    ...     print(e)
+    key: expected a finite number > 0, got 0
+    """
+    try:
+        ok = np.isfinite(key) and key > 0
+    except TypeError:
+        ok = False
+    if not ok or isinstance(key, bool):
+        raise InputError("key", f"expected a finite number > 0, got {key!r}")
+    return float(key)
+
+
 def _luminance(rgb):
     return np.maximum(rgb @ LUMA, 0.0)
 
@@ -81,7 +109,7 @@ def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18
     radiance : ndarray, ``(H, W, 3)`` or ``(H, W)`` float, linear, finite, ≥ 0
     method : {"reinhard", "reinhard-local"}
     key : float
-        The scene key ``a`` (0.18 = middle grey).
+        The scene key ``a`` (0.18 = middle grey), > 0 (:func:`check_key`).
     white : float, optional
         ``L_white`` of the global operator (default: the largest scaled luminance).
     bit_depth : {8, 16}
@@ -99,6 +127,7 @@ def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18
         raise ValueError(f"method: expected 'reinhard' or 'reinhard-local', got {method!r}")
     if bit_depth not in (8, 16):
         raise ValueError(f"bit_depth: expected 8 or 16, got {bit_depth}")
+    key = check_key(key)
     rgb = np.asarray(radiance, dtype=np.float64)
     if rgb.ndim == 2:
         rgb = np.repeat(rgb[..., None], 3, axis=2)

@@ -25,6 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
+
+# Pyramid levels of mtb_shift: at least 1 (the full image); 2**levels px is
+# the largest shift found, and past ~16 levels the pyramid is stopped by its
+# 16 px floor on any image a camera makes.
+MIN_LEVELS, MAX_LEVELS = 1, 16
+
 
 def _gray(img: np.ndarray) -> np.ndarray:
     a = np.asarray(img, dtype=np.float32)
@@ -107,16 +114,48 @@ def apply_shift(image: np.ndarray, shift: tuple[int, int]) -> np.ndarray:
     return big[y0:y0 + h, x0:x0 + w].copy()
 
 
+def check_align_options(*, reference: int | None = None, levels: int = 6,
+                        count: int | None = None) -> None:
+    """:func:`align`'s options: ``levels`` an integer
+    :data:`MIN_LEVELS`..:data:`MAX_LEVELS`, ``reference`` an image index
+    ``0..count-1`` (``>= 0`` while ``count`` is unknown) or None.
+
+    Raises
+    ------
+    InputError
+        Naming ``levels`` or ``reference``.
+
+    Examples
+    --------
+    >>> check_align_options(reference=1, levels=6, count=3)
+    >>> try:
+    ...     check_align_options(reference=3, count=3)
+    ... except InputError as e:
+    ...     print(e)
+    reference: expected an image index 0..2, got 3
+    """
+    def integer(v):
+        return isinstance(v, int | np.integer) and not isinstance(v, bool)
+
+    if not integer(levels) or not MIN_LEVELS <= levels <= MAX_LEVELS:
+        raise InputError("levels", f"expected an integer {MIN_LEVELS}..{MAX_LEVELS}, got {levels!r}")
+    if reference is not None:
+        top = "" if count is None else f"{count - 1}"
+        if not integer(reference) or reference < 0 or (count is not None and reference >= count):
+            raise InputError("reference", f"expected an image index 0..{top or 'N-1'}, got "
+                                          f"{reference!r}")
+
+
 def align(images, *, reference: int | None = None, levels: int = 6):
     """Align every exposure to a reference (default: the middle one).
 
-    Returns ``(aligned (P, H, W, C) same dtype, shifts list of (dx, dy))``.
+    Returns ``(aligned (P, H, W, C) same dtype, shifts list of (dx, dy))``;
+    the options are checked by :func:`check_align_options`.
     """
     stack = np.asarray(images)
     p = stack.shape[0]
+    check_align_options(reference=reference, levels=levels, count=p)
     ref = p // 2 if reference is None else int(reference)
-    if not 0 <= ref < p:
-        raise ValueError(f"reference: expected 0..{p - 1}, got {reference}")
     shifts = [(0, 0) if j == ref else mtb_shift(stack[ref], stack[j], levels=levels)
               for j in range(p)]
     return np.stack([apply_shift(stack[j], shifts[j]) for j in range(p)]), shifts

@@ -3,9 +3,10 @@ on the same ground-truth inputs, and write the speed-against-error report."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
-from lumigraph.capture.commandline import make_parser, output_dir, run, say
+from lumigraph.capture.commandline import make_parser, number, output_dir, run, say
 from lumigraph.capture.registry import Method, Registry
 
 # bench stage name -> its stage(*, quick) -> Stage and a one-line summary, in the
@@ -89,13 +90,34 @@ def load_stage(name: str, *, quick: bool = False):
     return stage(quick=quick)
 
 
-def main(argv=None, prog="lumigraph bench") -> int:
+def _stage_name(text: str) -> str:
+    """A name of :data:`BENCH_STAGES` (a type, not ``choices``: argparse checks
+    an empty ``nargs="*"`` list against ``choices`` and would refuse it)."""
+    if text not in BENCH_STAGES:
+        raise argparse.ArgumentTypeError(f"unknown bench stage {text!r}; choose from "
+                                         f"{', '.join(BENCH_STAGES)}")
+    return text
+
+
+_stage_name.__name__ = "bench stage"
+
+
+def build_parser(prog: str = "lumigraph bench"):
+    """The ``lumigraph bench`` parser."""
+    from lumigraph.capture.bench import MIN_REPEATS
+
     p = make_parser(prog, "Speed against error: our methods and the peers on the same inputs.",
                     epilog=EPILOG)
-    p.add_argument("stages", nargs="*", metavar="STAGE",
+    p.add_argument("stages", nargs="*", metavar="STAGE", type=_stage_name,
                    help=f"stages to run (default all): {', '.join(BENCH_STAGES)}")
-    p.add_argument("--out", required=True, type=output_dir, help="report folder")
-    p.add_argument("--repeats", type=int, default=3, help="timed runs per row, median kept (>= 3)")
+    p.add_argument("--out", required=True, type=output_dir,
+                   help="report folder (report.md, report.json, STAGE.png)")
+    p.add_argument("--repeats", type=number(int, lo=MIN_REPEATS), default=MIN_REPEATS,
+                   help="timed runs per row, median kept")
     p.add_argument("--quick", action="store_true", help="small inputs (smoke test)")
     p.set_defaults(func=_bench)
-    return run(p, argv)
+    return p
+
+
+def main(argv=None, prog="lumigraph bench") -> int:
+    return run(build_parser(prog), argv)

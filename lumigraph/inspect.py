@@ -8,7 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from lumigraph.capture.commandline import make_parser, output_file, run
+from lumigraph.capture.commandline import (
+    input_path,
+    make_parser,
+    number,
+    numbers,
+    output_file,
+    run,
+)
 
 EPILOG = """\
 examples:
@@ -56,10 +63,9 @@ def describe(path: Path) -> dict:
 def _inspect(args) -> int:
     from lumigraph.capture import io
     from lumigraph.capture.artifact import make_meta, write_artifact
-    from lumigraph.capture.commandline import parse_floats
 
     paths = [Path(p) for p in args.inputs]
-    times = parse_floats(args.times, name="--times") if args.times else None
+    times = list(args.times) if args.times else None
     is_stack = len(paths) > 1 or (len(paths) == 1 and (paths[0].is_dir() or paths[0].name == "stack.json"))
     if is_stack and all(p.suffix.lower() not in {".flo", ".ply"} | io.RGBE_EXTS for p in paths):
         st = io.read_stack(paths, times=times, need_times=args.need_times)
@@ -79,12 +85,20 @@ def _inspect(args) -> int:
     return 0
 
 
-def main(argv=None, prog="lumigraph inspect") -> int:
+def build_parser(prog: str = "lumigraph inspect"):
+    """The ``lumigraph inspect`` parser."""
     p = make_parser(prog, "Describe images, stacks and artifacts; validate inputs.", epilog=EPILOG)
-    p.add_argument("inputs", nargs="+", help="files, or a folder with stack.json")
-    p.add_argument("--times", help="exposure times in seconds, comma-separated (1/30 allowed)")
+    p.add_argument("inputs", nargs="+", type=input_path, help="files, or a folder with stack.json")
+    # exposure times are positive (capture.exposure.check_exposure_times checks the rest)
+    p.add_argument("--times", type=numbers(number(float, lo=0, lo_open=True), length=(1, None)),
+                   help="exposure times in seconds, comma-separated (1/30 allowed)")
     p.add_argument("--need-times", action="store_true",
                    help="fail unless every image has an exposure time")
-    p.add_argument("--out", type=output_file(".json"), help="write the summary as JSON here (atomically) instead of stdout")
+    p.add_argument("--out", type=output_file(".json"),
+                   help="write the summary as JSON here (atomically) instead of stdout")
     p.set_defaults(func=_inspect)
-    return run(p, argv)
+    return p
+
+
+def main(argv=None, prog="lumigraph inspect") -> int:
+    return run(build_parser(prog), argv)

@@ -8,12 +8,15 @@ patterns the methods expect.
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
-    check_output_dir,
+    check_planned,
+    input_path,
     make_parser,
+    number,
     output_dir,
     parse_size,
     run,
@@ -110,10 +113,15 @@ def _load(args):
 def _separate(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.separation import separate
+    from lumigraph.separation.result import FILES
     from lumigraph.separation.separate import check_options
 
-    check_options(alpha=args.alpha, b=args.b, tile=args.tile)  # before any capture is read
-    out = check_output_dir(args.out)
+    # before any capture is read
+    check_options(alpha=args.alpha, b=args.b, tile=args.tile, noise_sigma=args.noise,
+                  saturation=args.saturation)
+    out = Path(args.out)
+    # 'separate D --out D' would put them beside the captures: refused now, not after the work
+    check_planned([out / n for f in FILES for n in (f, f + ".meta.json")])
     response = None
     if args.response:
         from lumigraph.hdr.response import ResponseCurve
@@ -150,7 +158,7 @@ def _separate(args) -> int:
 def _patterns(args) -> int:
     from lumigraph.capture import patterns as pt
 
-    size = parse_size(args.size)
+    size = args.size
     kinds = ["checker", "sinusoid", "stripe", "occluder", "flat"] if args.kind == "all" else [args.kind]
     if args.alpha is not None:
         pt.check_lit_fraction(args.alpha)  # whatever the kind
@@ -177,44 +185,87 @@ def _patterns(args) -> int:
     return 0
 
 
+def _size(text: str) -> tuple[int, int]:
+    """``--size WxH`` as ``(width, height)``, each side 8..20000 px."""
+    try:
+        return parse_size(text)
+    except InputError as e:
+        raise argparse.ArgumentTypeError(e.problem) from None
+
+
+_size.__name__ = "size"
+
+
+def build_patterns_parser(prog: str = "lumigraph separate patterns"):
+    """The parser of ``lumigraph separate patterns``; each bound is the least
+    value the pattern functions of :mod:`lumigraph.capture.patterns` accept
+    (they check the rest: ``--square`` a multiple of ``--shifts``, …)."""
+    from lumigraph.capture.patterns import KINDS
+
+    p = make_parser(prog, "Write projector patterns (PNG, projector resolution) "
+                    "and a stack.json, in the order the separation expects.", epilog=EPILOG)
+    p.add_argument("--kind", default="checker", choices=[*KINDS, "all"])
+    p.add_argument("--size", default=(1024, 768), type=_size, metavar="WxH",
+                   help="projector resolution WxH (default 1024x768)")
+    p.add_argument("--square", type=number(int, lo=1), default=8,
+                   help="checker square (px) / block cell (px)")
+    p.add_argument("--shifts", type=number(int, lo=1), default=4,
+                   help="checker shift steps per axis (divides --square)")
+    p.add_argument("--period", type=number(int, lo=2), default=16,
+                   help="sinusoid/stripe/occluder period (px)")
+    p.add_argument("--width", type=number(int, lo=1), default=2, help="occluder bar width (px)")
+    p.add_argument("--alpha", type=number(float, lo=0, hi=1, lo_open=True, hi_open=True),
+                   default=None, help="lit fraction of 'block' patterns")
+    p.add_argument("--tile-cells", type=number(int, lo=2), default=4,
+                   help="block tile size in cells")
+    p.add_argument("--out", required=True, type=output_dir, help="output folder")
+    # the pattern functions' arguments that differ from the flags' dests
+    p.set_defaults(func=_patterns, arg_flags={"tile": "--tile-cells", "cell": "--square"})
+    return p
+
+
+def build_parser(prog: str = "lumigraph separate"):
+    """The ``lumigraph separate`` parser (the ``patterns`` verb is
+    :func:`build_patterns_parser`: a positional list of captures cannot share
+    a parser with verbs). Bounds are :func:`separation.separate.check_options`'s."""
+    from lumigraph.separation.methods import METHODS
+    from lumigraph.separation.separate import MIN_TILE
+
+    p = make_parser(prog, "Separate direct and global light from captures under high-frequency "
+                    "projector patterns (Nayar et al. 2006).",
+                    epilog=f"{EPILOG}\nmethods:\n{METHODS.help_text()}\n")
+    p.add_argument("images", nargs="+", type=input_path,
+                   help="captures (files, or a folder with stack.json)")
+    p.add_argument("--method", default="checker", choices=METHODS.names,
+                   help="separation method (listed below)")
+    p.add_argument("--alpha", type=number(float, lo=0, hi=1, lo_open=True, hi_open=True),
+                   default=None, help="lit fraction of the patterns (default 0.5)")
+    p.add_argument("--b", type=number(float, lo=0, hi=1, hi_open=True), default=None,
+                   help="projector black level")
+    p.add_argument("--black", type=input_path,
+                   help="capture under an all-black projector frame (to measure b)")
+    p.add_argument("--white", type=input_path,
+                   help="capture under an all-white projector frame (to measure b)")
+    p.add_argument("--response", type=input_path,
+                   help="response.json for 8-bit (non-linear) captures")
+    p.add_argument("--estimator", default="pairs", choices=["pairs", "maxmin"],
+                   help="checker: noise-robust pairs (default) or the textbook max/min")
+    p.add_argument("--noise", type=number(float, lo=0), default=0.0,
+                   help="known noise std per capture (linear)")
+    p.add_argument("--saturation", type=number(float, lo=0, lo_open=True), default=None,
+                   help="linear clip level")
+    p.add_argument("--tile", type=number(int, lo=MIN_TILE), default=16,
+                   help="tile size for --method single (px)")
+    p.add_argument("--out", required=True, type=output_dir,
+                   help="output folder (direct.exr, global.exr, mask.png)")
+    p.set_defaults(func=_separate, arg_flags={"noise_sigma": "--noise"})
+    return p
+
+
 def main(argv=None, prog="lumigraph separate") -> int:
     import sys
 
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "patterns":
-        p = make_parser(f"{prog} patterns", "Write projector patterns (PNG, projector resolution) "
-                        "and a stack.json, in the order the separation expects.", epilog=EPILOG)
-        p.add_argument("--kind", default="checker",
-                       choices=["checker", "block", "sinusoid", "stripe", "occluder", "flat", "all"])
-        p.add_argument("--size", default="1024x768", help="projector resolution WxH")
-        p.add_argument("--square", type=int, default=8, help="checker square (px) / block cell (px)")
-        p.add_argument("--shifts", type=int, default=4, help="checker shift steps per axis (divides --square)")
-        p.add_argument("--period", type=int, default=16, help="sinusoid/stripe/occluder period (px)")
-        p.add_argument("--width", type=int, default=2, help="occluder bar width (px)")
-        p.add_argument("--alpha", type=float, default=None, help="lit fraction of 'block' patterns")
-        p.add_argument("--tile-cells", type=int, default=4, help="block tile size in cells")
-        p.add_argument("--out", required=True, type=output_dir, help="output folder")
-        # the pattern functions' arguments that differ from the flags' dests
-        p.set_defaults(func=_patterns, arg_flags={"tile": "--tile-cells", "cell": "--square"})
-        return run(p, argv[1:])
-    from lumigraph.separation.methods import METHODS
-
-    p = make_parser(prog, "Separate direct and global light from captures under high-frequency "
-                    "projector patterns (Nayar et al. 2006).",
-                    epilog=f"{EPILOG}\nmethods:\n{METHODS.help_text()}\n")
-    p.add_argument("images", nargs="+", help="captures (files, or a folder with stack.json)")
-    p.add_argument("--method", default="checker", choices=METHODS.names,
-                   help="separation method (listed below)")
-    p.add_argument("--alpha", type=float, default=None, help="lit fraction of the patterns (default 0.5)")
-    p.add_argument("--b", type=float, default=None, help="projector black level in [0, 1)")
-    p.add_argument("--black", help="capture under an all-black projector frame (to measure b)")
-    p.add_argument("--white", help="capture under an all-white projector frame (to measure b)")
-    p.add_argument("--response", help="response.json for 8-bit (non-linear) captures")
-    p.add_argument("--estimator", default="pairs", choices=["pairs", "maxmin"],
-                   help="checker: noise-robust pairs (default) or the textbook max/min")
-    p.add_argument("--noise", type=float, default=0.0, help="known noise std per capture (linear)")
-    p.add_argument("--saturation", type=float, default=None, help="linear clip level")
-    p.add_argument("--tile", type=int, default=16, help="tile size for --method single (px)")
-    p.add_argument("--out", required=True, type=output_dir, help="output folder")
-    p.set_defaults(func=_separate)
-    return run(p, argv)
+        return run(build_patterns_parser(f"{prog} patterns"), argv[1:])
+    return run(build_parser(prog), argv)

@@ -24,6 +24,8 @@ from lumigraph.separation.nayar2006 import MASK_LOW_CONTRAST, MASK_NEVER_LIT, MA
 SCHEMA = "lumigraph.separation"
 MASK_BITS = {"never_lit": MASK_NEVER_LIT, "saturated": MASK_SATURATED,
              "low_contrast": MASK_LOW_CONTRAST}
+# what Separation.save writes into its folder (each with its .meta.json), mask last
+FILES = ("direct.exr", "global.exr", "mask.png")
 
 
 @dataclass(frozen=True)

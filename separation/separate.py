@@ -26,7 +26,11 @@ __all__ = ["EXACT_IMAGES", "METHODS", "MIN_IMAGES", "check_options", "separate"]
 RESIDUE_WARN_FRACTION = 0.10
 
 
-def check_options(*, alpha: float | None = None, b: float | None = None, tile: int = 16) -> None:
+MIN_TILE = 2  # pixels: the least tile of 'single' and of the residue check
+
+
+def check_options(*, alpha: float | None = None, b: float | None = None, tile: int = 16,
+                  noise_sigma: float = 0.0, saturation: float | None = None) -> None:
     """Check :func:`separate`'s scalar options (ranges in its Parameters),
     so a caller can do it before any capture is read.
 
@@ -34,8 +38,9 @@ def check_options(*, alpha: float | None = None, b: float | None = None, tile: i
     ------
     InputError
         Naming ``alpha`` (not in (0, 1),
-        :func:`capture.patterns.check_lit_fraction`), ``b`` (not in [0, 1))
-        or ``tile`` (below 2).
+        :func:`capture.patterns.check_lit_fraction`), ``b`` (not in [0, 1)),
+        ``tile`` (not an integer >= 2), ``noise_sigma`` (not a finite number
+        >= 0) or ``saturation`` (not a finite number > 0).
 
     Examples
     --------
@@ -50,8 +55,15 @@ def check_options(*, alpha: float | None = None, b: float | None = None, tile: i
         check_lit_fraction(alpha)
     if b is not None and not 0.0 <= b < 1.0:
         raise InputError("b", f"black level must lie in [0, 1), got {b}")
-    if tile < 2:
-        raise InputError("tile", f"expected at least 2 pixels, got {tile}")
+    if isinstance(tile, bool) or not isinstance(tile, int | np.integer) or tile < MIN_TILE:
+        raise InputError("tile", f"expected at least {MIN_TILE} pixels, got {tile}")
+    if not (isinstance(noise_sigma, int | float | np.number) and np.isfinite(noise_sigma)
+            and noise_sigma >= 0):
+        raise InputError("noise_sigma", f"expected a finite standard deviation >= 0, got "
+                                        f"{noise_sigma!r}")
+    if saturation is not None and not (isinstance(saturation, int | float | np.number)
+                                       and np.isfinite(saturation) and saturation > 0):
+        raise InputError("saturation", f"expected a finite clip level > 0, got {saturation!r}")
 
 
 def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None = None,
@@ -107,7 +119,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         raise EstimationError("<images>", f"method {method!r} takes exactly {EXACT_IMAGES[method]} "
                                           f"image(s), got {len(a)}")
     names = list(names) if names is not None else [f"image {i}" for i in range(len(a))]
-    check_options(alpha=alpha, b=b, tile=tile)
+    check_options(alpha=alpha, b=b, tile=tile, noise_sigma=noise_sigma, saturation=saturation)
     quant = quant_step / np.sqrt(12.0)
     floor = 3.0 * np.hypot(noise_sigma, quant) + 1e-7
     # a strided look first (cheap); the full image only when that one looks dark

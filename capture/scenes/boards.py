@@ -190,7 +190,9 @@ def _sample_poses(rng, cams, spec, views, poses):
                 out.append((R, t))
                 break
         else:
-            raise RuntimeError("could not place the board in view; use a larger image or fewer squares")
+            # the options together leave no pose in view (not our fault: the user's choice)
+            raise InputError("size", "could not place the board in view of every camera; use a "
+                                     "larger image, fewer squares or a shorter baseline")
     return out
 
 
@@ -393,7 +395,7 @@ _COMMON_OPTIONS = (
     Option("board", str, "checker", "target kind", choices=("checker", "charuco")),
     Option("cols", int, 10, "squares across the board", low=3, high=40),
     Option("rows", int, 7, "squares down the board", low=3, high=40),
-    Option("square", float, 30.0, "square side, in board units (mm)", low=0.0, open_low=True),
+    Option("square", float, 30.0, "square side, in board units (mm)", low=1e-6, high=1e6),
     Option("noise", float, 1.0, "Gaussian read noise, in 8-bit code values", low=0.0, high=50.0),
     Option("blur", float, 0.6, "Gaussian optical blur sigma, in pixels", low=0.0, high=5.0),
     Option("supersample", int, 2, "samples per pixel side (box-filtered each)", low=1, high=8),
@@ -413,7 +415,7 @@ SPECS = {
         "boards-stereo", (320, 240),
         _COMMON_OPTIONS + (
             Option("views", int, 12, "number of board poses", low=1, high=60),
-            Option("baseline", float, 120.0, "baseline, in board units", low=0.0, open_low=True),
+            Option("baseline", float, 120.0, "baseline, in board units", low=1e-6, high=1e6),
             Option("distortion", str, "normal", "lens of both cameras",
                    choices=("none", "normal", "strong")),
             Option("rig", str, "boards", "the cameras and their pose: this scene's own (boards), or "

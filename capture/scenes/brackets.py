@@ -133,7 +133,8 @@ def scene_radiance(w: int, h: int, *, shift=(0.0, 0.0), emitter_shift=(0.0, 0.0)
     ys = (ys - shift[1]) / max(h - 1, 1)
     albedo = 0.03 + 0.9 * _texture("coffee", w, h, shift=shift)
     light = 0.35 * np.exp(1.2 * (1.0 - ys))[..., None] * np.ones(3)
-    shadow = 1.0 / (1.0 + np.exp(-(xs - 0.28) / 0.02))  # 0 in the left shadow, 1 outside
+    with np.errstate(over="ignore"):  # far left of a long pan: exp -> inf, the shadow -> 0
+        shadow = 1.0 / (1.0 + np.exp(-(xs - 0.28) / 0.02))  # 0 in the left shadow, 1 outside
     light = light * (0.008 + 0.992 * shadow)[..., None]
     rad = albedo * light
     window = (xs > 0.62) & (xs < 0.95) & (ys > 0.08) & (ys < 0.5)
@@ -278,11 +279,15 @@ _CAMERA_OPTIONS = (
     Option("bit_depth", int, 8, "sensor bit depth (8..16; 10/12/16 are written as 16-bit PNG "
                                 "with sBIT)", low=8, high=16),
     Option("response", str, "film", "camera response", choices=("film", "gamma", "linear")),
-    Option("noise", float, 1.0, "noise scale (0 = noise-free, 1 = shot + read noise)", low=0.0),
-    Option("full_well", float, 20000.0, "electrons at saturation (shot noise)", low=1.0),
-    Option("read_noise", float, 4.0, "read noise, electrons RMS", low=0.0),
+    # The upper bounds keep every product of the sensor model finite (beyond
+    # them a render overflows: inf electrons, NaN codes, null exposure times).
+    Option("noise", float, 1.0, "noise scale (0 = noise-free, 1 = shot + read noise)", low=0.0,
+           high=100.0),
+    Option("full_well", float, 20000.0, "electrons at saturation (shot noise)", low=1.0,
+           high=1e9),
+    Option("read_noise", float, 4.0, "read noise, electrons RMS", low=0.0, high=1e6),
     Option("exposure_scale", float, 10.0, "X = scale * radiance * time (X = 1 saturates)",
-           low=0.0, open_low=True),
+           low=0.0, open_low=True, high=1e9),
 )
 
 SPECS = {
@@ -293,7 +298,7 @@ SPECS = {
             Option("stops", float, 1.5, "spacing between exposures, in stops", low=0.0,
                    open_low=True, high=8.0),
             Option("min_time", float, 1 / 1000, "shortest nominal exposure, seconds", low=0.0,
-                   open_low=True),
+                   open_low=True, high=1e4),
             Option("time_error", float, 0.03, "exact times differ from nominal by up to this "
                                               "fraction", low=0.0, high=0.5),
             Option("stack_times", str, "exact", "times written to stack.json",
@@ -307,8 +312,12 @@ SPECS = {
             Option("frames", int, 8, "number of frames", low=2, high=240),
             Option("stops", float, 3.0, "long/short exposure ratio, in stops", low=0.0,
                    open_low=True, high=8.0),
-            Option("min_time", float, 1 / 500, "short exposure, seconds", low=0.0, open_low=True),
-            Option("pan", float, 1.5, "camera pan, pixels per frame (right)"),
-            Option("light_speed", float, 2.0, "extra motion of the brightest light, px/frame"),
+            Option("min_time", float, 1 / 500, "short exposure, seconds", low=0.0, open_low=True,
+                   high=1e4),
+            # (a texture lookup shifted by more than a few thousand px never returns)
+            Option("pan", float, 1.5, "camera pan, pixels per frame (right)", low=-1000.0,
+                   high=1000.0),
+            Option("light_speed", float, 2.0, "extra motion of the brightest light, px/frame",
+                   low=-1000.0, high=1000.0),
         ), version=1),
 }

@@ -297,7 +297,8 @@ def _options(**defaults) -> tuple[Option, ...]:
                "gradient reached in the last frame", low=0.0, high=0.9),
         Option("change", str, d["change"], "an object added to / removed from the last frame",
                choices=("none", "added", "removed")),
-        Option("noise", float, d["noise"], "Gaussian noise sigma, 8-bit code values", low=0.0),
+        Option("noise", float, d["noise"], "Gaussian noise sigma, 8-bit code values", low=0.0,
+               high=255.0),
         Option("supersample", int, d["supersample"], "samples per pixel side (anti-aliasing)",
                low=1, high=8),
     )

@@ -48,6 +48,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 from dataclasses import dataclass
@@ -107,6 +108,11 @@ class Plane:
     rect: tuple[float, float, float, float] | None
 
 
+class OutsideScene(ValueError):
+    """A camera (or a refocus shift) the scene's textures do not cover: the
+    options asked for a view the generator cannot render exactly."""
+
+
 def _axis_weights(p, cam, plane_offset, zrel, f, pp, texel, n_tex, lo_clip, hi_clip):
     """Sparse (N, n_tex): mean over cameras of the exact mean of beta3(t - i)
     over each pixel's clipped footprint.
@@ -130,7 +136,7 @@ def _axis_weights(p, cam, plane_offset, zrel, f, pp, texel, n_tex, lo_clip, hi_c
     w[~ok] = 0.0
     used = w != 0.0
     if used.any() and (idx[used].min() < 0 or idx[used].max() >= n_tex):
-        raise ValueError("texture too small for this camera position (render within the slab)")
+        raise OutsideScene("texture too small for this camera position (render within the slab)")
     idx = np.clip(idx, 0, n_tex - 1)
     n, npx = p.shape
     w = np.moveaxis(w, 0, 1).reshape(npx, n * k) / n
@@ -177,7 +183,7 @@ class PlaneScene:
         for k, plane in enumerate(self.planes):
             zrel = plane.depth - cam_z
             if zrel <= 0:
-                raise ValueError(f"cam_z: plane at depth {plane.depth} is behind the camera")
+                raise OutsideScene(f"cam_z: plane at depth {plane.depth} is behind the camera")
             occluders = [j for j in range(k) if self.planes[j].rect is not None]
             for r in range(len(occluders) + 1):
                 for subset in itertools.combinations(occluders, r):
@@ -317,6 +323,16 @@ def _codes(radiance: np.ndarray, bits: int, noise: float, rng) -> np.ndarray:
     return np.clip(np.round(c), 0, top).astype(np.uint16)
 
 
+@contextlib.contextmanager
+def _refused(option: str, problem: str):
+    """An :class:`OutsideScene` inside the block is the options' doing:
+    InputError naming ``option``."""
+    try:
+        yield
+    except OutsideScene:
+        raise InputError(option, problem) from None
+
+
 def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
                  disparity_far=0.2, spacing=1.0, texel_px=1.5, focus=(), thin_lens=True,
                  novel=(0.5, 0.5, 0.0), noise=0.0, jitter_deg=0.0, jitter_pos=0.0):
@@ -358,17 +374,30 @@ def render_array(*, size, seed, rng, grid="5x5", planes=3, disparity_near=1.0,
     views = render_views(scene, u, v, spacing, xs, ys)
     slopes = [float(s) for s in focus] if focus else sorted(
         {float(x) for x in np.round(np.concatenate([disp, (disp[:-1] + disp[1:]) / 2]), 6)})
-    sa = np.stack([synthetic_aperture(scene, u, v, spacing, s, w, h) for s in slopes])
+    # a refocus slope far from the planes' disparities shifts the views past
+    # the textures (which cover the array's reach): refused, naming the option
+    slope_opt = "focus" if focus else "disparity_near"
+    with _refused(slope_opt, f"refocus slopes {slopes} shift the views beyond this scene's "
+                             "textures; use slopes near the plane disparities, or disparities "
+                             "closer together"):
+        sa = np.stack([synthetic_aperture(scene, u, v, spacing, s, w, h) for s in slopes])
     depth = scene.depth_at(xs, ys)
     nx_, ny_, nz_ = (float(t) * spacing for t in novel)
-    novel_view = scene.render(nx_, xs, ny_, ys, cam_z=nz_)
+    with _refused("novel", f"the novel view at {tuple(novel)} view steps is outside the scene "
+                           "(behind a plane or beyond its textures); use a position within a few "
+                           "view steps of the grid, in front of the planes"):
+        novel_view = scene.render(nx_, xs, ny_, ys, cam_z=nz_)
     gt_arrays = {"novel_view": novel_view.astype(np.float32), "views": views.astype(np.float32),
                  "depth": depth.astype(np.float32),
                  "disparity": (f * spacing / depth).astype(np.float32),
                  "synthetic_aperture": sa.astype(np.float32)}
     if thin_lens:
-        gt_arrays["thin_lens"] = np.stack(
-            [thin_lens_image(scene, u, v, spacing, s, w, h) for s in slopes]).astype(np.float32)
+        with _refused(slope_opt, f"thin-lens refocus at slopes {slopes} reaches beyond this "
+                                 "scene's textures; use slopes near the plane disparities, or "
+                                 "--thin-lens false"):
+            gt_arrays["thin_lens"] = np.stack(
+                [thin_lens_image(scene, u, v, spacing, s, w, h) for s in slopes]
+            ).astype(np.float32)
     captured = views
     lf_cams = None
     if jittered:
@@ -542,14 +571,16 @@ def _array_options(**defaults):
                "disparity of the nearest plane, px per view step", low=0.02, high=8.0),
         Option("disparity_far", float, d["disparity_far"],
                "disparity of the farthest plane, px per view step", low=0.02, high=8.0),
-        Option("spacing", float, d["spacing"], "camera spacing (world units)", low=0.0,
-               open_low=True),
+        Option("spacing", float, d["spacing"], "camera spacing (world units)", low=1e-3,
+               high=1e3),
         Option("texel_px", float, d["texel_px"], "texel size in pixels (texture smoothness)",
                low=0.5, high=20.0),
         Option("focus", tuple, (), "refocus slopes for the GT refocus images (comma list); "
-                                   "default: the plane disparities and midpoints"),
+                                   "default: the plane disparities and midpoints",
+               low=-16.0, high=16.0),
         Option("thin_lens", bool, d["thin_lens"], "also render thin-lens refocus truth"),
-        Option("novel", tuple, (0.5, 0.5, 0.0), "novel-view truth position X,Y,Z (view steps)"),
+        Option("novel", tuple, (0.5, 0.5, 0.0), "novel-view truth position X,Y,Z (view steps)",
+               low=-100.0, high=100.0),
         Option("noise", float, d["noise"], "Gaussian noise in 16-bit code values", low=0.0),
         Option("jitter_deg", float, 0.0, "per-camera rotation jitter (max degrees; poses in "
                                          "stack.json)", low=0.0, high=5.0),

@@ -356,8 +356,10 @@ SPECS = {
                 low=0.0, high=1.0, open_high=True),
          Option("mirror", bool, False, "add a near-mirror panel that throws the pattern onto a wall"),
          Option("bit_depth", int, 16, "camera bit depth", low=8, high=16),
-         Option("full_well", float, 0.0, "electrons at full scale for shot noise (0 = off)", low=0.0),
-         Option("read_noise", float, 0.0, "Gaussian read noise in codes", low=0.0),
+         # (numpy's Poisson sampler refuses means past ~1e19 electrons)
+         Option("full_well", float, 0.0, "electrons at full scale for shot noise (0 = off)", low=0.0,
+                high=1e9),
+         Option("read_noise", float, 0.0, "Gaussian read noise in codes", low=0.0, high=1e6),
          Option("spp", int, 128, "samples per pixel of the global renders", low=4, high=4096),
          Option("repeats", int, 1, "frames per checker pattern (independent noise)", low=1, high=16)),
         version=VERSION, min_size=(32, 24)),

@@ -56,7 +56,7 @@ def test_bad_inputs_exit_2_and_write_nothing(tmp_path):
     r = lumigraph("hdr", "response", *imgs, "--out", out)
     assert_clean_error(r, "exposure time")
     r = lumigraph("hdr", "response", *imgs, "--times", "0.01,-1,0.1", "--out", out)
-    assert_clean_error(r, "positive")
+    assert_clean_error(r, "--times", "> 0")  # the parser's type: before any image is read
     other = tmp_path / "other"
     render("bracket", size=(80, 60), exposures=1).save(other)
     shutil.copy(other / "exposure_00.png", tmp_path / "small.png")
@@ -115,7 +115,7 @@ def test_library_errors_name_arguments_and_the_cli_names_flags(tmp_path):
     d = _bracket_folder(tmp_path, exposures=3)
     out = tmp_path / "r.json"
     assert_clean_error(lumigraph("hdr", "response", d, "--smoothness", "-1", "--out", out),
-                       "--smoothness", "λ >= 0")
+                       "--smoothness", ">= 0 or auto")
     assert_clean_error(lumigraph("hdr", "response", d, "--method", "mitsunaga-nayar", "--order",
                                  "11", "--out", out), "--order")
     assert not out.exists()
@@ -162,7 +162,7 @@ def test_the_library_checks_samples_noise_and_temporal_and_the_cli_names_the_fla
     out = tmp_path / "r.json"
     for method in ("debevec", "linear"):
         assert_clean_error(lumigraph("hdr", "response", d, "--method", method, "--samples", "1",
-                                     "--out", out), "--samples", "at least 2")
+                                     "--out", out), "--samples", ">= 2")
     assert_clean_error(lumigraph("hdr", "merge", d, "--response", tmp_path / "none.json",
                                  "--noise", "0,4", "--out", tmp_path / "x.exr"), "--noise", "full well")
     assert_clean_error(lumigraph("hdr", "video", d, "--response", tmp_path / "none.json",

@@ -96,7 +96,7 @@ def test_bad_inputs_exit_2_and_write_nothing(scene_dir, tmp_path):
     assert e.value.where == "alpha"
     for method in ("checker", "single"):  # --tile's range is separate()'s, whatever the method
         assert_clean_error(lumigraph("separate", *ck, "--method", method, "--tile", "1", "--out",
-                                     out), "--tile", "at least 2")
+                                     out), "--tile", ">= 2")
         with pytest.raises(InputError) as e:
             separate(np.ones((2, 8, 8, 1), np.float32), method="checker", tile=1)
         assert e.value.where == "tile"

@@ -82,5 +82,5 @@ def test_pattern_library_names_the_argument_and_the_cli_the_flag(tmp_path, make,
 
 def test_patterns_alpha_is_checked_whatever_the_kind(tmp_path):
     assert_clean_error(lumigraph("separate", "patterns", "--kind", "checker", "--alpha", "0",
-                                 "--out", tmp_path / "q"), "--alpha", "lit fraction")
+                                 "--out", tmp_path / "q"), "--alpha", "> 0 and < 1")
     assert not (tmp_path / "q").exists()
