@@ -78,16 +78,19 @@ def test_wheel_installs_only_the_lumigraph_namespace(wheel):
 
 
 def test_console_script_runs_the_shell(wheel):
-    # the `lumigraph` script a user (and the Makefile) runs is lumigraph.command:main
+    # the `lumigraph` script a user (and the Makefile) runs is lumigraph._entry:main,
+    # which imports lumigraph.command:main inside its Ctrl-C handler
     with zipfile.ZipFile(wheel) as z:
         (ep,) = [n for n in z.namelist() if n.endswith(".dist-info/entry_points.txt")]
         lines = z.read(ep).decode().splitlines()
     scripts = lines[lines.index("[console_scripts]") + 1:]
     target = next(ln.split("=", 1)[1].strip() for ln in scripts if ln.split("=")[0].strip() == "lumigraph")
     module, attr = target.split(":")
-    from lumigraph import command
+    from lumigraph import _entry
 
-    assert getattr(importlib.import_module(module), attr) is command.main
+    assert getattr(importlib.import_module(module), attr) is _entry.main
+    src = Path(_entry.__file__).read_text()
+    assert "from lumigraph.command import main" in src and "KeyboardInterrupt" in src
 
 
 def test_installed_wheel_imports_through_namespace_only(wheel, tmp_path):
