@@ -297,9 +297,9 @@ def remove_stale_temps(final: str | os.PathLike, *, kind: str = "file") -> list[
 
 
 class OutputGuard:
-    """What a command must not overwrite: its input files, and files in its
-    input folders that are not its own earlier outputs (``force`` allows those,
-    never an input). Installed by :func:`guard`; checked on every write."""
+    """What a command must not overwrite: its input files (never), and files
+    in its input folders that are not its own earlier outputs (``force``
+    allows those). Installed by :func:`guard`; checked on every write."""
 
     def __init__(self, inputs: Iterable[str | os.PathLike], *, producer: str, force: bool = False):
         self.files: set[Path] = set()
@@ -320,14 +320,13 @@ class OutputGuard:
         if real in self.files or (final.exists() and any(_same(final, f) for f in self.files)):
             return "is one of this command's inputs; choose another output"
         if final.exists() and real.parent in self.folders:
-            if self.force and producer_of(final) == self.producer:
+            # beside the inputs: this command's own earlier output is replaced
+            # (make reruns a step into the folder it reads from); anything else
+            # may be the user's, and only --force replaces it
+            if self.force or producer_of(final) == self.producer:
                 return None
-            who = producer_of(final)
-            if who == self.producer:
-                return ("holds an earlier output of this command beside its inputs; add --force to "
-                        "replace it")
-            return ("exists in an input folder and was not written by this command; choose "
-                    "another output (files beside the inputs are never replaced)")
+            return ("exists beside this command's inputs and was not written by this command; "
+                    "choose another output, or add --force to replace it")
         return None
 
     def check(self, final: str | os.PathLike, *, where: str | None = None) -> None:

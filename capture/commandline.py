@@ -276,8 +276,8 @@ def add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--debug", action="store_true",
                    help="show tracebacks for errors and the messages of the libraries we call")
     p.add_argument("--force", action="store_true",
-                   help="replace an earlier output of this command that lies beside its inputs "
-                        "(an input itself is never replaced)")
+                   help="replace a file beside the inputs that this command did not write "
+                        "(its own earlier outputs are replaced anyway; an input, never)")
     p.add_argument("--max-pixels", type=number(int, lo=1), metavar="N",
                    help=f"refuse images larger than N pixels, read from the header before decoding "
                         f"(default {DEFAULT_MAX_PIXELS}, or $LUMIGRAPH_MAX_PIXELS)")
@@ -367,7 +367,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     debug = getattr(args, "debug", False) or "--debug" in argv
     if getattr(args, "max_pixels", None):
         os.environ["LUMIGRAPH_MAX_PIXELS"] = str(args.max_pixels)
-    producer = " ".join([parser.prog, *_verbs(parser, args)])
+    producer = " ".join([_command_name(parser.prog), *_verbs(parser, args)])
     locks: list[_Lock] = []
     with _foreign_messages(debug) as said:
         try:
@@ -405,6 +405,20 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
         finally:
             for lock in locks:
                 lock.release()
+
+
+_MODULE_STAGES = {"capture": "render", "separation": "separate", "stereo.flow_cli": "flow"}
+
+
+def _command_name(prog: str) -> str:
+    """``"lumigraph hdr"`` whichever way it was started (``python -m
+    lumigraph.hdr``, ``python -m lumigraph.capture`` = ``lumigraph render``):
+    the name an output's sidecar records as its producer."""
+    words = prog.split()
+    if words[:2] == ["python", "-m"] and len(words) > 2 and words[2].startswith("lumigraph."):
+        module = words[2][len("lumigraph."):]
+        return " ".join(["lumigraph", _MODULE_STAGES.get(module, module), *words[3:]])
+    return prog
 
 
 def _internal(e: BaseException, debug: bool, said) -> int:

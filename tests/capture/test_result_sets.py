@@ -104,14 +104,17 @@ def test_the_guard_protects_inputs_and_what_lies_beside_them(tmp_path):
             write_json(src / "notes.txt", {})
         write_artifact(src / "mine.json", lambda p: p.write_text("1"), meta=make_meta("t"))
     assert (src / "photo.png").read_bytes() == b"photo" and (src / "notes.txt").read_text() == "user's"
-    with guard([src / "photo.png"], producer="lumigraph t"):  # our earlier output: --force only
+    with guard([src / "photo.png"], producer="lumigraph t"):  # our own earlier output: replaced
+        write_artifact(src / "mine.json", lambda p: p.write_text("2"), meta=make_meta("t"))
+    with guard([src / "photo.png"], producer="lumigraph other"):  # another command's: --force
         with pytest.raises(InputError, match="--force"):
             write_json(src / "mine.json", {})
-    with guard([src / "photo.png"], producer="lumigraph t", force=True):
-        write_artifact(src / "mine.json", lambda p: p.write_text("2"), meta=make_meta("t"))
+    with guard([src / "photo.png"], producer="lumigraph other", force=True):
+        write_artifact(src / "notes.txt", lambda p: p.write_text("forced"), meta=make_meta("t"))
         with pytest.raises(InputError, match="inputs"):
             write_json(src / "photo.png", {})  # --force never replaces an input
-    assert (src / "mine.json").read_text() == "2"
+    assert (src / "mine.json").read_text() == "2" and (src / "notes.txt").read_text() == "forced"
+    assert (src / "photo.png").read_bytes() == b"photo"
 
 
 def test_unwritable_outputs_are_refused_before_work(tmp_path):
