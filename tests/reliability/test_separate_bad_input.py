@@ -125,7 +125,7 @@ def test_inspect_options_are_typed(capsys, captures, tmp_path):
     notes.write_text("{}")
     try:
         before = snapshot(captures)
-        assert_refused(cli(capsys, "inspect", png, "--out", notes), "--out", "input folder")
+        assert_refused(cli(capsys, "inspect", png, "--out", notes), "--out", "beside this command's inputs")
         assert snapshot(captures) == before
     finally:
         notes.unlink()
