@@ -604,14 +604,21 @@ def prepare_output(path: str | os.PathLike, *, kind: str = "file", where: str = 
 
 
 class _Said:
-    """Where the run's own last line goes (the real stderr)."""
+    """What a run says: its warnings are held until the end and shown if the
+    run did its work; a run that fails says one line, its error."""
 
     def __init__(self, stream):
         self.stream = stream
+        self.held: list[str] = []
+        self.failed = False
 
     def error(self, line: str) -> None:
+        self.failed = True
         self.stream.write(line + "\n")
         self.stream.flush()
+
+
+_ACTIVE: list[_Said] = []  # the run in progress (warn() holds its lines there)
 
 
 @contextlib.contextmanager
@@ -636,15 +643,22 @@ def _foreign_messages(debug: bool):
         sys.stderr = os.fdopen(os.dup(saved), "w", buffering=1, encoding=stream.encoding,
                                errors="backslashreplace")
     said = _Said(sys.stderr)
+    _ACTIVE.append(said)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             yield said
         finally:
+            _ACTIVE.remove(said)
             ours = [w for w in caught if _is_ours(w.filename)]
-            for w in ours:
-                if not any(str(w.message) == str(o.message) for o in ours[:ours.index(w)]):
-                    sys.stderr.write(f"warning: {w.message}\n")
+            lines = said.held + [f"warning: {w.message}" for w in ours]
+            lines = [ln for i, ln in enumerate(lines) if ln not in lines[:i]]
+            if not said.failed:
+                for ln in lines:
+                    sys.stderr.write(ln + "\n")
+            elif debug:  # a failed run's one line stays the last; the rest only on request
+                for ln in lines:
+                    said.stream.write(f"debug: held back: {ln}\n")
             if debug:
                 for w in caught:
                     if w not in ours:
@@ -733,8 +747,13 @@ def say(args, message: str) -> None:
 
 
 def warn(message: str) -> None:
-    """A warning line on stderr (always shown)."""
-    sys.stderr.write(f"warning: {message}\n")
+    """A warning line on stderr (always shown, ``--quiet`` or not). Within
+    :func:`run` it is held and shown when the command has done its work, so a
+    command that fails says exactly one line, its error."""
+    if _ACTIVE:
+        _ACTIVE[-1].held.append(f"warning: {message}")
+    else:
+        sys.stderr.write(f"warning: {message}\n")
 
 
 def check_output_path(out: str | os.PathLike, *, suffixes: Iterable[str] | None = None) -> Path:

@@ -98,7 +98,7 @@ def _check(rc: int, err: str, m, before: dict, what: str) -> None:
     assert rc == 2, f"{what}: exit {rc}, stderr {err!r}"
     assert "Traceback" not in err, f"{what}: a traceback: {err}"
     errs = [line for line in lines if line.startswith("error: ")]
-    assert len(errs) == 1 and lines[-1] == errs[0], f"{what}: expected one error line: {err!r}"
+    assert len(lines) == 1 and len(errs) == 1, f"{what}: expected exactly one line: {err!r}"
     assert not errs[0].startswith("error: internal"), f"{what}: {errs[0]}"
     written = [p for p in m.names["out"].rglob("*") if p.is_file()] \
         if m.names["out"].exists() else []
