@@ -54,7 +54,9 @@ def _top_help() -> str:
     lines += [f"  {m.name:<11} {m.help}" for m in STAGES.values()]
     lines += ["", "Each stage explains itself: lumigraph STAGE --help",
               "Also runnable as python -m lumigraph (a stage: python -m lumigraph.hdr ...).",
-              "Exit status: 0 ok, 2 bad input or usage (one line on stderr), 1 internal fault."]
+              "Exit status: 0 done; 1 an internal fault (our bug: report it); 2 bad input or",
+              "usage, one line on stderr, nothing written; 3 the work ran but its result is not",
+              "usable; 4 a batch with some items failed; 130 interrupted."]
     return "\n".join(lines)
 
 
