@@ -32,6 +32,7 @@ examples:
   lumigraph separate cap/checker_*.png --method checker --b 0.1 --out sep/
   lumigraph separate cap/s0.png cap/s1.png cap/s2.png --method sinusoid --out sep/
   lumigraph separate raw8/*.png --method checker --response response.json --out sep/
+  lumigraph separate Curtain.mpg --method occluder --stride 2 --out sep/
   lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
@@ -41,6 +42,10 @@ the all-black/all-white frames and the pattern layout. Checker images are
 the shifted boards then their complements in the same order (the order of
 'separate patterns'). Without --b the black level is measured from
 --black/--white frames when given, else taken as 0.
+
+A video (.mpg, .avi, .mkv, .mp4, ...; read through OpenCV/FFmpeg) is one
+input: its frames, every --stride-th, at most --max-frames, are the
+captures; without --response its codes are linearised with the BT.709 curve.
 
 mask.png: 0 trusted; otherwise 1 never lit, 2 saturated, 4 L+ - L- within noise.
 """
@@ -74,8 +79,13 @@ def _linear(stack, response, where):
 
 def _load(args):
     from lumigraph.capture.io import read_stack, read_stack_json
+    from lumigraph.separation.video import read_video_stack, video_input
 
     inputs = [Path(p) for p in args.images]
+    video = video_input(inputs, max_frames=args.max_frames, stride=args.stride)
+    if video is not None:
+        return (read_video_stack(video, max_frames=args.max_frames, stride=args.stride), {},
+                [str(video)], None, args.alpha)
     black = white = None
     complement_of = None
     alpha = args.alpha
@@ -130,6 +140,12 @@ def _separate(args) -> int:
     t0 = time.perf_counter()
     stack, extra, files, complement_of, alpha = _load(args)
     where = stack.paths[0]
+    if response is None and "video" in stack.info:
+        from lumigraph.separation.video import video_response
+
+        response = video_response(stack.images.shape[-1])
+        warn(f"{files[0]}: codes linearised with the ITU-R BT.709 curve (the MPEG default; the "
+             "stream declares none); give --response for a measured curve")
     images, quant, sat = _linear(stack, response, where)
     bw = {k: _linear(v, response, v.paths[0])[0][0] for k, v in extra.items()}
     if args.saturation is not None:
@@ -142,7 +158,9 @@ def _separate(args) -> int:
     t2 = time.perf_counter()
     meta = make_meta("lumigraph.separation", inputs=files,
                      params={"method": args.method, "alpha": alpha, "b_given": args.b,
-                             "estimator": args.estimator, "response": args.response,
+                             "estimator": args.estimator,
+                             "response": args.response or (response and response.method),
+                             "video": stack.info.get("video"),
                              "noise": args.noise, "saturation": sat, "tile": args.tile,
                              "images": len(images)},
                      timings_s={"load": t1 - t0, "separate": t2 - t1})
@@ -256,6 +274,10 @@ def build_parser(prog: str = "lumigraph separate"):
                    help="linear clip level")
     p.add_argument("--tile", type=number(int, lo=MIN_TILE), default=16,
                    help="tile size for --method single (px)")
+    p.add_argument("--max-frames", type=number(int, lo=1), default=None,
+                   help="video input: keep at most this many frames")
+    p.add_argument("--stride", type=number(int, lo=1), default=1,
+                   help="video input: keep every n-th frame")
     p.add_argument("--out", required=True, type=output_dir,
                    help="output folder (direct.exr, global.exr, mask.png)")
     p.set_defaults(func=_separate, arg_flags={"noise_sigma": "--noise"})

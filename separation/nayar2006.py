@@ -37,8 +37,8 @@ Methods (all take linear images ``(N, H, W, C)`` float32):
 - :func:`sinusoid` — three phase-shifted sinusoids, solved exactly per pixel
   (offset and amplitude of a three-step phase shift);
 - :func:`single` — one stripe image, ``L±`` per tile, interpolated back;
-- :func:`occluder` — a shadow sweep: ``L⁺`` the median (mostly unshadowed),
-  ``L⁻`` the minimum (in the shadow).
+- :func:`occluder` — a shadow sweep (a pole or a mesh moved over the scene):
+  ``L⁺`` the maximum, ``L⁻`` the minimum over the frames, α measured from them.
 
 Examples
 --------
@@ -377,29 +377,76 @@ def single(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, tile: int 
     return direct, glob, {"l_plus": lp, "l_minus": lm, "tile": tile}
 
 
+def occluder_lit_fraction(images: np.ndarray, l_plus: np.ndarray, l_minus: np.ndarray,
+                          *, step: int = 2) -> float:
+    """The lit fraction α of a shadow sweep, measured from its frames.
+
+    α is the fraction of the source's light that reaches a point in a typical
+    frame (``1 − shadow width / sweep`` for a pole, the open area of a mesh).
+    Among pixels whose shadow contrast ``L⁺ − L⁻`` is at least half the 90th
+    percentile (pixels the sweep visibly covers), α is the fraction of
+    (frame, pixel) samples nearer ``L⁺`` than ``L⁻``; every ``step``-th row and
+    column is enough. The result is clipped to ``[1/N, 1 − 1/N]``.
+
+    Raises
+    ------
+    EstimationError
+        No pixel changes across the frames (no moving shadow).
+
+    Examples
+    --------
+    >>> frames = np.ones((4, 2, 8, 1)); frames[np.arange(4), :, np.arange(4) * 2] = 0.2
+    >>> occluder_lit_fraction(frames, frames.max(axis=0), frames.min(axis=0), step=1)
+    0.75
+    """
+    a = np.asarray(images)[:, ::step, ::step]
+    lp = np.asarray(l_plus)[::step, ::step]
+    lm = np.asarray(l_minus)[::step, ::step]
+    c = lp - lm
+    top = float(np.percentile(c, 90))
+    if not top > 0:
+        raise EstimationError("<images>", "no pixel changes across the frames (no moving shadow): "
+                                          "the occluder method needs a shadow swept over the scene")
+    sel = c >= 0.5 * top
+    lit = a[:, sel] > 0.5 * (lp + lm)[sel]
+    n = len(a)
+    return float(np.clip(lit.mean(), 1.0 / n, 1.0 - 1.0 / n))
+
+
 def occluder(images: np.ndarray, *, alpha: float | None = None,
              b: float = 0.0) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Separate a shadow sweep: a thin occluder moved across the scene (§8.3.4, Fig. 8.46).
+    """Separate a shadow sweep: a thin occluder or a mesh moved across the scene
+    (Nayar et al. 2006, §5; reference ch. 8, §8.3.4, Fig. 8.46).
 
-    Each pixel is in the shadow in few frames and lit in most, so ``L⁺`` is the
-    per-pixel median (robust to the shadow frames and to noise) and ``L⁻`` the
-    minimum (in the umbra). Both frames have the same lit fraction
-    ``alpha`` (default ``1 − 1/N``: one bar width per ``N`` steps).
+    A pixel is lit in some frames and in the umbra in others, so, as the paper
+    and the book take them, ``L⁺`` is the per-pixel maximum over the frames
+    and ``L⁻`` the minimum. Every frame has the same lit fraction α (the
+    occluder blocks the same share of the source wherever it is), so both
+    extremes see ``α·L_g``: ``L_d = (L⁺ − L⁻)/(1 − b)``, ``L_g = L⁻/α`` for
+    ``b = 0``. α is measured from the frames (:func:`occluder_lit_fraction`)
+    unless given: a pole leaves α near 1, a mesh its open fraction.
+
+    The maximum and minimum of noisy frames are biased (up and down by about
+    the noise times the expected extreme of N draws); a pixel the sweep never
+    lit fully (too few frames, a penumbra wider than the step) keeps too low
+    an ``L⁺`` and too much of its direct light in the global image.
 
     Examples
     --------
     >>> frames = np.full((4, 3, 1), 0.7 + 0.75 * 0.2)   # lit: d + (3/4) g
     >>> frames[1] = 0.75 * 0.2                           # pixel in shadow
-    >>> d, g, _ = occluder(frames[:, :, None, :], alpha=0.75)
-    >>> round(float(d.mean()), 5), round(float(g.mean()), 5)
-    (0.7, 0.2)
+    >>> d, g, info = occluder(frames[:, :, None, :])
+    >>> round(float(d.mean()), 5), round(float(g.mean()), 5), info["alpha"], info["alpha_source"]
+    (0.7, 0.2, 0.75, 'measured')
     """
     a = validate_stack(images, need=3, method="occluder")
-    alpha = 1.0 - 1.0 / len(a) if alpha is None else alpha
-    lp = np.median(a, axis=0).astype(np.float32)
-    lm = a.min(axis=0)
+    lp, lm = extremes(a)
+    source = "given"
+    if alpha is None:
+        alpha, source = occluder_lit_fraction(a, lp, lm), "measured"
     direct, glob = solve(lp, lm, alpha=alpha, b=b, alpha_minus=alpha)
-    return direct, glob, {"l_plus": lp, "l_minus": lm, "alpha": alpha}
+    return direct, glob, {"l_plus": lp, "l_minus": lm, "alpha": float(alpha),
+                          "alpha_source": source}
 
 
 def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:

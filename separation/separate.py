@@ -81,7 +81,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     method : {"checker", "sinusoid", "single", "occluder"}
         A name of :data:`separation.methods.METHODS`.
     alpha : float in (0, 1), optional
-        Lit fraction of the patterns (default ½; occluder ``1 − 1/N``).
+        Lit fraction of the patterns (default ½; occluder: measured from the frames).
     b : float in [0, 1), optional
         Projector black level; measured from ``black``/``white`` when those are
         given and ``b`` is not, else 0.
@@ -166,7 +166,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         params.update(alpha=alpha, tile=tile)
     else:
         direct, glob, info = fn(a, alpha=alpha, b=b)
-        params["alpha"] = info["alpha"]
+        params.update(alpha=info["alpha"], alpha_source=info["alpha_source"])
     lp, lm = info["l_plus"], info["l_minus"]
 
     sigma = np.sqrt(var0 + var1 * np.clip(lp, 0, None)).astype(np.float32)
