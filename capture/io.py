@@ -14,7 +14,8 @@ what the C libraries print is kept off the terminal.
 Conventions (DESIGN §3): images are ``H×W`` or ``H×W×C`` in **RGB** order;
 captured code values stay integers (``uint8``/``uint16``) with their true bit
 depth recorded; linear data are ``float32``. OpenCV's BGR order is converted
-here and nowhere else.
+by the readers on this floor only: here for images, in
+:mod:`lumigraph.capture.video` for video frames.
 
 ==========  ================================  ======================================
 format      reader / writer                   notes
