@@ -333,7 +333,6 @@ def refocus(spec: FourierLightField, slope: float, *,
     ndarray, (H, W, C) float32
         Same grid and normalisation as :func:`lightfield.refocus.shift_and_add`.
     """
-    import scipy.fft as sfft
 
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation: expected one of {', '.join(INTERPOLATIONS)}, "
