@@ -25,5 +25,5 @@ REFOCUS_METHODS = Registry("refocus", [
     Method("fourier", "lumigraph.lightfield.ng2005:refocus_stack",
            "Fourier slice photography (Ng 2005 eqs. 5.10-5.11): one 4-D FFT, then a 2-D "
            "slice per value",
-           options=("max_slope", "oversample", "kernel_width")),
+           options=("max_slope", "oversample", "kernel_width", "interpolation")),
 ])

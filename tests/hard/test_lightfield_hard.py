@@ -55,7 +55,7 @@ def test_small_and_non_square_grids_refocus_to_truth(grid):
         # occlusion edges: on views this small it can fall below bilinear,
         # while at 512x512 it beats Lanczos; see the bench.)
         ref = _sinc_shift_and_add(lf, slope, spec.pad[0], spec.shape_p)
-        assert np.abs(ng2005.refocus(spec, slope) - ref).max() < 2e-3, grid
+        assert np.abs(ng2005.refocus(spec, slope, interpolation="sinc") - ref).max() < 2e-3, grid
 
 
 def test_alpha_outside_refocusable_range_warns_with_the_bound():
