@@ -8,7 +8,7 @@ an order fixed by its content before any floating-point reduction).
 
 import numpy as np
 import pytest
-from conftest import assert_clean_error, lumigraph
+from conftest import lumigraph
 
 from lumigraph.capture import io
 from lumigraph.capture.errors import InputError
