@@ -52,6 +52,7 @@ from lumigraph.capture.errors import InputError
 # 0.12 sits between, with room for noise of a few per cent of the contrast.
 MAX_PAIR_SCORE = 0.12
 MAX_NOISY_SCORE = 0.25
+FLAT_FRACTION = 0.9  # a board is the brightest capture at about half the pixels
 SAMPLES = 65536  # pixels scored per pair: a fixed random subset (no aliasing with the board)
 
 
@@ -187,6 +188,18 @@ def find_pairs(images: np.ndarray, *, names=None, noise: float = 0.0,
                                           f"{100 * best[k]:.0f}% of the contrast, the complements "
                                           f"found {100 * float(np.median(sc)):.0f}%); give each "
                                           "board's complement, or leave this one out")
+    if decisive and n > 2:
+        # an all-white (all-black) frame is a complement too, of the all-black (white)
+        # one, but it is the brightest (darkest) capture at almost every pixel, where a
+        # board is so at about half of them: refused, it would be taken for a board
+        for side, pick in (("white", x.argmax(axis=0)), ("black", x.argmin(axis=0))):
+            frac = np.bincount(pick, minlength=n) / x.shape[1]
+            if frac.max() > FLAT_FRACTION:
+                k = int(np.argmax(frac))
+                raise InputError(names[order[k]], f"looks like an all-{side} frame (the "
+                                                  f"{'brightest' if side == 'white' else 'darkest'}"
+                                                  f" capture at {100 * frac[k]:.0f}% of the "
+                                                  f"pixels), not a pattern; give it as --{side}")
     # back to the caller's indices
     inv = np.empty(n, int)
     inv[order] = np.arange(n)

@@ -145,6 +145,12 @@ def test_unpairable_captures_are_refused(scene, tmp_path):
     with pytest.raises(InputError) as e:
         separate(mixed, method="checker", names=names + ["sinusoid_0.png", "sinusoid_1.png"])
     assert e.value.where.startswith("sinusoid_")
+    # the all-black and all-white frames globbed in with the boards: complements of
+    # each other, but not patterns
+    flat = np.concatenate([a, sets["flat"]])
+    with pytest.raises(InputError) as e:
+        separate(flat, method="checker", names=names + ["black.png", "white.png"])
+    assert e.value.where in ("black.png", "white.png") and "all-" in e.value.problem
     # the textbook max/min needs no pairs: it runs
     assert separate(a[keep], method="checker", estimator="maxmin").direct.shape == a.shape[1:]
     # a layout the captures contradict
