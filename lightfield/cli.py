@@ -111,22 +111,26 @@ def _need_spacing(lf, folder) -> None:
 # options taking a list of numbers: '--slope -2 -1 0', '--slope=-2,-1,0',
 # '--slope -2,-1,0' and '--slope=-2 -1 0' all mean the same
 LIST_OPTIONS = ("--slope", "--alpha", "--depth", "--slopes")
-_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
-_NUMBER_LIST = re.compile(rf"^{_NUM}(?:,{_NUM})*$")
+MANY_VALUES = ("--slope", "--alpha", "--depth")  # nargs="+": also any word, as argparse would
+_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf|infinity|nan)"
+_NUMBER_LIST = re.compile(rf"^(?:{_NUM})(?:,(?:{_NUM}))*$", re.I)
 
 
 def join_number_lists(argv) -> list[str]:
     """``argv`` with each list option's values joined into one ``--opt=a,b,c`` token.
 
     argparse reads ``-2,-1`` as an option and stops ``--opt=-2`` at its first
-    value; joined, every spelling reaches the option's :func:`numbers` type.
+    value; joined, every spelling reaches the option's :func:`numbers` type
+    (which names the option for a bad value). The options of several values
+    take every following word that is not an option, as argparse does;
+    ``--slopes`` (one value) only number lists, so a positional after it stays.
 
     Examples
     --------
     >>> join_number_lists(["lf", "--slope=-2", "-1", "0", "--out", "o"])
     ['lf', '--slope=-2,-1,0', '--out', 'o']
-    >>> join_number_lists(["lf", "--slopes", "-1,1,41", "-q"])
-    ['lf', '--slopes=-1,1,41', '-q']
+    >>> join_number_lists(["--slopes", "-1", "1,41", "lf", "-q"])
+    ['--slopes=-1,1,41', 'lf', '-q']
     """
     argv = [str(a) for a in argv]
     out, i = [], 0
@@ -139,7 +143,8 @@ def join_number_lists(argv) -> list[str]:
         if name in LIST_OPTIONS:
             vals = [val] if eq else []
             j = i + 1
-            while j < len(argv) and _NUMBER_LIST.match(argv[j]):
+            while j < len(argv) and (_NUMBER_LIST.match(argv[j]) or (
+                    name in MANY_VALUES and not argv[j].startswith("-"))):
                 vals.append(argv[j])
                 j += 1
             if vals:

@@ -31,8 +31,12 @@ def test_alpha_and_depth_lists_and_bad_values(capsys):
     # a negative depth is still out of range, reported under the flag (exit 2)
     assert main(["refocus", "lf", "--depth", "-2,3", "--out", "o"]) == 2
     assert "--depth" in capsys.readouterr().err
-    # a word after the values is not swallowed: the positional stays a positional
-    assert join_number_lists(["refocus", "--slope", "1", "lf"]) == ["refocus", "--slope=1", "lf"]
+    # a bad word among the values is reported under the flag, as argparse would
+    assert main(["refocus", "lf", "--slope", "-1", "inf", "--out", "o"]) == 2
+    assert "--slope" in capsys.readouterr().err
+    # '--slopes' takes one value: a positional after it stays a positional
+    assert join_number_lists(["depth", "--slopes", "-1,1,9", "lf"]) == ["depth",
+                                                                      "--slopes=-1,1,9", "lf"]
 
 
 def test_import_without_spacing_refocuses_by_slope_refuses_depth(tmp_path, capsys):
