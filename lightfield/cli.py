@@ -12,6 +12,7 @@ refuses to write a view whose every ray leaves the slab."""
 from __future__ import annotations
 
 import argparse
+import re
 import time
 from pathlib import Path
 
@@ -40,17 +41,20 @@ examples:
   lumigraph lightfield import out/scenes/lightfield-array --out lf     (rendered folder)
   lumigraph lightfield import views/*.png --grid 5x5 --rig rig.json --out lf  (rectified)
   lumigraph lightfield decode raw.png --white white.png --views 5 --out lf
+  lumigraph lightfield import views/*.png --grid 5x5 --out lf   (no spacing: refocus by slope)
   lumigraph lightfield refocus lf --slope 0.5 --out focus.exr
+  lumigraph lightfield refocus lf --slope -2 -1 0 1 --out stack/
   lumigraph lightfield refocus lf --depth 2 3 4 5 6 7 8 9 10 12 --method auto --out stack/
   lumigraph lightfield render lf --position 0.5 0.5 0 --focus-slope 0.4 --out view.exr
-  lumigraph lightfield depth lf --slopes=-1,1,41 --out disparity.pfm
-  (negative values: write --slope=-0.5,0.5 so they are not read as options)
+  lumigraph lightfield depth lf --slopes -1,1,41 --out disparity.pfm
+  (number lists: '--slope -2 -1 0', '--slope -2,-1,0' and '--slope=-2,-1,0' are the same)
 
 A light field folder holds view-UU-VV.exr (linear float32, row-major, U = row)
 and lightfield.json (grid, spacing, focal_px). Refocus by --slope (px per view
 step: a point of that disparity comes out sharp), --depth (units of --spacing:
 slope = focal_px * spacing / depth) or --alpha (Ng's virtual sensor position:
-slope = alpha_scale * (1 - 1/alpha)).
+slope = alpha_scale * (1 - 1/alpha)). Without --spacing at import, world
+units are grid steps and --depth / --focus-depth are refused.
 """
 
 
@@ -90,6 +94,66 @@ class SlopeRange(NumberList):
 
     def bad_examples(self) -> list[str]:
         return [*super().bad_examples(), "1,-1,5", "-1,1,2.5", f"-1,1,{self.min_n - 1}"]
+
+
+SPACING_UNKNOWN = "spacing_unknown"
+
+
+def _need_spacing(lf, folder) -> None:
+    """Refuse a depth (world units) on a light field imported without ``--spacing``."""
+    if SPACING_UNKNOWN in (lf.info or {}):
+        raise InputError(Path(folder) / "lightfield.json",
+                         "has no camera spacing (imported without --spacing), so a depth cannot "
+                         "be turned into a slope; import again with --spacing (and --focal-px), "
+                         "or give --slope / --alpha")
+
+
+# options taking a list of numbers: '--slope -2 -1 0', '--slope=-2,-1,0',
+# '--slope -2,-1,0' and '--slope=-2 -1 0' all mean the same
+LIST_OPTIONS = ("--slope", "--alpha", "--depth", "--slopes")
+MANY_VALUES = ("--slope", "--alpha", "--depth")  # nargs="+": also any word, as argparse would
+_NUM = r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?|[+-]?(?:inf|infinity|nan)"
+_NUMBER_LIST = re.compile(rf"^(?:{_NUM})(?:,(?:{_NUM}))*$", re.I)
+
+
+def join_number_lists(argv) -> list[str]:
+    """``argv`` with each list option's values joined into one ``--opt=a,b,c`` token.
+
+    argparse reads ``-2,-1`` as an option and stops ``--opt=-2`` at its first
+    value; joined, every spelling reaches the option's :func:`numbers` type
+    (which names the option for a bad value). The options of several values
+    take every following word that is not an option, as argparse does;
+    ``--slopes`` (one value) only number lists, so a positional after it stays.
+
+    Examples
+    --------
+    >>> join_number_lists(["lf", "--slope=-2", "-1", "0", "--out", "o"])
+    ['lf', '--slope=-2,-1,0', '--out', 'o']
+    >>> join_number_lists(["--slopes", "-1", "1,41", "lf", "-q"])
+    ['--slopes=-1,1,41', 'lf', '-q']
+    """
+    argv = [str(a) for a in argv]
+    out, i = [], 0
+    while i < len(argv):
+        tok = argv[i]
+        if tok == "--":
+            out.extend(argv[i:])
+            break
+        name, eq, val = tok.partition("=")
+        if name in LIST_OPTIONS:
+            vals = [val] if eq else []
+            j = i + 1
+            while j < len(argv) and (_NUMBER_LIST.match(argv[j]) or (
+                    name in MANY_VALUES and not argv[j].startswith("-"))):
+                vals.append(argv[j])
+                j += 1
+            if vals:
+                out.append(f"{name}={','.join(vals)}")
+                i = j
+                continue
+        out.append(tok)
+        i += 1
+    return out
 
 
 def _values(groups) -> list[float]:
@@ -137,8 +201,9 @@ def _import(args) -> int:
         raise InputError("grid", "give the camera grid, e.g. --grid 5x5 (rows x columns)")
     spacing = args.spacing if args.spacing is not None else info.get("spacing")
     posed = args.rig is not None or "cameras" in info
-    if spacing is None and not posed:
-        raise InputError("spacing", "give the camera spacing (world units), e.g. --spacing 0.05")
+    # without a spacing the views are still a light field: refocus by slope or alpha
+    # works; world units are then grid steps and depths are refused (_need_spacing)
+    spacing_known = spacing is not None or posed
     focal = args.focal_px if args.focal_px is not None else info.get("focal_px")
     # the library's rules, before any view is read (posed: the spacing is fitted below)
     check_from_images(len(files), grid=grid, spacing=1.0 if spacing is None else spacing,
@@ -156,6 +221,9 @@ def _import(args) -> int:
                      bit_depth=bit_depth, names=[str(f) for f in files])
     info_out = {"source": [str(f) for f in files],
                 "decoded": "linear" if linear else "sRGB -> linear"}
+    if not spacing_known:
+        info_out[SPACING_UNKNOWN] = ("imported without --spacing: world units are grid steps; "
+                                     "depths need the spacing")
     quality, warnings = {}, []
     if cameras is not None:
         lf, quality, warnings = _rectify(lf, cameras, args, grid, files, spacing)
@@ -169,6 +237,8 @@ def _import(args) -> int:
                                         "plane_depth": args.plane_depth,
                                         "grid_tolerance": args.grid_tolerance},
                                 quality=quality, warnings=warnings))
+    if not spacing_known:
+        say(args, "no --spacing: refocus by --slope or --alpha; --depth needs the spacing")
     say(args, f"wrote {grid[0]}x{grid[1]} views of {lf.size[0]}x{lf.size[1]} to {out}")
     return 0
 
@@ -259,6 +329,8 @@ def _refocus(args) -> int:
         check_planned([out / f"refocus-{k:03d}.exr" for k in range(len(given))]
                       + [out / "index.json"])
     lf = LightField.load(args.lightfield)
+    if kind == "depth":
+        _need_spacing(lf, args.lightfield)
     if kind == "alpha":
         slopes = [lf.slope_from_alpha(a) for a in given]
     elif kind == "depth":
@@ -311,6 +383,7 @@ def _render(args) -> int:
     out = Path(args.out)  # .exr, the parser's
     lf = LightField.load(args.lightfield)
     if args.focus_depth is not None:
+        _need_spacing(lf, args.lightfield)
         slope = lf.slope_from_depth(args.focus_depth)
     else:
         slope = args.focus_slope
@@ -457,4 +530,7 @@ def build_parser(prog: str = "lumigraph lightfield"):
 
 
 def main(argv=None, prog: str = "lumigraph lightfield") -> int:
-    return run(build_parser(prog), argv)
+    import sys
+
+    argv = sys.argv[1:] if argv is None else argv
+    return run(build_parser(prog), join_number_lists(argv))

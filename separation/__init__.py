@@ -9,7 +9,7 @@ come from there).
 ========== ================================================== ==============
 method     input                                              images
 ========== ================================================== ==============
-checker    shifted checkerboards, then their complements       >= 2
+checker    shifted checkerboards and complements, any order    >= 2
 sinusoid   three phase-shifted sinusoids                       3
 single     one high-frequency stripe image                     1
 occluder   a shadow sweep (thin occluder moved across)         >= 3

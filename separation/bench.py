@@ -131,7 +131,8 @@ def _error(data, out) -> dict:
     ed = float(np.abs(sep.direct[..., 0] - d)[m].mean() / d[m].mean())
     eg = float(np.abs(sep.global_[..., 0] - g)[m].mean() / g[m].mean())
     return {"error": max(ed, eg), "direct": ed, "global": eg,
-            "residue": sep.quality["residue"]["fraction"], "warned": bool(sep.warnings)}
+            "residue": sep.quality["residue"]["fraction"], "warned": bool(sep.warnings),
+            "order_diff": sep.quality.get("order_max_abs_diff")}
 
 
 def _checker(estimator, *, use_b=True):
@@ -144,6 +145,43 @@ def _checker(estimator, *, use_b=True):
         comp = [*range(len(chosen), 2 * len(chosen)), *range(len(chosen))]
         return separate(a[idx], method="checker", b=data["b"] if use_b else 0.0,
                         complement_of=comp, estimator=estimator, quant_step=data["quant"])
+
+    return run
+
+
+def _shuffled(*, assume_halves=False):
+    """Checker pairs on the first ``pairs`` pairs in the documented order, in glob
+    order (each board next to its complement) and in 3 random orders,
+    complements found from the captures (no layout given); the row's error is
+    that of the order farthest from the documented one, ``order_max_abs_diff``
+    the largest difference of any order's direct image from the documented's. ``assume_halves``: the old
+    assumption (boards, then complements) applied to the glob order, the
+    silent failure of issue 16, as a baseline."""
+    def run(data, pairs):
+        from lumigraph.separation import separate
+
+        a = data["sets"]["checker"]
+        chosen = [(i, j) for i, j in enumerate(data["comp"]) if i < j][:pairs]
+        glob = [k for p in chosen for k in p]
+        if assume_halves:
+            # straight to the estimator: separate() now refuses a layout the captures contradict
+            from types import SimpleNamespace
+
+            from lumigraph.separation.nayar2006 import checker
+
+            m = len(chosen)
+            d, g, _ = checker(a[glob], b=data["b"], complement_of=[*range(m, 2 * m), *range(m)])
+            return SimpleNamespace(direct=d, global_=g, warnings=(),
+                                   quality={"residue": {"fraction": float("nan")}})
+        rng = np.random.default_rng(0)
+        documented = [i for i, _ in chosen] + [j for _, j in chosen]
+        orders = [documented, glob] + [list(rng.permutation(glob)) for _ in range(3)]
+        outs = [separate(a[o], method="checker", b=data["b"], quant_step=data["quant"])
+                for o in orders]
+        worst = max(outs, key=lambda r: float(np.abs(r.direct - outs[0].direct).max()))
+        worst.quality["order_max_abs_diff"] = max(
+            float(np.abs(r.direct - outs[0].direct).max()) for r in outs)
+        return worst
 
     return run
 
@@ -220,6 +258,18 @@ def _checks(res: Results, ctx) -> list[Check]:
                          f"{e['frames']} frames "
                          f"(every {VIDEO_STRIDE}) at {e['size'][1]}x{e['size'][0]}, "
                          f"{r.time_s:.3f} s"))
+    for case in ("clean", "noisy"):
+        k = 4 if case == "clean" else 8
+        sh = res.get(case, "checker pairs, any order (ours)", k)
+        doc = res.get(case, "checker pairs (ours)", k)
+        old = res.get(case, "checker, glob order read as boards-then-complements (old)", k)
+        out.append(Check(f"{case}: any file order gives the documented order's result "
+                         "(max |difference|, bit-identical = 0)", sh.extra["order_diff"], 0.0,
+                         sh.extra["order_diff"] == 0,
+                         f"error {sh.error:.4f} in every order (layout given: {doc.error:.4f}; "
+                         f"with repeated frames either copy of a complement is a valid partner); "
+                         f"the old boards-then-complements assumption on glob order: "
+                         f"{old.error:.3f}"))
     t = ctx.get("speed_25x1mp_s")
     if t is None:
         t = _speed(25, 1.0)
@@ -250,6 +300,11 @@ def stage(*, quick: bool = False) -> Stage:
                peer="textbook (Fig. 8.43)", cases=SYNTH),
         Method("checker uncorrected b (baseline)", _checker("pairs", use_b=False), "pairs", (4,),
                peer="uncorrected formulas", cases=("b=0.15",)),
+        Method("checker pairs, any order (ours)", _shuffled(), "pairs", (4, 8),
+               cases=("clean", "noisy")),
+        Method("checker, glob order read as boards-then-complements (old)",
+               _shuffled(assume_halves=True), "pairs", (4, 8), peer="the old order assumption",
+               cases=("clean", "noisy")),
         Method("sinusoid (ours)", _other("sinusoid"), cases=("clean", "b=0.15", "noisy")),
         Method("single (ours)", _other("single"), "tile", (8, 16, 24) if not quick else (16,),
                cases=("clean", "b=0.15", "noisy")),

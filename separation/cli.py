@@ -38,9 +38,10 @@ examples:
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
 stack.json from 'lumigraph render projector' supplies the method's images,
-the all-black/all-white frames and the pattern layout. Checker images are
-the shifted boards then their complements in the same order (the order of
-'separate patterns'). Without --b the black level is measured from
+the all-black/all-white frames and the pattern layout. Checker images may
+come in any order: each board's complement is found from the captures (a
+board plus its complement is the all-lit image), and a board without one is
+refused; sinusoid phases likewise. Without --b the black level is measured from
 --black/--white frames when given, else taken as 0.
 
 A video (.mpg, .avi, .mkv, .mp4, ...; read through OpenCV/FFmpeg) is one

@@ -28,7 +28,7 @@ def _images(name: str) -> str:
 
 METHODS = Registry("separation", [
     Method("checker", "lumigraph.separation.nayar2006:checker",
-           f"shifted checkerboards, then their complements ({_images('checker')})",
+           f"shifted checkerboards and their complements, any order ({_images('checker')})",
            options=("alpha", "b", "complement_of", "estimator", "sigma")),
     Method("sinusoid", "lumigraph.separation.nayar2006:sinusoid",
            f"three phase-shifted sinusoids ({_images('sinusoid')})", options=("b",)),

@@ -231,15 +231,16 @@ def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complemen
     Parameters
     ----------
     images : ndarray, ``(N, H, W, C)`` float32, linear
-        The shifted patterns then their complements (``capture.patterns.checker_set``
-        order), or shifts of one pattern without complements.
+        Shifted patterns and their complements, in any order, or shifts of
+        one pattern without complements.
     alpha : float in (0, 1)
         Lit fraction of the patterns.
     b : float in [0, 1)
         Projector black level.
     complement_of : sequence of int, optional
-        Complement index per image; default: the second half complements the
-        first when N is even and ``alpha == 0.5``, otherwise none.
+        Complement index per image; default: found from the images
+        (:func:`separation.pairing.find_pairs`, which raises
+        :class:`InputError` for a missing complement); ``maxmin`` needs none.
     estimator : {"pairs", "maxmin"}
         ``pairs``: :func:`pair_extremes` (noise-robust); ``maxmin``: the
         textbook max/min over all images (Fig. 8.43).
@@ -266,8 +267,10 @@ def checker(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, complemen
     a = validate_stack(images, need=2, method="checker")
     n = len(a)
     if complement_of is None:
-        complement_of = ([*range(n // 2, n), *range(n // 2)]
-                         if n % 2 == 0 and abs(alpha - 0.5) < 1e-9 else [-1] * n)
+        # from the captures, whatever their order (a board plus its complement is all-lit)
+        from lumigraph.separation.pairing import find_pairs
+
+        complement_of = find_pairs(a).complement_of if estimator == "pairs" else [-1] * n
     complement_of = list(complement_of)
     if len(complement_of) != n:
         raise ValueError(f"complement_of: expected {n} entries, got {len(complement_of)}")

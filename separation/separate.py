@@ -76,8 +76,10 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     Parameters
     ----------
     images : ndarray, ``(N, H, W, C)`` float32
-        Linear captures under the method's patterns, in the order of
-        ``capture.patterns``.
+        Linear captures under the method's patterns, in any order: checker
+        complements are found from the captures and the sinusoid phases
+        checked (:mod:`separation.pairing`), and the stack is put in an order
+        fixed by its content, so every permutation gives the same result.
     method : {"checker", "sinusoid", "single", "occluder"}
         A name of :data:`separation.methods.METHODS`.
     alpha : float in (0, 1), optional
@@ -88,7 +90,9 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     black, white : ndarray, ``(H, W, C)``, optional
         Captures under all-black and all-white projector frames.
     complement_of : sequence of int, optional
-        Complement index per checker image (see :func:`nayar2006.checker`).
+        Complement index per checker image (a pattern layout, e.g. from
+        ``stack.json``), checked against the captures; default: found from
+        them (:func:`separation.pairing.find_pairs`).
     estimator : {"pairs", "maxmin"}
         Checker estimator (noise-robust pairs, or the textbook max/min).
     noise_sigma : float
@@ -107,8 +111,10 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     Raises
     ------
     InputError
-        An option out of range (:func:`check_options`, naming it), or an
-        all-dark capture (naming it).
+        An option out of range (:func:`check_options`, naming it), an
+        all-dark capture, a checker capture without a complement among the
+        others, a layout the captures contradict, or two sinusoid captures of
+        the same phase (each naming the capture).
     EstimationError
         Too few or too many images for the method, or a measured black
         level outside [0, 1).
@@ -131,6 +137,13 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
             raise InputError(names[i], f"all-dark frame (brightest value {p:.3g} is within the "
                                        "noise); check the projector and the exposure")
     params: dict = {"method": method}
+    if method != "single":
+        # the captures in an order fixed by their content (and, for checker, their
+        # complements found from the data): any file order gives the same result
+        a, names, complement_of, order_info = _arrange(
+            a, names, method=method, complement_of=complement_of, estimator=estimator,
+            noise=float(np.hypot(noise_sigma, quant)))
+        params.update(order_info)
     if b is None and black is not None and white is not None:
         b = nayar2006.black_level(black, white, floor=floor)
         params["b_source"] = "measured from the all-black/all-white frames"
@@ -148,8 +161,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     if method == "checker":
         alpha = 0.5 if alpha is None else alpha
         n = len(a)
-        comp = list(complement_of) if complement_of is not None else (
-            [*range(n // 2, n), *range(n // 2)] if n % 2 == 0 and abs(alpha - 0.5) < 1e-9 else [-1] * n)
+        comp = list(complement_of) if complement_of is not None else [-1] * n
         s0, s1 = nayar2006.noise_from_pairs(a, comp)
         var0, var1 = var0 + s0, s1
     mean_image = a.mean(axis=0)
@@ -205,6 +217,50 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
                         "pattern too coarse for the scene); the split is unreliable there")
     return Separation(direct.astype(np.float32), glob.astype(np.float32), mask, method, params,
                       quality, tuple(warnings))
+
+
+def _arrange(a, names, *, method, complement_of, estimator, noise):
+    """``a`` and ``names`` in canonical order (:func:`separation.pairing.canonical_order`),
+    the complements in that order, and what was found (for the meta)."""
+    from lumigraph.separation import pairing
+
+    info: dict = {}
+    comp = None
+    if complement_of is not None and len(complement_of) != len(a):
+        raise InputError("complement_of", f"expected {len(a)} entries, got {len(complement_of)}")
+    # the search considers the images sorted by content, so that it (ties, the
+    # first name in an error) does not depend on the file order either
+    keys = pairing.content_keys(a)
+    pre, _ = pairing.canonical_order(a, keys=keys)
+    if method == "checker":
+        try:
+            found = pairing.find_pairs(a, names=names, noise=noise, order=pre)
+        except InputError:
+            if estimator == "pairs":
+                raise
+            found = None  # max/min needs no pairs; the residue check then uses none
+        if complement_of is not None:
+            if found is not None:
+                pairing.check_pairs(found, complement_of, names=names)
+            comp = list(complement_of)
+            info["pairs_source"] = "given (pattern layout), checked against the captures"
+        elif found is not None:
+            comp = list(found.complement_of)
+            info["pairs_source"] = ("found from the captures" if found.decisive else
+                                    "found from the captures (contrast within the noise)")
+        if found is not None:
+            info["pair_score_median"] = float(np.nanmedian(found.score)) if any(
+                j >= 0 for j in found.complement_of) else None
+    elif method == "sinusoid":
+        sp = pairing.phase_spacing(a[pre], names=[names[k] for k in pre], noise=noise)
+        iu = np.triu_indices(len(a), 1)
+        if np.isfinite(sp[iu]).all():
+            info["phase_spacing_deg"] = [round(float(v), 1) for v in sp[iu]]
+    order, comp = pairing.canonical_order(a, comp, keys=keys)
+    if order != list(range(len(a))):
+        a = a[order]
+        names = [names[k] for k in order]
+    return a, names, comp, info
 
 
 def _residue_pairs(a, comp, **kw):

@@ -55,3 +55,42 @@ def test_mirror_scene_is_flagged_not_silently_wrong():
     a = np.stack([ims[n] for n in s.stack["sets"]["checker"]])[..., None]
     r = separate(a, method="checker", quant_step=1 / top)
     assert r.warnings and "residue" in r.warnings[0]
+
+
+def test_missing_complement_exits_2_naming_the_file(tmp_path):
+    """Captures in glob order with one complement left out: refused, not
+    separated with the wrong pairs (issue 16)."""
+    from conftest import assert_clean_error, lumigraph
+
+    s = render("projector")
+    s.save(tmp_path / "scene")
+    names = s.stack["sets"]["checker"]
+    files = [tmp_path / "scene" / n for n in names if n != "checker_06.png"]
+    r = lumigraph("separate", *sorted(files), "--out", tmp_path / "out")
+    assert_clean_error(r, "checker_02.png", "no complement")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("sigma", [0.002, 0.01])
+def test_black_level_near_one_pairing_is_order_proof(sigma):
+    """b = 0.97: the contrast (1 - b) d is 0.009. With sigma = 0.002 the pair
+    sums still tell complements apart (the score averages over all pixels):
+    the true pairs are found in any order. With sigma = 0.01 the contrast is
+    under 6 sigma, the pairing is not decisive and nothing is refused. Either
+    way the result is the same for any order, and the pixels whose contrast
+    is within the noise are masked (low contrast), not silently wrong."""
+    from lumigraph.separation.pairing import find_pairs
+
+    rng = np.random.default_rng(9)
+    b = 0.97
+    ims, ps = _stack(0.3, 0.2, b, sigma, rng)
+    found = find_pairs(ims, noise=sigma)
+    assert found.decisive == (sigma < 0.005)
+    if found.decisive:
+        assert found.complement_of == ps.complement_of
+    ref = separate(ims, method="checker", b=b, noise_sigma=sigma)
+    for perm in (rng.permutation(len(ims)) for _ in range(3)):
+        r = separate(ims[perm], method="checker", b=b, noise_sigma=sigma)
+        np.testing.assert_array_equal(r.direct, ref.direct)
+        np.testing.assert_array_equal(r.mask, ref.mask)
+    assert (ref.mask & 4).mean() > 0.5
