@@ -227,7 +227,9 @@ def winner(cost: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray
     step = np.diff(slopes)
     disp = slopes[best] + off * np.where(off >= 0, step[np.minimum(best, n - 2)],
                                          step[np.maximum(best - 1, 0)])
-    conf = 1.0 - cost.min(0) / np.maximum(cost.mean(0), 1e-12)
+    # the floor keeps a flat (textureless, parallax-free) curve at 0, not 0/0
+    floor = np.float32(1e-4)
+    conf = 1.0 - (cost.min(0) + floor) / (cost.mean(0) + floor)
     return disp.astype(np.float32), np.clip(conf, 0, 1).astype(np.float32)
 
 
