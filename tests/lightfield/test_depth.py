@@ -2,7 +2,6 @@
 bounds from the rendered ground truth, the command line, and HCI antinous."""
 
 import numpy as np
-import pytest
 from conftest import assert_clean_error, lumigraph, need_shared
 
 from lumigraph.capture.render import render
