@@ -415,11 +415,11 @@ def _depth(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_exr, write_pfm
     from lumigraph.lightfield.field import LightField
+    from lumigraph.lightfield.methods import DEPTH_METHODS
     from lumigraph.lightfield.refocus import (
         all_in_focus,
         check_disparity_slopes,
         check_disparity_window,
-        estimate_disparity,
         focal_stack,
     )
 
@@ -427,18 +427,34 @@ def _depth(args) -> int:
     lo, hi, n = args.slopes  # MIN < MAX, N an integer (the parser's)
     # the library's rules, before the light field loads
     slopes = check_disparity_slopes(np.linspace(lo, hi, n))
-    check_disparity_window(args.window)
+    method = DEPTH_METHODS.resolve(args.method)
+    options = {}
+    if args.window is not None:
+        if "window" not in method.options:
+            raise InputError("window", f"applies to the variance method, not {args.method}")
+        options["window"] = check_disparity_window(args.window)
     lf = LightField.load(args.lightfield)
-    est = estimate_disparity(lf, slopes, window=args.window)
+    est = method(lf, slopes, **options)
+    inputs = [Path(args.lightfield) / "lightfield.json"]
+    params = {"method": args.method, "slopes": [lo, hi, int(n)], **options}
+    low = float(np.mean(est.confidence < 0.3))
+    warnings = []
+    if low > 0.5:
+        warnings.append(f"{100 * low:.0f}% of the pixels have confidence < 0.3 (little texture "
+                        "or parallax): the disparity there is a guess")
+        warn(warnings[-1])
     write_artifact(out, lambda p: write_pfm(p, est.disparity), meta=make_meta(
-        "lumigraph.disparity", inputs=[Path(args.lightfield) / "lightfield.json"],
-        params={"slopes": [lo, hi, int(n)], "window": args.window},
-        quality={"median_confidence": float(np.median(est.confidence))}))
+        "lumigraph.disparity", inputs=inputs, params=params, warnings=warnings,
+        quality={"median_confidence": float(np.median(est.confidence)),
+                 "low_confidence_fraction": low}))
+    if args.confidence:
+        write_artifact(args.confidence, lambda p: write_pfm(p, est.confidence), meta=make_meta(
+            "lumigraph.disparity-confidence", inputs=inputs, params=params))
     if args.all_in_focus:
         stack = focal_stack(lf, slopes, method="auto")
         aif = all_in_focus(stack, slopes, est.disparity)
         write_artifact(args.all_in_focus, lambda p: write_exr(p, aif), meta=make_meta(
-            "lumigraph.all-in-focus", inputs=[Path(args.lightfield) / "lightfield.json"],
+            "lumigraph.all-in-focus", inputs=inputs,
             params={"slopes": [lo, hi, int(n)]}))
     say(args, f"wrote {out}")
     return 0
@@ -516,13 +532,20 @@ def build_parser(prog: str = "lumigraph lightfield"):
     v.add_argument("--out", required=True, type=output_file(".exr"), help="view.exr (RGBA, A = valid ray)")
     v.set_defaults(func=_render)
 
-    v = add_verb(sp, "depth", "disparity (and all-in-focus image) from the light field")
+    from lumigraph.lightfield.methods import DEPTH_METHODS
+
+    v = add_verb(sp, "depth", "disparity, confidence (and all-in-focus image) from the light field",
+                 epilog="methods:\n" + DEPTH_METHODS.help_text())
     v.add_argument("lightfield", type=input_path, help="light-field folder")
     v.add_argument("--slopes", type=SlopeRange(), default=(-2.0, 2.0, 41),
                    help="MIN,MAX,N: N candidate disparities from MIN to MAX (px per view step; "
                         "default -2,2,41)")
-    v.add_argument("--window", type=number(int, lo=1, odd=True), default=7,
-                   help="cost aggregation window side (px)")
+    v.add_argument("--method", choices=DEPTH_METHODS.names, default=DEPTH_METHODS.names[0],
+                   help=f"depth method (see below; default {DEPTH_METHODS.names[0]})")
+    v.add_argument("--window", type=number(int, lo=1, odd=True),
+                   help="variance method: cost aggregation window side (px; default 7)")
+    v.add_argument("--confidence", type=output_file(".pfm"),
+                   help="also write the confidence in [0, 1] (PFM)")
     v.add_argument("--all-in-focus", type=output_file(".exr"), help="also write the all-in-focus image (EXR)")
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity.pfm")
     v.set_defaults(func=_depth)

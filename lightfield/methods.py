@@ -12,6 +12,14 @@ Examples
 ('shift-add', 'fourier')
 >>> REFOCUS_METHODS["shift-add"].options
 ('kernel',)
+
+Every depth method takes ``(lf, slopes, **options)`` (candidate disparities,
+px per view step) and returns a
+:class:`~lumigraph.lightfield.refocus.DisparityEstimate` (disparity and
+confidence of the centre view).
+
+>>> DEPTH_METHODS.names
+('wang2015', 'variance')
 """
 
 from __future__ import annotations
@@ -26,4 +34,15 @@ REFOCUS_METHODS = Registry("refocus", [
            "Fourier slice photography (Ng 2005 eqs. 5.10-5.11): one 4-D FFT, then a 2-D "
            "slice per value",
            options=("max_slope", "oversample", "kernel_width", "interpolation")),
+])
+
+DEPTH_METHODS = Registry("depth", [
+    Method("wang2015", "lumigraph.lightfield.wang2015:estimate_disparity",
+           "occlusion-aware: least cost over half-apertures (Wang et al. 2015), guided-filter "
+           "cost aggregation, weighted-median refinement; keeps silhouettes (default)",
+           options=("views", "radius", "median_radius")),
+    Method("variance", "lumigraph.lightfield.refocus:estimate_disparity",
+           "angular variance of the refocused views in a box window (the earlier default; "
+           "fattens silhouettes)",
+           options=("window",)),
 ])

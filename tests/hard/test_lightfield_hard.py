@@ -87,3 +87,58 @@ def test_impossible_grids_and_options_are_refused(tmp_path):
     r = lumigraph("render", "lightfield-lenslet", "--out", tmp_path / "y", "--size", "16x16",
                   "--view-step-px", "5", "-q")
     assert_clean_error(r, "--view-step-px", "do not fit")
+
+
+# ------------------------------------------------------------------ depth
+def _depth_scene(grid):
+    s = render("lightfield-array", size=(80, 60), grid=grid, seed=5, thin_lens=False)
+    return LightField(s.gt_arrays["views"], spacing=1.0), s.gt_arrays["disparity"]
+
+
+@pytest.mark.parametrize("grid,cross", [("5x5", False), ("9x9", False), ("9x9", True)])
+def test_depth_on_5x5_9x9_and_cross_shaped_sets(grid, cross):
+    """Depth (wang2015) on a 5x5 and a 9x9 grid and on the central row and
+    column of a 9x9 grid: within a quarter candidate step of the planes away
+    from occlusion edges (largest parallax over the aperture plus the guided
+    filter's support), BadPix(0.07) at most half the variance baseline's."""
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    from lumigraph.lightfield import refocus, wang2015
+
+    lf, gt = _depth_scene(grid)
+    slopes = np.linspace(-0.5, 2.5, 31)
+    u, v = lf.grid
+    views = None
+    if cross:
+        views = np.zeros((u, v), bool)
+        views[u // 2], views[:, v // 2] = True, True
+    est = wang2015.estimate_disparity(lf, slopes, views=views)
+    reach = int(np.ceil(0.8 * (max(u, v) - 1) / 2)) + 2 * wang2015.RADIUS
+    edge = (maximum_filter(gt, 3) - minimum_filter(gt, 3)) > 1e-3
+    far = maximum_filter(edge, 2 * reach + 1) == 0
+    far[:reach], far[-reach:], far[:, :reach], far[:, -reach:] = False, False, False, False
+    err = np.abs(est.disparity - gt)
+    assert np.median(err[far]) < 0.1 / 4
+    old = refocus.estimate_disparity(lf, slopes)
+    assert (err > 0.07).mean() <= 0.5 * (np.abs(old.disparity - gt) > 0.07).mean()
+
+
+def test_cross_shaped_import_is_refused_and_masks_are_checked(tmp_path):
+    from lumigraph.capture.io import write_image
+    from lumigraph.lightfield import wang2015
+
+    # a cross (9 of a 5x5 grid's views) is not a light-field folder: refused
+    files = []
+    for k in range(9):
+        files.append(tmp_path / f"v{k}.png")
+        write_image(files[-1], np.full((8, 10, 3), 20 * k, np.uint8))
+    r = lumigraph("lightfield", "import", *files, "--grid", "5x5", "--spacing", "1",
+                  "--out", tmp_path / "lf")
+    assert_clean_error(r, "--grid", "needs 25 images, got 9")
+    lf = LightField(np.zeros((3, 3, 8, 8, 3)), spacing=1.0)
+    with pytest.raises(InputError, match="^views: "):
+        wang2015.estimate_disparity(lf, [0, 1, 2], views=np.ones((2, 3), bool))
+    no_centre = np.ones((3, 3), bool)
+    no_centre[1, 1] = False
+    with pytest.raises(InputError, match="^views: .*central"):
+        wang2015.estimate_disparity(lf, [0, 1, 2], views=no_centre)

@@ -78,8 +78,8 @@ def _case_lightfield_depth(tmp: Path):
     lf = tmp / "lf"
     shutil.copytree(FIX / "lightfield", lf)
     out = tmp / "out"
-    return ([_cmd("lightfield", "depth", lf, "--window", str(w), "--all-in-focus",
-                  out / "all-in-focus.exr", "--out", out / "disparity.pfm") for w in (5, 9)], [out])
+    return ([_cmd("lightfield", "depth", lf, "--method", "variance", "--window", str(w),
+                  "--all-in-focus", out / "all-in-focus.exr", "--out", out / "disparity.pfm") for w in (5, 9)], [out])
 
 
 def _case_refocus_sweep(tmp: Path):

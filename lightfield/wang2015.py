@@ -1,0 +1,284 @@
+"""Occlusion-aware light-field depth: a filtered cost volume over all views
+with half-aperture occlusion handling (after Wang, Efros & Ramamoorthi 2015),
+then an edge-aware weighted median.
+
+Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
+
+1. **Cost volume.** For each candidate disparity ``d`` (px per view step,
+   the HCI convention of :mod:`lightfield.field`: view ``(u, v)`` sees a
+   point of disparity ``d`` at ``x - d (v - vc), y - d (u - uc)``) every view
+   is resampled onto the centre view's grid (bilinear, ``cv2.warpAffine``)
+   and compared with the reference (the centre view; for an even grid axis
+   the mean of the central views at that ``d``): the per-view cost
+   ``c_k(x, d)`` is the truncated absolute colour difference plus the
+   truncated difference of the horizontal and vertical gradients (the data
+   term of cost-volume filtering, Hosni et al. 2013, eq. 4), on
+   gamma-encoded values so dark texture counts.
+2. **Occlusion.** Wang et al. 2015 (§4, "occlusion-aware depth
+   estimation") observe that at an occlusion edge the views on one side of
+   the edge (a half of the aperture, split by the edge's orientation) still
+   see the occluded point, so photo-consistency holds on that half only.
+   Without estimating edge orientation per pixel we take, at every pixel
+   and candidate, the least mean cost over eight half-apertures split at
+   0, 45, 90 and 135 degrees (each half keeps the views on its dividing
+   line), ``C(x, d) = min_h mean_{k in h} c_k(x, d)`` -- the data term of
+   their eq. 6 with the occluder-free half chosen by its cost.
+3. **Aggregation.** Each slice ``C(., d)`` is smoothed by a guided filter
+   (He et al. 2013) with the centre view as guide: cost-volume filtering
+   (Hosni et al. 2013, eq. 2), which averages the cost within regions of
+   like colour and so keeps silhouettes.
+4. **Winner-takes-all + sub-pixel.** ``argmin_d`` and a parabola through the
+   least cost and its two neighbours.
+5. **Confidence.** ``1 - C_min / C_mean`` over the candidates (0: a flat cost
+   curve, nothing decided; near 1: one sharp minimum), in [0, 1].
+6. **Refinement.** A weighted median (Zhang et al. 2014,
+   ``cv2.ximgproc.weightedMedianFilter``) guided by the centre view over the
+   confident pixels fills the unsure ones from like-coloured neighbours
+   without crossing colour edges.
+
+Memory: the light field, one gamma-encoded copy, and the aggregated cost
+volume ``(N, H, W)`` float32; per candidate the view costs ``(K, H, W)``.
+
+Examples
+--------
+>>> import numpy as np
+>>> from lumigraph.lightfield.field import LightField
+>>> rng = np.random.default_rng(0)
+>>> base = rng.random((40, 48, 3)).astype(np.float32)
+>>> views = np.stack([np.stack([np.roll(base, (-(u - 1), -(v - 1)), (0, 1)) for v in range(3)])
+...                   for u in range(3)])                  # disparity 1 everywhere
+>>> est = estimate_disparity(LightField(views), np.linspace(-2, 2, 21))
+>>> bool(np.abs(est.disparity[8:-8, 8:-8] - 1.0).max() < 0.05)
+True
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lumigraph.capture.errors import InputError
+from lumigraph.lightfield.field import LightField
+from lumigraph.lightfield.refocus import DisparityEstimate, check_disparity_slopes
+
+#: defaults, tuned on rendered light fields (seed 0 of the scenes in
+#: docs/decisions/lightfield-depth.md), never on HCI antinous
+RADIUS = 2          # guided-filter radius (px)
+COARSE_RADIUS = 12  # second, coarse guided filter (cross-scale aggregation)
+SURE = 0.3          # fine-scale confidence below which the coarse scale decides
+EPS = 1e-3          # guided-filter regulariser (guide in [0, 1])
+MEDIAN_RADIUS = 7   # weighted-median radius (px)
+TAU_COLOUR = 0.08   # truncation of the colour difference (gamma-encoded, [0, 1])
+TAU_GRAD = 0.04     # truncation of the gradient difference
+ALPHA_GRAD = 0.5    # weight of the gradient term
+
+
+def check_views(views, grid) -> np.ndarray:
+    """A ``(U, V)`` boolean mask of the views to use (``None``: all), with at
+    least one other view in a row or column than the reference; or
+    ``InputError`` naming ``views``.
+
+    >>> int(check_views(None, (3, 3)).sum())
+    9
+    """
+    if views is None:
+        return np.ones(grid, bool)
+    m = np.asarray(views, bool)
+    if m.shape != tuple(grid):
+        raise InputError("views", f"expected a {grid[0]}x{grid[1]} mask of views, got shape "
+                                  f"{m.shape}")
+    if m.sum() < 2:
+        raise InputError("views", f"at least 2 views are needed for depth, got {int(m.sum())}")
+    return m
+
+
+def _half_apertures(offsets: np.ndarray) -> np.ndarray:
+    """(8, K) weights: the mean over each half-aperture split by a line through
+    the grid centre at 0, 45, 90, 135 degrees (rows: each half, both sides)."""
+    a, b = offsets[:, 0], offsets[:, 1]
+    sides = []
+    for proj in (b, a, a + b, a - b):
+        for sign in (1, -1):
+            sides.append(sign * proj >= -1e-9)
+    w = np.array(sides, np.float32)
+    # a half with no view off its dividing line says nothing (1 x N grids)
+    informative = np.array([np.any(np.abs(o) > 1e-9) for o in
+                            [np.where(s, proj, 0) for s, proj in
+                             zip(sides, [b, b, a, a, a + b, a + b, a - b, a - b], strict=True)]])
+    w = w[informative] if informative.any() else np.ones((1, len(a)), np.float32)
+    return w / w.sum(1, keepdims=True)
+
+
+def _gamma(img: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.clip(img, 0, None), dtype=np.float32)
+
+
+def _gradients(img: np.ndarray):
+    import cv2
+
+    gray = img.mean(-1).astype(np.float32)
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=1, borderType=cv2.BORDER_REFLECT101) * 0.5
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=1, borderType=cv2.BORDER_REFLECT101) * 0.5
+    return gx, gy
+
+
+def _shift(img: np.ndarray, dx: float, dy: float) -> np.ndarray:
+    """Sample ``img`` at ``(x + dx, y + dy)`` (bilinear, mirrored borders)."""
+    import cv2
+
+    h, w = img.shape[:2]
+    m = np.array([[1, 0, dx], [0, 1, dy]], np.float64)
+    return cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REFLECT101)
+
+
+def cost_volume(lf: LightField, slopes, *, views=None, occlusion: bool = True,
+                radius: int = RADIUS, eps: float = EPS,
+                coarse_radius: int = COARSE_RADIUS) -> tuple[np.ndarray, np.ndarray]:
+    """The aggregated cost volume and the guide image.
+
+    Returns
+    -------
+    cost : (N, H, W) float32
+        Filtered occlusion-aware cost per candidate (steps 1-3 above).
+    guide : (H, W, 3) float32
+        Gamma-encoded reference (centre) view in [0, 1].
+    """
+    import cv2
+
+    slopes = check_disparity_slopes(slopes)
+    u, v = lf.grid
+    mask = check_views(views, lf.grid)
+    uc, vc = lf.center
+    data = lf.data
+    if data.shape[-1] == 1:
+        data = np.repeat(data, 3, -1)
+    h, w = data.shape[2:4]
+    idx = [(i, j) for i in range(u) for j in range(v) if mask[i, j]]
+    offsets = np.array([(i - uc, j - vc) for i, j in idx], np.float64)
+    # the reference: the view(s) nearest the grid centre
+    ref_rows = [int(np.floor(uc)), int(np.ceil(uc))]
+    ref_cols = [int(np.floor(vc)), int(np.ceil(vc))]
+    ref = sorted({(i, j) for i in ref_rows for j in ref_cols})
+    ref_exact = len(ref) == 1
+    if any(not mask[i, j] for i, j in ref):
+        raise InputError("views", "the central view(s) must be among the views used")
+    weights = _half_apertures(offsets) if occlusion else np.full((1, len(idx)), 1 / len(idx),
+                                                                  np.float32)
+    colour = {(i, j): _gamma(data[i, j]) for i, j in set(idx) | set(ref)}
+    # a translation commutes with the gradient: differentiate once, shift both
+    grads = {key: np.dstack(_gradients(img)) for key, img in colour.items()}
+    guide = np.mean([colour[r] for r in ref], 0).astype(np.float32)
+    gf = cv2.ximgproc.createGuidedFilter(guide, radius, eps) if radius > 0 else None
+    gc = cv2.ximgproc.createGuidedFilter(guide, coarse_radius, eps) if coarse_radius > 0 \
+        else None
+    coarse = np.empty((len(slopes), h, w), np.float32) if gc is not None else None
+    cost = np.empty((len(slopes), h, w), np.float32)
+    per_view = np.empty((len(idx), h, w), np.float32)
+    third = np.full((1, 3), (1 - ALPHA_GRAD) / 3, np.float32)
+    half = np.full((1, 2), ALPHA_GRAD, np.float32)
+    for n, d in enumerate(slopes):
+        shifted = {}
+
+        def get(i, j, d=d, shifted=shifted):
+            if (i, j) not in shifted:
+                dx, dy = -d * (j - vc), -d * (i - uc)
+                shifted[(i, j)] = (_shift(colour[(i, j)], dx, dy), _shift(grads[(i, j)], dx, dy))
+            return shifted[(i, j)]
+
+        if ref_exact:
+            r_col, r_grad = get(*ref[0])
+        else:
+            r_col = np.mean([get(*r)[0] for r in ref], 0)
+            r_grad = np.mean([get(*r)[1] for r in ref], 0)
+        for k, (i, j) in enumerate(idx):
+            s_col, s_grad = get(i, j)
+            # (a scalar given to cv2.min applies to the first channel only)
+            c = cv2.min(cv2.absdiff(s_col, r_col), (TAU_COLOUR,) * 4)
+            g = cv2.min(cv2.absdiff(s_grad, r_grad), (TAU_GRAD / 2,) * 4)
+            per_view[k] = cv2.transform(c, third).reshape(h, w)
+            per_view[k] += cv2.transform(g, half).reshape(h, w)
+        halves = weights @ per_view.reshape(len(idx), -1)        # (n_halves, H*W)
+        c_min = halves.min(0).reshape(h, w)
+        cost[n] = gf.filter(c_min) if gf is not None else c_min
+        if gc is not None:
+            coarse[n] = gc.filter(c_min)
+    return cost, coarse, guide
+
+
+def winner(cost: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Winner-takes-all over a cost volume ``(N, H, W)`` with a parabola through
+    the least cost and its neighbours, and the confidence ``1 - min/mean``:
+    ``(disparity, confidence)``, each ``(H, W)`` float32.
+
+    >>> c = np.array([3.0, 1.0, 2.0, 4.0], np.float32)[:, None, None]
+    >>> d, q = winner(c, np.arange(4.0))
+    >>> round(float(d[0, 0]), 3), round(float(q[0, 0]), 3)
+    (1.167, 0.6)
+    """
+    n = len(slopes)
+    best = cost.argmin(0)
+    k = np.clip(best, 1, n - 2)
+    c0 = np.take_along_axis(cost, (k - 1)[None], 0)[0]
+    c1 = np.take_along_axis(cost, k[None], 0)[0]
+    c2 = np.take_along_axis(cost, (k + 1)[None], 0)[0]
+    den = c0 - 2 * c1 + c2
+    ok = (den > 1e-12) & (best == k)
+    off = np.clip(np.where(ok, 0.5 * (c0 - c2) / np.where(ok, den, 1), 0.0), -0.5, 0.5)
+    step = np.diff(slopes)
+    disp = slopes[best] + off * np.where(off >= 0, step[np.minimum(best, n - 2)],
+                                         step[np.maximum(best - 1, 0)])
+    # the floor keeps a flat (textureless, parallax-free) curve at 0, not 0/0
+    floor = np.float32(1e-4)
+    conf = 1.0 - (cost.min(0) + floor) / (cost.mean(0) + floor)
+    return disp.astype(np.float32), np.clip(conf, 0, 1).astype(np.float32)
+
+
+def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = True,
+                       radius: int = RADIUS, eps: float = EPS,
+                       coarse_radius: int = COARSE_RADIUS, sure: float = SURE,
+                       median_radius: int = MEDIAN_RADIUS) -> DisparityEstimate:
+    """Disparity of the centre view (px per view step) with confidence.
+
+    Parameters
+    ----------
+    lf : LightField
+        Views ``(U, V, H, W, C)``; any grid of at least 2 views.
+    slopes : sequence of float
+        Candidate disparities, increasing, at least 3
+        (:func:`~lumigraph.lightfield.refocus.check_disparity_slopes`); the
+        sub-pixel fit resolves well below their spacing.
+    views : (U, V) bool, optional
+        Views to use (a cross: the central row and column); default all.
+    occlusion : bool
+        Min over half-apertures (True) or the mean over all views.
+    radius, eps : guided-filter radius (px) and regulariser.
+    median_radius : int
+        Weighted-median radius (px); 0 skips the refinement.
+
+    Returns
+    -------
+    DisparityEstimate
+        ``disparity`` and ``confidence`` (H, W) float32, ``slopes``.
+    """
+    import cv2
+
+    slopes = check_disparity_slopes(slopes)
+    cost, coarse, guide = cost_volume(lf, slopes, views=views, occlusion=occlusion,
+                                      radius=radius, eps=eps, coarse_radius=coarse_radius)
+    disp, conf = winner(cost, slopes)
+    del cost
+    if coarse is not None:
+        # where the fine aggregation decides nothing (no texture in its window)
+        # the coarse one, which reaches texture further away, decides
+        d2, c2 = winner(coarse, slopes)
+        del coarse
+        use = conf < sure
+        disp = np.where(use, d2, disp)
+        conf = np.where(use, np.minimum(c2, conf), conf)
+    if median_radius > 0:
+        joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
+        keep = (conf >= np.quantile(conf, 0.2)).astype(np.uint8)
+        cv2.setRNGSeed(0)
+        disp = cv2.ximgproc.weightedMedianFilter(
+            joint, disp, median_radius, sigma=25.5, weightType=cv2.ximgproc.WMF_EXP, mask=keep)
+    return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)

@@ -1,0 +1,94 @@
+"""Light-field depth (lightfield/wang2015.py against the variance baseline):
+bounds from the rendered ground truth, the command line, and HCI antinous."""
+
+import numpy as np
+from conftest import assert_clean_error, lumigraph, need_shared
+
+from lumigraph.capture.render import render
+from lumigraph.lightfield import refocus, wang2015
+from lumigraph.lightfield.field import LightField
+
+SLOPES = np.linspace(-0.5, 2.5, 31)        # step 0.1 px/view
+STEP = float(SLOPES[1] - SLOPES[0])
+
+
+def _scene(grid="5x5", size=(96, 72), seed=3):
+    s = render("lightfield-array", size=size, grid=grid, seed=seed, thin_lens=False)
+    return LightField(s.gt_arrays["views"], spacing=1.0), s.gt_arrays["disparity"]
+
+
+def _far_from_edges(gt, reach):
+    from scipy.ndimage import maximum_filter, minimum_filter
+
+    edge = (maximum_filter(gt, 3) - minimum_filter(gt, 3)) > 1e-3
+    return maximum_filter(edge, 2 * reach + 1) == 0
+
+
+def test_planes_are_exact_away_from_edges_and_silhouettes_beat_the_baseline():
+    lf, gt = _scene()
+    est = wang2015.estimate_disparity(lf, SLOPES)
+    assert est.disparity.shape == gt.shape and est.confidence.shape == gt.shape
+    assert 0 <= est.confidence.min() and est.confidence.max() <= 1
+    # noise-free planes on the candidate grid: away from an occlusion edge (by
+    # the largest parallax over the aperture, 0.8 px/view x 2 views, plus the
+    # guided filter's support, twice its radius) the parabola lands within a
+    # quarter step
+    reach = int(np.ceil(0.8 * 2)) + 2 * wang2015.RADIUS
+    far = _far_from_edges(gt, reach)
+    far[:reach], far[-reach:], far[:, :reach], far[:, -reach:] = False, False, False, False
+    assert far.mean() > 0.2
+    assert np.median(np.abs(est.disparity - gt)[far]) < STEP / 4
+    # the issue's target: BadPix(0.07) at most half the variance baseline's
+    old = refocus.estimate_disparity(lf, SLOPES)
+    bad = lambda d: float((np.abs(d - gt) > 0.07).mean())  # noqa: E731
+    assert bad(est.disparity) <= 0.5 * bad(old.disparity)
+
+
+def test_confidence_is_low_where_there_is_no_parallax_information():
+    lf, _ = _scene(size=(48, 40))
+    flat = LightField(np.full_like(lf.data, 0.3), spacing=1.0)
+    est = wang2015.estimate_disparity(flat, SLOPES, median_radius=0)
+    assert est.confidence.max() < 1e-3
+
+
+def test_cli_writes_disparity_and_confidence_and_keeps_the_old_method(tmp_path):
+    from lumigraph.capture.io import read_pfm
+
+    scene_dir = tmp_path / "scene"
+    render("lightfield-array", size=(64, 48), grid="3x3", thin_lens=False).save(scene_dir)
+    lf = tmp_path / "lf"
+    assert lumigraph("lightfield", "import", scene_dir, "--out", lf).returncode == 0
+    r = lumigraph("lightfield", "depth", lf, "--slopes=-0.5,2.5,31", "--confidence",
+                  tmp_path / "c.pfm", "--out", tmp_path / "d.pfm")
+    assert r.returncode == 0, r.stderr
+    c = read_pfm(tmp_path / "c.pfm")
+    assert c.shape == read_pfm(tmp_path / "d.pfm").shape and 0 <= c.min() and c.max() <= 1
+    r = lumigraph("lightfield", "depth", lf, "--slopes=-0.5,2.5,31", "--method", "variance",
+                  "--window", "5", "--out", tmp_path / "v.pfm")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph("lightfield", "depth", lf, "--slopes=-0.5,2.5,31", "--window", "5",
+                  "--out", tmp_path / "w.pfm")
+    assert_clean_error(r, "--window", "variance")
+    assert not (tmp_path / "w.pfm").exists()
+
+
+def test_hci_antinous_beats_the_baseline():
+    """Real-data check (held out: nothing was tuned on it). Centre 160x160 crop
+    to keep the test short; the issue's targets (BadPix 0.07 <= 20 %, MSE x 100
+    <= 5 on the whole view) are not met yet (docs/decisions/lightfield-depth.md),
+    so only the comparison with the baseline on the same input is asserted
+    (BadPix; the crop's MSE is not yet below the baseline's)."""
+    from lumigraph.capture.io import read_image, read_pfm
+    from lumigraph.lightfield.field import from_images
+
+    root = need_shared("data", "lightfield-real", "hci_antinous_5x5")
+    crop = (slice(176, 336), slice(176, 336))
+    names = [root / f"input_Cam{9 * r + c:03d}.png" for r in range(2, 7) for c in range(2, 7)]
+    lf = from_images([read_image(n)[crop] for n in names], grid=(5, 5), spacing=1.0)
+    gt = read_pfm(root / "gt_disp_lowres.pfm")[crop]
+    slopes = np.linspace(-3.3, 2.9, 63)
+    new = wang2015.estimate_disparity(lf, slopes).disparity
+    old = refocus.estimate_disparity(lf, slopes).disparity
+    b = 15   # the HCI evaluation's boundary offset
+    err = lambda d: (d - gt)[b:-b, b:-b]  # noqa: E731
+    assert (np.abs(err(new)) > 0.07).mean() < (np.abs(err(old)) > 0.07).mean()
