@@ -34,7 +34,7 @@ from collections.abc import Iterable, Sequence
 from fractions import Fraction
 from pathlib import Path
 
-from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.capture.errors import EstimationError, InputError, UnusableResult
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNUSABLE, EXIT_PARTIAL = 0, 1, 2, 3, 4
 EXIT_INTERRUPTED = 130
@@ -388,6 +388,11 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             where = argument_flags(parser, args).get(e.where, e.where)
             said.error(f"error: {where}: {_one_line(e.problem)}")
             return EXIT_USAGE
+        except UnusableResult as e:  # the work ran; its result is not usable: nothing written
+            if debug:
+                traceback.print_exc()
+            said.error(f"error: {e.where}: {_one_line(e.problem)}")
+            return EXIT_UNUSABLE
         except KeyboardInterrupt:
             said.error("error: interrupted; nothing half-written was left behind")
             return 130

@@ -42,3 +42,14 @@ class EstimationError(ValueError):
         self.where = os.fspath(where)
         self.problem = problem
         super().__init__(f"{self.where}: {problem}")
+
+
+class UnusableResult(Exception):
+    """The work ran but its result cannot be used (an SfM that registered too
+    few views): the command line exits 3 with one line ``error: <where>:
+    <problem>`` and writes nothing. ``where`` names the input."""
+
+    def __init__(self, where: str | os.PathLike, problem: str):
+        self.where = os.fspath(where)
+        self.problem = problem
+        super().__init__(f"{self.where}: {problem}")

@@ -24,14 +24,13 @@ usable result: exit 3 (``EXIT_UNUSABLE``), one line, nothing written.
 from __future__ import annotations
 
 import math
-import sys
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from lumigraph.capture.commandline import (
-    EXIT_UNUSABLE,
     add_verb,
     check_output_dir,
     check_output_path,
@@ -336,10 +335,10 @@ def _sfm(args) -> int:
     try:
         rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
     except EstimationError as e:  # COLMAP ran and registered fewer than two views
-        return _unusable(f"registered fewer than 2 of {n} views ({e.problem}); nothing written")
+        _unusable(args.images, f"registered fewer than 2 of {n} views ({e.problem}); nothing written")
     got = rec.info["registered"]
     if got < need:
-        return _unusable(f"registered {got} of {n} views, fewer than --min-registered "
+        _unusable(args.images, f"registered {got} of {n} views, fewer than --min-registered "
                          f"{args.min_registered:g} asks ({need}); nothing written")
     if got < n:
         warn(f"registered {got} of {n} views; cameras.json marks the others")
@@ -357,10 +356,13 @@ def _sfm(args) -> int:
     return 0
 
 
-def _unusable(problem: str) -> int:
-    """Exit 3, one line: the work ran but its result is not usable (nothing is written)."""
-    sys.stderr.write(f"error: IMAGES: {problem}\n")
-    return EXIT_UNUSABLE
+def _unusable(images, problem: str):
+    """Exit 3, one line naming the images' folder: the work ran but its result
+    is not usable (nothing is written)."""
+    from lumigraph.capture.errors import UnusableResult
+
+    folder = os.path.commonpath([os.path.abspath(p) for p in images])
+    raise UnusableResult(folder if os.path.isdir(folder) else os.path.dirname(folder), problem)
 
 
 def _read_model(path):

@@ -184,3 +184,18 @@ def test_foreign_messages_are_kept_back(tmp_path):
     assert r.returncode == 2 and r.stderr == "error: a.png: not an image\n"
     r = subprocess.run([sys.executable, "-c", script, "--debug"], capture_output=True, text=True)
     assert "libpng warning" in r.stderr
+
+
+def test_an_unusable_result_is_exit_3_one_line_and_held_warnings_dropped(tmp_path, capsys):
+    """Exit 3 (DESIGN §5): the work ran, its result is not usable; the one line
+    is the last word, warnings held during the run are not shown."""
+    from lumigraph.capture.commandline import warn
+    from lumigraph.capture.errors import UnusableResult
+
+    def work(args):
+        warn("only 1 of 4 views matched")
+        raise UnusableResult(tmp_path, "registered 1 of 4 views; nothing written")
+
+    rc = run(_toy_parser(tmp_path, work), [str(tmp_path), "--out", str(tmp_path / "o.json")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 3 and err == [f"error: {tmp_path}: registered 1 of 4 views; nothing written"]

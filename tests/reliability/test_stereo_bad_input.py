@@ -3,6 +3,7 @@ over inputs (exit 2), and an SfM that registered too few views (exit 3)."""
 
 import json
 import types
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -101,7 +102,8 @@ def test_sfm_registering_too_few_views_is_unusable(views, tmp_path, capsys, monk
 
     monkeypatch.setattr(sfm, "reconstruct", fake)
     out = tmp_path / "sfm"
-    assert_refused(main, ["sfm", *views, "--out", out], "IMAGES", capsys, code=3, outputs=[out],
+    folder = str(Path(views[0]).resolve().parent)  # the one line names the views' folder
+    assert_refused(main, ["sfm", *views, "--out", out], folder, capsys, code=3, outputs=[out],
                    inputs=views, fragments=[fragment, "nothing written"])
 
 
