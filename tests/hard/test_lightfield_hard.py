@@ -142,3 +142,36 @@ def test_cross_shaped_import_is_refused_and_masks_are_checked(tmp_path):
     no_centre[1, 1] = False
     with pytest.raises(InputError, match="^views: .*central"):
         wang2015.estimate_disparity(lf, [0, 1, 2], views=no_centre)
+
+
+def test_a_light_field_with_one_missing_view_is_refused(tmp_path):
+    """Hard case: one view of the array missing, as files given to `import`
+    or as a light-field folder that lost one: exit 2, one line, naming it."""
+    import shutil
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[2] / "fixtures" / "lightfield"
+    views = sorted(src.glob("view-*.exr"))
+    r = lumigraph("lightfield", "import", *views[:-1], "--grid", "3x3", "--out", tmp_path / "a",
+                  "-q")
+    assert_clean_error(r, "--grid", "needs 9 images, got 8")
+    assert not (tmp_path / "a").exists()
+    lf = tmp_path / "lf"
+    shutil.copytree(src, lf)
+    (lf / "view-01-02.exr").unlink()
+    r = lumigraph("lightfield", "refocus", lf, "--slope", "0.5", "--out", tmp_path / "r.exr", "-q")
+    assert_clean_error(r, "lightfield.json", "view-01-02.exr")
+    assert not (tmp_path / "r.exr").exists()
+
+
+def test_refocus_beyond_the_depth_of_field_says_so(tmp_path):
+    """Hard case: a slope outside the range the aperture's sampling refocuses
+    exactly is done, with a warning on stderr naming the bound."""
+    import shutil
+    from pathlib import Path
+
+    lf = tmp_path / "lf"
+    shutil.copytree(Path(__file__).resolve().parents[2] / "fixtures" / "lightfield", lf)
+    r = lumigraph("lightfield", "refocus", lf, "--alpha", "0.5", "--out", tmp_path / "r.exr")
+    assert r.returncode == 0, r.stderr
+    assert "warning:" in r.stderr and "alpha 0.5" in r.stderr and (tmp_path / "r.exr").exists()
