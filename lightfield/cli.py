@@ -505,7 +505,7 @@ def build_parser(prog: str = "lumigraph lightfield"):
 
     v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)",
                  epilog="methods:\n" + REFOCUS_METHODS.help_text() +
-                        "\n  auto       shift-add for a few values, fourier from about 6 on")
+                        "\n  auto       shift-add for up to 3 values, fourier from 4 on")
     v.add_argument("lightfield", type=input_path, help="light-field folder")
     g = v.add_mutually_exclusive_group(required=True)
     g.add_argument("--alpha", nargs="+", type=numbers(positive), help="Ng's alpha values")

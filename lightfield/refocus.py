@@ -187,10 +187,16 @@ def focal_stack(lf: LightField, slopes, *, method: str = "shift-add", **options)
 
 def choose_method(lf: LightField, n_slopes: int) -> str:
     """``fourier`` when the one-time 4-D FFT plus n cheap slices beats n
-    shift-and-add passes. Cost model (measured by the bench on 2 cores, 9x9
-    views of 512x512x3): one FFT ~ 6 shift-and-add refocuses, one slice ~ 0.03
-    of one; so Fourier wins from about 7 depths on."""
-    fft_cost, slice_cost = 6.0, 0.03
+    shift-and-add passes. Cost model, in shift-and-add refocuses (measured by
+    ``lumigraph bench lightfield``, single-threaded, 9x9 views of 512x512x3,
+    with the band-limited slice of docs/decisions/fourier-refocus.md): one
+    4-D FFT ~ 3 (0.83 s against 0.273 s), one slice ~ 0.13 (0.036 s); so
+    Fourier wins from 4 depths on.
+
+    >>> choose_method(None, 3), choose_method(None, 4)
+    ('shift-add', 'fourier')
+    """
+    fft_cost, slice_cost = 3.0, 0.13
     return "fourier" if fft_cost + slice_cost * n_slopes < n_slopes else "shift-add"
 
 
