@@ -100,7 +100,7 @@ JOURNAL_PREFIX = ".lumigraph-commit."
 
 
 def _temp_pattern(final: Path) -> re.Pattern:
-    """Temporaries of ``final`` made by :func:`atomic_path`: ``.NAME.XXXXXXXX.tmpSUFFIX``,
+    """Temporaries of ``final`` made by :func:`atomic_path`: ``.NAME.<random>.tmpSUFFIX``,
     and those of a writer nested in it (a temporary of that temporary)."""
     one = rf"\.[A-Za-z0-9_]+\.tmp{re.escape(final.suffix)}"
     return re.compile(rf"^\.+{re.escape(final.name)}{one}(?:{one})*$")
