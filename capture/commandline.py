@@ -319,17 +319,10 @@ def argument_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) ->
     ('--pixel-sigma', '--times')
     """
     flags: dict[str, str] = {}
-    todo = [parser]
-    while todo:
-        p = todo.pop()
-        for a in p._actions:
-            if isinstance(a, argparse._SubParsersAction):
-                chosen = getattr(args, a.dest, None) if a.dest != argparse.SUPPRESS else None
-                if chosen in a.choices:
-                    todo.append(a.choices[chosen])
-            elif a.option_strings and a.dest not in ("help",):
-                longs = [o for o in a.option_strings if o.startswith("--")]
-                flags.setdefault(a.dest, (longs or a.option_strings)[0])
+    for _, a in _chosen_actions(parser, args):
+        if a.option_strings:
+            longs = [o for o in a.option_strings if o.startswith("--")]
+            flags.setdefault(a.dest, (longs or a.option_strings)[0])
     flags.update(getattr(args, "arg_flags", None) or {})
     return flags
 
