@@ -82,6 +82,10 @@ SUPPORT_HALF = 2.0
 WIDE_FACTOR = 4.0
 # Width of the contrast normalisation's Gaussian, px of each level.
 CONTRAST_SIGMA = 3.0
+# Its floor (units of the [0, 1] image; about one 8-bit code, the noise of a
+# good camera): local contrast well above it is normalised exactly, flat
+# areas are not blown up beyond the noise.
+CONTRAST_EPS = 0.004
 # Texture term of the probability: the structure tensor's smaller eigenvalue
 # against TEXTURE_NOISE x what image noise alone gives (sigma^2 / 2 for
 # central differences); 0.5 at that ratio.
@@ -127,7 +131,7 @@ def _as_gray(image: np.ndarray, where: str) -> np.ndarray:
 
 
 def normalise_contrast(image: np.ndarray, *, sigma: float = CONTRAST_SIGMA,
-                       eps: float = 0.01) -> np.ndarray:
+                       eps: float | None = None) -> np.ndarray:
     """Local contrast normalisation: ``(I - G*I) / sqrt(G*(I - G*I)^2 + eps^2)``,
     per channel, ``G`` a Gaussian of ``sigma`` px. Removes a local gain and
     offset exactly, a gamma or smooth shading to first order over ``sigma``.
@@ -142,6 +146,7 @@ def normalise_contrast(image: np.ndarray, *, sigma: float = CONTRAST_SIGMA,
     """
     import cv2
 
+    eps = CONTRAST_EPS if eps is None else eps
     img = np.asarray(image, np.float32)
     hp = img - cv2.GaussianBlur(img, (0, 0), sigma).reshape(img.shape)
     var = cv2.GaussianBlur(hp * hp, (0, 0), sigma).reshape(img.shape)
@@ -336,7 +341,10 @@ def _match(n0, mm1, field, *, radius, region):
     hi, lo = np.ascontiguousarray(hl[..., 0]), np.ascontiguousarray(hl[..., 1])
     side = 2 * r + 1
     best = mean = idx = better = None
-    for i in range(side * side):
+    centre = r * side + r
+    # The centre (no change) first: ties (the cost is flat near a match)
+    # keep the current field.
+    for i in [centre] + [j for j in range(side * side) if j != centre]:
         dy, dx = divmod(i, side)
         c = n0 - hi[dy:dy + h, dx:dx + w]
         np.maximum(c, lo[dy:dy + h, dx:dx + w] - n0, out=c)
@@ -344,7 +352,7 @@ def _match(n0, mm1, field, *, radius, region):
         c = cv2.boxFilter(c, -1, (region, region), borderType=cv2.BORDER_REFLECT)
         if best is None:
             best, mean = c, c.copy()
-            idx, better = np.zeros((h, w), np.int16), np.empty((h, w), bool)
+            idx, better = np.full((h, w), centre, np.int16), np.empty((h, w), bool)
             continue
         mean += c
         np.less(c, best, out=better)

@@ -14,8 +14,10 @@ kind           content
                rectangles at different depths (different motions, occlusions)
 ``natural``    one photo plane under a small homography (rotation, zoom)
 ``noise``      multi-scale value-noise texture with two textured discs
-``cartoon``    flat colour regions with a little fine texture: large
-               textureless areas, edges carry the motion
+``cartoon``    flat colour regions: large textureless areas, edges carry
+               the motion
+``materials``  gravel background, a grass rectangle and a brick disc, each
+               moving on its own (held out: never run while tuning)
 =============  ================================================================
 
 The frames are box filters of the continuous scene over each pixel
@@ -45,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-KINDS = ("layers", "natural", "noise", "cartoon")
+KINDS = ("layers", "natural", "noise", "cartoon", "materials")
 CHANGES = ("none", "added", "removed")
 
 # Named lighting/scene variants of the family: each is a set of options of
@@ -206,6 +208,16 @@ def _layers(kind, w, h, rng, shift, change):
         cx, cy = rng.uniform(r, w - r), rng.uniform(r, h - r)
         mot = _affine(cx, cy, dx * 1.8, dy * 1.8)
         out.append(_Layer(_cartoon(W, H, rng), mot, "disc", (cx - r, cy - r, cx + r, cy + r)))
+    elif kind == "materials":
+        out.append(_Layer(_texture("gravel", W, H, rng), cam))
+        for shape, name in (("rect", "grass"), ("disc", "brick")):
+            bw, bh = w * rng.uniform(0.25, 0.35), h * rng.uniform(0.3, 0.45)
+            x0, y0 = rng.uniform(0.05, 0.95) * (w - bw), rng.uniform(0.05, 0.95) * (h - bh)
+            psi = rng.uniform(0, 2 * math.pi)
+            m = rng.uniform(1.5, 4.0)
+            mot = _affine(x0 + bw / 2, y0 + bh / 2, dx + m * math.cos(psi), dy + m * math.sin(psi),
+                          rng.uniform(-1.5, 1.5))
+            out.append(_Layer(_texture(name, W, H, rng), mot, shape, (x0, y0, x0 + bw, y0 + bh)))
     else:
         raise ValueError(f"kind: expected one of {KINDS}, got {kind!r}")
     if change != "none":
