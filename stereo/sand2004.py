@@ -13,14 +13,17 @@ each level:
    local gain and offset cancel exactly, a gamma or a smooth shading to first
    order over ``G``'s width. The reference leaves this preprocessing to
    "other techniques from computer vision".
-2. **Pixel matching** against the 3x3 maximum and minimum images of the
-   secondary (Fig. 5.7): the cost of offset (u, v) at a pixel is
+2. **Pixel matching** against the maximum and minimum images of the
+   secondary (Fig. 5.7; the paper's 3x3 range, or by default the range
+   within half a pixel, :func:`_minmax`): the cost of offset (u, v) at a
+   pixel is
    ``mean_R max(0, n0 - nmax(x+u, y+v), nmin(x+u, y+v) - n0)`` (the
    unnumbered equation of §5.1.4, mean instead of sum over the region R),
    zero wherever the primary value lies within the secondary's local range,
    so half-pixel misalignment and resampling cost nothing. Candidates are
-   the integer offsets within ``radius`` of the current field (a larger
-   radius at the top level), refined by a parabola.
+   the integer offsets within ``radius`` of the current field (wider below
+   full size and at the top level); the secondary's range images are warped
+   once and the candidates are whole-pixel slices of them.
 3. **Matching probability** per pixel: ``exp(-cost / MATCH_SCALE)`` times
    how distinct the best cost is among the candidates, times how textured
    the primary is there (the structure tensor's smaller eigenvalue against
@@ -30,18 +33,28 @@ each level:
    (:func:`weighted_regression`) of the matched offsets, each weighted by its
    probability times a Gaussian of distance, gives a smooth field (a local
    affine fit per pixel: no global projective model, no distortion
-   correction assumed). Where the kernel holds little evidence the coarser
-   level's field is kept.
-5. **Iterate**: match around the smoothed field (the probabilities are
-   recomputed from it), regress again, until the field stops changing.
+   correction assumed). Where the kernel holds little evidence a kernel
+   ``WIDE_FACTOR`` times wider speaks, and where even that holds little, the
+   coarser level's field.
+5. **Per-pixel choice** by the same cost: the regressed field, the field
+   before this round and (below full size) the matches' own 5x5 median.
+   The regression treats an independently moving object as an outlier to
+   its surroundings' motion; the choice keeps it.
+6. **Sub-pixel**: one probability-weighted Lucas-Kanade step on the
+   normalised images (:func:`lk_refine`); the min/max cost is flat within
+   the secondary's range and locates a match only to about a pixel.
+7. **Iterate** matching and regression around the new field (the
+   probabilities are recomputed from it), ``max_iterations`` rounds per
+   level below full size, one at full size.
 
-Finally, at full size, each pixel keeps whichever of a few candidate fields
-(the regressed field here and at ``BOUNDARY_STEP`` px either side) matches
-best over a small region: the regression kernel blends the two sides of a
-motion boundary, and this puts each pixel back on its own side. The output
-probability is the matching probability of the final field at every pixel
-(texture included), so flat regions and changed objects say they are
-unreliable.
+At full size, each pixel also keeps the field found ``BOUNDARY_STEP`` px
+left, right, up or down if that matches clearly better: the regression
+kernel blends the two sides of a motion boundary, the neighbour's field does
+not. The output probability is the matching probability of the final field
+at every pixel (texture included), so flat regions and changed objects say
+they are unreliable.
+
+Design notes, figures and what was tried: ``docs/decisions/video-matching.md``.
 
 Examples
 --------
@@ -499,8 +512,9 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
         Kernel width of the locally weighted regression at full size, px
         (halved per level, at least 2).
     max_iterations : int
-        Match/regress rounds per level at most; fewer when the field's mean
-        change falls below ``tol_px`` (px of full size).
+        Match/regress rounds per level below full size at most (one at full
+        size); fewer when the field's mean change falls below ``tol_px``
+        (px of full size).
     radius : int
         Search radius around the current field below the top level, px.
     refine_boundaries : bool

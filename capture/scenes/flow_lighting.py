@@ -324,9 +324,3 @@ def render_lighting(kind: str, *, size=(320, 240), seed: int = 0, shift: float =
     return LightingPair((frames[0], frames[1]), flow.astype(np.float32), occluded, changed,
                         textureless, opts)
 
-
-def family(kinds=KINDS, variants=tuple(VARIANTS), seeds=(0,), size=(320, 240)):
-    """The family's pairs: ``{(kind, variant, seed): LightingPair}`` (rendered lazily
-    by the caller: returns the options of each)."""
-    return {(k, v, s): dict(kind=k, size=size, seed=s, **VARIANTS[v])
-            for k in kinds for v in variants for s in seeds}
