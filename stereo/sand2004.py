@@ -438,22 +438,25 @@ def _support(prob, sigma):
     return cv2.GaussianBlur(prob, (0, 0), sigma) * (2 * np.pi * sigma * sigma)
 
 
-def _choose(n0, mm1, cands, allowed=None):
+def _choose(n0, mm1, cands, allowed=None, abs_margin=None):
     """Per pixel, the candidate field that matches best over SELECT_REGION
-    (a later candidate must beat the kept one by SELECT_MARGIN). Returns the
-    field and the index kept."""
+    (a later candidate must beat the kept one by SELECT_MARGIN and
+    ``abs_margin``, default SELECT_ABS: noise in the cost would otherwise swap
+    equally good fields at random). Returns the field and the index kept."""
+    abs_margin = SELECT_ABS if abs_margin is None else abs_margin
     field = cands[0]
     best = _cost_at(n0, _warp(mm1, field), SELECT_REGION)
     keep = np.zeros(best.shape, np.int8)
     out = field.copy()
+    better = np.empty(best.shape, bool)
     for i, f in enumerate(cands[1:], 1):
         c = _cost_at(n0, _warp(mm1, f), SELECT_REGION)
-        better = c < SELECT_MARGIN * best - SELECT_ABS
+        np.less(c, SELECT_MARGIN * best - abs_margin, out=better)
         if allowed is not None and allowed[i] is not None:
             better &= allowed[i]
-        out[better] = f[better]
-        keep[better] = i
-        best = np.where(better, c, best)
+        np.copyto(out, f, where=better[..., None])
+        np.copyto(keep, i, where=better)
+        np.copyto(best, c, where=better)
     return out, keep
 
 
@@ -467,20 +470,9 @@ def _choose_side(n0, mm1, field):
     h, w = n0.shape
     s = BOUNDARY_STEP
     pad = cv2.copyMakeBorder(field, s, s, s, s, cv2.BORDER_REPLICATE)
-    cands = [field] + [np.ascontiguousarray(pad[s + dy:s + dy + h, s + dx:s + dx + w])
+    cands = [field] + [pad[s + dy:s + dy + h, s + dx:s + dx + w]
                        for dx, dy in ((-s, 0), (s, 0), (0, -s), (0, s))]
-    best = _cost_at(n0, _warp(mm1, field), SELECT_REGION)
-    keep = np.zeros((h, w), np.int8)
-    out = field.copy()
-    for i, f in enumerate(cands[1:], 1):
-        c = _cost_at(n0, _warp(mm1, f), SELECT_REGION)
-        # A neighbour's field must match clearly better (noise in the cost
-        # would otherwise swap equally good fields at random).
-        better = c < SELECT_MARGIN * best
-        out[better] = f[better]
-        keep[better] = i
-        best = np.where(better, c, best)
-    return out, keep
+    return _choose(n0, mm1, cands, abs_margin=0.0)
 
 
 def _probability(best, mean, texture):
