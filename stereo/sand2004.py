@@ -547,7 +547,7 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
         raise InputError("max_iterations", f"expected an integer >= 1, got {max_iterations}")
     levels = check_levels(levels)
     h, w = g0.shape
-    est = None
+    est = full = None
     if initial_flow is not None:
         start = np.asarray(initial_flow, np.float32)
         if start.shape != (h, w, 2):
@@ -555,7 +555,8 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
         n_levels, choice_d = 1, {"levels": 1, "source": "initial_flow"}
     elif levels == "auto":
         if max_motion_px is None:
-            est, _ = estimate_max_motion(normalise_contrast(g0), normalise_contrast(g1))
+            full = normalise_contrast(g0), normalise_contrast(g1)
+            est, _ = estimate_max_motion(*full)
             source = "estimated"
         else:
             est, source = float(max_motion_px), "given"
@@ -574,7 +575,10 @@ def video_matching(reference: np.ndarray, moving: np.ndarray, *, levels: int | s
     for lvl in range(n_levels - 1, -1, -1):
         if field.shape[:2] != p0[lvl].shape:
             field = upsample_flow(field, p0[lvl].shape)
-        n0, n1 = normalise_contrast(p0[lvl]), normalise_contrast(p1[lvl])
+        if lvl == 0 and full is not None:
+            n0, n1 = full  # already made for the motion estimate
+        else:
+            n0, n1 = normalise_contrast(p0[lvl]), normalise_contrast(p1[lvl])
         mm1 = _minmax(n1)
         tex_cache = {}
         tex = texture_weight(p0[lvl], _cached=tex_cache)
