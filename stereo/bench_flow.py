@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from lumigraph.capture.bench import Case, Check, Method, Results, Stage, missing_shared, shared_data
+from lumigraph.stereo.bench_vmatch import with_video_matching
 
 SYNTHETIC = ("flow", "flow-large", "flow-textureless", "flow-brightness", "flow-video")
 REAL = ("RubberWhale", "Venus", "Dimetrodon", "Hydrangea")
@@ -182,6 +183,7 @@ def _checks(res: Results, _ctx) -> list[Check]:
     return out
 
 
+@with_video_matching  # the lighting-change family of video matching (issue 15)
 def stage(*, quick: bool = False) -> Stage:
     size = (160, 120) if quick else (320, 240)
     synth = ("flow", "flow-large", "flow-brightness") if quick else SYNTHETIC
