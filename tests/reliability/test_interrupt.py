@@ -36,6 +36,12 @@ def test_ctrl_c_is_one_line_and_130(delay_s, tmp_path):
     _, err = p.communicate(timeout=60)
     if p.returncode == 0:
         return  # it finished first: nothing to interrupt
+    if p.returncode == -signal.SIGINT:
+        # Under load the signal can land before the interpreter has installed
+        # its own SIGINT handler: the default action ends the process, which a
+        # shell reports as 130, as it does ours. Nothing ran, so nothing is said.
+        assert "Traceback" not in err and not out.exists(), err
+        return
     assert p.returncode == 130, err
     assert "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("error: interrupted"), err
