@@ -141,7 +141,7 @@ LG_INLINE int cost_body(const uint64_t *cl, const uint64_t *cr, int H, int W, in
             } else {
                 dreg = -1;
             }
-            for (int d = dreg + 1; d < D; d++) {
+            for (int d = dreg < 0 ? 0 : dreg + 1; d < D; d++) {
                 if (d > x) { c[d] = (uint16_t)invalid; continue; }
                 int s = 0;
                 for (int dx = -r; dx <= r; dx++) s += V[(size_t)clampi(x + dx, d, W - 1) * D + d];

@@ -70,7 +70,7 @@ SSD_TRUNCATION = 24.0  # code values: SSD costs are capped at this RMS differenc
 RANGE_WARNING = 0.02  # share of pixels whose best is max_disp above which we warn
 # How the defaults were chosen: docs/decisions/stereo-sgm.md
 DEFAULTS = {"cost": "census", "cost_window": 3, "p1": 7, "p2": 100, "edge": 8, "paths": 8,
-            "uniqueness": 0.05, "lr_tolerance": 1, "speckle_size": 60, "speckle_range": 1.0}
+            "uniqueness": 0.01, "lr_tolerance": 2, "speckle_size": 20, "speckle_range": 1.0}
 
 
 # ----------------------------------------------------------------- kernels
@@ -507,16 +507,23 @@ def _decide(win, *, D, uniqueness, lr_tolerance, subpixel):
         bad = ok & (second < sb * (1.0 + uniqueness))
         counts["not_unique"] = int(bad.sum())
         ok &= ~bad
-    if lr_tolerance >= 0:
-        br = np.take_along_axis(win["best_r"].astype(np.int64), np.clip(xs - best, 0, w - 1), 1)
-        bad = ok & (np.abs(br - best) > lr_tolerance)
-        counts["left_right"] = int(bad.sum())
-        ok &= ~bad
     d = best.astype(np.float64)
     if subpixel:
         den = sm + sp - 2 * sb
         fit = (sm >= 0) & (sp >= 0) & (den > 0)
         with np.errstate(invalid="ignore", divide="ignore"):
             d = np.where(fit, d + (sm - sp) / (2 * np.where(fit, den, 1)), d)
+    if lr_tolerance >= 0:
+        # the right pixels either side of x - d (as OpenCV's disp12MaxDiff):
+        # a sub-pixel match between two right pixels agrees with either
+        br = win["best_r"].astype(np.float64)
+        xr = xs - d
+        agree = np.zeros(best.shape, bool)
+        for xi in (np.floor(xr), np.ceil(xr)):
+            xi = np.clip(xi, 0, w - 1).astype(np.int64)
+            agree |= np.abs(np.take_along_axis(br, xi, 1) - d) <= lr_tolerance
+        bad = ok & ~agree
+        counts["left_right"] = int(bad.sum())
+        ok &= ~bad
     disp = np.where(ok, d, np.nan).astype(np.float32)
     return disp, counts
