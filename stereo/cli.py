@@ -181,9 +181,9 @@ def _match(args) -> int:
     t0 = time.perf_counter()
     params = {"method": args.method, "max_disp": args.max_disp, "uniqueness": uniqueness,
               "lr_tolerance": lr_tolerance}
+    params["texture_snr"] = args.texture_snr
     params.update({"cost": args.cost} if sgm else
-                  {"window": window, "texture_snr": args.texture_snr, "channels": args.channels,
-                   "prefilter": args.prefilter})
+                  {"window": window, "channels": args.channels, "prefilter": args.prefilter})
     model: dict = {}
     inputs = [args.left, args.right]
     if rectifying:
@@ -200,7 +200,7 @@ def _match(args) -> int:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
     if sgm:
         res = sgm_match(left, right, max_disp=args.max_disp, cost=args.cost, uniqueness=uniqueness,
-                        lr_tolerance=lr_tolerance)
+                        lr_tolerance=lr_tolerance, texture_snr=args.texture_snr)
         model["sgm"] = res.info
     else:
         res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
@@ -495,8 +495,8 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "unknown (inf).\n"
                         "--method ssd: SSD window matching; --window auto picks per pixel the "
                         "smallest of 5, 9, 15 whose texture passes --texture-snr; the choice is "
-                        "recorded in the .meta.json. --window, --texture-snr, --channels and "
-                        "--prefilter apply to ssd only, --cost to sgm only.")
+                        "recorded in the .meta.json. --window, --channels and --prefilter apply to "
+                        "ssd only, --cost to sgm only.")
     v.add_argument("left", type=input_path, help="left image (the reference)")
     v.add_argument("right", type=input_path, help="right image")
     g = v.add_mutually_exclusive_group()
@@ -516,7 +516,8 @@ def build_parser(prog: str = "lumigraph stereo"):
                                            allow=("auto",)),
                    default="auto", help="odd window side, or auto (default)")
     v.add_argument("--texture-snr", type=number(float, lo=0), default=1.0,
-                   help="minimum window signal std in units of the noise sigma (default 1.0)")
+                   help="minimum window signal std in units of the noise sigma (default 1.0; "
+                        "sgm: over 21x21, flatter pixels are unknown)")
     v.add_argument("--uniqueness", type=number(float, lo=0), default=None,
                    help="second-best must cost (1+u) times the best (default 0.01 sgm, 0.02 ssd)")
     v.add_argument("--lr-tolerance", type=number(int, lo=-1), default=None,
@@ -566,7 +567,8 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--step", type=positive,
                    help="offset step, at most --max-offset (default: one offset-image pixel)")
     v.add_argument("--texture-snr", type=number(float, lo=0), default=1.0,
-                   help="minimum window signal std in units of the noise sigma (default 1.0)")
+                   help="minimum window signal std in units of the noise sigma (default 1.0; "
+                        "sgm: over 21x21, flatter pixels are unknown)")
     v.add_argument("--uniqueness", type=number(float, lo=0), default=0.02,
                    help="every other offset must cost (1+u) times the best (default 0.02)")
     v.add_argument("--max-cost", type=number(float, lo=0, allow=("inf",)), default=1.0,

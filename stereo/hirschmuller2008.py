@@ -67,10 +67,12 @@ COSTS = ("census", "ssd")
 CENSUS = (9, 7)  # census window (width, height): 62 bits
 CENSUS_MAX = CENSUS[0] * CENSUS[1] - 1
 SSD_TRUNCATION = 24.0  # code values: SSD costs are capped at this RMS difference
+TEXTURE_WINDOW = (21, 21)  # where the texture test looks for evidence
 RANGE_WARNING = 0.02  # share of pixels whose best is max_disp above which we warn
 # How the defaults were chosen: docs/decisions/stereo-sgm.md
 DEFAULTS = {"cost": "census", "cost_window": 3, "p1": 7, "p2": 100, "edge": 8, "paths": 8,
-            "uniqueness": 0.01, "lr_tolerance": 2, "speckle_size": 20, "speckle_range": 1.0}
+            "uniqueness": 0.01, "lr_tolerance": 2, "speckle_size": 20, "speckle_range": 1.0,
+            "texture_snr": 1.0}
 
 
 # ----------------------------------------------------------------- kernels
@@ -385,7 +387,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
           p2: int = DEFAULTS["p2"], edge: int = DEFAULTS["edge"], paths: int = DEFAULTS["paths"],
           uniqueness: float = DEFAULTS["uniqueness"], lr_tolerance: int = DEFAULTS["lr_tolerance"],
           speckle_size: int = DEFAULTS["speckle_size"],
-          speckle_range: float = DEFAULTS["speckle_range"], subpixel: bool = True,
+          speckle_range: float = DEFAULTS["speckle_range"],
+          texture_snr: float = DEFAULTS["texture_snr"], subpixel: bool = True,
           engine: str = "auto") -> DisparityMap:
     """Dense disparity of a rectified pair by semi-global matching.
 
@@ -419,6 +422,11 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     speckle_size, speckle_range : int, float
         Segments (4-connected, neighbours within ``speckle_range`` px) of
         fewer than ``speckle_size`` pixels are set unknown (0 disables).
+    texture_snr : float
+        A pixel whose luma standard deviation over the census window is
+        below ``texture_snr · σ`` (``σ`` the sensor noise estimated from the
+        left image) holds no evidence of its own: unknown, rather than the
+        value the paths carried in from elsewhere (0 disables).
     subpixel : bool
         Parabola refinement of the integer minimum of ``S``.
     engine : {"auto", "numpy"}
@@ -445,6 +453,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     _check(left, right, max_disp=max_disp, cost=cost, cost_window=cost_window, p1=p1, p2=p2,
            edge=edge, paths=paths, uniqueness=uniqueness, lr_tolerance=lr_tolerance,
            speckle_size=speckle_size, speckle_range=speckle_range, engine=engine)
+    if not texture_snr >= 0:
+        raise InputError("texture_snr", f"expected a value >= 0, got {texture_snr!r}")
     kernel = _kernel() if engine == "auto" else None
     gl, gr, Lf, Rf = _guide(left, right)
     h, w = gl.shape
@@ -463,6 +473,17 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     t3 = time.perf_counter()
     disp, counts = _decide(win, D=D, uniqueness=uniqueness, lr_tolerance=lr_tolerance,
                            subpixel=subpixel)
+    sigma = None
+    if texture_snr > 0:
+        from lumigraph.stereo.luma import noise_sigma_smooth_blocks
+
+        sigma = max(noise_sigma_smooth_blocks(Lf.astype(np.float32)), 0.5)  # 8-bit luma codes
+        g = Lf.astype(np.float32)
+        m = cv2.boxFilter(g, -1, TEXTURE_WINDOW, borderType=cv2.BORDER_REPLICATE)
+        m2 = cv2.sqrBoxFilter(g, cv2.CV_32F, TEXTURE_WINDOW, borderType=cv2.BORDER_REPLICATE)
+        flat = np.isfinite(disp) & (m2 - m * m < (texture_snr * sigma) ** 2)
+        disp[flat] = np.nan
+        counts["no_texture"] = int(flat.sum())
     if speckle_size > 0:
         d16 = np.where(np.isfinite(disp), np.rint(disp * 16), -16).astype(np.int16)
         before = d16 >= 0
@@ -476,6 +497,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
             "census": list(CENSUS) if cost == "census" else None, "p1": p1, "p2": p2, "edge": edge,
             "paths": paths, "uniqueness": uniqueness, "lr_tolerance": lr_tolerance,
             "speckle_size": speckle_size, "speckle_range": speckle_range, "subpixel": subpixel,
+            "texture_snr": texture_snr, "noise_sigma_estimate": sigma,
             "rejected_fraction": {k: v / npx for k, v in counts.items()},
             "valid_fraction": float(np.isfinite(disp).mean()),
             "engine": "c" if kernel is not None else "numpy",
