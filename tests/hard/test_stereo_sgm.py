@@ -6,6 +6,7 @@ runs on the same inputs in the same test."""
 
 import numpy as np
 import pytest
+from conftest import assert_clean_error, lumigraph
 from scipy import ndimage
 
 from lumigraph.capture import io
@@ -13,7 +14,6 @@ from lumigraph.capture.bench import shared_data
 from lumigraph.capture.render import render
 from lumigraph.stereo import hirschmuller2008 as sgm
 from lumigraph.stereo.bench_stereo import exposure_changed, visible
-from conftest import assert_clean_error, lumigraph
 
 
 def _sgbm_best(left, right, max_disp, gt, mask):
