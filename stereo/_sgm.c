@@ -133,10 +133,12 @@ LG_INLINE int cost_body(const uint64_t *cl, const uint64_t *cr, int H, int W, in
             int dreg = x - r;
             if (dreg > D - 1) dreg = D - 1;
             if (x + r <= W - 1) {
-                for (int d = 0; d <= dreg; d++) {
-                    int s = 0;
-                    for (int dx = -r; dx <= r; dx++) s += V[(size_t)(x + dx) * D + d];
-                    c[d] = (uint16_t)s;
+                /* window columns added one at a time: the loops over d vectorise */
+                const uint16_t *v0 = V + (size_t)(x - r) * D;
+                for (int d = 0; d <= dreg; d++) c[d] = v0[d];
+                for (int dx = -r + 1; dx <= r; dx++) {
+                    const uint16_t *v = V + (size_t)(x + dx) * D;
+                    for (int d = 0; d <= dreg; d++) c[d] = (uint16_t)(c[d] + v[d]);
                 }
             } else {
                 dreg = -1;
@@ -287,9 +289,11 @@ int lumigraph_sgm_aggregate(const uint16_t *cost, const uint8_t *guide, int H, i
 /* Winner-take-all over d <= min(x, D-1) (ties: the smaller d), the sums at
  * best - 1, best, best + 1 (-1 where outside the searchable range), the
  * runner-up outside best +- 1 (INT32_MAX when none) and, for every right
- * pixel xr, the d <= W-1-xr minimising S[y][xr + d][d] (ties: smaller d). */
+ * pixel xr, the d <= W-1-xr minimising S[y][xr + d][d] (ties: smaller d;
+ * skipped when best_r is NULL). */
 LG_INLINE int wta_body(const uint16_t *S, int H, int W, int D, int16_t *best, int32_t *sb,
                       int32_t *sm, int32_t *sp, int32_t *second, int16_t *best_r) {
+    /* best_r NULL: the right image's search is skipped */
     for (int y = 0; y < H; y++) {
         for (int x = 0; x < W; x++) {
             const uint16_t *s = S + ((size_t)y * W + x) * D;
@@ -310,6 +314,7 @@ LG_INLINE int wta_body(const uint16_t *S, int H, int W, int D, int16_t *best, in
             second[i] = sec;
         }
         /* right pixel xr: S[y][xr + d][d], a stride of D + 1 */
+        if (!best_r) continue;
         const uint16_t *sy = S + (size_t)y * W * D;
         for (int xr = 0; xr < W; xr++) {
             int dmax = W - 1 - xr < D - 1 ? W - 1 - xr : D - 1;
@@ -338,6 +343,32 @@ int lumigraph_sgm_wta(const uint16_t *S, int H, int W, int D, int16_t *best, int
                       int32_t *sm, int32_t *sp, int32_t *second, int16_t *best_r) {
     return fast_ok() ? wta_fast(S, H, W, D, best, sb, sm, sp, second, best_r)
                      : wta_plain(S, H, W, D, best, sb, sm, sp, second, best_r);
+}
+
+/* The right image's disparity as the left pixels claim it (OpenCV's left-right
+ * check): at each right pixel xr, the best d of the lowest-cost left pixel
+ * (among those with ok set) whose winner lands there, ties to the smaller d;
+ * -1 where none lands. */
+int lumigraph_sgm_claims(const int16_t *best, const int32_t *sb, const uint8_t *ok, int H, int W,
+                         int16_t *claim) {
+    int32_t *cost = (int32_t *)malloc(sizeof(int32_t) * (size_t)W);
+    if (!cost) return 2;
+    for (int y = 0; y < H; y++) {
+        int16_t *cl = claim + (size_t)y * W;
+        for (int x = 0; x < W; x++) { cost[x] = INT32_MAX; cl[x] = -1; }
+        for (int x = 0; x < W; x++) {
+            size_t i = (size_t)y * W + x;
+            if (!ok[i]) continue;
+            int xr = x - best[i];
+            if (xr < 0 || xr >= W) continue;
+            if (sb[i] < cost[xr] || (sb[i] == cost[xr] && best[i] < cl[xr])) {
+                cost[xr] = sb[i];
+                cl[xr] = best[i];
+            }
+        }
+    }
+    free(cost);
+    return 0;
 }
 
 #ifdef LUMIGRAPH_PYMODULE

@@ -64,15 +64,21 @@ from lumigraph.capture.errors import InputError
 from lumigraph.stereo.block_matching import DisparityMap
 
 COSTS = ("census", "ssd")
+LR_CHECKS = ("winners", "paper")
 CENSUS = (9, 7)  # census window (width, height): 62 bits
 CENSUS_MAX = CENSUS[0] * CENSUS[1] - 1
 SSD_TRUNCATION = 24.0  # code values: SSD costs are capped at this RMS difference
 TEXTURE_WINDOW = (21, 21)  # where the texture test looks for evidence
 RANGE_WARNING = 0.02  # share of pixels whose best is max_disp above which we warn
+# median cost of the winners (share of the largest pixel cost: for census the
+# share of differing bits) above which we warn: random codes differ in half
+# their bits, the best of a few dozen random candidates in about 0.4; the
+# well-matched pairs of the tuning set have medians of 0.13-0.16
+COST_WARNING = 0.25
 # How the defaults were chosen: docs/decisions/stereo-sgm.md
-DEFAULTS = {"cost": "census", "cost_window": 3, "p1": 7, "p2": 100, "edge": 8, "paths": 8,
-            "uniqueness": 0.01, "lr_tolerance": 2, "speckle_size": 20, "speckle_range": 1.0,
-            "texture_snr": 1.0}
+DEFAULTS = {"cost": "census", "cost_window": 3, "p1": 12, "p2": 200, "edge": 8, "paths": 8,
+            "uniqueness": 0.005, "lr_tolerance": 2, "speckle_size": 20, "speckle_range": 2.0,
+            "texture_snr": 1.0, "lr_check": "winners"}
 
 
 # ----------------------------------------------------------------- kernels
@@ -85,7 +91,8 @@ def _kernel():
 
     try:
         lib = ctypes.CDLL(importlib.import_module("lumigraph.stereo._sgm").__file__)
-        fns = {k: getattr(lib, f"lumigraph_sgm_{k}") for k in ("census", "cost", "aggregate", "wta")}
+        fns = {k: getattr(lib, f"lumigraph_sgm_{k}")
+               for k in ("census", "cost", "aggregate", "wta", "claims")}
     except (ImportError, OSError, AttributeError) as e:
         warnings.warn(f"lumigraph.stereo.hirschmuller2008: compiled kernel stereo/_sgm.c unavailable "
                       f"({e}); using the numpy path (same results, much slower). Reinstall "
@@ -96,6 +103,7 @@ def _kernel():
     fns["cost"].argtypes = [P, P, I, I, I, I, I, P]
     fns["aggregate"].argtypes = [P, P, I, I, I, I, I, I, I, P]
     fns["wta"].argtypes = [P, I, I, I, P, P, P, P, P, P]
+    fns["claims"].argtypes = [P, P, P, I, I, P]
     for f in fns.values():
         f.restype = I
     return fns
@@ -253,11 +261,12 @@ def aggregate(cost: np.ndarray, guide: np.ndarray, *, p1: int, p2: int, edge: in
     return S.astype(np.uint16)
 
 
-def winners(S: np.ndarray, *, kernel=None) -> dict:
+def winners(S: np.ndarray, *, right: bool = True, kernel=None) -> dict:
     """Winner-take-all over ``d ≤ min(x, D − 1)`` (ties: the smaller ``d``):
     ``best``, the sums ``sb``, ``sm``/``sp`` at ``best ∓ 1`` (−1 outside the
     range), the runner-up ``second`` outside ``best ± 1`` (int32 max when
-    none) and ``best_r``, the right image's best ``d`` (``min_d S(x_r + d, d)``).
+    none) and ``best_r``, the right image's best ``d`` (``min_d S(x_r + d, d)``;
+    only with ``right``, the paper's left–right check).
 
     >>> S = np.full((1, 3, 2), 9, np.uint16); S[0, 2, 1] = 1
     >>> winners(S)["best"].tolist(), winners(S)["best_r"].tolist()
@@ -268,9 +277,12 @@ def winners(S: np.ndarray, *, kernel=None) -> dict:
     if kernel is not None:
         out = {"best": np.empty((h, w), np.int16), "sb": np.empty((h, w), np.int32),
                "sm": np.empty((h, w), np.int32), "sp": np.empty((h, w), np.int32),
-               "second": np.empty((h, w), np.int32), "best_r": np.empty((h, w), np.int16)}
+               "second": np.empty((h, w), np.int32)}
+        if right:
+            out["best_r"] = np.empty((h, w), np.int16)
         _call(kernel["wta"], _ptr(S), h, w, D, *(_ptr(out[k]) for k in
-                                                  ("best", "sb", "sm", "sp", "second", "best_r")))
+                                                  ("best", "sb", "sm", "sp", "second")),
+              _ptr(out["best_r"]) if right else None)
         return out
     big = np.iinfo(np.int32).max
     ds = np.arange(D)
@@ -285,14 +297,16 @@ def winners(S: np.ndarray, *, kernel=None) -> dict:
                   -1)
     far = np.abs(ds[None, None, :] - best[..., None]) > 1
     second = np.where(far, V, big).min(2)
+    out = {"best": best.astype(np.int16), "sb": sb.astype(np.int32), "sm": sm.astype(np.int32),
+           "sp": sp.astype(np.int32), "second": second.astype(np.int32)}
+    if not right:
+        return out
     # right image: T[y, xr, d] = S[y, xr + d, d] where xr + d < W
     xi = xs[:, None] + ds[None, :]
     okr = xi < w
     T = np.where(okr[None], S.astype(np.int64)[:, np.minimum(xi, w - 1), ds[None, :]], big)
-    best_r = T.argmin(2)
-    return {"best": best.astype(np.int16), "sb": sb.astype(np.int32), "sm": sm.astype(np.int32),
-            "sp": sp.astype(np.int32), "second": second.astype(np.int32),
-            "best_r": best_r.astype(np.int16)}
+    out["best_r"] = T.argmin(2).astype(np.int16)
+    return out
 
 
 # ----------------------------------------------------------------- checks
@@ -388,8 +402,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
           uniqueness: float = DEFAULTS["uniqueness"], lr_tolerance: int = DEFAULTS["lr_tolerance"],
           speckle_size: int = DEFAULTS["speckle_size"],
           speckle_range: float = DEFAULTS["speckle_range"],
-          texture_snr: float = DEFAULTS["texture_snr"], subpixel: bool = True,
-          engine: str = "auto") -> DisparityMap:
+          texture_snr: float = DEFAULTS["texture_snr"], lr_check: str = DEFAULTS["lr_check"],
+          subpixel: bool = True, engine: str = "auto") -> DisparityMap:
     """Dense disparity of a rectified pair by semi-global matching.
 
     Parameters
@@ -423,9 +437,9 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
         Segments (4-connected, neighbours within ``speckle_range`` px) of
         fewer than ``speckle_size`` pixels are set unknown (0 disables).
     texture_snr : float
-        A pixel whose luma standard deviation over the census window is
-        below ``texture_snr · σ`` (``σ`` the sensor noise estimated from the
-        left image) holds no evidence of its own: unknown, rather than the
+        A pixel whose luma standard deviation over ``TEXTURE_WINDOW`` (21×21)
+        is below ``texture_snr · σ`` (``σ`` the sensor noise estimated from
+        the left image) holds no evidence of its own: unknown, rather than the
         value the paths carried in from elsewhere (0 disables).
     subpixel : bool
         Parabola refinement of the integer minimum of ``S``.
@@ -455,6 +469,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
            speckle_size=speckle_size, speckle_range=speckle_range, engine=engine)
     if not texture_snr >= 0:
         raise InputError("texture_snr", f"expected a value >= 0, got {texture_snr!r}")
+    if lr_check not in LR_CHECKS:
+        raise InputError("lr_check", f"expected one of {', '.join(LR_CHECKS)}, got {lr_check!r}")
     kernel = _kernel() if engine == "auto" else None
     gl, gr, Lf, Rf = _guide(left, right)
     h, w = gl.shape
@@ -469,10 +485,14 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     t1 = time.perf_counter()
     S = aggregate(C, gl, p1=p1 * n, p2=p2 * n, edge=edge, paths=paths, kernel=kernel)
     t2 = time.perf_counter()
-    win = winners(S, kernel=kernel)
+    win = winners(S, right=lr_check == "paper" and lr_tolerance >= 0, kernel=kernel)
+    # how well the winners match on their own (pixels that see the whole range)
+    own = np.take_along_axis(C[:, D - 1:], win["best"][:, D - 1:, None].astype(np.intp), 2)
+    match_cost = float(np.median(own)) / invalid if own.size else float("nan")
+    del C
     t3 = time.perf_counter()
     disp, counts = _decide(win, D=D, uniqueness=uniqueness, lr_tolerance=lr_tolerance,
-                           subpixel=subpixel)
+                           subpixel=subpixel, lr_check=lr_check, kernel=kernel)
     sigma = None
     if texture_snr > 0:
         from lumigraph.stereo.luma import noise_sigma_smooth_blocks
@@ -504,17 +524,55 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
             "timings_s": {"cost": t1 - t0, "aggregate": t2 - t1, "winners": t3 - t2,
                           "decide": t4 - t3},
             "warnings": []}
+    info["median_match_cost"] = match_cost
     at_limit = counts["at_max_disp"] / npx
     if at_limit > RANGE_WARNING:
         info["warnings"].append(
             f"{100 * at_limit:.1f}% of pixels have their best match at max_disp = {max_disp}: the "
             "scene's disparities likely exceed the searched range (those pixels are unknown); "
             "search a larger max_disp")
+    elif match_cost > COST_WARNING:
+        info["warnings"].append(
+            f"the median best match differs in {100 * match_cost:.0f}% of its cost range (a "
+            f"well-matched pair: under {100 * COST_WARNING:.0f}%): the scene's disparities may "
+            f"exceed the searched range (max_disp = {max_disp}), or the pair is not rectified")
     cost_map = (win["sb"] / paths).astype(np.float32)
     return DisparityMap(disp, cost_map, np.full((h, w), cost_window, np.uint8), info)
 
 
-def _decide(win, *, D, uniqueness, lr_tolerance, subpixel):
+def claims(best: np.ndarray, sb: np.ndarray, ok: np.ndarray, *, kernel=None) -> np.ndarray:
+    """The right image's disparity as the left pixels claim it (the
+    left–right check of OpenCV's SGBM, cheaper than a second winner search):
+    at each right pixel, the best disparity of the lowest-cost left pixel
+    (among ``ok``) whose winner lands there, ties to the smaller disparity;
+    −1 where none lands. ``best`` int16, ``sb`` int32, ``ok`` bool, all (H, W).
+
+    >>> claims(np.array([[0, 1, 1]], np.int16), np.array([[5, 3, 4]], np.int32),
+    ...        np.ones((1, 3), bool)).tolist()
+    [[1, 1, -1]]
+    """
+    best = np.ascontiguousarray(best, dtype=np.int16)
+    sb = np.ascontiguousarray(sb, dtype=np.int32)
+    okb = np.ascontiguousarray(ok, dtype=np.uint8)
+    h, w = best.shape
+    if kernel is not None:
+        out = np.empty((h, w), np.int16)
+        _call(kernel["claims"], _ptr(best), _ptr(sb), _ptr(okb), h, w, _ptr(out))
+        return out
+    big = np.iinfo(np.int64).max
+    xr = np.arange(w)[None, :] - best.astype(np.int64)
+    sel = okb.astype(bool) & (xr >= 0) & (xr < w)
+    key = (np.arange(h)[:, None] * w + xr)[sel]
+    c = sb.astype(np.int64)[sel]
+    cost = np.full(h * w, big, np.int64)
+    np.minimum.at(cost, key, c)
+    won = c == cost[key]
+    d = np.full(h * w, big, np.int64)
+    np.minimum.at(d, key[won], best.astype(np.int64)[sel][won])
+    return np.where(d == big, -1, d).reshape(h, w).astype(np.int16)
+
+
+def _decide(win, *, D, uniqueness, lr_tolerance, subpixel, lr_check="winners", kernel=None):
     """Disparity (float32, NaN unknown) from the winners, and how many pixels each test rejected."""
     best = win["best"].astype(np.int64)
     h, w = best.shape
@@ -536,14 +594,19 @@ def _decide(win, *, D, uniqueness, lr_tolerance, subpixel):
         with np.errstate(invalid="ignore", divide="ignore"):
             d = np.where(fit, d + (sm - sp) / (2 * np.where(fit, den, 1)), d)
     if lr_tolerance >= 0:
+        if lr_check == "winners":
+            br = claims(win["best"], win["sb"], ok, kernel=kernel).astype(np.float64)
+            br[br < 0] = np.nan
+        else:
+            br = win["best_r"].astype(np.float64)
         # the right pixels either side of x - d (as OpenCV's disp12MaxDiff):
         # a sub-pixel match between two right pixels agrees with either
-        br = win["best_r"].astype(np.float64)
         xr = xs - d
         agree = np.zeros(best.shape, bool)
         for xi in (np.floor(xr), np.ceil(xr)):
             xi = np.clip(xi, 0, w - 1).astype(np.int64)
-            agree |= np.abs(np.take_along_axis(br, xi, 1) - d) <= lr_tolerance
+            other = np.take_along_axis(br, xi, 1)
+            agree |= ~(np.abs(other - d) > lr_tolerance)  # NaN: no claim, nothing to disagree with
         bad = ok & ~agree
         counts["left_right"] = int(bad.sum())
         ok &= ~bad
