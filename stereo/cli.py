@@ -519,7 +519,7 @@ def build_parser(prog: str = "lumigraph stereo"):
                    help="minimum window signal std in units of the noise sigma (default 1.0; "
                         "sgm: over 21x21, flatter pixels are unknown)")
     v.add_argument("--uniqueness", type=number(float, lo=0), default=None,
-                   help="second-best must cost (1+u) times the best (default 0.01 sgm, 0.02 ssd)")
+                   help="second-best must cost (1+u) times the best (default 0.005 sgm, 0.02 ssd)")
     v.add_argument("--lr-tolerance", type=number(int, lo=-1), default=None,
                    help="left-right check tolerance in px, -1 disables (default 2 sgm, 3 ssd)")
     v.add_argument("--channels", choices=("luma", "color"), default="luma",
