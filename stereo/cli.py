@@ -48,6 +48,7 @@ from lumigraph.capture.commandline import (
 from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.stereo.block_matching import WINDOW_RANGE
 from lumigraph.stereo.debevec1996 import WINDOW_RANGE as MODEL_WINDOW_RANGE
+from lumigraph.stereo.match_methods import MATCH_METHODS
 from lumigraph.stereo.triangulate import ANGLE_RANGE_DEG
 from lumigraph.stereo.triangulate import METHODS as TRIANGULATION_METHODS
 
@@ -506,9 +507,8 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "with it, as saved")
     v.add_argument("--max-disp", type=number(int, lo=1), required=True,
                    help="largest disparity searched (px), below the image width")
-    v.add_argument("--method", choices=("sgm", "ssd"), default="sgm",
-                   help="sgm: semi-global matching (default; best on the bench's real pairs); "
-                        "ssd: SSD block matching (eq. 5.1)")
+    v.add_argument("--method", choices=MATCH_METHODS.names, default="sgm",
+                   help="; ".join(f"{m.name}: {m.help}" for m in MATCH_METHODS.values()))
     v.add_argument("--cost", choices=("census", "ssd"), default="census",
                    help="sgm's matching cost: census (default; robust to exposure changes) or "
                         "ssd (truncated mean squared difference over 3x3)")
