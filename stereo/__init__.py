@@ -1,2 +1,2 @@
 """Correspondence and geometry: optical flow, Sand–Teller video matching,
-block-matching stereo, triangulation, multi-view SfM and model-based stereo."""
+semi-global and block-matching stereo, triangulation, multi-view SfM and model-based stereo."""

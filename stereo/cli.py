@@ -48,6 +48,7 @@ from lumigraph.capture.commandline import (
 from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.stereo.block_matching import WINDOW_RANGE
 from lumigraph.stereo.debevec1996 import WINDOW_RANGE as MODEL_WINDOW_RANGE
+from lumigraph.stereo.match_methods import MATCH_METHODS
 from lumigraph.stereo.triangulate import ANGLE_RANGE_DEG
 from lumigraph.stereo.triangulate import METHODS as TRIANGULATION_METHODS
 
@@ -151,6 +152,9 @@ def _match(args) -> int:
         check_rectified,
         match,
     )
+    from lumigraph.stereo.hirschmuller2008 import DEFAULTS as SGM_DEFAULTS
+    from lumigraph.stereo.hirschmuller2008 import check_sgm_options
+    from lumigraph.stereo.hirschmuller2008 import match as sgm_match
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     _distinct_files(args.left, args.right)
@@ -162,15 +166,25 @@ def _match(args) -> int:
     # the library names the images "left" and "right": report their files
     args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "left": args.left, "right": args.right}
     window = args.window  # an odd integer or "auto" (the parser's)
+    sgm = args.method == "sgm"
+    defaults = SGM_DEFAULTS if sgm else {"uniqueness": 0.02, "lr_tolerance": 3}
+    uniqueness = defaults["uniqueness"] if args.uniqueness is None else args.uniqueness
+    lr_tolerance = defaults["lr_tolerance"] if args.lr_tolerance is None else args.lr_tolerance
     # the library's rules, before the pair is rectified and checked
-    check_match_options(left.shape, max_disp=args.max_disp, window=window,
-                        texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                        channels=args.channels, prefilter=args.prefilter,
-                        lr_tolerance=args.lr_tolerance)
+    if sgm:
+        check_sgm_options(left.shape, max_disp=args.max_disp, cost=args.cost,
+                          uniqueness=uniqueness, lr_tolerance=lr_tolerance)
+    else:
+        check_match_options(left.shape, max_disp=args.max_disp, window=window,
+                            texture_snr=args.texture_snr, uniqueness=uniqueness,
+                            channels=args.channels, prefilter=args.prefilter,
+                            lr_tolerance=lr_tolerance)
     t0 = time.perf_counter()
-    params = {"max_disp": args.max_disp, "window": window, "texture_snr": args.texture_snr,
-              "uniqueness": args.uniqueness, "lr_tolerance": args.lr_tolerance,
-              "channels": args.channels, "prefilter": args.prefilter}
+    params = {"method": args.method, "max_disp": args.max_disp, "uniqueness": uniqueness,
+              "lr_tolerance": lr_tolerance}
+    params["texture_snr"] = args.texture_snr
+    params.update({"cost": args.cost} if sgm else
+                  {"window": window, "channels": args.channels, "prefilter": args.prefilter})
     model: dict = {}
     inputs = [args.left, args.right]
     if rectifying:
@@ -185,16 +199,24 @@ def _match(args) -> int:
         model["rectification_check"] = off
         if off["matches"] < RECTIFIED_MIN_MATCHES:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
-    res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
-                uniqueness=args.uniqueness, lr_tolerance=args.lr_tolerance, channels=args.channels,
-                prefilter=args.prefilter)
-    model["block_matching"] = res.info
+    if sgm:
+        res = sgm_match(left, right, max_disp=args.max_disp, cost=args.cost, uniqueness=uniqueness,
+                        lr_tolerance=lr_tolerance, texture_snr=args.texture_snr)
+        model["sgm"] = res.info
+    else:
+        res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
+                    uniqueness=uniqueness, lr_tolerance=lr_tolerance, channels=args.channels,
+                    prefilter=args.prefilter)
+        model["block_matching"] = res.info
+    warnings = list(res.info.get("warnings", []))
+    for w in warnings:
+        warn(w)
     dt = time.perf_counter() - t0
     meta = make_meta("lumigraph.disparity", inputs=inputs, params=params, model=model,
                      quality={"valid_fraction": res.valid_fraction,
                               "median_disparity": float(np.nanmedian(res.disparity))
                               if res.valid_fraction > 0 else None},
-                     timings_s={"total": dt},
+                     timings_s={"total": dt}, warnings=warnings,
                      extra={"convention": "left reference, x_right = x_left - d, unknown = inf"})
     res.save(out, meta=meta)
     say(args, f"wrote {out} ({100 * res.valid_fraction:.0f}% of pixels matched)")
@@ -463,11 +485,19 @@ def build_parser(prog: str = "lumigraph stereo"):
                           "structure from motion.", epilog=EPILOG)
     sp = subparsers(p)
 
-    v = add_verb(sp, "match", "dense disparity of a stereo pair (SSD block matching, eq. 5.1)",
+    v = add_verb(sp, "match", "dense disparity of a stereo pair (semi-global matching, or SSD "
+                              "block matching, eq. 5.1)",
                  epilog="A pair without --rig or --rectification must already be rectified "
                         "(checked from matched features: vertical offsets > 1 px are refused).\n"
-                        "--window auto picks per pixel the smallest of 5, 9, 15 whose texture "
-                        "passes --texture-snr; the choice is recorded in the .meta.json.")
+                        "--method sgm (default): semi-global matching (Hirschmueller 2008) on a "
+                        "9x7 census cost, robust to an exposure change between the views; pixels "
+                        "failing the left-right, uniqueness or speckle tests, and pixels whose best "
+                        "match is --max-disp (a warning says when the range looks too small), are "
+                        "unknown (inf).\n"
+                        "--method ssd: SSD window matching; --window auto picks per pixel the "
+                        "smallest of 5, 9, 15 whose texture passes --texture-snr; the choice is "
+                        "recorded in the .meta.json. --window, --channels and --prefilter apply to "
+                        "ssd only, --cost to sgm only.")
     v.add_argument("left", type=input_path, help="left image (the reference)")
     v.add_argument("right", type=input_path, help="right image")
     g = v.add_mutually_exclusive_group()
@@ -477,15 +507,21 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "with it, as saved")
     v.add_argument("--max-disp", type=number(int, lo=1), required=True,
                    help="largest disparity searched (px), below the image width")
+    v.add_argument("--method", choices=MATCH_METHODS.names, default="sgm",
+                   help="; ".join(f"{m.name}: {m.help}" for m in MATCH_METHODS.values()))
+    v.add_argument("--cost", choices=("census", "ssd"), default="census",
+                   help="sgm's matching cost: census (default; robust to exposure changes) or "
+                        "ssd (truncated mean squared difference over 3x3)")
     v.add_argument("--window", type=number(int, lo=WINDOW_RANGE[0], hi=WINDOW_RANGE[1], odd=True,
                                            allow=("auto",)),
                    default="auto", help="odd window side, or auto (default)")
     v.add_argument("--texture-snr", type=number(float, lo=0), default=1.0,
-                   help="minimum window signal std in units of the noise sigma (default 1.0)")
-    v.add_argument("--uniqueness", type=number(float, lo=0), default=0.02,
-                   help="second-best must cost (1+u) times the best (default 0.02)")
-    v.add_argument("--lr-tolerance", type=number(int, lo=-1), default=3,
-                   help="left-right check tolerance in px, -1 disables (default 3)")
+                   help="minimum window signal std in units of the noise sigma (default 1.0; "
+                        "sgm: over 21x21, flatter pixels are unknown)")
+    v.add_argument("--uniqueness", type=number(float, lo=0), default=None,
+                   help="second-best must cost (1+u) times the best (default 0.005 sgm, 0.02 ssd)")
+    v.add_argument("--lr-tolerance", type=number(int, lo=-1), default=None,
+                   help="left-right check tolerance in px, -1 disables (default 2 sgm, 3 ssd)")
     v.add_argument("--channels", choices=("luma", "color"), default="luma",
                    help="compare luma (default) or the sum over R, G, B (slower; helps "
                         "colourful scenes of equal-luma hues)")
@@ -531,7 +567,8 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--step", type=positive,
                    help="offset step, at most --max-offset (default: one offset-image pixel)")
     v.add_argument("--texture-snr", type=number(float, lo=0), default=1.0,
-                   help="minimum window signal std in units of the noise sigma (default 1.0)")
+                   help="minimum window signal std in units of the noise sigma (default 1.0; "
+                        "sgm: over 21x21, flatter pixels are unknown)")
     v.add_argument("--uniqueness", type=number(float, lo=0), default=0.02,
                    help="every other offset must cost (1+u) times the best (default 0.02)")
     v.add_argument("--max-cost", type=number(float, lo=0, allow=("inf",)), default=1.0,

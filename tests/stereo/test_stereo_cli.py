@@ -40,7 +40,7 @@ def test_match_rectified_and_depth(pairs, tmp_path):
                   "--out", d, "-q")
     assert r.returncode == 0, r.stderr
     meta = json.loads((tmp_path / "d.pfm.meta.json").read_text())
-    assert "auto" in meta["model"]["block_matching"]
+    assert meta["model"]["sgm"]["method"] == "sgm" and meta["params"]["method"] == "sgm"  # the default
     disp = io.read_pfm(d)
     gt = s.gt_arrays["disparity"]
     e = np.abs(disp - gt)[np.isfinite(gt)]
@@ -241,7 +241,7 @@ def test_match_channels_and_prefilter_flags(pairs, tmp_path):
                                        (["--prefilter", "local-mean"], "luma", "local-mean")):
         d = tmp_path / f"{channels}-{prefilter}.pfm"
         r = lumigraph("stereo", "match", folder / "left.png", folder / "right.png", "--max-disp", "40",
-                      "--window", "9", *flags, "--out", d, "-q")
+                      "--method", "ssd", "--window", "9", *flags, "--out", d, "-q")
         assert r.returncode == 0, r.stderr
         info = json.loads(d.with_name(d.name + ".meta.json").read_text())["model"]["block_matching"]
         assert (info["channels"], info["prefilter"]) == (channels, prefilter)
@@ -278,7 +278,7 @@ def test_match_option_checks_live_in_the_library(pairs, tmp_path):
     out = tmp_path / "d.pfm"
 
     def run(*extra, left=folder / "left.png", right=folder / "right.png"):
-        return lumigraph("stereo", "match", left, right, "--out", out, *extra)
+        return lumigraph("stereo", "match", left, right, "--method", "ssd", "--out", out, *extra)
 
     # the ranges known without the images: the parser, with the library's bounds
     assert_clean_error(run("--max-disp", "0"), "error: --max-disp: expected an integer >= 1, got '0'")
