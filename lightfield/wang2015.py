@@ -65,6 +65,7 @@ from lumigraph.lightfield.refocus import DisparityEstimate, check_disparity_slop
 RADIUS = 2          # guided-filter radius (px)
 EPS = 1e-3          # guided-filter regulariser (guide in [0, 1])
 MEDIAN_RADIUS = 7   # weighted-median radius (px)
+MIN_SUPPORT = 0.2   # share of a weighted-median window that must be confident
 TAU_COLOUR = 0.08   # truncation of the colour difference (gamma-encoded, [0, 1])
 TAU_GRAD = 0.04     # truncation of the gradient difference
 ALPHA_GRAD = 0.5    # weight of the gradient term
@@ -350,6 +351,12 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
         keep = (conf >= np.quantile(conf, 0.2)).astype(np.uint8)
         cv2.setRNGSeed(0)
-        disp = cv2.ximgproc.weightedMedianFilter(
+        med = cv2.ximgproc.weightedMedianFilter(
             joint, disp, median_radius, sigma=25.5, weightType=cv2.ximgproc.WMF_EXP, mask=keep)
+        # a window with no kept pixel gets the filter's lowest bin (the least
+        # candidate), not a median, and one with a few gets their median from
+        # far off: keep the estimate there
+        side = 2 * median_radius + 1
+        support = cv2.boxFilter(keep, cv2.CV_32F, (side, side), borderType=cv2.BORDER_REFLECT101)
+        disp = np.where(support >= MIN_SUPPORT, med, disp)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
