@@ -62,9 +62,10 @@ from lumigraph.lightfield.refocus import DisparityEstimate, check_disparity_slop
 
 #: defaults, tuned on rendered light fields (seed 0 of the scenes in
 #: docs/decisions/lightfield-depth.md), never on HCI antinous
-RADIUS = 2          # guided-filter radius (px)
+RADIUS = 1          # guided-filter radius (px); 0: none
 EPS = 1e-3          # guided-filter regulariser (guide in [0, 1])
 MEDIAN_RADIUS = 7   # weighted-median radius (px)
+UNSURE = 0.2        # share of least-confident pixels the weighted median refills
 MIN_SUPPORT = 0.2   # share of a weighted-median window that must be confident
 TAU_COLOUR = 0.08   # truncation of the colour difference (gamma-encoded, [0, 1])
 TAU_GRAD = 0.04     # truncation of the gradient difference
@@ -349,7 +350,7 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         del cost
     if median_radius > 0:
         joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
-        keep = (conf >= np.quantile(conf, 0.2)).astype(np.uint8)
+        keep = (conf >= np.quantile(conf, UNSURE)).astype(np.uint8)
         cv2.setRNGSeed(0)
         med = cv2.ximgproc.weightedMedianFilter(
             joint, disp, median_radius, sigma=25.5, weightType=cv2.ximgproc.WMF_EXP, mask=keep)
