@@ -179,6 +179,7 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
     per_view = np.empty((len(idx), h, w), np.float32)
     gy_, gx_ = np.mgrid[0:h, 0:w].astype(np.float32)
     sobel = {"ddepth": cv2.CV_32F, "ksize": 1, "borderType": cv2.BORDER_REFLECT101}
+    zero = np.zeros((h, w), np.float32)
 
     def slice_cost(d) -> np.ndarray:
         per_pixel = np.ndim(d) == 2
@@ -201,10 +202,9 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
             # (a scalar given to cv2.min applies to the first channel only)
             c = cv2.cvtColor(cv2.min(cv2.absdiff(s_a, r_a), tau_col), cv2.COLOR_BGRA2GRAY)
             diff = cv2.subtract(cv2.cvtColor(s_a, cv2.COLOR_BGRA2GRAY), r_grey)
-            for dx, dy in ((1, 0), (0, 1)):
-                g = cv2.min(np.abs(cv2.Sobel(diff, dx=dx, dy=dy, **sobel)), tau_g)
-                c = cv2.scaleAdd(g, w_g, c)
-            per_view[k] = c
+            gx = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=1, dy=0, **sobel), zero), tau_g)
+            gy = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=0, dy=1, **sobel), zero), tau_g)
+            cv2.scaleAdd(cv2.add(gx, gy), w_g, c, dst=per_view[k])
         halves = weights @ per_view.reshape(len(idx), -1)        # (n_halves, H*W)
         c_min = halves.min(0).reshape(h, w)
         return gf.filter(c_min) if gf is not None else c_min
@@ -228,8 +228,7 @@ def cost_volume(lf: LightField, slopes, *, views=None, occlusion: bool = True,
     return np.stack([slice_cost(float(d)) for d in slopes]), guide
 
 
-def winner(cost: np.ndarray, slopes: np.ndarray, best: np.ndarray | None = None
-           ) -> tuple[np.ndarray, np.ndarray]:
+def winner(cost: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Winner-takes-all over a cost volume ``(N, H, W)`` with a parabola through
     the least cost and its neighbours, and the confidence ``1 - min/mean``:
     ``(disparity, confidence)``, each ``(H, W)`` float32.
@@ -240,11 +239,7 @@ def winner(cost: np.ndarray, slopes: np.ndarray, best: np.ndarray | None = None
     (1.167, 0.6)
     """
     n = len(slopes)
-    if best is None:
-        best = cost.argmin(0)
-    else:   # the least cost within one candidate of a given winner
-        near = np.stack([np.clip(best + k, 0, n - 1) for k in (-1, 0, 1)])
-        best = np.take_along_axis(near, np.take_along_axis(cost, near, 0).argmin(0)[None], 0)[0]
+    best = cost.argmin(0)
     k = np.clip(best, 1, n - 2)
     c0 = np.take_along_axis(cost, (k - 1)[None], 0)[0]
     c1 = np.take_along_axis(cost, k[None], 0)[0]
