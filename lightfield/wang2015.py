@@ -26,18 +26,26 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
 3. **Aggregation.** Each slice ``C(., d)`` is smoothed by a guided filter
    (He et al. 2013) with the centre view as guide: cost-volume filtering
    (Hosni et al. 2013, eq. 2), which averages the cost within regions of
-   like colour and so keeps silhouettes.
-4. **Winner-takes-all + sub-pixel.** ``argmin_d`` and a parabola through the
-   least cost and its two neighbours.
-5. **Confidence.** ``1 - C_min / C_mean`` over the candidates (0: a flat cost
-   curve, nothing decided; near 1: one sharp minimum), in [0, 1].
+   like colour; radius 1 (3 x 3): larger windows fatten silhouettes, and
+   the weighted median (6.) does the wider aggregation.
+4. **Coarse to fine.** Steps 1-3 run over every ``stride``-th candidate;
+   ``argmin_d`` and a parabola through the least cost and its neighbours
+   give a coarse estimate; then every pixel is sampled again one fine
+   candidate step either side of it (``cv2.remap`` with per-pixel shifts,
+   steps 1-3 again; one more sample so the least of them is in the middle)
+   and a parabola through the three fine costs gives the disparity.
+   ``N / stride + 4`` passes over the views instead of ``N``.
+5. **Confidence.** ``1 - C_min / C_mean`` over the coarse candidates (0: a
+   flat cost curve, nothing decided; near 1: one sharp minimum), in [0, 1].
 6. **Refinement.** A weighted median (Zhang et al. 2014,
    ``cv2.ximgproc.weightedMedianFilter``) guided by the centre view over the
    confident pixels fills the unsure ones from like-coloured neighbours
-   without crossing colour edges.
+   without crossing colour edges (:func:`refill`); where a window holds too
+   few confident pixels the estimate is kept.
 
-Memory: the light field, one gamma-encoded copy, and the aggregated cost
-volume ``(N, H, W)`` float32; per candidate the view costs ``(K, H, W)``.
+Memory: the light field, one gamma-encoded 4-channel copy, and the
+aggregated coarse cost volume ``(N / stride, H, W)`` float32; per pass the
+view costs ``(K, H, W)``.
 
 Examples
 --------
@@ -273,6 +281,36 @@ def _refine(c0, c1, c2, centre, h):
     return (centre + off * h).astype(np.float32)
 
 
+def refill(disp: np.ndarray, conf: np.ndarray, guide: np.ndarray, *,
+           radius: int = MEDIAN_RADIUS) -> np.ndarray:
+    """Step 6: the weighted median (Zhang et al. 2014,
+    ``cv2.ximgproc.weightedMedianFilter``, radius ``radius`` px) of the
+    disparity over its confident pixels (all but the ``UNSURE`` share of
+    least confidence), weighted by colour likeness in ``guide`` (H, W, 3) in
+    [0, 1]; where less than ``MIN_SUPPORT`` of a window is confident the
+    estimate is kept (with none, the filter returns its least bin, not a
+    median). Returns (H, W) float32.
+
+    >>> d = np.full((100, 100), 2.0, np.float32); d[0, 0] = -3.0; d[40:60, 40:60] = 1.0
+    >>> q = np.ones_like(d); q[30:70, 30:70] = 0          # an unsure block, 16 %
+    >>> guide = np.random.default_rng(0).random((100, 100, 3), np.float32)
+    >>> out = refill(d, q, guide, radius=5)
+    >>> float(out[50, 50]), float(out[10, 50])          # (without the rule: -3.0, 2.0)
+    (1.0, 2.0)
+    """
+    import cv2
+
+    joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
+    keep = (conf >= np.quantile(conf, UNSURE)).astype(np.uint8)
+    cv2.setRNGSeed(0)
+    med = cv2.ximgproc.weightedMedianFilter(
+        joint, np.ascontiguousarray(disp, np.float32), radius, sigma=25.5,
+        weightType=cv2.ximgproc.WMF_EXP, mask=keep)
+    side = 2 * radius + 1
+    support = cv2.boxFilter(keep, cv2.CV_32F, (side, side), borderType=cv2.BORDER_REFLECT101)
+    return np.where(support >= MIN_SUPPORT, med, disp).astype(np.float32)
+
+
 def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = True,
                        radius: int = RADIUS, eps: float = EPS, stride: int = STRIDE,
                        median_radius: int = MEDIAN_RADIUS) -> DisparityEstimate:
@@ -309,7 +347,6 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     DisparityEstimate
         ``disparity`` and ``confidence`` (H, W) float32, ``slopes``.
     """
-    import cv2
 
     slopes = check_disparity_slopes(slopes)
     if not isinstance(stride, (int, np.integer)) or stride < 1:
@@ -344,15 +381,5 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     else:
         del cost
     if median_radius > 0:
-        joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
-        keep = (conf >= np.quantile(conf, UNSURE)).astype(np.uint8)
-        cv2.setRNGSeed(0)
-        med = cv2.ximgproc.weightedMedianFilter(
-            joint, disp, median_radius, sigma=25.5, weightType=cv2.ximgproc.WMF_EXP, mask=keep)
-        # a window with no kept pixel gets the filter's lowest bin (the least
-        # candidate), not a median, and one with a few gets their median from
-        # far off: keep the estimate there
-        side = 2 * median_radius + 1
-        support = cv2.boxFilter(keep, cv2.CV_32F, (side, side), borderType=cv2.BORDER_REFLECT101)
-        disp = np.where(support >= MIN_SUPPORT, med, disp)
+        disp = refill(disp, conf, guide, radius=median_radius)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
