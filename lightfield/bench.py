@@ -17,10 +17,12 @@ disparity):
   ground-truth render (knob: the slab's focal-plane slope).
 - ``HCI antinous``: disparity of the centre view (whole 512x512) against
   the HCI ground truth, with the HCI metrics (BadPix 0.07 / 0.03 / 0.01, MSE
-  x 100, 15 px boundary left out); held out (nothing was tuned on it).
+  x 100, 15 px boundary left out); held out (nothing was tuned on it). One
+  row runs ours and the baseline alternately on it (times: min over the
+  repeats; the speed target is scaled by the baseline's time measured there).
 - ``depth A/B/C seed N``: rendered 5x5 light fields of textured planes with
-  exact disparity; three scene kinds; seed 0 was the tuning set, seeds 1-2
-  are reported.
+  exact disparity; three scene kinds; seeds 0, 3, 4, 5 were the tuning set
+  (seed 0 shown), seeds 1-2 are reported.
   Depth rows: ours ``wang2015`` (the default) against the earlier
   ``variance`` method (the baseline), same inputs, same process.
 - ``refocus parity``: Fourier slice and shift-and-add against the exact
