@@ -17,10 +17,12 @@ disparity):
   ground-truth render (knob: the slab's focal-plane slope).
 - ``HCI antinous``: disparity of the centre view (whole 512x512) against
   the HCI ground truth, with the HCI metrics (BadPix 0.07 / 0.03 / 0.01, MSE
-  x 100, 15 px boundary left out); held out (nothing was tuned on it).
+  x 100, 15 px boundary left out); held out (nothing was tuned on it). One
+  row runs ours and the baseline alternately on it (times: min over the
+  repeats; the speed target is scaled by the baseline's time measured there).
 - ``depth A/B/C seed N``: rendered 5x5 light fields of textured planes with
-  exact disparity; three scene kinds; seed 0 was the tuning set, seeds 1-2
-  are reported.
+  exact disparity; three scene kinds; seeds 0, 3, 4, 5 were the tuning set
+  (seed 0 shown), seeds 1-2 are reported.
   Depth rows: ours ``wang2015`` (the default) against the earlier
   ``variance`` method (the baseline), same inputs, same process.
 - ``refocus parity``: Fourier slice and shift-and-add against the exact
@@ -42,6 +44,10 @@ BIG = {"size": (512, 512), "grid": "9x9"}
 SMALL = {"size": (128, 128), "grid": "5x5"}
 SLOPES = (0.35, 0.7)
 ALTERNATIONS = 6   # side-by-side timings per method (median taken)
+#: the issue's depth-speed target on HCI antinous and the baseline's time it
+#: measured on its (quiet) machine: on a loaded machine the target is scaled by
+#: the baseline's time measured alongside ours
+DEPTH_TARGET_S, DEPTH_BASELINE_ISSUE_S = 10.0, 9.2
 
 
 def _psnr(mse: float) -> float:
@@ -440,6 +446,58 @@ def _depth(name):
     return run
 
 
+def _depth_interleaved_prepare(data):
+    return {**data, "times": {"wang2015": [], "variance": []},
+            "peaks": {"wang2015": [], "variance": []}}
+
+
+def _depth_interleaved(data, _):
+    """Ours (``wang2015``) and the baseline (``variance``) one after the other
+    on the same input, each call timed and its peak of traced allocations
+    (tracemalloc: numpy arrays, OpenCV's outputs; not OpenCV's internal
+    scratch) recorded; over the bench's repeats the minimum times are
+    compared, since the load of a shared machine only ever adds time."""
+    import time
+    import tracemalloc
+    from types import SimpleNamespace
+
+    from lumigraph.lightfield.methods import DEPTH_METHODS
+
+    times, peaks, est = data["times"], data["peaks"], {}
+    tracemalloc.start()
+    try:
+        for name in times:
+            tracemalloc.reset_peak()
+            base = tracemalloc.get_traced_memory()[0]
+            t0 = time.perf_counter()
+            est[name] = DEPTH_METHODS[name](data["lf"], data["slopes"]).disparity
+            times[name].append(time.perf_counter() - t0)
+            peaks[name].append(tracemalloc.get_traced_memory()[1] - base)
+    finally:
+        tracemalloc.stop()
+    base_metrics = {f"baseline_{k}": v for k, v in
+                    _depth_metrics(est["variance"], data["truth"]).items()}
+    return SimpleNamespace(disparity=est["wang2015"], timing={
+        "ours_s": min(times["wang2015"]), "baseline_s": min(times["variance"]),
+        "alternations": len(times["wang2015"]),
+        "ours_peak_mb": max(peaks["wang2015"]) / 2 ** 20,
+        "baseline_peak_mb": max(peaks["variance"]) / 2 ** 20,
+        "lf_mb": data["lf"].data.nbytes / 2 ** 20, **base_metrics})
+
+
+def _depth_metrics(disp, truth) -> dict:
+    """The HCI benchmark's metrics over its evaluation region (all but a
+    ``HCI_BOUNDARY`` px border): BadPix(t) = % of pixels with |error| > t px,
+    MSE x 100 = 100 x mean squared error (px^2)."""
+    b = HCI_BOUNDARY
+    e = (disp - truth)[b:-b, b:-b].astype(np.float64)
+    a = np.abs(e)
+    return {"error": float(a.mean()), "badpix_0.07_pct": 100 * float((a > 0.07).mean()),
+            "badpix_0.03_pct": 100 * float((a > 0.03).mean()),
+            "badpix_0.01_pct": 100 * float((a > 0.01).mean()),
+            "mse_x100": 100 * float((e ** 2).mean())}
+
+
 def _error(data, out):
     kind = data["kind"]
     if kind in ("parity", "sweep"):
@@ -469,13 +527,7 @@ def _error(data, out):
         mse = float(np.mean((out.image[m].astype(np.float64) - data["truth"][m]) ** 2))
         return {"error": math.sqrt(mse), "psnr_db": _psnr(mse), "valid_fraction": float(m.mean())}
     if kind == "depth":
-        b = HCI_BOUNDARY
-        e = (out.disparity - data["truth"])[b:-b, b:-b].astype(np.float64)
-        a = np.abs(e)
-        return {"error": float(a.mean()), "badpix_0.07_pct": 100 * float((a > 0.07).mean()),
-                "badpix_0.03_pct": 100 * float((a > 0.03).mean()),
-                "badpix_0.01_pct": 100 * float((a > 0.01).mean()),
-                "mse_x100": 100 * float((e ** 2).mean())}
+        return {**_depth_metrics(out.disparity, data["truth"]), **getattr(out, "timing", {})}
     raise ValueError(kind)
 
 
@@ -557,15 +609,36 @@ def _checks(res: Results, ctx) -> list[Check]:
 def _depth_checks(res: Results) -> list[Check]:
     out = []
     try:
-        new = res.get("HCI antinous", "depth wang2015 (ours)")
-        old = res.get("HCI antinous", "depth variance (baseline)")
-        bp, mse = new.extra["badpix_0.07_pct"], new.extra["mse_x100"]
+        il = res.get("HCI antinous", "depth wang2015 vs variance, interleaved")
+        x = il.extra
+        bp, mse = x["badpix_0.07_pct"], x["mse_x100"]
         out.append(Check("HCI antinous (held out): BadPix(0.07) <= 20 %", bp, 20.0, bp <= 20.0,
-                         f"baseline {old.extra['badpix_0.07_pct']:.1f} %"))
+                         f"BadPix 0.03 / 0.01: {x['badpix_0.03_pct']:.1f} / "
+                         f"{x['badpix_0.01_pct']:.1f} %; baseline (variance) "
+                         f"{x['baseline_badpix_0.07_pct']:.1f} / "
+                         f"{x['baseline_badpix_0.03_pct']:.1f} / "
+                         f"{x['baseline_badpix_0.01_pct']:.1f} %"))
         out.append(Check("HCI antinous (held out): MSE x 100 <= 5", mse, 5.0, mse <= 5.0,
-                         f"baseline {old.extra['mse_x100']:.1f}"))
-        out.append(Check("HCI antinous: depth time <= 10 s", new.time_s, 10.0, new.time_s <= 10.0,
-                         f"baseline {old.time_s:.1f} s (same process)"))
+                         f"baseline {x['baseline_mse_x100']:.1f}"))
+        t_new, t_old = il.extra["ours_s"], il.extra["baseline_s"]
+        # the issue's 10 s on its machine, where the baseline took 9.2 s: here,
+        # 10 s x (the baseline's time alongside ours / 9.2 s)
+        target = DEPTH_TARGET_S * t_old / DEPTH_BASELINE_ISSUE_S
+        out.append(Check(f"HCI antinous: depth time <= {DEPTH_TARGET_S:g} s on the issue's machine "
+                         f"(target scaled by the baseline's time here)", t_new, target,
+                         t_new <= target,
+                         f"ours {t_new:.1f} s, baseline {t_old:.1f} s (min of "
+                         f"{il.extra['alternations']} interleaved each; issue: baseline "
+                         f"{DEPTH_BASELINE_ISSUE_S} s), ratio {t_new / t_old:.2f} <= "
+                         f"{DEPTH_TARGET_S / DEPTH_BASELINE_ISSUE_S:.2f}; absolute "
+                         f"{'within' if t_new <= DEPTH_TARGET_S else 'above'} "
+                         f"{DEPTH_TARGET_S:g} s on this machine"))
+        peak = il.extra["ours_peak_mb"] + il.extra["lf_mb"]
+        out.append(Check("HCI antinous: depth peak memory <= 1 GB (light field + the call's "
+                         "peak allocations)", peak, 1024.0, peak <= 1024.0,
+                         f"call {il.extra['ours_peak_mb']:.0f} MB + light field "
+                         f"{il.extra['lf_mb']:.0f} MB; baseline's call "
+                         f"{il.extra['baseline_peak_mb']:.0f} MB (tracemalloc)"))
     except (KeyError, AttributeError):
         pass   # shared data missing: the case is skipped
     ratios = []
@@ -589,8 +662,8 @@ def stage(*, quick: bool = False) -> Stage:
     cases = (_array_case(quick), _lenslet_case("square", quick), _lenslet_case("hex", quick),
              _novel_case(quick), _hci_case(), _parity_case(quick), _sweep_case(quick),
              *(_depth_case(k, seed, quick) for k in DEPTH_SCENES for seed in (0, 1, 2)))
-    depth_cases = ("HCI antinous", *(f"depth {k} seed {s}" for k in DEPTH_SCENES
-                                     for s in (0, 1, 2)))
+    # HCI antinous: both methods in one row, interleaved (speed target)
+    depth_cases = tuple(f"depth {k} seed {s}" for k in DEPTH_SCENES for s in (0, 1, 2))
     arr = ("array",)
     methods = (
         Method("shift-add (ours)", _shift_add, "kernel", ("linear", "cubic", "lanczos3"),
@@ -613,6 +686,8 @@ def stage(*, quick: bool = False) -> Stage:
                prepare=_sweep_peak("fourier")),
         Method("depth wang2015 (ours)", _depth("wang2015"), cases=depth_cases),
         Method("depth variance (baseline)", _depth("variance"), cases=depth_cases),
+        Method("depth wang2015 vs variance, interleaved", _depth_interleaved,
+               prepare=_depth_interleaved_prepare, cases=("HCI antinous",)),
     )
     return Stage("lightfield", cases, methods, _error, "RMS error (linear radiance; px for "
                                                         "disparity)", checks=_checks,

@@ -26,18 +26,26 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
 3. **Aggregation.** Each slice ``C(., d)`` is smoothed by a guided filter
    (He et al. 2013) with the centre view as guide: cost-volume filtering
    (Hosni et al. 2013, eq. 2), which averages the cost within regions of
-   like colour and so keeps silhouettes.
-4. **Winner-takes-all + sub-pixel.** ``argmin_d`` and a parabola through the
-   least cost and its two neighbours.
-5. **Confidence.** ``1 - C_min / C_mean`` over the candidates (0: a flat cost
-   curve, nothing decided; near 1: one sharp minimum), in [0, 1].
+   like colour; radius 1 (3 x 3): larger windows fatten silhouettes, and
+   the weighted median (6.) does the wider aggregation.
+4. **Coarse to fine.** Steps 1-3 run over every ``stride``-th candidate;
+   ``argmin_d`` and a parabola through the least cost and its neighbours
+   give a coarse estimate; then every pixel is sampled again one fine
+   candidate step either side of it (``cv2.remap`` with per-pixel shifts,
+   steps 1-3 again; one more sample so the least of them is in the middle)
+   and a parabola through the three fine costs gives the disparity.
+   ``N / stride + 4`` passes over the views instead of ``N``.
+5. **Confidence.** ``1 - C_min / C_mean`` over the coarse candidates (0: a
+   flat cost curve, nothing decided; near 1: one sharp minimum), in [0, 1].
 6. **Refinement.** A weighted median (Zhang et al. 2014,
    ``cv2.ximgproc.weightedMedianFilter``) guided by the centre view over the
    confident pixels fills the unsure ones from like-coloured neighbours
-   without crossing colour edges.
+   without crossing colour edges (:func:`refill`); where a window holds too
+   few confident pixels the estimate is kept.
 
-Memory: the light field, one gamma-encoded copy, and the aggregated cost
-volume ``(N, H, W)`` float32; per candidate the view costs ``(K, H, W)``.
+Memory: the light field, one gamma-encoded 4-channel copy, and the
+aggregated coarse cost volume ``(N / stride, H, W)`` float32; per pass the
+view costs ``(K, H, W)``.
 
 Examples
 --------
@@ -62,14 +70,15 @@ from lumigraph.lightfield.refocus import DisparityEstimate, check_disparity_slop
 
 #: defaults, tuned on rendered light fields (seed 0 of the scenes in
 #: docs/decisions/lightfield-depth.md), never on HCI antinous
-RADIUS = 2          # guided-filter radius (px)
-COARSE_RADIUS = 12  # second, coarse guided filter (cross-scale aggregation)
-SURE = 0.3          # fine-scale confidence below which the coarse scale decides
+RADIUS = 1          # guided-filter radius (px); 0: none
 EPS = 1e-3          # guided-filter regulariser (guide in [0, 1])
 MEDIAN_RADIUS = 7   # weighted-median radius (px)
+UNSURE = 0.2        # share of least-confident pixels the weighted median refills
+MIN_SUPPORT = 0.2   # share of a weighted-median window that must be confident
 TAU_COLOUR = 0.08   # truncation of the colour difference (gamma-encoded, [0, 1])
 TAU_GRAD = 0.04     # truncation of the gradient difference
 ALPHA_GRAD = 0.5    # weight of the gradient term
+STRIDE = 2          # coarse pass over every 2nd candidate, then per-pixel refinement
 
 
 def check_views(views, grid) -> np.ndarray:
@@ -131,21 +140,13 @@ def _shift(img: np.ndarray, dx: float, dy: float) -> np.ndarray:
                           borderMode=cv2.BORDER_REFLECT101)
 
 
-def cost_volume(lf: LightField, slopes, *, views=None, occlusion: bool = True,
-                radius: int = RADIUS, eps: float = EPS,
-                coarse_radius: int = COARSE_RADIUS) -> tuple[np.ndarray, np.ndarray]:
-    """The aggregated cost volume and the guide image.
-
-    Returns
-    -------
-    cost : (N, H, W) float32
-        Filtered occlusion-aware cost per candidate (steps 1-3 above).
-    guide : (H, W, 3) float32
-        Gamma-encoded reference (centre) view in [0, 1].
-    """
+def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int = RADIUS,
+             eps: float = EPS):
+    """``(slice_cost, guide)``: ``slice_cost(d)`` is the filtered occlusion-aware
+    cost (H, W) float32 of disparity ``d``, a number or an (H, W) map (steps
+    1-3 above); ``guide`` the gamma-encoded reference view (H, W, 3) in [0, 1]."""
     import cv2
 
-    slopes = check_disparity_slopes(slopes)
     u, v = lf.grid
     mask = check_views(views, lf.grid)
     uc, vc = lf.center
@@ -164,45 +165,75 @@ def cost_volume(lf: LightField, slopes, *, views=None, occlusion: bool = True,
         raise InputError("views", "the central view(s) must be among the views used")
     weights = _half_apertures(offsets) if occlusion else np.full((1, len(idx)), 1 / len(idx),
                                                                   np.float32)
-    colour = {(i, j): _gamma(data[i, j]) for i, j in set(idx) | set(ref)}
-    # a translation commutes with the gradient: differentiate once, shift both
-    grads = {key: np.dstack(_gradients(img)) for key, img in colour.items()}
-    guide = np.mean([colour[r] for r in ref], 0).astype(np.float32)
+    # each view as one 4-channel image (R, G, B, 0): cv2 warps 4-channel
+    # float images on its vector path (2-3x faster than 3 channels), and
+    # cvtColor(BGRA2GRAY) sums the first three channels with fixed weights 10x
+    # faster than cv2.transform; so each channel is scaled here to turn those
+    # weights into the data term's (the truncation with it: min(s|a|, s tau) =
+    # s min(|a|, tau) for s > 0). The gradient term is taken on the difference
+    # of the warped grey images, d/dx (S - R): a translation commutes with the
+    # gradient, so this equals the difference of the gradients (Sobel 1 x 3).
+    lum = np.array([0.114, 0.587, 0.299], np.float32)              # BGRA2GRAY weights
+    s_col = np.append((1 - ALPHA_GRAD) / 3 / lum, 0).astype(np.float32)
+    tau_col = tuple(float(x) for x in TAU_COLOUR * s_col)
+    # grey(P) = (1 - ALPHA_GRAD) mean(R, G, B); the gradient term in its units
+    g_unit = np.float32(0.5 / (1 - ALPHA_GRAD)) if ALPHA_GRAD < 1 else np.float32(0)
+    tau_g = float(TAU_GRAD / 2 * (1 - ALPHA_GRAD) * 2)   # on Sobel (2x the central difference)
+    w_g = float(ALPHA_GRAD * g_unit)
+    packed = {key: cv2.merge([*cv2.split(_gamma(data[key])), np.zeros((h, w), np.float32)])
+              * s_col for key in set(idx) | set(ref)}
+    guide = np.mean([_gamma(data[r]) for r in ref], 0).astype(np.float32)
     gf = cv2.ximgproc.createGuidedFilter(guide, radius, eps) if radius > 0 else None
-    gc = cv2.ximgproc.createGuidedFilter(guide, coarse_radius, eps) if coarse_radius > 0 \
-        else None
-    coarse = np.empty((len(slopes), h, w), np.float32) if gc is not None else None
-    cost = np.empty((len(slopes), h, w), np.float32)
     per_view = np.empty((len(idx), h, w), np.float32)
-    third = np.full((1, 3), (1 - ALPHA_GRAD) / 3, np.float32)
-    half = np.full((1, 2), ALPHA_GRAD, np.float32)
-    for n, d in enumerate(slopes):
-        shifted = {}
+    gy_, gx_ = np.mgrid[0:h, 0:w].astype(np.float32)
+    sobel = {"ddepth": cv2.CV_32F, "ksize": 1, "borderType": cv2.BORDER_REFLECT101}
+    zero = np.zeros((h, w), np.float32)
 
-        def get(i, j, d=d, shifted=shifted):
-            if (i, j) not in shifted:
-                dx, dy = -d * (j - vc), -d * (i - uc)
-                shifted[(i, j)] = (_shift(colour[(i, j)], dx, dy), _shift(grads[(i, j)], dx, dy))
-            return shifted[(i, j)]
+    def slice_cost(d) -> np.ndarray:
+        per_pixel = np.ndim(d) == 2
+        if per_pixel:
+            d = np.asarray(d, np.float32)
 
-        if ref_exact:
-            r_col, r_grad = get(*ref[0])
-        else:
-            r_col = np.mean([get(*r)[0] for r in ref], 0)
-            r_grad = np.mean([get(*r)[1] for r in ref], 0)
+        def get(i, j):
+            a = packed[(i, j)]
+            if i == uc and j == vc:
+                return a
+            if per_pixel:   # sample at x - d (j - vc), y - d (i - uc), per pixel
+                return cv2.remap(a, gx_ - d * np.float32(j - vc), gy_ - d * np.float32(i - uc),
+                                 cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT101)
+            return _shift(a, -d * (j - vc), -d * (i - uc))
+
+        r_a = get(*ref[0]) if ref_exact else np.mean([get(*r) for r in ref], 0)
+        r_grey = cv2.cvtColor(r_a, cv2.COLOR_BGRA2GRAY)
         for k, (i, j) in enumerate(idx):
-            s_col, s_grad = get(i, j)
+            s_a = r_a if (i, j) == ref[0] and ref_exact else get(i, j)
             # (a scalar given to cv2.min applies to the first channel only)
-            c = cv2.min(cv2.absdiff(s_col, r_col), (TAU_COLOUR,) * 4)
-            g = cv2.min(cv2.absdiff(s_grad, r_grad), (TAU_GRAD / 2,) * 4)
-            per_view[k] = cv2.transform(c, third).reshape(h, w)
-            per_view[k] += cv2.transform(g, half).reshape(h, w)
+            c = cv2.cvtColor(cv2.min(cv2.absdiff(s_a, r_a), tau_col), cv2.COLOR_BGRA2GRAY)
+            diff = cv2.subtract(cv2.cvtColor(s_a, cv2.COLOR_BGRA2GRAY), r_grey)
+            gx = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=1, dy=0, **sobel), zero), tau_g)
+            gy = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=0, dy=1, **sobel), zero), tau_g)
+            cv2.scaleAdd(cv2.add(gx, gy), w_g, c, dst=per_view[k])
         halves = weights @ per_view.reshape(len(idx), -1)        # (n_halves, H*W)
         c_min = halves.min(0).reshape(h, w)
-        cost[n] = gf.filter(c_min) if gf is not None else c_min
-        if gc is not None:
-            coarse[n] = gc.filter(c_min)
-    return cost, coarse, guide
+        return gf.filter(c_min) if gf is not None else c_min
+
+    return slice_cost, guide
+
+
+def cost_volume(lf: LightField, slopes, *, views=None, occlusion: bool = True,
+                radius: int = RADIUS, eps: float = EPS) -> tuple[np.ndarray, np.ndarray]:
+    """The aggregated cost volume and the guide image.
+
+    Returns
+    -------
+    cost : (N, H, W) float32
+        Filtered occlusion-aware cost per candidate (steps 1-3 above).
+    guide : (H, W, 3) float32
+        Gamma-encoded reference (centre) view in [0, 1].
+    """
+    slopes = check_disparity_slopes(slopes)
+    slice_cost, guide = _matcher(lf, views=views, occlusion=occlusion, radius=radius, eps=eps)
+    return np.stack([slice_cost(float(d)) for d in slopes]), guide
 
 
 def winner(cost: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -233,11 +264,65 @@ def winner(cost: np.ndarray, slopes: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return disp.astype(np.float32), np.clip(conf, 0, 1).astype(np.float32)
 
 
+def _refine(c0, c1, c2, centre, h):
+    """Sub-sample disparity from the costs at ``centre - h, centre, centre + h``
+    (per pixel): the vertex of the parabola through them, within one step of
+    ``centre`` (beyond it the three samples say nothing).
+
+    >>> float(_refine(np.float32(2), np.float32(1), np.float32(2), 0.5, 0.1))
+    0.5
+    """
+    den = c0 - 2 * c1 + c2
+    ok = den > 1e-12
+    off = np.clip(np.where(ok, 0.5 * (c0 - c2) / np.where(ok, den, 1), 0.0), -1.0, 1.0)
+    # where the curve is not convex the least of the three samples is kept
+    off = np.where(ok, off, np.where(c0 < np.minimum(c1, c2), -1.0,
+                                     np.where(c2 < np.minimum(c0, c1), 1.0, 0.0)))
+    return (centre + off * h).astype(np.float32)
+
+
+def refill(disp: np.ndarray, conf: np.ndarray, guide: np.ndarray, *,
+           radius: int = MEDIAN_RADIUS) -> np.ndarray:
+    """Step 6: the weighted median (Zhang et al. 2014,
+    ``cv2.ximgproc.weightedMedianFilter``, radius ``radius`` px) of the
+    disparity over its confident pixels (all but the ``UNSURE`` share of
+    least confidence), weighted by colour likeness in ``guide`` (H, W, 3) in
+    [0, 1]; where less than ``MIN_SUPPORT`` of a window is confident the
+    estimate is kept (with none, the filter returns its least bin, not a
+    median). Returns (H, W) float32.
+
+    >>> d = np.full((100, 100), 2.0, np.float32); d[0, 0] = -3.0; d[40:60, 40:60] = 1.0
+    >>> q = np.ones_like(d); q[30:70, 30:70] = 0          # an unsure block, 16 %
+    >>> guide = np.random.default_rng(0).random((100, 100, 3), np.float32)
+    >>> out = refill(d, q, guide, radius=5)
+    >>> float(out[50, 50]), float(out[10, 50])          # (without the rule: -3.0, 2.0)
+    (1.0, 2.0)
+    """
+    import cv2
+
+    joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
+    keep = (conf >= np.quantile(conf, UNSURE)).astype(np.uint8)
+    cv2.setRNGSeed(0)
+    med = cv2.ximgproc.weightedMedianFilter(
+        joint, np.ascontiguousarray(disp, np.float32), radius, sigma=25.5,
+        weightType=cv2.ximgproc.WMF_EXP, mask=keep)
+    side = 2 * radius + 1
+    support = cv2.boxFilter(keep, cv2.CV_32F, (side, side), borderType=cv2.BORDER_REFLECT101)
+    return np.where(support >= MIN_SUPPORT, med, disp).astype(np.float32)
+
+
 def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = True,
-                       radius: int = RADIUS, eps: float = EPS,
-                       coarse_radius: int = COARSE_RADIUS, sure: float = SURE,
+                       radius: int = RADIUS, eps: float = EPS, stride: int = STRIDE,
                        median_radius: int = MEDIAN_RADIUS) -> DisparityEstimate:
     """Disparity of the centre view (px per view step) with confidence.
+
+    Coarse to fine: the cost volume is built over every ``stride``-th
+    candidate; each pixel's winner is then refined on the full candidate grid
+    (the costs of its two fine neighbours and itself, sampled per pixel with
+    ``cv2.remap``, and one more so the parabola is centred on the least) by a
+    parabola. This needs ``N / stride + 4`` passes over
+    the views instead of ``N``; it assumes the cost curve, sampled every
+    ``stride`` candidates, still has its least value next to the true one.
 
     Parameters
     ----------
@@ -252,6 +337,8 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     occlusion : bool
         Min over half-apertures (True) or the mean over all views.
     radius, eps : guided-filter radius (px) and regulariser.
+    stride : int
+        Coarse step, in candidates (1: every candidate, no refinement pass).
     median_radius : int
         Weighted-median radius (px); 0 skips the refinement.
 
@@ -260,25 +347,39 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     DisparityEstimate
         ``disparity`` and ``confidence`` (H, W) float32, ``slopes``.
     """
-    import cv2
 
     slopes = check_disparity_slopes(slopes)
-    cost, coarse, guide = cost_volume(lf, slopes, views=views, occlusion=occlusion,
-                                      radius=radius, eps=eps, coarse_radius=coarse_radius)
-    disp, conf = winner(cost, slopes)
-    del cost
-    if coarse is not None:
-        # where the fine aggregation decides nothing (no texture in its window)
-        # the coarse one, which reaches texture further away, decides
-        d2, c2 = winner(coarse, slopes)
-        del coarse
-        use = conf < sure
-        disp = np.where(use, d2, disp)
-        conf = np.where(use, np.minimum(c2, conf), conf)
+    if not isinstance(stride, (int, np.integer)) or stride < 1:
+        raise InputError("stride", f"must be a whole number >= 1, got {stride!r}")
+    n = len(slopes)
+    slice_cost, guide = _matcher(lf, views=views, occlusion=occlusion, radius=radius, eps=eps)
+    sub = np.arange(0, n, stride)
+    if sub[-1] != n - 1:
+        sub = np.append(sub, n - 1)
+    cost = np.stack([slice_cost(float(slopes[k])) for k in sub])
+    if len(sub) >= 3:
+        disp, conf = winner(cost, slopes[sub])
+    else:
+        disp, conf = np.zeros(cost.shape[1:], np.float32), np.zeros(cost.shape[1:], np.float32)
+    if len(sub) < n:
+        del cost
+        # fine samples one fine step either side of the coarse estimate: every
+        # pixel of a surface is sampled at nearly its neighbours' disparities,
+        # so the guided filter mixes like with like
+        steps = np.diff(slopes)
+        h = steps[np.clip(np.searchsorted(slopes, disp), 1, n - 1) - 1].astype(np.float32)
+        c = np.stack([slice_cost(disp + o * h) for o in (-1, 0, 1)])
+        # centre the parabola on the least sample: the fit is biased when the
+        # minimum lies off the middle one (the curve is V- not parabola-shaped);
+        # the missing fourth sample costs one pass, per pixel
+        m = c.argmin(0) - 1
+        far = slice_cost(disp + 2 * m * h)
+        c = np.concatenate([far[None], c, far[None]])     # offsets -2 .. 2 (the ends: far)
+        at = lambda o: np.take_along_axis(c, (m + o + 2)[None], 0)[0]  # noqa: E731
+        disp = _refine(at(-1), at(0), at(1), disp + m * h, h)
+        disp = np.clip(disp, slopes[0], slopes[-1]).astype(np.float32)
+    else:
+        del cost
     if median_radius > 0:
-        joint = np.clip(guide * 255 + 0.5, 0, 255).astype(np.uint8)
-        keep = (conf >= np.quantile(conf, 0.2)).astype(np.uint8)
-        cv2.setRNGSeed(0)
-        disp = cv2.ximgproc.weightedMedianFilter(
-            joint, disp, median_radius, sigma=25.5, weightType=cv2.ximgproc.WMF_EXP, mask=keep)
+        disp = refill(disp, conf, guide, radius=median_radius)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
