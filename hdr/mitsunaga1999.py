@@ -615,19 +615,47 @@ def responsive_range(zs: np.ndarray, t: np.ndarray, zmax: int) -> tuple[np.ndarr
     return floor, ceil
 
 
-def table_from_poly(a: np.ndarray, bit_depth: int) -> np.ndarray:
-    """``f(z/z_max)`` over every code, made monotonic and positive: ``(2**bit_depth,)``."""
+def table_from_poly(a: np.ndarray, bit_depth: int,
+                    m_range: tuple[float, float] | None = None) -> np.ndarray:
+    """``f(z/z_max)`` over every code, strictly increasing and positive: ``(2**bit_depth,)``.
+
+    Over ``m_range`` (the fitted codes) the polynomial, made monotone where the
+    constraints left a rounding-level dip; outside it, where no data say anything,
+    ``ln f`` continued along a straight line with the slope at that end (at least
+    the fitted range's mean slope / 10): a curve that cannot flatten (codes merged)
+    or jump where the polynomial would wander.
+
+    Examples
+    --------
+    >>> f = table_from_poly(np.array([0.5]), 8, (0.1, 0.9))
+    >>> bool(np.all(np.diff(np.log(f)) > 0)), float(f[-1]) > float(f[128])
+    (True, True)
+    """
     from scipy.optimize import isotonic_regression
 
     zmax = 2 ** bit_depth - 1
     m = np.arange(zmax + 1) / zmax
-    f = np.asarray(isotonic_regression(evaluate(a, m), increasing=True).x)
-    # Below the first clearly positive value, ramp linearly to zero exposure.
-    floor = 1e-4 * f[-1]
-    first = int(np.argmax(f > floor))
-    if first > 0:
-        f[:first] = f[first] * (np.arange(first) + 0.5) / (first + 0.5)
-    return np.maximum(f, 1e-12)
+    if m_range is None:
+        m_range = (0.0, 1.0)
+    lo = max(int(math.ceil(m_range[0] * zmax - 1e-9)), 0)
+    hi = min(int(math.floor(m_range[1] * zmax + 1e-9)), zmax)
+    f = np.asarray(isotonic_regression(np.maximum(evaluate(a, m[lo:hi + 1]), F_FLOOR),
+                                       increasing=True).x)
+    lf = np.log(f)
+    n = lf.size
+    mean_slope = (lf[-1] - lf[0]) / max(n - 1, 1)
+    min_slope = max(mean_slope, 1e-6) / 10
+    # strictly increasing inside: a flat run (an active constraint) gets the minimum slope
+    lf = lf + min_slope * 1e-3 * np.arange(n)
+    lf = np.maximum.accumulate(lf)
+    k = min(max(n // 20, 1), n - 1)
+    s_lo = max((lf[k] - lf[0]) / k, min_slope) if n > 1 else min_slope
+    s_hi = max((lf[-1] - lf[-1 - k]) / k, min_slope) if n > 1 else min_slope
+    out = np.empty(zmax + 1)
+    out[lo:hi + 1] = lf
+    out[:lo] = lf[0] - s_lo * (lo - np.arange(lo))
+    out[hi + 1:] = lf[-1] + s_hi * (np.arange(hi + 1, zmax + 1) - hi)
+    return np.exp(out)
 
 
 def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
@@ -802,7 +830,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
             warnings.append(f"channel {ch}: the joint fit is not monotone over codes "
                             f"{round(ranges[ch][0] * zmax)}..{round(ranges[ch][1] * zmax)}")
         # Exposures rescaled as e -> e^γ pair with the curve f -> f^γ (eq. 6.6 is unchanged).
-        g[ch] = gam * np.log(table_from_poly(coeffs[ch], bd))
+        g[ch] = gam * np.log(table_from_poly(coeffs[ch], bd, ranges[ch]))
     sel_scores = {str(ch): [{"order": n, "held_out_code_mse": float(mse[i, ch]),
                              "rejected": reasons.get((n, ch))}
                             for i, n in enumerate(orders)] for ch in range(c)}
