@@ -265,3 +265,88 @@ def decide_bit_depth(images: Sequence[np.ndarray], paths: Sequence[str | os.Path
                               f"{bits}-bit data in a {container}-bit container")
     return BitDepth(bits, f"largest code {top}: the smallest common sensor depth holding it "
                           f"({bits} bits; no code at {2 ** bits - 1}, nothing clipped)")
+
+
+def check_brightness_order(images: np.ndarray, exposure_times_s, paths: Sequence[str], *,
+                           force: bool = False, max_pixels: int = 65536) -> list[str]:
+    """Check exposure times against the images' brightness order.
+
+    A static bracket's longer exposure is brighter at almost every pixel that
+    is clipped in neither frame. For each pair of images adjacent in time
+    order (equal times skipped), the pixels where the two differ are counted:
+    the pair is out of order when more of them are darker in the longer
+    exposure than brighter, by more than 3 binomial standard deviations
+    (``darker − brighter > 3 √(darker + brighter)``). That catches times given
+    reversed, shuffled, or with one pair swapped (``--times`` in another order
+    than the files).
+
+    Parameters
+    ----------
+    images : ndarray, ``(P, H, W[, C])`` integer codes
+    exposure_times_s : sequence of float, ``(P,)``
+    paths : sequence of str, ``(P,)``
+        The files, for the message.
+    force : bool
+        Return the disagreements as warnings instead of raising.
+    max_pixels : int
+        Pixels compared (an even subsample of larger images).
+
+    Returns
+    -------
+    list of str
+        One line per out-of-order pair (only with ``force``; otherwise empty).
+
+    Raises
+    ------
+    InputError
+        Naming the longer exposure's file and the other one of the first pair
+        out of order (and how many pairs are).
+
+    Examples
+    --------
+    >>> z = np.stack([np.full((4, 4), v, np.uint8) + np.arange(16, dtype=np.uint8).reshape(4, 4)
+    ...               for v in (20, 60, 120)])
+    >>> check_brightness_order(z, [0.01, 0.03, 0.09], ["a", "b", "c"])
+    []
+    >>> try:
+    ...     check_brightness_order(z, [0.09, 0.03, 0.01], ["a", "b", "c"])
+    ... except InputError as e:
+    ...     print(e.where)
+    b
+    """
+    z = np.asarray(images)
+    t = np.asarray(exposure_times_s, dtype=np.float64).ravel()
+    p = z.shape[0]
+    if p < 2 or t.size != p or z.dtype.kind not in "ui":
+        return []
+    if z.ndim == 3:
+        z = z[..., None]
+    step = max(1, int(np.ceil(np.sqrt(z.shape[1] * z.shape[2] / max_pixels))))
+    s = z[:, ::step, ::step].reshape(p, -1, z.shape[-1]).astype(np.int64)
+    top = int(s.max())
+    lum = s.sum(axis=2)
+    lo_clip = (s <= 0.02 * top).all(axis=2)
+    hi_clip = (s >= 0.98 * top).any(axis=2)
+    order = np.argsort(t, kind="stable")
+    bad = []
+    for a, b in zip(order[:-1], order[1:], strict=True):
+        if t[a] == t[b]:
+            continue
+        use = ~(lo_clip[a] & lo_clip[b]) & ~(hi_clip[a] & hi_clip[b])
+        d = lum[b, use] - lum[a, use]
+        brighter, darker = int(np.sum(d > 0)), int(np.sum(d < 0))
+        if darker - brighter > 3.0 * np.sqrt(max(darker + brighter, 1)):
+            share = darker / max(darker + brighter, 1)
+            bad.append((int(a), int(b), share))
+    if not bad:
+        return []
+    lines = [f"{paths[b]} is given {t[b]:g} s, longer than {t[a]:g} s of {paths[a]}, but it is "
+             f"darker at {100 * s_:.0f} % of the pixels that differ" for a, b, s_ in bad]
+    if force:
+        return [line + " (used as given: --force)" for line in lines]
+    a, b, share = bad[0]
+    more = f" ({len(bad)} pairs out of order)" if len(bad) > 1 else ""
+    raise InputError(paths[b], f"exposure time {t[b]:g} s is longer than {t[a]:g} s of "
+                               f"{paths[a]}, but this image is darker at {100 * share:.0f} % of "
+                               f"the pixels that differ{more}: the times are not in the images' "
+                               "order (give --times in file order, or --force to use them)")
