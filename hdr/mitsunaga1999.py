@@ -228,12 +228,11 @@ def _fit(chans, ln_e0, orders, ranges, code_max, iters=10, tol=1e-8, noise_weigh
             wts = np.ones(d.size) if var is None else 1.0 / var[pos]
             # Normal equations of the tiny, well-conditioned exposure graph (P x P).
             ia, ib = qa[pos], qb[pos]
-            np.add.at(lap, (ia, ia), wts)
-            np.add.at(lap, (ib, ib), wts)
-            np.add.at(lap, (ia, ib), -wts)
-            np.add.at(lap, (ib, ia), -wts)
-            np.add.at(rhs_e, ia, wts * d)
-            np.add.at(rhs_e, ib, -wts * d)
+            # the graph Laplacian and its right side by bincount (np.add.at is 10x slower)
+            lap += (np.bincount(ia * p + ia, wts, p * p) + np.bincount(ib * p + ib, wts, p * p)
+                    - np.bincount(ia * p + ib, wts, p * p)
+                    - np.bincount(ib * p + ia, wts, p * p)).reshape(p, p)
+            rhs_e += np.bincount(ia, wts * d, p) - np.bincount(ib, wts * d, p)
             change = max(change, float(np.max(np.abs(a_new - coeffs[k]))))
             coeffs[k] = a_new
             if noise_weights:
