@@ -306,8 +306,8 @@ def check_brightness_order(images: np.ndarray, exposure_times_s, paths: Sequence
 
     Examples
     --------
-    >>> z = np.stack([np.full((4, 4), v, np.uint8) + np.arange(16, dtype=np.uint8).reshape(4, 4)
-    ...               for v in (20, 60, 120)])
+    >>> scene = np.linspace(1.0, 60.0, 64).reshape(8, 8)
+    >>> z = np.stack([np.clip(scene * k, 0, 255) for k in (1, 2, 4)]).astype(np.uint8)
     >>> check_brightness_order(z, [0.01, 0.03, 0.09], ["a", "b", "c"])
     []
     >>> try:
