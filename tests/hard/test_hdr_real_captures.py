@@ -136,3 +136,22 @@ def test_cli_refuses_reversed_times_with_exit_2_and_force_accepts_them(bracket, 
 
     meta = json.loads((tmp_path / "f.json.meta.json").read_text())
     assert any("darker" in w for w in meta["warnings"])
+
+
+def test_cli_reference_times_reach_the_fit_and_an_unknown_file_is_exit_2(bracket, tmp_path):
+    import json
+
+    from conftest import assert_clean_error, lumigraph
+
+    files, t = bracket
+    rough = ",".join(f"{x * (1.1 if k % 2 else 0.92):.9g}" for k, x in enumerate(t))
+    args = ("hdr", "response", *files, "--times", rough, "--method", "mitsunaga-nayar",
+            "--samples", "200", "-q")
+    p = lumigraph(*args, "--reference-time", f"{files[0].name}={t[0]!r}",
+                  "--reference-time", f"{files[-1]}={t[-1]!r}", "--out", tmp_path / "r.json")
+    assert p.returncode == 0, p.stderr
+    meta = json.loads((tmp_path / "r.json.meta.json").read_text())
+    assert meta["quality"]["power_fixed_by"] == "the reference exposures"
+    assert set(meta["quality"]["reference_exposures"]) == {"0", str(len(files) - 1)}
+    p = lumigraph(*args, "--reference-time", "nosuch.png=0.01", "--out", tmp_path / "x.json")
+    assert_clean_error(p, "--reference-time", "nosuch.png")
