@@ -19,6 +19,16 @@ Cases
   the current frame clips but a neighbour's exposure records (``all``: every
   pixel, 6 px borders excluded).
 
+- ``family <kind> <b>-bit (tuned|reported)``: capture.scenes.brackets' family
+  (room, walls, outdoor, night, studio; each its own response and noise;
+  seeds 0-2; 8/12/16 bits): Debevec against CalibrateDebevec over codes
+  10/255..95 % (median over seeds, worst in the JSON), merge against
+  MergeDebevec, Mitsunaga-Nayar monotone; ``tuned`` kinds may have set our
+  defaults, ``reported`` ones are held out;
+- real sets: ``memorial`` (against Debevec's memorial.hdr), ``canon 5D Mk II``
+  (the chart's neutral patches' ratios across channels), ``iphone`` (against
+  OpenCV's merge; no reference).
+
 Error: ln-response RMS over the well-exposed codes (5–95 % of the range)
 after removing each channel's free offset; for merges, relative RMS radiance
 error over pixels well exposed in at least one image after one global
