@@ -671,12 +671,15 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
         exposure); distinct.
     bit_depth : int, optional
     order : int or "auto"
-        Polynomial order ``N`` (1..10); ``"auto"`` chooses by held-out error.
+        Polynomial order ``N`` (1..10), one for every channel; ``"auto"``
+        chooses by the BIC of the held-out code-prediction error, among the
+        candidates whose curves are monotone (see the module docstring).
     samples : int
         Pixels sampled (:func:`hdr.samples.sample_pixels`), at least 2
         (:func:`hdr.samples.check_samples`).
     clip_margin : float
-        Codes within this fraction of either end are masked.
+        Codes within this fraction of either end are masked, and so are
+        codes that do not follow the exposure (:func:`responsive_range`).
     rng : numpy.random.Generator, optional
     reference_times : dict, optional
         ``{image index: exact exposure}`` (same units as the times) for
@@ -688,8 +691,10 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     ResponseCurve
         ``method="mitsunaga-nayar"``; ``exposure_times_s`` are the refined
         exposures (in the units given); ``fit`` holds the coefficients (shifted
-        Chebyshev), the refined adjacent ratios and the common power γ;
-        ``selection`` the order and each candidate's held-out error.
+        Chebyshev), the refined adjacent ratios and the common power γ, the
+        responsive and monotone code ranges, the static pixels dropped;
+        ``selection`` the order, the rule, each candidate's held-out error
+        (or why it was rejected) and BIC, each channel's disagreement.
     """
     from lumigraph.capture.errors import EstimationError, InputError
 
