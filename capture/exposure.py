@@ -265,3 +265,96 @@ def decide_bit_depth(images: Sequence[np.ndarray], paths: Sequence[str | os.Path
                               f"{bits}-bit data in a {container}-bit container")
     return BitDepth(bits, f"largest code {top}: the smallest common sensor depth holding it "
                           f"({bits} bits; no code at {2 ** bits - 1}, nothing clipped)")
+
+
+def check_brightness_order(images: np.ndarray, exposure_times_s, paths: Sequence[str], *,
+                           force: bool = False, max_pixels: int = 65536) -> list[str]:
+    """Check exposure times against the images' brightness order.
+
+    A static bracket's longer exposure is brighter at almost every pixel that
+    is clipped (any channel) in neither frame and above the dark floor (each frame's 5th
+    percentile, plus a tenth of the code range) in one of them. For each pair of
+    images adjacent in time order (equal times skipped), those pixels where the
+    two differ are counted:
+    the pair is out of order when more of them are darker in the longer
+    exposure than brighter, by more than 3 binomial standard deviations
+    (``darker − brighter > 3 √(darker + brighter)``). That catches times given
+    reversed, shuffled, or with one pair swapped (``--times`` in another order
+    than the files).
+
+    Parameters
+    ----------
+    images : ndarray, ``(P, H, W[, C])`` integer codes
+    exposure_times_s : sequence of float, ``(P,)``
+    paths : sequence of str, ``(P,)``
+        The files, for the message.
+    force : bool
+        Return the disagreements as warnings instead of raising.
+    max_pixels : int
+        Pixels compared (an even subsample of larger images).
+
+    Returns
+    -------
+    list of str
+        One line per out-of-order pair (only with ``force``; otherwise empty).
+
+    Raises
+    ------
+    InputError
+        Naming the longer exposure's file and the other one of the first pair
+        out of order (and how many pairs are).
+
+    Examples
+    --------
+    >>> scene = np.linspace(1.0, 60.0, 64).reshape(8, 8)
+    >>> z = np.stack([np.clip(scene * k, 0, 255) for k in (1, 2, 4)]).astype(np.uint8)
+    >>> check_brightness_order(z, [0.01, 0.03, 0.09], ["a", "b", "c"])
+    []
+    >>> try:
+    ...     check_brightness_order(z, [0.09, 0.03, 0.01], ["a", "b", "c"])
+    ... except InputError as e:
+    ...     print(e.where)
+    b
+    """
+    z = np.asarray(images)
+    t = np.asarray(exposure_times_s, dtype=np.float64).ravel()
+    p = z.shape[0]
+    if p < 2 or t.size != p or z.dtype.kind not in "ui":
+        return []
+    if z.ndim == 3:
+        z = z[..., None]
+    step = max(1, int(np.ceil(np.sqrt(z.shape[1] * z.shape[2] / max_pixels))))
+    s = z[:, ::step, ::step].reshape(p, -1, z.shape[-1]).astype(np.int64)
+    top = int(s.max())
+    lum = s.sum(axis=2)
+    hi_clip = (s >= 0.98 * top).any(axis=2)
+    # Each frame's dark floor (a black level, a film base, where most pixels of a short
+    # exposure sit): its 5th percentile. Only pixels clearly above the floor in one of the
+    # two frames say which is brighter; at the floor, grain and a scan's offset decide.
+    above = lum - np.percentile(lum, 5, axis=1)[:, None]
+    signal = 0.1 * top * s.shape[2]
+    order = np.argsort(t, kind="stable")
+    bad = []
+    for a, b in zip(order[:-1], order[1:], strict=True):
+        if t[a] == t[b]:
+            continue
+        # clipped in either frame: no order to read (and a registration border, pure
+        # blue in Memorial, is clipped in one channel of the frames it covers)
+        use = (np.maximum(above[a], above[b]) > signal) & ~(hi_clip[a] | hi_clip[b])
+        d = lum[b, use] - lum[a, use]
+        brighter, darker = int(np.sum(d > 0)), int(np.sum(d < 0))
+        if darker - brighter > 3.0 * np.sqrt(max(darker + brighter, 1)):
+            share = darker / max(darker + brighter, 1)
+            bad.append((int(a), int(b), share))
+    if not bad:
+        return []
+    lines = [f"{paths[b]} is given {t[b]:g} s, longer than {t[a]:g} s of {paths[a]}, but it is "
+             f"darker at {100 * s_:.0f} % of the pixels that differ" for a, b, s_ in bad]
+    if force:
+        return [line + " (used as given: --force)" for line in lines]
+    a, b, share = bad[0]
+    more = f" ({len(bad)} pairs out of order)" if len(bad) > 1 else ""
+    raise InputError(paths[b], f"exposure time {t[b]:g} s is longer than {t[a]:g} s of "
+                               f"{paths[a]}, but this image is darker at {100 * share:.0f} % of "
+                               f"the pixels that differ{more}: the times are not in the images' "
+                               "order (give --times in file order, or --force to use them)")

@@ -22,6 +22,7 @@ format      reader / writer                   notes
 ==========  ================================  ======================================
 PNG, TIFF   read_image / write_image           8/16-bit; PNG ``sBIT`` keeps bit depth
 JPEG        read_image, read_exif              EXIF exposure time, f-number, ISO
+(all LDR)   read_image, image_orientation      EXIF Orientation applied when read
 RAW         read_raw                           rawpy, linear 16-bit, levels applied
 OpenEXR     read_exr / write_exr               float32 or half, ZIP, deterministic
 PFM         read_pfm / write_pfm               NaN in memory <-> inf in the file
@@ -325,7 +326,10 @@ def read_image(path) -> np.ndarray:
     ndarray
         ``(H, W)`` or ``(H, W, 3|4)``; ``uint8``/``uint16`` code values for LDR
         and RAW files (RAW: linear 16-bit, see :func:`read_raw`), ``float32``
-        linear values for EXR/PFM/RGBE.
+        linear values for EXR/PFM/RGBE. JPEG, PNG and TIFF come as meant to be
+        seen: their EXIF Orientation applied (:func:`apply_orientation`;
+        :func:`image_orientation` says which), so a portrait phone photo is
+        portrait and every frame of a bracket has one orientation.
 
     Raises
     ------
@@ -357,6 +361,7 @@ def read_image(path) -> np.ndarray:
     _check_header(p, header)
     if header.kind == "JPEG":
         img = _read_jpeg(p, data, header.width * header.height)
+        img = apply_orientation(img, _orientation(data, header.kind, p))
     else:
         if header.kind == "TIFF" and not _tiff_channels_ok(data, p):
             raise InputError(p, "TIFF has more than 4 samples per pixel; read_image reads "
@@ -374,11 +379,101 @@ def read_image(path) -> np.ndarray:
             raise _decoder_failed(p, header.kind, failure, said)
         if img.ndim == 3:
             img = img[..., ::-1] if img.shape[2] == 3 else img[..., [2, 1, 0, 3]]
-        img = np.ascontiguousarray(img)
+        o = _orientation(data, header.kind, p)
+        # OpenCV's TIFF decoder orients the pixels itself, IMREAD_UNCHANGED or not (its
+        # PNG decoder does not); 5-8 swap the sides, which tells whether it did
+        if header.kind == "TIFF" and not (o >= 5 and img.shape[:2] == (header.height, header.width)
+                                          and header.height != header.width):
+            o = 1
+        img = np.ascontiguousarray(apply_orientation(img, o))
     if img.dtype.kind == "f":
         img = img.astype(np.float32, copy=False)
         check_finite(img, p)
     return img
+
+
+# ----------------------------------------------------------- EXIF orientation
+ORIENTATION_TAG = 0x0112
+
+
+def apply_orientation(img: np.ndarray, orientation: int) -> np.ndarray:
+    """The image as it is meant to be seen: EXIF ``Orientation`` (1..8, TIFF 6.0
+    tag 274) applied to an ``(H, W[, C])`` array, as Pillow's ``exif_transpose``
+    does (6: rotate 90° clockwise, 8: 90° counter-clockwise, 2/4: mirror, 3: 180°,
+    5/7: transpose/transverse). Other values leave it as stored.
+
+    Examples
+    --------
+    >>> a = np.arange(6).reshape(2, 3)
+    >>> apply_orientation(a, 6).tolist(), apply_orientation(a, 8).tolist()
+    ([[3, 0], [4, 1], [5, 2]], [[2, 5], [1, 4], [0, 3]])
+    """
+    o = int(orientation)
+    if o == 2:
+        return img[:, ::-1]
+    if o == 3:
+        return img[::-1, ::-1]
+    if o == 4:
+        return img[::-1]
+    if o == 5:
+        return img.swapaxes(0, 1)
+    if o == 6:
+        return np.rot90(img, k=-1)
+    if o == 7:
+        return img.swapaxes(0, 1)[::-1, ::-1]
+    if o == 8:
+        return np.rot90(img, k=1)
+    return img
+
+
+def _exif_block_orientation(block: bytes) -> int:
+    """Orientation from a TIFF-structured EXIF block (PNG ``eXIf``), 1 if absent."""
+    from PIL import Image
+
+    ex = Image.Exif()
+    try:
+        ex.load(block)
+    except Exception:  # a broken block orients nothing; the pixels are still good
+        return 1
+    return int(ex.get(ORIENTATION_TAG, 1) or 1)
+
+
+def _orientation(data: bytes, kind: str, p: Path) -> int:
+    """EXIF Orientation of an image file's bytes (JPEG APP1, TIFF tag 274, PNG
+    ``eXIf``); 1 (as stored) when absent or out of range."""
+    o = 1
+    if kind == "JPEG":
+        import io as _bytesio
+
+        from PIL import Image
+
+        try:
+            with _pil_allows(max_pixels()), Image.open(_bytesio.BytesIO(data)) as im:
+                o = int(im.getexif().get(ORIENTATION_TAG, 1) or 1)
+        except Exception:  # the pixels decoded; a broken EXIF block orients nothing
+            o = 1
+    elif kind == "TIFF":
+        from lumigraph.capture.headers import tiff_pages
+
+        o = tiff_pages(data, p, tags={ORIENTATION_TAG})[0].get(ORIENTATION_TAG, [1])[0]
+    elif kind == "PNG":
+        for name, _pos, body in _png_chunks(data):
+            if name == b"eXIf":
+                o = _exif_block_orientation(body)
+                break
+            if name == b"IDAT":
+                break  # eXIf must precede the image data (PNG 1.5 extensions)
+    return o if 1 <= o <= 8 else 1
+
+
+def image_orientation(path) -> int:
+    """The EXIF Orientation (1..8) that :func:`read_image` applied to ``path``;
+    1 for files without one (RAW: LibRaw applies the camera's own flip)."""
+    p = _existing(path)
+    if p.suffix.lower() not in LDR_EXTS:
+        return 1
+    data = p.read_bytes()
+    return _orientation(data, image_header(data, p).kind, p)
 
 
 def _png_complete(data: bytes) -> bool:
@@ -892,6 +987,8 @@ class Stack:
     times_given : bool
         The times were given to :func:`read_stack` (``--times``), overriding
         EXIF and stack.json: they are the exposures, whatever the apertures.
+    orientations : tuple of int
+        The EXIF Orientation applied to each image when read (1: as stored).
     """
 
     images: np.ndarray
@@ -902,6 +999,7 @@ class Stack:
     info: dict = field(default_factory=dict)
     times_given: bool = False
     bit_depth_source: str | None = None  # how bit_depth was decided (capture.exposure.BitDepth)
+    orientations: tuple[int, ...] = ()  # EXIF Orientation read_image applied to each (1: none)
 
     def __post_init__(self):
         if self.images.ndim != 4:
@@ -1092,7 +1190,8 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
                                  where=sj)
     return Stack(np.stack(imgs), tuple(str(f) for f in files), depth.bits, t,
                  bool(info.get("linear", linear)), info, times_given=times is not None,
-                 bit_depth_source=depth.source)
+                 bit_depth_source=depth.source,
+                 orientations=tuple(image_orientation(f) for f in files))
 
 
 def write_stack_json(folder, images: Sequence[str], **info) -> Path:

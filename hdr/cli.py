@@ -23,6 +23,7 @@ from lumigraph.capture.commandline import (
     warn,
 )
 from lumigraph.capture.errors import InputError
+from lumigraph.capture.exposure import check_brightness_order
 from lumigraph.hdr.methods import ALIGN_METHODS, RESPONSE_METHODS, TONEMAP_METHODS
 
 EPILOG = """\
@@ -70,7 +71,46 @@ def _load(args, *, need_times=True):
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float images are already linear; merge needs code values "
                                          "(integer PNG/TIFF/JPEG/RAW)")
-    return stack, stack.effective_exposure_times_s
+    times = stack.effective_exposure_times_s
+    args.order_warnings = [] if times is None else check_brightness_order(
+        stack.images, times, stack.paths, force=args.force)  # exit 2 naming the files
+    for w in args.order_warnings:
+        warn(w)
+    return stack, times
+
+
+def _reference_time(text: str) -> tuple[str, float]:
+    """``--reference-time FILE=SECONDS``: an image of the bracket and its exact
+    exposure time (a fraction such as 1/250 is fine), > 0 and finite."""
+    from fractions import Fraction
+
+    name, sep, value = text.rpartition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected FILE=SECONDS, got {text!r}")
+    try:
+        x = float(Fraction(value.strip()))
+    except (ValueError, ZeroDivisionError):
+        raise argparse.ArgumentTypeError(f"cannot read {value!r} as seconds") from None
+    if not (x > 0 and x < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected seconds > 0, got {value!r}")
+    return name, x
+
+
+_reference_time.__name__ = "reference time"
+
+
+def _reference_times(args, stack) -> dict[int, float]:
+    """``--reference-time`` as the library's ``{image index: seconds}``, each FILE
+    matched to the bracket's images by path or by file name."""
+    out: dict[int, float] = {}
+    for name, secs in args.reference_time or ():
+        hits = [i for i, p in enumerate(stack.paths)
+                if Path(p) == Path(name) or Path(p).name == Path(name).name]
+        if len(hits) != 1:
+            raise InputError("reference_times", f"{name} is not one of the bracket's images "
+                                                f"({', '.join(Path(p).name for p in stack.paths)})")
+        out[hits[0]] = secs
+    return out
 
 
 def _response(args) -> int:
@@ -108,6 +148,11 @@ def _response(args) -> int:
     if "samples" in m.options:
         opts["samples"] = samples
         opts["rng"] = np.random.default_rng(args.seed)
+    if args.reference_time:
+        if "reference_times" not in inspect.signature(fn).parameters:
+            raise InputError("reference_times", f"only mitsunaga-nayar refines the exposures; "
+                                                f"for {method} give the exact times with --times")
+        opts["reference_times"] = _reference_times(args, stack)
     t0 = time.perf_counter()
     curve = fn(stack.images, times, **opts)
     dt = time.perf_counter() - t0
@@ -117,9 +162,11 @@ def _response(args) -> int:
                      params={"method": method, "times_s": times,
                              "samples": samples if "samples" in m.options else None,
                              "seed": args.seed, "bit_depth": stack.bit_depth,
-                             "bit_depth_source": stack.bit_depth_source},
+                             "bit_depth_source": stack.bit_depth_source,
+                             "exif_orientation": list(stack.orientations)},
                      model={"method": curve.method, "selection": curve.selection},
-                     quality=curve.fit, timings_s={"fit": dt}, warnings=curve.warnings)
+                     quality=curve.fit, timings_s={"fit": dt},
+                     warnings=(*args.order_warnings, *curve.warnings))
     curve.save(out, meta=meta)
     if args.plot:
         plot_curve(curve, args.plot)
@@ -225,8 +272,10 @@ def _merge(args) -> int:
                              "response_method": curve.method,
                              "noise": noise if args.weights == "variance" else None,
                              "bit_depth": stack.bit_depth,
-                             "bit_depth_source": stack.bit_depth_source},
-                     quality=m.stats, timings_s={"merge": dt}, warnings=m.warnings,
+                             "bit_depth_source": stack.bit_depth_source,
+                             "exif_orientation": list(stack.orientations)},
+                     quality=m.stats, timings_s={"merge": dt},
+                     warnings=(*args.order_warnings, *m.warnings),
                      extra={"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
                             "mask": "flags PNG beside the output: 1 clipped everywhere (lower "
                                     "bound), 2 black everywhere (upper bound), 4 ghost"})
@@ -457,8 +506,13 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="pixels sampled (default 600; robertson 5000, for its per-code means)")
     v.add_argument("--seed", type=number(int, lo=0), default=0,
                    help="seed of the pixel sampling")
+    v.add_argument("--reference-time", type=_reference_time, action="append",
+                   metavar="FILE=SECONDS",
+                   help="mitsunaga-nayar: an exposure known exactly (repeatable). The data fix "
+                        "the ratios only up to a common power: one reference fixes the scale, "
+                        "two (e.g. the shortest and longest) also the power")
     _bit_depth_option(v, "images")
-    v.set_defaults(func=_response, arg_flags=TIMES_FLAG)
+    v.set_defaults(func=_response, arg_flags={**TIMES_FLAG, "reference_times": "--reference-time"})
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
     v.add_argument("images", nargs="+", type=input_path,
                    help="bracket images, or a folder with stack.json")

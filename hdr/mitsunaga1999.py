@@ -40,10 +40,25 @@ order at 3 and skips the ratio update):
   weights, step halving keeps ``f > 0`` at the data): the linear solve
   weights residuals by the previous curve, which lets high orders (8–10)
   run away on noisy data; the joint ln fit keeps them usable;
-- the order (≤ 10) chosen by held-out error on a second fold of pixels:
-  the lowest order within one paired standard error (per-pixel differences
-  on the same held-out pixels) of the best (model only what the data need);
-  every candidate recorded.
+- curves that cannot break: every linear solve is a least-squares fit under
+  linear constraints (Lawson & Hanson's LSI by NNLS) that keep ``f``
+  positive and non-decreasing on every observed code, and the joint
+  refinement only takes steps that keep them; a candidate order whose curve
+  is still not monotone over the observed codes is rejected, with the reason;
+- only codes that follow the exposure are used (:func:`responsive_range`: a
+  film base or black level, a shoulder), and pixels whose code does not move
+  over two stops are dropped (:func:`static_pixels`: Memorial's pure-blue
+  registration borders, which the smoothness-seeking sampler favours);
+- one order (≤ 10) for all channels, chosen on 3x the samples by the BIC of
+  the 2-fold held-out error of predicting one exposure's code from another's
+  (code units, where the noise is even; an ln error is ruled by the darkest
+  codes); every candidate recorded. The former rule ("lowest order within one
+  standard error of the best") picked 6/9/6 and 6/9/9 on Memorial with seeds
+  0 and 1 (docs/decisions/hdr-mitsunaga-stable.md);
+- a channel whose own exposure ratios differ from the common ones beyond its
+  sampling noise and far beyond the other channels' is named in ``warnings``;
+- exposures known exactly (``reference_times``) fix the scale, and with two
+  or more the power the data leave free (:func:`align_power`).
 
 Examples
 --------
@@ -99,6 +114,41 @@ def check_order(order: int | str) -> int | str:
     return int(order)
 
 
+def check_reference_times(reference_times, count: int) -> dict[int, float]:
+    """:func:`response_mitsunaga1999`'s ``reference_times``: ``{index: exposure}``,
+    indices ``0..count-1``, exposures finite and > 0.
+
+    Raises
+    ------
+    InputError
+        Naming ``reference_times``.
+
+    Examples
+    --------
+    >>> check_reference_times({1: 0.5}, 3)
+    {1: 0.5}
+    >>> try:
+    ...     check_reference_times({3: 0.5}, 3)
+    ... except InputError as e:
+    ...     print(e)
+    reference_times: image index 3 is not one of the 3 images
+    """
+    out: dict[int, float] = {}
+    for k, v in (reference_times or {}).items():
+        if isinstance(k, bool) or not isinstance(k, int | np.integer) or not 0 <= k < count:
+            raise InputError("reference_times", f"image index {k!r} is not one of the {count} "
+                                                "images")
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            x = math.nan
+        if not (math.isfinite(x) and x > 0):
+            raise InputError("reference_times", f"exposure of image {k} must be a finite number "
+                                                f"> 0, got {v!r}")
+        out[int(k)] = x
+    return out
+
+
 def basis(m: np.ndarray, order: int) -> np.ndarray:
     """Constrained basis ``T_n(2M − 1) − 1``, ``n = 1..order`` (zero at ``M = 1``),
     shape ``m.shape + (order,)``.
@@ -122,16 +172,24 @@ def evaluate(a: np.ndarray, m: np.ndarray) -> np.ndarray:
     return 1.0 + basis(m, a.size) @ a
 
 
+MAX_PAIR_GAP = 3  # exposures compared at most this many steps apart
+
+
 def _pairs(mz: np.ndarray, valid: np.ndarray):
-    """All (pixel, q, q') with both exposures valid, q < q'."""
+    """All (pixel, q, q') with both exposures valid, q < q' <= q + MAX_PAIR_GAP
+    (farther pairs repeat what the chain of nearer ones says, at the cost of
+    pairs that grow as P²: 120 per pixel on Memorial's 16 exposures)."""
     p = mz.shape[1]
     qa, qb = np.triu_indices(p, 1)
+    near = qb - qa <= MAX_PAIR_GAP
+    qa, qb = qa[near], qb[near]
     ok = valid[:, qa] & valid[:, qb]
     pix, k = np.nonzero(ok)
     return pix, qa[k], qb[k]
 
 
-def _fit(chans, ln_e0, orders, iters=10, tol=1e-8, noise_weights=True, refine=True):
+def _fit(chans, ln_e0, orders, ranges, code_max, iters=10, tol=1e-8, noise_weights=True,
+         refine=True):
     """Alternate eq. 6.6 (coefficients, per channel) and the ratio update
     (pooled over channels: the exposures are common to all of them).
 
@@ -146,6 +204,8 @@ def _fit(chans, ln_e0, orders, iters=10, tol=1e-8, noise_weights=True, refine=Tr
         ma, mb = mz[pix, qa], mz[pix, qb]
         data.append([qa, qb, basis(ma, order), basis(mb, order), np.maximum(ma, 1e-3),
                      np.maximum(mb, 1e-3), ma, mb, None])
+    cons = [monotone_constraints(m_range, order, code_max)
+            for m_range, order in zip(ranges, orders, strict=True)]
     ln_e = ln_e0.copy()
     coeffs = [np.zeros(o) for o in orders]
     for _ in range(iters):
@@ -160,20 +220,19 @@ def _fit(chans, ln_e0, orders, iters=10, tol=1e-8, noise_weights=True, refine=Tr
             if var is not None:
                 s = s / np.sqrt(var)
             # QR with column pivoting (LAPACK gelsy): stable, and far cheaper than SVD.
-            a_new = scipy.linalg.lstsq((ba - r[:, None] * bb) * s[:, None], -(1.0 - r) * s,
-                                       lapack_driver="gelsy", check_finite=False)[0]
+            a_new = constrained_lstsq((ba - r[:, None] * bb) * s[:, None], -(1.0 - r) * s,
+                                      *cons[k])
             fa, fb = 1.0 + ba @ a_new, 1.0 + bb @ a_new
             pos = (fa > 1e-6) & (fb > 1e-6)
             d = np.log(fa[pos]) - np.log(fb[pos])
             wts = np.ones(d.size) if var is None else 1.0 / var[pos]
             # Normal equations of the tiny, well-conditioned exposure graph (P x P).
             ia, ib = qa[pos], qb[pos]
-            np.add.at(lap, (ia, ia), wts)
-            np.add.at(lap, (ib, ib), wts)
-            np.add.at(lap, (ia, ib), -wts)
-            np.add.at(lap, (ib, ia), -wts)
-            np.add.at(rhs_e, ia, wts * d)
-            np.add.at(rhs_e, ib, -wts * d)
+            # the graph Laplacian and its right side by bincount (np.add.at is 10x slower)
+            lap += (np.bincount(ia * p + ia, wts, p * p) + np.bincount(ib * p + ib, wts, p * p)
+                    - np.bincount(ia * p + ib, wts, p * p)
+                    - np.bincount(ib * p + ia, wts, p * p)).reshape(p, p)
+            rhs_e += np.bincount(ia, wts * d, p) - np.bincount(ib, wts * d, p)
             change = max(change, float(np.max(np.abs(a_new - coeffs[k]))))
             coeffs[k] = a_new
             if noise_weights:
@@ -192,11 +251,12 @@ def _fit(chans, ln_e0, orders, iters=10, tol=1e-8, noise_weights=True, refine=Tr
         if change < tol:
             break
     if refine:
-        coeffs, ln_e = _gauss_newton(data, coeffs, ln_e, ln_e0, noise_weights=noise_weights)
+        coeffs, ln_e = _gauss_newton(data, coeffs, ln_e, ln_e0, noise_weights=noise_weights,
+                                     cons=cons)
     return coeffs, ln_e
 
 
-def _gauss_newton(data, coeffs, ln_e, ln_e0, iters=8, noise_weights=True):
+def _gauss_newton(data, coeffs, ln_e, ln_e0, iters=8, noise_weights=True, cons=None):
     """Eq. 6.6 fitted directly in ln units: coefficients of every channel and
     the ln exposures together, weighted by the predicted noise of each ln residual,
     started from the alternation's solution.
@@ -214,6 +274,9 @@ def _gauss_newton(data, coeffs, ln_e, ln_e0, iters=8, noise_weights=True):
 
     def state(cs, le):
         parts = []
+        if cons is not None and any(np.any(g @ a < h - 1e-12)
+                                    for a, (g, h) in zip(cs, cons, strict=True)):
+            return None  # a step may not leave the monotone, positive curves
         for (qa, qb, ba, bb, *_rest), a in zip(data, cs, strict=True):
             fa, fb = 1.0 + ba @ a, 1.0 + bb @ a
             if np.any(fa <= 1e-6) or np.any(fb <= 1e-6):
@@ -274,6 +337,81 @@ def _gauss_newton(data, coeffs, ln_e, ln_e0, iters=8, noise_weights=True):
     return coeffs, ln_e
 
 
+# f at the darkest observed code stays above this (f(1) = 1): the table's own
+# floor (table_from_poly), so ln f is finite wherever there are data.
+F_FLOOR = 1e-4
+CONSTRAINT_POINTS = 256
+
+
+def code_grid(m_range: tuple[float, float], code_max: int) -> np.ndarray:
+    """The normalised codes from ``m_range[0]`` to ``m_range[1]``: every code, or
+    :data:`CONSTRAINT_POINTS` evenly spaced ones when there are more."""
+    lo, hi = round(m_range[0] * code_max), round(m_range[1] * code_max)
+    if hi - lo + 1 <= CONSTRAINT_POINTS:
+        return np.arange(lo, hi + 1) / code_max
+    return np.linspace(lo, hi, CONSTRAINT_POINTS) / code_max
+
+
+def monotone_constraints(m_range: tuple[float, float], order: int,
+                         code_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """Linear constraints ``G a >= h`` that make ``f`` positive and non-decreasing
+    over the observed normalised codes ``m_range``: ``f(M_lo) >= F_FLOOR`` and
+    ``f(M_k+1) - f(M_k) >= 0`` on every code between (:func:`code_grid`).
+
+    Examples
+    --------
+    >>> g, h = monotone_constraints((0.1, 0.9), 2, 10)
+    >>> g.shape, float(h[0])
+    ((9, 2), -0.9999)
+    """
+    m = code_grid(m_range, code_max)
+    if m.size < 2:
+        m = np.array([m_range[0], max(m_range[1], m_range[0] + 1.0 / code_max)])
+    b = basis(m, order)
+    g = np.vstack([b[:1], np.diff(b, axis=0)])
+    h = np.concatenate([[F_FLOOR - 1.0], np.zeros(m.size - 1)])
+    return g, h
+
+
+def constrained_lstsq(a: np.ndarray, b: np.ndarray, g: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``min ||a x - b||`` subject to ``g x >= h`` (Lawson & Hanson 1974, ch. 23:
+    the problem reduced to least distance programming and solved by NNLS).
+
+    The unconstrained solution is returned when it already satisfies the
+    constraints; when no ``x`` satisfies them, ``LinAlgError``.
+
+    Examples
+    --------
+    >>> x = constrained_lstsq(np.eye(2), np.array([1.0, -1.0]), np.array([[0.0, 1.0]]),
+    ...                       np.array([0.5]))
+    >>> x.round(6).tolist()
+    [1.0, 0.5]
+    """
+    from scipy.optimize import nnls
+
+    x = scipy.linalg.lstsq(a, b, lapack_driver="gelsy", check_finite=False)[0]
+    if np.all(g @ x >= h - 1e-12):
+        return x
+    q, r = np.linalg.qr(a)
+    c = q.T @ b
+    try:
+        gt = scipy.linalg.solve_triangular(r, g.T, trans="T", check_finite=False).T  # g R^-1
+    except np.linalg.LinAlgError:
+        raise np.linalg.LinAlgError("rank-deficient constrained fit") from None
+    ht = h - gt @ c
+    n = r.shape[0]
+    e = np.vstack([gt.T, ht[None, :]])
+    f = np.zeros(n + 1)
+    f[-1] = 1.0
+    u = nnls(e, f, maxiter=50 * e.shape[1])[0]
+    res = e @ u - f
+    if abs(res[-1]) < 1e-12:
+        raise np.linalg.LinAlgError("the constraints admit no solution")
+    y = -res[:n] / res[-1]
+    x = scipy.linalg.solve_triangular(r, y + c, check_finite=False)
+    return x
+
+
 def _noise_var(a, ma, mb, fa, fb, d, pos, ln_r):
     """Predicted variance of each pair's ln residual: shot noise (∝ 1/f) plus
     code quantisation (∝ (f'/f)²), the two coefficients fitted to the squared
@@ -295,17 +433,26 @@ def _noise_var(a, ma, mb, fa, fb, d, pos, ln_r):
     return np.where(np.isfinite(var), np.maximum(var, floor), floor)
 
 
-def _held_out(a, ln_e, mz, valid):
-    """Each held-out pixel's summed squared ln residual over its pairs, divided by
-    the fold's pair count (so the sum is the fold's mean squared residual)."""
+def _held_out_codes(a, ln_e, mz, valid, m_range):
+    """Each held-out pixel's summed squared error of predicting one exposure's code
+    from another's (``M_q' = f^-1(f(M_q) e_q'/e_q)``, both directions, in codes of
+    the unit range), divided by the fold's count of predictions.
+
+    The code domain is where the noise is roughly even: an ln-domain error is
+    dominated by the darkest codes, where ``ln f`` is steep and no order fits
+    better than another (Memorial's film base: codes 17-19 over ten stops).
+    """
     pix, qa, qb = _pairs(mz, valid)
-    fa, fb = evaluate(a, mz[pix, qa]), evaluate(a, mz[pix, qb])
-    bad = (fa <= 1e-6) | (fb <= 1e-6)
-    r = np.log(np.maximum(fa, 1e-6)) - np.log(np.maximum(fb, 1e-6)) - (ln_e[qa] - ln_e[qb])
-    r = np.where(bad, 1.0, r)  # a curve that goes negative on held-out data is penalised
-    per = np.bincount(pix, weights=r ** 2, minlength=mz.shape[0])
+    grid = np.linspace(m_range[0], m_range[1], 1024)
+    fg = np.maximum.accumulate(np.maximum(evaluate(a, grid), F_FLOOR))
+    fa = np.interp(mz[pix, qa], grid, fg)
+    fb = np.interp(mz[pix, qb], grid, fg)
+    dl = ln_e[qb] - ln_e[qa]
+    rb = np.interp(fa * np.exp(dl), fg, grid) - mz[pix, qb]
+    ra = np.interp(fb * np.exp(-dl), fg, grid) - mz[pix, qa]
+    per = np.bincount(pix, weights=ra ** 2 + rb ** 2, minlength=mz.shape[0])
     cnt = np.bincount(pix, minlength=mz.shape[0])
-    return per[cnt > 0] / max(int(np.sum(cnt)), 1)
+    return per[cnt > 0] / max(2 * int(np.sum(cnt)), 1)
 
 
 def _align_power(ln_e, ln_nominal):
@@ -316,24 +463,204 @@ def _align_power(ln_e, ln_nominal):
     return gam, gam * x + ln_nominal.mean()
 
 
-def table_from_poly(a: np.ndarray, bit_depth: int) -> np.ndarray:
-    """``f(z/z_max)`` over every code, made monotonic and positive: ``(2**bit_depth,)``."""
+def align_power(ln_e: np.ndarray, ln_rough: np.ndarray, *,
+                reference: dict[int, float] | None = None) -> tuple[float, np.ndarray]:
+    """Fix the data's free power and scale: ``γ, γ·ln_e + c``.
+
+    The data determine the ln exposures only up to ``γ·ln_e + c`` (eq. 6.6 is
+    unchanged by ``f → f^γ``, ``e → e^γ``; the radiance scale is free too).
+    Without references both come from the rough times (least squares in log);
+    one reference exposure (``{index: ln seconds}``) is met exactly and the
+    power still comes from the rough times; two or more fix the power and the
+    scale themselves (least squares over them), so rough times no longer matter.
+
+    Examples
+    --------
+    >>> x = np.log([1.0, 2.0, 4.0])
+    >>> gam, le = align_power(0.5 * x, np.log([1.0, 2.2, 3.9]), reference={0: 0.0, 2: np.log(4.0)})
+    >>> round(gam, 6), np.exp(le).round(6).tolist()
+    (2.0, [1.0, 2.0, 4.0])
+    """
+    ref = reference or {}
+    if not ref:
+        return _align_power(ln_e, ln_rough)
+    k = np.array(sorted(ref), dtype=np.int64)
+    y = np.array([ref[i] for i in k])
+    if k.size == 1:
+        x = ln_e - ln_e[k[0]]
+        yy = ln_rough - ln_rough[k[0]]
+        gam = float(np.dot(x, yy) / np.dot(x, x)) if np.dot(x, x) > 0 else 1.0
+        return gam, gam * x + y[0]
+    x = ln_e[k] - ln_e[k].mean()
+    gam = float(np.dot(x, y - y.mean()) / np.dot(x, x)) if np.dot(x, x) > 0 else 1.0
+    return gam, gam * (ln_e - ln_e[k].mean()) + y.mean()
+
+
+def is_monotone(a: np.ndarray, m_range: tuple[float, float], code_max: int) -> bool:
+    """``f`` positive and non-decreasing over the codes of ``m_range`` (:func:`code_grid`).
+
+    Examples
+    --------
+    >>> is_monotone(np.array([0.5]), (0.1, 0.9), 255), is_monotone(np.array([0.0, 0.5]), (0.0, 1.0), 255)
+    (True, False)
+    """
+    f = evaluate(a, code_grid(m_range, code_max))
+    return bool(f[0] > 0 and np.all(np.diff(f) >= -1e-9 * max(abs(float(f[-1])), 1.0)))
+
+
+DISAGREE_LIMIT = 9.0  # (RMS of a channel's ln-exposure difference / its sampling sd)^2: 3 sigma
+
+
+def _channel_disagreement(chans, fold_le, ln_nom, le_joint, n, ranges, code_max):
+    """Per channel: mean over exposures of ``(ln e_channel − ln e_joint)² / σ²``,
+    ``ln e_channel`` the channel's own fit (at order ``n``, same gauge), ``σ²`` its
+    sampling variance from the two half-sample fits (``(le_a − le_b)² / 4``, pooled
+    over exposures). Every channel sees the same exposures, so a channel whose data
+    imply other ratios beyond its noise is not following the shared model."""
+    out = []
+    _, ref_joint = _align_power(le_joint, ln_nom)
+    for ch, (mz, valid) in enumerate(chans):
+        les = fold_le.get((n, ch))
+        if not les or len(les) != 2:
+            out.append((0.0, 0.0))
+            continue
+        try:
+            _, le_c = _fit([(mz, valid)], ln_nom, [n], [ranges[ch]], code_max, refine=False)
+        except np.linalg.LinAlgError:
+            out.append((0.0, 0.0))
+            continue
+        a0 = _align_power(les[0], ln_nom)[1]
+        a1 = _align_power(les[1], ln_nom)[1]
+        var = float(np.mean((a0 - a1) ** 2)) / 4 + 1e-12
+        d = _align_power(le_c, ln_nom)[1] - ref_joint
+        out.append((float(np.mean(d ** 2)) / var, float(np.sqrt(np.mean(d ** 2)))))
+    return out
+
+
+STATIC_STOPS = 2.0  # exposure span over which an unclipped scene point must change code
+STATIC_RANGE = 0.01  # ... by more than this fraction of the code range (2.5 codes at 8 bits)
+
+
+def static_pixels(zs: np.ndarray, t: np.ndarray, clip_margin: float) -> np.ndarray:
+    """Pixels whose code does not move (by more than :data:`STATIC_RANGE` of the
+    range) between their first and last unclipped exposures although these are
+    :data:`STATIC_STOPS` or more stops apart, in any channel: ``(N,)`` bool.
+
+    ``zs``: ``(P, N, C)`` normalised codes, exposures ascending; ``t``: ``(P,)``.
+
+    Examples
+    --------
+    >>> zs = np.array([[[0.1], [0.5]], [[0.3], [0.5]], [[0.9], [0.5]]])
+    >>> static_pixels(zs, np.array([1.0, 3.0, 9.0]), 0.03).tolist()
+    [False, True]
+    """
+    valid = (zs >= clip_margin) & (zs <= 1 - clip_margin)
+    p = zs.shape[0]
+    first = np.argmax(valid, axis=0)
+    last = p - 1 - np.argmax(valid[::-1], axis=0)
+    zf = np.take_along_axis(zs, first[None], 0)[0]
+    zl = np.take_along_axis(zs, last[None], 0)[0]
+    span = np.log2(t[last] / t[first])
+    bad = valid.any(axis=0) & (span >= STATIC_STOPS) & (zl - zf <= STATIC_RANGE)
+    return bad.any(axis=1)
+
+
+def responsive_range(zs: np.ndarray, t: np.ndarray, zmax: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per channel, the codes that follow the exposure: ``(floor, ceiling)``, each
+    ``(C,)`` in normalised codes.
+
+    ``floor`` is the highest code (below the median) at which most pixels do not
+    brighten by 2 codes when the exposure grows 1.5× or more to the next one (a
+    film base, a black level, the toe where noise beats the signal); ``ceiling``
+    the lowest code (above the median) at which most do not darken by 2 codes
+    when it shrinks (saturation, a shoulder). Codes outside carry no ratio
+    information and dominate an ln fit; 0 and 1 when every code responds.
+
+    ``zs``: ``(P, N, C)`` normalised codes, exposures ascending; ``t``: ``(P,)``.
+
+    Examples
+    --------
+    >>> e = np.geomspace(0.01, 1, 200)
+    >>> zs = np.stack([np.clip(np.round(255 * (0.1 + e * k)), 0, 255) / 255
+    ...                for k in (0.25, 0.5, 1.0)])[..., None]
+    >>> lo, hi = responsive_range(zs, np.array([0.25, 0.5, 1.0]), 255)
+    >>> round(float(lo[0]) * 255), round(float(hi[0]) * 255)
+    (27, 255)
+    """
+    p, n, c = zs.shape
+    step = 2.0 / zmax
+    codes = np.round(zs * zmax).astype(np.int64)
+    floor, ceil = np.zeros(c), np.ones(c)
+    adj = np.flatnonzero(t[1:] / t[:-1] >= 1.5)
+    if adj.size == 0:
+        return floor, ceil
+    for ch in range(c):
+        lo_z = codes[adj, :, ch].ravel()  # shorter exposure of each adjacent pair
+        hi_z = codes[adj + 1, :, ch].ravel()
+        d = (hi_z - lo_z) / zmax
+        med = int(np.median(codes[..., ch]))
+        stuck = np.bincount(lo_z, weights=(d < step), minlength=zmax + 1)
+        seen = np.bincount(lo_z, minlength=zmax + 1)
+        bad = (seen >= 20) & (stuck > 0.5 * seen)
+        below = np.flatnonzero(bad[:med])
+        if below.size:
+            floor[ch] = (below[-1] + 1) / zmax
+        stuck = np.bincount(hi_z, weights=(d < step), minlength=zmax + 1)
+        seen = np.bincount(hi_z, minlength=zmax + 1)
+        bad = (seen >= 20) & (stuck > 0.5 * seen)
+        above = np.flatnonzero(bad[med + 1:])
+        if above.size:
+            ceil[ch] = (med + above[0]) / zmax
+    return floor, ceil
+
+
+def table_from_poly(a: np.ndarray, bit_depth: int,
+                    m_range: tuple[float, float] | None = None) -> np.ndarray:
+    """``f(z/z_max)`` over every code, strictly increasing and positive: ``(2**bit_depth,)``.
+
+    Over ``m_range`` (the fitted codes) the polynomial, made monotone where the
+    constraints left a rounding-level dip; outside it, where no data say anything,
+    ``ln f`` continued along a straight line with the slope at that end (at least
+    the fitted range's mean slope / 10): a curve that cannot flatten (codes merged)
+    or jump where the polynomial would wander.
+
+    Examples
+    --------
+    >>> f = table_from_poly(np.array([0.5]), 8, (0.1, 0.9))
+    >>> bool(np.all(np.diff(np.log(f)) > 0)), float(f[-1]) > float(f[128])
+    (True, True)
+    """
     from scipy.optimize import isotonic_regression
 
     zmax = 2 ** bit_depth - 1
     m = np.arange(zmax + 1) / zmax
-    f = np.asarray(isotonic_regression(evaluate(a, m), increasing=True).x)
-    # Below the first clearly positive value, ramp linearly to zero exposure.
-    floor = 1e-4 * f[-1]
-    first = int(np.argmax(f > floor))
-    if first > 0:
-        f[:first] = f[first] * (np.arange(first) + 0.5) / (first + 0.5)
-    return np.maximum(f, 1e-12)
+    if m_range is None:
+        m_range = (0.0, 1.0)
+    lo = max(int(math.ceil(m_range[0] * zmax - 1e-9)), 0)
+    hi = min(int(math.floor(m_range[1] * zmax + 1e-9)), zmax)
+    f = np.asarray(isotonic_regression(np.maximum(evaluate(a, m[lo:hi + 1]), F_FLOOR),
+                                       increasing=True).x)
+    lf = np.log(f)
+    n = lf.size
+    mean_slope = (lf[-1] - lf[0]) / max(n - 1, 1)
+    min_slope = max(mean_slope, 1e-6) / 10
+    # strictly increasing inside: a flat run (an active constraint) gets the minimum slope
+    lf = lf + min_slope * 1e-3 * np.arange(n)
+    lf = np.maximum.accumulate(lf)
+    k = min(max(n // 20, 1), n - 1)
+    s_lo = max((lf[k] - lf[0]) / k, min_slope) if n > 1 else min_slope
+    s_hi = max((lf[-1] - lf[-1 - k]) / k, min_slope) if n > 1 else min_slope
+    out = np.empty(zmax + 1)
+    out[lo:hi + 1] = lf
+    out[:lo] = lf[0] - s_lo * (lo - np.arange(lo))
+    out[hi + 1:] = lf[-1] + s_hi * (np.arange(hi + 1, zmax + 1) - hi)
+    return np.exp(out)
 
 
 def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
                     order: int | str = "auto", samples: int = 600, clip_margin: float = 0.03,
-                    rng: np.random.Generator | None = None) -> ResponseCurve:
+                    rng: np.random.Generator | None = None,
+                    reference_times: dict[int, float] | None = None) -> ResponseCurve:
     """Recover the inverse response as a polynomial and refine the exposure ratios.
 
     Parameters
@@ -344,21 +671,30 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
         exposure); distinct.
     bit_depth : int, optional
     order : int or "auto"
-        Polynomial order ``N`` (1..10); ``"auto"`` chooses by held-out error.
+        Polynomial order ``N`` (1..10), one for every channel; ``"auto"``
+        chooses by the BIC of the held-out code-prediction error, among the
+        candidates whose curves are monotone (see the module docstring).
     samples : int
         Pixels sampled (:func:`hdr.samples.sample_pixels`), at least 2
         (:func:`hdr.samples.check_samples`).
     clip_margin : float
-        Codes within this fraction of either end are masked.
+        Codes within this fraction of either end are masked, and so are
+        codes that do not follow the exposure (:func:`responsive_range`).
     rng : numpy.random.Generator, optional
+    reference_times : dict, optional
+        ``{image index: exact exposure}`` (same units as the times) for
+        exposures known exactly: one fixes the scale of the refined exposures,
+        two or more also the power the data leave free (:func:`align_power`).
 
     Returns
     -------
     ResponseCurve
         ``method="mitsunaga-nayar"``; ``exposure_times_s`` are the refined
         exposures (in the units given); ``fit`` holds the coefficients (shifted
-        Chebyshev), the refined adjacent ratios and the common power γ;
-        ``selection`` the order and each candidate's held-out error.
+        Chebyshev), the refined adjacent ratios and the common power γ, the
+        responsive and monotone code ranges, the static pixels dropped;
+        ``selection`` the order, the rule, each candidate's held-out error
+        (or why it was rejected) and BIC, each channel's disagreement.
     """
     from lumigraph.capture.errors import EstimationError, InputError
 
@@ -369,79 +705,161 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     check_samples(samples)
     order = check_order(order)
     rng = np.random.default_rng(0) if rng is None else rng
+    ref = check_reference_times(reference_times, t.size)
     perm = np.argsort(t)
     z, t = z[perm], t[perm]
     ln_nom = np.log(t)
-    idx = sample_pixels(z, n=samples, bit_depth=bd, rng=rng)
+    inv = np.argsort(perm)
+    ref = {int(inv[k]): math.log(v) for k, v in ref.items()}
     zmax = 2 ** bd - 1
+    # Oversampled, then pixels that are not scene points dropped (a code that does not
+    # move over two stops: a matte, a registration border, a dead pixel; Memorial's
+    # pure-blue borders are smooth, so the sampler favours them), then thinned evenly
+    # along radiance back to `samples`.
+    idx = sample_pixels(z, n=3 * samples, bit_depth=bd, rng=rng)
     zs = z.reshape(p, h * w_, c)[:, idx].astype(np.float64) / zmax  # (P, N, C)
+    keep = ~static_pixels(zs, t, clip_margin)
+    n_static = int(np.sum(~keep))
+    idx, zs = idx[keep], zs[:, keep]
+    floor, ceil = responsive_range(zs, t, zmax)
+    zs_sel = zs  # the order is chosen on every oversampled pixel: 3x the data, less noise
+    if idx.size > samples:
+        pick = np.round(np.linspace(0, idx.size - 1, samples)).astype(np.int64)
+        idx, zs = idx[pick], zs[:, pick]
+    lo = np.maximum(clip_margin, floor)
+    hi = np.minimum(1.0 - clip_margin, ceil)
     # A given order is still compared with the others by held-out error, so an
     # order the data cannot support is reported, not silently used.
     orders = list(range(1, MAX_ORDER + 1))
-    fold = np.arange(idx.size) % 2
+    fold = np.arange(zs_sel.shape[1]) % 2
+    n_pix = max(int(np.ceil(zs_sel.shape[1] / 2)), 2)
     g = np.empty((c, zmax + 1))
     warnings: list[str] = []
-    sel_scores, chosen, chans = {}, [], []
+    chans, ranges, chans_sel = [], [], []
     for ch in range(c):
         mz = zs[..., ch].T  # (N, P)
-        valid = (mz >= clip_margin) & (mz <= 1 - clip_margin)
-        per_pixel = {}
-        for n in orders:
-            parts = []
+        valid = (mz >= lo[ch]) & (mz <= hi[ch])
+        chans.append((mz, valid))
+        mz = zs_sel[..., ch].T
+        valid = (mz >= lo[ch]) & (mz <= hi[ch])
+        chans_sel.append((mz, valid))
+        ranges.append((float(mz[valid].min()), float(mz[valid].max())) if valid.any()
+                      else (0.0, 1.0))
+    # Every candidate order fitted on one half of the pixels and scored on the other
+    # (both ways), per channel, by the error of predicting one exposure's code from
+    # another's; a candidate whose curve is not monotone over the observed codes, or
+    # whose fit fails, is rejected with the reason.
+    mse = np.full((len(orders), c), np.inf)
+    reasons: dict[tuple[int, int], str] = {}
+    fold_le: dict[tuple[int, int], list] = {}
+    bic = np.full(len(orders), np.inf)
+    for i, n in enumerate(orders):
+        # BIC rises past the best order; three orders in a row above it end the search
+        # (a given order is still scored, to be compared with the best)
+        best = int(np.argmin(bic))
+        if i - best > 3 and np.isfinite(bic[best]) and (order == "auto" or n > int(order)):
+            break
+        for ch, ((mz, valid), m_range) in enumerate(zip(chans_sel, ranges, strict=True)):
+            total, les = 0.0, []
             for f in (0, 1):
                 try:
-                    (a,), le = _fit([(mz[fold != f], valid[fold != f])], ln_nom, [n])
-                    parts.append(_held_out(a, le, mz[fold == f], valid[fold == f]) / 2)
-                except np.linalg.LinAlgError:
-                    parts = None
+                    # the alternation alone (no joint ln refinement): 5x cheaper, and
+                    # orders whose linear solve runs away are scored as they are
+                    (a,), le = _fit([(mz[fold != f], valid[fold != f])], ln_nom, [n],
+                                    [m_range], zmax, refine=False)
+                except np.linalg.LinAlgError as e:
+                    reasons[n, ch] = f"fit failed ({e})"
                     break
-            per_pixel[n] = None if parts is None else np.concatenate(parts)
-        fitted = [n for n in orders if per_pixel[n] is not None]
-        if not fitted:
-            raise EstimationError("images", f"channel {ch}: no polynomial order could be fitted")
-        n_best = min(fitted, key=lambda n: float(np.sum(per_pixel[n])))
-
-        # Orders are compared on the same held-out pixels: the standard error of the
-        # per-pixel difference from the best, far smaller than either mean's own.
-        cand = [(n, float(np.sum(per_pixel[n])),
-                 float(np.std(per_pixel[n] - per_pixel[n_best], ddof=1)
-                       * math.sqrt(per_pixel[n].size))) if per_pixel[n] is not None
-                else (n, math.inf, math.inf) for n in orders]
-        best = next(x for x in cand if x[0] == n_best)
-        n_ch = min(x[0] for x in cand if x[1] <= best[1] + x[2])
-        if order != "auto":
-            given = next(x for x in cand if x[0] == int(order))
-            if not given[1] <= best[1] + 2 * given[2]:
-                warnings.append(f"channel {ch}: order {int(order)} does not fit held-out pixels "
-                                f"(error {given[1]:.3g} against {best[1]:.3g} at order {best[0]}): "
-                                "it follows the noise; use --order auto")
-            n_ch = int(order)
-        sel_scores[str(ch)] = [{"order": n, "held_out_mse": e, "se_of_difference_from_best": s}
-                                for n, e, s in cand]
-        chosen.append(n_ch)
-        chans.append((mz, valid))
+                if not is_monotone(a, m_range, zmax):
+                    reasons[n, ch] = ("not monotone over the observed codes "
+                                      f"{round(m_range[0] * zmax)}..{round(m_range[1] * zmax)}")
+                    break
+                total += float(np.sum(_held_out_codes(a, le, mz[fold == f], valid[fold == f],
+                                                      m_range))) / 2
+                les.append(le)
+            else:
+                mse[i, ch] = total
+                fold_le[n, ch] = les
+        with np.errstate(divide="ignore"):
+            bic[i] = float(np.sum(n_pix * np.log(mse[i]))) + c * n * math.log(n_pix)
+    # One order for all channels, by an information criterion on the held-out errors
+    # (BIC: N ln MSE + k ln N per channel, N the held-out pixels): an order must
+    # earn ln N / N relative error per coefficient. The raw "lowest within one standard
+    # error of the best" rule flipped between 6 and 9 with the sampling seed on
+    # Memorial, where the held-out error is flat above order 3-5.
+    ok = np.all(np.isfinite(mse), axis=1)
+    if not ok.any():
+        why = "; ".join(f"order {n} channel {ch}: {r}" for (n, ch), r in sorted(reasons.items()))
+        raise EstimationError("images", "no polynomial order gives a monotone response over the "
+                                        f"observed codes ({why[:300]})")
+    n_auto = orders[int(np.argmin(np.where(ok, bic, np.inf)))]
+    n_use = n_auto
+    if order != "auto":
+        n_use = int(order)
+        i = orders.index(n_use)
+        if not ok[i]:
+            bad = [f"channel {ch}: {reasons[n_use, ch]}" for ch in range(c)
+                   if (n_use, ch) in reasons]
+            warnings.append(f"order {n_use} was rejected on held-out pixels ({bad[0]}); its "
+                            "curve is kept monotone by constraint: use --order auto "
+                            f"(chooses {n_auto})")
+        elif bic[i] > bic[orders.index(n_auto)] + c * math.log(n_pix):
+            warnings.append(f"order {n_use} does not fit held-out pixels as well as order "
+                            f"{n_auto} (BIC {bic[i]:.1f} against {bic[orders.index(n_auto)]:.1f}): "
+                            "use --order auto")
+    chosen = [n_use] * c
     try:
-        coeffs, le = _fit(chans, ln_nom, chosen)
+        coeffs, le = _fit(chans, ln_nom, chosen, ranges, zmax)
     except np.linalg.LinAlgError:
         raise EstimationError("images", "too few pixels seen unclipped in two exposures for "
                                         "Mitsunaga-Nayar") from None
-    gam, ln_e = _align_power(le, ln_nom)
-    if abs(gam - 1.0) > 0.1:
+    gam, ln_e = align_power(le, ln_nom, reference=ref)
+    if not ref and abs(gam - 1.0) > 0.1:
         warnings.append(f"the data's exposure ratios are the given ones to the power {1 / gam:.3f}; "
                         "check the rough times")
+    disagree = _channel_disagreement(chans_sel, fold_le, ln_nom, le, n_use, ranges, zmax)
+    typical = float(np.median([x for _, x in disagree])) if disagree else 0.0
+    for ch, (stat, rms) in enumerate(disagree):
+        # beyond its sampling noise (3 sigma), and an outlier among the channels (three times
+        # the median channel's distance: film dyes and colour filters differ in shape, and an
+        # order that suits all of them leaves each a small bias of its own)
+        if c > 1 and stat > DISAGREE_LIMIT and rms > 3.0 * typical:
+            warnings.append(f"channel {ch}: its own exposure ratios differ from the common ones by "
+                            f"{rms:.3f} ln RMS, {math.sqrt(stat):.1f}x its sampling noise and over "
+                            "3x the median channel's: "
+                            "a clipped, misregistered or non-linear channel; check its curve")
+    monotone = [is_monotone(a, m_range, zmax) for a, m_range in zip(coeffs, ranges, strict=True)]
     for ch in range(c):
+        if not monotone[ch]:  # the constraints make this unreachable; say so if not
+            warnings.append(f"channel {ch}: the joint fit is not monotone over codes "
+                            f"{round(ranges[ch][0] * zmax)}..{round(ranges[ch][1] * zmax)}")
         # Exposures rescaled as e -> e^γ pair with the curve f -> f^γ (eq. 6.6 is unchanged).
-        g[ch] = gam * np.log(table_from_poly(coeffs[ch], bd))
+        g[ch] = gam * np.log(table_from_poly(coeffs[ch], bd, ranges[ch]))
+    sel_scores = {str(ch): [{"order": n, "held_out_code_mse": float(mse[i, ch]),
+                             "rejected": reasons.get((n, ch))}
+                            for i, n in enumerate(orders)] for ch in range(c)}
+    sel_scores["bic"] = [float(x) if np.isfinite(x) else None for x in bic]
     refined = np.empty(p)
     refined[perm] = np.exp(ln_e)
     ratios = np.exp(np.diff(ln_e))  # e_{q+1}/e_q in ascending exposure order
-    sel = {"parameter": "order", "chosen": chosen, "candidates": sel_scores,
+    sel = {"parameter": "order", "chosen": chosen, "candidates": sel_scores, "auto": n_auto,
            "rule": "given" if order != "auto" else
-           "lowest order within one paired standard error of the best held-out error"}
+           "one order for all channels: least BIC (N ln MSE + k ln N, N held-out pixels) of "
+           "the 2-fold held-out code-prediction error; non-monotone candidates rejected",
+           "channel_disagreement_rms_sigma": [math.sqrt(x) for x, _ in disagree],
+           "channel_disagreement_rms_ln": [x for _, x in disagree]}
     fit = {"basis": "shifted Chebyshev T_n(2M-1) - 1, f = 1 + sum a_n (...)",
            "coefficients": [a.tolist() for a in coeffs], "power_gamma": gam,
            "refined_ratios_ascending": ratios.tolist(),
            "given_ratios_ascending": np.exp(np.diff(ln_nom)).tolist(),
-           "samples": int(idx.size)}
+           "samples": int(idx.size), "static_pixels_dropped": n_static,
+           "responsive_codes": [[round(float(a) * zmax), round(float(b) * zmax)]
+                                for a, b in zip(lo, hi, strict=True)],
+           "monotone_over_codes": [[round(a * zmax), round(b * zmax)] if m else None
+                                   for (a, b), m in zip(ranges, monotone, strict=True)],
+           "reference_exposures": {str(int(perm[k])): float(np.exp(v)) for k, v in ref.items()},
+           "power_fixed_by": ("the rough times (least squares in log)" if not ref else
+                              "the rough times through the reference exposure" if len(ref) == 1
+                              else "the reference exposures")}
     return ResponseCurve("mitsunaga-nayar", bd, normalise_g(g), tuple(refined.tolist()), sel,
                          tuple(warnings), fit)

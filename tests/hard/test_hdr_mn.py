@@ -1,0 +1,95 @@
+"""Mitsunaga-Nayar hard cases of issue 13: Memorial with sampling seeds 0-4
+(monotone on every channel, one order on at least 4 of 5), a channel that
+disagrees with the others, exposures known exactly, and the local tone
+mapper's memory per pixel."""
+
+from __future__ import annotations
+
+import tracemalloc
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from lumigraph.capture.bench import shared_data
+from lumigraph.capture.render import render
+from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
+
+MEMORIAL = shared_data("data", "hdr-real", "memorial")
+
+
+@pytest.mark.skipif(not (MEMORIAL / "shutter_times.txt").exists(), reason="no Memorial data")
+def test_memorial_seeds_0_to_4_give_monotone_curves_and_one_order():
+    from lumigraph.capture.io import read_stack
+
+    t = [float(Fraction(x)) for x in (MEMORIAL / "shutter_times.txt").read_text().split()]
+    stack = read_stack(sorted(MEMORIAL.glob("memorial0*.png")), times=t)
+    z = stack.images[:, ::4, ::4]  # 128x192: the same bracket, 16x cheaper to sample
+    orders = []
+    for seed in range(5):
+        r = response_mitsunaga1999(z, t, samples=200, rng=np.random.default_rng(seed))
+        # strictly increasing over every code: no flat run (codes merged), no reversal
+        assert np.all(np.diff(r.g, axis=1) > 0), (seed, r.selection["chosen"])
+        assert len(set(r.selection["chosen"])) == 1
+        orders.append(r.selection["chosen"][0])
+        assert not r.warnings, r.warnings
+    assert max(orders.count(o) for o in orders) >= 4, orders
+
+
+def test_a_channel_whose_exposures_disagree_is_warned():
+    s = render("bracket", size=(96, 72), seed=2)
+    z = np.stack(s.images).copy()
+    t = s.stack["exposure_times_s"]
+    z[2, ..., 2], z[3, ..., 2] = z[3, ..., 2].copy(), z[2, ..., 2].copy()  # blue: two swapped
+    r = response_mitsunaga1999(z, t, samples=300)
+    assert any(w.startswith("channel 2:") for w in r.warnings), r.warnings
+    assert not any(w.startswith(("channel 0:", "channel 1:")) for w in r.warnings), r.warnings
+    clean = response_mitsunaga1999(np.stack(s.images), t, samples=300)
+    assert not any(w.startswith("channel") for w in clean.warnings), clean.warnings
+
+
+def test_two_exposures_known_exactly_fix_the_ratios_one_fixes_the_scale():
+    s = render("bracket", size=(96, 72), seed=3, time_error=0.10, stack_times="nominal")
+    z = np.stack(s.images)
+    rough = np.array(s.stack["exposure_times_s"])
+    exact = np.array(s.gt["exposure_times_exact_s"])
+    last = exact.size - 1
+    true = np.exp(np.diff(np.log(exact)))
+    two = response_mitsunaga1999(z, rough, samples=300,
+                                 reference_times={0: exact[0], last: exact[last]})
+    ratio_err = np.abs(np.array(two.fit["refined_ratios_ascending"]) / true - 1)
+    # a tenth of the injected time error (10 %): the power is no longer taken from it
+    assert ratio_err.max() < 0.01, ratio_err
+    got = np.array(two.exposure_times_s)
+    assert np.allclose(got[[0, last]], exact[[0, last]], rtol=1e-9)
+    one = response_mitsunaga1999(z, rough, samples=300, reference_times={1: exact[1]})
+    assert one.exposure_times_s[1] == pytest.approx(exact[1], rel=1e-9)
+    assert one.fit["power_fixed_by"] == "the rough times through the reference exposure"
+
+
+def test_reference_times_are_checked():
+    from lumigraph.capture.errors import InputError
+
+    z = np.stack(render("bracket", size=(48, 36), seed=0).images)
+    with pytest.raises(InputError, match="reference_times"):
+        response_mitsunaga1999(z, [1, 2, 4, 8, 16, 32, 64][:z.shape[0]],
+                               reference_times={z.shape[0]: 1.0})
+
+
+def test_local_tone_mapping_memory_per_pixel_fits_the_phone_budget():
+    from lumigraph.hdr.reinhard2002 import tonemap
+
+    # Issue 13: <= 0.8 GB for the 12.19 MP iPhone merge, 65.6 bytes a pixel in all. The
+    # float32 RGB radiance and the EXR reader's staging copy take 24 of them: the tone
+    # mapper's own working memory must grow by at most 41 bytes a pixel (the slope between
+    # two sizes, so the fixed cost of its row bands does not count).
+    rng = np.random.default_rng(0)
+    peaks = []
+    for h in (400, 800):
+        x = np.exp(rng.normal(0, 2, (h, 1000, 3))).astype(np.float32)
+        tracemalloc.start()
+        tonemap(x, method="reinhard-local")
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    slope = (peaks[1] - peaks[0]) / (400 * 1000)
+    assert 0 < slope <= 41, slope

@@ -1,0 +1,88 @@
+"""Mitsunaga-Nayar's building blocks (issue 13): the constrained solve, the
+monotone constraints, the responsive code range, static pixels, the power gauge."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from lumigraph.hdr.mitsunaga1999 import (
+    align_power,
+    constrained_lstsq,
+    evaluate,
+    is_monotone,
+    monotone_constraints,
+    responsive_range,
+    static_pixels,
+)
+
+
+def test_constrained_lstsq_is_the_constrained_optimum():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(40, 4))
+    b = rng.normal(size=40)
+    g = rng.normal(size=(6, 4))
+    h = g @ rng.normal(size=4) + 0.5  # feasible, and the free optimum violates some rows
+    x = constrained_lstsq(a, b, g, h)
+    assert np.all(g @ x >= h - 1e-9)
+    ref = minimize(lambda v: np.sum((a @ v - b) ** 2), np.zeros(4), method="SLSQP",
+                   constraints=[{"type": "ineq", "fun": lambda v: g @ v - h}],
+                   options={"ftol": 1e-14, "maxiter": 500}).x
+    cost = np.sum((a @ x - b) ** 2)
+    # SLSQP stops at ftol 1e-14 relative, possibly a hair outside the constraints
+    assert cost <= np.sum((a @ ref - b) ** 2) * (1 + 1e-7)
+
+
+def test_infeasible_constraints_raise_linalgerror():
+    with pytest.raises(np.linalg.LinAlgError):
+        constrained_lstsq(np.eye(2), np.zeros(2), np.array([[1.0, 0.0], [-1.0, 0.0]]),
+                          np.array([1.0, 0.0]))
+
+
+def test_a_curve_solved_under_the_monotone_constraints_is_monotone():
+    # data that pull an order-6 polynomial into a dip: the constrained fit may not dip
+    m = np.linspace(0.05, 0.95, 200)
+    target = m ** 2 + 0.08 * np.sin(12 * m)  # not monotone near m = 0.4 and 0.9
+    from lumigraph.hdr.mitsunaga1999 import basis
+
+    bas = basis(m, 6)
+    g, h = monotone_constraints((0.05, 0.95), 6, 255)
+    free = np.linalg.lstsq(bas, target - 1.0, rcond=None)[0]
+    assert not is_monotone(free, (0.05, 0.95), 255)
+    a = constrained_lstsq(bas, target - 1.0, g, h)
+    assert is_monotone(a, (0.05, 0.95), 255)
+    assert evaluate(a, np.array([0.05]))[0] > 0
+
+
+def test_responsive_range_finds_a_film_base_and_a_shoulder():
+    # codes = 20 + 215 * min(x, 1): a base at 20 that no exposure moves, saturation at 235
+    rng = np.random.default_rng(1)
+    e = np.exp(rng.uniform(-6, 1, 3000))
+    t = 2.0 ** np.arange(6)
+    zs = np.stack([np.round(20 + 215 * np.minimum(e * ti / 8, 1.0)) for ti in t])[..., None] / 255
+    lo, hi = responsive_range(zs, t, 255)
+    # the base (20) and the code just above it move by less than 2 codes per doubling
+    assert 20 / 255 < lo[0] <= 24 / 255
+    assert hi[0] <= 235 / 255
+
+
+def test_static_pixels_are_the_ones_that_ignore_two_stops():
+    t = np.array([1.0, 2.0, 4.0, 8.0])
+    moving = np.array([0.1, 0.2, 0.4, 0.8])
+    still = np.full(4, 0.3)
+    one_stop = np.array([0.3, 0.3, 0.99, 0.99])  # unclipped over one stop only
+    zs = np.stack([moving, still, one_stop], axis=1)[..., None]
+    assert static_pixels(zs, t, 0.03).tolist() == [False, True, False]
+
+
+def test_power_gauge_without_with_one_and_with_two_references():
+    ln_true = np.log([0.01, 0.04, 0.16, 0.64])
+    data = 0.7 * ln_true + 0.3  # what the data fix: ln e up to a power and an offset
+    rough = ln_true + np.array([0.05, -0.08, 0.02, 0.06])
+    _, free = align_power(data, rough)
+    _, one = align_power(data, rough, reference={1: ln_true[1]})
+    _, two = align_power(data, rough, reference={0: ln_true[0], 3: ln_true[3]})
+    assert one[1] == pytest.approx(ln_true[1], abs=1e-12)
+    assert np.allclose(two, ln_true, atol=1e-12)  # two references remove the ambiguity
+    assert not np.allclose(free, ln_true, atol=1e-3)
