@@ -42,6 +42,7 @@ True
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -168,93 +169,141 @@ def solve_sparse_lstsq(a_mat, b: np.ndarray) -> np.ndarray:
     return x
 
 
-def data_weight(z: np.ndarray, bit_depth: int, clip_margin: float) -> np.ndarray:
-    """Weight of each observation in eq. 6.5: the hat ω(z), and zero within
-    ``clip_margin·z_max`` of either end.
+def data_weight(z: np.ndarray, bit_depth: int, clip_margin: float = 0.0) -> np.ndarray:
+    """Row weight of each observation in eq. 6.5: ``√ω(z)`` (the hat), zero
+    at the censored codes 0 and ``z_max`` and within ``clip_margin·z_max``
+    of either end.
 
-    Near 0 and ``z_max`` clipping truncates the noise: a code just below
-    ``z_max`` is more often a pixel whose noise happened to be negative
-    (the others clipped and were discarded), so its mean is biased low, and
-    likewise at the bottom. Through the chain of exposure ratios that bias
-    becomes a ripple in ``g`` of period one exposure step, which the
-    held-out prediction cannot see (the held-out data carry the same bias).
+    The paper weights each row by ω, i.e. trusts an observation in
+    proportion to ω²; near the ends that leaves the curve to the smoothness
+    prior, which cannot follow a toe's curvature (bench ``walls``: +0.13 ln
+    at z = 10). With the row weight √ω (inverse variance ∝ ω) the low and
+    high codes speak for themselves; what noise and clipping do to them
+    there — a code just above 0 is more often a pixel whose noise happened
+    to be positive — is then removed by the bias correction
+    (:func:`_debias`), so no margin is needed (``clip_margin`` 0).
 
     Examples
     --------
-    >>> data_weight(np.array([3, 10, 128, 250]), 8, 0.03).round(2).tolist()
-    [0.0, 0.08, 1.0, 0.0]
+    >>> data_weight(np.array([0, 3, 10, 128, 250, 255]), 8).round(2).tolist()
+    [0.0, 0.15, 0.28, 1.0, 0.2, 0.0]
     """
     zmax = 2 ** bit_depth - 1
     zf = np.asarray(z, dtype=np.float64)
     keep = (zf >= clip_margin * zmax) & (zf <= (1 - clip_margin) * zmax)
-    return np.where(keep, hat_weight(zf, bit_depth), 0.0)
+    return np.where(keep, np.sqrt(hat_weight(zf, bit_depth)), 0.0)
 
 
 class _Reduced:
-    """Eq. 6.5 for one channel with the ``ln E_i`` eliminated, ready for any λ.
+    """Eq. 6.5 for one channel with the ``ln E_i`` eliminated, every λ from
+    one factorisation.
 
     Each ``ln E_i`` touches only its own pixel's rows, so for a given ``g`` its
     optimum is the weighted mean of ``g(Z_ij) − ln Δt_j``; substituting it
-    projects the data rows (built with ``scipy.sparse``) onto a problem in the
-    ``K`` knot values alone. One QR factorisation ``QR`` of those rows (never
-    the normal equations) then serves every λ: the fit is the small
-    least-squares problem ``[R; √λ S; gauge] g = [Qᵀb; 0; 0]``. The solution
-    equals the full sparse system's (:func:`solve_sparse_lstsq` on
+    leaves a quadratic in the ``K`` knot values alone: data ``gᵀHg − 2gᵀh +
+    c₀`` (``H`` assembled with ``np.bincount``: each observation touches two
+    adjacent knots, each pixel one row of ``M`` in ``H = D − Mᵀ S⁻¹ M``) and
+    smoothness ``λ gᵀLg``. One generalised symmetric eigendecomposition
+    ``L V = (H + G + λ_r L) V diag(μ)`` (``G`` the gauge, ``λ_r`` a mid-grid
+    reference so both terms are of like size) diagonalises every λ's system
+    at once: ``g(λ) = V diag(1 / (1 + (λ − λ_r) μ)) Vᵀ h``, and the misfit and
+    roughness of each λ follow from ``μ`` and ``Vᵀh`` in ``O(K)``. The
+    solution equals the full sparse system's (:func:`solve_sparse_lstsq` on
     :func:`_system`; a test checks).
     """
 
-    def __init__(self, z, lnt, w, n_knots, bit_depth):
-        import scipy.sparse as sp
+    LAM_REF = 1e-7
 
+    def __init__(self, z, lnt, w, n_knots, bit_depth):
         use = np.count_nonzero(w > 0, axis=1) >= 2
         if np.count_nonzero(use) < 2:
             raise np.linalg.LinAlgError("too few pixels seen in two exposures")
         self.z, self.w = z[use], w[use]
         self.lnt, self.k, self.bd = lnt, n_knots, bit_depth
+        self.use = use
+        kk = n_knots
         ii, jj = np.nonzero(self.w > 0)
         m = ii.size
-        ws = self.w[ii, jj] / math.sqrt(m)
-        k0, a = knot_basis(self.z[ii, jj], n_knots, bit_depth)
-        r = np.arange(m)
-        wb = sp.csr_matrix((np.concatenate([ws * (1 - a), ws * a]),
-                            (np.concatenate([r, r]), np.concatenate([k0, k0 + 1]))),
-                           shape=(m, n_knots))
+        self.m, self.ii = m, ii
+        w2 = self.w[ii, jj] ** 2 / m  # squared row weights (data term = mean)
+        k0, a = knot_basis(self.z[ii, jj], kk, bit_depth)
+        y = lnt[jj]
+        b0, b1 = w2 * (1 - a), w2 * a
+        d = (np.bincount(k0 * kk + k0, b0 * (1 - a), kk * kk)
+             + np.bincount(k0 * kk + k0 + 1, b0 * a, kk * kk)
+             + np.bincount((k0 + 1) * kk + k0 + 1, b1 * a, kk * kk)).reshape(kk, kk)
+        d = d + np.triu(d, 1).T
+        import scipy.sparse as sp
+
         n_px = self.z.shape[0]
-        e = sp.csr_matrix((ws, (ii, r)), shape=(n_px, m))  # pixel <- its weighted rows
-        s_i = np.asarray(e.multiply(e).sum(axis=1)).ravel()
-        # Rows minus their pixel's weighted mean: the projection that eliminates ln E_i.
-        mean_b = sp.diags(1.0 / s_i) @ (e @ wb)
-        a_red = (wb - sp.diags(ws) @ mean_b[ii]).toarray()
-        b = ws * lnt[jj]
-        b_red = b - ws * ((e @ b) / s_i)[ii]
-        q, self.q_r = np.linalg.qr(a_red, mode="reduced")
-        self.qtb = q.T @ b_red
-        self.rss0 = max(float(b_red @ b_red - self.qtb @ self.qtb), 0.0)
-        self.ii, self.jj, self.ws, self.e, self.s_i, self.wb, self.b = ii, jj, ws, e, s_i, wb, b
-        h = 1.0 / (n_knots - 1)
-        kk = np.arange(1, n_knots - 1)
-        wk = _smooth_weights(n_knots, bit_depth)
-        d2 = np.zeros((kk.size, n_knots))
-        d2[kk - 1, kk - 1], d2[kk - 1, kk], d2[kk - 1, kk + 1] = wk, -2 * wk, wk
-        self.d2 = d2 / h ** 2 * math.sqrt(h)  # ||d2 g||² = ∫ ω² g''² du
-        gauge = np.zeros((1, n_knots))
-        gauge[0, n_knots // 2] = 1.0
-        self.gauge = gauge
+        # M: pixel i's weighted knot loads (sparse: at most 2P knots a pixel).
+        mm = sp.csr_matrix((np.concatenate([b0, b1]), (np.concatenate([ii, ii]),
+                                                       np.concatenate([k0, k0 + 1]))),
+                           shape=(n_px, kk))
+        s_i = np.bincount(ii, w2, n_px)
+        q = np.bincount(ii, w2 * y, n_px)
+        ms = sp.diags(1.0 / s_i) @ mm
+        self.h_mat = d - (mm.T @ ms).toarray()
+        self.h_vec = np.bincount(k0, b0 * y, kk) + np.bincount(k0 + 1, b1 * y, kk) - ms.T @ q
+        self.c0 = float(np.sum(w2 * y * y) - np.sum(q * q / s_i))
+        self.mm, self.s_i, self.q = mm, s_i, q
+        self.l_mat = _smoothness_matrix(kk, bit_depth)
+        self.a0 = self.h_mat.copy()
+        self.a0[kk // 2, kk // 2] += 1.0  # gauge: g at the middle knot is 0
+        self._eig = None
+
+    def _decompose(self):
+        import scipy.linalg
+
+        if self._eig is None:
+            mu, v = scipy.linalg.eigh(self.l_mat, self.a0 + self.LAM_REF * self.l_mat,
+                                      driver="gvd", check_finite=False)
+            self._eig = (np.maximum(mu, 0.0), v, v.T @ self.h_vec)
+        return self._eig
+
+    def curve(self, grid):
+        """``(ρ, η)`` for every λ of ``grid``: mean squared weighted residual and
+        roughness, from the one eigendecomposition."""
+        mu, _, c = self._decompose()
+        lam = np.asarray(grid, dtype=np.float64)[:, None]
+        den = 1.0 + (lam - self.LAM_REF) * mu
+        if np.any(den <= 0):
+            raise np.linalg.LinAlgError("singular system")
+        y = c / den
+        eta = np.sum(mu * y * y, axis=1)
+        rho = np.sum((1.0 - self.LAM_REF * mu) * y * y, axis=1) - 2 * np.sum(c * y, axis=1) + self.c0
+        return np.maximum(rho, 1e-300), eta
 
     def fit(self, lam):
         """``(g at the knots, ln E per used pixel, data misfit ρ, roughness η)``."""
         import scipy.linalg
 
-        mat = np.vstack([self.q_r, math.sqrt(lam) * self.d2, self.gauge])
-        rhs = np.concatenate([self.qtb, np.zeros(self.d2.shape[0] + 1)])
-        # QR with column pivoting (LAPACK gelsy): several times cheaper than the SVD.
-        gk = scipy.linalg.lstsq(mat, rhs, lapack_driver="gelsy", check_finite=False)[0]
+        try:
+            cf = scipy.linalg.cho_factor(self.a0 + lam * self.l_mat, check_finite=False)
+        except np.linalg.LinAlgError:
+            raise np.linalg.LinAlgError("singular system") from None
+        gk = scipy.linalg.cho_solve(cf, self.h_vec, check_finite=False)
         if not np.all(np.isfinite(gk)):
             raise np.linalg.LinAlgError("singular system")
-        rho = float(np.sum((self.q_r @ gk - self.qtb) ** 2)) + self.rss0
-        eta = float(np.sum((self.d2 @ gk) ** 2))
-        lne = (self.e @ (self.wb @ gk - self.b)) / self.s_i
+        rho = max(float(gk @ self.h_mat @ gk - 2 * gk @ self.h_vec + self.c0), 1e-300)
+        eta = float(gk @ self.l_mat @ gk)
+        lne = (self.mm @ gk - self.q) / self.s_i
         return gk, lne, rho, eta
+
+
+@functools.lru_cache(maxsize=8)
+def _smoothness_matrix(n_knots, bit_depth):
+    """``Dᵀ D`` of the weighted second differences, ``||D g||² = ∫ ω² g''² du``
+    (the same for every fit of a bit depth, so built once). Read-only."""
+    h = 1.0 / (n_knots - 1)
+    ki = np.arange(1, n_knots - 1)
+    wk = _smooth_weights(n_knots, bit_depth)
+    d2 = np.zeros((ki.size, n_knots))
+    d2[ki - 1, ki - 1], d2[ki - 1, ki], d2[ki - 1, ki + 1] = wk, -2 * wk, wk
+    d2 *= math.sqrt(h) / h ** 2
+    out = d2.T @ d2
+    out.setflags(write=False)
+    return out
 
 
 def _fit_channel_sparse(z, lnt, w, n_knots, bit_depth, lam):
@@ -304,13 +353,12 @@ def _l_curve(red: _Reduced, grid):
     Returns ``(λ, candidates)``: every candidate's ``ln ρ``, ``ln η`` and
     curvature.
     """
-    rows = []
-    for lam in grid:
-        try:
-            _, _, rho, eta = red.fit(lam)
-        except np.linalg.LinAlgError:
-            continue
-        rows.append((lam, math.log(max(rho, 1e-300)), math.log(max(eta, 1e-300))))
+    try:
+        rho, eta = red.curve(grid)
+        rows = [(float(lam), math.log(r), math.log(max(e, 1e-300)))
+                for lam, r, e in zip(grid, rho, eta, strict=True)]
+    except np.linalg.LinAlgError:
+        rows = []
     if not rows:
         from lumigraph.capture.errors import EstimationError
 
@@ -346,10 +394,9 @@ def _discrepancy(red: _Reduced, cand, lam_corner, lnt, w):
     and kept.
     """
     gk, lne, _, _ = red.fit(lam_corner)
-    ok = w > 0
-    ok = ok[np.count_nonzero(ok, axis=1) >= 2]
-    resid = (_g_at(gk, red.z, red.k, red.bd) - lne[:, None] - lnt[None]) * ok
-    if np.sqrt((resid ** 2).sum() / max(ok.sum(), 1)) <= 0.1:
+    wu = red.w  # the used pixels' row weights: the ends count as little as in the fit
+    resid = (_g_at(gk, red.z, red.k, red.bd) - lne[:, None] - lnt[None]) * wu
+    if np.sqrt((resid ** 2).sum() / max(float((wu ** 2).sum()), 1e-300)) <= 0.1:
         return lam_corner
     m, n_px = red.ii.size, red.z.shape[0]
     dof = m - n_px - red.k
@@ -363,6 +410,101 @@ def _discrepancy(red: _Reduced, cand, lam_corner, lnt, w):
     return float(lam)
 
 
+def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth):
+    """Sensor noise of the bracket, from a fit's own residuals.
+
+    Model (in the fit's relative exposure units ``X = exp g``): an
+    observation's exposure scatters with variance ``a X + b`` (shot noise
+    ``a``, read noise ``b``) before quantisation, which adds
+    ``(dX/dz)² / 12``. Each weighted observation gives ``(exp g(Z_ij) −
+    E_i Δt_j)²``; per bin of ``X`` (log-spaced) the median of those, divided
+    by the χ²₁ median 0.455, is a robust variance (misregistered or moving
+    pixels do not inflate it), from which the quantisation term is removed;
+    ``a, b >= 0`` follow by non-negative least squares weighted by the
+    inverse variance.
+
+    Returns ``(a, b)``.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> k = np.arange(256.0); gk = np.log(np.maximum(k, 0.5) / 255)
+    >>> x = np.exp(rng.uniform(-5, -0.2, 4000)); lnt = np.zeros(1)
+    >>> z = np.clip(np.round(255 * (x + rng.normal(0, np.sqrt(1e-4 * x + 1e-6)))), 0, 255)
+    >>> a, b = estimate_noise(gk, np.log(x), z[:, None].astype(int), np.ones((4000, 1)), lnt, 256, 8)
+    >>> bool(0.5e-4 < a < 2e-4)
+    True
+    """
+    from scipy.optimize import nnls
+
+    ii, jj = np.nonzero(w > 0)
+    if ii.size < 20:
+        return 0.0, 0.0
+    zz = z[ii, jj]
+    x = np.exp(lne[ii] + lnt[jj])
+    xh = np.exp(_g_at(gk, zz, n_knots, bit_depth))
+    step = 1.0 / ((n_knots - 1) / (2 ** bit_depth - 1))  # codes per knot cell
+    k0, _ = knot_basis(zz, n_knots, bit_depth)
+    ex = np.exp(gk)
+    quant = ((ex[k0 + 1] - ex[k0]) / step) ** 2 / 12.0
+    # The fit's own error at a code (before the bias correction, largest at the
+    # ends) is common to every observation of that code: remove it, keeping the
+    # scatter, which is the noise.
+    e = np.log(xh) - np.log(x)
+    kc = np.rint(zz * (n_knots - 1) / (2 ** bit_depth - 1)).astype(np.int64)
+    cnt = np.bincount(kc, minlength=n_knots)
+    mean_e = np.bincount(kc, e, n_knots) / np.maximum(cnt, 1)
+    r2 = (x * (e - mean_e[kc])) ** 2 * (cnt[kc] / np.maximum(cnt[kc] - 1, 1))
+    nb = int(min(12, max(4, ii.size // 50)))
+    edges = np.quantile(np.log(x), np.linspace(0, 1, nb + 1))
+    b = np.clip(np.searchsorted(edges, np.log(x), side="right") - 1, 0, nb - 1)
+    rows, rhs = [], []
+    trio = np.stack([r2, quant, x])
+    for k in range(nb):
+        sel = b == k
+        if np.count_nonzero(sel) < 10:
+            continue
+        m_r2, m_q, xm = np.median(trio[:, sel], axis=1)
+        v = m_r2 / 0.455 - m_q
+        sd = max(v, m_q, 1e-30)
+        rows.append([xm / sd, 1.0 / sd])
+        rhs.append(max(v, 0.0) / sd)
+    if len(rows) < 2:
+        return 0.0, 0.0
+    coef = nnls(np.array(rows), np.array(rhs))[0]
+    return float(coef[0]), float(coef[1])
+
+
+def _debias(gk, lne, zc, wfun, lnt, noise, lam, n_knots, bit_depth, rng, draws):
+    """Parametric-bootstrap bias of the fit at ``lam``: render the bracket
+    the fit describes (exposures ``E_i Δt_j`` of the used pixels, the noise
+    ``a X + b`` before the response, the response ``exp g`` quantised and
+    clipped at 0 and ``z_max`` exactly as a camera does), fit it the same
+    way, and return the mean difference of the refits from ``gk`` (the
+    estimator's bias at the fitted curve, ``draws`` refits averaged).
+
+    Near the ends of the code range this bias is what the noise and the
+    clipping do to eq. 6.5 (the code a dark exposure gives is not ``f`` of
+    its mean: shot and read noise, the rounding and the floor at 0 shift
+    it); subtracting it is the first-order bias-corrected estimator.
+    """
+    a, b = noise
+    zmax = 2 ** bit_depth - 1
+    gm = _monotone(gk, np.ones_like(gk))
+    gc = _g_at(gm, np.arange(zmax + 1), n_knots, bit_depth)
+    edges = np.exp(0.5 * (gc[1:] + gc[:-1]))  # X where the code steps up
+    x = np.exp(lne[:, None] + lnt[None])
+    sd = np.sqrt(np.maximum(a * x + b, 0.0))
+    # The draws stacked as more pixels: one system whose solution is the refit of
+    # all draws at once (the same as averaging single-draw refits to first order,
+    # at a fraction of the cost).
+    xn = np.tile(x, (draws, 1)) + np.tile(sd, (draws, 1)) * rng.standard_normal(
+        (draws * x.shape[0], x.shape[1]))
+    zs = np.searchsorted(edges, xn).astype(np.int64)
+    red = _Reduced(zs, lnt, wfun(zs), n_knots, bit_depth)
+    return red.fit(lam)[0] - gk
+
+
 def _monotone(gk, counts):
     from scipy.optimize import isotonic_regression
 
@@ -372,7 +514,8 @@ def _monotone(gk, counts):
 
 def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
             smoothness: float | str = "auto", samples: int = 600, knots: int | None = None,
-            clip_margin: float = 0.03, rng: np.random.Generator | None = None) -> ResponseCurve:
+            clip_margin: float = 0.0, noise: tuple[float, float] | None = None,
+            bias_draws: int = 4, rng: np.random.Generator | None = None) -> ResponseCurve:
     """Recover ``g = ln f⁻¹`` per channel from a bracket (eq. 6.5).
 
     Parameters
@@ -442,6 +585,8 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     g_out = np.empty((c, 2 ** bd))
     scores: dict[str, list] = {}
     chosen, fit_rms, monotone_fix, linked_px = [], [], [], []
+    robust_rms, noise_ab, bias_max, rel_noise = [], [], [], []
+    noise_src = ""
     all_codes = np.arange(2 ** bd)
     for ch in range(c):
         zc = zs[..., ch].T.astype(np.int64)  # (N, P)
@@ -473,6 +618,24 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
                                             "(too few distinct codes; use a larger λ)") from None
         resid = (_g_at(gk, zc, n_knots, bd) - lne[:, None] - lnt[None]) * (wc > 0)
         fit_rms.append(float(np.sqrt((resid ** 2).sum() / max((wc > 0).sum(), 1))))
+        robust_rms.append(float(1.4826 * np.median(np.abs(resid[wc > 0]))))
+        if noise is None:
+            nz = estimate_noise(gk, lne, zc, wc, lnt, n_knots, bd)
+            noise_src = "estimated from the bracket (robust residual variance a X + b)"
+        else:
+            xs = math.exp(float(gk[-1]))  # the top code: the full well, in the fit's units
+            nz = (xs / noise[0], (xs * noise[1] / noise[0]) ** 2)
+            noise_src = "given (full_well_e, read_noise_e)"
+        noise_ab.append(nz)
+        if bias_draws > 0:
+            try:
+                bias = _debias(gk, lne, zc, lambda zz: data_weight(zz, bd, clip_margin), lnt,
+                               nz, lam_ch, n_knots, bd, rng, bias_draws)
+                bias_max.append(float(np.max(np.abs(bias))))
+                gk = gk - bias
+            except np.linalg.LinAlgError:
+                warnings.append(f"channel {ch}: the bias correction's refit was singular; the "
+                                "curve is not bias-corrected")
         # Only pixels seen well exposed in two exposures link codes to each other;
         # where few knots are linked, the smoothness prior draws the curve.
         lo, hi = int(0.05 * (n_knots - 1)), int(0.95 * (n_knots - 1))
@@ -484,10 +647,14 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
             warnings.append(f"channel {ch}: only {zc.shape[0]} pixels are well exposed in two "
                             f"exposures, covering {100 * coverage:.0f} % of the code range: the "
                             "curve is poorly constrained (exposures too far apart or too few)")
-        if fit_rms[-1] > 0.1:
-            warnings.append(f"channel {ch}: heavy noise ({fit_rms[-1]:.2f} ln units per "
-                            "observation): expect response errors of several percent; average "
-                            "frames or add exposures")
+        # Heavy noise: judged from the noise model at mid-range (robust: film grain,
+        # misregistered edges and moving pixels in a few observations do not count).
+        xm = math.exp(float(_g_at(gk, np.array([2 ** (bd - 1)]), n_knots, bd)[0]))
+        rel_noise.append(math.sqrt(max(nz[0] * xm + nz[1], 0.0)) / xm)
+        if rel_noise[-1] > 0.1:
+            warnings.append(f"channel {ch}: heavy noise ({rel_noise[-1]:.2f} relative at "
+                            "mid-range, estimated from the bracket): expect response errors "
+                            "of several percent; average frames or add exposures")
         k0, _ = knot_basis(zc[wc > 0], n_knots, bd)
         counts = np.bincount(k0, minlength=n_knots).astype(np.float64)
         gm = _monotone(gk, counts)
@@ -503,7 +670,12 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
            ("L-curve corner: largest curvature of (ln data misfit, ln roughness) over λ; "
             "under heavy noise the largest λ within the discrepancy bound"),
            "candidates": scores, "knots": n_knots}
-    fit = {"samples": int(idx.size), "residual_rms_ln": fit_rms, "linked_pixels": linked_px,
-           "monotone_max_change_ln": monotone_fix}
+    fit = {"samples": int(idx.size), "residual_rms_ln": fit_rms,
+           "residual_robust_rms_ln": robust_rms, "linked_pixels": linked_px,
+           "monotone_max_change_ln": monotone_fix,
+           "noise": {"model": "Var X = a X + b (X = exp g, relative exposure) + quantisation",
+                     "a_b": [list(v) for v in noise_ab], "source": noise_src,
+                     "relative_at_mid": rel_noise},
+           "bias_correction": {"draws": int(bias_draws), "max_abs_ln": bias_max}}
     times = tuple(float(x) for x in np.asarray(exposure_times_s, dtype=np.float64))
     return ResponseCurve("debevec", bd, normalise_g(g_out), times, sel, tuple(warnings), fit)
