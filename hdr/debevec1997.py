@@ -410,18 +410,70 @@ def _discrepancy(red: _Reduced, cand, lam_corner, lnt, w):
     return float(lam)
 
 
-def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth):
+def _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth, edges=None):
+    """Per bin of ``ln X`` (log-spaced quantiles of the observations unless
+    ``edges`` given): robust residual variance (median of the squared
+    residuals over the χ²₁ median 0.455), median quantisation variance
+    ``(dX/dz)²/12``, median ``X`` and count. The fit's own error at a code
+    (largest at the ends before the bias correction) is common to every
+    observation of that code and is removed first, keeping the scatter."""
+    ii, jj = np.nonzero(w > 0)
+    zz = z[ii, jj]
+    x = np.exp(lne[ii] + lnt[jj])
+    lx = np.log(x)
+    e = _g_at(gk, zz, n_knots, bit_depth) - lx
+    kc = np.rint(zz * (n_knots - 1) / (2 ** bit_depth - 1)).astype(np.int64)
+    cnt = np.bincount(kc, minlength=n_knots)
+    mean_e = np.bincount(kc, e, n_knots) / np.maximum(cnt, 1)
+    r2 = (x * (e - mean_e[kc])) ** 2 * (cnt[kc] / np.maximum(cnt[kc] - 1, 1))
+    step = (2 ** bit_depth - 1) / (n_knots - 1)  # codes per knot cell
+    k0, _ = knot_basis(zz, n_knots, bit_depth)
+    ex = np.exp(gk)
+    quant = ((ex[k0 + 1] - ex[k0]) / step) ** 2 / 12.0
+    if edges is None:
+        nb = int(min(12, max(4, ii.size // 50)))
+        edges = np.quantile(lx, np.linspace(0, 1, nb + 1))
+    nb = edges.size - 1
+    b = np.clip(np.searchsorted(edges, lx, side="right") - 1, 0, nb - 1)
+    out = np.full((4, nb), np.nan)
+    trio = np.stack([r2, quant, x])
+    for k in range(nb):
+        sel = b == k
+        out[3, k] = np.count_nonzero(sel)
+        if out[3, k] >= 10:
+            out[:3, k] = np.median(trio[:, sel], axis=1)
+    out[0] /= 0.455
+    return out, edges
+
+
+def _fit_ab(var, quant, xm):
+    """``a, b >= 0`` of ``var − quant ≈ a X + b``, each bin relative (NNLS)."""
+    from scipy.optimize import nnls
+
+    ok = np.isfinite(var) & np.isfinite(xm)
+    if np.count_nonzero(ok) < 2:
+        return 0.0, 0.0
+    v, q, x = var[ok] - quant[ok], quant[ok], xm[ok]
+    sd = np.maximum(np.maximum(v, q), 1e-30)
+    coef = nnls(np.stack([x / sd, 1.0 / sd], axis=1), np.maximum(v, 0.0) / sd)[0]
+    return float(coef[0]), float(coef[1])
+
+
+def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth, *, wfun=None, rng=None, rounds=4):
     """Sensor noise of the bracket, from a fit's own residuals.
 
     Model (in the fit's relative exposure units ``X = exp g``): an
     observation's exposure scatters with variance ``a X + b`` (shot noise
-    ``a``, read noise ``b``) before quantisation, which adds
-    ``(dX/dz)² / 12``. Each weighted observation gives ``(exp g(Z_ij) −
-    E_i Δt_j)²``; per bin of ``X`` (log-spaced) the median of those, divided
-    by the χ²₁ median 0.455, is a robust variance (misregistered or moving
-    pixels do not inflate it), from which the quantisation term is removed;
-    ``a, b >= 0`` follow by non-negative least squares weighted by the
-    inverse variance.
+    ``a``, read noise ``b``) before quantisation, which adds ``(dX/dz)²/12``.
+    The residuals' robust variance per bin of ``X`` (:func:`_noise_bins`)
+    gives a first ``a, b`` (non-negative least squares). That statistic is
+    not the noise variance where the noise meets the floor at code 0 or the
+    top code, or where a pixel has few exposures (its ``ln E`` follows its
+    own noise): so, with ``wfun`` (the fit's weight function) and ``rng``,
+    the bracket the fit describes is rendered at the current ``a, b``, the
+    same statistic taken on it, and each bin's ratio of statistic to true
+    variance divides the observed one before ``a, b`` are refitted
+    (``rounds`` times; indirect inference).
 
     Returns ``(a, b)``.
 
@@ -435,44 +487,36 @@ def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth):
     >>> bool(0.5e-4 < a < 2e-4)
     True
     """
-    from scipy.optimize import nnls
-
-    ii, jj = np.nonzero(w > 0)
-    if ii.size < 20:
+    if np.count_nonzero(w > 0) < 20:
         return 0.0, 0.0
-    zz = z[ii, jj]
-    x = np.exp(lne[ii] + lnt[jj])
-    xh = np.exp(_g_at(gk, zz, n_knots, bit_depth))
-    step = 1.0 / ((n_knots - 1) / (2 ** bit_depth - 1))  # codes per knot cell
-    k0, _ = knot_basis(zz, n_knots, bit_depth)
-    ex = np.exp(gk)
-    quant = ((ex[k0 + 1] - ex[k0]) / step) ** 2 / 12.0
-    # The fit's own error at a code (before the bias correction, largest at the
-    # ends) is common to every observation of that code: remove it, keeping the
-    # scatter, which is the noise.
-    e = np.log(xh) - np.log(x)
-    kc = np.rint(zz * (n_knots - 1) / (2 ** bit_depth - 1)).astype(np.int64)
-    cnt = np.bincount(kc, minlength=n_knots)
-    mean_e = np.bincount(kc, e, n_knots) / np.maximum(cnt, 1)
-    r2 = (x * (e - mean_e[kc])) ** 2 * (cnt[kc] / np.maximum(cnt[kc] - 1, 1))
-    nb = int(min(12, max(4, ii.size // 50)))
-    edges = np.quantile(np.log(x), np.linspace(0, 1, nb + 1))
-    b = np.clip(np.searchsorted(edges, np.log(x), side="right") - 1, 0, nb - 1)
-    rows, rhs = [], []
-    trio = np.stack([r2, quant, x])
-    for k in range(nb):
-        sel = b == k
-        if np.count_nonzero(sel) < 10:
-            continue
-        m_r2, m_q, xm = np.median(trio[:, sel], axis=1)
-        v = m_r2 / 0.455 - m_q
-        sd = max(v, m_q, 1e-30)
-        rows.append([xm / sd, 1.0 / sd])
-        rhs.append(max(v, 0.0) / sd)
-    if len(rows) < 2:
-        return 0.0, 0.0
-    coef = nnls(np.array(rows), np.array(rhs))[0]
-    return float(coef[0]), float(coef[1])
+    obs, edges = _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth)
+    a, b = _fit_ab(obs[0], obs[1], obs[2])
+    if wfun is None or rng is None or rounds <= 0 or z.shape[1] < 2:
+        return a, b
+    zmax = 2 ** bit_depth - 1
+    gm = _monotone(gk, np.ones_like(gk))
+    gc = _g_at(gm, np.arange(zmax + 1), n_knots, bit_depth)
+    cut = np.exp(0.5 * (gc[1:] + gc[:-1]))
+    x = np.exp(lne[:, None] + lnt[None])
+    for _ in range(rounds):
+        zs = np.searchsorted(cut, x + np.sqrt(np.maximum(a * x + b, 0.0))
+                             * rng.standard_normal(x.shape)).astype(np.int64)
+        ws = wfun(zs)
+        w2 = ws ** 2
+        keep = np.count_nonzero(ws > 0, axis=1) >= 2
+        if np.count_nonzero(keep) < 10:
+            break
+        lne_s = (np.sum(w2 * (gc[zs] - lnt[None]), axis=1) / np.maximum(w2.sum(axis=1), 1e-300))
+        sim, _ = _noise_bins(gk, lne_s[keep], zs[keep], ws[keep], lnt, n_knots, bit_depth,
+                             edges)
+        true = a * sim[2] + b + sim[1]
+        ratio = sim[0] / np.maximum(true, 1e-300)
+        ok = np.isfinite(ratio) & (ratio > 0.05)
+        if np.count_nonzero(ok) < 2:
+            break
+        corr = np.where(ok, obs[0] / np.where(ok, ratio, 1.0), np.nan)
+        a, b = _fit_ab(corr, obs[1], obs[2])
+    return a, b
 
 
 def _debias(gk, lne, zc, wfun, lnt, noise, lam, n_knots, bit_depth, rng, draws):
@@ -620,7 +664,8 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         fit_rms.append(float(np.sqrt((resid ** 2).sum() / max((wc > 0).sum(), 1))))
         robust_rms.append(float(1.4826 * np.median(np.abs(resid[wc > 0]))))
         if noise is None:
-            nz = estimate_noise(gk, lne, zc, wc, lnt, n_knots, bd)
+            nz = estimate_noise(gk, lne, zc, wc, lnt, n_knots, bd, rng=rng,
+                                wfun=lambda zz: data_weight(zz, bd, clip_margin))
             noise_src = "estimated from the bracket (robust residual variance a X + b)"
         else:
             xs = math.exp(float(gk[-1]))  # the top code: the full well, in the fit's units
