@@ -14,13 +14,14 @@ for a sensor whose well holds ``n_sat`` electrons at ``X = f⁻¹(z_max)``
 ``weights="hat"`` gives Debevec–Malik's triangle instead.
 
 Units are consistent whatever the bit depth: every response here maps the
-middle code to ``z_mid / z_max`` (:func:`hdr.response.normalise_g`), so a
+top code to 1 (:func:`hdr.response.normalise_g`), so a
 linear 8-bit and a linear 16-bit capture of one scene merge to the same
 numbers. Codes within ``clip_margin`` of 0 or ``z_max`` get no weight (the
 noise there is truncated). A pixel clipped in every exposure is set to the
 lower bound the shortest saturated exposure gives (``f⁻¹(z_hi)/Δt``) and flagged
 :data:`CLIPPED`; one black in every exposure gets the upper bound from the
-longest exposure and :data:`BLACK` — never a silent 0 or mid-grey.
+longest exposure and :data:`BLACK` — never a silent 0 or mid-grey — with one
+colour per pixel, not one bound per channel (:func:`_fill_bounds`).
 
 The work runs in row blocks on a thread pool (numpy releases the GIL), so
 peak memory is the inputs, the float32 output, its mask and a few blocks.
@@ -166,6 +167,49 @@ def check_noise(weights: str = "variance", full_well_e: float | None = None,
     return float(fw), float(rn)
 
 
+def _fill_bounds(num, empty, zb, t, x_tab, hi_code, bound_lo, fb):
+    """Fill the pixel-channels no exposure measured (``empty``) in place, one
+    colour per pixel, and flag them.
+
+    A channel saturated in some exposure is at least ``f⁻¹(z_hi)/Δt`` of the
+    shortest such (:data:`CLIPPED`); one dark in every exposure is at most
+    ``f⁻¹(z_lo)/Δt_longest`` (:data:`BLACK`). Per channel those bounds differ
+    (each channel's curve), so filling each channel with its own bound
+    paints a black night sky in saturated speckle once tone-mapped. Instead,
+    per pixel: where other channels were measured, a black channel takes
+    ``min(bound, their mean)`` and a clipped one ``max(bound, their mean)``
+    (never brighter, resp. darker, than the pixel's own colour says); where
+    none was, every black channel takes the smallest of their bounds and
+    every clipped one the largest — one grey within every channel's bound.
+    """
+    zmax = x_tab.shape[1] - 1
+    val = np.full(empty.shape, np.nan, np.float32)
+    ii = np.nonzero(empty)
+    v = np.full(ii[0].size, np.nan, np.float32)
+    for j in np.argsort(t)[::-1]:  # longest first, so the shortest wins
+        sj = zb[j][ii] > hi_code
+        v[sj] = x_tab[ii[2][sj], min(hi_code, zmax)] / t[j]
+    sat_e = np.isfinite(v)
+    v[~sat_e] = bound_lo[ii[2][~sat_e]]
+    val[ii] = v
+    sat = np.zeros(empty.shape, bool)
+    sat[ii] = sat_e
+    black = empty & ~sat
+    clip = empty & sat
+    measured = ~empty
+    n_meas = measured.sum(axis=2)
+    mean_meas = np.where(measured, num, 0.0).sum(axis=2) / np.maximum(n_meas, 1)
+    has = (n_meas > 0)[..., None]
+    grey_black = np.where(black, val, np.inf).min(axis=2, keepdims=True)
+    grey_clip = np.where(clip, val, -np.inf).max(axis=2, keepdims=True)
+    out_black = np.where(has, np.minimum(val, mean_meas[..., None]), grey_black)
+    out_clip = np.where(has, np.maximum(val, mean_meas[..., None]), grey_clip)
+    num[black] = out_black[black]
+    num[clip] = out_clip[clip]
+    fb[clip] |= CLIPPED
+    fb[black] |= BLACK
+
+
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           weights: str = "variance", full_well_e: float | None = None,
           read_noise_e: float | None = None,
@@ -294,20 +338,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         empty = den <= 0
         np.divide(num, den, out=num, where=~empty)
         if empty.any():
-            # Saturated in some exposure: the shortest such gives the tightest lower
-            # bound f^-1(z_hi)/t. Otherwise dark everywhere: the longest exposure
-            # gives the tightest upper bound f^-1(z_lo)/t.
-            ii = np.nonzero(empty)
-            val = np.full(ii[0].size, np.nan, np.float32)
-            for j in np.argsort(t)[::-1]:  # longest first, so the shortest wins
-                sj = z[j, r0:r1][ii] > hi_code
-                val[sj] = x_tab[ii[2][sj], min(hi_code, zmax)] / t[j]
-            sat = np.isfinite(val)
-            val[~sat] = bound_lo[ii[2][~sat]]
-            num[ii] = val
-            fb = flags[r0:r1]
-            fb[ii[0][sat], ii[1][sat], ii[2][sat]] |= CLIPPED
-            fb[ii[0][~sat], ii[1][~sat], ii[2][~sat]] |= BLACK
+            _fill_bounds(num, empty, z[:, r0:r1], t, x_tab, hi_code, bound_lo, flags[r0:r1])
         if deghost:
             flags[r0:r1][ghost] |= GHOST
         out[r0:r1] = num
@@ -328,8 +359,13 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
                         "bound from the shortest saturated exposure and flagged (add a shorter exposure)")
     if n_black:
         warnings.append(f"{n_black} pixel-channels are black in every exposure: set to the upper "
-                        "bound from the longest exposure and flagged (add a longer exposure)")
+                        "bound from the longest exposure, one grey per pixel, and flagged (add a "
+                        "longer exposure)")
     stats = {"clipped_everywhere": n_clip, "black_everywhere": n_black,
+             "black_everywhere_pixels": int(np.count_nonzero((flags & BLACK).any(axis=2))),
+             "clipped_everywhere_pixels": int(np.count_nonzero((flags & CLIPPED).any(axis=2))),
+             "fill": "one colour per pixel: min/max(bound, measured channels' mean), else one "
+                     "grey within every channel's bound",
              "ghost": int(np.count_nonzero(flags & GHOST)) if deghost else 0,
              "reference": reference}
     return RadianceMap(out, flags, tuple(float(x) for x in t), weights, tuple(warnings), stats)
