@@ -170,11 +170,12 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
     if not (math.isfinite(tol) and tol > 0):
         raise ValueError(f"tol: expected a positive number, got {tol!r}")
     rng = np.random.default_rng(0) if rng is None else rng
-    order = np.argsort(t)
-    z, t = z[order], t[order]
-    zmax = n_codes - 1
+    # Sample first, then order the small sample by time (no copy of the stack).
     idx = sample_pixels(z, n=samples, bit_depth=bd, rng=rng)
-    zs = z.reshape(p, h * w_, c)[:, idx].astype(np.int64)  # (P, N, C)
+    order = np.argsort(t)
+    t = t[order]
+    zmax = n_codes - 1
+    zs = z[:, idx // w_, idx % w_][order].astype(np.int64)  # (P, N, C)
     lo, hi = clip_margin * zmax, (1 - clip_margin) * zmax
     all_codes = np.arange(n_codes, dtype=np.float64)
     tt = t[:, None]

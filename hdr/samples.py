@@ -106,20 +106,20 @@ def hat_weight(z: np.ndarray, bit_depth: int) -> np.ndarray:
 
 def candidate_grid(h: int, w: int, n: int) -> int:
     """Stride of the pixel grid :func:`sample_pixels` draws from: every pixel
-    while the image has at most ``64 n`` of them, else every ``s``-th row and
-    column so that about ``64 n`` remain.
+    while the image has at most ``16 n`` of them, else every ``s``-th row and
+    column so that about ``16 n`` remain.
 
     Why: the fit uses ``n`` pixels; ranking every pixel of a 12 MP bracket to
     pick 600 costs time and memory in proportion to all pixels of all frames
-    (the iPhone set needed 2.4 GB). A regular grid 64× denser than the pick
-    still offers every radiance stratum many smooth candidates.
+    (the iPhone set needed 2.4 GB). A regular grid 16× denser than the pick
+    still offers each of the 64 radiance strata ~16 candidates per pick.
 
     Examples
     --------
     >>> candidate_grid(120, 160, 600), candidate_grid(768, 512, 600), candidate_grid(4032, 3024, 600)
-    (1, 3, 17)
+    (1, 6, 35)
     """
-    return max(1, int(math.sqrt(h * w / (64.0 * max(n, 1)))))
+    return max(1, int(math.sqrt(h * w / (16.0 * max(n, 1)))))
 
 
 def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.Generator,
