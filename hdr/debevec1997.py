@@ -57,7 +57,8 @@ LAMBDA_GRID = tuple(10.0 ** (k / 4) for k in range(-40, -11))
 # 0.0054 vs 0.0052, night 0.0340 vs 0.0353; 512 at 12 bits no better than 256)
 # and the eigendecomposition costs (K)³: a quarter of the time at 8 bits.
 DEFAULT_KNOTS = 128
-BIAS_ROUNDS = 1  # bias-correction iterations (bench: a second one did not help, 8-bit outdoor 0.0044 -> 0.0051)
+BIAS_ROUNDS = 1
+HEAVY_NOISE = 0.02  # ln units of response error per knot the noise alone implies  # bias-correction iterations (bench: a second one did not help, 8-bit outdoor 0.0044 -> 0.0051)
 MIN_SMOOTHNESS = 0.0  # λ = 0 is allowed (no smoothness term; see the warning it gives)
 
 
@@ -718,10 +719,15 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         # misregistered edges and moving pixels in a few observations do not count).
         xm = math.exp(float(_g_at(gk, np.array([2 ** (bd - 1)]), n_knots, bd)[0]))
         rel_noise.append(math.sqrt(max(nz[0] * xm + nz[1], 0.0)) / xm)
-        if rel_noise[-1] > 0.1:
+        # What the noise does to the curve: per knot, the relative noise over the
+        # root of the observations a knot gets; "heavy" when that reaches 2 %
+        # (several percent once the ends' fewer observations are counted).
+        per_knot = rel_noise[-1] / math.sqrt(max(np.count_nonzero(wc > 0) / n_knots, 1.0))
+        if per_knot > HEAVY_NOISE:
             warnings.append(f"channel {ch}: heavy noise ({rel_noise[-1]:.2f} relative at "
-                            "mid-range, estimated from the bracket): expect response errors "
-                            "of several percent; average frames or add exposures")
+                            f"mid-range, estimated from the bracket; {per_knot:.3f} ln per "
+                            "knot): expect response errors of several percent; average frames, "
+                            "add exposures or sample more pixels")
         k0, _ = knot_basis(zc[wc > 0], n_knots, bd)
         counts = np.bincount(k0, minlength=n_knots).astype(np.float64)
         gm = _monotone(gk, counts)
