@@ -704,15 +704,20 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
             except np.linalg.LinAlgError:
                 warnings.append(f"channel {ch}: the bias correction's refit was singular; the "
                                 "curve is not bias-corrected")
-        # Only pixels seen well exposed in two exposures link codes to each other;
-        # where few knots are linked, the smoothness prior draws the curve.
+        # Only pixels seen well exposed in two exposures link codes to each other
+        # (well: hat >= 0.2, the middle 80 % of the codes; the low-weight ends
+        # cannot pin a curve); where few knots are linked, the smoothness prior
+        # draws the curve.
         lo, hi = int(0.05 * (n_knots - 1)), int(0.95 * (n_knots - 1))
+        well = hat_weight(zc, bd) >= 0.2
+        two = np.count_nonzero(well, axis=1) >= 2
         linked = np.zeros(n_knots, bool)
-        linked[knot_basis(zc[wc > 0], n_knots, bd)[0]] = True
+        linked[knot_basis(zc[two][well[two]], n_knots, bd)[0]] = True
         coverage = float(linked[lo:hi + 1].mean())
-        linked_px.append(int(zc.shape[0]))
-        if coverage < 0.6 or zc.shape[0] < 50:
-            warnings.append(f"channel {ch}: only {zc.shape[0]} pixels are well exposed in two "
+        n_two = int(np.count_nonzero(two))
+        linked_px.append(n_two)
+        if coverage < 0.6 or n_two < 50:
+            warnings.append(f"channel {ch}: only {n_two} pixels are well exposed in two "
                             f"exposures, covering {100 * coverage:.0f} % of the code range: the "
                             "curve is poorly constrained (exposures too far apart or too few)")
         # Heavy noise: judged from the noise model at mid-range (robust: film grain,
