@@ -5,16 +5,21 @@ Photographs", SIGGRAPH 1997, doi:10.1145/258734.258884. Reference ch. 6,
 eq. 6.3-6.5.
 
 For each channel the unknowns are ``g`` (``ln f⁻¹``) and ``ln E_i`` of the
-sampled pixels; eq. 6.5 is solved as one sparse weighted least-squares system
-(``scipy.sparse``), through its augmented form ``[[I, A], [Aᵀ, 0]]`` so the
-normal equations (which square the condition number) are never formed.
+sampled pixels. The ``ln E_i`` are eliminated (each touches only its own
+pixel's rows), leaving a ``K × K`` quadratic in the knot values assembled
+with ``np.bincount`` and ``scipy.sparse``; one generalised symmetric
+eigendecomposition per channel then gives every λ's solution, misfit and
+roughness at once (:class:`_Reduced`; the full sparse system,
+:func:`_system` with :func:`solve_sparse_lstsq`, is kept as the reference a
+test compares against).
 
 What this adds to the paper:
 
-- any bit depth up to 16: ``g`` lives on ``K`` knots (one per code up to 8
-  bits; 256 evenly spaced knots above, interpolated linearly) instead of one
-  unknown per code value;
-- principled pixel sampling (:func:`hdr.samples.sample_pixels`);
+- any bit depth up to 16: ``g`` lives on ``K`` knots (default
+  :data:`DEFAULT_KNOTS` = 128 evenly spaced, interpolated linearly; as
+  accurate as one per code on the bench family, a quarter of the cost);
+- principled pixel sampling (:func:`hdr.samples.sample_pixels`) from a grid
+  whose size follows the sample count, not the frames';
 - λ chosen automatically at the corner of the L-curve (:func:`_l_curve`,
   which also says why held-out prediction and GCV are not used); every
   candidate is recorded;
@@ -22,10 +27,15 @@ What this adds to the paper:
   number of observations, so one λ means the same for every bit depth and
   sample count (λ weighs ``∫ ω(u)² g''(u)² du`` against the mean squared
   weighted residual, ``u = z / z_max``);
-- observations near the clipping ends are dropped (:func:`data_weight`),
-  which removes the truncation bias noise causes there;
+- noise-aware at the dark and bright ends: rows weighted ``√ω`` down to code
+  1 (:func:`data_weight`), the sensor noise ``Var X = a X + b`` estimated
+  from the bracket (:func:`estimate_noise`, or given as ``noise``), and the
+  bias that noise, quantisation and clipping at 0 and ``z_max`` give the
+  fit removed by a parametric bootstrap (:func:`_debias`);
 - a monotonic result (weighted isotonic regression when noise makes the
   solution dip; reported in ``warnings``).
+
+Research notes and figures: ``docs/decisions/hdr-debevec-noise.md``.
 
 Examples
 --------
@@ -596,7 +606,13 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         Unknowns per channel; default ``min(2**bit_depth, DEFAULT_KNOTS)``.
     clip_margin : float
         Fraction of the code range at each end left out of the fit
-        (:func:`data_weight`).
+        (:func:`data_weight`); default 0 (the bias correction handles the ends).
+    noise : (full_well_e, read_noise_e), optional
+        The sensor's noise (electrons at the top code, read noise RMS); by
+        default estimated from the bracket (:func:`estimate_noise`).
+    bias_draws : int
+        Renders of the fitted bracket for the bias correction (:func:`_debias`);
+        0 turns it off.
     rng : numpy.random.Generator, optional
         For the pixel sampling's tie-breaking (default seeded 0).
 
@@ -604,7 +620,9 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     -------
     ResponseCurve
         ``method="debevec"``; ``selection`` holds λ and every candidate's
-        L-curve point; ``fit`` the residual RMS and the sample count.
+        L-curve point; ``fit`` the residual RMS (plain and robust), the
+        sample count, the noise (``a, b`` per channel, its source, the
+        relative noise at mid-range) and the bias correction.
 
     Raises
     ------
@@ -619,6 +637,12 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         raise InputError("images", "a response needs at least two exposures")
     check_samples(samples)
     smoothness = check_smoothness(smoothness)
+    if noise is not None:
+        from lumigraph.hdr.merge import check_noise
+
+        if len(noise) != 2:
+            raise InputError("noise", f"expected (full_well_e, read_noise_e), got {noise!r}")
+        noise = check_noise("variance", *noise)  # InputError naming the bad one
     rng = np.random.default_rng(0) if rng is None else rng
     n_knots = int(knots) if knots is not None else min(2 ** bd, DEFAULT_KNOTS)
     if not 4 <= n_knots <= 2 ** bd:
