@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -114,3 +115,153 @@ def effective_exposure_times(exposure_times_s: Sequence[float],
     if not (np.isfinite(ref) and ref > 0):
         raise InputError(where, f"f_number_ref must be positive and finite, got {ref}")
     return tuple(float(t * (ref / n) ** 2) for t, n in zip(times, fn, strict=True))
+
+
+# ------------------------------------------------------------------ bit depth
+# Common sensor depths: data without a declared depth are taken as the
+# smallest of these that holds their largest code.
+SENSOR_DEPTHS = (8, 10, 12, 14, 16)
+
+
+@dataclass(frozen=True)
+class BitDepth:
+    """How deep a stack's integer codes are, and how that was decided.
+
+    Attributes
+    ----------
+    bits : int or None
+        Significant bits; ``z_max = 2**bits - 1`` is saturation (``None``:
+        float data).
+    source : str
+        How it was decided (recorded in the meta as ``bit_depth_source``).
+    shift : int
+        Left-aligned data (the low bits of every code empty): the codes are
+        shifted right by this many bits to give ``bits``-bit values.
+    """
+
+    bits: int | None
+    source: str
+    shift: int = 0
+
+
+def _low_zero_bits(images, container: int) -> int:
+    """Bits at the bottom that are zero in every code of every image."""
+    ored = 0
+    for im in images:
+        ored |= int(np.bitwise_or.reduce(np.asarray(im).ravel())) if np.asarray(im).size else 0
+    if ored == 0:
+        return container
+    return (ored & -ored).bit_length() - 1
+
+
+def decide_bit_depth(images: Sequence[np.ndarray], paths: Sequence[str | os.PathLike], *,
+                     given: int | None = None, declared: int | None = None,
+                     declared_where: str | os.PathLike = "bit_depth",
+                     significant: Sequence[tuple[int, str] | None] | None = None) -> BitDepth:
+    """Decide the bit depth of a stack's codes: given, declared, or detected.
+
+    In order: ``given`` (the user's, e.g. ``--bit-depth``) is checked against
+    the codes; ``declared`` (``stack.json``'s ``bit_depth``) likewise;
+    ``significant`` (per file: a PNG's ``sBIT`` or a RAW's white level, with
+    its name) is honoured, its codes right- or left-aligned (the PNG
+    specification scales a 12-bit sample up to 16 bits); otherwise an 8-bit
+    container is 8-bit, and a 16-bit container is taken as left-aligned when
+    the low bits of every code are empty (10-bit data shifted up by 6), else
+    as the smallest common sensor depth (:data:`SENSOR_DEPTHS`) holding the
+    largest code: a 12-bit camera's clipped pixels sit at 4095, and a bracket
+    always has some.
+
+    Parameters
+    ----------
+    images : sequence of ndarray
+        The integer codes of each file (any shape), one dtype.
+    paths : sequence of path-like
+        The files, for the messages.
+    given, declared : int, optional
+        Bits (1..16).
+    declared_where : str or path-like
+        What an error about ``declared`` names (the stack.json).
+    significant : sequence of (int, str) or None, optional
+        Per file, the bits its header declares and which header.
+
+    Returns
+    -------
+    BitDepth
+
+    Raises
+    ------
+    InputError
+        Naming the file whose codes exceed the given, declared or
+        significant depth (and are not left-aligned to it).
+
+    Examples
+    --------
+    >>> z = np.array([0, 17, 4095], np.uint16)
+    >>> decide_bit_depth([z], ["a.png"]).bits
+    12
+    >>> b = decide_bit_depth([z << 6], ["a.png"])
+    >>> b.bits, b.shift
+    (10, 6)
+    >>> decide_bit_depth([z], ["a.png"], given=10)
+    Traceback (most recent call last):
+    ...
+    lumigraph.capture.errors.InputError: a.png: codes up to 4095 do not fit in 10 bits (0..1023): the bit depth given is too small for this file (leave it out to detect it)
+    """
+    imgs = [np.asarray(im) for im in images]
+    if not imgs or imgs[0].dtype.kind not in "ui":
+        return BitDepth(None, "float data (linear, no code values)")
+    container = 8 * imgs[0].dtype.itemsize
+    tops = [int(im.max()) if im.size else 0 for im in imgs]
+    top = max(tops)
+
+    def fits(bits: int, what: str, problem: str) -> BitDepth:
+        """``bits``-bit codes, right-aligned or left-aligned in the container;
+        else an error naming the first file that overflows."""
+        if top < 2 ** bits:
+            return BitDepth(bits, what)
+        k = container - bits
+        if k > 0 and _low_zero_bits(imgs, container) >= k:
+            return BitDepth(bits, f"{what}; codes left-aligned in the {container}-bit container "
+                                  f"(the low {k} bits of every code empty): shifted right", k)
+        i = next(j for j, t in enumerate(tops) if t >= 2 ** bits)
+        raise InputError(paths[i], f"codes up to {tops[i]} do not fit in {bits} bits "
+                                   f"(0..{2 ** bits - 1}): {problem}")
+
+    if given is not None:
+        if not 1 <= int(given) <= container:
+            raise InputError(paths[0], f"{given} bits given, but the file holds {container}-bit "
+                                       f"codes ({imgs[0].dtype}); give 1..{container}")
+        return fits(int(given), "given", "the bit depth given is too small for this file "
+                                         "(leave it out to detect it)")
+    if declared is not None:
+        if int(declared) > container or top >= 2 ** int(declared):
+            raise InputError(declared_where, f"key 'bit_depth': {declared} bits, but the images "
+                                             f"are {imgs[0].dtype} with codes up to {top}")
+        return BitDepth(int(declared), "stack.json")
+    sig = [s for s in (significant or ()) if s is not None]
+    if sig:
+        for path, im, top_i, s in zip(paths, imgs, tops, significant, strict=True):
+            if s is None:
+                continue
+            b, what = s
+            k = container - b
+            if b > container or (top_i >= 2 ** b and not (
+                    k > 0 and _low_zero_bits([im], container) >= k)):
+                raise InputError(path, f"its {what} declares {b} bits but its codes reach "
+                                       f"{top_i} in a {container}-bit container (give the bit "
+                                       "depth)")
+        bits, what = max(sig)
+        return fits(bits, what, f"{what} declares {bits} bits (give the bit depth)")
+    if container == 8:
+        return BitDepth(8, "8-bit container")
+    k = _low_zero_bits(imgs, container)
+    if 2 <= k <= container - 8:
+        bits = container - k
+        return BitDepth(bits, f"left-aligned: the low {k} bits of every code are empty "
+                              f"({bits}-bit data in a {container}-bit container), shifted right", k)
+    bits = next(b for b in SENSOR_DEPTHS if top < 2 ** b or b >= container)
+    if top == 2 ** bits - 1:
+        return BitDepth(bits, f"largest code {top} = 2^{bits}-1 (the saturation plateau): "
+                              f"{bits}-bit data in a {container}-bit container")
+    return BitDepth(bits, f"largest code {top}: the smallest common sensor depth holding it "
+                          f"({bits} bits; no code at {2 ** bits - 1}, nothing clipped)")

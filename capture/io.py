@@ -60,7 +60,11 @@ import numpy as np
 from lumigraph.capture.artifact import atomic_path, dumps_json
 from lumigraph.capture.commandline import DEFAULT_MAX_PIXELS  # beside --max-pixels
 from lumigraph.capture.errors import InputError
-from lumigraph.capture.exposure import check_exposure_times, effective_exposure_times
+from lumigraph.capture.exposure import (
+    check_exposure_times,
+    decide_bit_depth,
+    effective_exposure_times,
+)
 from lumigraph.capture.headers import exr_header, image_header
 from lumigraph.capture.rgbe import RGBE_EXTS as _RGBE_EXTS
 
@@ -897,6 +901,7 @@ class Stack:
     linear: bool = False
     info: dict = field(default_factory=dict)
     times_given: bool = False
+    bit_depth_source: str | None = None  # how bit_depth was decided (capture.exposure.BitDepth)
 
     def __post_init__(self):
         if self.images.ndim != 4:
@@ -1013,7 +1018,7 @@ def _stack_files(inputs: Sequence[str | os.PathLike]) -> tuple[list[Path], dict,
 
 
 def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | None = None,
-               need_times: bool = False) -> Stack:
+               need_times: bool = False, bit_depth: int | None = None) -> Stack:
     """Read an image stack from a list of files or a folder holding ``stack.json``.
 
     Parameters
@@ -1025,6 +1030,10 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
         aperture bracket, its f-numbers: see :attr:`Stack.effective_exposure_times_s`).
     need_times : bool
         Raise InputError (naming the file) when an exposure time is missing.
+    bit_depth : int, optional
+        The codes' bit depth, overriding stack.json, sBIT and detection
+        (:func:`capture.exposure.decide_bit_depth`, which also decides it when
+        not given and records how in :attr:`Stack.bit_depth_source`).
 
     Raises
     ------
@@ -1039,13 +1048,14 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
         ext = f.suffix.lower()
         if ext in RAW_EXTS:
             raw = read_raw(f)
-            img, bd, linear = raw.codes, raw.bit_depth, True
+            img, bd, linear = raw.codes, (raw.bit_depth, "RAW black/white levels"), True
         else:
             img = read_image(f)
             if img.dtype.kind == "f":
                 bd, linear = None, True
             else:
-                bd = (png_significant_bits(f) if ext == ".png" else None) or 8 * img.dtype.itemsize
+                sb = png_significant_bits(f) if ext == ".png" else None
+                bd = None if sb is None else (sb, "PNG sBIT")
         if img.ndim == 2:
             img = img[..., None]
         if imgs and (img.shape != imgs[0].shape or img.dtype != imgs[0].dtype):
@@ -1054,13 +1064,11 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
                                 f"{imgs[0].shape[2]} {imgs[0].dtype}; a stack needs one size and type")
         imgs.append(img)
         bit_depths.append(bd)
-    bit_depth = info.get("bit_depth", None if bit_depths[0] is None else max(bit_depths))
-    if info.get("bit_depth") is not None and imgs[0].dtype.kind in "ui":
-        # stack.json's bit depth is a claim about the codes: check it against them
-        top = max(int(im.max()) for im in imgs)
-        if bit_depth > 8 * imgs[0].dtype.itemsize or top >= 2 ** bit_depth:
-            raise InputError(sj, f"key 'bit_depth': {bit_depth} bits, but the images are "
-                                 f"{imgs[0].dtype} with codes up to {top}")
+    # given, stack.json's (a claim checked against the codes), sBIT/RAW, or detected
+    depth = decide_bit_depth(imgs, files, given=bit_depth, declared=info.get("bit_depth"),
+                             declared_where=sj, significant=bit_depths)
+    if depth.shift:
+        imgs = [im >> depth.shift for im in imgs]
     if times is not None:
         t = tuple(float(x) for x in check_exposure_times(times, len(files), where="times"))
     elif "exposure_times_s" in info:
@@ -1082,8 +1090,9 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
     if t is not None and times is None and "f_numbers" in info:
         effective_exposure_times(t, info["f_numbers"], f_number_ref=info.get("f_number_ref"),
                                  where=sj)
-    return Stack(np.stack(imgs), tuple(str(f) for f in files), bit_depth, t,
-                 bool(info.get("linear", linear)), info, times_given=times is not None)
+    return Stack(np.stack(imgs), tuple(str(f) for f in files), depth.bits, t,
+                 bool(info.get("linear", linear)), info, times_given=times is not None,
+                 bit_depth_source=depth.source)
 
 
 def write_stack_json(folder, images: Sequence[str], **info) -> Path:

@@ -65,7 +65,8 @@ def _load(args, *, need_times=True):
     (an aperture bracket's f-numbers applied), as every HDR verb uses them."""
     from lumigraph.capture.io import read_stack
 
-    stack = read_stack(args.images, times=_times(args), need_times=need_times)
+    stack = read_stack(args.images, times=_times(args), need_times=need_times,
+                       bit_depth=args.bit_depth)
     if stack.images.dtype.kind == "f":
         raise InputError(stack.paths[0], "float images are already linear; merge needs code values "
                                          "(integer PNG/TIFF/JPEG/RAW)")
@@ -115,7 +116,8 @@ def _response(args) -> int:
     meta = make_meta("lumigraph.response", inputs=stack.paths,
                      params={"method": method, "times_s": times,
                              "samples": samples if "samples" in m.options else None,
-                             "seed": args.seed, "bit_depth": stack.bit_depth},
+                             "seed": args.seed, "bit_depth": stack.bit_depth,
+                             "bit_depth_source": stack.bit_depth_source},
                      model={"method": curve.method, "selection": curve.selection},
                      quality=curve.fit, timings_s={"fit": dt}, warnings=curve.warnings)
     curve.save(out, meta=meta)
@@ -221,7 +223,9 @@ def _merge(args) -> int:
     meta = make_meta("lumigraph.radiance", inputs=[*stack.paths, args.response],
                      params={"weights": args.weights, "deghost": args.deghost, "times_s": times,
                              "response_method": curve.method,
-                             "noise": noise if args.weights == "variance" else None},
+                             "noise": noise if args.weights == "variance" else None,
+                             "bit_depth": stack.bit_depth,
+                             "bit_depth_source": stack.bit_depth_source},
                      quality=m.stats, timings_s={"merge": dt}, warnings=m.warnings,
                      extra={"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
                             "mask": "flags PNG beside the output: 1 clipped everywhere (lower "
@@ -340,7 +344,8 @@ def _video(args) -> int:
     check_key(args.key)
     check_video_options(window=args.window, consistency_sigma=args.consistency_sigma)
     curve = ResponseCurve.load(args.response)
-    stack = read_stack(args.frames, times=_times(args), need_times=True)
+    stack = read_stack(args.frames, times=_times(args), need_times=True,
+                       bit_depth=args.bit_depth)
     # hdr_video checks its frames (at least 2 of them); an error about them
     # names the input they came from
     args.arg_flags = {**TIMES_FLAG,
@@ -385,7 +390,8 @@ def _video(args) -> int:
     summary = make_meta("lumigraph.hdr_video", inputs=[*stack.paths, args.response],
                         params={"times_s": list(v.exposure_times_s), **v.params,
                                 "tonemap": bool(args.tonemap), "key": args.key,
-                                "temporal": args.temporal},
+                                "temporal": args.temporal, "bit_depth": stack.bit_depth,
+                                "bit_depth_source": stack.bit_depth_source},
                         quality={"mean_sources": shares,
                                  "flicker": None if tm is None else tm.flicker,
                                  "frames": list(v.frames)},
@@ -405,6 +411,15 @@ def _methods_epilog(registry) -> str:
 # The ranges below are the library's own (its check_* functions and constants):
 # the parser refuses a bad value before any file is read, the library again.
 TIMES = numbers(number(float, lo=0, lo_open=True), length=(1, None))
+
+
+def _bit_depth_option(v, what: str) -> None:
+    """``--bit-depth N`` of the verbs that read code values (response, merge, video)."""
+    v.add_argument("--bit-depth", type=number(int, lo=1, hi=16), default=None, metavar="N",
+                   help=f"bits of the {what}' codes, saturation at 2^N-1 (default: detected: "
+                        "stack.json, PNG sBIT, left-aligned codes with empty low bits, else the "
+                        "smallest of 8/10/12/14/16 bits holding the largest code; the meta "
+                        "records how); codes above 2^N-1 are an error naming the file")
 
 
 def build_parser(prog: str = "lumigraph hdr"):
@@ -442,6 +457,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="pixels sampled (default 600; robertson 5000, for its per-code means)")
     v.add_argument("--seed", type=number(int, lo=0), default=0,
                    help="seed of the pixel sampling")
+    _bit_depth_option(v, "images")
     v.set_defaults(func=_response, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
     v.add_argument("images", nargs="+", type=input_path,
@@ -457,6 +473,7 @@ def build_parser(prog: str = "lumigraph hdr"):
     v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E", type=_noise_pair,
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
+    _bit_depth_option(v, "images")
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
                    derived_outputs=lambda a: [("--out", _mask_path(a.out))])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
@@ -502,6 +519,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="reject warped neighbours further than this many noise sigma (default "
                         f"{sigma:g}, chosen as docs/decisions/hdr-video-consistency-sigma.md "
                         "records)")
+    _bit_depth_option(v, "frames")
     v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input", type=input_path, help="an HDR image (.exr, .hdr, LogLuv .tif, .pfm)")

@@ -58,7 +58,7 @@ True
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -130,6 +130,9 @@ class FourierLightField:
     beta: float
     max_slope: float
     channels: tuple[int, ...] = (0,)
+    # Scratch buffers of refocus(), reused from slice to slice (not thread-safe:
+    # one spectrum, one thread at a time).
+    workspace: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def nbytes(self) -> int:
@@ -368,7 +371,8 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
     terms_u, terms_v = plan
     flat = spec.spectrum.view(np.float32).reshape(hp, nu, nv * wr * c2)
     # Stage 1, u: acc[y, n, x] = sum_a wu[y, a] S[y, i(y) + a, n, x].
-    acc = np.empty((hp, 1, nv * wr * c2), np.float32)
+    work = spec.workspace
+    acc = _scratch(work, "acc", (hp, 1, nv * wr * c2))
     tmp = None
     # The first term (no alias) covers every row and writes acc; the aliases
     # (rows with |ky| > 1/3 for lanczos3) add to it.
@@ -388,13 +392,12 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
                         np.matmul(wp_, taps, out=acc[r0:r1])
                         continue
                     if tmp is None:
-                        tmp = np.empty_like(acc)
+                        tmp = _scratch(work, "tmp", acc.shape)
                     np.matmul(wp_, taps, out=tmp[r0:r1])
                     acc[r0:r1] += tmp[r0:r1]
-    del tmp
     acc = acc.reshape(hp, nv, wr * c2)
     # Stage 2, v: out[y, x] = sum_b wv[x, b] acc[y, j(x) + b, x].
-    out = np.empty((hp, wr * c2), np.float32)
+    out = _scratch(work, "out", (hp, wr * c2))
     part = None
     # The first term covers every column and writes out; the alias adds.
     for t, (lo, runs, wv) in enumerate(terms_v):
@@ -404,7 +407,7 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
             cols = slice((lo + x0) * c2, (lo + x1) * c2)
             wc = slice(x0 * c2, x1 * c2)
             if part is None:
-                part = np.empty_like(out)
+                part = _scratch(work, "part", out.shape)
             o, p = out[:, cols], part[:, cols]
             if j0 + k <= nv:
                 np.einsum("ybx,bx->yx", acc[:, j0:j0 + k, cols], wvx[:, wc],
@@ -418,12 +421,21 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
                     continue
                 np.multiply(acc[:, (j0 + b) % nv, cols], wvx[b, wc], out=p)
                 o += p
-    del acc, part
     spec2 = out.view(np.complex64).reshape(hp, wr, c)
     img = sfft.irfft2(spec2, s=(hp_, wp), axes=(0, 1), workers=WORKERS)
     w, h = spec.size
     py, px = spec.pad
     return np.ascontiguousarray(img[py:py + h, px:px + w] / (u * v), dtype=np.float32)
+
+
+def _scratch(work: dict, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    """A float32 scratch array kept in ``work`` between slices: allocating the
+    ~100 MB of a 9x9x512² slice's buffers afresh page-faults every page each
+    time, which cost as much as the slice's arithmetic."""
+    a = work.get(name)
+    if a is None or a.shape != shape:
+        a = work[name] = np.empty(shape, np.float32)
+    return a
 
 
 def _stored_slices(c0: int, c1: int, shift: int, n: int):
