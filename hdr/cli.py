@@ -108,6 +108,10 @@ def _response(args) -> int:
     if "samples" in m.options:
         opts["samples"] = samples
         opts["rng"] = np.random.default_rng(args.seed)
+    if args.noise is not None:
+        if "noise" not in m.options:
+            raise InputError("noise", f"applies to the debevec method, not {method}")
+        opts["noise"] = tuple(args.noise)
     t0 = time.perf_counter()
     curve = fn(stack.images, times, **opts)
     dt = time.perf_counter() - t0
@@ -117,7 +121,10 @@ def _response(args) -> int:
                      params={"method": method, "times_s": times,
                              "samples": samples if "samples" in m.options else None,
                              "seed": args.seed, "bit_depth": stack.bit_depth,
-                             "bit_depth_source": stack.bit_depth_source},
+                             "bit_depth_source": stack.bit_depth_source,
+                             "noise": (dict(zip(("full_well_e", "read_noise_e"), args.noise,
+                                                strict=True)) | {"source": "given (--noise)"})
+                             if args.noise is not None else None},
                      model={"method": curve.method, "selection": curve.selection},
                      quality=curve.fit, timings_s={"fit": dt}, warnings=curve.warnings)
     curve.save(out, meta=meta)
@@ -457,8 +464,12 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="pixels sampled (default 600; robertson 5000, for its per-code means)")
     v.add_argument("--seed", type=number(int, lo=0), default=0,
                    help="seed of the pixel sampling")
+    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E", type=_noise_pair,
+                   help="debevec: the sensor's noise (electrons at the top code, read noise in "
+                        "electrons RMS) for the bias correction at the dark and bright ends "
+                        "(default: estimated from the bracket)")
     _bit_depth_option(v, "images")
-    v.set_defaults(func=_response, arg_flags=TIMES_FLAG)
+    v.set_defaults(func=_response, arg_flags={**TIMES_FLAG, **NOISE_FLAG, "noise": "--noise"})
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
     v.add_argument("images", nargs="+", type=input_path,
                    help="bracket images, or a folder with stack.json")
