@@ -183,31 +183,54 @@ def _fill_bounds(num, empty, zb, t, x_tab, hi_code, bound_lo, fb):
     every clipped one the largest — one grey within every channel's bound.
     """
     zmax = x_tab.shape[1] - 1
-    val = np.full(empty.shape, np.nan, np.float32)
-    ii = np.nonzero(empty)
-    v = np.full(ii[0].size, np.nan, np.float32)
-    for j in np.argsort(t)[::-1]:  # longest first, so the shortest wins
-        sj = zb[j][ii] > hi_code
-        v[sj] = x_tab[ii[2][sj], min(hi_code, zmax)] / t[j]
-    sat_e = np.isfinite(v)
-    v[~sat_e] = bound_lo[ii[2][~sat_e]]
-    val[ii] = v
-    sat = np.zeros(empty.shape, bool)
-    sat[ii] = sat_e
-    black = empty & ~sat
-    clip = empty & sat
-    measured = ~empty
-    n_meas = measured.sum(axis=2)
-    mean_meas = np.where(measured, num, 0.0).sum(axis=2) / np.maximum(n_meas, 1)
-    has = (n_meas > 0)[..., None]
-    grey_black = np.where(black, val, np.inf).min(axis=2, keepdims=True)
-    grey_clip = np.where(clip, val, -np.inf).max(axis=2, keepdims=True)
-    out_black = np.where(has, np.minimum(val, mean_meas[..., None]), grey_black)
-    out_clip = np.where(has, np.maximum(val, mean_meas[..., None]), grey_clip)
-    num[black] = out_black[black]
-    num[clip] = out_clip[clip]
-    fb[clip] |= CLIPPED
-    fb[black] |= BLACK
+    c = empty.shape[2]
+    w = empty.shape[1]
+    num2, empty2, fb2 = num.reshape(-1, c), empty.reshape(-1, c), fb.reshape(-1, c)
+    # Only the pixels with an empty channel, as (n, C) rows: blocks of a large
+    # merge hold a few such pixels among thousands. (Reductions over the short
+    # channel axis are written out per channel: numpy's are slow there.)
+    any_e = empty2[:, 0].copy()
+    for k in range(1, c):
+        any_e |= empty2[:, k]
+    flat = np.flatnonzero(any_e)
+    py, px = np.divmod(flat, w)
+    e = empty2[flat]  # (n, C)
+    vals = num2[flat]
+    # Saturated somewhere means saturated in the longest exposure (a code only
+    # grows with exposure); the shortest saturated one gives the bound, looked up
+    # for those few entries only.
+    j_order = np.argsort(t)
+    sat = e & (zb[j_order[-1]][py, px] > hi_code)
+    val = np.broadcast_to(bound_lo.astype(np.float32)[None], e.shape).copy()
+    si, sc = np.nonzero(sat)
+    if si.size:
+        vs = np.full(si.size, np.nan, np.float32)
+        for j in j_order[::-1]:  # longest first, so the shortest wins
+            sj = zb[j][py[si], px[si], sc] > hi_code
+            vs[sj] = x_tab[sc[sj], min(hi_code, zmax)] / t[j]
+        val[si, sc] = vs
+    black, clip = e & ~sat, e & sat
+    n_meas = np.zeros(flat.size, np.int32)
+    tot = np.zeros(flat.size, np.float32)
+    gb = np.full(flat.size, np.inf, np.float32)
+    gc = np.full(flat.size, -np.inf, np.float32)
+    for k in range(c):
+        m_k = ~e[:, k]
+        n_meas += m_k
+        tot += np.where(m_k, vals[:, k], 0)
+        gb = np.where(black[:, k], np.minimum(gb, val[:, k]), gb)
+        gc = np.where(clip[:, k], np.maximum(gc, val[:, k]), gc)
+    has = n_meas > 0
+    mean_meas = tot / np.maximum(n_meas, 1)
+    for k in range(c):
+        vk = np.where(black[:, k], np.where(has, np.minimum(val[:, k], mean_meas), gb),
+                      np.where(has, np.maximum(val[:, k], mean_meas), gc))
+        vals[:, k] = np.where(e[:, k], vk, vals[:, k])
+    num2[flat] = vals
+    f = fb2[flat]
+    f[clip] |= CLIPPED
+    f[black] |= BLACK
+    fb2[flat] = f
 
 
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
