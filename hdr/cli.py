@@ -153,6 +153,10 @@ def _response(args) -> int:
             raise InputError("reference_times", f"only mitsunaga-nayar refines the exposures; "
                                                 f"for {method} give the exact times with --times")
         opts["reference_times"] = _reference_times(args, stack)
+    if args.noise is not None:
+        if "noise" not in m.options:
+            raise InputError("noise", f"applies to the debevec method, not {method}")
+        opts["noise"] = tuple(args.noise)
     t0 = time.perf_counter()
     curve = fn(stack.images, times, **opts)
     dt = time.perf_counter() - t0
@@ -163,7 +167,10 @@ def _response(args) -> int:
                              "samples": samples if "samples" in m.options else None,
                              "seed": args.seed, "bit_depth": stack.bit_depth,
                              "bit_depth_source": stack.bit_depth_source,
-                             "exif_orientation": list(stack.orientations)},
+                             "exif_orientation": list(stack.orientations),
+                             "noise": (dict(zip(("full_well_e", "read_noise_e"), args.noise,
+                                                strict=True)) | {"source": "given (--noise)"})
+                             if args.noise is not None else None},
                      model={"method": curve.method, "selection": curve.selection},
                      quality=curve.fit, timings_s={"fit": dt},
                      warnings=(*args.order_warnings, *curve.warnings))
@@ -511,8 +518,13 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="mitsunaga-nayar: an exposure known exactly (repeatable). The data fix "
                         "the ratios only up to a common power: one reference fixes the scale, "
                         "two (e.g. the shortest and longest) also the power")
+    v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E", type=_noise_pair,
+                   help="debevec: the sensor's noise (electrons at the top code, read noise in "
+                        "electrons RMS) for the bias correction at the dark and bright ends "
+                        "(default: estimated from the bracket)")
     _bit_depth_option(v, "images")
-    v.set_defaults(func=_response, arg_flags={**TIMES_FLAG, "reference_times": "--reference-time"})
+    v.set_defaults(func=_response, arg_flags={**TIMES_FLAG, **NOISE_FLAG, "noise": "--noise",
+                                              "reference_times": "--reference-time"})
     v = add_verb(sp, "merge", "merge a bracket into a radiance map")
     v.add_argument("images", nargs="+", type=input_path,
                    help="bracket images, or a folder with stack.json")

@@ -14,13 +14,14 @@ for a sensor whose well holds ``n_sat`` electrons at ``X = f⁻¹(z_max)``
 ``weights="hat"`` gives Debevec–Malik's triangle instead.
 
 Units are consistent whatever the bit depth: every response here maps the
-middle code to ``z_mid / z_max`` (:func:`hdr.response.normalise_g`), so a
+top code to 1 (:func:`hdr.response.normalise_g`), so a
 linear 8-bit and a linear 16-bit capture of one scene merge to the same
 numbers. Codes within ``clip_margin`` of 0 or ``z_max`` get no weight (the
 noise there is truncated). A pixel clipped in every exposure is set to the
 lower bound the shortest saturated exposure gives (``f⁻¹(z_hi)/Δt``) and flagged
 :data:`CLIPPED`; one black in every exposure gets the upper bound from the
-longest exposure and :data:`BLACK` — never a silent 0 or mid-grey.
+longest exposure and :data:`BLACK` — never a silent 0 or mid-grey — with one
+colour per pixel, not one bound per channel (:func:`_fill_bounds`).
 
 The work runs in row blocks on a thread pool (numpy releases the GIL), so
 peak memory is the inputs, the float32 output, its mask and a few blocks.
@@ -166,6 +167,72 @@ def check_noise(weights: str = "variance", full_well_e: float | None = None,
     return float(fw), float(rn)
 
 
+def _fill_bounds(num, empty, zb, t, x_tab, hi_code, bound_lo, fb):
+    """Fill the pixel-channels no exposure measured (``empty``) in place, one
+    colour per pixel, and flag them.
+
+    A channel saturated in some exposure is at least ``f⁻¹(z_hi)/Δt`` of the
+    shortest such (:data:`CLIPPED`); one dark in every exposure is at most
+    ``f⁻¹(z_lo)/Δt_longest`` (:data:`BLACK`). Per channel those bounds differ
+    (each channel's curve), so filling each channel with its own bound
+    paints a black night sky in saturated speckle once tone-mapped. Instead,
+    per pixel: where other channels were measured, a black channel takes
+    ``min(bound, their mean)`` and a clipped one ``max(bound, their mean)``
+    (never brighter, resp. darker, than the pixel's own colour says); where
+    none was, every black channel takes the smallest of their bounds and
+    every clipped one the largest — one grey within every channel's bound.
+    """
+    zmax = x_tab.shape[1] - 1
+    c = empty.shape[2]
+    w = empty.shape[1]
+    num2, empty2, fb2 = num.reshape(-1, c), empty.reshape(-1, c), fb.reshape(-1, c)
+    # Only the pixels with an empty channel, as (n, C) rows: blocks of a large
+    # merge hold a few such pixels among thousands. (Reductions over the short
+    # channel axis are written out per channel: numpy's are slow there.)
+    any_e = empty2[:, 0].copy()
+    for k in range(1, c):
+        any_e |= empty2[:, k]
+    flat = np.flatnonzero(any_e)
+    py, px = np.divmod(flat, w)
+    e = empty2[flat]  # (n, C)
+    vals = num2[flat]
+    # Saturated somewhere means saturated in the longest exposure (a code only
+    # grows with exposure); the shortest saturated one gives the bound, looked up
+    # for those few entries only.
+    j_order = np.argsort(t)
+    sat = e & (zb[j_order[-1]][py, px] > hi_code)
+    val = np.broadcast_to(bound_lo.astype(np.float32)[None], e.shape).copy()
+    si, sc = np.nonzero(sat)
+    if si.size:
+        vs = np.full(si.size, np.nan, np.float32)
+        for j in j_order[::-1]:  # longest first, so the shortest wins
+            sj = zb[j][py[si], px[si], sc] > hi_code
+            vs[sj] = x_tab[sc[sj], min(hi_code, zmax)] / t[j]
+        val[si, sc] = vs
+    black, clip = e & ~sat, e & sat
+    n_meas = np.zeros(flat.size, np.int32)
+    tot = np.zeros(flat.size, np.float32)
+    gb = np.full(flat.size, np.inf, np.float32)
+    gc = np.full(flat.size, -np.inf, np.float32)
+    for k in range(c):
+        m_k = ~e[:, k]
+        n_meas += m_k
+        tot += np.where(m_k, vals[:, k], 0)
+        gb = np.where(black[:, k], np.minimum(gb, val[:, k]), gb)
+        gc = np.where(clip[:, k], np.maximum(gc, val[:, k]), gc)
+    has = n_meas > 0
+    mean_meas = tot / np.maximum(n_meas, 1)
+    for k in range(c):
+        vk = np.where(black[:, k], np.where(has, np.minimum(val[:, k], mean_meas), gb),
+                      np.where(has, np.maximum(val[:, k], mean_meas), gc))
+        vals[:, k] = np.where(e[:, k], vk, vals[:, k])
+    num2[flat] = vals
+    f = fb2[flat]
+    f[clip] |= CLIPPED
+    f[black] |= BLACK
+    fb2[flat] = f
+
+
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           weights: str = "variance", full_well_e: float | None = None,
           read_noise_e: float | None = None,
@@ -294,20 +361,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         empty = den <= 0
         np.divide(num, den, out=num, where=~empty)
         if empty.any():
-            # Saturated in some exposure: the shortest such gives the tightest lower
-            # bound f^-1(z_hi)/t. Otherwise dark everywhere: the longest exposure
-            # gives the tightest upper bound f^-1(z_lo)/t.
-            ii = np.nonzero(empty)
-            val = np.full(ii[0].size, np.nan, np.float32)
-            for j in np.argsort(t)[::-1]:  # longest first, so the shortest wins
-                sj = z[j, r0:r1][ii] > hi_code
-                val[sj] = x_tab[ii[2][sj], min(hi_code, zmax)] / t[j]
-            sat = np.isfinite(val)
-            val[~sat] = bound_lo[ii[2][~sat]]
-            num[ii] = val
-            fb = flags[r0:r1]
-            fb[ii[0][sat], ii[1][sat], ii[2][sat]] |= CLIPPED
-            fb[ii[0][~sat], ii[1][~sat], ii[2][~sat]] |= BLACK
+            _fill_bounds(num, empty, z[:, r0:r1], t, x_tab, hi_code, bound_lo, flags[r0:r1])
         if deghost:
             flags[r0:r1][ghost] |= GHOST
         out[r0:r1] = num
@@ -328,8 +382,13 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
                         "bound from the shortest saturated exposure and flagged (add a shorter exposure)")
     if n_black:
         warnings.append(f"{n_black} pixel-channels are black in every exposure: set to the upper "
-                        "bound from the longest exposure and flagged (add a longer exposure)")
+                        "bound from the longest exposure, one grey per pixel, and flagged (add a "
+                        "longer exposure)")
     stats = {"clipped_everywhere": n_clip, "black_everywhere": n_black,
+             "black_everywhere_pixels": int(np.count_nonzero((flags & BLACK).any(axis=2))),
+             "clipped_everywhere_pixels": int(np.count_nonzero((flags & CLIPPED).any(axis=2))),
+             "fill": "one colour per pixel: min/max(bound, measured channels' mean), else one "
+                     "grey within every channel's bound",
              "ghost": int(np.count_nonzero(flags & GHOST)) if deghost else 0,
              "reference": reference}
     return RadianceMap(out, flags, tuple(float(x) for x in t), weights, tuple(warnings), stats)

@@ -24,7 +24,7 @@ from lumigraph.capture.registry import Method, Registry
 RESPONSE_METHODS = Registry("response", [
     Method("debevec", "lumigraph.hdr.debevec1997:response_debevec1997",
            "Debevec & Malik 1997: g = ln f^-1 per code, smoothness from the L-curve",
-           options=("bit_depth", "smoothness", "samples", "rng")),
+           options=("bit_depth", "smoothness", "samples", "rng", "noise")),
     Method("mitsunaga-nayar", "lumigraph.hdr.mitsunaga1999:response_mitsunaga1999",
            "Mitsunaga & Nayar 1999: polynomial response, refined exposure ratios",
            options=("bit_depth", "order", "samples", "rng")),

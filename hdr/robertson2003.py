@@ -40,7 +40,15 @@ What this implementation adds:
 - principled pixel sampling (:func:`hdr.samples.sample_pixels`, pixels
   unclipped in two exposures: one seen once only pulls its own code towards
   the current curve), stratified over radiance; ``samples`` default 5000;
-- iterated to convergence (``tol`` 1e-6 in ``ln I``, at most 2000 iterations; 500-1000 are typical).
+- the fixed point solved directly (:func:`_fixed_point`, the Perron vector
+  of the alternation's linear map) and polished by the alternation to
+  ``tol`` 1e-6 in ``ln I`` (at most 2000 iterations; from a linear start
+  500-1000 were typical, from the fixed point a handful);
+- bias-corrected (:func:`_debias`): the converged estimate's
+  errors-in-variables bias, measured on renders of the fitted bracket with
+  the noise estimated from it, is subtracted (bench family, 8-bit, median
+  over seeds: room 0.021 → 0.015, outdoor 0.050 → 0.028, studio 0.0053 →
+  0.0037 ln RMS).
 
 What convergence shows (bench ``8-bit`` bracket, film response, shot + read
 noise, ln-response RMS against the exact curve over 5-95 % of the codes):
@@ -67,7 +75,7 @@ Examples
 >>> r = response_robertson2003(z, t, rng=rng)
 >>> x = r.exposure_table()[0]
 >>> c = r.fit["convergence"][0]
->>> bool(abs(x[200] / x[100] - 4.0) < 0.1), c["objective_last"] < c["objective_first"]
+>>> bool(abs(x[200] / x[100] - 4.0) < 0.1), c["converged"]
 (True, True)
 """
 
@@ -107,9 +115,138 @@ def _fill(ln_i: np.ndarray, centres: np.ndarray, known: np.ndarray, at: np.ndarr
     return out
 
 
+def _fixed_point(y, use, w, t, bu, cnt, known, k0, k1, a, den, n_bins):
+    """The alternation's fixed point in one step: with ``I`` interpolated
+    linearly between bins, the radiance step is a linear map ``x = B I`` and
+    the response step ``I = A x``, so the normalised iteration is the power
+    method on the non-negative ``A B`` (bins × bins) and converges to its
+    Perron vector — computed here directly (``numpy.linalg.eig``), instead of
+    the hundreds of slow iterations the second eigenvalue near 1 costs.
+    Returns ``ln I`` per bin (NaN where unvisited) or None when the Perron
+    vector is not positive.
+    """
+    import scipy.sparse as sp
+
+    p, n = y.shape
+    jj, ii = np.nonzero(np.ones_like(y, dtype=bool))
+    wt = (w * t[:, None])[jj, ii] / den[ii]
+    aa = a[jj, ii]
+    b_mat = sp.csr_matrix((np.concatenate([wt * (1 - aa), wt * aa]),
+                           (np.concatenate([ii, ii]), np.concatenate([k0[jj, ii], k1[jj, ii]]))),
+                          shape=(n, n_bins))
+    ju, iu = np.nonzero(use)
+    a_mat = sp.csr_matrix((t[ju] / cnt[bu], (bu, iu)), shape=(n_bins, n))
+    kc = np.flatnonzero(known)
+    m = (a_mat @ b_mat).toarray()[np.ix_(kc, kc)]
+    vals, vecs = np.linalg.eig(m)
+    v = np.real(vecs[:, int(np.argmax(np.real(vals)))])
+    v = v * np.sign(v[np.argmax(np.abs(v))])
+    if not np.all(v > 0):
+        return None
+    out = np.full(n_bins, np.nan)
+    out[kc] = np.log(v)
+    return out
+
+
+def _fit_channel(y, tt, bd, n_bins, lo, hi, max_iter, tol):
+    """One channel's alternation (module docstring) from codes ``y`` (P, N):
+    ``g`` over every code, the radiances ``x`` (N,), the weights and the
+    convergence; None when fewer than 4 code bins are well exposed."""
+    n_codes = 2 ** bd
+    zmax = n_codes - 1
+    use = (y >= lo) & (y <= hi)
+    w = np.where(use, certainty_weight(y, bd), 0.0)
+    b = (y * n_bins) // n_codes  # equal-width code bins (the identity at <= 8 bits)
+    bu = b[use]
+    den = np.maximum((w * tt ** 2).sum(axis=0), 1e-300)
+    cnt = np.bincount(bu, minlength=n_bins).astype(np.float64)
+    known = cnt > 0
+    if np.count_nonzero(known) < 4:
+        return None
+    # Each bin's I belongs at the mean code of its observations.
+    centres = np.where(known, np.bincount(bu, weights=y[use], minlength=n_bins)
+                       / np.maximum(cnt, 1), (np.arange(n_bins) + 0.5) * n_codes / n_bins)
+    # Linear interpolation of ln I from bin centres to each observation's code,
+    # fixed through the iterations: position k0 + a among the visited centres.
+    kc = np.flatnonzero(known)
+    pos = np.clip(np.searchsorted(centres[kc], y, side="right") - 1, 0, kc.size - 2)
+    k0, k1 = kc[pos], kc[pos + 1]
+    a = np.clip((y - centres[k0]) / (centres[k1] - centres[k0]), 0.0, 1.0)
+    mid_bin = int(np.argmin(np.abs(centres - zmax / 2.0) + np.where(known, 0, np.inf)))
+    # Start at the fixed point itself (:func:`_fixed_point`), else from a linear
+    # response; the alternation then only polishes it (interpolation in ln I).
+    ln_i = _fixed_point(y, use, w, tt[:, 0], bu, cnt, known, k0, k1, a, den, n_bins)
+    if ln_i is None or not np.all(np.isfinite(ln_i[known])):
+        ln_i = np.log(np.maximum(centres, 0.5) / zmax)
+    else:
+        ln_i[~known] = _fill(ln_i, centres, known, centres[~known])
+    ln_i -= ln_i[mid_bin]
+    change, obj0, obj, it = math.inf, math.nan, math.nan, 0
+    for it in range(1, max_iter + 1):
+        i_obs = np.exp(ln_i[k0] * (1 - a) + ln_i[k1] * a)
+        x = (w * tt * i_obs).sum(axis=0) / den  # radiance step
+        obj = float((w * (i_obs - tt * x) ** 2).sum() / w.sum())
+        if it == 1:
+            obj0 = obj
+        tx = (tt * x)[use]
+        new = np.bincount(bu, weights=tx, minlength=n_bins)
+        ln_new = np.full(n_bins, np.nan)
+        ln_new[known] = np.log(np.maximum(new[known] / cnt[known], 1e-300))  # response step
+        ln_new -= ln_new[mid_bin]  # I at mid-code = 1
+        change = float(np.max(np.abs(ln_new[known] - ln_i[known])))
+        ln_i = ln_new
+        ln_i[~known] = _fill(ln_i, centres, known, centres[~known])
+        if change < tol:
+            break
+    g_ch = _fill(ln_i, centres, known, np.arange(n_codes, dtype=np.float64))
+    return {"g": g_ch, "x": x, "w": w, "it": it, "change": change, "obj0": obj0, "obj": obj,
+            "known": known, "centres": centres, "cnt": cnt, "kc": kc}
+
+
+def _debias(fc, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng, draws, noise=None):
+    """Parametric-bootstrap bias correction, as for Debevec
+    (:func:`hdr.debevec1997._debias`): the noise ``a X + b`` estimated from
+    the fit's residuals (:func:`hdr.debevec1997.estimate_noise`, calibrated on
+    renders of the fitted bracket) unless given; the bracket the fit
+    describes (radiances ``x``, times, the response quantised and clipped)
+    rendered ``draws`` times as more pixels and fitted the same way; the
+    refit's departure from the fit is the estimator's bias at the fitted
+    curve (the errors-in-variables ripple the module docstring describes),
+    and is subtracted. Returns ``(g, (a, b), max |bias|)``."""
+    from scipy.optimize import isotonic_regression
+
+    from lumigraph.hdr.debevec1997 import estimate_noise
+
+    n_codes = 2 ** bd
+    g = fc["g"]
+    x = np.maximum(fc["x"], 1e-300)
+    lnt = np.log(tt[:, 0])
+
+    def wfun(zz):
+        return np.where((zz >= lo) & (zz <= hi), certainty_weight(zz, bd), 0.0)
+
+    if noise is None:
+        nz = estimate_noise(g, np.log(x), y.T, fc["w"].T, lnt, n_codes, bd, wfun=wfun, rng=rng)
+    else:
+        nz = noise
+    gm = np.asarray(isotonic_regression(g, increasing=True).x)
+    edges = np.exp(0.5 * (gm[1:] + gm[:-1]))
+    ex = tt * x[None]  # (P, N)
+    sd = np.sqrt(np.maximum(nz[0] * ex + nz[1], 0.0))
+    sim = np.tile(ex, (1, draws)) + np.tile(sd, (1, draws)) * rng.standard_normal(
+        (ex.shape[0], ex.shape[1] * draws))
+    ys = np.searchsorted(edges, sim).astype(np.int64)
+    f2 = _fit_channel(ys, tt, bd, n_bins, lo, hi, max_iter, tol)
+    if f2 is None:
+        return g, nz, 0.0
+    mid = n_codes // 2
+    bias = (f2["g"] - f2["g"][mid]) - (g - g[mid])
+    return g - bias, (float(nz[0]), float(nz[1])), float(np.max(np.abs(bias)))
+
+
 def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
               samples: int = 5000, bins: int | None = None, max_iter: int = 2000,
-              tol: float = 1e-6, clip_margin: float = 0.03,
+              tol: float = 1e-6, clip_margin: float = 0.03, bias_draws: int = 4,
               rng: np.random.Generator | None = None) -> ResponseCurve:
     """Recover ``g = ln f⁻¹`` per channel by Robertson et al.'s alternating estimation.
 
@@ -170,66 +307,39 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
     if not (math.isfinite(tol) and tol > 0):
         raise ValueError(f"tol: expected a positive number, got {tol!r}")
     rng = np.random.default_rng(0) if rng is None else rng
-    order = np.argsort(t)
-    z, t = z[order], t[order]
-    zmax = n_codes - 1
+    # Sample first, then order the small sample by time (no copy of the stack).
     idx = sample_pixels(z, n=samples, bit_depth=bd, rng=rng)
-    zs = z.reshape(p, h * w_, c)[:, idx].astype(np.int64)  # (P, N, C)
+    order = np.argsort(t)
+    t = t[order]
+    zmax = n_codes - 1
+    zs = z[:, idx // w_, idx % w_][order].astype(np.int64)  # (P, N, C)
     lo, hi = clip_margin * zmax, (1 - clip_margin) * zmax
     all_codes = np.arange(n_codes, dtype=np.float64)
     tt = t[:, None]
     g_out = np.empty((c, n_codes))
     warnings: list[str] = []
     conv, mono, visited = [], [], []
+    noise_ab, bias_max = [], []
     for ch in range(c):
         y = zs[..., ch]  # (P, N)
-        use = (y >= lo) & (y <= hi)
-        w = np.where(use, certainty_weight(y, bd), 0.0)
-        b = (y * n_bins) // n_codes  # equal-width code bins (the identity at <= 8 bits)
-        bu = b[use]
-        den = np.maximum((w * tt ** 2).sum(axis=0), 1e-300)
-        cnt = np.bincount(bu, minlength=n_bins).astype(np.float64)
-        known = cnt > 0
-        if np.count_nonzero(known) < 4:
-            raise EstimationError("images", f"channel {ch}: only {np.count_nonzero(known)} code "
-                                            "levels are well exposed; no curve can be estimated")
-        # Each bin's I belongs at the mean code of its observations.
-        centres = np.where(known, np.bincount(bu, weights=y[use], minlength=n_bins)
-                           / np.maximum(cnt, 1), (np.arange(n_bins) + 0.5) * n_codes / n_bins)
-        # Linear interpolation of ln I from bin centres to each observation's code,
-        # fixed through the iterations: position k0 + a among the visited centres.
-        kc = np.flatnonzero(known)
-        pos = np.clip(np.searchsorted(centres[kc], y, side="right") - 1, 0, kc.size - 2)
-        k0, k1 = kc[pos], kc[pos + 1]
-        a = np.clip((y - centres[k0]) / (centres[k1] - centres[k0]), 0.0, 1.0)
-        mid_bin = int(np.argmin(np.abs(centres - zmax / 2.0) + np.where(known, 0, np.inf)))
-        # Start from a linear response, I = code / z_max, normalised at mid-code.
-        ln_i = np.log(np.maximum(centres, 0.5) / zmax)
-        ln_i -= ln_i[mid_bin]
-        change, obj0, obj, it = math.inf, math.nan, math.nan, 0
-        for it in range(1, max_iter + 1):
-            i_obs = np.exp(ln_i[k0] * (1 - a) + ln_i[k1] * a)
-            x = (w * tt * i_obs).sum(axis=0) / den  # radiance step
-            obj = float((w * (i_obs - tt * x) ** 2).sum() / w.sum())
-            if it == 1:
-                obj0 = obj
-            tx = (tt * x)[use]
-            new = np.bincount(bu, weights=tx, minlength=n_bins)
-            ln_new = np.full(n_bins, np.nan)
-            ln_new[known] = np.log(np.maximum(new[known] / cnt[known], 1e-300))  # response step
-            ln_new -= ln_new[mid_bin]  # I at mid-code = 1
-            change = float(np.max(np.abs(ln_new[known] - ln_i[known])))
-            ln_i = ln_new
-            ln_i[~known] = _fill(ln_i, centres, known, centres[~known])
-            if change < tol:
-                break
+        fc = _fit_channel(y, tt, bd, n_bins, lo, hi, max_iter, tol)
+        if fc is None:
+            raise EstimationError("images", f"channel {ch}: too few code levels are well exposed; "
+                                            "no curve can be estimated")
+        it, change, obj0, obj = fc["it"], fc["change"], fc["obj0"], fc["obj"]
+        centres, known, cnt, kc = fc["centres"], fc["known"], fc["cnt"], fc["kc"]
+        g_ch = fc["g"]
+        if bias_draws > 0:
+            g_ch, nz, bmax = _debias(fc, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng,
+                                     bias_draws)
+            noise_ab.append(nz)
+            bias_max.append(bmax)
         converged = change < tol
         if not converged:
             warnings.append(f"channel {ch}: not converged after {max_iter} iterations (last change "
                             f"{change:.2g} in ln units); raise max_iter")
         conv.append({"iterations": it, "final_change_ln": change, "converged": bool(converged),
                      "objective_first": obj0, "objective_last": obj})
-        g_ch = _fill(ln_i, centres, known, all_codes)
         wts = np.interp(all_codes, centres[kc], cnt[kc]) + 1.0
         g_mono = np.asarray(isotonic_regression(g_ch, weights=wts, increasing=True).x)
         change_mono = float(np.max(np.abs(g_mono - g_ch)))
@@ -245,6 +355,9 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
            "weight": "exp(-4 (z - z_mid)^2 / z_mid^2), zero within clip_margin of either end",
            "clip_margin": clip_margin}
     fit = {"samples": int(idx.size), "bins_visited": visited, "convergence": conv,
+           "noise": {"model": "Var X = a X + b (X = exp g) + quantisation", "a_b": noise_ab,
+                     "source": "estimated from the bracket"},
+           "bias_correction": {"draws": int(bias_draws), "max_abs_ln": bias_max},
            "monotone_max_change_ln": mono, "tol_ln": tol, "max_iter": int(max_iter)}
     times = tuple(float(x) for x in np.asarray(exposure_times_s, dtype=np.float64))
     return ResponseCurve("robertson", bd, normalise_g(g_out), times, sel, tuple(warnings), fit)

@@ -8,7 +8,7 @@ from conftest import assert_clean_error, lumigraph, need_shared
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.render import render
 from lumigraph.hdr.bench import ln_response_rms
-from lumigraph.hdr.debevec1997 import response_debevec1997
+from lumigraph.hdr.debevec1997 import DEFAULT_KNOTS, response_debevec1997
 from lumigraph.hdr.merge import merge
 from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
 from lumigraph.hdr.response import ResponseCurve
@@ -87,7 +87,7 @@ def test_one_image_of_a_different_size(tmp_path):
 def test_sixteen_bit_data():
     s, z, t = _b(bit_depth=16, exposures=5, stops=2.0)
     r = response_debevec1997(z, t, bit_depth=16)
-    assert r.g.shape == (3, 65536) and r.selection["knots"] == 256
+    assert r.g.shape == (3, 65536) and r.selection["knots"] == DEFAULT_KNOTS
     assert 0 < ln_response_rms(r.g, s.gt_arrays["g"], 16) < 0.02
 
 
