@@ -23,7 +23,6 @@ usable result: exit 3 (``EXIT_UNUSABLE``), one line, nothing written.
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from pathlib import Path
@@ -324,35 +323,47 @@ def _triangulate(args) -> int:
 def _sfm(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.capture.camera import Camera
-    from lumigraph.stereo.sfm import reconstruct
+    from lumigraph.stereo.sfm import Reconstruction, assess, exif_focal_px, reconstruct
 
     out = check_output_dir(args.out)
-    check_planned([out / "cameras.json", out / "points.ply"])
+    check_planned([out / n for n in Reconstruction.OUTPUTS])
     images = [_read(p) for p in args.images]
     camera = Camera.load(args.camera) if args.camera else None
     n = len(images)
-    need = max(2, math.ceil(args.min_registered * n))
+    prior, prior_from = args.focal_px, "--focal-px"
+    if camera is None and prior is None:
+        size = images[0].shape[1::-1]
+        found = [f for f in (exif_focal_px(p, size) for p in args.images) if f]
+        if found:
+            prior, prior_from = float(np.median(found)), "EXIF"
     try:
-        rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
+        rec = reconstruct(images, [str(p) for p in args.images], camera=camera,
+                          focal_prior_px=prior if camera is None else None, seed=args.seed)
     except EstimationError as e:  # COLMAP ran and registered fewer than two views
         _unusable(args.images, f"registered fewer than 2 of {n} views ({e.problem}); nothing written")
+    why = assess(rec, min_registered=args.min_registered,
+                 focal_prior_px=prior if camera is None else None)
+    if why:
+        _unusable(args.images, "; ".join(why) + "; nothing written")
     got = rec.info["registered"]
-    if got < need:
-        _unusable(args.images, f"registered {got} of {n} views, fewer than --min-registered "
-                         f"{args.min_registered:g} asks ({need}); nothing written")
+    warnings = []
     if got < n:
-        warn(f"registered {got} of {n} views; cameras.json marks the others")
+        left = [m for m, ok in zip(rec.image_names, rec.registered, strict=True) if not ok]
+        warnings.append(f"registered {got} of {n} views; not registered: {', '.join(left)} "
+                        "(cameras.json marks them)")
+        warn(warnings[-1])
     meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
                      params={"seed": args.seed, "fixed_intrinsics": camera is not None,
-                             "min_registered": args.min_registered},
+                             "min_registered": args.min_registered,
+                             "focal_prior_px": prior if camera is None else None,
+                             "focal_prior_from": prior_from if camera is None and prior else None},
                      quality={k: rec.info[k] for k in ("registered", "images", "points",
-                                                       "mean_reprojection_error_px")},
-                     timings_s=rec.info["timings_s"], model=rec.info,
-                     warnings=[f"{(~rec.registered).sum()} images not registered"]
-                     if not rec.registered.all() else [])
+                                                       "mean_reprojection_error_px",
+                                                       "median_ray_angle_deg")},
+                     timings_s=rec.info["timings_s"], model=rec.info, warnings=warnings)
     rec.save(out, meta=meta)
-    say(args, f"registered {rec.info['registered']}/{len(images)} views, {rec.info['points']} points "
-              f"-> {out}/cameras.json, {out}/points.ply")
+    say(args, f"registered {got}/{n} views, {rec.info['points']} points "
+              f"-> {out}/cameras.json, points.ply and COLMAP's cameras.txt, images.txt, points3D.txt")
     return 0
 
 
@@ -560,19 +571,28 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.set_defaults(func=_triangulate)
 
     v = add_verb(sp, "sfm", "unordered multi-view reconstruction (pycolmap)",
-                 epilog="Exit status 3 (nothing written): COLMAP ran but registered fewer than "
-                        "two views, or fewer than --min-registered of them; the one line says how "
-                        "many of how many. Views left out above that are listed in cameras.json "
-                        "(registered: false) and in the .meta.json warnings.")
+                 epilog="Writes cameras.json, points.ply and COLMAP's text model (cameras.txt, "
+                        "images.txt, points3D.txt) into --out.\n"
+                        "Exit status 3 (nothing written), one line saying why: fewer than "
+                        "--min-registered of the views registered (each view left out is named with "
+                        "the verified matches it has); intrinsics estimated from two views only; "
+                        "an estimated |k1| > 1 or a focal more than 30 %% off --focal-px (or the "
+                        "EXIF focal); views too close together (median ray angle under 2 deg). "
+                        "Views left out above --min-registered are listed in cameras.json "
+                        "(registered: false), on stderr and in the .meta.json warnings.")
     v.add_argument("images", nargs="+", type=input_path, help="the views (one camera, one size)")
     v.add_argument("--camera", type=input_path,
                    help="camera.json (or a scene gt.json): known, fixed intrinsics")
+    v.add_argument("--focal-px", type=positive,
+                   help="without --camera: the focal length expected (px), COLMAP's start; "
+                        "an estimate more than 30%% off it is refused (default: EXIF, if any)")
     v.add_argument("--seed", type=number(int, lo=0, hi=2**31 - 1), default=0,
                    help="COLMAP's random seed (default 0)")
     v.add_argument("--min-registered", type=number(float, lo=0, hi=1), default=0.5,
                    help="fraction of the views that must register for a usable result "
                         "(default 0.5; at least two views always)")
-    v.add_argument("--out", required=True, type=output_dir, help="folder for cameras.json and points.ply")
+    v.add_argument("--out", required=True, type=output_dir,
+                   help="folder for cameras.json, points.ply and the COLMAP text model")
     v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
     return p
 

@@ -408,7 +408,8 @@ ENTRIES: list[Entry] = [
     Entry("stereo sfm", ("stereo", "sfm", *(f"{{in}}/views/view{k:02d}.png" for k in range(SFM_VIEWS)),
                          "--camera", "{in}/views/gt.json", "--seed", "0", "--out", "{out}/sfm", "-q"),
           _views, (*(f"{{in}}/views/view{k:02d}.png" for k in range(SFM_VIEWS)), "{in}/views/gt.json"),
-          ("{out}/sfm/cameras.json", "{out}/sfm/points.ply"), fresh_process=True),
+          ("{out}/sfm/cameras.json", "{out}/sfm/points.ply", "{out}/sfm/cameras.txt",
+           "{out}/sfm/images.txt", "{out}/sfm/points3D.txt"), fresh_process=True),
     # lightfield -------------------------------------------------------------
     Entry("lightfield import", ("lightfield", "import", "{in}/array", "--out", "{out}/lf", "-q"),
           _array, ("{in}/array",), (*_names("{out}/lf", _LF_VIEWS), "{out}/lf/lightfield.json")),

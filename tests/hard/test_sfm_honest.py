@@ -1,0 +1,82 @@
+"""Hard cases: SfM that cannot give a usable model says so (exit 3, one line
+naming why and which views), never a confident wrong model."""
+
+import numpy as np
+from conftest import lumigraph
+
+from lumigraph.capture import io
+from lumigraph.capture.render import render
+
+
+def _views(tmp_path, n, size=(160, 120), **kw):
+    s = render("stereo-views", size=size, seed=0, views=n, arc_deg=20.0, **kw)
+    folder = s.save(tmp_path / "v")
+    return folder, [folder / name for name in s.image_names]
+
+
+def _refused(r, *fragments, any_of=()):
+    assert r.returncode == 3, (r.returncode, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), r.stderr
+    for f in fragments:
+        assert f in lines[0], (f, lines[0])
+    assert not any_of or any(f in lines[0] for f in any_of), lines[0]
+
+
+def test_two_views_without_intrinsics_are_unusable(tmp_path):
+    # two views of one camera leave its focal length undetermined: exit 3
+    # whether COLMAP gives up (20 degrees is below its 16-degree start on
+    # most points) or registers both (assess() then refuses the focal)
+    _, imgs = _views(tmp_path, 2, size=(320, 240))
+    out = tmp_path / "o"
+    _refused(lumigraph("stereo", "sfm", *imgs, "--out", out), any_of=("two views", "of 2 views"))
+    assert not out.exists() or not any(out.iterdir())
+
+
+def test_two_registered_views_with_an_estimated_camera_are_refused():
+    from lumigraph.capture.camera import Camera
+    from lumigraph.stereo.sfm import Reconstruction, assess
+
+    cam = Camera(np.diag([200.0, 200.0, 1.0]), [0.01, 0, 0, 0, 0], (160, 120), "k1", {})
+    R = np.repeat(np.eye(3)[None], 2, 0)
+    t = np.array([[0.0, 0, 0], [-1.0, 0, 0]])
+    rec = Reconstruction(("a.png", "b.png"), np.array([True, True]), R, t, cam, np.zeros((0, 3)),
+                         np.zeros((0, 3), np.uint8), np.zeros(0, int), {"fixed_intrinsics": False})
+    assert any("two views" in w for w in assess(rec))
+    fixed = Reconstruction(*[getattr(rec, f) for f in ("image_names", "registered", "cam_from_world_R",
+                                                      "cam_from_world_t", "camera", "points", "colors",
+                                                      "track_length")], {"fixed_intrinsics": True})
+    assert assess(fixed) == []
+    # a prior the estimate misses by more than 30 %
+    assert any("off the expected" in w for w in assess(rec, focal_prior_px=100.0))
+
+
+def test_views_of_different_scenes_are_unusable(tmp_path):
+    # two views of the scene among three unrelated (noise) images: at most 2
+    # of 5 register, below half; the line names the views left out
+    folder, imgs = _views(tmp_path, 2)
+    rng = np.random.default_rng(1)
+    others = []
+    for k in range(3):
+        others.append(folder / f"other{k}.png")
+        io.write_image(others[-1], rng.integers(0, 255, (120, 160, 3), dtype=np.uint8))
+    out = tmp_path / "o"
+    _refused(lumigraph("stereo", "sfm", *imgs, *others, "--camera", folder / "gt.json", "--out", out),
+             "of 5 views", "other0.png")
+    assert not (out / "points.ply").exists()
+
+
+def test_usable_model_writes_colmap_text_beside_points(tmp_path):
+    folder, imgs = _views(tmp_path, 4)
+    out = tmp_path / "o"
+    r = lumigraph("stereo", "sfm", *imgs, "--camera", folder / "gt.json", "--out", out, "-q")
+    assert r.returncode == 0, r.stderr
+    images_txt = (out / "images.txt").read_text()
+    # every view under its given name, with its pose (COLMAP: one line per image, then its 2-D points)
+    for p in imgs:
+        assert f" {p.name}\n" in images_txt
+    cams = (out / "cameras.txt").read_text().splitlines()
+    assert [ln for ln in cams if not ln.startswith("#")][0].split()[2:4] == ["160", "120"]
+    n_points = sum(1 for ln in (out / "points3D.txt").read_text().splitlines() if not ln.startswith("#"))
+    pts, _ = io.read_ply(out / "points.ply")
+    assert n_points == len(pts) > 0
