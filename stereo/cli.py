@@ -210,6 +210,13 @@ def _depth(args) -> int:
     disp = read_pfm(args.disparity)
     if disp.ndim != 2:
         raise InputError(args.disparity, f"expected a one-channel disparity PFM, got shape {disp.shape}")
+    if not (args.rig or args.rectification):
+        return _depth_from_focal(args, out, disp)
+    given = [f for f, v in (("--focal-px", args.focal_px), ("--baseline", args.baseline),
+                            ("--cx", args.cx), ("--cy", args.cy), ("--doffs", args.doffs)) if v is not None]
+    if given:
+        raise InputError(given[0], "belongs to a pair without a rig; the rig or rectification file "
+                                   "already gives the focal length and baseline: drop it")
     rect, src = _rectification(args)
     rig = rect.rig
     if disp.shape[::-1] != tuple(rect.image_size):
@@ -247,6 +254,56 @@ def _depth(args) -> int:
                      extra={"focal_px": rect.focal_px, "baseline": rect.baseline})
     write_artifact(out, lambda tmp: write_ply(tmp, pts[ok], colors), meta=meta)
     say(args, f"wrote {int(ok.sum())} points to {out} ({frame} frame)")
+    return 0
+
+
+def _depth_from_focal(args, out, disp) -> int:
+    """Points of a rectified pair known only by its focal length and
+    baseline (Middlebury's calib.txt): Z = baseline f / (d + doffs), X = (x -
+    cx) Z / f, Y = (y - cy) Z / f in the left camera's frame."""
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_ply
+
+    if args.focal_px is None or args.baseline is None:
+        raise InputError("--focal-px", "give the rig (--rig or --rectification) or, for a rectified pair "
+                                  "without one, --focal-px and --baseline")
+    h, w = disp.shape
+    f, b = args.focal_px, args.baseline
+    cx = (w - 1) / 2 if args.cx is None else args.cx
+    cy = (h - 1) / 2 if args.cy is None else args.cy
+    doffs = args.doffs or 0.0
+    d = disp.astype(np.float64) + doffs
+    ok = np.isfinite(d) & (d > 0)
+    z = np.where(ok, b * f / np.where(ok, d, 1.0), np.inf)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    pts = np.stack([(x - cx) * z / f, (y - cy) * z / f, z], axis=2)
+    if args.max_depth is not None:
+        ok &= z <= args.max_depth
+    colors = None
+    if args.image:
+        img = _read(args.image)
+        if img.shape[:2] != disp.shape:
+            raise InputError(args.image, f"size {img.shape[1]}x{img.shape[0]} differs from the "
+                                         f"disparity's {w}x{h}; give the rectified left image")
+        if img.dtype == np.uint16:
+            img = (img / 257.0).round().astype(np.uint8)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=2)
+        colors = img[..., :3][ok].astype(np.uint8)
+    if not ok.any():
+        if args.max_depth is not None and (np.isfinite(d) & (d > 0)).any():
+            raise EstimationError("max_depth", f"no point is nearer than {args.max_depth:g}; "
+                                               "nothing to write")
+        raise EstimationError(args.disparity, "no valid disparity (finite and above -doffs): "
+                                              "nothing to reproject")
+    meta = make_meta("lumigraph.points", inputs=[args.disparity] + ([args.image] if args.image else []),
+                     params={"frame": "rectified left camera", "max_depth": args.max_depth,
+                             "focal_px": f, "baseline": b, "cx": cx, "cy": cy, "doffs": doffs},
+                     quality={"points": int(ok.sum()), "of_pixels": int(disp.size)},
+                     extra={"convention": "Z = baseline * focal_px / (d + doffs), X = (x - cx) Z / "
+                                          "focal_px, Y = (y - cy) Z / focal_px (Middlebury calib.txt)"})
+    write_artifact(out, lambda tmp: write_ply(tmp, pts[ok], colors), meta=meta)
+    say(args, f"wrote {int(ok.sum())} points to {out} (rectified left camera frame)")
     return 0
 
 
@@ -506,13 +563,26 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
     v.set_defaults(func=_match)
 
-    v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)")
+    v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",
+                 epilog="Without a rig: a rectified pair known by --focal-px and --baseline "
+                        "(Middlebury calib.txt: f, baseline, cx, cy of cam0, doffs = cx1 - cx0): "
+                        "Z = baseline f / (d + doffs), X = (x - cx) Z / f, Y = (y - cy) Z / f, in "
+                        "the baseline's unit; --image is then the rectified left image.")
     v.add_argument("disparity", type=input_path, help="disparity .pfm from 'stereo match'")
-    g = v.add_mutually_exclusive_group(required=True)
+    g = v.add_mutually_exclusive_group()
     g.add_argument("--rig", type=input_path,
                    help="the rig the pair was rectified with (rig.json or gt.json)")
     g.add_argument("--rectification", type=input_path,
                    help="the rectification.json the pair was rectified with")
+    v.add_argument("--focal-px", type=positive, help="without a rig: focal length of the rectified pair (px)")
+    v.add_argument("--baseline", type=positive,
+                   help="without a rig: distance between the camera centres (its unit is the points')")
+    v.add_argument("--cx", type=number(float), help="without a rig: principal point x (px; default the "
+                                                    "image centre)")
+    v.add_argument("--cy", type=number(float), help="without a rig: principal point y (px; default the "
+                                                    "image centre)")
+    v.add_argument("--doffs", type=number(float), help="without a rig: x offset of the right principal "
+                                                       "point, added to d (px; default 0)")
     v.add_argument("--image", type=input_path, help="the ORIGINAL left image, for point colours")
     v.add_argument("--frame", choices=("left", "rectified"), default="left",
                    help="points in the original left camera frame (default) or the rectified one")
