@@ -73,7 +73,14 @@ from dataclasses import replace
 import numpy as np
 
 from lumigraph.calib.detect import Detection
-from lumigraph.calib.zhang2000 import FREE, MODELS, ZhangFit, calibrate_fixed, n_intrinsics
+from lumigraph.calib.zhang2000 import (
+    FREE,
+    MODELS,
+    ZhangFit,
+    _one_opencv_thread,
+    calibrate_fixed,
+    n_intrinsics,
+)
 from lumigraph.capture.camera import Camera
 from lumigraph.capture.errors import EstimationError, InputError
 
@@ -298,15 +305,16 @@ def _agree_with_best(fits, rows, chosen, obj, img, size):
 
     if order.index(best) <= order.index(chosen):
         return chosen, full(chosen)
-    ref = full(best)
-    pick, fit = best, ref
+    # the best's all-view fit (no uncertainties needed: the yardstick is the
+    # simple model's own sigma) gives the reference values
+    ref = fits(best).K[[0, 1, 0, 1], [0, 1, 2, 2]]
+    pick, fit = best, None
     for r in rows[order.index(chosen):order.index(best)]:
         if r.get("significantly_worse") is not False:
             continue
         f = full(r["model"])
         sig = np.array([f.std[p] for p in ("fx", "fy", "cx", "cy")])
-        d = np.abs(f.K[[0, 1, 0, 1], [0, 1, 2, 2]] - ref.K[[0, 1, 0, 1], [0, 1, 2, 2]])
-        z = float(np.max(d / sig))
+        z = float(np.max(np.abs(f.K[[0, 1, 0, 1], [0, 1, 2, 2]] - ref) / sig))
         r["shift_sigma"] = z
         if z <= SHIFT_Z:
             pick, fit = r["model"], f
@@ -315,7 +323,7 @@ def _agree_with_best(fits, rows, chosen, obj, img, size):
             f"fx, fy, cx or cy {z:.1f} of its sigma from {best}'s: biased, not chosen"
     for r in rows:
         r["chosen"] = r["model"] == pick
-    return pick, fit
+    return pick, (fit if fit is not None else full(pick))
 
 
 def _tilts(fit: ZhangFit) -> tuple[np.ndarray, float]:
@@ -495,8 +503,9 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
                 rejected = _reject_outliers(obj, img, vnames, size, screen)
             if rejected:
                 fits = fitter(candidates)
-        chosen, rows = select_model(fits, obj, img, size)
-        chosen, fit = _agree_with_best(fits, rows, chosen, obj, img, size)
+        with _one_opencv_thread():  # once for the dozen solves below (see zhang2000)
+            chosen, rows = select_model(fits, obj, img, size)
+            chosen, fit = _agree_with_best(fits, rows, chosen, obj, img, size)
         selection = {"rule": "simplest candidate whose held-out (leave-views-out, "
                              f"{min(FOLDS, len(obj))}-fold) error is not significantly worse than the "
                              f"best candidate's: one-sided paired t-test over views at {SIGNIFICANCE:g}, "
