@@ -393,9 +393,11 @@ def _sfm(args) -> int:
         found = [f for f in (exif_focal_px(p, size) for p in args.images) if f]
         if found:
             prior, prior_from = float(np.median(found)), "EXIF"
+    centres = _prior_centres(args.poses, args.images) if args.poses else None
     try:
         rec = reconstruct(images, [str(p) for p in args.images], camera=camera,
-                          focal_prior_px=prior if camera is None else None, seed=args.seed)
+                          focal_prior_px=prior if camera is None else None,
+                          centres_prior=centres, centre_sigma=args.pose_sigma, seed=args.seed)
     except EstimationError as e:  # COLMAP ran and registered fewer than two views
         _unusable(args.images, f"registered fewer than 2 of {n} views ({e.problem}); nothing written")
     why = assess(rec, min_registered=args.min_registered,
@@ -409,9 +411,11 @@ def _sfm(args) -> int:
         warnings.append(f"registered {got} of {n} views; not registered: {', '.join(left)} "
                         "(cameras.json marks them)")
         warn(warnings[-1])
-    meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
+    meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else [])
+                     + ([args.poses] if args.poses else []),
                      params={"seed": args.seed, "fixed_intrinsics": camera is not None,
                              "min_registered": args.min_registered,
+                             "pose_priors": bool(args.poses), "pose_sigma": args.pose_sigma,
                              "focal_prior_px": prior if camera is None else None,
                              "focal_prior_from": prior_from if camera is None and prior else None},
                      quality={k: rec.info[k] for k in ("registered", "images", "points",
@@ -422,6 +426,30 @@ def _sfm(args) -> int:
     say(args, f"registered {got}/{n} views, {rec.info['points']} points "
               f"-> {out}/cameras.json, points.ply and COLMAP's cameras.txt, images.txt, points3D.txt")
     return 0
+
+
+def _prior_centres(path, images):
+    """Camera centres (N, 3) from a cameras.json (``views``: ``image``,
+    ``cam_from_world``), matched to the images by file name; NaN where absent."""
+    import json
+
+    try:
+        doc = json.loads(Path(path).read_text())
+        poses = {os.path.basename(v["image"]): v["cam_from_world"] for v in doc["views"]
+                 if v.get("cam_from_world")}
+        C = np.full((len(images), 3), np.nan)
+        for i, p in enumerate(images):
+            cw = poses.get(os.path.basename(str(p)))
+            if cw is not None:
+                R, t = np.asarray(cw["R"], float).reshape(3, 3), np.asarray(cw["t"], float).reshape(3)
+                C[i] = -R.T @ t
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise InputError(path, f"expected a cameras.json with views of image and cam_from_world "
+                               f"{{R, t}} ({type(e).__name__}: {e})") from None
+    if np.isfinite(C).all(axis=1).sum() < 3:
+        raise InputError(path, "gives the pose of fewer than 3 of the images (matched by file name); "
+                               "at least 3 fix the frame")
+    return C
 
 
 def _unusable(images, problem: str):
@@ -656,6 +684,11 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--focal-px", type=positive,
                    help="without --camera: the focal length expected (px), COLMAP's start; "
                         "an estimate more than 30%% off it is refused (default: EXIF, if any)")
+    v.add_argument("--poses", type=input_path,
+                   help="cameras.json with known poses (views: image, cam_from_world): their centres "
+                        "are position priors, and the model comes out in their frame and scale")
+    v.add_argument("--pose-sigma", type=positive,
+                   help="std of each known centre coordinate, in its unit (default 1%% of their spread)")
     v.add_argument("--seed", type=number(int, lo=0, hi=2**31 - 1), default=0,
                    help="COLMAP's random seed (default 0)")
     v.add_argument("--min-registered", type=number(float, lo=0, hi=1), default=0.5,

@@ -200,6 +200,7 @@ def check_views(images, names) -> None:
 
 
 def reconstruct(images, names, *, camera=None, focal_prior_px: float | None = None,
+                centres_prior=None, centre_sigma: float | None = None,
                 seed: int = 0, threads: int = 2,
                 max_features: int = 4096, peak_threshold: float = PEAK_THRESHOLD) -> Reconstruction:
     """Reconstruct cameras and sparse points from an unordered image set.
@@ -217,6 +218,13 @@ def reconstruct(images, names, *, camera=None, focal_prior_px: float | None = No
         Without ``camera``: the focal length expected (px; from EXIF or a
         spec sheet), COLMAP's starting value, and what :func:`assess` holds
         the estimate to.
+    centres_prior : ndarray, (N, 3), optional
+        Known camera centres (world frame, NaN rows for unknown ones): COLMAP's
+        position priors (``use_prior_position``). The result is then in this
+        frame and scale instead of an arbitrary similarity.
+    centre_sigma : float, optional
+        Standard deviation of each prior centre coordinate (the priors' unit;
+        default 1 % of the spread of the given centres).
     seed : int
         COLMAP's random seed (every RANSAC: two-view verification, initial
         pair, registration). Same images, camera and seed: the same bytes,
@@ -264,8 +272,9 @@ def reconstruct(images, names, *, camera=None, focal_prior_px: float | None = No
     old_level = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = 2
     try:
-        models, files, verified, tmarks = _run_colmap(images, names, camera, focal_prior_px, seed,
-                                                      threads, max_features, peak_threshold, t0)
+        priors = _check_priors(centres_prior, centre_sigma, len(images))
+        models, files, verified, tmarks = _run_colmap(images, names, camera, focal_prior_px, priors,
+                                                      seed, threads, max_features, peak_threshold, t0)
     finally:
         pycolmap.logging.minloglevel = old_level
     t_feat, t_match, t_map = tmarks
@@ -273,8 +282,28 @@ def reconstruct(images, names, *, camera=None, focal_prior_px: float | None = No
                    (t0, t_feat, t_match, t_map))
 
 
-def _run_colmap(images, names, camera, focal_prior_px, seed, threads, max_features, peak_threshold,
-                t0):
+def _check_priors(centres, sigma, n):
+    """``(centres (N, 3), sigma)`` checked, or None without priors."""
+    if centres is None:
+        return None
+    c = np.asarray(centres, np.float64)
+    if c.shape != (n, 3):
+        raise InputError("centres_prior", f"expected ({n}, 3) camera centres, got shape {c.shape}")
+    known = np.isfinite(c).all(axis=1)
+    if known.sum() < 3:
+        raise InputError("centres_prior", "fewer than 3 known camera centres: they cannot fix a frame")
+    spread = float(np.linalg.norm(c[known] - c[known].mean(0), axis=1).max())
+    if spread == 0:
+        raise InputError("centres_prior", "the known camera centres coincide")
+    if sigma is None:
+        sigma = 0.01 * spread
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise InputError("centre_sigma", f"expected a positive standard deviation, got {sigma!r}")
+    return c, float(sigma)
+
+
+def _run_colmap(images, names, camera, focal_prior_px, priors, seed, threads, max_features,
+                peak_threshold, t0):
     import tempfile
     import time
     from pathlib import Path
@@ -324,6 +353,8 @@ def _run_colmap(images, names, camera, focal_prior_px, seed, threads, max_featur
         pycolmap.Database.open(db).close()
         pycolmap.import_images(db, img_dir, camera_mode=pycolmap.CameraMode.SINGLE, image_names=files,
                                options=ro)
+        if priors is not None:
+            _write_priors(db, files, *priors)
         pycolmap.extract_features(db, img_dir, image_names=files, camera_mode=pycolmap.CameraMode.SINGLE,
                                   reader_options=ro, extraction_options=eo, device=pycolmap.Device.cpu)
         t_feat = time.perf_counter()
@@ -341,6 +372,8 @@ def _run_colmap(images, names, camera, focal_prior_px, seed, threads, max_featur
         opts.num_threads = 1  # see `threads` in reconstruct()'s docstring
         for k, v in MAPPER.items():
             setattr(opts.mapper, k, v)
+        if priors is not None:
+            opts.use_prior_position = True
         if camera is not None:
             opts.ba_refine_focal_length = False
             opts.ba_refine_principal_point = False
@@ -350,6 +383,24 @@ def _run_colmap(images, names, camera, focal_prior_px, seed, threads, max_featur
         t_map = time.perf_counter()
         verified = _verified_matches(db, files)
     return models, files, verified, (t_feat, t_match, t_map)
+
+
+def _write_priors(db_path, files, centres, sigma) -> None:
+    """Known camera centres as COLMAP position priors (Cartesian, isotropic sigma)."""
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        ids = {im.name: im for im in db.read_all_images()}
+        for f, c in zip(files, centres, strict=True):
+            if not np.isfinite(c).all():
+                continue
+            db.write_pose_prior(pycolmap.PosePrior(
+                corr_data_id=ids[f].data_id, position=np.asarray(c, np.float64),
+                position_covariance=np.eye(3) * sigma ** 2,
+                coordinate_system=pycolmap.PosePriorCoordinateSystem.CARTESIAN))
+    finally:
+        db.close()
 
 
 def _verified_matches(db_path, files) -> list[int]:
