@@ -431,6 +431,10 @@ def _result(models, files, verified, names, camera, size, seed, marks):
     shown = ", ".join(f"{names[i]} ({verified[i]} verified matches)" for i in order[:4])
     shown += f" and {len(names) - 4} more" if len(names) > 4 else ""
     if not models:
+        if max(verified, default=0) >= 100:  # COLMAP's init_min_num_inliers: they match well
+            raise EstimationError("images", "no pair of views could start a model although they "
+                                            "match: too small a baseline between the views (or a "
+                                            f"plane seen from one spot): {shown}")
         raise EstimationError("images", "COLMAP registered no image pair: too little overlap or "
                                         f"texture between the views: {shown}")
     rec = max(models.values(), key=lambda r: r.num_reg_images())
