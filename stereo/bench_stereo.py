@@ -714,3 +714,12 @@ def stage(*, quick: bool = False) -> Stage:
                  "of depth (model-based)",
                  checks=lambda res, ctx: _checks(res, {"stereo_cases": stereo_names}),
                  description=__doc__.split("\n\n", 1)[1].strip())
+
+
+_stage_without_sfm_rows = stage
+
+
+def stage(*, quick: bool = False) -> Stage:  # noqa: F811 - SfM rows on real views: stereo/bench_sfm.py
+    from lumigraph.stereo.bench_sfm import extend
+
+    return extend(_stage_without_sfm_rows(quick=quick), quick=quick)

@@ -23,7 +23,6 @@ usable result: exit 3 (``EXIT_UNUSABLE``), one line, nothing written.
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from pathlib import Path
@@ -233,6 +232,13 @@ def _depth(args) -> int:
     disp = read_pfm(args.disparity)
     if disp.ndim != 2:
         raise InputError(args.disparity, f"expected a one-channel disparity PFM, got shape {disp.shape}")
+    if not (args.rig or args.rectification):
+        return _depth_from_focal(args, out, disp)
+    given = [f for f, v in (("--focal-px", args.focal_px), ("--baseline", args.baseline),
+                            ("--cx", args.cx), ("--cy", args.cy), ("--doffs", args.doffs)) if v is not None]
+    if given:
+        raise InputError(given[0], "belongs to a pair without a rig; the rig or rectification file "
+                                   "already gives the focal length and baseline: drop it")
     rect, src = _rectification(args)
     rig = rect.rig
     if disp.shape[::-1] != tuple(rect.image_size):
@@ -270,6 +276,56 @@ def _depth(args) -> int:
                      extra={"focal_px": rect.focal_px, "baseline": rect.baseline})
     write_artifact(out, lambda tmp: write_ply(tmp, pts[ok], colors), meta=meta)
     say(args, f"wrote {int(ok.sum())} points to {out} ({frame} frame)")
+    return 0
+
+
+def _depth_from_focal(args, out, disp) -> int:
+    """Points of a rectified pair known only by its focal length and
+    baseline (Middlebury's calib.txt): Z = baseline f / (d + doffs), X = (x -
+    cx) Z / f, Y = (y - cy) Z / f in the left camera's frame."""
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_ply
+
+    if args.focal_px is None or args.baseline is None:
+        raise InputError("--focal-px", "give the rig (--rig or --rectification) or, for a rectified pair "
+                                  "without one, --focal-px and --baseline")
+    h, w = disp.shape
+    f, b = args.focal_px, args.baseline
+    cx = (w - 1) / 2 if args.cx is None else args.cx
+    cy = (h - 1) / 2 if args.cy is None else args.cy
+    doffs = args.doffs or 0.0
+    d = disp.astype(np.float64) + doffs
+    ok = np.isfinite(d) & (d > 0)
+    z = np.where(ok, b * f / np.where(ok, d, 1.0), np.inf)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    pts = np.stack([(x - cx) * z / f, (y - cy) * z / f, z], axis=2)
+    if args.max_depth is not None:
+        ok &= z <= args.max_depth
+    colors = None
+    if args.image:
+        img = _read(args.image)
+        if img.shape[:2] != disp.shape:
+            raise InputError(args.image, f"size {img.shape[1]}x{img.shape[0]} differs from the "
+                                         f"disparity's {w}x{h}; give the rectified left image")
+        if img.dtype == np.uint16:
+            img = (img / 257.0).round().astype(np.uint8)
+        if img.ndim == 2:
+            img = np.repeat(img[..., None], 3, axis=2)
+        colors = img[..., :3][ok].astype(np.uint8)
+    if not ok.any():
+        if args.max_depth is not None and (np.isfinite(d) & (d > 0)).any():
+            raise EstimationError("max_depth", f"no point is nearer than {args.max_depth:g}; "
+                                               "nothing to write")
+        raise EstimationError(args.disparity, "no valid disparity (finite and above -doffs): "
+                                              "nothing to reproject")
+    meta = make_meta("lumigraph.points", inputs=[args.disparity] + ([args.image] if args.image else []),
+                     params={"frame": "rectified left camera", "max_depth": args.max_depth,
+                             "focal_px": f, "baseline": b, "cx": cx, "cy": cy, "doffs": doffs},
+                     quality={"points": int(ok.sum()), "of_pixels": int(disp.size)},
+                     extra={"convention": "Z = baseline * focal_px / (d + doffs), X = (x - cx) Z / "
+                                          "focal_px, Y = (y - cy) Z / focal_px (Middlebury calib.txt)"})
+    write_artifact(out, lambda tmp: write_ply(tmp, pts[ok], colors), meta=meta)
+    say(args, f"wrote {int(ok.sum())} points to {out} (rectified left camera frame)")
     return 0
 
 
@@ -346,36 +402,76 @@ def _triangulate(args) -> int:
 def _sfm(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.capture.camera import Camera
-    from lumigraph.stereo.sfm import reconstruct
+    from lumigraph.stereo.sfm import Reconstruction, assess, exif_focal_px, reconstruct
 
     out = check_output_dir(args.out)
-    check_planned([out / "cameras.json", out / "points.ply"])
+    check_planned([out / n for n in Reconstruction.OUTPUTS])
     images = [_read(p) for p in args.images]
     camera = Camera.load(args.camera) if args.camera else None
     n = len(images)
-    need = max(2, math.ceil(args.min_registered * n))
+    prior, prior_from = args.focal_px, "--focal-px"
+    if camera is None and prior is None:
+        size = images[0].shape[1::-1]
+        found = [f for f in (exif_focal_px(p, size) for p in args.images) if f]
+        if found:
+            prior, prior_from = float(np.median(found)), "EXIF"
+    centres = _prior_centres(args.poses, args.images) if args.poses else None
     try:
-        rec = reconstruct(images, [str(p) for p in args.images], camera=camera, seed=args.seed)
+        rec = reconstruct(images, [str(p) for p in args.images], camera=camera,
+                          focal_prior_px=prior if camera is None else None,
+                          centres_prior=centres, centre_sigma=args.pose_sigma, seed=args.seed)
     except EstimationError as e:  # COLMAP ran and registered fewer than two views
         _unusable(args.images, f"registered fewer than 2 of {n} views ({e.problem}); nothing written")
+    why = assess(rec, min_registered=args.min_registered,
+                 focal_prior_px=prior if camera is None else None)
+    if why:
+        _unusable(args.images, "; ".join(why) + "; nothing written")
     got = rec.info["registered"]
-    if got < need:
-        _unusable(args.images, f"registered {got} of {n} views, fewer than --min-registered "
-                         f"{args.min_registered:g} asks ({need}); nothing written")
+    warnings = []
     if got < n:
-        warn(f"registered {got} of {n} views; cameras.json marks the others")
-    meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else []),
+        left = [m for m, ok in zip(rec.image_names, rec.registered, strict=True) if not ok]
+        warnings.append(f"registered {got} of {n} views; not registered: {', '.join(left)} "
+                        "(cameras.json marks them)")
+        warn(warnings[-1])
+    meta = make_meta("lumigraph.sfm", inputs=[*args.images] + ([args.camera] if args.camera else [])
+                     + ([args.poses] if args.poses else []),
                      params={"seed": args.seed, "fixed_intrinsics": camera is not None,
-                             "min_registered": args.min_registered},
+                             "min_registered": args.min_registered,
+                             "pose_priors": bool(args.poses), "pose_sigma": args.pose_sigma,
+                             "focal_prior_px": prior if camera is None else None,
+                             "focal_prior_from": prior_from if camera is None and prior else None},
                      quality={k: rec.info[k] for k in ("registered", "images", "points",
-                                                       "mean_reprojection_error_px")},
-                     timings_s=rec.info["timings_s"], model=rec.info,
-                     warnings=[f"{(~rec.registered).sum()} images not registered"]
-                     if not rec.registered.all() else [])
+                                                       "mean_reprojection_error_px",
+                                                       "median_ray_angle_deg")},
+                     timings_s=rec.info["timings_s"], model=rec.info, warnings=warnings)
     rec.save(out, meta=meta)
-    say(args, f"registered {rec.info['registered']}/{len(images)} views, {rec.info['points']} points "
-              f"-> {out}/cameras.json, {out}/points.ply")
+    say(args, f"registered {got}/{n} views, {rec.info['points']} points "
+              f"-> {out}/cameras.json, points.ply and COLMAP's cameras.txt, images.txt, points3D.txt")
     return 0
+
+
+def _prior_centres(path, images):
+    """Camera centres (N, 3) from a cameras.json (``views``: ``image``,
+    ``cam_from_world``), matched to the images by file name; NaN where absent."""
+    import json
+
+    try:
+        doc = json.loads(Path(path).read_text())
+        poses = {os.path.basename(v["image"]): v["cam_from_world"] for v in doc["views"]
+                 if v.get("cam_from_world")}
+        C = np.full((len(images), 3), np.nan)
+        for i, p in enumerate(images):
+            cw = poses.get(os.path.basename(str(p)))
+            if cw is not None:
+                R, t = np.asarray(cw["R"], float).reshape(3, 3), np.asarray(cw["t"], float).reshape(3)
+                C[i] = -R.T @ t
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise InputError(path, f"expected a cameras.json with views of image and cam_from_world "
+                               f"{{R, t}} ({type(e).__name__}: {e})") from None
+    if np.isfinite(C).all(axis=1).sum() < 3:
+        raise InputError(path, "gives the pose of fewer than 3 of the images (matched by file name); "
+                               "at least 3 fix the frame")
+    return C
 
 
 def _unusable(images, problem: str):
@@ -531,13 +627,26 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
     v.set_defaults(func=_match)
 
-    v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)")
+    v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",
+                 epilog="Without a rig: a rectified pair known by --focal-px and --baseline "
+                        "(Middlebury calib.txt: f, baseline, cx, cy of cam0, doffs = cx1 - cx0): "
+                        "Z = baseline f / (d + doffs), X = (x - cx) Z / f, Y = (y - cy) Z / f, in "
+                        "the baseline's unit; --image is then the rectified left image.")
     v.add_argument("disparity", type=input_path, help="disparity .pfm from 'stereo match'")
-    g = v.add_mutually_exclusive_group(required=True)
+    g = v.add_mutually_exclusive_group()
     g.add_argument("--rig", type=input_path,
                    help="the rig the pair was rectified with (rig.json or gt.json)")
     g.add_argument("--rectification", type=input_path,
                    help="the rectification.json the pair was rectified with")
+    v.add_argument("--focal-px", type=positive, help="without a rig: focal length of the rectified pair (px)")
+    v.add_argument("--baseline", type=positive,
+                   help="without a rig: distance between the camera centres (its unit is the points')")
+    v.add_argument("--cx", type=number(float), help="without a rig: principal point x (px; default the "
+                                                    "image centre)")
+    v.add_argument("--cy", type=number(float), help="without a rig: principal point y (px; default the "
+                                                    "image centre)")
+    v.add_argument("--doffs", type=number(float), help="without a rig: x offset of the right principal "
+                                                       "point, added to d (px; default 0)")
     v.add_argument("--image", type=input_path, help="the ORIGINAL left image, for point colours")
     v.add_argument("--frame", choices=("left", "rectified"), default="left",
                    help="points in the original left camera frame (default) or the rectified one")
@@ -597,19 +706,33 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.set_defaults(func=_triangulate)
 
     v = add_verb(sp, "sfm", "unordered multi-view reconstruction (pycolmap)",
-                 epilog="Exit status 3 (nothing written): COLMAP ran but registered fewer than "
-                        "two views, or fewer than --min-registered of them; the one line says how "
-                        "many of how many. Views left out above that are listed in cameras.json "
-                        "(registered: false) and in the .meta.json warnings.")
+                 epilog="Writes cameras.json, points.ply and COLMAP's text model (cameras.txt, "
+                        "images.txt, points3D.txt) into --out.\n"
+                        "Exit status 3 (nothing written), one line saying why: fewer than "
+                        "--min-registered of the views registered (each view left out is named with "
+                        "the verified matches it has); intrinsics estimated from two views only; "
+                        "an estimated |k1| > 1 or a focal more than 30 %% off --focal-px (or the "
+                        "EXIF focal); views too close together (median ray angle under 2 deg). "
+                        "Views left out above --min-registered are listed in cameras.json "
+                        "(registered: false), on stderr and in the .meta.json warnings.")
     v.add_argument("images", nargs="+", type=input_path, help="the views (one camera, one size)")
     v.add_argument("--camera", type=input_path,
                    help="camera.json (or a scene gt.json): known, fixed intrinsics")
+    v.add_argument("--focal-px", type=positive,
+                   help="without --camera: the focal length expected (px), COLMAP's start; "
+                        "an estimate more than 30%% off it is refused (default: EXIF, if any)")
+    v.add_argument("--poses", type=input_path,
+                   help="cameras.json with known poses (views: image, cam_from_world): their centres "
+                        "are position priors, and the model comes out in their frame and scale")
+    v.add_argument("--pose-sigma", type=positive,
+                   help="std of each known centre coordinate, in its unit (default 1%% of their spread)")
     v.add_argument("--seed", type=number(int, lo=0, hi=2**31 - 1), default=0,
                    help="COLMAP's random seed (default 0)")
     v.add_argument("--min-registered", type=number(float, lo=0, hi=1), default=0.5,
                    help="fraction of the views that must register for a usable result "
                         "(default 0.5; at least two views always)")
-    v.add_argument("--out", required=True, type=output_dir, help="folder for cameras.json and points.ply")
+    v.add_argument("--out", required=True, type=output_dir,
+                   help="folder for cameras.json, points.ply and the COLMAP text model")
     v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
     return p
 

@@ -40,6 +40,25 @@ import numpy as np
 
 from lumigraph.capture.errors import EstimationError, InputError
 
+# SIFT contrast threshold. COLMAP's 0.02/3 drops most features of a pale
+# object on a dark background: on the Middlebury temple ring (640x480) it
+# registers 13 of 16 views; 0.002 registers all 16 (docs/decisions/sfm.md).
+PEAK_THRESHOLD = 0.002
+# Registration thresholds: COLMAP asks 30 inliers and a 25 % inlier ratio
+# to register a view; three temple views seen across a 42 degree gap have
+# 15-30 (13 of 16 registered). A looser registration is safe here because
+# assess() judges the model as a whole afterwards (the exit-3 checks).
+MAPPER = {"abs_pose_min_num_inliers": 15, "abs_pose_min_inlier_ratio": 0.1}
+
+# assess()'s bounds (docs/decisions/sfm.md): a radial term beyond 1 bends
+# the image edge by more than its own size; a focal more than 30 % off a
+# known prior is a different camera or a failed self-calibration; points seen
+# under rays closer than 2 degrees have a depth error of 1/(f·θ) per pixel
+# of noise (3 % at f = 1000 px), and COLMAP keeps points down to 1.5 degrees.
+MAX_ABS_K1 = 1.0
+FOCAL_TOLERANCE = 0.30
+MIN_MEDIAN_RAY_ANGLE_DEG = 2.0
+
 
 @dataclass(frozen=True)
 class Reconstruction:
@@ -61,7 +80,14 @@ class Reconstruction:
     colors : ndarray, (P, 3) uint8
     track_length : ndarray, (P,) int
     info : dict
-        Counts, mean reprojection error (px), options, timings.
+        Counts, mean reprojection error (px), options, timings, per view the
+        most verified matches it shares with another view
+        (``verified_matches``), the median largest ray angle of the points
+        (``median_ray_angle_deg``).
+    colmap_text : dict
+        COLMAP's text model, ``{"cameras.txt": str, "images.txt": str,
+        "points3D.txt": str}`` (COLMAP's own conventions: pixel centres at
+        +0.5, image names as given).
     """
 
     image_names: tuple[str, ...]
@@ -73,6 +99,7 @@ class Reconstruction:
     colors: np.ndarray
     track_length: np.ndarray
     info: dict = field(default_factory=dict, compare=False)
+    colmap_text: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self):
         n = len(self.image_names)
@@ -98,8 +125,12 @@ class Reconstruction:
             views.append(v)
         return {"schema": "lumigraph.cameras", "schema_version": 1, "camera": cam, "views": views}
 
+    OUTPUTS = ("cameras.json", "points.ply", "cameras.txt", "images.txt", "points3D.txt")
+
     def save(self, folder, *, meta: dict) -> None:
-        """Write ``points.ply`` and ``cameras.json`` (each with its sidecar) into ``folder``."""
+        """Write ``points.ply``, ``cameras.json`` and COLMAP's text model
+        (``cameras.txt``, ``images.txt``, ``points3D.txt``), each with its
+        sidecar, into ``folder`` (the names in ``OUTPUTS``)."""
         from pathlib import Path
 
         from lumigraph.capture.artifact import dumps_json, write_artifact
@@ -111,6 +142,8 @@ class Reconstruction:
                        lambda tmp: tmp.write_text(dumps_json(self.cameras_dict())), meta=meta)
         write_artifact(folder / "points.ply", lambda tmp: write_ply(tmp, self.points, self.colors),
                        meta=meta)
+        for name, text in self.colmap_text.items():
+            write_artifact(folder / name, lambda tmp, text=text: tmp.write_text(text), meta=meta)
 
 
 def align_similarity(src: np.ndarray, dst: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
@@ -166,8 +199,10 @@ def check_views(images, names) -> None:
                                            "a second view must move the camera; drop one")
 
 
-def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
-                max_features: int = 4096) -> Reconstruction:
+def reconstruct(images, names, *, camera=None, focal_prior_px: float | None = None,
+                centres_prior=None, centre_sigma: float | None = None,
+                seed: int = 0, threads: int = 2,
+                max_features: int = 4096, peak_threshold: float = PEAK_THRESHOLD) -> Reconstruction:
     """Reconstruct cameras and sparse points from an unordered image set.
 
     Parameters
@@ -179,6 +214,17 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
     camera : capture.camera.Camera, optional
         Known intrinsics: held fixed in bundle adjustment. Without it COLMAP
         estimates a SIMPLE_RADIAL camera from a focal guess.
+    focal_prior_px : float, optional
+        Without ``camera``: the focal length expected (px; from EXIF or a
+        spec sheet), COLMAP's starting value, and what :func:`assess` holds
+        the estimate to.
+    centres_prior : ndarray, (N, 3), optional
+        Known camera centres (world frame, NaN rows for unknown ones): COLMAP's
+        position priors (``use_prior_position``). The result is then in this
+        frame and scale instead of an arbitrary similarity.
+    centre_sigma : float, optional
+        Standard deviation of each prior centre coordinate (the priors' unit;
+        default 1 % of the spread of the given centres).
     seed : int
         COLMAP's random seed (every RANSAC: two-view verification, initial
         pair, registration). Same images, camera and seed: the same bytes,
@@ -190,6 +236,10 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
         50 000 residuals, so small sets lose nothing.
     max_features : int
         SIFT features per image.
+    peak_threshold : float
+        SIFT's difference-of-Gaussian contrast threshold (COLMAP's default is
+        0.0067). Lower keeps the faint features of low-contrast objects on
+        dark backgrounds (see ``PEAK_THRESHOLD``).
 
     Returns
     -------
@@ -222,14 +272,38 @@ def reconstruct(images, names, *, camera=None, seed: int = 0, threads: int = 2,
     old_level = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = 2
     try:
-        models, files, tmarks = _run_colmap(images, names, camera, seed, threads, max_features, t0)
+        priors = _check_priors(centres_prior, centre_sigma, len(images))
+        models, files, verified, tmarks = _run_colmap(images, names, camera, focal_prior_px, priors,
+                                                      seed, threads, max_features, peak_threshold, t0)
     finally:
         pycolmap.logging.minloglevel = old_level
     t_feat, t_match, t_map = tmarks
-    return _result(models, files, names, camera, (w, h), seed, (t0, t_feat, t_match, t_map))
+    return _result(models, files, verified, names, camera, (w, h), seed,
+                   (t0, t_feat, t_match, t_map))
 
 
-def _run_colmap(images, names, camera, seed, threads, max_features, t0):
+def _check_priors(centres, sigma, n):
+    """``(centres (N, 3), sigma)`` checked, or None without priors."""
+    if centres is None:
+        return None
+    c = np.asarray(centres, np.float64)
+    if c.shape != (n, 3):
+        raise InputError("centres_prior", f"expected ({n}, 3) camera centres, got shape {c.shape}")
+    known = np.isfinite(c).all(axis=1)
+    if known.sum() < 3:
+        raise InputError("centres_prior", "fewer than 3 known camera centres: they cannot fix a frame")
+    spread = float(np.linalg.norm(c[known] - c[known].mean(0), axis=1).max())
+    if spread == 0:
+        raise InputError("centres_prior", "the known camera centres coincide")
+    if sigma is None:
+        sigma = 0.01 * spread
+    if not (np.isfinite(sigma) and sigma > 0):
+        raise InputError("centre_sigma", f"expected a positive standard deviation, got {sigma!r}")
+    return c, float(sigma)
+
+
+def _run_colmap(images, names, camera, focal_prior_px, priors, seed, threads, max_features,
+                peak_threshold, t0):
     import tempfile
     import time
     from pathlib import Path
@@ -260,9 +334,16 @@ def _run_colmap(images, names, camera, seed, threads, max_features, t0):
                 ro.camera_model = "FULL_OPENCV"
                 params = [fx, fy, cx, cy, *dist[:5], 0.0, 0.0, 0.0]
             ro.camera_params = ",".join(repr(float(p)) for p in params)
+        elif focal_prior_px is not None:
+            # a starting focal (COLMAP refines it); its own guess is 1.2 x the
+            # longer side
+            h, w = images[0].shape[:2]
+            ro.camera_model = "SIMPLE_RADIAL"
+            ro.camera_params = ",".join(repr(float(p)) for p in (focal_prior_px, w / 2, h / 2, 0.0))
         eo = pycolmap.FeatureExtractionOptions()
         eo.num_threads = threads
         eo.sift.max_num_features = max_features
+        eo.sift.peak_threshold = peak_threshold
         pycolmap.set_random_seed(seed)
         db = tmp / "database.db"
         # The extractor's threads store each image when its features are done,
@@ -272,6 +353,8 @@ def _run_colmap(images, names, camera, seed, threads, max_features, t0):
         pycolmap.Database.open(db).close()
         pycolmap.import_images(db, img_dir, camera_mode=pycolmap.CameraMode.SINGLE, image_names=files,
                                options=ro)
+        if priors is not None:
+            _write_priors(db, files, *priors)
         pycolmap.extract_features(db, img_dir, image_names=files, camera_mode=pycolmap.CameraMode.SINGLE,
                                   reader_options=ro, extraction_options=eo, device=pycolmap.Device.cpu)
         t_feat = time.perf_counter()
@@ -287,6 +370,10 @@ def _run_colmap(images, names, camera, seed, threads, max_features, t0):
         opts = pycolmap.IncrementalPipelineOptions()
         opts.random_seed = seed
         opts.num_threads = 1  # see `threads` in reconstruct()'s docstring
+        for k, v in MAPPER.items():
+            setattr(opts.mapper, k, v)
+        if priors is not None:
+            opts.use_prior_position = True
         if camera is not None:
             opts.ba_refine_focal_length = False
             opts.ba_refine_principal_point = False
@@ -294,22 +381,65 @@ def _run_colmap(images, names, camera, seed, threads, max_features, t0):
         (tmp / "sparse").mkdir()
         models = pycolmap.incremental_mapping(db, img_dir, tmp / "sparse", options=opts)
         t_map = time.perf_counter()
-    return models, files, (t_feat, t_match, t_map)
+        verified = _verified_matches(db, files)
+    return models, files, verified, (t_feat, t_match, t_map)
 
 
-def _result(models, files, names, camera, size, seed, marks):
+def _write_priors(db_path, files, centres, sigma) -> None:
+    """Known camera centres as COLMAP position priors (Cartesian, isotropic sigma)."""
+    import pycolmap
+
+    db = pycolmap.Database.open(db_path)
+    try:
+        ids = {im.name: im for im in db.read_all_images()}
+        for f, c in zip(files, centres, strict=True):
+            if not np.isfinite(c).all():
+                continue
+            db.write_pose_prior(pycolmap.PosePrior(
+                corr_data_id=ids[f].data_id, position=np.asarray(c, np.float64),
+                position_covariance=np.eye(3) * sigma ** 2,
+                coordinate_system=pycolmap.PosePriorCoordinateSystem.CARTESIAN))
+    finally:
+        db.close()
+
+
+def _verified_matches(db_path, files) -> list[int]:
+    """Per image, the most geometrically verified matches it shares with any
+    other image (why a view did not register, when it did not)."""
+    import pycolmap
+
+    best = dict.fromkeys(files, 0)
+    db = pycolmap.Database.open(db_path)
+    try:
+        names = {im.image_id: im.name for im in db.read_all_images()}
+        for pid, n in zip(*db.read_two_view_geometry_num_inliers(), strict=True):
+            for i in pycolmap.pair_id_to_image_pair(pid):
+                best[names[i]] = max(best[names[i]], int(n))
+    finally:
+        db.close()
+    return [best[f] for f in files]
+
+
+def _result(models, files, verified, names, camera, size, seed, marks):
     import pycolmap
 
     from lumigraph.capture.camera import Camera
 
     w, h = size
     t0, t_feat, t_match, t_map = marks
+    order = sorted(range(len(names)), key=lambda i: verified[i])
+    shown = ", ".join(f"{names[i]} ({verified[i]} verified matches)" for i in order[:4])
+    shown += f" and {len(names) - 4} more" if len(names) > 4 else ""
     if not models:
+        if max(verified, default=0) >= 100:  # COLMAP's init_min_num_inliers: they match well
+            raise EstimationError("images", "no pair of views could start a model although they "
+                                            "match: too small a baseline between the views (or a "
+                                            f"plane seen from one spot): {shown}")
         raise EstimationError("images", "COLMAP registered no image pair: too little overlap or "
-                                        "texture between the views")
+                                        f"texture between the views: {shown}")
     rec = max(models.values(), key=lambda r: r.num_reg_images())
     if rec.num_reg_images() < 2:
-        raise EstimationError("images", "fewer than two views could be registered")
+        raise EstimationError("images", f"fewer than two views could be registered: {shown}")
     n = len(names)
     Rs = np.full((n, 3, 3), np.nan)
     ts = np.full((n, 3), np.nan)
@@ -331,18 +461,152 @@ def _result(models, files, names, camera, size, seed, marks):
                      (w, h), "k1", {"source": f"COLMAP {cam.model.name}"})
     else:
         est = camera
-    pts = rec.points3D.values()
+    pts = list(rec.points3D.values())
     P = np.array([p.xyz for p in pts]).reshape(-1, 3)
     C = np.array([p.color for p in pts], np.uint8).reshape(-1, 3)
     L = np.array([p.track.length() for p in pts], int)
+    centres = -np.einsum("nji,nj->ni", Rs, ts)
+    id_index = {im.image_id: index[im.name] for im in rec.images.values()}
+    angles = [_max_ray_angle(p.xyz, centres[[id_index[e.image_id] for e in p.track.elements]])
+              for p in pts]
     info = {"method": "pycolmap incremental SfM", "pycolmap": pycolmap.__version__,
+            "verified_matches": dict(zip(names, verified, strict=True)),
+            "median_ray_angle_deg": float(np.median(angles)) if angles else 0.0,
             "registered": int(reg.sum()), "images": n, "points": len(P),
             "models_found": len(models),
             "mean_reprojection_error_px": float(rec.compute_mean_reprojection_error()),
             "fixed_intrinsics": camera is not None, "seed": seed,
             "timings_s": {"features": t_feat - t0, "matching": t_match - t_feat,
                           "mapping": t_map - t_match}}
-    return Reconstruction(tuple(names), reg, Rs, ts, est, P, C, L, info)
+    return Reconstruction(tuple(names), reg, Rs, ts, est, P, C, L, info,
+                          colmap_text=_colmap_text(rec, dict(zip(files, names, strict=True))))
+
+
+def _max_ray_angle(x, centres) -> float:
+    """The widest angle (degrees) between the rays from ``centres`` to ``x``."""
+    d = centres - x
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return float(np.degrees(np.arccos(np.clip((d @ d.T).min(), -1.0, 1.0))))
+
+
+def _colmap_text(rec, rename: dict) -> dict:
+    """COLMAP's text model as strings, the images under their given names."""
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory(prefix="lumigraph-sfm-text-") as tmp:
+        rec.write_text(tmp)
+        text = {n: (Path(tmp) / n).read_text() for n in ("cameras.txt", "images.txt", "points3D.txt")}
+    lines = text["images.txt"].split("\n")
+    first = next((i for i, ln in enumerate(lines) if not ln.startswith("#")), len(lines))
+    for i in range(first, len(lines), 2):  # image lines alternate with their 2-D point lines
+        if not lines[i]:
+            continue
+        head, _, name = lines[i].rpartition(" ")
+        lines[i] = f"{head} {rename.get(name, name)}"
+    text["images.txt"] = "\n".join(lines)
+    return text
+
+
+def assess(rec: Reconstruction, *, min_registered: float = 0.5,
+           focal_prior_px: float | None = None) -> list[str]:
+    """Why a reconstruction cannot be used; an empty list when it can.
+
+    A model is refused (each reason one phrase) when
+
+    * fewer than ``min_registered`` of the views (and fewer than two)
+      registered — the views left out are named with the most verified
+      matches each shares with another view;
+    * the intrinsics were estimated from two views only (the focal length
+      of one shared camera is not determined by two views);
+    * the estimated radial term is beyond ``MAX_ABS_K1``, or the focal
+      length is more than ``FOCAL_TOLERANCE`` off ``focal_prior_px``;
+    * the points are seen under a median widest ray angle below
+      ``MIN_MEDIAN_RAY_ANGLE_DEG`` (views too close together: depth, and
+      with it the poses, are not determined).
+
+    Parameters
+    ----------
+    rec : Reconstruction
+    min_registered : float in [0, 1]
+    focal_prior_px : float, optional
+        The focal length expected (EXIF, spec sheet); without it the focal
+        is not checked (COLMAP keeps it within 0.1-10x its 1.2x-width guess).
+
+    Returns
+    -------
+    list of str
+
+    Examples
+    --------
+    >>> from lumigraph.capture.camera import Camera
+    >>> cam = Camera(np.diag([500., 500, 1]), [2.0, 0, 0, 0, 0], (64, 48), "k1", {})
+    >>> R = np.repeat(np.eye(3)[None], 2, 0)
+    >>> rec = Reconstruction(("a.png", "b.png"), np.array([True, False]), R, np.zeros((2, 3)),
+    ...                      cam, np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros(0, int),
+    ...                      {"verified_matches": {"a.png": 9, "b.png": 9}})
+    >>> for r in assess(rec): print(r)
+    registered 1 of 2 views, fewer than 0.5 of them (2); not registered: b.png (9 verified matches)
+    radial distortion k1 = 2 is beyond +-1 (a failed self-calibration)
+    """
+    n = len(rec.image_names)
+    got = int(rec.registered.sum())
+    need = max(2, int(np.ceil(min_registered * n)))
+    why = []
+    if got < need:
+        vm = rec.info.get("verified_matches", {})
+        left = [f"{name} ({vm[name]} verified matches)" if name in vm else name
+                for name, ok in zip(rec.image_names, rec.registered, strict=True) if not ok]
+        shown = ", ".join(left[:4]) + (f" and {len(left) - 4} more" if len(left) > 4 else "")
+        why.append(f"registered {got} of {n} views, fewer than {min_registered:g} of them "
+                   f"({need}); not registered: {shown}")
+    estimated = not rec.info.get("fixed_intrinsics", False)
+    if estimated and got == 2:
+        why.append("the camera was estimated from two views, which do not determine the focal "
+                   "length; give the intrinsics (camera.json) or more views")
+    if estimated:
+        k1 = float(rec.camera.dist[0]) if rec.camera.dist.size else 0.0
+        if abs(k1) > MAX_ABS_K1:
+            why.append(f"radial distortion k1 = {k1:.3g} is beyond +-{MAX_ABS_K1:g} "
+                       "(a failed self-calibration)")
+        f = float(rec.camera.K[0, 0])
+        if focal_prior_px is not None and abs(f / focal_prior_px - 1) > FOCAL_TOLERANCE:
+            why.append(f"estimated focal {f:.0f} px is {100 * abs(f / focal_prior_px - 1):.0f} % off "
+                       f"the expected {focal_prior_px:.0f} px (more than "
+                       f"{100 * FOCAL_TOLERANCE:.0f} %)")
+    ang = rec.info.get("median_ray_angle_deg")
+    if ang is not None and got >= 2 and ang < MIN_MEDIAN_RAY_ANGLE_DEG:
+        why.append(f"the views are too close together: points are seen under a median ray angle "
+                   f"of {ang:.2g} deg (below {MIN_MEDIAN_RAY_ANGLE_DEG:g}), so depth and poses are "
+                   "not determined; move the camera more between views")
+    return why
+
+
+def exif_focal_px(path, size) -> float | None:
+    """Focal length in pixels from a file's EXIF (35 mm equivalent, or the
+    focal length and the focal-plane resolution), None when absent.
+
+    ``size`` is the image's ``(width, height)``. The 35 mm equivalent is
+    taken over the longer side (36 mm), as COLMAP does.
+    """
+    try:
+        from PIL import Image
+    except ImportError:  # pragma: no cover - Pillow is a dependency of matplotlib
+        return None
+    try:
+        with Image.open(path) as im:
+            exif = im.getexif().get_ifd(0x8769)
+    except Exception:  # noqa: BLE001 - no EXIF is not an error
+        return None
+    f35 = exif.get(0xA405)  # FocalLengthIn35mmFilm
+    if f35:
+        return float(f35) * max(size) / 36.0
+    f, xres, unit = exif.get(0x920A), exif.get(0xA20E), exif.get(0xA210, 2)
+    if f and xres:
+        mm_per_unit = {2: 25.4, 3: 10.0, 4: 1.0}.get(int(unit))
+        if mm_per_unit:
+            return float(f) * float(xres) / mm_per_unit
+    return None
 
 
 def centre_error(rec: Reconstruction, gt_centres: np.ndarray) -> dict:

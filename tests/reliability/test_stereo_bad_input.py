@@ -2,7 +2,6 @@
 over inputs (exit 2), and an SfM that registered too few views (exit 3)."""
 
 import json
-import types
 from pathlib import Path
 
 import numpy as np
@@ -94,11 +93,18 @@ def views(tmp_path):
 def test_sfm_registering_too_few_views_is_unusable(views, tmp_path, capsys, monkeypatch,
                                                    registered, fragment):
     import lumigraph.stereo.sfm as sfm
+    from lumigraph.capture.camera import Camera
 
     def fake(images, names, **kw):  # what COLMAP would report, without running it
         if registered is None:
             raise EstimationError("images", "fewer than two views could be registered")
-        return types.SimpleNamespace(info={"registered": registered})
+        n = len(names)
+        reg = np.arange(n) < registered
+        cam = Camera(np.diag([60.0, 60.0, 1.0]), [0, 0, 0, 0, 0], (50, 40), "k1", {})
+        return sfm.Reconstruction(tuple(Path(x).name for x in names), reg,
+                                  np.repeat(np.eye(3)[None], n, 0), np.zeros((n, 3)), cam,
+                                  np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros(0, int),
+                                  {"registered": registered, "fixed_intrinsics": True})
 
     monkeypatch.setattr(sfm, "reconstruct", fake)
     out = tmp_path / "sfm"
