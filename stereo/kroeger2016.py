@@ -308,6 +308,20 @@ def _wmf(flow, guide, radius):
 
 
 def _one_way(g0, g1, c0, c1, p: Preset, init):
+    import cv2
+
+    # OpenCV's DIS splits the frame into one stripe per thread, and its
+    # spatial propagation runs within a stripe: the answer depends on the
+    # thread count. One thread gives byte-stable results on every machine.
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        return _one_way_pinned(g0, g1, c0, c1, p, init)
+    finally:
+        cv2.setNumThreads(threads)
+
+
+def _one_way_pinned(g0, g1, c0, c1, p: Preset, init):
     f = _search(g0, g1, p, p.patch_size, init)
     if p.fuse_patch_sizes:
         f = _fuse(c0, c1, [f] + [_search(g0, g1, p, s, init) for s in p.fuse_patch_sizes])
