@@ -303,8 +303,13 @@ def _wmf(flow, guide, radius):
 
     if radius == 0:
         return flow
-    return np.dstack([cv2.ximgproc.weightedMedianFilter(guide, np.ascontiguousarray(flow[..., c]),
-                                                         radius, 25.5) for c in (0, 1)])
+    # Both components in one pass (a third, zero channel: the filter takes 1 or 3).
+    three = np.dstack([flow, np.zeros(flow.shape[:2], np.float32)])
+    # The filter draws from OpenCV's global generator: seeded, the flow depends
+    # on its inputs alone (as in stereo.pyramid_flow._median).
+    cv2.setRNGSeed(0)
+    return np.ascontiguousarray(cv2.ximgproc.weightedMedianFilter(guide, three, radius,
+                                                                  sigma=25.5)[..., :2])
 
 
 def _one_way(g0, g1, c0, c1, p: Preset, init):
