@@ -9,13 +9,14 @@ Gauss-Newton (their eq. 2-4, ``descent_iterations`` steps), propagated to
 their neighbours, and densified by the overlap-weighted average of eq. 5. What
 we add around it, each a handful of OpenCV/numpy passes at full size:
 
-* **finest scale 0** and **no per-level variational refinement**: the refinement
-  DIS's "medium" preset runs at every level costs more than the patch search
-  and gains less than solving at full size (our bench, ``docs/decisions/flow-default.md``);
+* **finest scale 0** and **one variational step per level** (not 5): the
+  refinement DIS's "medium" preset runs at every level costs more than the
+  patch search and gains less than solving at full size (our bench,
+  ``docs/decisions/flow-default.md``);
 * a **5x5 median** of the dense field (the robust filtering of Sun, Roth &
   Black 2010, doi:10.1109/CVPR.2010.5539939), which removes the isolated
   bad patches the densification averages in;
-* then **variational refinement at full size only** (the energy of the DIS
+* for the accurate end, **variational refinement at full size** (the energy of the DIS
   paper's §2.3: brightness and gradient constancy, robust smoothness; solved
   by ``cv2.VariationalRefinement``, ``refine_iterations`` fixed-point steps);
 * for the accurate end, **fusion** of the fields of several patch sizes (per
@@ -76,6 +77,9 @@ class Preset:
         slower, more accurate.
     descent_iterations : int
         Inverse-compositional Gauss-Newton steps per patch (``theta_it``).
+    level_refine_iterations : int
+        Variational refinement steps DIS runs at each level, inside the
+        pyramid (its own ``theta_vo``; DIS-medium uses 5).
     refine_iterations : int
         Fixed-point steps of the full-size variational refinement (0: none).
     median : int
@@ -89,7 +93,8 @@ class Preset:
     patch_size: int = 8
     patch_stride: int = 4
     descent_iterations: int = 16
-    refine_iterations: int = 2
+    level_refine_iterations: int = 1
+    refine_iterations: int = 0
     median: int = 5
     fuse_patch_sizes: tuple = ()
     wmf_radius: int = 0
@@ -97,15 +102,17 @@ class Preset:
 
 PRESETS = {
     # About DIS-medium's time, more accurate: a sparse patch search at full size.
-    "fast": Preset(patch_stride=6, descent_iterations=8, refine_iterations=0, median=5),
-    # The default: a denser search at full size and the median, no
-    # variational refinement (it doubles the time for 5-10 % less error;
-    # docs/decisions/flow-default.md).
-    "default": Preset(patch_stride=4, descent_iterations=16, refine_iterations=0, median=5),
+    "fast": Preset(patch_stride=6, descent_iterations=8, level_refine_iterations=0,
+                   refine_iterations=0, median=5),
+    # The default: a denser search at full size, one variational step per
+    # level (five, as DIS-medium, or a separate full-size refinement,
+    # double the time for little gain; docs/decisions/flow-default.md), the median.
+    "default": Preset(patch_stride=4, descent_iterations=16, level_refine_iterations=1,
+                      refine_iterations=0, median=5),
     # The accuracy end: dense patches, fusion with 16-px patches, more
     # refinement, the weighted median.
-    "accurate": Preset(patch_stride=2, descent_iterations=32, refine_iterations=5, median=5,
-                       fuse_patch_sizes=(16,), wmf_radius=7),
+    "accurate": Preset(patch_stride=2, descent_iterations=16, level_refine_iterations=0,
+                       refine_iterations=5, median=5, fuse_patch_sizes=(16,), wmf_radius=7),
 }
 
 
@@ -140,6 +147,9 @@ def check_options(*, preset: str = "default", **overrides) -> Preset:
                                          f"{p.patch_size}), got {p.patch_stride}")
     if p.descent_iterations < 1:
         raise InputError("descent_iterations", f"expected >= 1, got {p.descent_iterations}")
+    if not 0 <= p.level_refine_iterations <= 100:
+        raise InputError("level_refine_iterations",
+                         f"expected 0..100, got {p.level_refine_iterations}")
     if not 0 <= p.refine_iterations <= 100:
         raise InputError("refine_iterations", f"expected 0..100, got {p.refine_iterations}")
     if p.median not in (0, 3, 5):
@@ -207,7 +217,7 @@ def _dis(p: Preset, patch_size: int):
     d.setPatchSize(patch_size)
     d.setPatchStride(max(1, min(p.patch_stride * patch_size // p.patch_size, patch_size - 1)))
     d.setGradientDescentIterations(p.descent_iterations)
-    d.setVariationalRefinementIterations(0)
+    d.setVariationalRefinementIterations(p.level_refine_iterations)
     d.setUseMeanNormalization(True)
     d.setUseSpatialPropagation(True)
     return d
@@ -378,6 +388,7 @@ def dense_inverse_search(reference: np.ndarray, moving: np.ndarray, *, preset: s
                          max_motion_px: float | None = None, consistency: bool = True,
                          patch_size: int | None = None, patch_stride: int | None = None,
                          descent_iterations: int | None = None,
+                         level_refine_iterations: int | None = None,
                          refine_iterations: int | None = None, median: int | None = None,
                          wmf_radius: int | None = None) -> FlowResult:
     """Forward optical flow from ``reference`` to ``moving`` by dense inverse search.
@@ -397,7 +408,7 @@ def dense_inverse_search(reference: np.ndarray, moving: np.ndarray, *, preset: s
     consistency : bool
         Also compute the backward flow; forward-backward inconsistent pixels
         are marked occluded and get confidence 0 (doubles the cost).
-    patch_size, patch_stride, descent_iterations, refine_iterations, median, wmf_radius
+    patch_size, patch_stride, descent_iterations, level_refine_iterations, refine_iterations, median, wmf_radius
         Override the preset (:class:`Preset`).
 
     Returns
@@ -422,7 +433,9 @@ def dense_inverse_search(reference: np.ndarray, moving: np.ndarray, *, preset: s
         raise InputError("moving", f"expected the shape of reference {a.shape}, got {b.shape}; "
                                    "flow needs frames of one size")
     p = check_options(preset=preset, patch_size=patch_size, patch_stride=patch_stride,
-                      descent_iterations=descent_iterations, refine_iterations=refine_iterations,
+                      descent_iterations=descent_iterations,
+                      level_refine_iterations=level_refine_iterations,
+                      refine_iterations=refine_iterations,
                       median=median, wmf_radius=wmf_radius)
     g0, g1 = _gray8(a), _gray8(b)
     need_colour = bool(p.fuse_patch_sizes or p.wmf_radius)
