@@ -18,6 +18,7 @@ from lumigraph.capture.commandline import (
     output_file_or_dir,
     run,
     say,
+    warn,
 )
 from lumigraph.capture.errors import InputError
 from lumigraph.stereo.pyramid import MAX_LEVELS
@@ -28,15 +29,16 @@ examples:
   lumigraph render flow --out out/scenes/flow
   lumigraph flow out/scenes/flow/frame00.png out/scenes/flow/frame01.png \\
       --out out/flow/flow.flo --viz out/flow/flow.png
+  lumigraph flow a.png b.png --preset accurate --out sharp.flo   # accuracy end (~30x slower)
+  lumigraph flow a.png b.png --preset fast --out quick.flo       # speed end (~DIS-medium's time)
   lumigraph flow take1.png take2.png --method video-matching --out match.flo
-  lumigraph flow a.png b.png --median-radius 10 --out sharp.flo     # accuracy end
-  lumigraph flow a.png b.png --finest-level 1 --iterations 1 --out quick.flo  # speed end
+  lumigraph flow a.png b.png --method pyramid --median-radius 10 --out lk.flo
 
 Writes OUT (.flo: forward flow, I0(x, y) <-> I1(x + dx, y + dy), pixels,
 I0 the first image (the reference), I1 the second (the moving one);
 unknown = 1e10), OUT with .flo replaced by .prob.exr (one float channel Y in
-[0, 1]: for pyramid methods the confidence = texture x forward-backward
-consistency, for video-matching the Sand-Teller matching probability), and
+[0, 1]: for dis and pyramid methods the confidence = texture x forward-backward
+consistency (near 0 on textureless areas and occlusions), for video-matching the Sand-Teller matching probability), and
 OUT.meta.json (pyramid levels chosen and every candidate's score, timings,
 quality figures). --viz writes a Middlebury colour-coded PNG.
 
@@ -115,7 +117,7 @@ def _flow(args) -> int:
     if len(args.images) < 2:
         raise InputError(args.images[0], "flow needs at least two images")
     outs, vizs = _outputs(args)
-    options = check_options(args.method, levels=args.levels, window=args.window,
+    options = check_options(args.method, preset=args.preset, levels=args.levels, window=args.window,
                             iterations=args.iterations, finest_level=args.finest_level,
                             median_radius=args.median_radius)
     frames = [_load(p) for p in args.images]
@@ -127,7 +129,7 @@ def _flow(args) -> int:
         if im.ndim != i0.ndim or (im.ndim == 3 and im.shape[2] != i0.shape[2]):
             raise InputError(p, "has a different number of channels than " + args.images[0])
     method = FLOW_METHODS.resolve(args.method)
-    params = {"method": args.method, "levels": args.levels, "window": args.window,
+    params = {"method": args.method, "preset": args.preset, "levels": args.levels, "window": args.window,
               "iterations": args.iterations, "finest_level": args.finest_level,
               "median_radius": args.median_radius}
     summary = []
@@ -139,10 +141,13 @@ def _flow(args) -> int:
         res = method(frames[i], frames[i + 1], **options)
         dt = time.perf_counter() - t0
         info = res.info
+        for w in info.get("warnings", ()):
+            warn(f"{a} -> {b}: {w}")
         quality = {**info.get("quality", {}), "occluded_fraction": float(res.occluded.mean())}
         meta = make_meta("lumigraph.flow", inputs=[a, b], params=params,
                          model={"levels": res.levels, "level_choice": info.get("level_choice")},
                          quality=quality, timings_s={"flow": dt},
+                         warnings=[f"{a} -> {b}: {w}" for w in info.get("warnings", ())],
                          extra={"diagnostics": {k: v for k, v in info.items()
                                                 if k not in ("quality", "level_choice", "timings_s")},
                                 "probability_file": str(prob_path(out))})
@@ -184,13 +189,17 @@ def build_parser(prog: str = "lumigraph flow"):
                         "consecutive frames")
     p.add_argument("--out", required=True, type=output_file_or_dir(".flo"),
                    help="output flow file (.flo) for two images; a folder for a sequence")
-    p.add_argument("--method", choices=FLOW_METHODS.names, default="pyramid",
-                   help="flow method (default: pyramid)")
+    p.add_argument("--method", choices=FLOW_METHODS.names, default="dis",
+                   help="flow method (default: dis)")
+    p.add_argument("--preset", choices=("fast", "default", "accurate"), default=None,
+                   help="dis only: fast (about DIS-medium's time, more accurate), default "
+                        "(about 2-3x its time), accurate (about DeepFlow's time); each a point on "
+                        "`lumigraph bench flow`'s speed-error curve (default: default)")
     p.add_argument("--levels", type=number(int, lo=1, hi=MAX_LEVELS, allow=("auto",)), default="auto",
-                   help="pyramid levels, or 'auto' from the estimated largest motion (default)")
+                   help="pyramid methods: levels, or 'auto' from the estimated largest motion (default)")
     p.add_argument("--window", type=number(int, lo=3, odd=True), default=9,
-                   help="matching window side, odd (default 9)")
-    p.add_argument("--iterations", type=number(int, lo=1), default=3, help="warps per level (default 3)")
+                   help="pyramid methods: matching window side, odd (default 9)")
+    p.add_argument("--iterations", type=number(int, lo=1), default=3, help="pyramid methods: warps per level (default 3)")
     p.add_argument("--median-radius", type=number(int, lo=0, hi=MAX_MEDIAN_RADIUS), default=0,
                    help="0: a 3x3 median after each warp (default). R > 0: a colour-guided "
                         "weighted median of radius R px after each level (Sun, Roth & Black): "

@@ -5,14 +5,17 @@ command offers cannot drift from what exists.
 Each method is called as ``method(reference, moving, **options) -> FlowResult``
 (:class:`lumigraph.stereo.pyramid_flow.FlowResult`), ``options`` among its
 ``Method.options``; ``pyramid`` and ``pyramid-dense`` are one function in two
-modes (``bound``).
+modes (``bound``). ``dis`` (dense inverse search, the default) takes a
+``preset`` (``fast``/``default``/``accurate``), the others none.
 
 :func:`check_options` checks a method's options before any image is read.
 
 Examples
 --------
 >>> FLOW_METHODS.names
-('pyramid', 'pyramid-dense', 'video-matching')
+('dis', 'pyramid', 'pyramid-dense', 'video-matching')
+>>> FLOW_METHODS["dis"].options
+('preset',)
 >>> FLOW_METHODS["video-matching"].options
 ('levels',)
 >>> check_options("video-matching", levels=2, window=9, median_radius=0)
@@ -27,6 +30,10 @@ from lumigraph.capture.registry import Method, Registry
 PYRAMID_OPTIONS = ("levels", "window", "iterations", "finest_level", "median_radius")
 
 FLOW_METHODS = Registry("flow", [
+    Method("dis", "lumigraph.stereo.kroeger2016:dense_inverse_search",
+           "dense inverse search (Kroeger et al. 2016; OpenCV's DIS as inner solver) at full size, "
+           "median-filtered, variational refinement; --preset picks speed or accuracy (default)",
+           options=("preset",)),
     Method("pyramid", "lumigraph.stereo.pyramid_flow:pyramid_flow",
            "coarse-to-fine Lucas-Kanade pyramid flow (reference 5.1.3, Fig. 5.5)",
            options=PYRAMID_OPTIONS, bound={"method": "local"}),
@@ -42,7 +49,7 @@ FLOW_METHODS = Registry("flow", [
 PYRAMID_ONLY = ("finest_level", "median_radius")
 
 
-def check_options(method: str, **options) -> dict:
+def check_options(method: str, *, preset: str | None = None, **options) -> dict:
     """Check the options of flow ``method`` before any image is read; returns
     those the method takes.
 
@@ -55,10 +62,13 @@ def check_options(method: str, **options) -> dict:
     ------
     InputError
         Naming the option out of range, or ``method`` when it takes no
-        ``finest_level``/``median_radius`` and one was given.
+        ``finest_level``/``median_radius`` and one was given; ``preset`` out
+        of its choices, or given to a method without presets.
 
     Examples
     --------
+    >>> check_options("dis", preset="fast", window=9)
+    {'preset': 'fast'}
     >>> check_options("pyramid", levels="auto", finest_level=1)
     {'levels': 'auto', 'finest_level': 1}
     >>> try:
@@ -70,10 +80,17 @@ def check_options(method: str, **options) -> dict:
     from lumigraph.stereo.pyramid_flow import check_options as check_pyramid_options
 
     m = FLOW_METHODS.resolve(method)
+    if preset is not None:
+        if "preset" not in m.options:
+            raise InputError("preset", f"{method} has no presets (dis only)")
+        from lumigraph.stereo.kroeger2016 import check_options as check_dis
+
+        check_dis(preset=preset)
     levels = check_pyramid_options(**options)
     if "levels" in options:
         options["levels"] = levels
     if any(options.get(k) and k not in m.options for k in PYRAMID_ONLY):
         raise InputError("method", f"{method} takes no median_radius or finest_level "
                                    "(pyramid methods only)")
-    return {k: v for k, v in options.items() if k in m.options}
+    out = {k: v for k, v in options.items() if k in m.options}
+    return {**out, "preset": preset} if preset is not None else out

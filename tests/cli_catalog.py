@@ -377,10 +377,15 @@ ENTRIES: list[Entry] = [
           _radiance, ("{in}/radiance.exr",), ("{out}/radiance.hdr",)),
     # flow -------------------------------------------------------------------
     # the colour-guided weighted median: the path that drew from OpenCV's generator
-    Entry("flow", ("flow", "{in}/flow/frame00.png", "{in}/flow/frame01.png", "--median-radius", "3",
-                   "--out", "{out}/flow.flo", "--viz", "{out}/flow.png", "-q"),
+    Entry("flow", ("flow", "{in}/flow/frame00.png", "{in}/flow/frame01.png", "--method", "pyramid",
+                   "--median-radius", "3", "--out", "{out}/flow.flo", "--viz", "{out}/flow.png", "-q"),
           _flow, ("{in}/flow/frame00.png", "{in}/flow/frame01.png"),
           ("{out}/flow.flo", "{out}/flow.prob.exr", "{out}/flow.png"), fresh_process=True),
+    # the default method; accurate: its weighted median draws from OpenCV's generator too
+    Entry("flow (dis accurate)", ("flow", "{in}/flow/frame00.png", "{in}/flow/frame01.png",
+                                  "--preset", "accurate", "--out", "{out}/dis.flo", "-q"),
+          _flow, ("{in}/flow/frame00.png", "{in}/flow/frame01.png"),
+          ("{out}/dis.flo", "{out}/dis.prob.exr"), fresh_process=True),
     Entry("flow (video-matching)", ("flow", "{in}/flow/frame00.png", "{in}/flow/frame01.png",
                                     "--method", "video-matching", "--out", "{out}/match.flo", "-q"),
           _flow, ("{in}/flow/frame00.png", "{in}/flow/frame01.png"),

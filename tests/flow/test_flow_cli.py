@@ -94,7 +94,8 @@ def test_median_radius_and_finest_level_reach_the_method(pair, tmp_path, flags, 
     from lumigraph.stereo.pyramid_flow import pyramid_flow
 
     out = tmp_path / "k.flo"
-    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out, *flags, "-q")
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out, "--method",
+                  "pyramid", *flags, "-q")
     assert r.returncode == 0, r.stderr
     params = json.loads((tmp_path / "k.flo.meta.json").read_text())["params"]
     assert all(params[k] == v for k, v in kw.items())
@@ -113,7 +114,10 @@ def test_median_radius_and_finest_level_reach_the_method(pair, tmp_path, flags, 
                                               "--window"),
                                              (["--iterations", "0"], "--iterations"),
                                              (["--method", "video-matching", "--median-radius", "5"],
-                                              "--method")])
+                                              "--method"),
+                                             (["--median-radius", "5"], "--method"),
+                                             (["--method", "pyramid", "--preset", "fast"], "--preset"),
+                                             (["--preset", "slow"], "--preset")])
 def test_bad_flow_knobs(pair, tmp_path, flags, fragment):
     assert_clean_error(lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out",
                                  tmp_path / "out.flo", *flags), fragment)
@@ -189,3 +193,18 @@ def test_method_choices_and_help_come_from_the_registry():
     assert r.returncode == 0 and FLOW_METHODS.help_text() in r.stdout
     r = lumigraph("flow", "a.png", "b.png", "--out", "x.flo", "--method", "nope")
     assert r.returncode == 2 and all(n in r.stderr for n in FLOW_METHODS.names)
+
+
+@pytest.mark.parametrize("preset", ["fast", "accurate"])
+def test_preset_reaches_the_default_method(pair, tmp_path, preset):
+    from lumigraph.stereo.kroeger2016 import dense_inverse_search
+
+    out = tmp_path / "p.flo"
+    r = lumigraph("flow", pair / "frame00.png", pair / "frame01.png", "--out", out,
+                  "--preset", preset, "-q")
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((tmp_path / "p.flo.meta.json").read_text())
+    assert meta["params"]["method"] == "dis" and meta["params"]["preset"] == preset
+    i0, i1 = io.read_image(pair / "frame00.png"), io.read_image(pair / "frame01.png")
+    ref = dense_inverse_search(i0, i1, preset=preset).flow
+    assert np.array_equal(io.read_flo(out), ref)  # the file holds the library's answer

@@ -151,7 +151,7 @@ def test_flow_registry_options_are_keywords_of_the_callables():
 
     from lumigraph.stereo.flow_methods import FLOW_METHODS
 
-    assert FLOW_METHODS.names == ("pyramid", "pyramid-dense", "video-matching")
+    assert FLOW_METHODS.names == ("dis", "pyramid", "pyramid-dense", "video-matching")
     for m in FLOW_METHODS.values():
         params = inspect.signature(m.load()).parameters
         assert set(m.options) | set(m.bound) <= set(params), m.name

@@ -69,3 +69,32 @@ def test_brightness_change_needs_video_matching():
     g = [np.clip(np.rint(luma_normalised(x) * 255), 0, 255).astype(np.uint8) for x in s.images]
     dis = _err(cv2.DISOpticalFlow_create(2).calc(g[0], g[1], None), s.gt_arrays["flow"])[vis].mean()
     assert robust < 0.5 * plain and robust <= dis, (robust, dis)
+
+
+def test_default_flow_textureless_low_confidence_not_garbage():
+    from lumigraph.stereo.kroeger2016 import dense_inverse_search
+
+    s = render("flow-textureless", size=(160, 120), seed=1)
+    g = s.gt_arrays
+    flat, vis = g["textureless"], ~g["occluded"]
+    r = dense_inverse_search(s.images[0], s.images[1])
+    # The confidence file says where the flow is a guess: the structure tensor is noise only.
+    assert r.confidence[flat].mean() < 0.1 < r.confidence[vis & ~flat].mean()
+    # Not garbage: finite, and the flat area takes its surroundings' motion
+    # (propagation + smoothness): at most half the error of the zero-flow
+    # guess. (pyramid-dense fills it better, test above: a third.)
+    assert np.isfinite(r.flow).all()
+    motion = np.hypot(*g["flow"][flat].T).mean()
+    assert _err(r.flow, g["flow"])[flat & vis].mean() < motion / 2
+
+
+def test_default_flow_identical_frames_and_bad_sizes():
+    import pytest
+
+    from lumigraph.capture.errors import InputError
+    from lumigraph.stereo.kroeger2016 import dense_inverse_search
+
+    s = render("flow", size=(96, 72), seed=5)
+    assert (dense_inverse_search(s.images[1], s.images[1]).flow == 0).all()
+    with pytest.raises(InputError):
+        dense_inverse_search(s.images[0], s.images[1][:-1])
