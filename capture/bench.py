@@ -159,6 +159,10 @@ class Stage:
     checks: Callable[[Results, dict], list[Check]] | None = None
     description: str = ""
     repeats: int = 3
+    # Rows and checks measured by the stage's own protocol (seed sweeps,
+    # interleaved timings of one call against its peer) that do not fit the
+    # case x method grid; run after the grid, before ``checks``.
+    extra: Callable[[], tuple[list[Row], list[Check]]] | None = None
 
 
 def _is_number(x) -> bool:

@@ -900,4 +900,36 @@ def stage(*, quick: bool = False) -> Stage:
         Method("MergeDebevec (OpenCV)", _real_cv, peer="opencv", cases=reals),
     )
     return Stage("hdr", tuple(cases), methods, _error, "ln-response RMS / radiance rel. RMS",
-                 checks=_checks, description=__doc__.split("\n\n")[0], repeats=3)
+                 checks=_checks, description=__doc__.split("\n\n")[0], repeats=3,
+                 extra=lambda: _extra(quick))
+
+
+def _extra(quick: bool):
+    """Mitsunaga-Nayar's seed sweeps and ratio bound (``bench_mn``) and, in full
+    runs, the response fits' wall time on Memorial against OpenCV's, interleaved
+    (``bench_response.memorial_speed``)."""
+    import math
+
+    from lumigraph.capture.bench import Row, missing_shared, shared_data
+    from lumigraph.hdr.bench_mn import mn_rows
+    from lumigraph.hdr.bench_response import memorial_speed
+
+    rows, checks = mn_rows(quick=quick)
+    if quick or missing_shared(*MEMORIAL)():
+        return rows, checks
+    r = memorial_speed(shared_data(*MEMORIAL), repeats=5)
+    case = "memorial speed (16 x 512x768)"
+    for method, peer, key in (("debevec (ours, automatic lambda)", None, "ours_debevec"),
+                              ("CalibrateDebevec (OpenCV, 70 samples)", "opencv", "cv_debevec"),
+                              ("CalibrateDebevec (OpenCV, 600 samples)", "opencv",
+                               "cv_debevec_600"),
+                              ("robertson (ours)", None, "ours_robertson"),
+                              ("CalibrateRobertson (OpenCV)", "opencv", "cv_robertson")):
+        rows.append(Row("hdr", case, method, peer, "", None, r[key], (r[key],), math.nan, "ok"))
+    for what, ours, cv in (("Debevec with automatic lambda", "ours_debevec", "cv_debevec"),
+                           ("Robertson", "ours_robertson", "cv_robertson")):
+        ratio = r[ours] / r[cv]
+        checks.append(Check(f"Memorial: {what} wall time <= 1.0x OpenCV's (single thread, "
+                            "interleaved, min of 5)", ratio, 1.0, ratio <= 1.0,
+                            f"ours {r[ours]:.3f} s, OpenCV {r[cv]:.3f} s"))
+    return rows, checks

@@ -154,6 +154,7 @@ def memorial_speed(folder, *, repeats=5, robertson=True) -> dict:
     on the Memorial bracket (16 × 512×768), interleaved, minimum of ``repeats``.
     Call with OPENBLAS_NUM_THREADS=1 in the environment (numpy reads it at
     import); OpenCV is pinned here."""
+    from fractions import Fraction
     from pathlib import Path
 
     import cv2
@@ -164,8 +165,7 @@ def memorial_speed(folder, *, repeats=5, robertson=True) -> dict:
     cv2.setNumThreads(1)
     folder = Path(folder)
     files = sorted(folder.glob("memorial*.png"))
-    times = [float(eval(x, {"__builtins__": {}}))  # "1/16": a fraction, nothing else
-             for x in (folder / "shutter_times.txt").read_text().split()]
+    times = [float(Fraction(x)) for x in (folder / "shutter_times.txt").read_text().split()]
     bgr = [cv2.imread(str(f)) for f in files]
     z = np.stack([im[..., ::-1] for im in bgr])
     t = np.asarray(times, np.float64)

@@ -63,7 +63,14 @@ def _bench(args) -> int:
         rows = run_stage(st, repeats=args.repeats, on_row=show)
         from lumigraph.capture.bench import Results
 
+        extra_checks = []
+        if st.extra:
+            extra_rows, extra_checks = st.extra()
+            for row in extra_rows:
+                show(row)
+            rows = [*rows, *extra_rows]
         checks = st.checks(Results(rows), {"quick": args.quick}) if st.checks else []
+        checks = [*checks, *extra_checks]
         results[name] = (st, rows, checks)
         for c in checks:
             say(args, f"  [{'pass' if c.passed else 'FAIL'}] {c.target}: {c.measured:.4g}"
