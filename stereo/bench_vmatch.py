@@ -40,6 +40,7 @@ HELD_OUT_KINDS = ("materials",)
 PEERS = ("DIS medium", "Farneback")
 VM = "video matching (ours)"
 PLAIN = "default flow (ours)"
+BOOK = "pyramid flow (ours, brightness constancy)"
 TIME_FACTOR = 10.0
 
 
@@ -86,8 +87,16 @@ def _video(d, sigma):
 
 
 def _plain(d, _v):
-    # Our plain flow: what `lumigraph flow` runs without --method (forward
-    # only, as every method here).
+    # Our plain flow: what `lumigraph flow` runs without --method (dense
+    # inverse search, default preset; forward only, as every method here).
+    from lumigraph.stereo.flow_methods import FLOW_METHODS
+
+    return FLOW_METHODS["dis"](d["i0"], d["i1"], consistency=False).flow
+
+
+def _book(d, _v):
+    # The book's coarse-to-fine brightness-constancy flow (the default before
+    # issue 15): what the lighting change breaks.
     from lumigraph.stereo.flow_methods import FLOW_METHODS
 
     return FLOW_METHODS["pyramid"](d["i0"], d["i1"], consistency=False).flow
@@ -107,7 +116,13 @@ def _ratio_rows(res: Results, names):
             continue
         t = min(vm.times_s) / min(dis.times_s)
         half = 0.5 * pl.error if pl.status == "ok" else float("nan")
-        out[n] = (vm.error / dis.error, vm.error / half, t, vm.error, dis.error, pl.error)
+        try:
+            book = res.get(n, BOOK)
+            book_err = book.error if book.status == "ok" else float("nan")
+        except KeyError:
+            book_err = float("nan")
+        out[n] = (vm.error / dis.error, vm.error / half, t, vm.error, dis.error, pl.error,
+                  vm.error / (0.5 * book_err))
     return out
 
 
@@ -131,7 +146,8 @@ def checks(res: Results, quick: bool) -> list[Check]:
             med = statistics.median
             detail = (f"{len(r)} pairs ({role}); median EPE ours {med(v[3] for v in r.values()):.3f}"
                       f" / DIS-medium {med(v[4] for v in r.values()):.3f} / default flow "
-                      f"{med(v[5] for v in r.values()):.3f} px; worst ratio to DIS {max(dis_r):.2f}"
+                      f"{med(v[5] for v in r.values()):.3f} px (EPE / half the pyramid "
+                      f"flow's {med(v[6] for v in r.values()):.3f}); worst ratio to DIS {max(dis_r):.2f}"
                       f" ({worst}); time ratio median {med(t_r):.1f}, worst {max(t_r):.1f}")
             if role == "tuned":
                 out.append(Check(f"lighting {kind} (tuned-on pairs): video matching EPE / "
@@ -162,7 +178,7 @@ def extend(stage: Stage, *, quick: bool = False) -> Stage:
     methods = [m if (m.cases is not None or m.name in PEERS) else dataclasses.replace(m, cases=own)
                for m in stage.methods]
     methods += [Method(VM, _video, "regression_sigma", (9.0,), cases=mine),
-                Method(PLAIN, _plain, cases=mine)]
+                Method(PLAIN, _plain, cases=mine), Method(BOOK, _book, cases=mine)]
     old_checks = stage.checks
 
     def all_checks(res: Results, ctx) -> list[Check]:
