@@ -331,12 +331,15 @@ def refill(disp: np.ndarray, conf: np.ndarray, guide: np.ndarray, *,
     return np.where(support >= MIN_SUPPORT, med, disp).astype(np.float32)
 
 
-def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, radius: int = HALO_RADIUS,
-             jump: float = HALO_JUMP, tol: float = HALO_TOL) -> np.ndarray:
+def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray | None = None,
+             radius: int = HALO_RADIUS, jump: float = HALO_JUMP,
+             tol: float = HALO_TOL) -> np.ndarray:
     """Step 7: undo foreground fattening. ``disp`` (H, W) float32, ``guide``
     (H, W, 3) the reference view in [0, 1], ``cost(d)`` the cost (H, W) of a
-    per-pixel disparity map ``d``. A pixel takes ``far``, the least
-    disparity within ``radius`` px (the farthest surface nearby), where
+    per-pixel disparity map ``d``; ``trusted`` (H, W) bool, the pixels whose
+    estimate may be passed on (default all). A pixel takes ``far``, the
+    least trusted disparity within ``radius`` px (the farthest surface
+    nearby), where
 
     - ``disp - far > jump`` (a depth edge within reach),
     - its colour is nearer (L1 in ``guide``) to the mean colour of the
@@ -359,9 +362,14 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, radius: int = HALO_RA
 
     side = 2 * radius + 1
     kernel = np.ones((side, side), np.uint8)
-    far = cv2.erode(disp, kernel)
-    near = cv2.dilate(disp, kernel)
-    suspect = (disp - far) > jump
+    if trusted is None:
+        trusted = np.ones(disp.shape, bool)
+    # the farthest and nearest *trusted* disparities nearby: an unsure pixel
+    # (a textureless patch, estimated anywhere) must not pull others with it
+    big = np.float32(np.abs(disp).max() + 1)
+    far = cv2.erode(np.where(trusted, disp, big).astype(np.float32), kernel)
+    near = cv2.dilate(np.where(trusted, disp, -big).astype(np.float32), kernel)
+    suspect = ((disp - far) > jump) & (far < big)
     if not suspect.any():
         return disp
 
@@ -372,7 +380,7 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, radius: int = HALO_RA
         return total / np.maximum(count, 1e-6)[..., None]
 
     # the sides: pixels next to a depth edge of their own, on its far / near side
-    edge = (near - far) > jump
+    edge = trusted & ((near - far) > jump) & (far < big) & (near > -big)
     to_far = np.abs(guide - mean_colour(edge & (disp <= far + tol))).sum(-1)
     to_near = np.abs(guide - mean_colour(edge & (disp >= near - tol))).sum(-1)
     suspect &= to_far < to_near
@@ -460,8 +468,9 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     if halo_radius > 0:
         # twice (a flipped pixel can expose the next), then the last pixel
         # or two that the guided filter itself fattens, on the raw cost
+        trusted = conf >= np.quantile(conf, UNSURE)
         for _ in range(2):
-            disp = unfatten(disp, guide, slice_cost, radius=halo_radius)
-        disp = unfatten(disp, guide, lambda d: slice_cost(d, filtered=False),
+            disp = unfatten(disp, guide, slice_cost, trusted=trusted, radius=halo_radius)
+        disp = unfatten(disp, guide, lambda d: slice_cost(d, filtered=False), trusted=trusted,
                         radius=min(2, halo_radius))
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
