@@ -56,8 +56,9 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    side's mean colour than to the nearer side's, and whose cost at the
    farther disparity is no higher than at its own, takes the farther
    disparity (the visibility order: fattening only ever runs from near to
-   far). Twice with the filtered cost, then once within 2 px with the
-   unfiltered cost (the guided filter's own 1 px of fattening).
+   far). The cost is the unfiltered one of step 2 (the guided filter
+   fattens by its radius itself); three rounds, since a flipped pixel can
+   expose the next; ``2 x HALO_PASSES`` more passes over the views.
 
 Memory: the light field, one gamma-encoded 4-channel copy, and the
 aggregated coarse cost volume ``(N / stride, H, W)`` float32; per pass the
@@ -97,6 +98,7 @@ ALPHA_GRAD = 0.5    # weight of the gradient term
 STRIDE = 2          # coarse pass over every 2nd candidate, then per-pixel refinement
 HALO_RADIUS = 9     # reach (px) of the fattening check (step 7); 0: none
 HALO_JUMP = 0.3     # disparity step (px/view) that makes a pixel a fattening suspect
+HALO_PASSES = 3     # rounds of the fattening check
 HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
 
 
@@ -466,11 +468,10 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     if median_radius > 0:
         disp = refill(disp, conf, guide, radius=median_radius)
     if halo_radius > 0:
-        # twice (a flipped pixel can expose the next), then the last pixel
-        # or two that the guided filter itself fattens, on the raw cost
+        # on the unfiltered cost (the guided filter is itself a source of
+        # fattening); repeated, since a flipped pixel can expose the next
         trusted = conf >= np.quantile(conf, UNSURE)
-        for _ in range(2):
-            disp = unfatten(disp, guide, slice_cost, trusted=trusted, radius=halo_radius)
-        disp = unfatten(disp, guide, lambda d: slice_cost(d, filtered=False), trusted=trusted,
-                        radius=min(2, halo_radius))
+        raw = lambda d: slice_cost(d, filtered=False)  # noqa: E731
+        for _ in range(HALO_PASSES):
+            disp = unfatten(disp, guide, raw, trusted=trusted, radius=halo_radius)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
