@@ -388,6 +388,7 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray |
     suspect &= to_far < to_near
     if not suspect.any():
         return disp
+    far = np.where(suspect, far, disp).astype(np.float32)   # no far shifts where unused
     flip = suspect & (cost(far) <= cost(disp))
     return np.where(flip, far, disp).astype(np.float32)
 
