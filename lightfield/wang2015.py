@@ -42,6 +42,23 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    confident pixels fills the unsure ones from like-coloured neighbours
    without crossing colour edges (:func:`refill`); where a window holds too
    few confident pixels the estimate is kept.
+7. **Foreground fattening.** Next to a nearer surface a textureless
+   background has two photo-consistent explanations: its own disparity
+   (on the unoccluded half-aperture, step 2) and the foreground's (at the
+   foreground's disparity every view samples the same side of the
+   occluding edge, so all views see the flat background and agree). The
+   cost cannot choose; aggregation then leaks the foreground's disparity
+   outwards (the "foreground fattening" of local stereo, Scharstein &
+   Szeliski 2002 §5; Hosni et al. 2013 fix it with a left-right check).
+   A light field has no second reference view, so :func:`unfatten` asks
+   the data directly: a pixel within ``HALO_RADIUS`` of a farther one
+   (by more than ``HALO_JUMP``) whose colour is closer to the farther
+   side's mean colour than to the nearer side's, and whose cost at the
+   farther disparity is no higher than at its own, takes the farther
+   disparity (the visibility order: fattening only ever runs from near to
+   far). The cost is the unfiltered one of step 2 (the guided filter
+   fattens by its radius itself); three rounds, since a flipped pixel can
+   expose the next; ``2 x HALO_PASSES`` more passes over the views.
 
 Memory: the light field, one gamma-encoded 4-channel copy, and the
 aggregated coarse cost volume ``(N / stride, H, W)`` float32; per pass the
@@ -79,6 +96,10 @@ TAU_COLOUR = 0.08   # truncation of the colour difference (gamma-encoded, [0, 1]
 TAU_GRAD = 0.04     # truncation of the gradient difference
 ALPHA_GRAD = 0.5    # weight of the gradient term
 STRIDE = 2          # coarse pass over every 2nd candidate, then per-pixel refinement
+HALO_RADIUS = 9     # reach (px) of the fattening check (step 7); 0: none
+HALO_JUMP = 0.3     # disparity step (px/view) that makes a pixel a fattening suspect
+HALO_PASSES = 3     # rounds of the fattening check
+HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
 
 
 def check_views(views, grid) -> np.ndarray:
@@ -144,7 +165,8 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
              eps: float = EPS):
     """``(slice_cost, guide)``: ``slice_cost(d)`` is the filtered occlusion-aware
     cost (H, W) float32 of disparity ``d``, a number or an (H, W) map (steps
-    1-3 above); ``guide`` the gamma-encoded reference view (H, W, 3) in [0, 1]."""
+    1-3 above; ``slice_cost(d, filtered=False)``: steps 1-2); ``guide`` the
+    gamma-encoded reference view (H, W, 3) in [0, 1]."""
     import cv2
 
     u, v = lf.grid
@@ -189,7 +211,7 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
     sobel = {"ddepth": cv2.CV_32F, "ksize": 1, "borderType": cv2.BORDER_REFLECT101}
     zero = np.zeros((h, w), np.float32)
 
-    def slice_cost(d) -> np.ndarray:
+    def slice_cost(d, filtered: bool = True) -> np.ndarray:
         per_pixel = np.ndim(d) == 2
         if per_pixel:
             d = np.asarray(d, np.float32)
@@ -215,7 +237,7 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
             cv2.scaleAdd(cv2.add(gx, gy), w_g, c, dst=per_view[k])
         halves = weights @ per_view.reshape(len(idx), -1)        # (n_halves, H*W)
         c_min = halves.min(0).reshape(h, w)
-        return gf.filter(c_min) if gf is not None else c_min
+        return gf.filter(c_min) if gf is not None and filtered else c_min
 
     return slice_cost, guide
 
@@ -311,9 +333,70 @@ def refill(disp: np.ndarray, conf: np.ndarray, guide: np.ndarray, *,
     return np.where(support >= MIN_SUPPORT, med, disp).astype(np.float32)
 
 
+def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray | None = None,
+             radius: int = HALO_RADIUS, jump: float = HALO_JUMP,
+             tol: float = HALO_TOL) -> np.ndarray:
+    """Step 7: undo foreground fattening. ``disp`` (H, W) float32, ``guide``
+    (H, W, 3) the reference view in [0, 1], ``cost(d)`` the cost (H, W) of a
+    per-pixel disparity map ``d``; ``trusted`` (H, W) bool, the pixels whose
+    estimate may be passed on (default all). A pixel takes ``far``, the
+    least trusted disparity within ``radius`` px (the farthest surface
+    nearby), where
+
+    - ``disp - far > jump`` (a depth edge within reach),
+    - its colour is nearer (L1 in ``guide``) to the mean colour of the
+      window's far-side pixels (pixels with a depth edge in their own
+      window, within ``tol`` of its least disparity) than to that of the
+      near-side pixels (within ``tol`` of its greatest): the pixel looks like
+      the background,
+    - and ``cost(far) <= cost(disp)``: the data accept the far disparity.
+
+    Returns (H, W) float32.
+
+    >>> d = np.full((20, 40), 0.2, np.float32); d[:, :24] = 1.5    # 4 px fattened
+    >>> g = np.full((20, 40, 3), 0.1, np.float32); g[:, :20] = 0.8  # the true edge: x = 20
+    >>> flat = lambda m: np.zeros(m.shape, np.float32)   # a textureless scene: all ties
+    >>> out = unfatten(d, g, flat, radius=6)
+    >>> [round(float(out[10, x]), 2) for x in (19, 21, 23)]
+    [1.5, 0.2, 0.2]
+    """
+    import cv2
+
+    side = 2 * radius + 1
+    kernel = np.ones((side, side), np.uint8)
+    if trusted is None:
+        trusted = np.ones(disp.shape, bool)
+    # the farthest and nearest *trusted* disparities nearby: an unsure pixel
+    # (a textureless patch, estimated anywhere) must not pull others with it
+    big = np.float32(np.abs(disp).max() + 1)
+    far = cv2.erode(np.where(trusted, disp, big).astype(np.float32), kernel)
+    near = cv2.dilate(np.where(trusted, disp, -big).astype(np.float32), kernel)
+    suspect = ((disp - far) > jump) & (far < big)
+    if not suspect.any():
+        return disp
+
+    def mean_colour(member):
+        m = member.astype(np.float32)
+        total = cv2.boxFilter(guide * m[..., None], -1, (side, side), normalize=False)
+        count = cv2.boxFilter(m, -1, (side, side), normalize=False)
+        return total / np.maximum(count, 1e-6)[..., None]
+
+    # the sides: pixels next to a depth edge of their own, on its far / near side
+    edge = trusted & ((near - far) > jump) & (far < big) & (near > -big)
+    to_far = np.abs(guide - mean_colour(edge & (disp <= far + tol))).sum(-1)
+    to_near = np.abs(guide - mean_colour(edge & (disp >= near - tol))).sum(-1)
+    suspect &= to_far < to_near
+    if not suspect.any():
+        return disp
+    far = np.where(suspect, far, disp).astype(np.float32)   # no far shifts where unused
+    flip = suspect & (cost(far) <= cost(disp))
+    return np.where(flip, far, disp).astype(np.float32)
+
+
 def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = True,
                        radius: int = RADIUS, eps: float = EPS, stride: int = STRIDE,
-                       median_radius: int = MEDIAN_RADIUS) -> DisparityEstimate:
+                       median_radius: int = MEDIAN_RADIUS,
+                       halo_radius: int = HALO_RADIUS) -> DisparityEstimate:
     """Disparity of the centre view (px per view step) with confidence.
 
     Coarse to fine: the cost volume is built over every ``stride``-th
@@ -341,6 +424,9 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         Coarse step, in candidates (1: every candidate, no refinement pass).
     median_radius : int
         Weighted-median radius (px); 0 skips the refinement.
+    halo_radius : int
+        Reach (px) of the fattening check (step 7, :func:`unfatten`); 0
+        skips it.
 
     Returns
     -------
@@ -382,4 +468,11 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         del cost
     if median_radius > 0:
         disp = refill(disp, conf, guide, radius=median_radius)
+    if halo_radius > 0:
+        # on the unfiltered cost (the guided filter is itself a source of
+        # fattening); repeated, since a flipped pixel can expose the next
+        trusted = conf >= np.quantile(conf, UNSURE)
+        raw = lambda d: slice_cost(d, filtered=False)  # noqa: E731
+        for _ in range(HALO_PASSES):
+            disp = unfatten(disp, guide, raw, trusted=trusted, radius=halo_radius)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
