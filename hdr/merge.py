@@ -53,6 +53,7 @@ from lumigraph.hdr.samples import check_stack, hat_weight
 CLIPPED = 1  # saturated in every exposure: the value is a lower bound
 BLACK = 2  # black in every exposure: the value is an upper bound
 GHOST = 4  # an exposure disagreed with the reference and was left out
+_EMPTY = 128  # internal, cleared before return: no exposure measured the pixel-channel
 WEIGHTS = ("variance", "hat")
 # The variance weights' sensor when none is given: electrons at saturation and
 # read noise in electrons RMS (a default, not estimated from the images).
@@ -337,7 +338,6 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         # ~16k pixel-channels per block: the block's arrays stay in cache.
         block_rows = max(1, 16384 // max(w * c, 1))
     tiny = np.float32(1e-30)
-    empty = np.zeros((h, w, c), bool)  # no exposure measured this pixel-channel
 
     def do_block(r0, r1):
         if not deghost:
@@ -373,20 +373,23 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
             flags[r0:r1][ghost] |= GHOST
         # Where no exposure has weight both sums are 0: 0 / tiny = 0, marked for the fill.
         np.divide(num, np.maximum(den, tiny), out=out[r0:r1])
-        np.less_equal(den, 0, out=empty[r0:r1])
+        flags[r0:r1] |= (den <= 0).view(np.uint8) * _EMPTY  # no exposure measured it
 
     # The fill of unmeasured pixels runs once per chunk of many blocks (its cost is
     # per call, not per pixel, when few pixels need it).
     n_workers = workers or min(4, os.cpu_count() or 1)
-    chunk_rows = max(block_rows, min(-(-h // n_workers), max(1, (1 << 20) // max(w * c, 1))))
+    # (~64k pixel-channels a chunk: the fill's temporaries stay small beside the output)
+    chunk_rows = max(block_rows, min(-(-h // n_workers), max(1, (1 << 16) // max(w * c, 1))))
 
     def do_chunk(r0):
         r1 = min(r0 + chunk_rows, h)
         for b0 in range(r0, r1, block_rows):
             do_block(b0, min(b0 + block_rows, r1))
-        if empty[r0:r1].any():
-            _fill_bounds(out[r0:r1], empty[r0:r1], z[:, r0:r1], t, x_tab, hi_code, bound_lo,
-                         flags[r0:r1])
+        fl = flags[r0:r1]
+        empty = (fl & _EMPTY).astype(bool)
+        if empty.any():
+            fl &= np.uint8(~_EMPTY & 0xFF)
+            _fill_bounds(out[r0:r1], empty, z[:, r0:r1], t, x_tab, hi_code, bound_lo, fl)
 
     starts = range(0, h, chunk_rows)
     if n_workers > 1 and len(starts) > 1:
