@@ -598,7 +598,7 @@ def _monotone(gk, counts):
 def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
             smoothness: float | str = "auto", samples: int = 600, knots: int | None = None,
             clip_margin: float = 0.0, noise: tuple[float, float] | None = None,
-            bias_draws: int = 4, rng: np.random.Generator | None = None) -> ResponseCurve:
+            bias_draws: int = 2, rng: np.random.Generator | None = None) -> ResponseCurve:
     """Recover ``g = ln f⁻¹`` per channel from a bracket (eq. 6.5).
 
     Parameters
