@@ -51,10 +51,15 @@ order at 3 and skips the ratio update):
   registration borders, which the smoothness-seeking sampler favours);
 - one order (≤ 10) for all channels, chosen on 3x the samples by the BIC of
   the 2-fold held-out error of predicting one exposure's code from another's
-  (code units, where the noise is even; an ln error is ruled by the darkest
-  codes); every candidate recorded. The former rule ("lowest order within one
+  (code units, each error divided by its predicted variance from the sensor
+  noise Debevec's fit estimates from the bracket: the Gaussian likelihood; an
+  ln error is ruled by the darkest codes); the best order and the next are
+  scored again with the joint refinement and the better taken; every
+  candidate recorded. The former rule ("lowest order within one
   standard error of the best") picked 6/9/6 and 6/9/9 on Memorial with seeds
   0 and 1 (docs/decisions/hdr-mitsunaga-stable.md);
+- the final curve is bias-corrected by a parametric bootstrap (:func:`_debias`,
+  as Debevec's): the noise and the floor at code 0 bias the dark codes;
 - a channel whose own exposure ratios differ from the common ones beyond its
   sampling noise and far beyond the other channels' is named in ``warnings``;
 - exposures known exactly (``reference_times``) fix the scale, and with two
@@ -942,7 +947,8 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     sel = {"parameter": "order", "chosen": chosen, "candidates": sel_scores, "auto": n_auto,
            "rule": "given" if order != "auto" else
            "one order for all channels: least BIC (N ln MSE + k ln N, N held-out pixels) of "
-           "the 2-fold held-out code-prediction error; non-monotone candidates rejected",
+           "the 2-fold held-out code-prediction error (noise-weighted); the best and the next "
+           "order re-scored with the joint refinement; non-monotone candidates rejected",
            "channel_disagreement_rms_sigma": [math.sqrt(x) for x, _ in disagree],
            "channel_disagreement_rms_ln": [x for _, x in disagree]}
     fit = {"basis": "shifted Chebyshev T_n(2M-1) - 1, f = 1 + sum a_n (...)",
