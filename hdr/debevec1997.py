@@ -598,7 +598,7 @@ def _monotone(gk, counts):
 def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
             smoothness: float | str = "auto", samples: int = 600, knots: int | None = None,
             clip_margin: float = 0.0, noise: tuple[float, float] | None = None,
-            bias_draws: int = 4, rng: np.random.Generator | None = None) -> ResponseCurve:
+            bias_draws: int = 2, rng: np.random.Generator | None = None) -> ResponseCurve:
     """Recover ``g = ln f⁻¹`` per channel from a bracket (eq. 6.5).
 
     Parameters
@@ -684,7 +684,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     g_out = np.empty((c, 2 ** bd))
     scores: dict[str, list] = {}
     chosen, fit_rms, monotone_fix, linked_px = [], [], [], []
-    robust_rms, noise_ab, bias_max, rel_noise = [], [], [], []
+    robust_rms, noise_ab, bias_max, rel_noise, noise_top = [], [], [], [], []
     noise_src = ""
     all_codes = np.arange(2 ** bd)
     for ch in range(c):
@@ -727,6 +727,10 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
             nz = (xs / noise[0], (xs * noise[1] / noise[0]) ** 2)
             noise_src = "given (full_well_e, read_noise_e)"
         noise_ab.append(nz)
+        # the same model with X relative to the top code's exposure (X_sat = 1), the unit
+        # of a curve normalised at the top code (Mitsunaga-Nayar's bias correction uses it)
+        xs = math.exp(float(gk[-1]))
+        noise_top.append((nz[0] / xs, nz[1] / xs ** 2))
         if bias_draws > 0:
             try:
                 g_obs, g_cur = gk, gk
@@ -788,6 +792,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
            "monotone_max_change_ln": monotone_fix,
            "noise": {"model": "Var X = a X + b (X = exp g, relative exposure) + quantisation",
                      "a_b": [list(v) for v in noise_ab], "source": noise_src,
+                     "a_b_top": [list(v) for v in noise_top],
                      "relative_at_mid": rel_noise},
            "bias_correction": {"draws": int(bias_draws), "max_abs_ln": bias_max}}
     times = tuple(float(x) for x in np.asarray(exposure_times_s, dtype=np.float64))

@@ -53,6 +53,7 @@ from lumigraph.hdr.samples import check_stack, hat_weight
 CLIPPED = 1  # saturated in every exposure: the value is a lower bound
 BLACK = 2  # black in every exposure: the value is an upper bound
 GHOST = 4  # an exposure disagreed with the reference and was left out
+_EMPTY = 128  # internal, cleared before return: no exposure measured the pixel-channel
 WEIGHTS = ("variance", "hat")
 # The variance weights' sensor when none is given: electrons at saturation and
 # read noise in electrons RMS (a default, not estimated from the images).
@@ -237,7 +238,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           weights: str = "variance", full_well_e: float | None = None,
           read_noise_e: float | None = None,
           clip_margin: float = 0.02, deghost: bool = False, deghost_sigma: float = 4.0,
-          reference: int | None = None, block_rows: int = 8,
+          reference: int | None = None, block_rows: int | None = None,
           workers: int | None = None) -> RadianceMap:
     """Merge a bracket into relative radiance.
 
@@ -264,8 +265,9 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     reference : int, optional
         Reference exposure for deghosting (default: the one with the most
         well-exposed pixels).
-    block_rows, workers : int
-        Row-block size and thread count (default: CPU count, at most 4).
+    block_rows, workers : int, optional
+        Row-block size (default: about 16k pixel-channels, cache-sized) and
+        thread count (default: CPU count, at most 4).
 
     Returns
     -------
@@ -322,58 +324,80 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     flags = np.zeros((h, w, c), np.uint8)
 
     # Channel-interleaved LUTs: one gather per exposure covers every channel of a
-    # contiguous row block (index = code + channel * 2**bit_depth).
+    # contiguous row block (index = code + channel * 2**bit_depth). Without
+    # deghosting, w·X̂ and w are packed as the real and imaginary parts of one
+    # complex64 table, so each exposure costs one 8-byte gather and one add.
     n_codes = zmax + 1
     ch_off = (np.arange(c) * n_codes).astype(np.int32)
     wl_f, wxl_f, xl_f = wl.reshape(p, -1), wxl.reshape(p, -1), xl.reshape(p, -1)
     if deghost:
         vl_f = vl.reshape(p, -1)
+    else:
+        cl_f = (wxl_f + 1j * wl_f).astype(np.complex64)
+    if block_rows is None:
+        # ~16k pixel-channels per block: the block's arrays stay in cache.
+        block_rows = max(1, 16384 // max(w * c, 1))
+    tiny = np.float32(1e-30)
 
-    def do_block(r0):
-        r1 = min(r0 + block_rows, h)
-        num = np.zeros((r1 - r0, w, c), np.float32)
-        den = np.zeros((r1 - r0, w, c), np.float32)
-        if deghost:
+    def do_block(r0, r1):
+        if not deghost:
+            acc = np.zeros((r1 - r0, w, c), np.complex64)
+            ij = np.empty((r1 - r0, w, c), np.int32)
+            tmp = np.empty((r1 - r0, w, c), np.complex64)
+            for j in range(p):
+                np.add(z[j, r0:r1], ch_off, out=ij)
+                acc += np.take(cl_f[j], ij, out=tmp)
+            num, den = acc.real, acc.imag
+        else:
+            num = np.zeros((r1 - r0, w, c), np.float32)
+            den = np.zeros((r1 - r0, w, c), np.float32)
             ir = z[reference, r0:r1].astype(np.int32) + ch_off
             xr, vr = xl_f[reference][ir], vl_f[reference][ir]
             ref_ok = np.isfinite(vr)
             ghost = np.zeros((r1 - r0, w, c), bool)
-        ij = np.empty((r1 - r0, w, c), np.int32)
-        tmp = np.empty((r1 - r0, w, c), np.float32)
-        for j in range(p):
-            np.add(z[j, r0:r1], ch_off, out=ij)
-            if not deghost:
-                num += np.take(wxl_f[j], ij, out=tmp)
-                den += np.take(wl_f[j], ij, out=tmp)
-                continue
-            wj = wl_f[j][ij]
-            if j != reference:
-                d2 = (xl_f[j][ij] - xr) ** 2
-                bad = ref_ok & (wj > 0) & (d2 > deghost_sigma ** 2 * (vl_f[j][ij] + vr))
-                wj[bad] = 0.0
-                ghost |= bad
-                wx = wxl_f[j][ij]
-                wx[bad] = 0.0
-                num += wx
-            else:
-                num += wxl_f[j][ij]
-            den += wj
-        empty = den <= 0
-        np.divide(num, den, out=num, where=~empty)
-        if empty.any():
-            _fill_bounds(num, empty, z[:, r0:r1], t, x_tab, hi_code, bound_lo, flags[r0:r1])
-        if deghost:
+            ij = np.empty((r1 - r0, w, c), np.int32)
+            for j in range(p):
+                np.add(z[j, r0:r1], ch_off, out=ij)
+                wj = wl_f[j][ij]
+                if j != reference:
+                    d2 = (xl_f[j][ij] - xr) ** 2
+                    bad = ref_ok & (wj > 0) & (d2 > deghost_sigma ** 2 * (vl_f[j][ij] + vr))
+                    wj[bad] = 0.0
+                    ghost |= bad
+                    wx = wxl_f[j][ij]
+                    wx[bad] = 0.0
+                    num += wx
+                else:
+                    num += wxl_f[j][ij]
+                den += wj
             flags[r0:r1][ghost] |= GHOST
-        out[r0:r1] = num
+        # Where no exposure has weight both sums are 0: 0 / tiny = 0, marked for the fill.
+        np.divide(num, np.maximum(den, tiny), out=out[r0:r1])
+        flags[r0:r1] |= (den <= 0).view(np.uint8) * _EMPTY  # no exposure measured it
 
-    starts = range(0, h, block_rows)
+    # The fill of unmeasured pixels runs once per chunk of many blocks (its cost is
+    # per call, not per pixel, when few pixels need it).
     n_workers = workers or min(4, os.cpu_count() or 1)
-    if n_workers > 1 and h > block_rows:
+    # (~64k pixel-channels a chunk: the fill's temporaries stay small beside the output)
+    chunk_rows = max(block_rows, min(-(-h // n_workers), max(1, (1 << 16) // max(w * c, 1))))
+
+    def do_chunk(r0):
+        r1 = min(r0 + chunk_rows, h)
+        for b0 in range(r0, r1, block_rows):
+            do_block(b0, min(b0 + block_rows, r1))
+        fl = flags[r0:r1]
+        empty = (fl & _EMPTY).astype(bool)
+        if empty.any():
+            fl &= np.uint8(~_EMPTY & 0xFF)
+            _fill_bounds(out[r0:r1], empty, z[:, r0:r1], t, x_tab, hi_code, bound_lo, fl)
+
+    starts = range(0, h, chunk_rows)
+    if n_workers > 1 and len(starts) > 1:
         with ThreadPoolExecutor(n_workers) as ex:
-            list(ex.map(do_block, starts))
+            list(ex.map(do_chunk, starts))
     else:
         for r0 in starts:
-            do_block(r0)
+            do_chunk(r0)
     warnings = []
     n_clip = int(np.count_nonzero(flags & CLIPPED))
     n_black = int(np.count_nonzero(flags & BLACK))

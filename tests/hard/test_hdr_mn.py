@@ -93,3 +93,22 @@ def test_local_tone_mapping_memory_per_pixel_fits_the_phone_budget():
         tracemalloc.stop()
     slope = (peaks[1] - peaks[0]) / (400 * 1000)
     assert 0 < slope <= 41, slope
+
+
+def test_bias_correction_keeps_the_curve_increasing_on_a_night_bracket():
+    # The night kind: most codes dark, read noise 10 e- on a 5000 e- well, so the floor at
+    # code 0 biases the dark codes and the bootstrap's correction is largest. Whatever it
+    # does, the curve must stay strictly increasing on every channel (the guarantee), and
+    # the record must say whether each channel was corrected (a float) or not (None).
+    from lumigraph.capture.scenes.brackets import bracket_family
+
+    c = bracket_family(kinds=("night",), seeds=(0,), bit_depths=(8,))[0]
+    s = c.render((96, 72))
+    z, t = np.stack(s.images), np.asarray(s.stack["exposure_times_s"], np.float64)
+    r = response_mitsunaga1999(z, t)
+    assert np.all(np.diff(r.g, axis=1) > 0)
+    bc = r.fit["bias_correction"]
+    assert bc["draws"] > 0 and len(bc["max_abs_ln"]) == z.shape[-1]
+    assert all(a > 0 and b >= 0 for a, b in bc["noise_a_b_top"])
+    off = response_mitsunaga1999(z, t, bias_draws=0)
+    assert off.fit["bias_correction"]["max_abs_ln"] == []
