@@ -86,6 +86,18 @@ written as directions in the .json and left out of the .ply.
 
 
 # ----------------------------------------------------------------- loading
+
+
+def _point_colours(img: np.ndarray, ok: np.ndarray) -> np.ndarray:
+    """8-bit RGB colours of the image's pixels where ``ok``: 16-bit scaled
+    down, grey repeated over three channels, alpha dropped."""
+    if img.dtype == np.uint16:
+        img = (img / 257.0).round().astype(np.uint8)
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    return img[..., :3][ok].astype(np.uint8)
+
+
 def _read(path):
     from lumigraph.capture.io import read_image
 
@@ -260,11 +272,7 @@ def _depth(args) -> int:
                                          f"{rig.left.image_size[0]}x{rig.left.image_size[1]}")
         lx, ly, _, _ = rect.maps()
         img = cv2.remap(np.ascontiguousarray(img), lx, ly, cv2.INTER_LINEAR)
-        if img.dtype == np.uint16:
-            img = (img / 257.0).round().astype(np.uint8)
-        if img.ndim == 2:
-            img = np.repeat(img[..., None], 3, axis=2)
-        colors = img[..., :3][ok].astype(np.uint8)
+        colors = _point_colours(img, ok)
     if not ok.any():
         if args.max_depth is not None and np.isfinite(pts).all(axis=2).any():
             raise EstimationError("max_depth", f"no point is nearer than {args.max_depth:g} (rig "
@@ -307,11 +315,7 @@ def _depth_from_focal(args, out, disp) -> int:
         if img.shape[:2] != disp.shape:
             raise InputError(args.image, f"size {img.shape[1]}x{img.shape[0]} differs from the "
                                          f"disparity's {w}x{h}; give the rectified left image")
-        if img.dtype == np.uint16:
-            img = (img / 257.0).round().astype(np.uint8)
-        if img.ndim == 2:
-            img = np.repeat(img[..., None], 3, axis=2)
-        colors = img[..., :3][ok].astype(np.uint8)
+        colors = _point_colours(img, ok)
     if not ok.any():
         if args.max_depth is not None and (np.isfinite(d) & (d > 0)).any():
             raise EstimationError("max_depth", f"no point is nearer than {args.max_depth:g}; "
