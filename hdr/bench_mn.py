@@ -215,7 +215,7 @@ PHONE_BUDGET_GB = 0.8
 def tonemap_memory(*, quick: bool = False) -> tuple[list[Row], list[Check]]:
     """Peak RSS of ``lumigraph hdr tonemap --method reinhard-local`` on a radiance
     map the size of the iPhone merge (12.19 MP float32 RGB EXR), measured by the
-    child process itself (``ru_maxrss`` of its own, not of every child the bench ran).
+    child process itself (its ``VmHWM``: neither the bench's own size nor its other children).
     The radiance is synthetic (smooth log-normal field): memory does not depend on
     content. ``quick``: a quarter of the size, target scaled by pixels."""
     import subprocess
@@ -230,10 +230,13 @@ def tonemap_memory(*, quick: bool = False) -> tuple[list[Row], list[Check]]:
     y = np.linspace(0, 20, h, dtype=np.float32)[:, None]
     x = np.linspace(0, 30, w, dtype=np.float32)[None, :]
     base = np.exp(3 * np.sin(x) * np.cos(y)).astype(np.float32)
-    code = ("import resource, sys\n"
+    # VmHWM is the peak of this process image only; ru_maxrss would carry the
+    # forking bench's own resident size over the exec (Linux keeps it).
+    code = ("import sys\n"
             "from lumigraph.command import main\n"
             "rc = main(sys.argv[1:])\n"
-            "print('PEAK_KB', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)\n"
+            "hwm = [ln.split()[1] for ln in open('/proc/self/status') if ln.startswith('VmHWM')]\n"
+            "print('PEAK_KB', hwm[0])\n"
             "sys.exit(rc)\n")
     with tempfile.TemporaryDirectory() as d:
         src = Path(d) / "radiance.exr"
