@@ -277,7 +277,9 @@ def add_common(p: argparse.ArgumentParser) -> None:
                    help="show tracebacks for errors and the messages of the libraries we call")
     p.add_argument("--force", action="store_true",
                    help="replace a file beside the inputs that this command did not write "
-                        "(its own earlier outputs are replaced anyway; an input, never)")
+                        "(its own earlier outputs are replaced anyway; an input, never); for "
+                        "hdr, also accept exposure times whose order contradicts the images' "
+                        "brightness (warned, not refused)")
     p.add_argument("--max-pixels", type=number(int, lo=1), metavar="N",
                    help=f"refuse images larger than N pixels, read from the header before decoding "
                         f"(default {DEFAULT_MAX_PIXELS}, or $LUMIGRAPH_MAX_PIXELS)")
