@@ -100,6 +100,7 @@ HALO_RADIUS = 9     # reach (px) of the fattening check (step 7); 0: none
 HALO_JUMP = 0.3     # disparity step (px/view) that makes a pixel a fattening suspect
 HALO_PASSES = 3     # rounds of the fattening check
 HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
+DEADZONE = 0.5      # dead zone of the colour difference, in quantisation steps of the input
 
 
 def check_views(views, grid) -> np.ndarray:
@@ -140,6 +141,21 @@ def _half_apertures(offsets: np.ndarray) -> np.ndarray:
 
 def _gamma(img: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(img, 0, None), dtype=np.float32)
+
+
+def quantisation_step(img: np.ndarray) -> float:
+    """The median gap between the distinct values of ``img`` where they are
+    few (quantised input: 8-bit codes after decoding), else 0 (float data).
+
+    >>> quantisation_step(np.arange(10000.0).reshape(100, 100) % 7 / 7)
+    0.14285714285714285
+    >>> quantisation_step(np.random.default_rng(0).random((100, 100)))
+    0.0
+    """
+    vals = np.unique(img)
+    if len(vals) < 2 or len(vals) > img.size // 8:
+        return 0.0
+    return float(np.median(np.diff(vals)))
 
 
 def _gradients(img: np.ndarray):
@@ -198,6 +214,13 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
     lum = np.array([0.114, 0.587, 0.299], np.float32)              # BGRA2GRAY weights
     s_col = np.append((1 - ALPHA_GRAD) / 3 / lum, 0).astype(np.float32)
     tau_col = tuple(float(x) for x in TAU_COLOUR * s_col)
+    # quantised input (8-bit): on smooth texture many pixels keep the same
+    # code in every view, so the unshifted views match exactly while the true
+    # shift leaves interpolated quantisation residuals -- a bias towards 0.
+    # A dead zone of half a code makes both "no difference"
+    q_step = quantisation_step(_gamma(data[ref[0]]))
+    dz = DEADZONE * q_step
+    dz_col = tuple(float(x) for x in dz * s_col)
     # grey(P) = (1 - ALPHA_GRAD) mean(R, G, B); the gradient term in its units
     g_unit = np.float32(0.5 / (1 - ALPHA_GRAD)) if ALPHA_GRAD < 1 else np.float32(0)
     tau_g = float(TAU_GRAD / 2 * (1 - ALPHA_GRAD) * 2)   # on Sobel (2x the central difference)
@@ -230,7 +253,10 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
         for k, (i, j) in enumerate(idx):
             s_a = r_a if (i, j) == ref[0] and ref_exact else get(i, j)
             # (a scalar given to cv2.min applies to the first channel only)
-            c = cv2.cvtColor(cv2.min(cv2.absdiff(s_a, r_a), tau_col), cv2.COLOR_BGRA2GRAY)
+            ad = cv2.min(cv2.absdiff(s_a, r_a), tau_col)
+            if dz > 0:   # a difference within half a code is no evidence (quantised input)
+                ad = cv2.threshold(cv2.subtract(ad, dz_col), 0, 0, cv2.THRESH_TOZERO)[1]
+            c = cv2.cvtColor(ad, cv2.COLOR_BGRA2GRAY)
             diff = cv2.subtract(cv2.cvtColor(s_a, cv2.COLOR_BGRA2GRAY), r_grey)
             gx = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=1, dy=0, **sobel), zero), tau_g)
             gy = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=0, dy=1, **sobel), zero), tau_g)
