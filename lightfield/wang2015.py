@@ -100,6 +100,7 @@ HALO_RADIUS = 9     # reach (px) of the fattening check (step 7); 0: none
 HALO_JUMP = 0.3     # disparity step (px/view) that makes a pixel a fattening suspect
 HALO_PASSES = 3     # rounds of the fattening check
 HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
+GRAD_DEADZONE = 0.25  # the same for the gradient term (gx + gy, Sobel units); tuned
 DEADZONE = 0.5      # dead zone of the colour difference, in quantisation steps of the input
 
 
@@ -221,6 +222,7 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
     q_step = quantisation_step(_gamma(data[ref[0]]))
     dz = DEADZONE * q_step
     dz_col = tuple(float(x) for x in dz * s_col)
+    gdz = float(GRAD_DEADZONE * q_step * (1 - ALPHA_GRAD))
     # grey(P) = (1 - ALPHA_GRAD) mean(R, G, B); the gradient term in its units
     g_unit = np.float32(0.5 / (1 - ALPHA_GRAD)) if ALPHA_GRAD < 1 else np.float32(0)
     tau_g = float(TAU_GRAD / 2 * (1 - ALPHA_GRAD) * 2)   # on Sobel (2x the central difference)
@@ -260,7 +262,10 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
             diff = cv2.subtract(cv2.cvtColor(s_a, cv2.COLOR_BGRA2GRAY), r_grey)
             gx = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=1, dy=0, **sobel), zero), tau_g)
             gy = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=0, dy=1, **sobel), zero), tau_g)
-            cv2.scaleAdd(cv2.add(gx, gy), w_g, c, dst=per_view[k])
+            g = cv2.add(gx, gy)
+            if gdz > 0:
+                g = cv2.threshold(cv2.subtract(g, gdz), 0, 0, cv2.THRESH_TOZERO)[1]
+            cv2.scaleAdd(g, w_g, c, dst=per_view[k])
         halves = weights @ per_view.reshape(len(idx), -1)        # (n_halves, H*W)
         c_min = halves.min(0).reshape(h, w)
         return gf.filter(c_min) if gf is not None and filtered else c_min
