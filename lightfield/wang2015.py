@@ -13,7 +13,11 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    ``c_k(x, d)`` is the truncated absolute colour difference plus the
    truncated difference of the horizontal and vertical gradients (the data
    term of cost-volume filtering, Hosni et al. 2013, eq. 4), on
-   gamma-encoded values so dark texture counts.
+   gamma-encoded values so dark texture counts. Quantised input (8-bit
+   codes, :func:`quantisation_step`): differences within half a code (the
+   gradient term: a quarter) count as none, else the unshifted views, whose
+   smooth texture keeps one code in every view, match exactly and pull the
+   estimate towards disparity 0.
 2. **Occlusion.** Wang et al. 2015 (§4, "occlusion-aware depth
    estimation") observe that at an occlusion edge the views on one side of
    the edge (a half of the aperture, split by the edge's orientation) still
