@@ -63,6 +63,11 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    far). The cost is the unfiltered one of step 2 (the guided filter
    fattens by its radius itself); three rounds, since a flipped pixel can
    expose the next; ``2 x HALO_PASSES`` more passes over the views.
+8. **Mixed edge pixels** (:func:`soften`, ``soft_edges=True``): a pixel on
+   a depth edge takes a disparity between the two sides' by its colour's
+   position between their mean colours (the least-squares answer for a
+   blended pixel); this lowers the squared error but puts "flying pixels"
+   between surfaces (``soft_edges=False`` for triangulation).
 
 Memory: the light field, one gamma-encoded 4-channel copy, and the
 aggregated coarse cost volume ``(N / stride, H, W)`` float32; per pass the
@@ -105,6 +110,9 @@ HALO_JUMP = 0.3     # disparity step (px/view) that makes a pixel a fattening su
 HALO_PASSES = 3     # rounds of the fattening check
 HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
 GRAD_DEADZONE = 0.25  # the same for the gradient term (gx + gy, Sobel units); tuned
+SOFT_RADIUS = 4     # window (px) of the side colours for mixed edge pixels (step 8); 0: none
+SOFT_SNAP = 0.2     # mixing fractions within this of 0 or 1 snap to the side
+SOFT_CONTRAST = 0.03  # least colour difference (L2, gamma-encoded) of the two sides
 DEADZONE = 0.5      # dead zone of the colour difference, in quantisation steps of the input
 
 
@@ -428,10 +436,58 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray |
     return np.where(flip, far, disp).astype(np.float32)
 
 
+def soften(disp: np.ndarray, guide: np.ndarray, *, radius: int = SOFT_RADIUS,
+           jump: float = HALO_JUMP, tol: float = HALO_TOL, snap: float = SOFT_SNAP,
+           min_contrast: float = SOFT_CONTRAST) -> np.ndarray:
+    """Step 8: mixed pixels at depth edges. A pixel on a depth edge (its 3 x 3
+    neighbourhood spans more than ``jump``) sees a blend of the near and the
+    far surface; the data cannot place the edge within it (every view sees
+    the same blend at the near disparity), and a hard choice is off by the
+    whole jump. Its colour in ``guide`` (H, W, 3), projected onto the line
+    from the far side's mean colour to the near side's (pixels within
+    ``radius`` px next to a depth edge, within ``tol`` of the window's least /
+    greatest disparity, as in :func:`unfatten`), gives the mixing fraction
+    ``a`` in [0, 1] (snapped to 0 or 1 within ``snap``); the disparity
+    becomes ``a near3 + (1 - a) far3`` over the 3 x 3 neighbourhood: the
+    least-squares estimate for a blended pixel. Skipped where the sides'
+    colours differ by less than ``min_contrast``. Returns (H, W) float32.
+
+    >>> d = np.full((9, 12), 0.2, np.float32); d[:, :6] = 1.2          # edge at x = 6
+    >>> g = np.full((9, 12, 3), 0.1, np.float32); g[:, :6] = 0.9
+    >>> g[:, 5] = 0.5                                                  # a half-mixed pixel
+    >>> [round(float(x), 2) for x in soften(d, g, radius=3)[4, 4:8]]
+    [1.2, 0.8, 0.2, 0.2]
+    """
+    import cv2
+
+    k3 = np.ones((3, 3), np.uint8)
+    side = (2 * radius + 1, 2 * radius + 1)
+    lo3, hi3 = cv2.erode(disp, k3), cv2.dilate(disp, k3)
+    far = cv2.erode(disp, np.ones(side, np.uint8))
+    near = cv2.dilate(disp, np.ones(side, np.uint8))
+
+    def mean_colour(member):
+        m = member.astype(np.float32)
+        total = cv2.boxFilter(guide * m[..., None], -1, side, normalize=False)
+        count = cv2.boxFilter(m, -1, side, normalize=False)
+        return total / np.maximum(count, 1e-6)[..., None], count
+
+    edge = (near - far) > jump
+    c_far, n_far = mean_colour(edge & (disp <= far + tol))
+    c_near, n_near = mean_colour(edge & (disp >= near - tol))
+    axis = c_near - c_far
+    norm2 = (axis * axis).sum(-1)
+    a = np.clip(((guide - c_far) * axis).sum(-1) / np.maximum(norm2, 1e-12), 0, 1)
+    a = np.where(a < snap, 0, np.where(a > 1 - snap, 1, a))
+    ok = ((hi3 - lo3) > jump) & (norm2 > min_contrast ** 2) & (n_far > 0) & (n_near > 0)
+    return np.where(ok, a * hi3 + (1 - a) * lo3, disp).astype(np.float32)
+
+
 def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = True,
                        radius: int = RADIUS, eps: float = EPS, stride: int = STRIDE,
                        median_radius: int = MEDIAN_RADIUS,
-                       halo_radius: int = HALO_RADIUS) -> DisparityEstimate:
+                       halo_radius: int = HALO_RADIUS,
+                       soft_edges: bool = True) -> DisparityEstimate:
     """Disparity of the centre view (px per view step) with confidence.
 
     Coarse to fine: the cost volume is built over every ``stride``-th
@@ -462,6 +518,11 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     halo_radius : int
         Reach (px) of the fattening check (step 7, :func:`unfatten`); 0
         skips it.
+    soft_edges : bool
+        Step 8 (:func:`soften`): mixed pixels at depth edges get a
+        disparity between the two sides' by their colour (lower squared
+        error; False keeps every pixel on one surface, for triangulation
+        without "flying pixels").
 
     Returns
     -------
@@ -510,4 +571,6 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         raw = lambda d: slice_cost(d, filtered=False)  # noqa: E731
         for _ in range(HALO_PASSES):
             disp = unfatten(disp, guide, raw, trusted=trusted, radius=halo_radius)
+    if soft_edges and SOFT_RADIUS > 0:
+        disp = soften(disp, guide)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)
