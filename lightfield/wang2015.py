@@ -111,7 +111,8 @@ HALO_PASSES = 3     # rounds of the fattening check
 HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
 GRAD_DEADZONE = 0.25  # the same for the gradient term (gx + gy, Sobel units); tuned
 SOFT_RADIUS = 4     # window (px) of the side colours for mixed edge pixels (step 8); 0: none
-SOFT_SNAP = 0.2     # mixing fractions within this of 0 or 1 snap to the side
+SOFT_SNAP = 0.3     # mixing fractions within this of 0 or 1 snap to the side
+SOFT_TOL = 0.3      # disparity tolerance (px/view) of the two sides' colour classes
 SOFT_CONTRAST = 0.03  # least colour difference (L2, gamma-encoded) of the two sides
 DEADZONE = 0.5      # dead zone of the colour difference, in quantisation steps of the input
 
@@ -437,7 +438,7 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray |
 
 
 def soften(disp: np.ndarray, guide: np.ndarray, *, radius: int = SOFT_RADIUS,
-           jump: float = HALO_JUMP, tol: float = HALO_TOL, snap: float = SOFT_SNAP,
+           jump: float = HALO_JUMP, tol: float = SOFT_TOL, snap: float = SOFT_SNAP,
            min_contrast: float = SOFT_CONTRAST) -> np.ndarray:
     """Step 8: mixed pixels at depth edges. A pixel on a depth edge (its 3 x 3
     neighbourhood spans more than ``jump``) sees a blend of the near and the
