@@ -13,7 +13,11 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    ``c_k(x, d)`` is the truncated absolute colour difference plus the
    truncated difference of the horizontal and vertical gradients (the data
    term of cost-volume filtering, Hosni et al. 2013, eq. 4), on
-   gamma-encoded values so dark texture counts.
+   gamma-encoded values so dark texture counts. Quantised input (8-bit
+   codes, :func:`quantisation_step`): differences within half a code (the
+   gradient term: a quarter) count as none, else the unshifted views, whose
+   smooth texture keeps one code in every view, match exactly and pull the
+   estimate towards disparity 0.
 2. **Occlusion.** Wang et al. 2015 (§4, "occlusion-aware depth
    estimation") observe that at an occlusion edge the views on one side of
    the edge (a half of the aperture, split by the edge's orientation) still
@@ -59,6 +63,11 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    far). The cost is the unfiltered one of step 2 (the guided filter
    fattens by its radius itself); three rounds, since a flipped pixel can
    expose the next; ``2 x HALO_PASSES`` more passes over the views.
+8. **Mixed edge pixels** (:func:`soften`, ``soft_edges=True``): a pixel on
+   a depth edge takes a disparity between the two sides' by its colour's
+   position between their mean colours (the least-squares answer for a
+   blended pixel); this lowers the squared error but puts "flying pixels"
+   between surfaces (``soft_edges=False`` for triangulation).
 
 Memory: the light field, one gamma-encoded 4-channel copy, and the
 aggregated coarse cost volume ``(N / stride, H, W)`` float32; per pass the
@@ -100,6 +109,12 @@ HALO_RADIUS = 9     # reach (px) of the fattening check (step 7); 0: none
 HALO_JUMP = 0.3     # disparity step (px/view) that makes a pixel a fattening suspect
 HALO_PASSES = 3     # rounds of the fattening check
 HALO_TOL = 0.15     # disparity tolerance (px/view) of the near / far side classes
+GRAD_DEADZONE = 0.25  # the same for the gradient term (gx + gy, Sobel units); tuned
+SOFT_RADIUS = 4     # window (px) of the side colours for mixed edge pixels (step 8); 0: none
+SOFT_SNAP = 0.3     # mixing fractions within this of 0 or 1 snap to the side
+SOFT_TOL = 0.3      # disparity tolerance (px/view) of the two sides' colour classes
+SOFT_CONTRAST = 0.03  # least colour difference (L2, gamma-encoded) of the two sides
+DEADZONE = 0.5      # dead zone of the colour difference, in quantisation steps of the input
 
 
 def check_views(views, grid) -> np.ndarray:
@@ -140,6 +155,21 @@ def _half_apertures(offsets: np.ndarray) -> np.ndarray:
 
 def _gamma(img: np.ndarray) -> np.ndarray:
     return np.sqrt(np.clip(img, 0, None), dtype=np.float32)
+
+
+def quantisation_step(img: np.ndarray) -> float:
+    """The median gap between the distinct values of ``img`` where they are
+    few (quantised input: 8-bit codes after decoding), else 0 (float data).
+
+    >>> quantisation_step(np.arange(10000.0).reshape(100, 100) % 7 / 7)
+    0.14285714285714285
+    >>> quantisation_step(np.random.default_rng(0).random((100, 100)))
+    0.0
+    """
+    vals = np.unique(img)
+    if len(vals) < 2 or len(vals) > img.size // 8:
+        return 0.0
+    return float(np.median(np.diff(vals)))
 
 
 def _gradients(img: np.ndarray):
@@ -198,6 +228,14 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
     lum = np.array([0.114, 0.587, 0.299], np.float32)              # BGRA2GRAY weights
     s_col = np.append((1 - ALPHA_GRAD) / 3 / lum, 0).astype(np.float32)
     tau_col = tuple(float(x) for x in TAU_COLOUR * s_col)
+    # quantised input (8-bit): on smooth texture many pixels keep the same
+    # code in every view, so the unshifted views match exactly while the true
+    # shift leaves interpolated quantisation residuals -- a bias towards 0.
+    # A dead zone of half a code makes both "no difference"
+    q_step = quantisation_step(_gamma(data[ref[0]]))
+    dz = DEADZONE * q_step
+    dz_col = tuple(float(x) for x in dz * s_col)
+    gdz = float(GRAD_DEADZONE * q_step * (1 - ALPHA_GRAD))
     # grey(P) = (1 - ALPHA_GRAD) mean(R, G, B); the gradient term in its units
     g_unit = np.float32(0.5 / (1 - ALPHA_GRAD)) if ALPHA_GRAD < 1 else np.float32(0)
     tau_g = float(TAU_GRAD / 2 * (1 - ALPHA_GRAD) * 2)   # on Sobel (2x the central difference)
@@ -230,11 +268,17 @@ def _matcher(lf: LightField, *, views=None, occlusion: bool = True, radius: int 
         for k, (i, j) in enumerate(idx):
             s_a = r_a if (i, j) == ref[0] and ref_exact else get(i, j)
             # (a scalar given to cv2.min applies to the first channel only)
-            c = cv2.cvtColor(cv2.min(cv2.absdiff(s_a, r_a), tau_col), cv2.COLOR_BGRA2GRAY)
+            ad = cv2.min(cv2.absdiff(s_a, r_a), tau_col)
+            if dz > 0:   # a difference within half a code is no evidence (quantised input)
+                ad = cv2.threshold(cv2.subtract(ad, dz_col), 0, 0, cv2.THRESH_TOZERO)[1]
+            c = cv2.cvtColor(ad, cv2.COLOR_BGRA2GRAY)
             diff = cv2.subtract(cv2.cvtColor(s_a, cv2.COLOR_BGRA2GRAY), r_grey)
             gx = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=1, dy=0, **sobel), zero), tau_g)
             gy = cv2.min(cv2.absdiff(cv2.Sobel(diff, dx=0, dy=1, **sobel), zero), tau_g)
-            cv2.scaleAdd(cv2.add(gx, gy), w_g, c, dst=per_view[k])
+            g = cv2.add(gx, gy)
+            if gdz > 0:
+                g = cv2.threshold(cv2.subtract(g, gdz), 0, 0, cv2.THRESH_TOZERO)[1]
+            cv2.scaleAdd(g, w_g, c, dst=per_view[k])
         halves = weights @ per_view.reshape(len(idx), -1)        # (n_halves, H*W)
         c_min = halves.min(0).reshape(h, w)
         return gf.filter(c_min) if gf is not None and filtered else c_min
@@ -393,10 +437,58 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray |
     return np.where(flip, far, disp).astype(np.float32)
 
 
+def soften(disp: np.ndarray, guide: np.ndarray, *, radius: int = SOFT_RADIUS,
+           jump: float = HALO_JUMP, tol: float = SOFT_TOL, snap: float = SOFT_SNAP,
+           min_contrast: float = SOFT_CONTRAST) -> np.ndarray:
+    """Step 8: mixed pixels at depth edges. A pixel on a depth edge (its 3 x 3
+    neighbourhood spans more than ``jump``) sees a blend of the near and the
+    far surface; the data cannot place the edge within it (every view sees
+    the same blend at the near disparity), and a hard choice is off by the
+    whole jump. Its colour in ``guide`` (H, W, 3), projected onto the line
+    from the far side's mean colour to the near side's (pixels within
+    ``radius`` px next to a depth edge, within ``tol`` of the window's least /
+    greatest disparity, as in :func:`unfatten`), gives the mixing fraction
+    ``a`` in [0, 1] (snapped to 0 or 1 within ``snap``); the disparity
+    becomes ``a near3 + (1 - a) far3`` over the 3 x 3 neighbourhood: the
+    least-squares estimate for a blended pixel. Skipped where the sides'
+    colours differ by less than ``min_contrast``. Returns (H, W) float32.
+
+    >>> d = np.full((9, 12), 0.2, np.float32); d[:, :6] = 1.2          # edge at x = 6
+    >>> g = np.full((9, 12, 3), 0.1, np.float32); g[:, :6] = 0.9
+    >>> g[:, 5] = 0.5                                                  # a half-mixed pixel
+    >>> [round(float(x), 2) for x in soften(d, g, radius=3)[4, 4:8]]
+    [1.2, 0.8, 0.2, 0.2]
+    """
+    import cv2
+
+    k3 = np.ones((3, 3), np.uint8)
+    side = (2 * radius + 1, 2 * radius + 1)
+    lo3, hi3 = cv2.erode(disp, k3), cv2.dilate(disp, k3)
+    far = cv2.erode(disp, np.ones(side, np.uint8))
+    near = cv2.dilate(disp, np.ones(side, np.uint8))
+
+    def mean_colour(member):
+        m = member.astype(np.float32)
+        total = cv2.boxFilter(guide * m[..., None], -1, side, normalize=False)
+        count = cv2.boxFilter(m, -1, side, normalize=False)
+        return total / np.maximum(count, 1e-6)[..., None], count
+
+    edge = (near - far) > jump
+    c_far, n_far = mean_colour(edge & (disp <= far + tol))
+    c_near, n_near = mean_colour(edge & (disp >= near - tol))
+    axis = c_near - c_far
+    norm2 = (axis * axis).sum(-1)
+    a = np.clip(((guide - c_far) * axis).sum(-1) / np.maximum(norm2, 1e-12), 0, 1)
+    a = np.where(a < snap, 0, np.where(a > 1 - snap, 1, a))
+    ok = ((hi3 - lo3) > jump) & (norm2 > min_contrast ** 2) & (n_far > 0) & (n_near > 0)
+    return np.where(ok, a * hi3 + (1 - a) * lo3, disp).astype(np.float32)
+
+
 def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = True,
                        radius: int = RADIUS, eps: float = EPS, stride: int = STRIDE,
                        median_radius: int = MEDIAN_RADIUS,
-                       halo_radius: int = HALO_RADIUS) -> DisparityEstimate:
+                       halo_radius: int = HALO_RADIUS,
+                       soft_edges: bool = True) -> DisparityEstimate:
     """Disparity of the centre view (px per view step) with confidence.
 
     Coarse to fine: the cost volume is built over every ``stride``-th
@@ -427,6 +519,11 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
     halo_radius : int
         Reach (px) of the fattening check (step 7, :func:`unfatten`); 0
         skips it.
+    soft_edges : bool
+        Step 8 (:func:`soften`): mixed pixels at depth edges get a
+        disparity between the two sides' by their colour (lower squared
+        error; False keeps every pixel on one surface, for triangulation
+        without "flying pixels").
 
     Returns
     -------
@@ -475,4 +572,6 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         raw = lambda d: slice_cost(d, filtered=False)  # noqa: E731
         for _ in range(HALO_PASSES):
             disp = unfatten(disp, guide, raw, trusted=trusted, radius=halo_radius)
+    if soft_edges and SOFT_RADIUS > 0:
+        disp = soften(disp, guide)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)

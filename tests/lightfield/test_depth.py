@@ -129,3 +129,20 @@ def test_unfatten_gives_the_dark_background_back_and_keeps_the_foreground():
     # bad pixels (HCI BadPix(0.07)) than without it
     bad = lambda d: int((np.abs(d - gt) > 0.07).sum())  # noqa: E731
     assert bad(on) < bad(off)
+
+
+
+def test_differences_within_half_a_code_are_no_evidence():
+    # 8-bit input (the reference's gamma-encoded values on a grid of codes):
+    # a view that differs from it by less than half a code everywhere matches
+    # it exactly (up to float32 rounding of values ~1: a few 1e-7); by more
+    # than half a code it does not (0.1 code left, ~4e-4)
+    rng = np.random.default_rng(0)
+    codes = rng.integers(40, 200, (32, 40, 3)) / 255.0        # gamma-encoded (sqrt) values
+    step = 1 / 255
+    for frac, zero in ((0.4, True), (0.6, False)):
+        views = np.stack([codes + frac * step, codes, codes - frac * step])[None] ** 2  # linear
+        lf = LightField(views.astype(np.float32), spacing=1.0)
+        assert abs(wang2015.quantisation_step(np.sqrt(lf.data[0, 1])) - step) < 1e-6
+        cost, _ = wang2015._matcher(lf)
+        assert (float(cost(0.0, filtered=False).max()) < 1e-6) == zero
