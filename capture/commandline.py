@@ -34,7 +34,12 @@ from collections.abc import Iterable, Sequence
 from fractions import Fraction
 from pathlib import Path
 
-from lumigraph.capture.errors import EstimationError, InputError, UnusableResult
+from lumigraph.capture.errors import (
+    EstimationError,
+    InputError,
+    UnusableResult,
+    caused_by_interrupt,
+)
 
 EXIT_OK, EXIT_INTERNAL, EXIT_USAGE, EXIT_UNUSABLE, EXIT_PARTIAL = 0, 1, 2, 3, 4
 EXIT_INTERRUPTED = 130
@@ -401,6 +406,9 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
                 return EXIT_USAGE
             return _internal(e, debug, said)
         except Exception as e:  # an internal fault: say so, and how to see more
+            if caused_by_interrupt(e):  # a Ctrl-C wrapped by the import it landed in
+                said.error("error: interrupted; nothing half-written was left behind")
+                return EXIT_INTERRUPTED
             return _internal(e, debug, said)
         finally:
             for lock in locks:
@@ -799,5 +807,10 @@ def module_main(module: str, prog: str) -> int:
 
         return importlib.import_module(module).main(prog=prog)
     except KeyboardInterrupt:
+        sys.stderr.write("error: interrupted; nothing was written\n")
+        return EXIT_INTERRUPTED
+    except Exception as e:
+        if not caused_by_interrupt(e):  # a Ctrl-C wrapped by the import it landed in
+            raise
         sys.stderr.write("error: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED

@@ -53,3 +53,30 @@ class UnusableResult(Exception):
         self.where = os.fspath(where)
         self.problem = problem
         super().__init__(f"{self.where}: {problem}")
+
+
+def caused_by_interrupt(exc: BaseException | None) -> bool:
+    """True when ``exc`` is a ``KeyboardInterrupt`` or was raised while handling
+    one: a Ctrl-C during an import can surface as the ``RuntimeError`` (or
+    ``ImportError``) that wraps it, and is still the user's interrupt.
+
+    Examples
+    --------
+    >>> try:
+    ...     try:
+    ...         raise KeyboardInterrupt
+    ...     except KeyboardInterrupt as k:
+    ...         raise RuntimeError("Error calling __set_name__") from k
+    ... except RuntimeError as e:
+    ...     caused_by_interrupt(e)
+    True
+    >>> caused_by_interrupt(ValueError("x"))
+    False
+    """
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False

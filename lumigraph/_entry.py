@@ -13,3 +13,12 @@ def main() -> int:
     except KeyboardInterrupt:
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
+    except Exception as e:
+        # A Ctrl-C inside an import can surface wrapped (e.g. the RuntimeError
+        # of a dataclass's __set_name__): still the user's interrupt.
+        from lumigraph.capture.errors import caused_by_interrupt
+
+        if not caused_by_interrupt(e):
+            raise
+        sys.stderr.write("error: interrupted; nothing was written\n")
+        return 130

@@ -38,9 +38,11 @@ def test_ctrl_c_is_one_line_and_130(delay_s, tmp_path):
         return  # it finished first: nothing to interrupt
     if p.returncode == -signal.SIGINT:
         # Under load the signal can land before the interpreter has installed
-        # its own SIGINT handler: the default action ends the process, which a
-        # shell reports as 130, as it does ours. Nothing ran, so nothing is said.
-        assert "Traceback" not in err and not out.exists(), err
+        # its own SIGINT handler, or after it restored the default at exit: the
+        # default action ends the process, which a shell reports as 130, as it
+        # does ours. Either nothing ran, or the command had finished and said so.
+        assert "Traceback" not in err, err
+        assert not out.exists() or err.startswith("wrote "), err
         return
     assert p.returncode == 130, err
     assert "Traceback" not in err
