@@ -181,7 +181,8 @@ def build_parser(prog: str = "lumigraph flow"):
     from lumigraph.stereo.flow_methods import FLOW_METHODS
 
     methods = FLOW_METHODS.help_text()
-    p = make_parser(prog, "Dense correspondence between two images: optical flow (coarse-to-fine "
+    p = make_parser(prog, "Dense correspondence between two images: optical flow (default: dense "
+                    "inverse search, --preset fast|default|accurate; or the coarse-to-fine "
                     "pyramid) or Sand-Teller video matching.\n\nmethods:\n" + methods,
                     epilog=EPILOG)
     p.add_argument("images", nargs="+", metavar="IMAGE", type=input_path,
