@@ -2,10 +2,24 @@
 imported before Ctrl-C is handled, so an interrupt while the libraries load
 ends with one line and status 130, not a traceback."""
 
+import signal
 import sys
+
+_interrupted = False
+
+
+def _on_sigint(signum, frame):
+    # Remember the Ctrl-C: one landing inside a C extension's import can
+    # surface as an unrelated exception (a TypeError, a RuntimeError) that no
+    # longer carries the KeyboardInterrupt.
+    global _interrupted
+    _interrupted = True
+    raise KeyboardInterrupt
 
 
 def main() -> int:
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _on_sigint)
     try:
         from lumigraph.command import main as command_main
 
@@ -14,11 +28,9 @@ def main() -> int:
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
     except Exception as e:
-        # A Ctrl-C inside an import can surface wrapped (e.g. the RuntimeError
-        # of a dataclass's __set_name__): still the user's interrupt.
         from lumigraph.capture.errors import caused_by_interrupt
 
-        if not caused_by_interrupt(e):
+        if not (_interrupted or caused_by_interrupt(e)):
             raise
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
