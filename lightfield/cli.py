@@ -433,6 +433,10 @@ def _depth(args) -> int:
         if "window" not in method.options:
             raise InputError("window", f"applies to the variance method, not {args.method}")
         options["window"] = check_disparity_window(args.window)
+    if args.edges != "soft":
+        if "soft_edges" not in method.options:
+            raise InputError("edges", f"applies to the wang2015 method, not {args.method}")
+        options["soft_edges"] = False
     lf = LightField.load(args.lightfield)
     est = method(lf, slopes, **options)
     inputs = [Path(args.lightfield) / "lightfield.json"]
@@ -544,6 +548,11 @@ def build_parser(prog: str = "lumigraph lightfield"):
                    help=f"depth method (see below; default {DEPTH_METHODS.names[0]})")
     v.add_argument("--window", type=number(int, lo=1, odd=True),
                    help="variance method: cost aggregation window side (px; default 7)")
+    v.add_argument("--edges", choices=("soft", "hard"), default="soft",
+                   help="wang2015: at depth edges, soft (default) gives a mixed pixel a disparity "
+                        "between the two surfaces by its colour (lower squared error, but "
+                        "'flying pixels' in a point cloud); hard keeps every pixel on one "
+                        "surface (use it before triangulating)")
     v.add_argument("--confidence", type=output_file(".pfm"),
                    help="also write the confidence in [0, 1] (PFM)")
     v.add_argument("--all-in-focus", type=output_file(".exr"), help="also write the all-in-focus image (EXR)")

@@ -40,7 +40,7 @@ DEPTH_METHODS = Registry("depth", [
     Method("wang2015", "lumigraph.lightfield.wang2015:estimate_disparity",
            "occlusion-aware: least cost over half-apertures (Wang et al. 2015), guided-filter "
            "cost aggregation, weighted-median refinement; keeps silhouettes (default)",
-           options=("views", "radius", "median_radius")),
+           options=("views", "radius", "median_radius", "soft_edges")),
     Method("variance", "lumigraph.lightfield.refocus:estimate_disparity",
            "angular variance of the refocused views in a box window (the earlier default; "
            "fattens silhouettes)",

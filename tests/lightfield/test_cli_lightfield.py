@@ -190,3 +190,22 @@ def test_value_checks_live_in_the_library_and_the_cli_names_flags(lfdir, tmp_pat
     r = lumigraph("lightfield", "render", out, "--position", "0", "0", "1", "--out", tmp_path / "v.exr")
     assert_clean_error(r, "error: --position: Z != 0 needs the light field's focal_px")
     assert not (tmp_path / "v.exr").exists() and not (tmp_path / "d.pfm").exists()
+
+
+def test_depth_hard_edges_is_the_library_without_softening(lfdir, tmp_path):
+    from lumigraph.capture.io import read_pfm
+    from lumigraph.lightfield.field import LightField
+    from lumigraph.lightfield.wang2015 import estimate_disparity
+
+    r = lumigraph("lightfield", "depth", lfdir, "--slopes=-1,1,9", "--edges", "hard",
+                  "--out", tmp_path / "hard.pfm")
+    assert r.returncode == 0, r.stderr
+    lib = estimate_disparity(LightField.load(lfdir), np.linspace(-1, 1, 9), soft_edges=False)
+    # the same call: identical floats
+    np.testing.assert_array_equal(read_pfm(tmp_path / "hard.pfm"), lib.disparity)
+    meta = json.loads((tmp_path / "hard.pfm.meta.json").read_text())
+    assert meta["params"]["soft_edges"] is False
+    r = lumigraph("lightfield", "depth", lfdir, "--slopes=-1,1,9", "--method", "variance",
+                  "--edges", "hard", "--out", tmp_path / "v.pfm")
+    assert_clean_error(r, "--edges", "wang2015")
+    assert not (tmp_path / "v.pfm").exists()
