@@ -223,32 +223,40 @@ def _pattern_continues(gray: np.ndarray, pts: np.ndarray, board: BoardSpec) -> b
     H, _ = cv2.findHomography(grid, pts)
     if H is None:
         return False
+    g32 = gray if gray.dtype == np.float32 else gray.astype(np.float32)  # once, not per side
+    h, w = gray.shape
 
-    def side_contrast(d):
-        """Parity contrast of the square centres at distance ``d`` outside each side."""
+    def sides(d):
         c = np.arange(-d, nc - 1 + d + 1e-9)
         r = np.arange(-d, nr - 1 + d + 1e-9)
-        sides = [np.column_stack([c, np.full(c.size, -d)]), np.column_stack([c, np.full(c.size, nr - 1 + d)]),
-                 np.column_stack([np.full(r.size, -d), r]), np.column_stack([np.full(r.size, nc - 1 + d), r])]
-        h, w = gray.shape
-        out = []
-        for cells in sides:
-            xy = cv2.perspectiveTransform(cells[None], H)[0]
-            inside = np.all((xy >= 1) & (xy <= np.array([w - 2, h - 2])), axis=1)
-            if inside.sum() < 3:
-                out.append(np.nan)
-                continue
-            v = cv2.remap(gray.astype(np.float32), xy[inside, 0:1].astype(np.float32),
-                          xy[inside, 1:2].astype(np.float32), cv2.INTER_LINEAR).ravel()
-            parity = np.where((np.floor(cells[inside, 0]) + np.floor(cells[inside, 1])) % 2 == 0, 1.0, -1.0)
-            # a continuing checker alternates at every sample (a cluttered background
-            # beyond a narrow margin correlates with the parity only by chance)
-            signed = (v - np.median(v)) * parity
-            agree = max(np.mean(signed > 0), np.mean(signed < 0))
-            out.append(abs(float(np.mean(signed))) if agree >= 0.85 else 0.0)
-        return np.array(out)
+        return [np.column_stack([c, np.full(c.size, -d)]), np.column_stack([c, np.full(c.size, nr - 1 + d)]),
+                np.column_stack([np.full(r.size, -d), r]), np.column_stack([np.full(r.size, nc - 1 + d), r])]
 
-    outer, beyond = side_contrast(0.5), side_contrast(1.5)
+    # the square centres 0.5 and 1.5 squares outside each side, mapped and
+    # sampled in one call each (this runs once per detected view)
+    groups = sides(0.5) + sides(1.5)
+    cells = np.concatenate(groups)
+    xy = cv2.perspectiveTransform(cells[None], H)[0]
+    vals = cv2.remap(g32, xy[:, 0:1].astype(np.float32), xy[:, 1:2].astype(np.float32),
+                     cv2.INTER_LINEAR).ravel()
+    inside_all = np.all((xy >= 1) & (xy <= np.array([w - 2, h - 2])), axis=1)
+    parity_all = np.where((np.floor(cells[:, 0]) + np.floor(cells[:, 1])) % 2 == 0, 1.0, -1.0)
+    contrast = []
+    start = 0
+    for g in groups:
+        sl = slice(start, start + len(g))
+        start += len(g)
+        inside = inside_all[sl]
+        if inside.sum() < 3:
+            contrast.append(np.nan)
+            continue
+        v, parity = vals[sl][inside], parity_all[sl][inside]
+        # a continuing checker alternates at every sample (a cluttered background
+        # beyond a narrow margin correlates with the parity only by chance)
+        signed = (v - np.median(v)) * parity
+        agree = max(np.mean(signed > 0), np.mean(signed < 0))
+        contrast.append(abs(float(np.mean(signed))) if agree >= 0.85 else 0.0)
+    outer, beyond = np.array(contrast[:4]), np.array(contrast[4:])
     with np.errstate(invalid="ignore"):
         return bool(np.any(beyond > 0.5 * outer))
 
