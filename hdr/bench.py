@@ -180,11 +180,10 @@ def _pfs(method):
             with open(script, "w") as f:
                 f.write("\n".join(lines) + "\n")
             resp = os.path.join(tmp, "r.m")
-            gen = subprocess.Popen(["pfsinhdrgen", script], stdout=subprocess.PIPE)
-            subprocess.run(["pfshdrcalibrate", "-c", method, "-s", resp, "-b",
-                            str(d["bit_depth"])], stdin=gen.stdout, stdout=subprocess.DEVNULL,
-                           stderr=subprocess.DEVNULL, check=True)
-            gen.wait()
+            with subprocess.Popen(["pfsinhdrgen", script], stdout=subprocess.PIPE) as gen:
+                subprocess.run(["pfshdrcalibrate", "-c", method, "-s", resp, "-b",
+                                str(d["bit_depth"])], stdin=gen.stdout, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL, check=True)
             return _read_pfs_response(resp)
 
     return run
@@ -192,7 +191,9 @@ def _pfs(method):
 
 def _read_pfs_response(path) -> np.ndarray:
     chans, cur = [], None
-    for line in open(path):
+    with open(path) as f:
+        lines = f.readlines()
+    for line in lines:
         if line.startswith("# name:"):
             cur = []
             chans.append(cur)
