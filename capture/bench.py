@@ -10,7 +10,8 @@ Each stage contributes a :class:`Stage` from a module listed in
 - **checks**: the issue's targets, each a ratio to a peer measured in this run.
 
 :func:`run_stages` times every (case, method, knob value) as the median of
-``repeats`` runs and :func:`write_report` writes ``report.md``,
+``repeats`` runs (interleaved across the case's methods), and
+:func:`write_report` writes ``report.md``,
 ``report.json`` and one ``<stage>.png`` (error against time, log axes, one
 line per method).
 
@@ -222,31 +223,46 @@ def run_stage(stage: Stage, *, repeats: int | None = None,
                 unavailable(case, m, reason)
             continue
         data = case.load()
+        jobs = []
         for m in methods:
             reason = m.unavailable() if m.unavailable else None
             if reason:
                 unavailable(case, m, reason)
                 continue
             state = m.prepare(data) if m.prepare else data
-            for value in m.values:
-                times, out, status, extra = [], None, "ok", {}
+            jobs += [{"m": m, "value": v, "state": state, "times": [], "status": "ok",
+                      "err": math.nan, "extra": {}} for v in m.values]
+        # Interleaved: repeat r runs every (method, value) once, in an order that
+        # rotates with r, so a burst of machine load falls on all of them alike
+        # and the medians compare like with like. The error is taken from the
+        # last run's output (methods that accumulate state across runs report it
+        # there), and each output is dropped at once: one in memory at a time.
+        for r in range(repeats):
+            k = r % len(jobs) if jobs else 0
+            for j in jobs[k:] + jobs[:k]:
+                if j["status"] != "ok":
+                    continue
                 try:
-                    for _ in range(repeats):
-                        t0 = time.perf_counter()
-                        out = m.run(state, value)
-                        times.append(time.perf_counter() - t0)
-                    err = stage.error(data, out)
-                    if isinstance(err, dict):
-                        extra = {k: v for k, v in err.items() if k != "error"}
-                        err = err["error"]
-                    err = float(err)
+                    t0 = time.perf_counter()
+                    out = j["m"].run(j["state"], j["value"])
+                    j["times"].append(time.perf_counter() - t0)
+                    if len(j["times"]) == repeats:
+                        err = stage.error(data, out)
+                        if isinstance(err, dict):
+                            j["extra"] = {key: v for key, v in err.items() if key != "error"}
+                            err = err["error"]
+                        j["err"] = float(err)
+                    del out
                 except Exception as e:  # a peer may refuse an input: record it
-                    status = f"failed: {type(e).__name__}: {str(e).splitlines()[0][:160] if str(e) else ''}"
-                    err = math.nan
-                    extra = {"traceback": traceback.format_exc(limit=3)}
-                emit(Row(stage.name, case.name, m.name, m.peer, m.knob, value,
-                         statistics.median(times) if times else math.nan, tuple(times), err,
-                         status, extra))
+                    j["status"] = (f"failed: {type(e).__name__}: "
+                                   f"{str(e).splitlines()[0][:160] if str(e) else ''}")
+                    j["err"] = math.nan
+                    j["extra"] = {"traceback": traceback.format_exc(limit=3)}
+        for j in jobs:
+            m, times = j["m"], j["times"]
+            emit(Row(stage.name, case.name, m.name, m.peer, m.knob, j["value"],
+                     statistics.median(times) if times else math.nan, tuple(times), j["err"],
+                     j["status"], j["extra"]))
     return rows
 
 
