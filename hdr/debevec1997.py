@@ -188,8 +188,8 @@ def solve_sparse_lstsq(a_mat, b: np.ndarray) -> np.ndarray:
 
 def data_weight(z: np.ndarray, bit_depth: int, clip_margin: float = 0.0) -> np.ndarray:
     """Row weight of each observation in eq. 6.5: ``√ω(z)`` (the hat), zero
-    at the censored codes 0 and ``z_max`` and within ``clip_margin·z_max``
-    of either end.
+    within one 8-bit step (``z_max/255``) of 0 and ``z_max`` — the censored
+    codes 0 and 255 at 8 bits — and within ``clip_margin·z_max`` of either end.
 
     The paper weights each row by ω, i.e. trusts an observation in
     proportion to ω²; near the ends that leaves the curve to the smoothness
@@ -212,7 +212,13 @@ def data_weight(z: np.ndarray, bit_depth: int, clip_margin: float = 0.0) -> np.n
 def _weight_table(bit_depth, clip_margin):
     zmax = 2 ** bit_depth - 1
     zf = np.arange(zmax + 1, dtype=np.float64)
-    keep = (zf >= clip_margin * zmax) & (zf <= (1 - clip_margin) * zmax)
+    # The censored band is one 8-bit step wide at every depth (codes 0 and 255
+    # at 8 bits, where the hat is 0 there anyway; 0..16 of 4095 at 12 bits), so
+    # a deeper file of the same scene is fitted on the same share of its range,
+    # only finer: below z_max/255 a deep code is read noise truncated at 0, and
+    # its log pulls the toe (docs/decisions/hdr-debevec-noise.md, "deep codes").
+    edge = max(clip_margin * zmax, zmax / 255)
+    keep = (zf >= edge) & (zf <= zmax - edge)
     out = np.where(keep, np.sqrt(hat_weight(zf, bit_depth)), 0.0)
     out.setflags(write=False)
     return out
