@@ -82,6 +82,11 @@ from lumigraph.capture.errors import InputError
 
 MAX_STEPS = 257
 WINDOW_RANGE = (3, 63)  # odd SSD window sides model_stereo accepts
+COSTS = ("ssd", "sgm")  # the matching costs model_stereo offers
+# cost="sgm": census cost box, and the path penalties per box pixel (census
+# bits) of hirschmuller2008.aggregate; how they were chosen:
+# docs/decisions/model-stereo-sgm.md
+SGM = {"cost_window": 3, "p1": 12, "p2": 200, "edge": 8, "paths": 8}
 
 
 @dataclass(frozen=True)
@@ -420,7 +425,8 @@ def _check_model(model_depth, rig):
 
 def check_model_stereo_options(*, max_offset: float, window: int = 9, step: float | None = None,
                                texture_snr: float = 1.0, uniqueness: float = 0.02,
-                               max_cost: float = 1.0, left_right: float | None = 1.25) -> float:
+                               max_cost: float = 1.0, left_right: float | None = 1.25,
+                               cost: str = "ssd") -> float:
     """Check :func:`model_stereo`'s options before any image is loaded
     (``model_stereo`` checks them again itself); ``max_offset`` as a float.
 
@@ -454,12 +460,14 @@ def check_model_stereo_options(*, max_offset: float, window: int = 9, step: floa
             raise InputError(name, f"expected a value >= 0, got {v}")
     if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
         raise InputError("left_right", f"expected a finite value > 0 or None, got {left_right}")
+    if cost not in COSTS:
+        raise InputError("cost", f"expected one of {', '.join(COSTS)}, got {cost!r}")
     return max_offset
 
 
 # ------------------------------------------------- the steps of model_stereo
 def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, texture_snr,
-                  uniqueness, max_cost, left_right):
+                  uniqueness, max_cost, left_right, cost="ssd"):
     """Check the images against the rig, the model and every option:
     ``(model depth with NaN where absent, key, offset, max_offset)``."""
     zm = _check_model(model_depth, rig)
@@ -469,7 +477,7 @@ def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, te
     _check_image("offset", offset, rig.right.image_size)
     max_offset = check_model_stereo_options(
         max_offset=max_offset, window=window, step=step, texture_snr=texture_snr,
-        uniqueness=uniqueness, max_cost=max_cost, left_right=left_right)
+        uniqueness=uniqueness, max_cost=max_cost, left_right=left_right, cost=cost)
     return zm, key, offset, max_offset
 
 
@@ -707,13 +715,133 @@ def _check_fit(fit, *, max_median_cost, max_offset):
                                              f"farther than max_offset={max_offset:g} from the model")
 
 
+# ------------------------------------------------- the SGM cost (cost="sgm")
+def _codes8(gk, go):
+    """Both lumas as 8-bit codes for the census (float32, not yet rounded):
+    8-bit inputs as they are, others scaled by the pair's joint range (as
+    :func:`lumigraph.stereo.hirschmuller2008.match` does)."""
+    lo = min(float(np.nanmin(gk)), float(np.nanmin(go)))
+    hi = max(float(np.nanmax(gk)), float(np.nanmax(go)))
+    if lo >= 0 and hi <= 255:
+        return gk, go, 1.0
+    s = 255.0 / max(hi - lo, 1e-12)
+    return (gk - lo) * s, (go - lo) * s, s
+
+
+def _census_cost_volume(gk, go, rig, zm, view, deltas, *, cost_window=SGM["cost_window"],
+                       kernel=None):
+    """The census matching cost of every key pixel at every ``δ``:
+    ``(H, W, len(deltas))`` uint16, and where it was computed: ``(H, W)``
+    bool, the pixels seen at some ``δ``.
+
+    Per ``δ`` the offset luma is warped into the key view through the point
+    ``(z_m + δ) · r`` (as :func:`_cost_volume` does for eq. 5.1), rounded to
+    8-bit codes, and census-transformed in the key view's geometry (so the
+    census windows of both images cover the same patch of the model: the
+    foreshortening between the views is undone by the model); the cost is
+    the Hamming distance between the two 9×7 census codes (Hirschmüller &
+    Scharstein 2009; :func:`lumigraph.stereo.hirschmuller2008.census`),
+    summed over a ``cost_window²`` box (edges replicated). Where the point
+    is not seen (outside the offset frame, behind it, or the model point
+    hidden) the pixel costs the largest Hamming distance, ``CENSUS_MAX``.
+
+    ``gk``, ``go``: key and offset luma as 8-bit codes (float, unrounded);
+    ``view``, ``deltas`` as :func:`model_stereo` builds them.
+    """
+    import cv2
+
+    from lumigraph.stereo.hirschmuller2008 import CENSUS_MAX, census
+
+    h, w = zm.shape
+    size_o = rig.right.image_size
+    ck = census(np.clip(np.rint(gk), 0, 255).astype(np.uint8), kernel=kernel)
+    go = np.ascontiguousarray(go, np.float32)
+    zsafe = np.where(view.seen, zm, 1.0)
+    out = np.empty((h, w, len(deltas)), np.uint16)
+    box = (cost_window, cost_window)
+    computed = np.zeros((h, w), bool)
+    for i, dlt in enumerate(deltas):
+        px, zo = _project_offset(rig, view.a, zsafe + dlt)
+        m = view.seen & (zo > 0) & _inside(px, size_o)
+        warped = np.clip(np.rint(_remap(go, px)), 0, 255).astype(np.uint8)
+        ham = np.bitwise_count(ck ^ census(warped, kernel=kernel)).astype(np.float32)
+        ham[~m] = CENSUS_MAX
+        computed |= m
+        if cost_window > 1:
+            ham = cv2.boxFilter(ham, -1, box, normalize=False, borderType=cv2.BORDER_REPLICATE)
+        out[..., i] = np.rint(ham).astype(np.uint16)
+    return out, computed
+
+
+def _sgm_winner(S):
+    """Winner-take-all over ``S`` (H, W, n) uint16: the best index, ``S``
+    there and at the index either side (the edge value repeated at the
+    range's ends) and the best ``S`` more than one step away (uniqueness)."""
+    n = S.shape[2]
+    best = S.argmin(axis=2)
+    at = lambda i: np.take_along_axis(S, i[..., None], 2)[..., 0].astype(np.int64)  # noqa: E731
+    sb, sm, sp = at(best), at(np.maximum(best - 1, 0)), at(np.minimum(best + 1, n - 1))
+    masked = S.copy()
+    for k in (-1, 0, 1):
+        np.put_along_axis(masked, np.clip(best + k, 0, n - 1)[..., None], np.iinfo(np.uint16).max, 2)
+    return best, sb, sm, sp, masked.min(axis=2).astype(np.int64)
+
+
+def _surface_cost(gk, go, rig, zm, view, dlt, *, window):
+    """Eq. 5.1's mean squared difference of the recovered surface: the
+    offset luma sampled at each key pixel's own ``z_m + δ`` against the key
+    luma, over the ``window²`` box (masked as :func:`_cost_volume`; inf
+    where under half the window is seen). With ``cost="sgm"`` it stands in
+    for the SSD cost at the winner in the tests that judge a match by it
+    (plausible cost, half-occlusion, the model's fit)."""
+    import cv2
+
+    box = (window, window)
+    ok = view.seen & np.isfinite(dlt)
+    px, zo = _project_offset(rig, view.a, np.where(ok, zm + np.nan_to_num(dlt), 1.0))
+    m = ok & (zo > 0) & _inside(px, rig.right.image_size)
+    diff2 = np.where(m, (gk - _remap(go, px)) ** 2, 0).astype(np.float32)
+    num = cv2.boxFilter(diff2, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    den = cv2.boxFilter(m.astype(np.float32), -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(m & (den >= 0.5 * window * window), num / den, np.inf).astype(np.float32)
+
+
+def _decide_sgm(S, computed, gk, go, rig, zm, view, deltas, step, *, sigma, window, texture_snr,
+                uniqueness, max_cost, subpixel):
+    """Winner-take-all over the aggregated cost ``S`` (H, W, n), the
+    parabola through ``S`` at the best ``δ`` ± one step, and the same
+    per-pixel tests as :func:`_decide` (uniqueness on ``S``; the plausible
+    cost on :func:`_surface_cost`). Returns the decision and the sub-step
+    fraction."""
+    best, sb, sm, sp, second = _sgm_winner(S)
+    n = S.shape[2]
+    inner = (best > 0) & (best < n - 1)
+    frac = np.zeros(best.shape)
+    if subpixel:
+        den = sm + sp - 2 * sb
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = np.where(inner & (den > 0), 0.5 * (sm - sp) / np.maximum(den, 1), 0.0)
+        frac = np.clip(frac, -0.5, 0.5)
+    dlt = np.where(computed, deltas[best] + frac * step, np.nan)
+    cost = _surface_cost(gk, go, rig, zm, view, dlt, window=window)
+    computed = computed & np.isfinite(cost)
+    var = _window_variance(gk, window)
+    textured = var >= (texture_snr * sigma) ** 2
+    unique = ~(second <= (1 + uniqueness) * sb)
+    with np.errstate(invalid="ignore"):
+        plausible = cost <= 2 * sigma ** 2 + max_cost * var
+    passed = computed & textured & unique & inner & plausible
+    return _Decision(best, cost, computed, var, textured, unique, plausible, inner, passed), frac
+
+
 # ---------------------------------------------------------------- matching
 def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, rig, *,
                  max_offset: float, step: float | None = None, window: int = 9,
                  texture_snr: float = 1.0, uniqueness: float = 0.02, max_cost: float = 1.0,
                  occlusion_tolerance: float | None = 0.01, max_median_cost: float | None = 0.8,
                  left_right: float | None = 1.25, subpixel: bool = True,
-                 noise_sigma: float | None = None) -> ModelStereo:
+                 noise_sigma: float | None = None, cost: str = "ssd") -> ModelStereo:
     """Depth of the key view as offsets from a rough model (model-based stereo).
 
     Parameters
@@ -804,7 +932,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     t0 = time.perf_counter()
     zm, key, offset, max_offset = _check_inputs(
         key, offset, model_depth, rig, max_offset=max_offset, window=window, step=step,
-        texture_snr=texture_snr, uniqueness=uniqueness, max_cost=max_cost, left_right=left_right)
+        texture_snr=texture_snr, uniqueness=uniqueness, max_cost=max_cost, left_right=left_right,
+        cost=cost)
     gk, go = luma_codes(key), luma_codes(offset)
     sigma = _key_noise(key, gk, noise_sigma)
     warnings: list[str] = []
@@ -815,15 +944,33 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
                                              warnings=warnings)
     n = len(deltas)
     t_scan = time.perf_counter()
-    costs = _cost_volume(gk, go, rig, zm, view, deltas, window=window)
-    t_decide = time.perf_counter()
+    if cost == "sgm":
+        # census cost along the model-warped search, aggregated along 8 paths
+        # (Hirschmüller 2008, eqs. 13-14) with δ steps in place of disparities
+        from lumigraph.stereo.hirschmuller2008 import _kernel, aggregate
 
-    # decision: winner-take-all, the per-pixel tests, the parabola
-    dec = _decide(costs, gk, sigma=sigma, window=window, texture_snr=texture_snr,
-                  uniqueness=uniqueness, max_cost=max_cost)
+        kernel = _kernel()
+        k8, o8, _ = _codes8(gk, go)
+        census_costs, computed = _census_cost_volume(k8, o8, rig, zm, view, deltas, kernel=kernel)
+        nb = SGM["cost_window"] ** 2
+        S = aggregate(census_costs, np.clip(np.rint(k8), 0, 255).astype(np.uint8), p1=SGM["p1"] * nb,
+                      p2=SGM["p2"] * nb, edge=SGM["edge"], paths=SGM["paths"], kernel=kernel)
+        del census_costs
+        t_decide = time.perf_counter()
+        # decision: winner-take-all on the aggregated cost, the parabola, the tests
+        dec, frac = _decide_sgm(S, computed, gk, go, rig, zm, view, deltas, step, sigma=sigma,
+                                window=window, texture_snr=texture_snr, uniqueness=uniqueness,
+                                max_cost=max_cost, subpixel=subpixel)
+        del S
+    else:
+        costs = _cost_volume(gk, go, rig, zm, view, deltas, window=window)
+        t_decide = time.perf_counter()
+        # decision: winner-take-all, the per-pixel tests, the parabola
+        dec = _decide(costs, gk, sigma=sigma, window=window, texture_snr=texture_snr,
+                      uniqueness=uniqueness, max_cost=max_cost)
+        frac = (_subpixel_fraction(costs, dec.best, dec.cost, dec.inner) if subpixel
+                else np.zeros(zm.shape))
     valid = dec.passed.copy()
-    frac = (_subpixel_fraction(costs, dec.best, dec.cost, dec.inner) if subpixel
-            else np.zeros(zm.shape))
     dlt = np.where(valid, deltas[dec.best] + frac * step, np.nan)
     depth = (view.zz + dlt).astype(np.float32)
     valid &= depth > 0
@@ -840,7 +987,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
             key, offset, zm, rig, view, depth, valid, left_right=left_right, warnings=warnings,
             max_offset=max_offset, window=window, texture_snr=texture_snr, uniqueness=uniqueness,
             max_cost=max_cost, occlusion_tolerance=occlusion_tolerance, subpixel=subpixel,
-            noise_sigma=noise_sigma)
+            noise_sigma=noise_sigma, cost=cost)
         valid &= ~inconsistent
     depth[~valid] = np.nan
     t_lr = time.perf_counter()
@@ -866,6 +1013,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
             "px_per_unit_delta_p99": px_per_unit, "window": int(window),
             "texture_snr": texture_snr, "uniqueness": uniqueness, "max_cost": max_cost,
             "subpixel": subpixel, "left_right": left_right, "reverse": reverse_info,
+            "cost": cost, "sgm": dict(SGM) if cost == "sgm" else None,
             "noise_sigma": float(sigma),
             "noise_sigma_source": "given" if noise_sigma is not None else "estimated",
             "rejected": counts, "seen_fraction": float(seen.mean()),
