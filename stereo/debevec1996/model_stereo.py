@@ -426,7 +426,7 @@ def _check_model(model_depth, rig):
 def check_model_stereo_options(*, max_offset: float, window: int = 9, step: float | None = None,
                                texture_snr: float = 1.0, uniqueness: float = 0.02,
                                max_cost: float = 1.0, left_right: float | None = 1.25,
-                               cost: str = "ssd") -> float:
+                               cost: str = "sgm") -> float:
     """Check :func:`model_stereo`'s options before any image is loaded
     (``model_stereo`` checks them again itself); ``max_offset`` as a float.
 
@@ -467,7 +467,7 @@ def check_model_stereo_options(*, max_offset: float, window: int = 9, step: floa
 
 # ------------------------------------------------- the steps of model_stereo
 def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, texture_snr,
-                  uniqueness, max_cost, left_right, cost="ssd"):
+                  uniqueness, max_cost, left_right, cost="sgm"):
     """Check the images against the rig, the model and every option:
     ``(model depth with NaN where absent, key, offset, max_offset)``."""
     zm = _check_model(model_depth, rig)
@@ -841,7 +841,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
                  texture_snr: float = 1.0, uniqueness: float = 0.02, max_cost: float = 1.0,
                  occlusion_tolerance: float | None = 0.01, max_median_cost: float | None = 0.8,
                  left_right: float | None = 1.25, subpixel: bool = True,
-                 noise_sigma: float | None = None, cost: str = "ssd") -> ModelStereo:
+                 noise_sigma: float | None = None, cost: str = "sgm") -> ModelStereo:
     """Depth of the key view as offsets from a rough model (model-based stereo).
 
     Parameters
