@@ -756,7 +756,9 @@ def _census_cost_volume(gk, go, rig, zm, view, deltas, *, cost_window=SGM["cost_
     size_o = rig.right.image_size
     ck = census(np.clip(np.rint(gk), 0, 255).astype(np.uint8), kernel=kernel)
     go = np.ascontiguousarray(go, np.float32)
-    zsafe = np.where(view.seen, zm, 1.0)
+    # every model pixel is warped (not only the seen ones): its value enters
+    # the census codes of its seen neighbours
+    zsafe = np.where(view.has_model, zm, 1.0)
     out = np.empty((h, w, len(deltas)), np.uint16)
     box = (cost_window, cost_window)
     computed = np.zeros((h, w), bool)
