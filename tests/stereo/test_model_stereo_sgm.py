@@ -4,13 +4,19 @@ model-warped search against a direct evaluation, and issue 14's target on the
 rendered facade."""
 
 import importlib
+import json
 
 import numpy as np
 import pytest
+from conftest import lumigraph
 
+from lumigraph.capture import io
 from lumigraph.capture.camera import Camera
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.render import render
 from lumigraph.capture.rig import Rig
 from lumigraph.stereo.debevec1996 import model_stereo
+from lumigraph.stereo.hirschmuller2008 import _kernel
 
 ms = importlib.import_module("lumigraph.stereo.debevec1996.model_stereo")
 CENSUS_W, CENSUS_H, CENSUS_BITS = 9, 7, 62  # the census of hirschmuller2008
@@ -47,7 +53,8 @@ def _box_direct(v, r):
     return out
 
 
-def test_census_cost_volume_matches_a_direct_evaluation():
+@pytest.mark.parametrize("engine", ["c", "numpy"])
+def test_census_cost_volume_matches_a_direct_evaluation(engine):
     # A rig whose offset camera is translated by (b, b, 0) with its principal
     # point 2 px to the right: a point at depth Z lands f·b/Z + (2, 0) px
     # from its key pixel. The model is the plane z = 4; the offsets δ = -3,
@@ -65,7 +72,11 @@ def test_census_cost_volume_matches_a_direct_evaluation():
     zm = np.full((h, w), 4.0)
     deltas = np.array([-3.0, -2.0, 0.0])
     view = ms._model_view(rig, zm, max_offset=3.0)
-    got, computed = ms._census_cost_volume(key, off, rig, zm, view, deltas, cost_window=3)
+    kernel = _kernel() if engine == "c" else None
+    if engine == "c" and kernel is None:
+        pytest.skip("stereo/_sgm.c not built")
+    got, computed = ms._census_cost_volume(key, off, rig, zm, view, deltas, cost_window=3,
+                                           kernel=kernel)
 
     ck = _census_direct(key.astype(np.uint8))
     want = np.zeros((h, w, len(deltas)), np.int64)
@@ -107,3 +118,28 @@ def test_sgm_cost_beats_stereosgbm_on_the_facade(angle):
         cv2.setNumThreads(old)
     assert ours.info["cost"] == "sgm"  # the default
     assert e_ours <= e_sgbm, (e_ours, e_sgbm)
+
+
+def test_cost_option_reaches_the_library(tmp_path):
+    s = render("model-stereo", size=(160, 120))
+    folder = s.save(tmp_path / "scene")
+    model = folder / "gt" / "model_depth.npy"
+    out = tmp_path / "ssd.pfm"
+    r = lumigraph("stereo", "model-based", folder / "key.png", folder / "offset.png", "--rig",
+                  folder / "gt.json", "--model", model, "--max-offset", "0.35", "--cost", "ssd",
+                  "--left-right", "0", "--out", out, "-q")
+    assert r.returncode == 0, r.stderr
+    meta = json.loads(out.with_name(out.name + ".meta.json").read_text())
+    assert meta["params"]["cost"] == "ssd" and meta["model"]["model_based_stereo"]["cost"] == "ssd"
+    rig = Rig.from_dict(s.gt["rig"])
+    lib = model_stereo(s.images[0], s.images[1], np.load(model), rig, max_offset=0.35, cost="ssd",
+                       left_right=None)
+    z = io.read_pfm(out)
+    np.testing.assert_array_equal(np.isfinite(z), lib.valid)
+    np.testing.assert_array_equal(z[lib.valid], lib.depth[lib.valid])
+    with pytest.raises(InputError, match=r"^cost: expected one of ssd, sgm"):
+        model_stereo(s.images[0], s.images[1], np.load(model), rig, max_offset=0.35, cost="census")
+    r = lumigraph("stereo", "model-based", folder / "key.png", folder / "offset.png", "--rig",
+                  folder / "gt.json", "--model", model, "--max-offset", "0.35", "--cost", "census",
+                  "--out", tmp_path / "x.pfm")
+    assert r.returncode == 2 and "--cost" in r.stderr
