@@ -745,16 +745,23 @@ def _check_fit(fit, *, max_median_cost, max_offset):
 
 
 # ------------------------------------------------- the SGM cost (cost="sgm")
-def _codes8(gk, go):
+def _codes8(gk, go, *, eight_bit):
     """Both lumas as 8-bit codes for the census (float32, not yet rounded):
-    8-bit inputs as they are, others scaled by the pair's joint range (as
-    :func:`lumigraph.stereo.hirschmuller2008.match` does)."""
+    as they are when both images are 8-bit (``eight_bit``), else scaled so
+    that the pair's joint range spans 0-255 (as
+    :func:`lumigraph.stereo.hirschmuller2008.match` does; a float image in
+    [0, 1] would otherwise round to two codes).
+
+    >>> k, o = _codes8(np.float32([[0.0, 0.5]]), np.float32([[1.0, 0.25]]), eight_bit=False)
+    >>> k.tolist(), o.tolist()
+    ([[0.0, 127.5]], [[255.0, 63.75]])
+    """
+    if eight_bit:
+        return gk, go
     lo = min(float(np.nanmin(gk)), float(np.nanmin(go)))
     hi = max(float(np.nanmax(gk)), float(np.nanmax(go)))
-    if lo >= 0 and hi <= 255:
-        return gk, go, 1.0
-    s = 255.0 / max(hi - lo, 1e-12)
-    return (gk - lo) * s, (go - lo) * s, s
+    s = np.float32(255.0 / max(hi - lo, 1e-12))
+    return (gk - np.float32(lo)) * s, (go - np.float32(lo)) * s
 
 
 def _census_cost_volume(gk, go, rig, zm, view, deltas, *, cost_window=SGM["cost_window"],
@@ -807,15 +814,15 @@ def _census_cost_volume(gk, go, rig, zm, view, deltas, *, cost_window=SGM["cost_
 def _sgm_winner(S):
     """Winner-take-all over ``S`` (H, W, n) uint16: the best index, ``S``
     there and at the index either side (the edge value repeated at the
-    range's ends) and the best ``S`` more than one step away (uniqueness)."""
+    range's ends) and the best ``S`` more than one step away (uniqueness).
+    ``S`` is overwritten (no copy of the volume: it is not needed after)."""
     n = S.shape[2]
     best = S.argmin(axis=2)
     at = lambda i: np.take_along_axis(S, i[..., None], 2)[..., 0].astype(np.int64)  # noqa: E731
     sb, sm, sp = at(best), at(np.maximum(best - 1, 0)), at(np.minimum(best + 1, n - 1))
-    masked = S.copy()
     for k in (-1, 0, 1):
-        np.put_along_axis(masked, np.clip(best + k, 0, n - 1)[..., None], np.iinfo(np.uint16).max, 2)
-    return best, sb, sm, sp, masked.min(axis=2).astype(np.int64)
+        np.put_along_axis(S, np.clip(best + k, 0, n - 1)[..., None], np.iinfo(np.uint16).max, 2)
+    return best, sb, sm, sp, S.min(axis=2).astype(np.int64)
 
 
 def _surface_cost(gk, go, rig, zm, view, dlt, *, window):
@@ -840,8 +847,8 @@ def _surface_cost(gk, go, rig, zm, view, dlt, *, window):
 
 def _decide_sgm(S, computed, gk, go, rig, zm, view, deltas, step, *, sigma, window, texture_snr,
                 uniqueness, max_cost, subpixel):
-    """Winner-take-all over the aggregated cost ``S`` (H, W, n), the
-    parabola through ``S`` at the best ``δ`` ± one step, and the same
+    """Winner-take-all over the aggregated cost ``S`` (H, W, n; overwritten),
+    the parabola through ``S`` at the best ``δ`` ± one step, and the same
     per-pixel tests as :func:`_decide` (uniqueness on ``S``; the plausible
     cost on :func:`_surface_cost`). Returns the decision and the sub-step
     fraction."""
@@ -998,7 +1005,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         from lumigraph.stereo.hirschmuller2008 import _kernel, aggregate
 
         kernel = _kernel()
-        k8, o8, _ = _codes8(gk, go)
+        k8, o8 = _codes8(gk, go, eight_bit=key.dtype == np.uint8 and offset.dtype == np.uint8)
         census_costs, computed = _census_cost_volume(k8, o8, rig, zm, view, deltas, kernel=kernel)
         nb = SGM["cost_window"] ** 2
         S = aggregate(census_costs, np.clip(np.rint(k8), 0, 255).astype(np.uint8), p1=SGM["p1"] * nb,
