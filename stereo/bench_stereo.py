@@ -49,8 +49,16 @@ with its rough model, the wall plane, the key and offset views 20, 35, 50
 and 65° apart (the key camera sees the wall 12° off its normal, the offset
 camera 8, 23, 38 and 53°: the larger the angle, the more differently the two
 views foreshorten the wall and the more of it the relief hides). Ours:
-model-based stereo (Debevec, Taylor & Malik 1996, ``stereo/debevec1996.py``;
-knob: window). Baseline, the plain approach on the same pair: rectify, search
+model-based stereo (Debevec, Taylor & Malik 1996,
+``stereo/debevec1996/model_stereo.py``) at its defaults (window 9); knob: the
+matching cost along the model-warped search, ``sgm`` (census aggregated
+along 8 paths by semi-global matching, the default) or ``ssd`` (eq. 5.1).
+The SGM cost's settings (penalties, uniqueness, the tests' window) were
+chosen on other renders of the facade (views 27.5, 42.5 and 57.5° apart, seed
+1, and the textureless variant at 42.5°; docs/decisions/model-stereo-sgm.md);
+the four cases here (seed 0) are **reported on**. Target (issue 14): ours on
+the SGM cost at most StereoSGBM's error at every angle. Baseline, the plain
+approach on the same pair: rectify, search
 the ground truth's disparity range (with a 4 px margin) by our SSD block
 matching and by OpenCV StereoSGBM, and take each key pixel's disparity back
 to key-camera depth. The rectification uses OpenCV's rectifying rotations
@@ -259,6 +267,7 @@ def _sgbm(data, setting):
 
 MODEL_ANGLES = (20, 35, 50, 65)  # degrees between the key and offset viewing directions
 MODEL_CASES = tuple(f"model-based {a}deg" for a in MODEL_ANGLES)
+MODEL_COSTS = ("sgm", "ssd")  # model_stereo's matching costs, the default first
 
 
 def _wide_rectification(rig, X, scale=1.0):
@@ -324,18 +333,20 @@ def _model_case(angle, size=(320, 240)):
             "d_range": (int(np.floor(d.min())) - 4, int(np.ceil(d.max())) + 4)}
 
 
-def _model_based(data, window):
+@_one_thread
+def _model_based(data, cost):
     from lumigraph.stereo.debevec1996 import model_stereo
 
     return model_stereo(data["key"], data["offset"], data["model"], data["rig"],
-                        max_offset=data["max_offset"], window=window).depth
+                        max_offset=data["max_offset"], cost=cost).depth
 
 
-def _model_based_no_lr(data, window):
+@_one_thread
+def _model_based_no_lr(data, cost):
     from lumigraph.stereo.debevec1996 import model_stereo
 
     return model_stereo(data["key"], data["offset"], data["model"], data["rig"],
-                        max_offset=data["max_offset"], window=window, left_right=None).depth
+                        max_offset=data["max_offset"], cost=cost, left_right=None).depth
 
 
 def _unrectify(data, disp):
@@ -377,6 +388,7 @@ def _plain_ssd(data, window):
     return _unrectify(data, d)
 
 
+@_one_thread
 def _plain_sgbm(data, window):
     import cv2
 
@@ -570,6 +582,42 @@ def _sgm_checks(res: Results, cases) -> list[Check]:
     return out
 
 
+def _model_checks(res: Results) -> list[Check]:
+    """Issue 14's model-based target: ours on the SGM cost at most
+    StereoSGBM's error (its best window) at every angle; beside it, ours
+    (either cost) against the best plain rectified method (informational)."""
+    out = []
+    for case in MODEL_CASES:
+        rows = {r.value: r for r in res.of(case, "model-based (ours)")}
+        sg = res.of(case, "StereoSGBM rectified")
+        plain = [res.best(case, m) for m in ("ssd rectified (plain)", "StereoSGBM rectified")
+                 if res.of(case, m)]
+        if not rows or not plain:
+            continue
+        p = min(plain, key=lambda r: r.error)
+        nolr = {r.value: r for r in res.of(case, "model-based, no left-right (ours)")}
+        txt = "; ".join(
+            f"ours {c} {r.error:.3f} (relief {r.extra['bad1pct_relief']:.3f}, hidden refused "
+            f"{r.extra['hidden_refused']:.2f}"
+            + (f", without left-right {nolr[c].error:.3f}" if c in nolr else "") + ")"
+            for c, r in rows.items())
+        ref = (f"; best plain {p.method} {p.error:.3f} (window {p.value}, relief "
+               f"{p.extra['bad1pct_relief']:.3f}, hidden refused {p.extra['hidden_refused']:.2f})")
+        if "sgm" in rows and sg:
+            best_sg = min(sg, key=lambda r: r.error)
+            ratio = rows["sgm"].error / best_sg.error
+            out.append(Check(f"{case} (reported-on): model-based stereo on the SGM cost <= "
+                             "StereoSGBM's share of key pixels off by > 1 % of depth (same pair)",
+                             ratio, 1.0, ratio <= 1.0,
+                             f"ours {rows['sgm'].error:.3f} vs StereoSGBM {best_sg.error:.3f} (window "
+                             f"{best_sg.value}, its best)"))
+        for c, r in rows.items():
+            out.append(Check(f"{case}: model-based ({c} cost) / best plain rectified stereo, share off "
+                             "by > 1 % of depth (informational)", r.error / p.error, 1.0, True,
+                             txt + ref))
+    return out
+
+
 def _checks(res: Results, ctx) -> list[Check]:
     out = _sgm_checks(res, ctx["stereo_cases"])
     stereo_cases = [c for c in ctx["stereo_cases"] if res.of(c, "ssd (ours)")]
@@ -593,28 +641,7 @@ def _checks(res: Results, ctx) -> list[Check]:
             out.append(Check(f"{case}: wall time SSD / StereoBM at the same window <= 3 (median)",
                              float(np.median(tratios)), 3.0, float(np.median(tratios)) <= 3.0,
                              "ratios " + ", ".join(f"{r:.1f}" for r in tratios)))
-    for case in MODEL_CASES:
-        if not res.of(case, "model-based (ours)"):
-            continue
-        ours = res.best(case, "model-based (ours)")
-        plain = [res.best(case, m) for m in ("ssd rectified (plain)", "StereoSGBM rectified")
-                 if res.of(case, m)]
-        if plain:
-            p = min(plain, key=lambda r: r.error)
-            same = [r for r in res.of(case, "ssd rectified (plain)") if r.value == ours.value]
-            same_txt = (f"; plain SSD at window {ours.value}: {same[0].error:.3f}" if same else "")
-            nolr = [r for r in res.of(case, "model-based, no left-right (ours)") if r.value == ours.value]
-            if nolr:
-                same_txt += (f"; ours without left-right {nolr[0].error:.3f}; hidden by the relief "
-                             f"refused: ours {ours.extra['hidden_refused']:.2f}, without left-right "
-                             f"{nolr[0].extra['hidden_refused']:.2f}, {p.method} "
-                             f"{p.extra['hidden_refused']:.2f}")
-            out.append(Check(f"{case}: share of key pixels off by > 1 % of depth, ours / best plain "
-                             "rectified stereo on the same pair (informational)",
-                             ours.error / p.error, 1.0, True,
-                             f"ours {ours.error:.3f} (window {ours.value}, relief "
-                             f"{ours.extra['bad1pct_relief']:.3f}) vs {p.method} {p.error:.3f} "
-                             f"(window {p.value}, relief {p.extra['bad1pct_relief']:.3f})" + same_txt))
+    out += _model_checks(res)
     if _PHASES:
         phases = ("prepare", "scan", "decide")
         tot = {k: sum(p[k] for p in _PHASES) for k in phases}
@@ -698,9 +725,9 @@ def stage(*, quick: bool = False) -> Stage:
     ]
     if not quick:
         methods += [
-            Method("model-based (ours)", _model_based, "window", WINDOWS, cases=MODEL_CASES),
+            Method("model-based (ours)", _model_based, "cost", MODEL_COSTS, cases=MODEL_CASES),
             # informational: without the left-right check (the default has it)
-            Method("model-based, no left-right (ours)", _model_based_no_lr, "window", WINDOWS,
+            Method("model-based, no left-right (ours)", _model_based_no_lr, "cost", MODEL_COSTS,
                    cases=MODEL_CASES),
             # the plain approach on the same wide-baseline pair: rectify, match, unrectify
             Method("ssd rectified (plain)", _plain_ssd, "window", WINDOWS, cases=MODEL_CASES),

@@ -219,10 +219,14 @@ def test_cli_model_based(scene_dir, tmp_path):
                   "0.35", "--out", out2, "-q")
     assert r.returncode == 0, r.stderr
     z2 = io.read_pfm(out2)
-    # the PFM holds the model rounded to float32 (~4e-7 m at 6 m), the .npy float64
+    # the PFM holds the model rounded to float32 (~4e-7 m at 6 m), the .npy float64;
+    # the census cost of the default cost="sgm" is an integer, so that rounding may
+    # flip a code and move a winner, by no more than one δ step
+    assert meta["params"]["cost"] == "sgm"
     both = np.isfinite(z) & np.isfinite(z2)
     assert np.mean(np.isfinite(z) == np.isfinite(z2)) > 0.999
-    np.testing.assert_allclose(z2[both], z[both], atol=1e-4)
+    d = np.abs(z2[both] - z[both])
+    assert np.mean(d <= 1e-4) > 0.999 and d.max() <= meta["delta_step"]
 
 
 def _run(folder, model, out, *extra, key="key.png", offset="offset.png", rig=None):

@@ -25,11 +25,39 @@ distortion) and the offset image sampled there (bilinear, ``cv2.remap``),
 giving ``warped_δ``; ``δ = 0`` is exactly the warped offset image of
 Fig. 5.12c. Stepping ``δ`` moves the sample along the epipolar line of ``x``
 in the offset image, i.e. along the key image's epipolar line in the warped
-image. For each ``δ`` in ``[−max_offset, max_offset]`` the cost is the mean
-squared difference over a ``window × window`` box (eq. 5.1); the best ``δ``
-per pixel (winner-take-all) is refined by a parabola through its neighbours.
-The step is chosen so that the sample moves at most one offset-image pixel
-per step. The depth along the key camera's ``z`` is ``z_m + δ``.
+image. The step is chosen so that the sample moves at most one offset-image
+pixel per step. The depth along the key camera's ``z`` is ``z_m + δ``.
+
+Two matching costs along that search (``cost``):
+
+- ``"sgm"`` (the default): semi-global matching on the model-warped search
+  (H. Hirschmüller, "Stereo processing by semiglobal matching and mutual
+  information", TPAMI 30(2), 2008, doi:10.1109/TPAMI.2007.1166; the issue
+  that asked for it: "model-based stereo can use the same cost and
+  aggregation along its search" as :mod:`lumigraph.stereo.hirschmuller2008`).
+  Per ``δ`` the warped offset luma ``warped_δ`` is census-transformed in the
+  key view's geometry (9×7, so both codes cover the same patch of the model:
+  the foreshortening is undone by the warp) and compared with the key's
+  census code by Hamming distance, summed over a 3×3 box: the cost volume
+  ``C(x, δ)`` (``H × W × steps``; Hirschmüller & Scharstein, TPAMI 31(9),
+  2009, doi:10.1109/TPAMI.2008.221, for census as SGM's cost). ``C`` is
+  aggregated along 8 paths with the ``δ`` step in the place of the disparity
+  (eqs. 13–14, ``P1`` for one step, ``P2`` adapted to the key image's
+  intensity step; :func:`lumigraph.stereo.hirschmuller2008.aggregate`, the
+  compiled kernel ``stereo/_sgm.c``), and the best ``δ`` of the sum ``S``
+  refined by a parabola through ``S``. The tests below that judge a match by
+  its cost use eq. 5.1's mean squared difference of the recovered surface
+  (each key pixel's offset image sample at its own ``δ``, over the
+  ``window`` box); the uniqueness test uses ``S``.
+- ``"ssd"``: for each ``δ`` the mean squared difference over a ``window ×
+  window`` box (eq. 5.1); the best ``δ`` per pixel (winner-take-all) is
+  refined by a parabola through its neighbours.
+
+On the bench's facade sweep (``lumigraph bench stereo``, views 20-65° apart;
+share of seen key pixels off by > 1 % of depth) the SGM cost reads 0.070 /
+0.084 / 0.136 / 0.219 at 20 / 35 / 50 / 65°, the SSD cost 0.168 / 0.189 /
+0.258 / 0.334 and OpenCV StereoSGBM on the rectified pair 0.114 / 0.156 /
+0.228 / 0.414 (its best window): docs/decisions/model-stereo-sgm.md.
 
 A pixel is left unknown (NaN) when
 
@@ -40,7 +68,7 @@ A pixel is left unknown (NaN) when
 - its window lacks texture: the key image's window standard deviation is
   below ``texture_snr · σ`` (``σ`` the key image's noise, estimated);
 - the best ``δ`` is not unique: some ``δ`` more than one step away costs
-  less than ``(1 + uniqueness)`` times the best;
+  less than ``(1 + uniqueness)`` times the best (``S`` with ``cost="sgm"``);
 - the best ``δ`` lies at either end of the range: the surface is probably
   farther from the model than ``max_offset`` (a wrong model or range);
 - the best cost is implausibly high for a true match: above ``max_cost``
@@ -82,6 +110,11 @@ from lumigraph.capture.errors import InputError
 
 MAX_STEPS = 257
 WINDOW_RANGE = (3, 63)  # odd SSD window sides model_stereo accepts
+COSTS = ("ssd", "sgm")  # the matching costs model_stereo offers
+# cost="sgm": census cost box, and the path penalties per box pixel (census
+# bits) of hirschmuller2008.aggregate; how they were chosen:
+# docs/decisions/model-stereo-sgm.md
+SGM = {"cost_window": 3, "p1": 12, "p2": 200, "edge": 8, "paths": 8}
 
 
 @dataclass(frozen=True)
@@ -102,8 +135,9 @@ class ModelStereo:
         NaN where the model is absent or its point is unseen by the offset
         camera.
     cost : ndarray, (H, W) float32
-        Best mean squared difference (key-image code values²); NaN where
-        never computed.
+        Best mean squared difference (key-image code values², eq. 5.1; with
+        ``cost="sgm"`` that of the recovered surface, each key pixel's
+        offset sample at its own ``δ``); NaN where never computed.
     valid : ndarray, (H, W) bool
         Where ``depth`` is known.
     info : dict
@@ -420,7 +454,8 @@ def _check_model(model_depth, rig):
 
 def check_model_stereo_options(*, max_offset: float, window: int = 9, step: float | None = None,
                                texture_snr: float = 1.0, uniqueness: float = 0.02,
-                               max_cost: float = 1.0, left_right: float | None = 1.25) -> float:
+                               max_cost: float = 1.0, left_right: float | None = 1.25,
+                               cost: str = "sgm") -> float:
     """Check :func:`model_stereo`'s options before any image is loaded
     (``model_stereo`` checks them again itself); ``max_offset`` as a float.
 
@@ -454,12 +489,14 @@ def check_model_stereo_options(*, max_offset: float, window: int = 9, step: floa
             raise InputError(name, f"expected a value >= 0, got {v}")
     if left_right is not None and not (np.isfinite(left_right) and left_right > 0):
         raise InputError("left_right", f"expected a finite value > 0 or None, got {left_right}")
+    if cost not in COSTS:
+        raise InputError("cost", f"expected one of {', '.join(COSTS)}, got {cost!r}")
     return max_offset
 
 
 # ------------------------------------------------- the steps of model_stereo
 def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, texture_snr,
-                  uniqueness, max_cost, left_right):
+                  uniqueness, max_cost, left_right, cost="sgm"):
     """Check the images against the rig, the model and every option:
     ``(model depth with NaN where absent, key, offset, max_offset)``."""
     zm = _check_model(model_depth, rig)
@@ -469,7 +506,7 @@ def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, te
     _check_image("offset", offset, rig.right.image_size)
     max_offset = check_model_stereo_options(
         max_offset=max_offset, window=window, step=step, texture_snr=texture_snr,
-        uniqueness=uniqueness, max_cost=max_cost, left_right=left_right)
+        uniqueness=uniqueness, max_cost=max_cost, left_right=left_right, cost=cost)
     return zm, key, offset, max_offset
 
 
@@ -707,13 +744,142 @@ def _check_fit(fit, *, max_median_cost, max_offset):
                                              f"farther than max_offset={max_offset:g} from the model")
 
 
+# ------------------------------------------------- the SGM cost (cost="sgm")
+def _codes8(gk, go, *, eight_bit):
+    """Both lumas as 8-bit codes for the census (float32, not yet rounded):
+    as they are when both images are 8-bit (``eight_bit``), else scaled so
+    that the pair's joint range spans 0-255 (as
+    :func:`lumigraph.stereo.hirschmuller2008.match` does; a float image in
+    [0, 1] would otherwise round to two codes).
+
+    >>> k, o = _codes8(np.float32([[0.0, 0.5]]), np.float32([[1.0, 0.25]]), eight_bit=False)
+    >>> k.tolist(), o.tolist()
+    ([[0.0, 127.5]], [[255.0, 63.75]])
+    """
+    if eight_bit:
+        return gk, go
+    lo = min(float(np.nanmin(gk)), float(np.nanmin(go)))
+    hi = max(float(np.nanmax(gk)), float(np.nanmax(go)))
+    s = np.float32(255.0 / max(hi - lo, 1e-12))
+    return (gk - np.float32(lo)) * s, (go - np.float32(lo)) * s
+
+
+def _census_cost_volume(gk, go, rig, zm, view, deltas, *, cost_window=SGM["cost_window"],
+                       kernel=None):
+    """The census matching cost of every key pixel at every ``δ``:
+    ``(H, W, len(deltas))`` uint16, and where it was computed: ``(H, W)``
+    bool, the pixels seen at some ``δ``.
+
+    Per ``δ`` the offset luma is warped into the key view through the point
+    ``(z_m + δ) · r`` (as :func:`_cost_volume` does for eq. 5.1), rounded to
+    8-bit codes, and census-transformed in the key view's geometry (so the
+    census windows of both images cover the same patch of the model: the
+    foreshortening between the views is undone by the model); the cost is
+    the Hamming distance between the two 9×7 census codes (Hirschmüller &
+    Scharstein 2009; :func:`lumigraph.stereo.hirschmuller2008.census`),
+    summed over a ``cost_window²`` box (edges replicated). Where the point
+    is not seen (outside the offset frame, behind it, or the model point
+    hidden) the pixel costs the largest Hamming distance, ``CENSUS_MAX``.
+
+    ``gk``, ``go``: key and offset luma as 8-bit codes (float, unrounded);
+    ``view``, ``deltas`` as :func:`model_stereo` builds them.
+    """
+    import cv2
+
+    from lumigraph.stereo.hirschmuller2008 import CENSUS_MAX, census
+
+    h, w = zm.shape
+    size_o = rig.right.image_size
+    ck = census(np.clip(np.rint(gk), 0, 255).astype(np.uint8), kernel=kernel)
+    go = np.ascontiguousarray(go, np.float32)
+    # every model pixel is warped (not only the seen ones): its value enters
+    # the census codes of its seen neighbours
+    zsafe = np.where(view.has_model, zm, 1.0)
+    out = np.empty((h, w, len(deltas)), np.uint16)
+    box = (cost_window, cost_window)
+    computed = np.zeros((h, w), bool)
+    for i, dlt in enumerate(deltas):
+        px, zo = _project_offset(rig, view.a, zsafe + dlt)
+        m = view.seen & (zo > 0) & _inside(px, size_o)
+        warped = np.clip(np.rint(_remap(go, px)), 0, 255).astype(np.uint8)
+        ham = np.bitwise_count(ck ^ census(warped, kernel=kernel)).astype(np.float32)
+        ham[~m] = CENSUS_MAX
+        computed |= m
+        if cost_window > 1:
+            ham = cv2.boxFilter(ham, -1, box, normalize=False, borderType=cv2.BORDER_REPLICATE)
+        out[..., i] = np.rint(ham).astype(np.uint16)
+    return out, computed
+
+
+def _sgm_winner(S):
+    """Winner-take-all over ``S`` (H, W, n) uint16: the best index, ``S``
+    there and at the index either side (the edge value repeated at the
+    range's ends) and the best ``S`` more than one step away (uniqueness).
+    ``S`` is overwritten (no copy of the volume: it is not needed after)."""
+    n = S.shape[2]
+    best = S.argmin(axis=2)
+    at = lambda i: np.take_along_axis(S, i[..., None], 2)[..., 0].astype(np.int64)  # noqa: E731
+    sb, sm, sp = at(best), at(np.maximum(best - 1, 0)), at(np.minimum(best + 1, n - 1))
+    for k in (-1, 0, 1):
+        np.put_along_axis(S, np.clip(best + k, 0, n - 1)[..., None], np.iinfo(np.uint16).max, 2)
+    return best, sb, sm, sp, S.min(axis=2).astype(np.int64)
+
+
+def _surface_cost(gk, go, rig, zm, view, dlt, *, window):
+    """Eq. 5.1's mean squared difference of the recovered surface: the
+    offset luma sampled at each key pixel's own ``z_m + δ`` against the key
+    luma, over the ``window²`` box (masked as :func:`_cost_volume`; inf
+    where under half the window is seen). With ``cost="sgm"`` it stands in
+    for the SSD cost at the winner in the tests that judge a match by it
+    (plausible cost, half-occlusion, the model's fit)."""
+    import cv2
+
+    box = (window, window)
+    ok = view.seen & np.isfinite(dlt)
+    px, zo = _project_offset(rig, view.a, np.where(ok, zm + np.nan_to_num(dlt), 1.0))
+    m = ok & (zo > 0) & _inside(px, rig.right.image_size)
+    diff2 = np.where(m, (gk - _remap(go, px)) ** 2, 0).astype(np.float32)
+    num = cv2.boxFilter(diff2, -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    den = cv2.boxFilter(m.astype(np.float32), -1, box, normalize=False, borderType=cv2.BORDER_CONSTANT)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(m & (den >= 0.5 * window * window), num / den, np.inf).astype(np.float32)
+
+
+def _decide_sgm(S, computed, gk, go, rig, zm, view, deltas, step, *, sigma, window, texture_snr,
+                uniqueness, max_cost, subpixel):
+    """Winner-take-all over the aggregated cost ``S`` (H, W, n; overwritten),
+    the parabola through ``S`` at the best ``δ`` ± one step, and the same
+    per-pixel tests as :func:`_decide` (uniqueness on ``S``; the plausible
+    cost on :func:`_surface_cost`). Returns the decision and the sub-step
+    fraction."""
+    best, sb, sm, sp, second = _sgm_winner(S)
+    n = S.shape[2]
+    inner = (best > 0) & (best < n - 1)
+    frac = np.zeros(best.shape)
+    if subpixel:
+        den = sm + sp - 2 * sb
+        with np.errstate(invalid="ignore", divide="ignore"):
+            frac = np.where(inner & (den > 0), 0.5 * (sm - sp) / np.maximum(den, 1), 0.0)
+        frac = np.clip(frac, -0.5, 0.5)
+    dlt = np.where(computed, deltas[best] + frac * step, np.nan)
+    cost = _surface_cost(gk, go, rig, zm, view, dlt, window=window)
+    computed = computed & np.isfinite(cost)
+    var = _window_variance(gk, window)
+    textured = var >= (texture_snr * sigma) ** 2
+    unique = ~(second <= (1 + uniqueness) * sb)
+    with np.errstate(invalid="ignore"):
+        plausible = cost <= 2 * sigma ** 2 + max_cost * var
+    passed = computed & textured & unique & inner & plausible
+    return _Decision(best, cost, computed, var, textured, unique, plausible, inner, passed), frac
+
+
 # ---------------------------------------------------------------- matching
 def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, rig, *,
                  max_offset: float, step: float | None = None, window: int = 9,
                  texture_snr: float = 1.0, uniqueness: float = 0.02, max_cost: float = 1.0,
                  occlusion_tolerance: float | None = 0.01, max_median_cost: float | None = 0.8,
                  left_right: float | None = 1.25, subpixel: bool = True,
-                 noise_sigma: float | None = None) -> ModelStereo:
+                 noise_sigma: float | None = None, cost: str = "sgm") -> ModelStereo:
     """Depth of the key view as offsets from a rough model (model-based stereo).
 
     Parameters
@@ -736,7 +902,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         one pixel at the 99th percentile of the pixels (most move less).
         The number of steps is capped at ``MAX_STEPS`` (a warning says so).
     window : int
-        Odd side of the SSD box (3..63), eq. 5.1.
+        Odd side of the SSD box (3..63), eq. 5.1; with ``cost="sgm"`` the box
+        of the texture and plausible-cost tests and of the surface's cost.
     texture_snr : float
         Minimum key window standard deviation in units of the noise ``σ``
         (0 disables).
@@ -751,6 +918,10 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         ``inf`` cuts the matched pixels the offset camera cannot see from
         3790 to 2699 of 5115 but raises the share of visible pixels off by
         more than 1 % of the depth from 0.155 to 0.186 (missing counts).
+        With ``cost="sgm"`` (tuning renders, views 27.5 / 42.5 / 57.5°
+        apart, seed 1), 1.0 instead of ``inf``: key pixels hidden by the
+        relief refused 0.65 → 0.67, 0.76 → 0.81, 0.73 → 0.83, error 0.077 →
+        0.093, 0.082 → 0.110, 0.149 → 0.171 (kept at 1.0 for both costs).
     occlusion_tolerance : float or None
         Half-occlusion test: a recovered point lying behind the nearest
         recovered point on the same offset pixel by more than this fraction of
@@ -762,7 +933,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         var(window)`` exceeds this: the model does not explain the images.
         On the ``model-stereo`` scene (window 9) the correct model gives
         0.28, a model off by ±0.2-0.3 m 0.30-0.59, one off by ±0.6 m (beyond
-        ``max_offset`` 0.35) 1.1. ``None`` disables.
+        ``max_offset`` 0.35) 1.1; with ``cost="sgm"`` 0.14, 0.16-0.38 and
+        0.98-1.09 (the surface's cost at the winners). ``None`` disables.
     left_right : float or None
         Left-right check tolerance in round-trip units of ``1 + k`` key
         pixels (``k`` the key pixels per offset pixel; a correct pair comes
@@ -776,12 +948,23 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         20°: 0.40 → 0.51 / 0.163 → 0.168; 30°: 0.50 → 0.64 / 0.178 → 0.189;
         50°: 0.56 → 0.75 / 0.228 → 0.258; 65°: 0.55 → 0.72 / 0.293 → 0.334.
         The refused correct pixels lie within a window of depth edges.
+        With ``cost="sgm"``, bench error (seed 0) without → with the check:
+        20°: 0.061 → 0.070; 35°: 0.070 → 0.084; 50°: 0.114 → 0.136; 65°:
+        0.176 → 0.219; hidden key pixels refused with it 0.41 / 0.77 / 0.82
+        / 0.82 (0.25-0.33 without it on the tuning renders).
     subpixel : bool
         Parabola refinement of the best step.
     noise_sigma : float, optional
         Noise of the key image in code values; estimated when not given
         (:func:`lumigraph.stereo.luma.noise_sigma_smooth_blocks`, at least the 8-bit
         quantisation noise ``1/√12``).
+    cost : {"sgm", "ssd"}
+        Matching cost along the search: census aggregated along 8 paths by
+        semi-global matching (the default; its settings in ``SGM``) or the
+        SSD window cost of eq. 5.1 (the paper's). The SGM cost's error on the
+        bench's facade sweep is 0.41-0.66 x the SSD cost's and 0.53-0.61 x
+        StereoSGBM's on the rectified pair, in about the same time (the
+        left-right check's second search dominates either).
 
     Returns
     -------
@@ -804,7 +987,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
     t0 = time.perf_counter()
     zm, key, offset, max_offset = _check_inputs(
         key, offset, model_depth, rig, max_offset=max_offset, window=window, step=step,
-        texture_snr=texture_snr, uniqueness=uniqueness, max_cost=max_cost, left_right=left_right)
+        texture_snr=texture_snr, uniqueness=uniqueness, max_cost=max_cost, left_right=left_right,
+        cost=cost)
     gk, go = luma_codes(key), luma_codes(offset)
     sigma = _key_noise(key, gk, noise_sigma)
     warnings: list[str] = []
@@ -815,15 +999,33 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
                                              warnings=warnings)
     n = len(deltas)
     t_scan = time.perf_counter()
-    costs = _cost_volume(gk, go, rig, zm, view, deltas, window=window)
-    t_decide = time.perf_counter()
+    if cost == "sgm":
+        # census cost along the model-warped search, aggregated along 8 paths
+        # (Hirschmüller 2008, eqs. 13-14) with δ steps in place of disparities
+        from lumigraph.stereo.hirschmuller2008 import _kernel, aggregate
 
-    # decision: winner-take-all, the per-pixel tests, the parabola
-    dec = _decide(costs, gk, sigma=sigma, window=window, texture_snr=texture_snr,
-                  uniqueness=uniqueness, max_cost=max_cost)
+        kernel = _kernel()
+        k8, o8 = _codes8(gk, go, eight_bit=key.dtype == np.uint8 and offset.dtype == np.uint8)
+        census_costs, computed = _census_cost_volume(k8, o8, rig, zm, view, deltas, kernel=kernel)
+        nb = SGM["cost_window"] ** 2
+        S = aggregate(census_costs, np.clip(np.rint(k8), 0, 255).astype(np.uint8), p1=SGM["p1"] * nb,
+                      p2=SGM["p2"] * nb, edge=SGM["edge"], paths=SGM["paths"], kernel=kernel)
+        del census_costs
+        t_decide = time.perf_counter()
+        # decision: winner-take-all on the aggregated cost, the parabola, the tests
+        dec, frac = _decide_sgm(S, computed, gk, go, rig, zm, view, deltas, step, sigma=sigma,
+                                window=window, texture_snr=texture_snr, uniqueness=uniqueness,
+                                max_cost=max_cost, subpixel=subpixel)
+        del S
+    else:
+        costs = _cost_volume(gk, go, rig, zm, view, deltas, window=window)
+        t_decide = time.perf_counter()
+        # decision: winner-take-all, the per-pixel tests, the parabola
+        dec = _decide(costs, gk, sigma=sigma, window=window, texture_snr=texture_snr,
+                      uniqueness=uniqueness, max_cost=max_cost)
+        frac = (_subpixel_fraction(costs, dec.best, dec.cost, dec.inner) if subpixel
+                else np.zeros(zm.shape))
     valid = dec.passed.copy()
-    frac = (_subpixel_fraction(costs, dec.best, dec.cost, dec.inner) if subpixel
-            else np.zeros(zm.shape))
     dlt = np.where(valid, deltas[dec.best] + frac * step, np.nan)
     depth = (view.zz + dlt).astype(np.float32)
     valid &= depth > 0
@@ -840,7 +1042,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
             key, offset, zm, rig, view, depth, valid, left_right=left_right, warnings=warnings,
             max_offset=max_offset, window=window, texture_snr=texture_snr, uniqueness=uniqueness,
             max_cost=max_cost, occlusion_tolerance=occlusion_tolerance, subpixel=subpixel,
-            noise_sigma=noise_sigma)
+            noise_sigma=noise_sigma, cost=cost)
         valid &= ~inconsistent
     depth[~valid] = np.nan
     t_lr = time.perf_counter()
@@ -866,6 +1068,7 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
             "px_per_unit_delta_p99": px_per_unit, "window": int(window),
             "texture_snr": texture_snr, "uniqueness": uniqueness, "max_cost": max_cost,
             "subpixel": subpixel, "left_right": left_right, "reverse": reverse_info,
+            "cost": cost, "sgm": dict(SGM) if cost == "sgm" else None,
             "noise_sigma": float(sigma),
             "noise_sigma_source": "given" if noise_sigma is not None else "estimated",
             "rejected": counts, "seen_fraction": float(seen.mean()),
