@@ -93,6 +93,8 @@ def resample(image: np.ndarray, maps, device) -> np.ndarray:
     planes = a[None] if a.ndim == 2 else np.moveaxis(a, -1, 0)
     out = remap_tensor(to_torch(planes, device, dtype=dt), *maps)
     if a.dtype.kind == "u":
-        out = torch.round(out).clamp(0.0, float(np.iinfo(a.dtype).max))
+        from lumigraph.capture.remap_torch import round_like_cv2
+
+        out = round_like_cv2(out, a.dtype, channels=planes.shape[0])
     res = to_numpy(out).astype(a.dtype, copy=False)
     return res[0] if a.ndim == 2 else np.moveaxis(res, 0, -1)

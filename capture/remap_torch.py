@@ -18,9 +18,13 @@ numpy/OpenCV path's result within float32 rounding:
 - 8- and 16-bit images are interpolated in float32 and rounded to nearest,
   saturated to the type's range.
 
-OpenCV 5's ``remap`` interpolates at the float coordinates (older versions
-quantised them to 1/32 px); the torch path does the same arithmetic, in its
-own order of operations, hence "within float32 rounding".
+OpenCV 5's ``remap`` interpolates at the float coordinates for images of
+1, 3 and 4 channels, but still snaps them to the nearest 1/32 px (its older
+table path) for 2 channels (flow fields) and for more than 4; there, 8-bit
+results are rounded half up from exact fixed-point weights. Which channel
+counts snap is asked of the installed OpenCV once (:func:`snaps_to_32nds`),
+and the torch path snaps the same ones, so it reproduces OpenCV's arithmetic
+in its own order of operations, hence "within float32 rounding".
 
 Why not ``torch.nn.functional.grid_sample`` or ``kornia.geometry.remap``:
 they take normalised coordinates, ``x_n = 2x/(W − 1) − 1``, and undo the
@@ -41,6 +45,8 @@ Examples
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from lumigraph.capture.device import resolve_device, to_numpy, to_torch, torch_modules
@@ -51,6 +57,33 @@ CUBIC_A = -0.75  # OpenCV's INTER_CUBIC (Keys' kernel with a = -0.75)
 # Coordinates are clamped to this before the integer part is taken, so a huge
 # or infinite map entry is simply far outside (as cv2 saturates them).
 _FAR = float(1 << 22)
+
+
+TAB = 32  # OpenCV's INTER_TAB_SIZE: sub-pixel steps of the table path
+
+
+@functools.cache
+def snaps_to_32nds(channels: int, interpolation: str = "linear") -> bool:
+    """True when the installed ``cv2.remap`` snaps sample positions to 1/32 px
+    for float images of ``channels`` channels with this interpolation (its
+    table path). Found once by remapping a small random image at positions
+    between the 1/32 steps, both ways on torch's CPU device: the nearer is
+    OpenCV's (the two differ by a hundred times the float32 rounding)."""
+    import cv2
+
+    torch, _ = torch_modules()
+    img = np.random.default_rng(0).random((6, 7, channels)).astype(np.float32)
+    mx = np.array([[1.3, 2.71, 3.05, 4.49]], np.float32)
+    my = np.array([[1.17, 2.9, 3.33, 2.02]], np.float32)
+    flag = {"linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}[interpolation]
+    ref = np.asarray(cv2.remap(img, mx, my, flag), np.float64).reshape(1, 4, channels)
+    t = torch.from_numpy(np.moveaxis(img, -1, 0).copy())
+    err = []
+    for snap in (False, True):
+        out = remap_tensor(t, torch.from_numpy(mx), torch.from_numpy(my),
+                           interpolation=interpolation, snap=snap)
+        err.append(float(np.abs(np.moveaxis(out.numpy(), 0, -1) - ref).max()))
+    return err[1] < err[0]
 
 
 def _cubic_weights(f):
@@ -66,10 +99,13 @@ def _cubic_weights(f):
 
 
 def remap_tensor(image, map_x, map_y, *, interpolation: str = "linear",
-                 border: str = "constant", border_value: float = 0.0):
+                 border: str = "constant", border_value: float = 0.0, snap: bool | None = None):
     """Resample a ``(C, H, W)`` floating tensor at ``(map_x, map_y)``, each
     ``(Ho, Wo)`` on the same device; returns ``(C, Ho, Wo)`` in the image's
-    dtype. Conventions in the module docstring."""
+    dtype. ``border_value``: one float for every channel, or one per channel.
+    ``snap``: positions to the nearest 1/32 px first (default: as the
+    installed OpenCV does for this many channels, :func:`snaps_to_32nds`).
+    Conventions in the module docstring."""
     torch, _ = torch_modules()
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation: expected one of {INTERPOLATIONS}, got {interpolation!r}")
@@ -79,6 +115,10 @@ def remap_tensor(image, map_x, map_y, *, interpolation: str = "linear",
     dt = image.dtype
     mx = torch.nan_to_num(map_x.to(dt), nan=-_FAR, posinf=_FAR, neginf=-_FAR).clamp(-_FAR, _FAR)
     my = torch.nan_to_num(map_y.to(dt), nan=-_FAR, posinf=_FAR, neginf=-_FAR).clamp(-_FAR, _FAR)
+    if snap is None:
+        snap = snaps_to_32nds(C, interpolation)
+    if snap:  # rint(x·32)/32: the multiply and divide by 2^5 are exact
+        mx, my = torch.round(mx * TAB) / TAB, torch.round(my * TAB) / TAB
     x0f, y0f = torch.floor(mx), torch.floor(my)
     fx, fy = mx - x0f, my - y0f  # exact: x and floor(x) share their leading bits
     x0, y0 = x0f.to(torch.int64), y0f.to(torch.int64)
@@ -86,6 +126,9 @@ def remap_tensor(image, map_x, map_y, *, interpolation: str = "linear",
         offsets, wx, wy = (0, 1), [1 - fx, fx], [1 - fy, fy]
     else:
         offsets, wx, wy = (-1, 0, 1, 2), _cubic_weights(fx), _cubic_weights(fy)
+    bv = torch.as_tensor(border_value, dtype=dt, device=image.device)
+    if bv.ndim:  # one value per channel
+        bv = bv.reshape(C, 1, 1)
     flat = image.reshape(C, H * W)
     cols = []
     for i in offsets:
@@ -99,10 +142,23 @@ def remap_tensor(image, map_x, map_y, *, interpolation: str = "linear",
         for wi, (xc, xin) in zip(wx, cols, strict=True):
             v = flat[:, (yc * W + xc).reshape(-1)].reshape(C, *mx.shape)
             if border == "constant":
-                v = torch.where(yin & xin, v, torch.as_tensor(border_value, dtype=dt, device=v.device))
+                v = torch.where(yin & xin, v, bv)
             row = wi * v if row is None else row + wi * v
         out = wj * row if out is None else out + wj * row
     return out
+
+
+def round_like_cv2(values, dtype, *, channels: int):
+    """Float32 remap results to ``dtype`` (uint8/uint16) as ``cv2.remap``
+    rounds them: to nearest, ties to even (``saturate_cast``), except 8-bit
+    images on the table path (:func:`snaps_to_32nds`), whose fixed-point sum
+    rounds ties up; on that path the bilinear float32 value is exact (weights
+    are multiples of 1/1024), so ``floor(v + 0.5)`` is OpenCV's result."""
+    torch, _ = torch_modules()
+    hi = float(np.iinfo(dtype).max)
+    if dtype == np.uint8 and snaps_to_32nds(channels):
+        return torch.floor(values + 0.5).clamp(0.0, hi)
+    return torch.round(values).clamp(0.0, hi)
 
 
 def remap(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarray, *,
@@ -117,9 +173,11 @@ def remap(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarray, *,
         Source pixel per output pixel (pixel centres at integers).
     interpolation : {"linear", "cubic"}
     border : {"constant", "replicate"}
-    border_value : float
+    border_value : float or sequence of float
         Value of every tap outside the image for ``"constant"`` (NaN allowed
-        for float images).
+        for float images), or one per channel. Note that ``cv2.remap`` takes
+        a plain number as the Scalar ``(v, 0, 0, 0)``: only the first channel
+        gets ``v``; pass ``(v, 0, …)`` here to reproduce that.
 
     Returns
     -------
@@ -142,8 +200,6 @@ def remap(image: np.ndarray, map_x: np.ndarray, map_y: np.ndarray, *,
     out = remap_tensor(t, to_torch(mx, dev, dtype=torch.float32), to_torch(my, dev, dtype=torch.float32),
                        interpolation=interpolation, border=border, border_value=border_value)
     if a.dtype.kind == "u":
-        hi = float(np.iinfo(a.dtype).max)
-        # torch.round is round-half-to-even, as cv2's saturate_cast (lrint)
-        out = torch.round(out).clamp(0.0, hi)
+        out = round_like_cv2(out, a.dtype, channels=planes.shape[0])
     res = to_numpy(out).astype(a.dtype, copy=False)
     return res[0] if a.ndim == 2 else np.moveaxis(res, 0, -1)

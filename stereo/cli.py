@@ -44,6 +44,7 @@ from lumigraph.capture.commandline import (
     subparsers,
     warn,
 )
+from lumigraph.capture.device import add_device_option, resolve_device
 from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.stereo.block_matching import WINDOW_RANGE
 from lumigraph.stereo.debevec1996 import WINDOW_RANGE as MODEL_WINDOW_RANGE
@@ -169,6 +170,12 @@ def _match(args) -> int:
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     _distinct_files(args.left, args.right)
+    # before any image is read: a missing GPU, or sgm asked on one, is exit 2
+    device = resolve_device(args.device)
+    if args.method == "sgm" and device.uses_torch and args.device != "auto":
+        raise InputError("device", "semi-global matching (--method sgm) runs on the CPU only "
+                                   "(its path costs are sequential); use --method ssd for the "
+                                   "torch path, or --device cpu")
     left, right = _read(args.left), _read(args.right)
     rectifying = bool(args.rig or args.rectification)
     if left.shape[:2] != right.shape[:2] and not rectifying:  # with a rig, it says who is off
@@ -194,6 +201,7 @@ def _match(args) -> int:
     params = {"method": args.method, "max_disp": args.max_disp, "uniqueness": uniqueness,
               "lr_tolerance": lr_tolerance}
     params["texture_snr"] = args.texture_snr
+    params["device"] = device.name
     params.update({"cost": args.cost} if sgm else
                   {"window": window, "channels": args.channels, "prefilter": args.prefilter})
     model: dict = {}
@@ -201,7 +209,7 @@ def _match(args) -> int:
     if rectifying:
         rect, src = _rectification(args, ((args.left, left), (args.right, right)))
         inputs.append(src)
-        left, right = rect.apply(left, right)
+        left, right = rect.apply(left, right, device=device)
         model["rectification"] = {"R1": rect.R1, "P1": rect.P1, "P2": rect.P2, "Q": rect.Q,
                                   "focal_px": rect.focal_px, "baseline": rect.baseline}
         say(args, f"rectified with {src} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
@@ -217,7 +225,7 @@ def _match(args) -> int:
     else:
         res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
                     uniqueness=uniqueness, lr_tolerance=lr_tolerance, channels=args.channels,
-                    prefilter=args.prefilter)
+                    prefilter=args.prefilter, device=device)
         model["block_matching"] = res.info
     warnings = list(res.info.get("warnings", []))
     for w in warnings:
@@ -629,6 +637,7 @@ def build_parser(prog: str = "lumigraph stereo"):
                    help="local-mean: match each image minus its 9x9 mean, clipped (StereoBM's "
                         "normalised response); cancels a gain/offset between the views")
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
+    add_device_option(v)
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",

@@ -155,3 +155,22 @@ def test_kornia_pixel_convention(shift):
     np.testing.assert_allclose(good[inner], ref[inner], rtol=0, atol=tol)
     bad = _kornia_remap(img, mx, my, False)
     assert np.abs(bad[inner] - ref[inner]).max() > 0.1  # the pitfall is real
+
+
+@pytest.mark.parametrize("channels", [1, 2, 3, 4, 5])
+@pytest.mark.parametrize("dtype", [np.float32, np.uint8, np.uint16])
+def test_every_channel_count_follows_cv2(channels, dtype):
+    """OpenCV 5 interpolates 1, 3 and 4 channels at float positions and
+    snaps 2 and >= 5 channels to 1/32 px (8-bit: ties rounded up); the torch
+    path asks which (snaps_to_32nds) and does the same."""
+    img = np.stack([_ramp(dtype=dtype, seed=10 + c) for c in range(channels)], -1)
+    h, w = img.shape[:2]
+    rng = np.random.default_rng(5)
+    mx = rng.uniform(-2, w + 1, (23, 31)).astype(np.float32)
+    my = rng.uniform(-2, h + 1, (23, 31)).astype(np.float32)
+    ref = _cv(img, mx, my, "linear", "replicate").reshape(23, 31, channels)
+    got = remap(img, mx, my, border="replicate", device="torch-cpu").reshape(23, 31, channels)
+    if dtype == np.float32:
+        np.testing.assert_allclose(got, ref, rtol=0, atol=LIN_K * U * float(img.max()))
+    else:
+        assert np.abs(got.astype(np.int64) - ref.astype(np.int64)).max() <= 1
