@@ -163,6 +163,8 @@ class Stage:
     # interleaved timings of one call against its peer) that do not fit the
     # case x method grid; run after the grid, before ``checks``.
     extra: Callable[[], tuple[list[Row], list[Check]]] | None = None
+    # More columns of the report's tables: (heading, key of a row's ``extra``).
+    columns: tuple[tuple[str, str], ...] = ()
 
 
 def _is_number(x) -> bool:
@@ -290,12 +292,14 @@ def write_report(out_dir: str | Path, results: dict[str, tuple[Stage, list[Row],
             md += [f"### {name} / {case.name}", ""]
             if case.note:
                 md += [case.note, ""]
-            md += [f"| method | peer | knob | time (s) | {stage.error_name} | status |",
-                   "|---|---|---|---|---|---|"]
+            more = "".join(f" {head} |" for head, _ in stage.columns)
+            md += [f"| method | peer | knob | time (s) | {stage.error_name} |{more} status |",
+                   "|---|---|---|---|---|" + "---|" * len(stage.columns) + "---|"]
             for r in crow:
                 knob = f"{r.knob}={_fmt(r.value)}" if r.knob else ""
+                cells = "".join(f" {_fmt(r.extra.get(key))} |" for _, key in stage.columns)
                 md.append(f"| {r.method} | {r.peer or 'ours'} | {knob} | {_fmt(r.time_s)} | "
-                          f"{_fmt(r.error)} | {r.status} |")
+                          f"{_fmt(r.error)} |{cells} {r.status} |")
             md.append("")
         md += [f"![{name}]({name}.png)", ""]
         _plot(out / f"{name}.png", stage, rows)

@@ -22,6 +22,7 @@ from lumigraph.capture.commandline import (
     subparsers,
     warn,
 )
+from lumigraph.capture.device import add_device_option
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.exposure import check_brightness_order
 from lumigraph.hdr.methods import ALIGN_METHODS, RESPONSE_METHODS, TONEMAP_METHODS
@@ -260,22 +261,26 @@ def _merge(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.device import resolve_device
     from lumigraph.capture.io import write_exr, write_image
     from lumigraph.hdr.merge import merge
     from lumigraph.hdr.response import ResponseCurve
 
     out = Path(args.out)
+    dev = resolve_device(args.device)  # before the bracket is read
     given, noise = _noise(args)
     curve = ResponseCurve.load(args.response)
     stack, times = _load(args)
     _check_curve(curve, stack, args.response, "images")
     t0 = time.perf_counter()
-    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost, **given)
+    m = merge(stack.images, times, curve, weights=args.weights, deghost=args.deghost,
+              device=dev, **given)
     dt = time.perf_counter() - t0
     for w in m.warnings:
         warn(w)
     meta = make_meta("lumigraph.radiance", inputs=[*stack.paths, args.response],
                      params={"weights": args.weights, "deghost": args.deghost, "times_s": times,
+                             "device": dev.name,
                              "response_method": curve.method,
                              "noise": noise if args.weights == "variance" else None,
                              "bit_depth": stack.bit_depth,
@@ -345,19 +350,23 @@ def _align(args) -> int:
 
 def _tonemap(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.device import resolve_device
     from lumigraph.capture.io import write_image
     from lumigraph.hdr.formats import read_hdr_image
     from lumigraph.hdr.reinhard2002 import check_key
 
     out = Path(args.out)
     check_key(args.key)  # before the radiance is read
+    dev = resolve_device(args.device)
     img = read_hdr_image(args.input)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
     args.arg_flags = {"radiance": args.input}  # the library checks it; name the file it came from
-    ldr = TONEMAP_METHODS.resolve(args.method)(img, key=args.key, bit_depth=args.bit_depth)
+    ldr = TONEMAP_METHODS.resolve(args.method)(img, key=args.key, bit_depth=args.bit_depth,
+                                               device=dev)
     meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
-                     params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth})
+                     params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth,
+                             "device": dev.name})
     write_artifact(out, lambda p: write_image(p, ldr), meta=meta)
     say(args, f"wrote {out}")
     return 0
@@ -384,6 +393,7 @@ def _video(args) -> int:
 
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.commandline import progress
+    from lumigraph.capture.device import resolve_device
     from lumigraph.capture.io import read_stack, write_exr, write_image
     from lumigraph.hdr.kang2003 import (
         check_temporal,
@@ -399,6 +409,7 @@ def _video(args) -> int:
     check_temporal(args.temporal)
     check_key(args.key)
     check_video_options(window=args.window, consistency_sigma=args.consistency_sigma)
+    dev = resolve_device(args.device)
     curve = ResponseCurve.load(args.response)
     stack = read_stack(args.frames, times=_times(args), need_times=True,
                        bit_depth=args.bit_depth)
@@ -417,7 +428,7 @@ def _video(args) -> int:
                                      "video.meta.json")])
     t0 = time.perf_counter()
     v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=args.window,
-                  consistency_sigma=args.consistency_sigma,
+                  consistency_sigma=args.consistency_sigma, device=dev,
                   progress=lambda it: progress(it, total=stack.images.shape[0],
                                                description="hdr video", quiet=args.quiet))
     dt = time.perf_counter() - t0
@@ -540,6 +551,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
     _bit_depth_option(v, "images")
+    add_device_option(v)
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
                    derived_outputs=lambda a: [("--out", _mask_path(a.out))])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
@@ -565,6 +577,7 @@ def build_parser(prog: str = "lumigraph hdr"):
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
     v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"),
                    help="image.png")
+    add_device_option(v)
     v.set_defaults(func=_tonemap)
     v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
     v.add_argument("frames", nargs="+", type=input_path,
@@ -586,6 +599,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                         f"{sigma:g}, chosen as docs/decisions/hdr-video-consistency-sigma.md "
                         "records)")
     _bit_depth_option(v, "frames")
+    add_device_option(v)
     v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input", type=input_path, help="an HDR image (.exr, .hdr, LogLuv .tif, .pfm)")

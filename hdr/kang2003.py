@@ -362,7 +362,7 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
               neighbourhood: int = 7, outlier_share: float = 0.25,
               bidirectional: bool = True, max_motion_px: float | None = None,
               full_well_e: float = 10000.0, read_noise_e: float = 5.0,
-              clip_margin: float = 0.02, progress=None) -> HDRVideo:
+              clip_margin: float = 0.02, progress=None, device="cpu") -> HDRVideo:
     """Radiance of every frame of an alternating-exposure video.
 
     Parameters
@@ -399,6 +399,11 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
     progress : callable, optional
         Wraps the frame loop (``progress(range(N))``), e.g.
         :func:`capture.commandline.progress`.
+    device : {"cpu", "cuda", "torch-cpu", "auto"}
+        Where the neighbours are warped onto each frame
+        (:mod:`lumigraph.capture.device`; a torch device:
+        :func:`hdr.video_torch.warp_neighbour_torch`); the flow and the
+        tests run on the CPU.
 
     Returns
     -------
@@ -424,6 +429,16 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
     """
     z, t = _check(frames, exposure_times_s, response)
     _check_options(flow_method, consistency_sigma, neighbourhood, outlier_share, window)
+    warp = _warp_neighbour
+    if device != "cpu":
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.hdr.video_torch import warp_neighbour_torch
+
+            def warp(video, j, m):
+                return warp_neighbour_torch(video, j, m, dev)
     n, h, w, c = z.shape
     rad = Radiometry(response, c, full_well_e=full_well_e, read_noise_e=read_noise_e,
                       clip_margin=clip_margin)
@@ -442,7 +457,7 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
         cur = _current_frame(i, z, t, video, rad)
         maps, occ, unc, fdiag = _register(i, video.x, t, rad, grid, flow_opts,
                                           bidirectional=bidirectional)
-        warped = {j: _warp_neighbour(video, j, maps[j]) for j in cur.neighbours}
+        warped = {j: warp(video, j, maps[j]) for j in cur.neighbours}
         checked = {j: _consistency(cur, warped[j], occ[j], unc[j], tests)
                    for j in cur.neighbours}
         accepted, rejected = _accept(cur, warped, checked, tests)

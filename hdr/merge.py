@@ -239,7 +239,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           read_noise_e: float | None = None,
           clip_margin: float = 0.02, deghost: bool = False, deghost_sigma: float = 4.0,
           reference: int | None = None, block_rows: int | None = None,
-          workers: int | None = None) -> RadianceMap:
+          workers: int | None = None, device="cpu") -> RadianceMap:
     """Merge a bracket into relative radiance.
 
     Parameters
@@ -268,6 +268,11 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     block_rows, workers : int, optional
         Row-block size (default: about 16k pixel-channels, cache-sized) and
         thread count (default: CPU count, at most 4).
+    device : {"cpu", "cuda", "torch-cpu", "auto"}
+        Where the per-pixel work runs (:mod:`lumigraph.capture.device`):
+        ``"cpu"`` is this numpy code; a torch device runs
+        :func:`hdr.merge_torch.merge_torch` (same result within float32
+        rounding, same flags).
 
     Returns
     -------
@@ -279,6 +284,17 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         A bad bracket (:func:`hdr.samples.check_stack`), weights or noise model
         (:func:`check_noise`), or a curve whose channels do not fit.
     """
+    if device != "cpu":
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.hdr.merge_torch import merge_torch
+
+            return merge_torch(images, exposure_times_s, response, weights=weights,
+                               full_well_e=full_well_e, read_noise_e=read_noise_e,
+                               clip_margin=clip_margin, deghost=deghost,
+                               deghost_sigma=deghost_sigma, reference=reference, device=dev)
     z, t, bd = check_stack(images, exposure_times_s, bit_depth=response.bit_depth)
     full_well_e, read_noise_e = check_noise(weights, full_well_e, read_noise_e)
     p, h, w, c = z.shape

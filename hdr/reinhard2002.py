@@ -114,7 +114,7 @@ def srgb_encode(x: np.ndarray) -> np.ndarray:
 
 
 def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18,
-            white: float | None = None, bit_depth: int = 8) -> np.ndarray:
+            white: float | None = None, bit_depth: int = 8, device="cpu") -> np.ndarray:
     """Tone-map linear radiance to a displayable sRGB image.
 
     Parameters
@@ -126,6 +126,10 @@ def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18
     white : float, optional
         ``L_white`` of the global operator (default: the largest scaled luminance).
     bit_depth : {8, 16}
+    device : {"cpu", "cuda", "torch-cpu", "auto"}
+        Where it runs (:mod:`lumigraph.capture.device`): ``"cpu"`` is this
+        numpy code; a torch device runs :func:`hdr.reinhard2002_torch.tonemap_torch`
+        (float32; codes agree within one, :mod:`hdr.reinhard2002_torch`).
 
     Returns
     -------
@@ -150,6 +154,15 @@ def tonemap(radiance: np.ndarray, *, method: str = "reinhard", key: float = 0.18
         raise InputError("radiance", f"expected (H, W, 3), got {np.shape(radiance)}")
     if not np.isfinite(rgb).all():
         raise InputError("radiance", "contains NaN/inf; tone mapping needs finite radiance")
+    if device != "cpu":
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.hdr.reinhard2002_torch import tonemap_torch
+
+            return tonemap_torch(rgb, method=method, key=key, white=white, bit_depth=bit_depth,
+                                 device=dev)
     # Row bands: the float64 work of the luminance and the encoding never holds more than
     # a band (a 12 MP radiance map would need 5 full-size float64 copies otherwise).
     h = rgb.shape[0]

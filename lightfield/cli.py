@@ -33,6 +33,7 @@ from lumigraph.capture.commandline import (
     subparsers,
     warn,
 )
+from lumigraph.capture.device import add_device_option
 from lumigraph.capture.errors import InputError
 
 EPILOG = """\
@@ -311,11 +312,13 @@ def _refocus(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
+    from lumigraph.capture.device import resolve_device
     from lumigraph.capture.io import write_exr
     from lumigraph.lightfield.field import LightField
     from lumigraph.lightfield.methods import REFOCUS_METHODS
-    from lumigraph.lightfield.refocus import check_refocus_range, choose_method
+    from lumigraph.lightfield.refocus import check_refocus_range, choose_method, focal_stack
 
+    dev = resolve_device(args.device)  # before the light field is read
     given, kind = next((_values(g), k) for g, k in ((args.alpha, "alpha"), (args.depth, "depth"),
                                                     (args.slope, "slope")) if g is not None)
     out = Path(args.out)
@@ -349,10 +352,11 @@ def _refocus(args) -> int:
     m = REFOCUS_METHODS.resolve(method)
     options = {k: v for k, v in (("kernel", args.kernel),) if k in m.options}
     t0 = time.perf_counter()
-    images = m(lf, slopes, **options)
+    images = focal_stack(lf, slopes, method=m.name, device=dev, **options)
     timing = {"total": time.perf_counter() - t0}
     meta = make_meta("lumigraph.refocus", inputs=[Path(args.lightfield) / "lightfield.json"],
-                     params={kind: given, "slopes": slopes, "kernel": args.kernel},
+                     params={kind: given, "slopes": slopes, "kernel": args.kernel,
+                             "device": dev.name},
                      model={"method": method, "why": reason}, timings_s=timing,
                      warnings=warnings)
     if single:
@@ -517,6 +521,7 @@ def build_parser(prog: str = "lumigraph lightfield"):
     v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",
                    help="shift-add's interpolation (default lanczos3)")
     v.add_argument("--out", required=True, type=output_file_or_dir(".exr"), help="OUT.exr for one value, a folder for several")
+    add_device_option(v)
     v.set_defaults(func=_refocus)
 
     v = add_verb(sp, "render", "render a novel pinhole view from the light slab")

@@ -173,16 +173,30 @@ def shift_and_add_stack(lf: LightField, slopes, *, kernel: str = "lanczos3") -> 
     return np.stack([shift_and_add(lf, float(s), kernel=kernel) for s in slopes])
 
 
-def focal_stack(lf: LightField, slopes, *, method: str = "shift-add", **options) -> np.ndarray:
+def focal_stack(lf: LightField, slopes, *, method: str = "shift-add", device="cpu",
+                **options) -> np.ndarray:
     """Refocus at each slope: (N, H, W, C) float32.
 
     ``method`` is a name in :data:`METHODS`, or ``"auto"`` (:func:`choose_method`);
-    ``options`` go to that method.
+    ``options`` go to that method. ``device`` (:mod:`lumigraph.capture.device`):
+    ``"cpu"`` runs the numpy methods, a torch device their ports in
+    :mod:`lightfield.refocus_torch` (same result within float32 rounding).
     """
     slopes = [float(s) for s in slopes]
     if method == "auto":
         method = choose_method(lf, len(slopes))
-    return METHODS.resolve(method)(lf, slopes, **options)
+    m = METHODS.resolve(method)
+    if device != "cpu":
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.lightfield import refocus_torch
+
+            port = {"shift-add": refocus_torch.shift_and_add_stack_torch,
+                    "fourier": refocus_torch.refocus_stack_torch}[m.name]
+            return port(lf, slopes, device=dev, **options)
+    return m(lf, slopes, **options)
 
 
 def choose_method(lf: LightField, n_slopes: int) -> str:
@@ -343,7 +357,8 @@ def all_in_focus(stack: np.ndarray, slopes, disparity: np.ndarray) -> np.ndarray
     return np.take_along_axis(stack, idx[None, ..., None], 0)[0]
 
 
-def refocus(lf: LightField, slope: float, *, method: str = "shift-add", **options) -> np.ndarray:
+def refocus(lf: LightField, slope: float, *, method: str = "shift-add", device="cpu",
+            **options) -> np.ndarray:
     """One photograph refocused at ``slope`` by the method named as on the
     command line (:data:`METHODS`); ``(H, W, C)`` float32.
 
@@ -353,4 +368,4 @@ def refocus(lf: LightField, slope: float, *, method: str = "shift-add", **option
     m = METHODS.resolve(method)
     if "max_slope" in m.options:
         options.setdefault("max_slope", max(abs(slope), 1e-3))
-    return m(lf, [slope], **options)[0]
+    return focal_stack(lf, [slope], method=m.name, device=device, **options)[0]

@@ -29,6 +29,8 @@ BENCH_STAGES = Registry("bench stage", [
            "refocusing, lenslet decoding, light-slab rendering, depth"),
     Method("separation", "lumigraph.separation.bench:stage",
            "Nayar 2006 separation against Mitsuba ground truth"),
+    Method("gpu", "lumigraph.bench_gpu:stage",
+           "the torch/kornia ports on cpu, torch-cpu and cuda beside our CPU code and peers"),
 ])
 
 EPILOG = """\
@@ -36,6 +38,7 @@ examples:
   lumigraph bench --out out/bench              every stage
   lumigraph bench hdr flow --out /tmp/b        two stages
   lumigraph bench io --out /tmp/b --quick      small inputs, for a smoke test
+  lumigraph bench gpu --device cuda --out /tmp/b   the GPU rows and their speed targets
 
 Writes DIR/report.md (per stage: the targets with measured and peer figures,
 then one table per input case: method, knob value, median wall time, error
@@ -49,7 +52,7 @@ def _bench(args) -> int:
     from lumigraph.capture.bench import run_stage, write_report
 
     names = args.stages or list(BENCH_STAGES)
-    stages = {n: load_stage(n, quick=args.quick) for n in names}
+    stages = {n: load_stage(n, quick=args.quick, device=args.device) for n in names}
     results = {}
     for name, st in stages.items():
         say(args, f"bench {name}: {len(st.cases)} case(s), {len(st.methods)} method(s)")
@@ -81,8 +84,9 @@ def _bench(args) -> int:
     return 0
 
 
-def load_stage(name: str, *, quick: bool = False):
-    """The :class:`lumigraph.capture.bench.Stage` of bench stage ``name``."""
+def load_stage(name: str, *, quick: bool = False, device: str | None = None):
+    """The :class:`lumigraph.capture.bench.Stage` of bench stage ``name``;
+    ``device`` goes to the stages that take one (``gpu``)."""
     from lumigraph.capture.errors import InputError
 
     if name not in BENCH_STAGES:
@@ -94,6 +98,10 @@ def load_stage(name: str, *, quick: bool = False):
         if e.name == method.target.split(":")[0]:
             raise InputError(name, "this stage has no bench yet") from None
         raise
+    import inspect
+
+    if device is not None and "device" in inspect.signature(stage).parameters:
+        return stage(quick=quick, device=device)
     return stage(quick=quick)
 
 
@@ -112,6 +120,7 @@ _stage_name.__name__ = "bench stage"
 def build_parser(prog: str = "lumigraph bench"):
     """The ``lumigraph bench`` parser."""
     from lumigraph.capture.bench import MIN_REPEATS
+    from lumigraph.capture.device import DEVICES
 
     p = make_parser(prog, "Speed against error: our methods and the peers on the same inputs.",
                     epilog=EPILOG)
@@ -122,6 +131,10 @@ def build_parser(prog: str = "lumigraph bench"):
     p.add_argument("--repeats", type=number(int, lo=MIN_REPEATS), default=MIN_REPEATS,
                    help="timed runs per row, median kept")
     p.add_argument("--quick", action="store_true", help="small inputs (smoke test)")
+    p.add_argument("--device", choices=DEVICES, default="auto",
+                   help="the gpu stage's devices: auto = cpu and torch-cpu rows, cuda rows when "
+                        "torch sees a GPU; cuda = insist on the GPU; torch-cpu = no cuda rows; "
+                        "cpu = ours and the peers only (other stages ignore it)")
     p.set_defaults(func=_bench)
     return p
 

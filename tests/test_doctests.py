@@ -43,6 +43,10 @@ def test_every_stage_is_collected():
 
 @pytest.mark.parametrize("name", MODULES)
 def test_docstring_examples(name, monkeypatch, tmp_path):
+    from lumigraph.capture.device import torch_available
+
+    if name.endswith("_torch") and not torch_available():
+        pytest.skip("the torch ports' examples need the gpu extra: pip install 'lumigraph[gpu]'")
     monkeypatch.chdir(tmp_path)  # an example that writes a file writes it here
     runner = doctest.DocTestRunner(optionflags=0)
     tests = _examples(name)
