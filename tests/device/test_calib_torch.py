@@ -166,3 +166,34 @@ def test_cuda_without_gpu_is_exit_2(tmp_path, capsys):
     rect = rectify(_rig())
     with pytest.raises(InputError, match="device"):
         rect.apply(_image(np.uint8), _image(np.uint8), device="cuda")
+
+
+def test_kornia_distortion_against_our_camera_model():
+    """kornia's ``distort_points`` is our (OpenCV's) Brown–Conrady/rational
+    model in OpenCV's coefficient order, with two conventions checked here:
+    ``new_K`` normalises the *input* pixels (so normalised points go in with
+    ``new_K = I``), and the skew of ``K`` is ignored on the way back to pixels
+    (as in ``initUndistortRectifyMap``), where ``Camera.project`` applies it.
+    Bound: float64 rounding of a few dozen operations on values of ~100 px,
+    64·2⁻⁵³·100 px."""
+    import kornia
+
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(-0.4, 0.4, (50, 2))
+    pts = np.concatenate([xy, np.ones((50, 1))], 1)
+    eye = torch.eye(3, dtype=torch.float64)
+    tol = 64 * 2.0 ** -53 * 200
+    for dist in CAMS.values():
+        cam = _camera(dist)
+        got = kornia.geometry.calibration.distort_points(
+            torch.from_numpy(xy), torch.from_numpy(cam.K), torch.tensor(dist, dtype=torch.float64),
+            eye).numpy()
+        np.testing.assert_allclose(got, cam.project(pts), rtol=0, atol=tol)
+    skewed = Camera(np.array([[110.0, 2.5, 50.3], [0, 104.0, 29.1], [0, 0, 1]]),
+                    np.asarray(CAMS["k1k2"], float), SIZE)
+    got = kornia.geometry.calibration.distort_points(
+        torch.from_numpy(xy), torch.from_numpy(skewed.K),
+        torch.tensor(CAMS["k1k2"], dtype=torch.float64), eye).numpy()
+    ours = skewed.project(pts)
+    yd = skewed.distort_normalized(xy)[:, 1]
+    np.testing.assert_allclose(got[:, 0] + 2.5 * yd, ours[:, 0], rtol=0, atol=tol)
