@@ -87,6 +87,38 @@ def _device_rows(out_rows, stage, name, devices, call, truth):
     return ref
 
 
+def single_thread():
+    """Context: cv2 and torch at one thread (restored after): the bench compares
+    single-threaded library calls. Here, on the lowest floor with device rows,
+    so that every stage's bench_device can import it."""
+    import contextlib
+
+    @contextlib.contextmanager
+    def ctx():
+        import cv2
+
+        prev = cv2.getNumThreads()
+        cv2.setNumThreads(1)
+        tprev = None
+        try:
+            import torch
+
+            tprev = torch.get_num_threads()
+            torch.set_num_threads(1)
+        except ImportError:
+            pass
+        try:
+            yield
+        finally:
+            cv2.setNumThreads(prev)
+            if tprev is not None:
+                import torch
+
+                torch.set_num_threads(tprev)
+
+    return ctx()
+
+
 def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The undistort and rectify rows (module docstring)."""
     import cv2
@@ -95,7 +127,6 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     from lumigraph.calib.undistort import undistorter
     from lumigraph.capture.camera import Camera
     from lumigraph.capture.rig import Rig
-    from lumigraph.separation.bench_device import single_thread
 
     out_rows: list[DeviceRow] = []
     with single_thread():

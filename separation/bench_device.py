@@ -36,38 +36,9 @@ def _case(quick: bool):
     return ims, list(ps.complement_of), d, b
 
 
-def single_thread():
-    """Context: cv2 and torch at one thread (restored after)."""
-    import contextlib
-
-    @contextlib.contextmanager
-    def ctx():
-        import cv2
-
-        prev = cv2.getNumThreads()
-        cv2.setNumThreads(1)
-        tprev = None
-        try:
-            import torch
-
-            tprev = torch.get_num_threads()
-            torch.set_num_threads(1)
-        except ImportError:
-            pass
-        try:
-            yield
-        finally:
-            cv2.setNumThreads(prev)
-            if tprev is not None:
-                import torch
-
-                torch.set_num_threads(tprev)
-
-    return ctx()
-
-
 def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The checker rows (module docstring)."""
+    from lumigraph.calib.bench_device import single_thread
     from lumigraph.separation import nayar2006
 
     ims, comp, d_true, b = _case(quick)

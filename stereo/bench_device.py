@@ -71,7 +71,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The block-matching and flow-warp rows (module docstring)."""
     import cv2
 
-    from lumigraph.separation.bench_device import single_thread
+    from lumigraph.calib.bench_device import single_thread
     from lumigraph.stereo.block_matching import match
     from lumigraph.stereo.pyramid import warp
 
