@@ -284,6 +284,10 @@ def build_parser(prog: str = "lumigraph separate"):
     p.add_argument("--out", required=True, type=output_dir,
                    help="output folder (direct.exr, global.exr, mask.png)")
     add_device_option(p)
+    for a in p._actions:
+        if a.dest == "device":
+            a.help += (". Ported here: the per-pixel estimators of checker, sinusoid and "
+                       "occluder; --method single, the pairing and the masks run on the CPU")
     p.set_defaults(func=_separate, arg_flags={"noise_sigma": "--noise"})
     return p
 

@@ -156,6 +156,13 @@ def _distinct_files(left, right) -> None:
 
 
 # ------------------------------------------------------------------ verbs
+def _device_help(parser, what: str) -> None:
+    """Append what the command ports to the shared --device help."""
+    for a in parser._actions:
+        if a.dest == "device":
+            a.help = f"{a.help}. {what}"
+
+
 def _match(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.stereo.block_matching import (
@@ -638,6 +645,9 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "normalised response); cancels a gain/offset between the views")
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
     add_device_option(v)
+    _device_help(v, "Ported here: --method ssd's cost volume and aggregation, and the "
+                    "rectification with --rig/--rectification; sgm runs on the CPU (refused "
+                    "with cuda or torch-cpu)")
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",
