@@ -286,8 +286,8 @@ def build_parser(prog: str = "lumigraph separate"):
     add_device_option(p)
     for a in p._actions:
         if a.dest == "device":
-            a.help += (". Ported here: the per-pixel estimators of checker, sinusoid and "
-                       "occluder; --method single, the pairing and the masks run on the CPU")
+            a.help += (". Ported here: the per-pixel estimators of every method; the "
+                       "pairing, the noise model and the masks run on the CPU")
     p.set_defaults(func=_separate, arg_flags={"noise_sigma": "--noise"})
     return p
 

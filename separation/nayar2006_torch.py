@@ -14,8 +14,10 @@ outer axis), so that thresholds such as a pair's decisiveness
 (``|t| >= keep·top``) see the same values and decide alike; a scalar enters
 an operation as float32, as under numpy's promotion rules. What is left to
 rounding differences is stated in ``tests/device/test_separation_torch.py``.
-The tile method ``single`` (a sort per 16×16 tile and an OpenCV resize,
-small work) and the noise model, pairing and masks stay on numpy.
+The tile method ``single`` sorts each tile on the device and
+interpolates the tile values as OpenCV's ``resize`` does; its tile means are
+numpy's pairwise sums in another order (a bound, not equality). The noise
+model, pairing and masks stay on numpy.
 
 Examples
 --------
@@ -164,4 +166,57 @@ def occluder(images: np.ndarray, *, alpha: float | None = None, b: float = 0.0,
                                               "alpha_source": source}
 
 
-METHODS = {"checker": checker, "sinusoid": sinusoid, "occluder": occluder}
+def _reflect101(n: int, m: int):
+    """Indices ``0 .. m − 1`` of a length-``n`` axis extended by numpy's
+    ``mode="reflect"`` (the edge not repeated), for any ``m``."""
+    if n == 1:
+        return np.zeros(m, np.int64)
+    i = np.arange(m) % (2 * (n - 1))
+    return np.where(i >= n, 2 * (n - 1) - i, i)
+
+
+def single(images: np.ndarray, *, alpha: float = 0.5, b: float = 0.0, tile: int = 16,
+           fraction: float = 0.2, device="torch-cpu"):
+    """:func:`nayar2006.single` through torch on ``device``: per tile the
+    means of the brightest and darkest ``fraction`` of the pixels (a sort per
+    tile), interpolated bilinearly from the tile centres as OpenCV's
+    ``resize`` does (centres at ``(i + ½)·tile − ½``, edges clamped), then
+    solved with α⁺ = α⁻ = ``alpha``."""
+    from lumigraph.capture.errors import EstimationError
+    from lumigraph.capture.remap_torch import remap_tensor
+
+    torch, _ = torch_modules()
+    dev = resolve_device(device)
+    a = nayar2006.validate_stack(images, need=1, method="single")
+    if len(a) != 1:
+        raise EstimationError("<images>", f"method 'single' takes exactly one image, got {len(a)}")
+    if tile < 2:
+        raise ValueError(f"tile: expected >= 2 pixels, got {tile}")
+    img = to_torch(a[0], dev)
+    h, w, c = img.shape
+    th, tw = max(1, -(-h // tile)), max(1, -(-w // tile))
+    iy = torch.as_tensor(_reflect101(h, th * tile), device=img.device)
+    ix = torch.as_tensor(_reflect101(w, tw * tile), device=img.device)
+    pad = img.index_select(0, iy).index_select(1, ix)
+    blocks = pad.reshape(th, tile, tw, tile, c).permute(0, 2, 4, 1, 3).reshape(th, tw, c, -1)
+    srt = torch.sort(blocks, dim=-1).values
+    k = max(1, int(round(fraction * srt.shape[-1])))
+    lp_t = srt[..., -k:].mean(dim=-1)
+    lm_t = srt[..., :k].mean(dim=-1)
+    # cv2.resize's source position of output pixel d: (d + ½)/tile − ½, in float32
+    mx = torch.as_tensor(((np.arange(w) + 0.5) / tile - 0.5).astype(np.float32), device=img.device)
+    my = torch.as_tensor(((np.arange(h) + 0.5) / tile - 0.5).astype(np.float32), device=img.device)
+    mx, my = mx[None, :].expand(h, w), my[:, None].expand(h, w)
+
+    def up(t):
+        # replicate border = resize's clamping at the edges; never snapped (resize is not remap)
+        return remap_tensor(t.permute(2, 0, 1).contiguous(), mx, my, border="replicate",
+                            snap=False).permute(1, 2, 0)
+
+    lp, lm = up(lp_t), up(lm_t)
+    direct, glob = _solve(lp, lm, alpha=alpha, b=b, alpha_minus=alpha)
+    return to_numpy(direct), to_numpy(glob), {"l_plus": to_numpy(lp), "l_minus": to_numpy(lm),
+                                              "tile": tile}
+
+
+METHODS = {"checker": checker, "sinusoid": sinusoid, "occluder": occluder, "single": single}

@@ -110,9 +110,8 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     device : {"cpu", "cuda", "torch-cpu", "auto"}
         Where the per-pixel estimator runs (:mod:`lumigraph.capture.device`):
         ``"cpu"`` numpy; the others :mod:`lumigraph.separation.nayar2006_torch`
-        (checker, sinusoid, occluder; ``single`` stays on numpy), equal to
-        numpy's result within float32 rounding. Pairing, the noise model and
-        the masks run on numpy either way.
+        (every method), equal to numpy's result within float32 rounding.
+        Pairing, the noise model and the masks run on numpy either way.
 
     Raises
     ------
@@ -173,7 +172,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         comp = list(complement_of) if complement_of is not None else [-1] * n
         s0, s1 = nayar2006.noise_from_pairs(a, comp)
         var0, var1 = var0 + s0, s1
-    if dev.uses_torch and method != "single":
+    if dev.uses_torch:
         from functools import partial
 
         from lumigraph.separation import nayar2006_torch

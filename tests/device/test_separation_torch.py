@@ -17,6 +17,7 @@ Bounds, from the arithmetic (``u = 2⁻²⁴``, float32):
   (4u·max I); ``L_d = amp/(0.5(1 − b))`` scales this by ``2/(1 − b)``, and
   ``L_g`` (the same mean minus ``L_d``) by as much plus one rounding of its
   own size.
+- single: the tile means' summation order (bound in its test).
 """
 
 from __future__ import annotations
@@ -104,12 +105,31 @@ def test_separate_end_to_end_equals_numpy():
     assert got.params["device"] == "torch-cpu" and "device" not in ref.params
 
 
-def test_single_stays_on_numpy():
-    x = np.arange(32)
-    img = np.broadcast_to(0.6 * (x % 4 < 2) + 0.1, (32, 32))[None, ..., None].astype(np.float32)
-    a = separate(img, method="single", tile=8)
-    b = separate(img, method="single", tile=8, device="torch-cpu")
-    np.testing.assert_array_equal(a.direct, b.direct)
+@pytest.mark.parametrize("tile", [8, 16])
+def test_single_within_float32_rounding(tile):
+    """Tile means of ``k`` sorted values: numpy sums them pairwise, torch in
+    its own order; each sum is within ``(k − 1)u·Σ|x|`` of exact, so the
+    means differ by at most ``2(k − 1)u·M + 2u·M`` (``M`` the largest value).
+    The bilinear interpolation of the tile values adds ``8u·M`` and one ulp
+    of a tile position times the largest step between tiles (``≤ M``).
+    ``L_d = (L⁺ − L⁻)/(1 − b)`` doubles δ and divides by ``1 − b``;
+    ``L_g = (L⁻ − b L⁺)/(a(1 − b))`` with ``a = b + (1 − b)α``."""
+    rng = np.random.default_rng(5)
+    stripe = (np.arange(W) % 4 < 2).astype(float)
+    img = (rng.uniform(0.3, 0.9, (H, W, 3)) * stripe[None, :, None]
+           + 0.1 * rng.uniform(0.5, 1.0, (H, W, 3)))[None].astype(np.float32)
+    b, alpha = 0.05, 0.5
+    ref = nayar2006.single(img, tile=tile, b=b, alpha=alpha)
+    got = nayar2006_torch.single(img, tile=tile, b=b, alpha=alpha, device="torch-cpu")
+    M = float(img.max())
+    k = max(1, round(0.2 * tile * tile))
+    delta = (2 * (k - 1) + 2 + 8) * U * M + float(np.spacing(np.float32(max(H, W) / tile))) * M
+    a = b + (1 - b) * alpha
+    np.testing.assert_allclose(got[0], ref[0], rtol=0, atol=2 * delta / (1 - b) + 4 * U * M)
+    np.testing.assert_allclose(got[1], ref[1], rtol=0,
+                               atol=(1 + b) * delta / (a * (1 - b)) + 4 * U * M)
+    sep = separate(img, method="single", tile=tile, device="torch-cpu")
+    assert sep.params["device"] == "torch-cpu"
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has a GPU")
