@@ -15,8 +15,9 @@ Cases (synthetic, built here; nothing was tuned on them):
   numpy), and the peers ``cv2.StereoBM`` (9x9, its texture and uniqueness
   tests) and ``cv2.StereoSGBM`` (block 5, its default smoothness), which
   solve the same problem with their own rules: their error column compares
-  methods, their time the library calls. The semi-global matcher (C) is not
-  ported.
+  methods, their time the library calls.
+- ``stereo match (sgm)``: the same pair through semi-global matching (census,
+  defaults), the aggregation on the device; peer ``cv2.StereoSGBM``.
 - ``flow warp``: bicubic backward warp (replicate border) of a 2048x1536
   (quick: 512x384) float32 grey image by a smooth flow of up to ±6 px. The
   image is an analytic pattern, so the truth is the pattern at ``x + flow``:
@@ -73,6 +74,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
 
     from lumigraph.calib.bench_device import single_thread
     from lumigraph.stereo.block_matching import match
+    from lumigraph.stereo.hirschmuller2008 import match as sgm_match
     from lumigraph.stereo.pyramid import warp
 
     out_rows: list[DeviceRow] = []
@@ -113,6 +115,35 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
                              truth=lambda o: _bad2(o, gt, mask), repeats=3, peer="opencv",
                              note="another method: its difference is not rounding")
             out_rows.append(row)
+
+        # ---- sgm (the aggregation on the device), same pair
+        stage, name = "stereo match (sgm)", f"{w}x{h} grey 8-bit, {D} disparities, census"
+
+        def ours_sgm(dev):
+            r = sgm_match(left, right, max_disp=D - 1, device=dev)
+            return np.where(np.isfinite(r.disparity), r.disparity, -1.0)
+
+        ref = None
+        for dev in ("cpu", "torch-cpu", "cuda"):
+            if dev not in devices:
+                why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
+                out_rows.append(skipped(stage, name, dev, why))
+                continue
+            row, out = measure(stage, name, dev, lambda dev=dev: ours_sgm(dev), reference=ref,
+                               truth=lambda o: _bad2(o, gt, mask), repeats=3,
+                               note="aggregation on the device; census, costs, checks on the CPU")
+            out_rows.append(row)
+            if dev == "cpu":
+                ref = out
+
+        def sgbm_peer():
+            d = sgbm.compute(left, right).astype(np.float32) / 16.0
+            return np.where(d >= 0, d, -1.0)
+
+        row, _ = measure(stage, name, "opencv StereoSGBM", sgbm_peer, reference=ref,
+                         truth=lambda o: _bad2(o, gt, mask), repeats=3, peer="opencv",
+                         note="another SGM: its difference is not rounding")
+        out_rows.append(row)
 
         # ---- flow warp
         w, h = (512, 384) if quick else (2048, 1536)

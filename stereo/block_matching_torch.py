@@ -15,9 +15,8 @@ uniqueness, left–right check, texture test) stays on numpy
 (:func:`lumigraph.stereo.block_matching._decide`): it reads five ``(H, W)``
 arrays and is cheap.
 
-Semi-global matching (:mod:`lumigraph.stereo.hirschmuller2008`, the C kernel
-``stereo/_sgm.c``) stays on the CPU: its path costs run pixel after pixel
-along eight directions, a Python-level loop per column on torch.
+Semi-global matching's aggregation has its own port
+(:mod:`lumigraph.stereo.hirschmuller2008_torch`).
 
 Examples
 --------

@@ -177,12 +177,7 @@ def _match(args) -> int:
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     _distinct_files(args.left, args.right)
-    # before any image is read: a missing GPU, or sgm asked on one, is exit 2
-    device = resolve_device(args.device)
-    if args.method == "sgm" and device.uses_torch and args.device != "auto":
-        raise InputError("device", "semi-global matching (--method sgm) runs on the CPU only "
-                                   "(its path costs are sequential); use --method ssd for the "
-                                   "torch path, or --device cpu")
+    device = resolve_device(args.device)  # before any image is read: a missing GPU is exit 2
     left, right = _read(args.left), _read(args.right)
     rectifying = bool(args.rig or args.rectification)
     if left.shape[:2] != right.shape[:2] and not rectifying:  # with a rig, it says who is off
@@ -227,7 +222,7 @@ def _match(args) -> int:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
     if sgm:
         res = sgm_match(left, right, max_disp=args.max_disp, cost=args.cost, uniqueness=uniqueness,
-                        lr_tolerance=lr_tolerance, texture_snr=args.texture_snr)
+                        lr_tolerance=lr_tolerance, texture_snr=args.texture_snr, device=device)
         model["sgm"] = res.info
     else:
         res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
@@ -645,9 +640,9 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "normalised response); cancels a gain/offset between the views")
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
     add_device_option(v)
-    _device_help(v, "Ported here: --method ssd's cost volume and aggregation, and the "
-                    "rectification with --rig/--rectification; sgm runs on the CPU (refused "
-                    "with cuda or torch-cpu)")
+    _device_help(v, "Ported here: sgm's aggregation along the paths (its census, costs and "
+                    "checks stay on the CPU), ssd's cost volume and aggregation, and the "
+                    "rectification with --rig/--rectification")
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",

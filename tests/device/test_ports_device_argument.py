@@ -21,6 +21,7 @@ def _calls():
     from lumigraph.capture.rig import Rig
     from lumigraph.separation.separate import separate
     from lumigraph.stereo.block_matching import match
+    from lumigraph.stereo.hirschmuller2008 import match as sgm
     from lumigraph.stereo.pyramid import forward_backward, warp
 
     rng = np.random.default_rng(0)
@@ -39,12 +40,13 @@ def _calls():
         "separate": lambda dev: separate(stack, method="checker", device=dev).direct,
         "match": lambda dev: match(img, np.roll(img, -3, 1), max_disp=8, window=5,
                                    device=dev).disparity,
+        "sgm": lambda dev: sgm(img, np.roll(img, -3, 1), max_disp=8, device=dev).disparity,
         "warp": lambda dev: warp(gray, flow, device=dev),
         "forward_backward": lambda dev: forward_backward(flow, -flow, device=dev)[1],
     }
 
 
-CALLS = ("undistort", "rectify", "separate", "match", "warp", "forward_backward")
+CALLS = ("undistort", "rectify", "separate", "match", "sgm", "warp", "forward_backward")
 
 
 @pytest.mark.parametrize("name", CALLS)
