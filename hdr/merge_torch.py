@@ -153,8 +153,9 @@ def merge_torch(images: np.ndarray, exposure_times_s, response: ResponseCurve, *
     flags = np.zeros((h, w, c), np.uint8)
     if ghost is not None:
         flags[to_numpy(ghost)] |= GHOST
-    empty = to_numpy(den <= 0)
-    if empty.any():
+    no_weight = den <= 0
+    if bool(no_weight.any()):          # rare: fetch the mask only then
+        empty = to_numpy(no_weight)
         # the numpy fill, once over the whole image: its cost is per unmeasured pixel
         _fill_bounds(out, empty, z, t, x_tab, hi_code, bound_lo, flags)
     warnings = []

@@ -47,36 +47,53 @@ from lumigraph.capture.device import resolve_device, to_numpy, to_torch
 from lumigraph.lightfield.field import LightField
 
 
-def _mirror(n: int, pad: int, small: int) -> np.ndarray:
-    """Index ``pad + p`` -> the sample the numpy code's padding puts at ``p``
-    (``p`` in ``[-pad, n + pad)``): half-sample symmetric, or the edge when
-    ``pad >= small``, the view's smaller side (:func:`lightfield.refocus.shift_view`'s rule)."""
-    return np.pad(np.arange(n), pad, mode="symmetric" if pad < small else "edge")
-
-
 def _axis_plan(shifts, n: int, pads, small: int, kernel: str):
-    """For one axis of every view: gather indices ``(T, N * n)`` into the
-    ``(N * n)`` rows and float32 weights ``(T, N)``."""
+    """For one axis of every view: the integer shifts ``(N,)``, whether each
+    view's padding is the edge rule ``(N,)`` and the float32 tap weights
+    ``(T, N)``; :func:`_axis_index` turns the first two into gather indices.
+
+    The numpy code pads each view by its own ``pad`` (half-sample symmetric,
+    or the edge where ``pad >= small``, the view's smaller side) and reads
+    taps at ``x + floor(d) + first + t``; here that padding is folded into the
+    index: the position is reflected (or clamped) instead.
+    """
     from lumigraph.lightfield.refocus import _taps
 
-    first, _ = _taps(kernel, 0.5)
-    taps = len(_taps(kernel, 0.5)[1])
-    idx = np.empty((taps, len(shifts), n), np.int64)
+    shifts = np.asarray(shifts, np.float64)
+    pads = np.asarray(pads)
+    first, w_half = _taps(kernel, 0.5)
+    taps = len(w_half)
+    base = np.floor(shifts)
+    frac = shifts - base
     wts = np.zeros((taps, len(shifts)), np.float32)
-    pos = np.arange(n)
-    for v, (d, pad) in enumerate(zip(shifts, pads, strict=True)):
-        mir = _mirror(n, pad, small)
-        base = math.floor(d)
-        frac = d - base
-        if frac < 1e-9 and kernel != "bspline3":
+    # the weights depend on the fraction only: one evaluation per distinct one
+    for f in np.unique(frac):
+        sel = frac == f
+        if f < 1e-9 and kernel != "bspline3":
             w = np.zeros(taps)
-            w[-first] = 1.0     # the numpy code copies the integer shift: one tap of 1
+            w[-first] = 1.0     # the numpy code copies an integer shift: one tap of 1
         else:
-            _, w = _taps(kernel, frac)
-        wts[:, v] = [np.float32(x) for x in w]
-        for t in range(taps):
-            idx[t, v] = v * n + mir[pad + pos + base + first + t]
-    return idx.reshape(taps, -1), wts
+            _, w = _taps(kernel, float(f))
+        wts[:, sel] = np.array([np.float32(x) for x in w], np.float32)[:, None]
+    edge = np.asarray(pads) >= small
+    return base.astype(np.int64), edge, wts
+
+
+def _axis_index(base, edge, n: int, taps: int, first: int, dev):
+    """The gather indices ``(T, N * n)`` of :func:`_axis_plan`'s view shifts,
+    built on the device (on the host this index arithmetic alone took longer
+    than a GPU refocus)."""
+    import torch
+
+    b = torch.from_numpy(base).to(dev)
+    e = torch.from_numpy(edge).to(dev)
+    nv = b.shape[0]
+    p = (torch.arange(n, device=dev)[None, None, :] + b[None, :, None]
+         + first + torch.arange(taps, device=dev)[:, None, None])       # (T, N, n)
+    mirrored = torch.where(p < 0, -p - 1, torch.where(p >= n, 2 * n - 1 - p, p))
+    idx = torch.where(e[None, :, None], p.clamp(0, n - 1), mirrored)
+    idx = idx + (torch.arange(nv, device=dev) * n)[None, :, None]
+    return idx.reshape(taps, -1)
 
 
 def shift_and_add_stack_torch(lf: LightField, slopes, *, kernel: str = "lanczos3",
@@ -98,7 +115,7 @@ def shift_and_add_stack_torch(lf: LightField, slopes, *, kernel: str = "lanczos3
     """
     import torch
 
-    from lumigraph.lightfield.refocus import KERNELS, spline_coefficients
+    from lumigraph.lightfield.refocus import KERNELS, _taps, spline_coefficients
 
     if kernel not in KERNELS:
         raise ValueError(f"kernel: expected one of {', '.join(KERNELS)}, got {kernel!r}")
@@ -116,25 +133,27 @@ def shift_and_add_stack_torch(lf: LightField, slopes, *, kernel: str = "lanczos3
     # x pass reads rows of the (N W, H C) layout: one column of a view a row
     by_col = views.permute(0, 2, 1, 3).contiguous().reshape(n * w, h * c)
     small = min(h, w)
+    first = _taps(kernel, 0.5)[0]
     out = np.empty((len(slopes), h, w, c), np.float32)
     ii, jj = np.divmod(np.arange(n), v)
     for k, s in enumerate(slopes):
         dx = -float(s) * (jj - vc)
         dy = -float(s) * (ii - uc)
         pads = [int(math.ceil(max(abs(a), abs(b)))) + 4 for a, b in zip(dx, dy, strict=True)]
-        ix, wx = _axis_plan(dx, w, pads, small, kernel)
-        iy, wy = _axis_plan(dy, h, pads, small, kernel)
-        ix_t, iy_t = torch.from_numpy(ix).to(dev.torch), torch.from_numpy(iy).to(dev.torch)
-        wx_t = torch.from_numpy(np.repeat(wx, w, axis=1)).to(dev.torch)[..., None]
-        wy_t = torch.from_numpy(np.repeat(wy, h, axis=1)).to(dev.torch)[..., None]
+        bx, ex, wx = _axis_plan(dx, w, pads, small, kernel)
+        by, ey, wy = _axis_plan(dy, h, pads, small, kernel)
+        ix_t = _axis_index(bx, ex, w, len(wx), first, dev.torch)
+        iy_t = _axis_index(by, ey, h, len(wy), first, dev.torch)
+        wx_t = torch.from_numpy(wx).to(dev.torch)[:, :, None, None]      # (T, N, 1, 1)
+        wy_t = torch.from_numpy(wy).to(dev.torch)[:, :, None, None]
         acc = None
-        for t in range(ix.shape[0]):          # taps in the numpy code's order
-            term = by_col.index_select(0, ix_t[t]) * wx_t[t]
+        for t in range(len(wx)):              # taps in the numpy code's order
+            term = by_col.index_select(0, ix_t[t]).view(n, w, h * c) * wx_t[t]
             acc = term if acc is None else acc.add_(term)
         by_row = acc.reshape(n, w, h, c).permute(0, 2, 1, 3).contiguous().reshape(n * h, w * c)
         acc = None
-        for t in range(iy.shape[0]):
-            term = by_row.index_select(0, iy_t[t]) * wy_t[t]
+        for t in range(len(wy)):
+            term = by_row.index_select(0, iy_t[t]).view(n, h, w * c) * wy_t[t]
             acc = term if acc is None else acc.add_(term)
         img = acc.reshape(n, h, w, c).sum(0) / np.float32(n)
         out[k] = to_numpy(img)

@@ -105,16 +105,27 @@ def stage(*, quick: bool = False, device: str = "auto") -> Stage:
 
     def extra():
         rows, device_rows = [], []
-        for key, mod in present:
-            got = mod.rows(devices=devices, quick=quick)
-            device_rows += got
-            rows += [_to_row(key, r) for r in got]
+        threads = None
+        if "torch-cpu" in devices:
+            import torch
+
+            # single thread, as every CPU row (the rules of the bench)
+            threads = torch.get_num_threads()
+            torch.set_num_threads(1)
+        try:
+            for key, mod in present:
+                got = mod.rows(devices=devices, quick=quick)
+                device_rows += got
+                rows += [_to_row(key, r) for r in got]
+        finally:
+            if threads is not None:
+                torch.set_num_threads(threads)
         return rows, checks_for(device_rows)
 
     desc = ("Each ported call on every device, and its CPU peer, on the same inputs in one "
             "process. Error: max |output - our cpu output| (0 for the cpu row; a peer's is its "
             "method's difference, not rounding); 'vs truth' where the case has ground truth. "
-            "Time: min of the repeats, cuda synchronised. Nothing was tuned on these inputs. "
+            "Time: min of the repeats, cuda synchronised; torch-cpu on one thread. Nothing was tuned on these inputs. "
             + note + ".")
     return Stage("gpu", tuple(Case(key, lambda: None) for key, _ in present), (),
                  error=lambda d, out: math.nan, error_name="max abs diff vs cpu",
