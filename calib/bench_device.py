@@ -14,7 +14,7 @@ Cases (synthetic, built here; nothing was tuned on them):
   of a verged rig with distortion; same truth construction on both views.
 
 Rows: ``cpu`` (ours: the maps cached on the object, then ``cv2.remap``),
-``torch-cpu``, ``cuda`` (the maps cached on the device, then the torch
+``torch-cpu`` (``--quick`` only: minutes at full size), ``cuda`` (the maps cached on the device, then the torch
 resampler), and the peer: ``cv2.undistort`` (maps rebuilt each call) for
 undistort, ``cv2.initUndistortRectifyMap`` + ``cv2.remap`` per call for
 rectify. Every CPU row runs single-threaded.
@@ -71,16 +71,34 @@ def _rms(out, truth, inside):
     return float(np.sqrt(np.mean(d[inside] ** 2)))
 
 
-def _device_rows(out_rows, stage, name, devices, call, truth):
+def not_run(stage, name, dev, devices, quick):
+    """The skipped row of a device not run here, or None: a device not asked
+    or absent, and torch-cpu at full size (minutes on torch's CPU device;
+    ``--quick`` and ``tests/device`` check the port there)."""
+    if dev not in devices:
+        why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
+        return skipped(stage, name, dev, why)
+    if dev == "torch-cpu" and not quick:
+        return skipped(stage, name, dev, "full size: minutes on torch's CPU device; --quick "
+                                         "and tests/device check the port")
+    return None
+
+
+def repeats_for(dev: str, quick: bool) -> int:
+    """Repeats of a timing (min taken): the full-size CPU rows take seconds each."""
+    return 3 if quick else (5 if dev == "cuda" else 2)
+
+
+def _device_rows(out_rows, stage, name, devices, call, truth, quick):
     ref = None
     for dev in ("cpu", "torch-cpu", "cuda"):
-        if dev not in devices:
-            why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
-            out_rows.append(skipped(stage, name, dev, why))
+        skip = not_run(stage, name, dev, devices, quick)
+        if skip is not None:
+            out_rows.append(skip)
             continue
         call(dev)  # the maps are built once per object and device: not the per-image cost
         row, out = measure(stage, name, dev, lambda dev=dev: call(dev), reference=ref,
-                           truth=truth, repeats=3)
+                           truth=truth, repeats=repeats_for(dev, quick))
         out_rows.append(row)
         if dev == "cpu":
             ref = out
@@ -141,11 +159,12 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
         stage, name = "calib undistort", f"{w}x{h} RGB 8-bit"
         ref = _device_rows(out_rows, stage, name, devices,
                            lambda dev: u.apply(img, device=dev),
-                           lambda out: _rms(out, t, inside))
+                           lambda out: _rms(out, t, inside), quick)
         K_new = u.camera.K
         row, _ = measure(stage, name, "opencv", lambda: cv2.undistort(img, cam.K, cam.dist,
                                                                        None, K_new),
-                         reference=ref, truth=lambda out: _rms(out, t, inside), repeats=3,
+                         reference=ref, truth=lambda out: _rms(out, t, inside),
+                         repeats=repeats_for("cpu", quick),
                          peer="opencv", note="cv2.undistort: maps rebuilt every call")
         out_rows.append(row)
 
@@ -166,7 +185,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
         stage, name = "calib rectify", f"pair of {w}x{h} grey 8-bit"
         ref = _device_rows(out_rows, stage, name, devices,
                            lambda dev: np.stack(rect.apply(*imgs, device=dev)),
-                           lambda out: _rms(out, truth_pair, inside_pair))
+                           lambda out: _rms(out, truth_pair, inside_pair), quick)
 
         def peer():
             out = []
@@ -177,7 +196,8 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
             return np.stack(out)
 
         row, _ = measure(stage, name, "opencv", peer, reference=ref,
-                         truth=lambda out: _rms(out, truth_pair, inside_pair), repeats=3,
+                         truth=lambda out: _rms(out, truth_pair, inside_pair),
+                         repeats=repeats_for("cpu", quick),
                          peer="opencv", note="initUndistortRectifyMap + remap every call")
         out_rows.append(row)
     return out_rows

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lumigraph.capture.bench_device import DeviceRow, measure, skipped
+from lumigraph.capture.bench_device import DeviceRow, measure
 
 
 def _case(quick: bool):
@@ -38,7 +38,7 @@ def _case(quick: bool):
 
 def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The checker rows (module docstring)."""
-    from lumigraph.calib.bench_device import single_thread
+    from lumigraph.calib.bench_device import not_run, repeats_for, single_thread
     from lumigraph.separation import nayar2006
 
     ims, comp, d_true, b = _case(quick)
@@ -62,12 +62,12 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     ref = None
     with single_thread():
         for dev in ("cpu", "torch-cpu", "cuda"):
-            if dev not in devices:
-                why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
-                out_rows.append(skipped(stage, name, dev, why))
+            skip = not_run(stage, name, dev, devices, quick)
+            if skip is not None:
+                out_rows.append(skip)
                 continue
             row, out = measure(stage, name, dev, lambda dev=dev: call(dev), reference=ref,
-                               truth=truth, repeats=3)
+                               truth=truth, repeats=repeats_for(dev, quick))
             out_rows.append(row)
             if dev == "cpu":
                 ref = out
@@ -77,7 +77,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
             return np.stack([r[0], r[1]])
 
         row, _ = measure(stage, name, "numpy max/min", maxmin, reference=ref, truth=truth,
-                         repeats=3, peer="numpy",
+                         repeats=repeats_for("cpu", quick), peer="numpy",
                          note="textbook max/min (Fig. 8.43): no library peer exists")
         out_rows.append(row)
     return out_rows

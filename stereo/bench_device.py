@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lumigraph.capture.bench_device import DeviceRow, measure, skipped
+from lumigraph.capture.bench_device import DeviceRow, measure
 
 
 def _pair(quick: bool):
@@ -72,7 +72,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The block-matching and flow-warp rows (module docstring)."""
     import cv2
 
-    from lumigraph.calib.bench_device import single_thread
+    from lumigraph.calib.bench_device import not_run, repeats_for, single_thread
     from lumigraph.stereo.block_matching import match
     from lumigraph.stereo.hirschmuller2008 import match as sgm_match
     from lumigraph.stereo.pyramid import warp
@@ -93,12 +93,12 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
 
         ref = None
         for dev in ("cpu", "torch-cpu", "cuda"):
-            if dev not in devices:
-                why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
-                out_rows.append(skipped(stage, name, dev, why))
+            skip = not_run(stage, name, dev, devices, quick)
+            if skip is not None:
+                out_rows.append(skip)
                 continue
             row, out = measure(stage, name, dev, lambda dev=dev: ours(dev), reference=ref,
-                               truth=lambda o: _bad2(o, gt, mask), repeats=3,
+                               truth=lambda o: _bad2(o, gt, mask), repeats=repeats_for(dev, quick),
                                note="unknown stored as -1 in the difference")
             out_rows.append(row)
             if dev == "cpu":
@@ -112,7 +112,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
                 return np.where(d >= 0, d, -1.0)
 
             row, _ = measure(stage, name, label, peer, reference=ref,
-                             truth=lambda o: _bad2(o, gt, mask), repeats=3, peer="opencv",
+                             truth=lambda o: _bad2(o, gt, mask), repeats=repeats_for("cpu", quick), peer="opencv",
                              note="another method: its difference is not rounding")
             out_rows.append(row)
 
@@ -125,12 +125,12 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
 
         ref = None
         for dev in ("cpu", "torch-cpu", "cuda"):
-            if dev not in devices:
-                why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
-                out_rows.append(skipped(stage, name, dev, why))
+            skip = not_run(stage, name, dev, devices, quick)
+            if skip is not None:
+                out_rows.append(skip)
                 continue
             row, out = measure(stage, name, dev, lambda dev=dev: ours_sgm(dev), reference=ref,
-                               truth=lambda o: _bad2(o, gt, mask), repeats=3,
+                               truth=lambda o: _bad2(o, gt, mask), repeats=repeats_for(dev, quick),
                                note="aggregation on the device; census, costs, checks on the CPU")
             out_rows.append(row)
             if dev == "cpu":
@@ -141,7 +141,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
             return np.where(d >= 0, d, -1.0)
 
         row, _ = measure(stage, name, "opencv StereoSGBM", sgbm_peer, reference=ref,
-                         truth=lambda o: _bad2(o, gt, mask), repeats=3, peer="opencv",
+                         truth=lambda o: _bad2(o, gt, mask), repeats=repeats_for("cpu", quick), peer="opencv",
                          note="another SGM: its difference is not rounding")
         out_rows.append(row)
 
@@ -165,12 +165,12 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
 
         ref = None
         for dev in ("cpu", "torch-cpu", "cuda"):
-            if dev not in devices:
-                why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
-                out_rows.append(skipped(stage, name, dev, why))
+            skip = not_run(stage, name, dev, devices, quick)
+            if skip is not None:
+                out_rows.append(skip)
                 continue
             row, out = measure(stage, name, dev, lambda dev=dev: warp(img, flow, device=dev),
-                               reference=ref, truth=rms, repeats=3)
+                               reference=ref, truth=rms, repeats=repeats_for(dev, quick))
             out_rows.append(row)
             if dev == "cpu":
                 ref = out
@@ -182,7 +182,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
                                    mode="nearest")
 
         row, _ = measure(stage, name, "scipy map_coordinates", scipy_peer, reference=ref,
-                         truth=rms, repeats=3, peer="scipy",
+                         truth=rms, repeats=repeats_for("cpu", quick), peer="scipy",
                          note="cubic B-spline (prefiltered), another kernel")
         out_rows.append(row)
     return out_rows
