@@ -3,7 +3,7 @@
 Case (synthetic, built here; nothing was tuned on it): a shifted-checkerboard
 set, 2 × 2 shifts and their complements (8 captures), square 8 px, α = ½, black
 level b = 0.05, of a scene with known direct and global images (uniform
-random per pixel; RGB), with Gaussian noise σ = 0.01; 2048x1536 (quick:
+random per pixel; RGB), with Gaussian noise σ = 0.01; 1024x768 (quick:
 320x240). Error vs truth: RMS of the direct image against the true one (the
 same figure on every row). Rows: ``cpu`` (ours, numpy, the noise-robust
 ``pairs`` estimator given the noise σ), ``torch-cpu``, ``cuda``, and the
@@ -22,7 +22,7 @@ from lumigraph.capture.bench_device import DeviceRow, measure
 def _case(quick: bool):
     from lumigraph.capture.patterns import checker_set
 
-    w, h = (320, 240) if quick else (2048, 1536)
+    w, h = (320, 240) if quick else (1024, 768)
     rng = np.random.default_rng(30)
     d = rng.uniform(0.1, 0.8, (h, w, 3)).astype(np.float32)
     g = rng.uniform(0.05, 0.4, (h, w, 3)).astype(np.float32)
