@@ -34,6 +34,7 @@ from lumigraph.capture.commandline import (
     subparsers,
     warn,
 )
+from lumigraph.capture.device import add_device_option, resolve_device
 from lumigraph.capture.errors import InputError
 
 MODEL_CHOICES = ("auto", *MODELS)  # the models calibrate() accepts
@@ -200,6 +201,7 @@ def _undistort(args) -> int:
                                 f"{paths[names.index(name)]}; rename one")
     # none of the folder's files may replace a photograph (--out = the input folder)
     check_planned([out / n for n in (*names, "camera.json", "undistorted.json")])
+    device = resolve_device(args.device)  # before any image is read: a missing GPU is exit 2
     images = _read_all(paths, args, "images")
     for p, im in zip(paths, images, strict=True):
         if im.shape[1::-1] != tuple(cam.image_size):
@@ -214,9 +216,9 @@ def _undistort(args) -> int:
             from lumigraph.capture.io import png_significant_bits
             bd = png_significant_bits(p) if p.suffix.lower() == ".png" else 16
         with atomic_path(out / name) as tmp:
-            write_image(tmp, u.apply(im), bit_depth=bd)
+            write_image(tmp, u.apply(im, device=device), bit_depth=bd)
     meta = make_meta("lumigraph.camera", inputs=[Path(args.camera), *paths],
-                     params={"keep_all": args.keep_all})
+                     params={"keep_all": args.keep_all, "device": device.name})
     u.camera.save(out / "camera.json", meta=meta)
     write_json(out / "undistorted.json", {"schema": "lumigraph.undistorted", "schema_version": 1,
                                           "images": names, "camera": "camera.json"})
@@ -277,6 +279,7 @@ def _rectify(args) -> int:
     if Path(args.left).resolve() == Path(args.right).resolve():
         raise InputError(args.right, "is also the left image; give the right camera's image")
     check_planned([out / n for n in RECTIFY_FILES])
+    device = resolve_device(args.device)  # before any file is read: a missing GPU is exit 2
     rig = Rig.load(args.rig)
     left, right = read_image(args.left), read_image(args.right)
     for p, im, cam in ((args.left, left, rig.left), (args.right, right, rig.right)):
@@ -289,7 +292,7 @@ def _rectify(args) -> int:
         raise
     except ValueError as e:  # the rig itself cannot be rectified
         raise InputError(args.rig, str(e)) from None
-    lr, rr = rect.apply(left, right)
+    lr, rr = rect.apply(left, right, device=device)
     lx, ly, rx, ry = rect.maps()
     out.mkdir(parents=True, exist_ok=True)
     import numpy as np
@@ -301,7 +304,7 @@ def _rectify(args) -> int:
         with atomic_path(out / name) as tmp:
             np.save(tmp, m, allow_pickle=False)
     meta = make_meta("lumigraph.rectification", inputs=[Path(args.rig), Path(args.left), Path(args.right)],
-                     params={"alpha": args.alpha},
+                     params={"alpha": args.alpha, "device": device.name},
                      quality={"focal_px": rect.focal_px, "baseline": rect.baseline})
     rect.save(out / "rectification.json", meta=meta)
     say(args, f"{out}: rectified left.png/right.png, maps_*.npy ((H, W, 2) float32 source x, y), "
@@ -332,6 +335,7 @@ def build_parser(prog: str = "lumigraph calib"):
     u.add_argument("--keep-all", action="store_true", help="keep every source pixel (black corners) "
                                                             "instead of cropping to valid pixels")
     u.add_argument("--out", required=True, type=output_dir, help="output folder (undistorted PNGs + camera.json)")
+    add_device_option(u)
     u.set_defaults(func=_undistort)
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",
@@ -356,6 +360,7 @@ def build_parser(prog: str = "lumigraph calib"):
                    help="0 crops to valid pixels (default), 1 keeps all")
     r.add_argument("--out", required=True, type=output_dir, help="output folder: left.png, right.png, maps_left/right.npy, "
                                                 "rectification.json")
+    add_device_option(r)
     r.set_defaults(func=_rectify)
     return p
 

@@ -151,7 +151,12 @@ class Rectification:
         """
         return self._maps
 
-    def apply(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    @cached_property
+    def _device_maps(self) -> dict:
+        return {}  # torch device -> the four map tensors, built on first use
+
+    def apply(self, left: np.ndarray, right: np.ndarray, *,
+              device="cpu") -> tuple[np.ndarray, np.ndarray]:
         """Rectify an image pair (bilinear; pixels from outside the source are 0).
 
         Parameters
@@ -160,6 +165,12 @@ class Rectification:
             Images of the rig's image size, any dtype ``cv2.remap`` accepts
             (uint8, uint16, float32, ...).
 
+        device : str
+            ``"cpu"`` remaps with OpenCV; ``"cuda"``/``"torch-cpu"`` build the
+            same maps and resample on torch (:mod:`lumigraph.calib.undistort_torch`),
+            equal within float32 rounding (integer images: within one code,
+            at halves only). :meth:`maps` stays OpenCV's.
+
         Returns
         -------
         left_rect, right_rect : ndarray
@@ -167,14 +178,30 @@ class Rectification:
         """
         import cv2
 
-        lx, ly, rx, ry = self._maps
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.calib import undistort_torch
+
+            dmaps = self._device_maps.get(dev.torch)
+            if dmaps is None:
+                dmaps = self._device_maps[dev.torch] = tuple(
+                    undistort_torch.maps_tensor(cam, R, P, self.image_size, dev)
+                    for cam, R, P in ((self.rig.left, self.R1, self.P1),
+                                      (self.rig.right, self.R2, self.P2)))
+        lx, ly, rx, ry = (None,) * 4 if dev.uses_torch else self._maps
         out = []
-        for name, img, cam, mx, my in (("left", left, self.rig.left, lx, ly),
-                                       ("right", right, self.rig.right, rx, ry)):
+        for k, (name, img, cam, mx, my) in enumerate((("left", left, self.rig.left, lx, ly),
+                                                      ("right", right, self.rig.right, rx, ry))):
             a = np.asarray(img)
             if a.ndim not in (2, 3) or a.shape[1::-1] != tuple(cam.image_size):
                 raise ValueError(f"{name}: expected an image of size {cam.image_size} (w, h), "
                                  f"got array shape {a.shape}")
+            if dev.uses_torch:
+                r = undistort_torch.resample(a, dmaps[k], dev)
+                out.append(r[:, :, None] if a.ndim == 3 and r.ndim == 2 else r)
+                continue
             r = cv2.remap(np.ascontiguousarray(a), mx, my, cv2.INTER_LINEAR,
                           borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             if a.ndim == 3 and r.ndim == 2:

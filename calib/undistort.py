@@ -55,13 +55,34 @@ class Undistortion:
         """``(map_x, map_y)``, each ``(H, W)`` float32: the source pixel per output pixel."""
         return self._maps
 
-    def apply(self, image: np.ndarray) -> np.ndarray:
-        """Undistort an image of the source camera's size; same dtype and channels."""
+    @cached_property
+    def _device_maps(self) -> dict:
+        return {}  # torch device -> (map_x, map_y) tensors, built on first use
+
+    def apply(self, image: np.ndarray, *, device="cpu") -> np.ndarray:
+        """Undistort an image of the source camera's size; same dtype and channels.
+
+        ``device`` (:mod:`lumigraph.capture.device`): ``"cpu"`` remaps with
+        OpenCV; ``"cuda"``/``"torch-cpu"`` build the same maps and resample on
+        torch (:mod:`lumigraph.calib.undistort_torch`), equal within float32
+        rounding (integer images: within one code, at halves only)."""
         import cv2
 
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
         a = np.asarray(image)
         if a.ndim not in (2, 3) or a.shape[1::-1] != tuple(self.source.image_size):
             raise ValueError(f"image: expected size {self.source.image_size} (w, h), got shape {a.shape}")
+        if dev.uses_torch:
+            from lumigraph.calib import undistort_torch
+
+            maps = self._device_maps.get(dev.torch)
+            if maps is None:
+                maps = self._device_maps[dev.torch] = undistort_torch.maps_tensor(
+                    self.source, np.eye(3), self.camera.K, self.camera.image_size, dev)
+            out = undistort_torch.resample(a, maps, dev)
+            return out[:, :, None] if a.ndim == 3 and out.ndim == 2 else out
         mx, my = self._maps
         out = cv2.remap(np.ascontiguousarray(a), mx, my, cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)

@@ -23,6 +23,7 @@ from lumigraph.capture.commandline import (
     say,
     warn,
 )
+from lumigraph.capture.device import add_device_option, resolve_device
 from lumigraph.capture.errors import InputError
 
 EPILOG = """\
@@ -133,6 +134,7 @@ def _separate(args) -> int:
     out = Path(args.out)
     # 'separate D --out D' would put them beside the captures: refused now, not after the work
     check_planned([out / n for f in FILES for n in (f, f + ".meta.json")])
+    device = resolve_device(args.device)  # before any capture is read: a missing GPU is exit 2
     response = None
     if args.response:
         from lumigraph.hdr.response import ResponseCurve
@@ -155,7 +157,7 @@ def _separate(args) -> int:
     sep = separate(images, method=args.method, alpha=alpha, b=args.b, black=bw.get("black"),
                    white=bw.get("white"), complement_of=complement_of, estimator=args.estimator,
                    noise_sigma=args.noise, quant_step=quant, saturation=sat, tile=args.tile,
-                   names=stack.paths)
+                   names=stack.paths, device=device)
     t2 = time.perf_counter()
     meta = make_meta("lumigraph.separation", inputs=files,
                      params={"method": args.method, "alpha": alpha, "b_given": args.b,
@@ -163,7 +165,7 @@ def _separate(args) -> int:
                              "response": args.response or (response and response.method),
                              "video": stack.info.get("video"),
                              "noise": args.noise, "saturation": sat, "tile": args.tile,
-                             "images": len(images)},
+                             "images": len(images), "device": device.name},
                      timings_s={"load": t1 - t0, "separate": t2 - t1})
     sep.save(out, meta=meta)
     for w in sep.warnings:
@@ -281,6 +283,11 @@ def build_parser(prog: str = "lumigraph separate"):
                    help="video input: keep every n-th frame")
     p.add_argument("--out", required=True, type=output_dir,
                    help="output folder (direct.exr, global.exr, mask.png)")
+    add_device_option(p)
+    for a in p._actions:
+        if a.dest == "device":
+            a.help += (". Ported here: the per-pixel estimators of every method; the "
+                       "pairing, the noise model and the masks run on the CPU")
     p.set_defaults(func=_separate, arg_flags={"noise_sigma": "--noise"})
     return p
 

@@ -70,7 +70,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
              b: float | None = None, black: np.ndarray | None = None,
              white: np.ndarray | None = None, complement_of=None, estimator: str = "pairs",
              noise_sigma: float = 0.0, quant_step: float = 0.0, saturation: float | None = None,
-             tile: int = 16, names=None) -> Separation:
+             tile: int = 16, names=None, device="cpu") -> Separation:
     """Separate linear captures into direct and global light.
 
     Parameters
@@ -107,6 +107,11 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         pairs.
     names : sequence of str, optional
         Image names for error messages.
+    device : {"cpu", "cuda", "torch-cpu", "auto"}
+        Where the per-pixel estimator runs (:mod:`lumigraph.capture.device`):
+        ``"cpu"`` numpy; the others :mod:`lumigraph.separation.nayar2006_torch`
+        (every method), equal to numpy's result within float32 rounding.
+        Pairing, the noise model and the masks run on numpy either way.
 
     Raises
     ------
@@ -119,6 +124,9 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         Too few or too many images for the method, or a measured black
         level outside [0, 1).
     """
+    from lumigraph.capture.device import resolve_device
+
+    dev = resolve_device(device)
     fn = METHODS.resolve(method)
     a = nayar2006.validate_stack(images, need=MIN_IMAGES[method], method=method)
     if method in EXACT_IMAGES and len(a) != EXACT_IMAGES[method]:
@@ -164,6 +172,13 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
         comp = list(complement_of) if complement_of is not None else [-1] * n
         s0, s1 = nayar2006.noise_from_pairs(a, comp)
         var0, var1 = var0 + s0, s1
+    if dev.uses_torch:
+        from functools import partial
+
+        from lumigraph.separation import nayar2006_torch
+
+        fn = partial(nayar2006_torch.METHODS[method], device=dev)
+        params["device"] = dev.name
     mean_image = a.mean(axis=0)
     sigma_mean = np.sqrt(var0 + var1 * np.clip(mean_image, 0, None)).astype(np.float32)
     if method == "checker":

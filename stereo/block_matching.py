@@ -835,7 +835,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
           texture_snr: float = 1.0, uniqueness: float = 0.02, lr_tolerance: int = 3,
           distinct: float = 0.0, subpixel: bool = True, channels: str = "luma",
           prefilter: str = "none", prefilter_cap: float = 31.0, threads: int | None = None,
-          engine: str = "auto") -> DisparityMap:
+          engine: str = "auto", device="cpu") -> DisparityMap:
     """Dense disparity of a rectified pair by SSD block matching (eq. 5.1).
 
     Parameters
@@ -891,6 +891,14 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         inputs always take the numpy path. ``info["engine"]`` says which ran
         and ``info["timings_s"]`` the time per phase (prepare: luma, noise,
         texture; scan; decide: what is left after the scan).
+    device : {"cpu", "cuda", "torch-cpu", "auto"}
+        Where the scan (cost volume, box aggregation, best and runner-up
+        per pixel) runs (:mod:`lumigraph.capture.device`): ``"cpu"`` as
+        ``engine`` says; the others :mod:`lumigraph.stereo.block_matching_torch`
+        (``info["engine"]`` then names the device). 8-bit pairs give
+        identical results; float pairs agree to float32 rounding of the
+        window sums (a cost unit, so a near-tie may fall the other way).
+        The decision stays on numpy.
 
     Returns
     -------
@@ -904,6 +912,9 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
         before the images are at hand).
     """
     t0 = time.perf_counter()
+    from lumigraph.capture.device import resolve_device
+
+    dev = resolve_device(device)
     # validate, and the images as compared (planes) and as tested for texture (luma)
     _check_options(left, right, channels=channels, prefilter=prefilter, prefilter_cap=prefilter_cap)
     _check_lr_tolerance(lr_tolerance)
@@ -922,7 +933,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
                    code=code)
     Lp, Rp = _padded(L, R, D)
     n_threads = threads or min(4, os.cpu_count() or 1)
-    kernel = _kernel() if costs.integer and engine != "numpy" else None
+    kernel = _kernel() if costs.integer and engine != "numpy" and not dev.uses_torch else None
     t1 = time.perf_counter()
     # scan every disparity, then decide: sub-pixel, uniqueness, left-right, texture
     decide = dict(subpixel=subpixel, lr_tolerance=lr_tolerance, uniqueness=uniqueness,
@@ -932,7 +943,12 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
                                             windows=windows, n_threads=n_threads, decide=decide)
         t2 = time.perf_counter()
     else:
-        scan = _scan_numpy_bands(Lp, Rp, D=D, costs=costs, n_threads=n_threads)
+        if dev.uses_torch:
+            from lumigraph.stereo import block_matching_torch
+
+            scan = block_matching_torch.scan(Lp, Rp, D=D, costs=costs, device=dev)
+        else:
+            scan = _scan_numpy_bands(Lp, Rp, D=D, costs=costs, n_threads=n_threads)
         t2 = time.perf_counter()
         disp, cost, counts = _decide(*scan, var=var, pick=pick, windows=windows, costs=costs,
                                      D=D, **decide)
@@ -940,7 +956,8 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     win = np.asarray((*windows, 0), np.uint8)[pick]
     timings = {"prepare": t1 - t0, "scan": t2 - t1, "decide": time.perf_counter() - t2}
     info = _info(disp, pick, counts, windows, noise=noise, nch=nch,
-                 engine="numpy" if kernel is None else "c", timings=timings, max_disp=max_disp,
+                 engine=dev.name if dev.uses_torch else "numpy" if kernel is None else "c",
+                 timings=timings, max_disp=max_disp,
                  window=window, texture_snr=texture_snr, uniqueness=uniqueness, distinct=distinct,
                  lr_tolerance=lr_tolerance, subpixel=subpixel, prefilter=prefilter,
                  prefilter_cap=prefilter_cap)

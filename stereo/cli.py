@@ -44,6 +44,7 @@ from lumigraph.capture.commandline import (
     subparsers,
     warn,
 )
+from lumigraph.capture.device import add_device_option, resolve_device
 from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.stereo.block_matching import WINDOW_RANGE
 from lumigraph.stereo.debevec1996 import WINDOW_RANGE as MODEL_WINDOW_RANGE
@@ -156,6 +157,13 @@ def _distinct_files(left, right) -> None:
 
 
 # ------------------------------------------------------------------ verbs
+def _device_help(parser, what: str) -> None:
+    """Append what the command ports to the shared --device help."""
+    for a in parser._actions:
+        if a.dest == "device":
+            a.help = f"{a.help}. {what}"
+
+
 def _match(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.stereo.block_matching import (
@@ -170,6 +178,7 @@ def _match(args) -> int:
 
     out = check_output_path(args.out, suffixes=(".pfm",))
     _distinct_files(args.left, args.right)
+    device = resolve_device(args.device)  # before any image is read: a missing GPU is exit 2
     left, right = _read(args.left), _read(args.right)
     rectifying = bool(args.rig or args.rectification)
     if left.shape[:2] != right.shape[:2] and not rectifying:  # with a rig, it says who is off
@@ -195,6 +204,7 @@ def _match(args) -> int:
     params = {"method": args.method, "max_disp": args.max_disp, "uniqueness": uniqueness,
               "lr_tolerance": lr_tolerance}
     params["texture_snr"] = args.texture_snr
+    params["device"] = device.name
     params.update({"cost": args.cost} if sgm else
                   {"window": window, "channels": args.channels, "prefilter": args.prefilter})
     model: dict = {}
@@ -202,7 +212,7 @@ def _match(args) -> int:
     if rectifying:
         rect, src = _rectification(args, ((args.left, left), (args.right, right)))
         inputs.append(src)
-        left, right = rect.apply(left, right)
+        left, right = rect.apply(left, right, device=device)
         model["rectification"] = {"R1": rect.R1, "P1": rect.P1, "P2": rect.P2, "Q": rect.Q,
                                   "focal_px": rect.focal_px, "baseline": rect.baseline}
         say(args, f"rectified with {src} (f = {rect.focal_px:.1f} px, B = {rect.baseline:.4g})")
@@ -213,12 +223,12 @@ def _match(args) -> int:
             warn(f"only {off['matches']} feature matches: could not confirm the pair is rectified")
     if sgm:
         res = sgm_match(left, right, max_disp=args.max_disp, cost=args.cost, uniqueness=uniqueness,
-                        lr_tolerance=lr_tolerance, texture_snr=args.texture_snr)
+                        lr_tolerance=lr_tolerance, texture_snr=args.texture_snr, device=device)
         model["sgm"] = res.info
     else:
         res = match(left, right, max_disp=args.max_disp, window=window, texture_snr=args.texture_snr,
                     uniqueness=uniqueness, lr_tolerance=lr_tolerance, channels=args.channels,
-                    prefilter=args.prefilter)
+                    prefilter=args.prefilter, device=device)
         model["block_matching"] = res.info
     warnings = list(res.info.get("warnings", []))
     for w in warnings:
@@ -630,6 +640,10 @@ def build_parser(prog: str = "lumigraph stereo"):
                    help="local-mean: match each image minus its 9x9 mean, clipped (StereoBM's "
                         "normalised response); cancels a gain/offset between the views")
     v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
+    add_device_option(v)
+    _device_help(v, "Ported here: sgm's aggregation along the paths (its census, costs and "
+                    "checks stay on the CPU), ssd's cost volume and aggregation, and the "
+                    "rectification with --rig/--rectification")
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",

@@ -403,7 +403,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
           speckle_size: int = DEFAULTS["speckle_size"],
           speckle_range: float = DEFAULTS["speckle_range"],
           texture_snr: float = DEFAULTS["texture_snr"], lr_check: str = DEFAULTS["lr_check"],
-          subpixel: bool = True, engine: str = "auto") -> DisparityMap:
+          subpixel: bool = True, engine: str = "auto", device="cpu") -> DisparityMap:
     """Dense disparity of a rectified pair by semi-global matching.
 
     Parameters
@@ -446,6 +446,12 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     engine : {"auto", "numpy"}
         ``"auto"``: the compiled kernel when it was built; ``"numpy"`` forces
         the numpy twin (identical results).
+    device : {"cpu", "cuda", "torch-cpu", "auto"}
+        Where the aggregation along the paths (eqs. 13–14) runs
+        (:mod:`lumigraph.capture.device`): ``"cpu"`` as ``engine`` says; the
+        others :mod:`lumigraph.stereo.hirschmuller2008_torch` (the same
+        integers). The census, the costs, the winners and the checks stay on
+        the CPU.
 
     Returns
     -------
@@ -463,7 +469,10 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     """
     import cv2
 
+    from lumigraph.capture.device import resolve_device
+
     t0 = time.perf_counter()
+    dev = resolve_device(device)
     _check(left, right, max_disp=max_disp, cost=cost, cost_window=cost_window, p1=p1, p2=p2,
            edge=edge, paths=paths, uniqueness=uniqueness, lr_tolerance=lr_tolerance,
            speckle_size=speckle_size, speckle_range=speckle_range, engine=engine)
@@ -483,7 +492,13 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     else:
         C = _ssd_cost(Lf.astype(np.float64), Rf.astype(np.float64), D, cost_window, invalid)
     t1 = time.perf_counter()
-    S = aggregate(C, gl, p1=p1 * n, p2=p2 * n, edge=edge, paths=paths, kernel=kernel)
+    if dev.uses_torch:
+        from lumigraph.stereo import hirschmuller2008_torch
+
+        S = hirschmuller2008_torch.aggregate(C, gl, p1=p1 * n, p2=p2 * n, edge=edge, paths=paths,
+                                             device=dev)
+    else:
+        S = aggregate(C, gl, p1=p1 * n, p2=p2 * n, edge=edge, paths=paths, kernel=kernel)
     t2 = time.perf_counter()
     win = winners(S, right=lr_check == "paper" and lr_tolerance >= 0, kernel=kernel)
     # how well the winners match on their own (pixels that see the whole range)
@@ -521,6 +536,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
             "rejected_fraction": {k: v / npx for k, v in counts.items()},
             "valid_fraction": float(np.isfinite(disp).mean()),
             "engine": "c" if kernel is not None else "numpy",
+            "aggregation_device": dev.name,
             "timings_s": {"cost": t1 - t0, "aggregate": t2 - t1, "winners": t3 - t2,
                           "decide": t4 - t3},
             "warnings": []}

@@ -126,11 +126,22 @@ def grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def warp(image: np.ndarray, flow: np.ndarray, *, border: str = "replicate",
-         cubic: bool = True) -> np.ndarray:
+         cubic: bool = True, device="cpu") -> np.ndarray:
     """Sample ``image`` at ``x + flow(x)`` (bicubic, or bilinear with
     ``cubic=False``): with forward flow 0 -> 1,
-    ``warp(moving, flow)`` is the moving image pulled back onto the reference."""
+    ``warp(moving, flow)`` is the moving image pulled back onto the reference.
+    ``device`` other than ``"cpu"`` runs :func:`lumigraph.stereo.warp_torch.warp`
+    (the same result within float32 rounding)."""
     import cv2
+
+    if device != "cpu":
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.stereo import warp_torch
+
+            return warp_torch.warp(image, flow, border=border, cubic=cubic, device=dev)
 
     mode = {"replicate": cv2.BORDER_REPLICATE, "constant": cv2.BORDER_CONSTANT}[border]
     # Bicubic: bilinear interpolation smooths by a sub-pixel-phase dependent
@@ -142,7 +153,8 @@ def warp(image: np.ndarray, flow: np.ndarray, *, border: str = "replicate",
                      borderValue=np.nan)
 
 
-def forward_backward(forward: np.ndarray, backward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def forward_backward(forward: np.ndarray, backward: np.ndarray, *,
+                     device="cpu") -> tuple[np.ndarray, np.ndarray]:
     """Forward-backward consistency: the round trip ``x -> x + f(x) -> + b(.)``
     should come back to ``x``.
 
@@ -154,7 +166,18 @@ def forward_backward(forward: np.ndarray, backward: np.ndarray) -> tuple[np.ndar
     -------
     inconsistent : ndarray, bool, ``(H, W)``
     round_trip_px : ndarray, float32, ``(H, W)``
+
+    ``device`` other than ``"cpu"`` runs
+    :func:`lumigraph.stereo.warp_torch.forward_backward`.
     """
+    if device != "cpu":
+        from lumigraph.capture.device import resolve_device
+
+        dev = resolve_device(device)
+        if dev.uses_torch:
+            from lumigraph.stereo import warp_torch
+
+            return warp_torch.forward_backward(forward, backward, device=dev)
     h, w = forward.shape[:2]
     bw = warp(backward, forward, border="constant", cubic=False)
     X, Y = grid((h, w))
