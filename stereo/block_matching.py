@@ -268,6 +268,7 @@ class _Costs:
     integer: bool
     rshift: int = 0
     scale: tuple | None = None
+    sqmax: int = 0  # integer: the largest per-pixel squared difference (summed over planes)
 
 
 def _costs(windows, pick, *, D, integer, span, nch=1, code=4):
@@ -289,10 +290,11 @@ def _costs(windows, pick, *, D, integer, span, nch=1, code=4):
     if len(wins) == 1:
         n = wins[0] ** 2
         shift = min(30 - nb - math.ceil(math.log2(n * sqmax + 1)), 0)
-        return _Costs(wins, cwin, nb, code ** 2 * n * 2.0 ** shift, True, rshift=-shift)
+        return _Costs(wins, cwin, nb, code ** 2 * n * 2.0 ** shift, True, rshift=-shift,
+                      sqmax=sqmax)
     shift = 30 - nb - math.ceil(math.log2(sqmax + 1))
     return _Costs(wins, cwin, nb, code ** 2 * 2.0 ** shift, True,
-                  scale=tuple(2.0 ** shift / win ** 2 for win in wins))
+                  scale=tuple(2.0 ** shift / win ** 2 for win in wins), sqmax=sqmax)
 
 
 def _scan_numpy(left, right_padded, y0, y1, *, D, costs, scratch):
@@ -333,7 +335,27 @@ def _scan_numpy(left, right_padded, y0, y1, *, D, costs, scratch):
             for c in range(1, nch):
                 cv2.add(sq, cv2.multiply(diff[c], diff[c]), dst=sq)
 
+    # A window sum of squares can pass 2^31 (a 63 px window of colour codes):
+    # OpenCV's int32 box filter would wrap, so wide windows sum in float64,
+    # exact below 2^53, and are shifted or scaled from there as the C kernel
+    # does from its int64 sums.
+    wide = integer and max(wins) ** 2 * costs.sqmax >= 2 ** 31
+
     def cost_into(v, diff):
+        if wide:
+            squares(diff)
+            sq64 = sq.astype(np.float64)
+            if len(wins) == 1:
+                s64 = cv2.boxFilter(sq64, -1, (wins[0], wins[0]), normalize=False,
+                                    borderType=reflect)
+                v[...] = np.right_shift(s64.astype(np.int64), costs.rshift)
+                return
+            for k, win in enumerate(wins):
+                mk = cv2.boxFilter(sq64, -1, (win, win), normalize=False, borderType=reflect)
+                mk = (mk * costs.scale[k]).astype(np.int32)  # truncation, as the C kernel
+                cv2.copyTo(mk, masks[k], merged)
+            v[...] = merged
+            return
         if integer:
             squares(diff)
             if len(wins) == 1:

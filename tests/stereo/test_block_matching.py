@@ -236,3 +236,23 @@ def test_colour_matches_hues_of_equal_luma():
         d = match(L, R, max_disp=15, window=9, channels=channels).disparity[:, 20:]
         ok[channels] = np.mean(np.abs(d - shift) <= 0.5)
     assert ok["color"] > 0.95 > 0.5 > ok["luma"], ok
+
+
+@pytest.mark.parametrize("channels", ["luma", "color"])
+def test_wide_window_sums_do_not_wrap(channels):
+    # 8 px blocks of 0 or 255: a 63 px window's sum of squared differences
+    # reaches 63² · 3 · 1020² ≈ 1.2e10 at a wrong disparity, far past int32; the
+    # numpy path must give the C kernel's int64 answer, not wrapped costs
+    import lumigraph.stereo.block_matching as bm
+
+    assert bm._kernel() is not None
+    rng = np.random.default_rng(3)
+    left = np.kron(rng.random((20, 30, 3)) < 0.5, np.ones((8, 8, 1))).astype(np.uint8) * 255
+    right = np.roll(left, -7, axis=1)  # disparity 7 except where the roll wraps
+    a = match(left, right, max_disp=24, window=63, channels=channels)
+    b = match(left, right, max_disp=24, window=63, channels=channels, engine="numpy")
+    assert (a.info["engine"], b.info["engine"]) == ("c", "numpy")
+    assert _same(a, b)
+    d = a.disparity[:, 7 + 32: 240 - 7 - 32]  # windows clear of the wrapped columns
+    ok = np.isfinite(d)
+    assert ok.mean() > 0.5 and np.all(np.abs(d[ok] - 7) < 0.5)
