@@ -558,8 +558,8 @@ class PngRowWriter:
 
 
 class TiffRowWriter:
-    """A striped TIFF (uncompressed), one strip per :meth:`write`: grey, RGB
-    or RGBA of any dtype tifffile writes. Every band but the last must have
+    """A striped TIFF (uncompressed), one strip per :meth:`write`: grey or RGB
+    of any dtype tifffile writes. Every band but the last must have
     the same height (``rows``), the strips' height."""
 
     def __init__(self, path, width: int, height: int, channels: int, dtype, rows: int):
@@ -567,6 +567,8 @@ class TiffRowWriter:
 
         import tifffile
 
+        if channels not in (1, 3):
+            raise ValueError(f"channels: TIFF rows are grey or RGB, got {channels}")
         self.shape = (height, width, channels) if channels > 1 else (height, width)
         self._q: list = []
         self._cv = threading.Condition()
@@ -587,8 +589,7 @@ class TiffRowWriter:
             try:
                 tifffile.imwrite(str(path), strips(), shape=self.shape, dtype=np.dtype(dtype),
                                  rowsperstrip=rows,
-                                 photometric="rgb" if channels in (3, 4) else "minisblack",
-                                 extrasamples=("unassalpha",) if channels == 4 else None)
+                                 photometric="rgb" if channels == 3 else "minisblack")
             except BaseException as e:  # re-raised in the caller's thread
                 self._error = e
 

@@ -457,15 +457,84 @@ def _tonemap(args) -> int:
 
     out = Path(args.out)
     check_key(args.key)  # before the radiance is read
+    plan = _tonemap_plan(args)
+    if plan.rows is not None:
+        return _tonemap_by_rows(args, plan)
     img = read_hdr_image(args.input)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
     args.arg_flags = {"radiance": args.input}  # the library checks it; name the file it came from
     ldr = TONEMAP_METHODS.resolve(args.method)(img, key=args.key, bit_depth=args.bit_depth)
     meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
-                     params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth})
+                     params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth},
+                     extra={"tiles": plan.as_meta(img.shape[0])})
     write_artifact(out, lambda p: write_image(p, ldr), meta=meta)
     say(args, f"wrote {out}")
+    return 0
+
+
+def _tonemap_plan(args):
+    """Whole or by bands: only OpenEXR radiance is read by rows."""
+    from lumigraph.capture.io import EXR_EXTS
+    from lumigraph.capture.tiles import ExrRows, TilePlan, plan_rows
+    from lumigraph.hdr.reinhard2002 import local_halo
+    from lumigraph.hdr.tiled import tonemap_bytes_per_pixel
+
+    halo = local_halo() if args.method == "reinhard-local" else 0
+    if args.tile == "off":
+        return TilePlan(None, halo, "--tile off: the whole image at once")
+    if Path(args.input).suffix.lower() not in EXR_EXTS:
+        if args.tile is None:
+            return TilePlan(None, halo, "whole: only OpenEXR radiance is read by rows")
+        from lumigraph.hdr.formats import read_hdr_image
+
+        h, w = read_hdr_image(args.input).shape[:2]  # read whole (the meta says so)
+        c = 3
+    else:
+        src = ExrRows(args.input)
+        (h, w, c), _ = src.shape, src.close()
+    per, band = tonemap_bytes_per_pixel(args.method, c, args.bit_depth)
+    return plan_rows(args.tile, args.memory, width=w, height=h, bytes_per_pixel=per,
+                     band_bytes_per_pixel=band, halo=halo)
+
+
+def _tonemap_by_rows(args, plan) -> int:
+    """``hdr tonemap`` by bands: statistics first, then band by band to a PNG
+    or TIFF written by rows (the same pixels as whole)."""
+    from contextlib import ExitStack
+
+    from lumigraph.capture.artifact import atomic_path, make_meta
+    from lumigraph.capture.io import EXR_EXTS
+    from lumigraph.capture.tiles import ArrayRows, ExrRows, finish_artifact, row_writer
+    from lumigraph.hdr.tiled import tonemap_rows
+
+    out = Path(args.out)
+    if Path(args.input).suffix.lower() in EXR_EXTS:
+        src = ExrRows(args.input)
+    else:
+        from lumigraph.hdr.formats import read_hdr_image
+
+        src = ArrayRows(read_hdr_image(args.input), args.input)
+    args.arg_flags = {"radiance": args.input}  # the library checks it; name the file it came from
+    t0 = time.perf_counter()
+    with ExitStack() as cleanup:
+        cleanup.callback(src.close)
+        h, w, _ = src.shape
+        dtype = "uint8" if args.bit_depth == 8 else "uint16"
+        with atomic_path(out) as tmp:
+            writer = row_writer(tmp, w, h, 3, dtype, rows=plan.rows)
+            cleanup.callback(writer.close)
+            r = tonemap_rows(src, rows=plan.rows, write=writer.write, method=args.method,
+                             key=args.key, bit_depth=args.bit_depth)
+            writer.close()
+            meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
+                             params={"method": args.method, "key": args.key,
+                                     "bit_depth": args.bit_depth},
+                             quality=r.stats, timings_s={"tonemap": time.perf_counter() - t0},
+                             extra={"tiles": {**plan.as_meta(h),
+                                              "read_whole": [src.path] if src.whole else []}})
+            finish_artifact(out, tmp, meta)
+    say(args, f"wrote {out} ({r.bands} bands of {plan.rows} rows)")
     return 0
 
 
@@ -673,6 +742,7 @@ def build_parser(prog: str = "lumigraph hdr"):
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
     v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"),
                    help="image.png")
+    add_tile_options(v, "the radiance map")
     v.set_defaults(func=_tonemap)
     v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
     v.add_argument("frames", nargs="+", type=input_path,
