@@ -522,7 +522,8 @@ class PngRowWriter:
     order: the same pixels :func:`capture.io.write_image` writes, in a file
     of any height without the image in memory."""
 
-    def __init__(self, path, width: int, height: int, channels: int, dtype):
+    def __init__(self, path, width: int, height: int, channels: int, dtype, *,
+                 bit_depth: int | None = None):
         self.dtype = np.dtype(dtype)
         if self.dtype not in (np.uint8, np.uint16) or channels not in (1, 3, 4):
             raise ValueError(f"PNG rows: expected uint8/uint16 grey, RGB or RGBA, got "
@@ -532,6 +533,8 @@ class PngRowWriter:
         self._fh.write(b"\x89PNG\r\n\x1a\n")
         self._chunk(b"IHDR", np.array([width, height], ">u4").tobytes()
                     + bytes([8 * self.dtype.itemsize, colour, 0, 0, 0]))
+        if bit_depth is not None and bit_depth != 8 * self.dtype.itemsize:
+            self._chunk(b"sBIT", bytes([bit_depth] * channels))  # as write_image records it
         self._z = zlib.compressobj(6)
         self._pending = b""
 
