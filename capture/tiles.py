@@ -194,6 +194,7 @@ class RowSource:
     dtype: np.dtype
     path: str
     whole: bool = False
+    orientation: int = 1  # the EXIF Orientation applied when read (1: as stored)
 
     def read(self, y0: int, y1: int) -> np.ndarray:  # pragma: no cover - interface
         raise NotImplementedError
@@ -342,7 +343,11 @@ def open_rows(path) -> RowSource:
         if src.orientation == 1:
             return src
         src.close()
-    return ArrayRows(read_image(p), str(p), whole=True)
+    src = ArrayRows(read_image(p), str(p), whole=True)
+    from lumigraph.capture.io import image_orientation
+
+    src.orientation = image_orientation(p)
+    return src
 
 
 def is_tiff(path) -> bool:

@@ -166,14 +166,16 @@ BUDGET_BYTES = 1e9
 WHOLE_UP_TO_MP = 16  # the untiled peer runs up to here (64 MP whole needs ~2.3 GB)
 
 
-def tile_rows(*, quick: bool = False, sizes_mp=SIZES_MP, budget: str = BUDGET,
-              workdir=None) -> tuple[list[Row], list[Check]]:
+def tile_rows(quick: bool = False, *, sizes_mp=SIZES_MP, budget: str = BUDGET,
+              workdir=None, issue_check: bool = True) -> tuple[list[Row], list[Check]]:
     """Peak memory of ``hdr merge`` by bands (``--tile auto --memory 1GB``)
-    against image size, beside the untiled merge (``--tile off``) where it fits.
+    against image size, beside the untiled merge (``--tile off``) where it fits;
+    and (not ``quick``, ``issue_check``) :func:`merge_100mp_check`.
 
     ``quick``: 1 and 4 MP only. Rows: one per size and mode (``value``: MP;
     ``error``: peak GB). Check: every tiled peak within the budget, and the
-    tiled radiance byte-identical to the untiled one where both ran."""
+    tiled radiance byte-identical to the untiled one where both ran. A row
+    provider of ``lumigraph bench scale`` (called with ``quick``)."""
     import tempfile
 
     from lumigraph.hdr.response import ResponseCurve
@@ -224,4 +226,7 @@ def tile_rows(*, quick: bool = False, sizes_mp=SIZES_MP, budget: str = BUDGET,
               Check("[reported] tiled radiance byte-identical to the untiled merge",
                     float(sum(same)), float(len(same)), all(same) and bool(same),
                     f"{sum(same)}/{len(same)} sizes identical")]
+    if issue_check and not quick:
+        more_rows, more_checks = merge_100mp_check(workdir=workdir)
+        rows, checks = [*rows, *more_rows], [*checks, *more_checks]
     return rows, checks

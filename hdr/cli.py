@@ -395,7 +395,8 @@ def _merge_by_rows(args, plan, curve, given, noise) -> int:
                                      "noise": noise if args.weights == "variance" else None,
                                      "bit_depth": stack.bit_depth,
                                      "bit_depth_source": stack.bit_depth_source,
-                                     "exif_orientation": [1] * len(stack.paths)},
+                                     "exif_orientation": [s.orientation
+                                                          for s in stack.sources]},
                              quality=r.stats,
                              timings_s={"first_pass": t1 - t0, "merge": dt},
                              warnings=(*order_warnings, *r.warnings),
