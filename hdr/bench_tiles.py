@@ -47,7 +47,7 @@ def radiance_rows(y0: int, y1: int, width: int, *, seed: int = 0) -> np.ndarray:
     x = np.arange(width, dtype=np.float32)[None, :]
     f = (2 * np.pi) / 997.0
     ln = 3.5 * np.sin(x * f * (1 + 0.1 * seed)) * np.cos(y * f * 0.7) \
-        + 1.5 * np.sin((x + 3 * y) * f * 11) - 0.3
+        + 1.5 * np.sin((x + 3 * y) * f * 11) + 0.5
     base = np.exp(ln)
     return np.stack([base * k for k in (1.0, 0.8, 0.6)], axis=-1).astype(np.float32)
 
