@@ -178,7 +178,8 @@ def plan_rows(tile, memory: int | None, *, width: int, height: int, bytes_per_pi
         need = BASELINE_BYTES + (bytes_per_pixel * (1 + 2 * halo) + band_bytes_per_pixel) * width
         raise InputError("memory", f"{budget / 1e9:.2f} GB cannot hold one band of this "
                                    f"{width}-pixel-wide image (needs {need / 1e9:.2f} GB); raise it")
-    rows = min(rows, height)
+    if rows >= height:
+        return TilePlan(height, halo, f"{why}: {height} rows per band (one band)")
     # round down to a multiple of 16 (OpenEXR's ZIP block), where that leaves any
     if rows >= 32:
         rows -= rows % 16
