@@ -386,7 +386,7 @@ def build_parser(prog: str = "lumigraph calib"):
     u.add_argument("--keep-all", action="store_true", help="keep every source pixel (black corners) "
                                                             "instead of cropping to valid pixels")
     u.add_argument("--out", required=True, type=output_dir, help="output folder (undistorted PNGs + camera.json)")
-    add_tile_options(u, "each image")
+    add_tile_options(u, "each image", "PNG")
     u.set_defaults(func=_undistort)
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",

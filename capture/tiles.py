@@ -518,9 +518,15 @@ class ExrRowWriter:
         self.rows_left -= a.shape[0]
 
     def close(self) -> None:
+        """Finish the file; one cut short (an error upstream) is closed
+        without raising, its temporary discarded by the caller."""
         if self._f is not None:
             f, self._f = self._f, None
-            f.close()
+            try:
+                f.close()
+            except Exception:
+                if self.rows_left == 0:
+                    raise
 
 
 class PngRowWriter:
@@ -579,6 +585,7 @@ class TiffRowWriter:
         if channels not in (1, 3):
             raise ValueError(f"channels: TIFF rows are grey or RGB, got {channels}")
         self.shape = (height, width, channels) if channels > 1 else (height, width)
+        self.rows_left = height
         self._q: list = []
         self._cv = threading.Condition()
         self._error: BaseException | None = None
@@ -612,6 +619,7 @@ class TiffRowWriter:
         with self._cv:
             self._cv.wait_for(lambda: len(self._q) < 1 or self._error is not None)
             self._q.append(np.ascontiguousarray(a))
+            self.rows_left -= a.shape[0]
             self._cv.notify_all()
         if self._error is not None:
             raise self._error
@@ -623,7 +631,8 @@ class TiffRowWriter:
         self._t.join()
         if self._error is not None:
             e, self._error = self._error, None
-            raise e
+            if self.rows_left == 0:  # a file cut short (an error upstream) is discarded quietly
+                raise e
 
 
 def row_writer(path, width: int, height: int, channels: int, dtype, *, rows: int):
@@ -681,8 +690,9 @@ def stack_geometry(inputs) -> tuple[int, int, int, int, int] | None:
         s.close()
 
 
-def add_tile_options(parser, what: str) -> None:
-    """``--tile`` and ``--memory`` on a verb that can work by bands of rows."""
+def add_tile_options(parser, what: str, writes: str) -> None:
+    """``--tile`` and ``--memory`` on a verb that can work by bands of rows
+    (``what`` it reads, the formats it ``writes`` by rows)."""
     from lumigraph.capture.commandline import number
 
     parser.add_argument(
@@ -693,7 +703,7 @@ def add_tile_options(parser, what: str) -> None:
              "not the image; the result is the same as whole. auto: the tallest band within "
              "--memory; off: whole. Default: whole when it fits --memory, else auto (the meta's "
              "'tiles' says which). Read by rows: TIFF and OpenEXR (other formats are read "
-             "whole); written by rows: OpenEXR, PNG, TIFF")
+             f"whole); written by rows: {writes}")
     parser.add_argument(
         "--memory", type=parse_memory, default=None, metavar="SIZE",
         help=f"memory budget for --tile auto and the default, e.g. 1GB, 512MB, 2GiB (default "

@@ -717,7 +717,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                    help="sensor noise for the variance weights: electrons at saturation and read "
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
     _bit_depth_option(v, "images")
-    add_tile_options(v, "the bracket")
+    add_tile_options(v, "the bracket", "the radiance as OpenEXR (.exr only) and its mask PNG")
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
                    derived_outputs=lambda a: [("--out", _mask_path(a.out))])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
@@ -743,7 +743,7 @@ def build_parser(prog: str = "lumigraph hdr"):
     v.add_argument("--bit-depth", type=int, choices=(8, 16), default=8)
     v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"),
                    help="image.png")
-    add_tile_options(v, "the radiance map")
+    add_tile_options(v, "the radiance map", "PNG and TIFF")
     v.set_defaults(func=_tonemap)
     v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
     v.add_argument("frames", nargs="+", type=input_path,

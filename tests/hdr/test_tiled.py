@@ -166,3 +166,16 @@ def test_cli_merge_and_tonemap_by_rows_match_whole(tmp_path):
                   "--out", tmp_path / "x.hdr", "--tile", "9")
     assert_clean_error(r, "x.hdr", ".exr")
     assert not (tmp_path / "x.hdr").exists()
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif"])
+def test_cli_tonemap_by_rows_refuses_nan_found_mid_image(tmp_path, suffix):
+    # the bad value sits in a band read after the first outputs were written: still
+    # one line, exit 2, and no output left behind
+    x = np.ones((150, 20, 3), np.float32)
+    x[120, 3] = np.nan
+    write_exr(tmp_path / "x.exr", x)
+    out = tmp_path / f"t{suffix}"
+    r = lumigraph("hdr", "tonemap", tmp_path / "x.exr", "--out", out, "--tile", "9")
+    assert_clean_error(r, "x.exr", "NaN")
+    assert not out.exists() and not list(tmp_path.glob(".t*"))
