@@ -36,6 +36,7 @@ from lumigraph.capture.commandline import (
 )
 from lumigraph.capture.device import add_device_option, resolve_device
 from lumigraph.capture.errors import InputError
+from lumigraph.capture.tiles import add_tile_options
 
 MODEL_CHOICES = ("auto", *MODELS)  # the models calibrate() accepts
 
@@ -202,14 +203,19 @@ def _undistort(args) -> int:
     # none of the folder's files may replace a photograph (--out = the input folder)
     check_planned([out / n for n in (*names, "camera.json", "undistorted.json")])
     device = resolve_device(args.device)  # before any image is read: a missing GPU is exit 2
-    images = _read_all(paths, args, "images")
-    for p, im in zip(paths, images, strict=True):
+    u = undistorter(cam, keep_all=args.keep_all)
+    plan = _undistort_plan(args, u)
+    whole = [] if plan.rows is not None else paths  # by rows: _undistort_by_rows reads them
+    images = _read_all(whole, args, "images")
+    for p, im in zip(whole, images, strict=True):
         if im.shape[1::-1] != tuple(cam.image_size):
             raise InputError(p, f"is {im.shape[1]}x{im.shape[0]} but {args.camera} was calibrated for "
                                 f"{cam.image_size[0]}x{cam.image_size[1]}; use that camera's images")
-    u = undistorter(cam, keep_all=args.keep_all)
     out.mkdir(parents=True, exist_ok=True)
-    for p, im, name in progress(list(zip(paths, images, names, strict=True)), total=len(paths),
+    if plan.rows is not None:
+        _undistort_by_rows(args, u, paths, names, out, plan)
+    for p, im, name in progress(list(zip(whole, images, names[:len(whole)], strict=True)),
+                                total=len(whole),
                                 description="undistorting", quiet=args.quiet):
         bd = None
         if im.dtype.kind == "u" and im.dtype.itemsize == 2:
@@ -218,12 +224,60 @@ def _undistort(args) -> int:
         with atomic_path(out / name) as tmp:
             write_image(tmp, u.apply(im, device=device), bit_depth=bd)
     meta = make_meta("lumigraph.camera", inputs=[Path(args.camera), *paths],
-                     params={"keep_all": args.keep_all, "device": device.name})
+                     params={"keep_all": args.keep_all, "device": device.name},
+                     extra={"tiles": plan.as_meta(cam.image_size[1])})
     u.camera.save(out / "camera.json", meta=meta)
     write_json(out / "undistorted.json", {"schema": "lumigraph.undistorted", "schema_version": 1,
                                           "images": names, "camera": "camera.json"})
     say(args, f"{out}: {len(names)} undistorted image(s) and camera.json (no distortion)")
     return 0
+
+
+def _undistort_plan(args, u):
+    """Whole or by bands (``--tile``, ``--memory``): the working set per pixel
+    is the source rows, the float64 map of the band and its output; the halo
+    is how far the lens moves a row (the map's largest vertical shift)."""
+    import numpy as np
+
+    from lumigraph.capture.tiles import plan_rows
+
+    w, h = u.camera.image_size
+    # the largest vertical shift, on every 64th row (it varies smoothly): memory only
+    shift = max(float(np.nanmax(np.abs(u.map_rows(y, y + 1)[1] - y), initial=0.0))
+                for y in sorted({*range(0, h, max(1, h // 64)), h - 1}))
+    return plan_rows(args.tile, args.memory, width=w, height=h, bytes_per_pixel=96 + 2 * 8,
+                     halo=int(np.ceil(shift)) + 2)
+
+
+def _undistort_by_rows(args, u, paths, names, out, plan) -> None:
+    """Each image read (TIFF, OpenEXR) and written (PNG) by bands of rows: the
+    pixels :meth:`Undistortion.apply` gives whole."""
+    from lumigraph.capture.artifact import atomic_path
+    from lumigraph.capture.io import png_significant_bits
+    from lumigraph.capture.tiles import PngRowWriter, bands, open_rows
+
+    w, h = u.camera.image_size
+    for p, name in progress(list(zip(paths, names, strict=True)), total=len(paths),
+                            description="undistorting", quiet=args.quiet):
+        src = open_rows(p)
+        try:
+            if src.shape[1::-1] != (w, h):
+                raise InputError(p, f"is {src.shape[1]}x{src.shape[0]} but {args.camera} was "
+                                    f"calibrated for {w}x{h}; use that camera's images")
+            if src.dtype.kind != "u":
+                raise InputError(p, "undistort by rows writes PNG codes: give 8/16-bit images")
+            bd = None
+            if src.dtype.itemsize == 2:
+                bd = png_significant_bits(p) if p.suffix.lower() == ".png" else 16
+            with atomic_path(out / name) as tmp:
+                wr = PngRowWriter(tmp, w, h, src.shape[2], src.dtype, bit_depth=bd)
+                try:
+                    for b in bands(h, plan.rows):
+                        wr.write(u.apply_rows(src.read, b.y0, b.y1))
+                finally:
+                    wr.close()
+        finally:
+            src.close()
 
 
 def _stereo(args) -> int:
@@ -336,6 +390,7 @@ def build_parser(prog: str = "lumigraph calib"):
                                                             "instead of cropping to valid pixels")
     u.add_argument("--out", required=True, type=output_dir, help="output folder (undistorted PNGs + camera.json)")
     add_device_option(u)
+    add_tile_options(u, "each image", "PNG")
     u.set_defaults(func=_undistort)
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",

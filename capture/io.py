@@ -1115,6 +1115,34 @@ def _stack_files(inputs: Sequence[str | os.PathLike]) -> tuple[list[Path], dict,
     return inputs, {}, None
 
 
+def _stack_times(files: Sequence[Path], info: dict, sj: Path | None, *,
+                 times: Sequence[float] | None, need_times: bool) -> tuple[float, ...] | None:
+    """The exposure times of a stack's files: given, stack.json's, or EXIF
+    (:func:`read_stack`'s rule; the tiled reader uses it too)."""
+    if times is not None:
+        t = tuple(float(x) for x in check_exposure_times(times, len(files), where="times"))
+    elif "exposure_times_s" in info:
+        t = tuple(float(x) for x in check_exposure_times(info["exposure_times_s"], len(files),
+                                                         where=sj))
+    else:
+        found = []
+        for f in files:
+            et = read_exif(f).exposure_time_s if f.suffix.lower() in {".jpg", ".jpeg", ".tif",
+                                                                      ".tiff"} | RAW_EXTS else None
+            if et is None and need_times:
+                raise InputError(f, "no EXIF exposure time; give --times T1,T2,... "
+                                    "or a folder with stack.json")
+            found.append(et)
+        t = tuple(found) if all(x is not None for x in found) else None
+        if t is not None:  # EXIF: an implausible time names its file
+            for f, x in zip(files, t, strict=True):
+                check_exposure_times([x], 1, where=f)
+    if t is not None and times is None and "f_numbers" in info:
+        effective_exposure_times(t, info["f_numbers"], f_number_ref=info.get("f_number_ref"),
+                                 where=sj)
+    return t
+
+
 def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | None = None,
                need_times: bool = False, bit_depth: int | None = None) -> Stack:
     """Read an image stack from a list of files or a folder holding ``stack.json``.
@@ -1167,27 +1195,7 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
                              declared_where=sj, significant=bit_depths)
     if depth.shift:
         imgs = [im >> depth.shift for im in imgs]
-    if times is not None:
-        t = tuple(float(x) for x in check_exposure_times(times, len(files), where="times"))
-    elif "exposure_times_s" in info:
-        t = tuple(float(x) for x in check_exposure_times(info["exposure_times_s"], len(files),
-                                                         where=sj))
-    else:
-        found = []
-        for f in files:
-            et = read_exif(f).exposure_time_s if f.suffix.lower() in {".jpg", ".jpeg", ".tif",
-                                                                      ".tiff"} | RAW_EXTS else None
-            if et is None and need_times:
-                raise InputError(f, "no EXIF exposure time; give --times T1,T2,... "
-                                    "or a folder with stack.json")
-            found.append(et)
-        t = tuple(found) if all(x is not None for x in found) else None
-        if t is not None:  # EXIF: an implausible time names its file
-            for f, x in zip(files, t, strict=True):
-                check_exposure_times([x], 1, where=f)
-    if t is not None and times is None and "f_numbers" in info:
-        effective_exposure_times(t, info["f_numbers"], f_number_ref=info.get("f_number_ref"),
-                                 where=sj)
+    t = _stack_times(files, info, sj, times=times, need_times=need_times)
     return Stack(np.stack(imgs), tuple(str(f) for f in files), depth.bits, t,
                  bool(info.get("linear", linear)), info, times_given=times is not None,
                  bit_depth_source=depth.source,

@@ -208,14 +208,15 @@ def plot_curve(curve, path) -> None:
 
 
 
-def _check_curve(curve, stack, path, what):
+def _check_curve(curve, stack, path, what, *, channels=None):
     """The response must be for the stack's bit depth and channels."""
+    channels = stack.images.shape[-1] if channels is None else channels
     if stack.bit_depth is not None and stack.bit_depth != curve.bit_depth:
         raise InputError(path, f"curve is {curve.bit_depth}-bit but the {what} are "
                                f"{stack.bit_depth}-bit; recover a curve at this depth")
-    if curve.channels not in (1, stack.images.shape[-1]):
+    if curve.channels not in (1, channels):
         raise InputError(path, f"curve has {curve.channels} channels, the {what} "
-                               f"{stack.images.shape[-1]}")
+                               f"{channels}")
 
 def _noise_pair(text: str) -> list[float]:
     """``--noise FULL_WELL_E,READ_NOISE_E``: two numbers, each within
@@ -270,6 +271,9 @@ def _merge(args) -> int:
     dev = resolve_device(args.device)  # before the bracket is read
     given, noise = _noise(args)
     curve = ResponseCurve.load(args.response)
+    plan = _merge_plan(args)
+    if plan.rows is not None:
+        return _merge_by_rows(args, plan, curve, given, noise)
     stack, times = _load(args)
     _check_curve(curve, stack, args.response, "images")
     t0 = time.perf_counter()
@@ -288,9 +292,7 @@ def _merge(args) -> int:
                              "exif_orientation": list(stack.orientations)},
                      quality=m.stats, timings_s={"merge": dt},
                      warnings=(*args.order_warnings, *m.warnings),
-                     extra={"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
-                            "mask": "flags PNG beside the output: 1 clipped everywhere (lower "
-                                    "bound), 2 black everywhere (upper bound), 4 ghost"})
+                     extra={**MERGE_META, "tiles": plan.as_meta(stack.images.shape[1])})
     mask_path = _mask_path(out)
     flags = np.bitwise_or.reduce(m.flags, axis=2).astype(np.uint8)
     write_artifact(mask_path, lambda p: write_image(p, flags),
@@ -302,6 +304,111 @@ def _merge(args) -> int:
 
         write_artifact(out, lambda p: write_hdr_image(p, m.radiance), meta=meta)
     say(args, f"wrote {out} and {mask_path.name} ({dt:.2f} s)")
+    return 0
+
+
+MERGE_META = {"units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
+              "mask": "flags PNG beside the output: 1 clipped everywhere (lower bound), 2 black "
+                      "everywhere (upper bound), 4 ghost"}
+
+
+def _merge_plan(args):
+    """Whole or by bands (``--tile``, ``--memory``; :func:`capture.tiles.plan_rows`)."""
+    import numpy as np
+
+    from lumigraph.capture.tiles import TilePlan, plan_rows, stack_geometry
+    from lumigraph.hdr.tiled import merge_bytes_per_pixel
+
+    if args.tile == "off":
+        return TilePlan(None, 0, "--tile off: the whole image at once")
+    geo = stack_geometry(args.images)
+    if geo is None:
+        if args.tile is None:
+            return TilePlan(None, 0, "whole: the images are not in a format read by rows "
+                                     "(TIFF, OpenEXR)")
+        from lumigraph.capture.io import _stack_files
+        from lumigraph.capture.tiles import open_rows
+
+        files = _stack_files(args.images)[0]
+        s = open_rows(files[0])  # read whole (the meta says so); only its size is used here
+        geo = (len(files), *s.shape, np.dtype(s.dtype).itemsize)
+    p, h, w, c, isz = geo
+    per, band = merge_bytes_per_pixel(p, c, isz)
+    return plan_rows(args.tile, args.memory, width=w, height=h, bytes_per_pixel=per,
+                     band_bytes_per_pixel=band)
+
+
+def _merge_by_rows(args, plan, curve, given, noise) -> int:
+    """``hdr merge`` by bands of rows: the radiance as scanline OpenEXR and the
+    mask PNG written band by band (the same bytes, resp. pixels, as whole)."""
+    from contextlib import ExitStack
+
+    import numpy as np
+
+    from lumigraph.capture.artifact import atomic_path, make_meta
+    from lumigraph.capture.exposure import check_brightness_order
+    from lumigraph.capture.tiles import (
+        ExrRowWriter,
+        PngRowWriter,
+        finish_artifact,
+        read_stack_rows,
+    )
+    from lumigraph.hdr.tiled import merge_rows
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".exr":
+        raise InputError(out, f"by bands ({plan.reason}) the radiance is written by rows as "
+                              "OpenEXR: name it .exr (or give --tile off to merge it whole)")
+    t0 = time.perf_counter()
+    stack = read_stack_rows(args.images, times=_times(args), need_times=True,
+                            bit_depth=args.bit_depth, rows=plan.rows)
+    with ExitStack() as cleanup:
+        cleanup.callback(stack.close)
+        if stack.dtype.kind == "f":
+            raise InputError(stack.paths[0], "float images are already linear; merge needs code "
+                                             "values (integer PNG/TIFF/JPEG/RAW)")
+        times = stack.effective_exposure_times_s
+        order_warnings = check_brightness_order(
+            stack.sample, times, stack.paths, force=args.force,
+            max_pixels=stack.sample.shape[1] * stack.sample.shape[2])
+        for w in order_warnings:
+            warn(w)
+        _check_curve(curve, stack, args.response, "images", channels=stack.shape[2])
+        h, w, c = stack.shape
+        mask_path = _mask_path(out)
+        t1 = time.perf_counter()
+        with atomic_path(out) as tmp, atomic_path(mask_path) as tmp_mask:
+            rad = ExrRowWriter(tmp, w, h, c)
+            cleanup.callback(rad.close)
+            flags = PngRowWriter(tmp_mask, w, h, 1, np.uint8)
+            cleanup.callback(flags.close)
+            r = merge_rows(stack, times, curve, rows=plan.rows, write_radiance=rad.write,
+                           write_flags=flags.write, weights=args.weights, deghost=args.deghost,
+                           **given)
+            rad.close()
+            flags.close()
+            dt = time.perf_counter() - t1
+            for msg in r.warnings:
+                warn(msg)
+            finish_artifact(mask_path, tmp_mask,
+                            make_meta("lumigraph.radiance_mask", inputs=stack.paths))
+            tiles = {**plan.as_meta(h),
+                     "read_whole": [s.path for s in stack.sources if s.whole]}
+            meta = make_meta("lumigraph.radiance", inputs=[*stack.paths, args.response],
+                             params={"weights": args.weights, "deghost": args.deghost,
+                                     "times_s": times, "response_method": curve.method,
+                                     "noise": noise if args.weights == "variance" else None,
+                                     "bit_depth": stack.bit_depth,
+                                     "bit_depth_source": stack.bit_depth_source,
+                                     "exif_orientation": [s.orientation
+                                                          for s in stack.sources]},
+                             quality=r.stats,
+                             timings_s={"first_pass": t1 - t0, "merge": dt},
+                             warnings=(*order_warnings, *r.warnings),
+                             extra={**MERGE_META, "tiles": tiles})
+            finish_artifact(out, tmp, meta)
+    say(args, f"wrote {out} and {mask_path.name} ({dt:.2f} s, {r.bands} bands of {plan.rows} "
+              "rows)")
     return 0
 
 
@@ -358,6 +465,9 @@ def _tonemap(args) -> int:
     out = Path(args.out)
     check_key(args.key)  # before the radiance is read
     dev = resolve_device(args.device)
+    plan = _tonemap_plan(args)
+    if plan.rows is not None:
+        return _tonemap_by_rows(args, plan)
     img = read_hdr_image(args.input)
     if img.ndim == 3 and img.shape[2] == 4:
         img = img[..., :3]
@@ -366,9 +476,75 @@ def _tonemap(args) -> int:
                                                device=dev)
     meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
                      params={"method": args.method, "key": args.key, "bit_depth": args.bit_depth,
-                             "device": dev.name})
+                             "device": dev.name},
+                     extra={"tiles": plan.as_meta(img.shape[0])})
     write_artifact(out, lambda p: write_image(p, ldr), meta=meta)
     say(args, f"wrote {out}")
+    return 0
+
+
+def _tonemap_plan(args):
+    """Whole or by bands: only OpenEXR radiance is read by rows."""
+    from lumigraph.capture.io import EXR_EXTS
+    from lumigraph.capture.tiles import ExrRows, TilePlan, plan_rows
+    from lumigraph.hdr.reinhard2002 import local_halo
+    from lumigraph.hdr.tiled import tonemap_bytes_per_pixel
+
+    halo = local_halo() if args.method == "reinhard-local" else 0
+    if args.tile == "off":
+        return TilePlan(None, halo, "--tile off: the whole image at once")
+    if Path(args.input).suffix.lower() not in EXR_EXTS:
+        if args.tile is None:
+            return TilePlan(None, halo, "whole: only OpenEXR radiance is read by rows")
+        from lumigraph.hdr.formats import read_hdr_image
+
+        h, w = read_hdr_image(args.input).shape[:2]  # read whole (the meta says so)
+        c = 3
+    else:
+        src = ExrRows(args.input)
+        (h, w, c), _ = src.shape, src.close()
+    per, band = tonemap_bytes_per_pixel(args.method, c, args.bit_depth)
+    return plan_rows(args.tile, args.memory, width=w, height=h, bytes_per_pixel=per,
+                     band_bytes_per_pixel=band, halo=halo)
+
+
+def _tonemap_by_rows(args, plan) -> int:
+    """``hdr tonemap`` by bands: statistics first, then band by band to a PNG
+    or TIFF written by rows (the same pixels as whole)."""
+    from contextlib import ExitStack
+
+    from lumigraph.capture.artifact import atomic_path, make_meta
+    from lumigraph.capture.io import EXR_EXTS
+    from lumigraph.capture.tiles import ArrayRows, ExrRows, finish_artifact, row_writer
+    from lumigraph.hdr.tiled import tonemap_rows
+
+    out = Path(args.out)
+    if Path(args.input).suffix.lower() in EXR_EXTS:
+        src = ExrRows(args.input)
+    else:
+        from lumigraph.hdr.formats import read_hdr_image
+
+        src = ArrayRows(read_hdr_image(args.input), args.input)
+    args.arg_flags = {"radiance": args.input}  # the library checks it; name the file it came from
+    t0 = time.perf_counter()
+    with ExitStack() as cleanup:
+        cleanup.callback(src.close)
+        h, w, _ = src.shape
+        dtype = "uint8" if args.bit_depth == 8 else "uint16"
+        with atomic_path(out) as tmp:
+            writer = row_writer(tmp, w, h, 3, dtype, rows=plan.rows)
+            cleanup.callback(writer.close)
+            r = tonemap_rows(src, rows=plan.rows, write=writer.write, method=args.method,
+                             key=args.key, bit_depth=args.bit_depth)
+            writer.close()
+            meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
+                             params={"method": args.method, "key": args.key,
+                                     "bit_depth": args.bit_depth},
+                             quality=r.stats, timings_s={"tonemap": time.perf_counter() - t0},
+                             extra={"tiles": {**plan.as_meta(h),
+                                              "read_whole": [src.path] if src.whole else []}})
+            finish_artifact(out, tmp, meta)
+    say(args, f"wrote {out} ({r.bands} bands of {plan.rows} rows)")
     return 0
 
 
@@ -491,6 +667,7 @@ def _bit_depth_option(v, what: str) -> None:
 
 def build_parser(prog: str = "lumigraph hdr"):
     """The ``lumigraph hdr`` parser: every verb, every option typed."""
+    from lumigraph.capture.tiles import add_tile_options
     from lumigraph.hdr.formats import HDR_EXTS
     from lumigraph.hdr.kang2003 import MIN_WINDOW
     from lumigraph.hdr.kang2003 import hdr_video as _hv
@@ -552,6 +729,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                         "noise in electrons RMS (default 10000,5; not estimated from the images)")
     _bit_depth_option(v, "images")
     add_device_option(v)
+    add_tile_options(v, "the bracket", "the radiance as OpenEXR (.exr only) and its mask PNG")
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
                    derived_outputs=lambda a: [("--out", _mask_path(a.out))])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
@@ -578,6 +756,7 @@ def build_parser(prog: str = "lumigraph hdr"):
     v.add_argument("--out", required=True, type=output_file(".png", ".tif", ".tiff"),
                    help="image.png")
     add_device_option(v)
+    add_tile_options(v, "the radiance map", "PNG and TIFF")
     v.set_defaults(func=_tonemap)
     v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
     v.add_argument("frames", nargs="+", type=input_path,

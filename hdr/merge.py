@@ -234,6 +234,12 @@ def _fill_bounds(num, empty, zb, t, x_tab, hi_code, bound_lo, fb):
     fb2[flat] = f
 
 
+def clip_codes(code_max: int, clip_margin: float) -> tuple[int, int]:
+    """The codes at and beyond which a pixel counts as black or clipped:
+    ``(⌈margin · z_max⌉, ⌊(1 − margin) · z_max⌋)``."""
+    return int(math.ceil(clip_margin * code_max)), int(math.floor((1 - clip_margin) * code_max))
+
+
 def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
           weights: str = "variance", full_well_e: float | None = None,
           read_noise_e: float | None = None,
@@ -322,8 +328,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
         xl[j] = x_tab / t[j]
         wl[j] = wj
         wxl[j] = wj * x_tab / t[j]
-    lo_code = int(math.ceil(clip_margin * zmax))
-    hi_code = int(math.floor((1 - clip_margin) * zmax))
+    lo_code, hi_code = clip_codes(zmax, clip_margin)
     j_long = int(np.argmax(t))
     bound_lo = (x_tab[:, max(lo_code, 0)] / t[j_long]).astype(np.float32)
     if deghost:
@@ -414,9 +419,25 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
     else:
         for r0 in starts:
             do_chunk(r0)
+    warnings, stats = merge_report(flag_counts(flags, deghost=deghost), reference=reference)
+    return RadianceMap(out, flags, tuple(float(x) for x in t), weights, warnings, stats)
+
+
+def flag_counts(flags: np.ndarray, *, deghost: bool) -> dict[str, int]:
+    """The counts :func:`merge_report` needs from ``(H, W, C)`` flags; counts
+    of rows add up, so a merge by bands sums them."""
+    return {"clipped_everywhere": int(np.count_nonzero(flags & CLIPPED)),
+            "black_everywhere": int(np.count_nonzero(flags & BLACK)),
+            "black_everywhere_pixels": int(np.count_nonzero((flags & BLACK).any(axis=2))),
+            "clipped_everywhere_pixels": int(np.count_nonzero((flags & CLIPPED).any(axis=2))),
+            "ghost": int(np.count_nonzero(flags & GHOST)) if deghost else 0}
+
+
+def merge_report(counts: dict[str, int], *, reference: int | None) -> tuple[tuple[str, ...], dict]:
+    """:attr:`RadianceMap.warnings` and :attr:`RadianceMap.stats` from
+    :func:`flag_counts` (of the whole image)."""
     warnings = []
-    n_clip = int(np.count_nonzero(flags & CLIPPED))
-    n_black = int(np.count_nonzero(flags & BLACK))
+    n_clip, n_black = counts["clipped_everywhere"], counts["black_everywhere"]
     if n_clip:
         warnings.append(f"{n_clip} pixel-channels are clipped in every exposure: set to the lower "
                         "bound from the shortest saturated exposure and flagged (add a shorter exposure)")
@@ -425,10 +446,10 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
                         "bound from the longest exposure, one grey per pixel, and flagged (add a "
                         "longer exposure)")
     stats = {"clipped_everywhere": n_clip, "black_everywhere": n_black,
-             "black_everywhere_pixels": int(np.count_nonzero((flags & BLACK).any(axis=2))),
-             "clipped_everywhere_pixels": int(np.count_nonzero((flags & CLIPPED).any(axis=2))),
+             "black_everywhere_pixels": counts["black_everywhere_pixels"],
+             "clipped_everywhere_pixels": counts["clipped_everywhere_pixels"],
              "fill": "one colour per pixel: min/max(bound, measured channels' mean), else one "
                      "grey within every channel's bound",
-             "ghost": int(np.count_nonzero(flags & GHOST)) if deghost else 0,
+             "ghost": counts["ghost"],
              "reference": reference}
-    return RadianceMap(out, flags, tuple(float(x) for x in t), weights, tuple(warnings), stats)
+    return tuple(warnings), stats
