@@ -1,0 +1,391 @@
+"""View-dependent texture mapping (VDTM): a model rendered from a new
+viewpoint, each surface point textured from the photographs that see it.
+
+P. E. Debevec, C. J. Taylor and J. Malik, "Modeling and Rendering
+Architecture from Photographs: A hybrid geometry- and image-based approach",
+SIGGRAPH 1996, doi:10.1145/237170.237191 (reference ch. 5, §5.3.2 "Stage 2",
+Fig. 5.11); P. E. Debevec, Y. Yu and G. Borshukov, "Efficient
+View-Dependent Image-Based Rendering with Projective Texture-Mapping",
+Eurographics Rendering Workshop 1998, doi:10.1007/978-3-7091-6453-2_10
+(the per-polygon *view map*).
+
+``method="blend"`` (1996). The new camera's z-buffer of the model gives the
+surface point ``X`` of each pixel. Photograph ``i`` (centre ``C_i``) sees
+``X`` when ``X`` projects inside its frame and all four bilinear taps of its
+depth map lie on ``X``'s surface (``|z_tap − z_i(X)| ≤ tolerance · z_i(X)``,
+so a sample never mixes an occluder's or the background's colour in). The
+colour is the weighted mean of the visible photographs' bilinear samples,
+
+    c(X) = Σ_i w_i c_i(X) / Σ_i w_i,      w_i = (θ_i + ε)^(−power)
+
+with ``θ_i`` the angle at ``X`` between the new viewing ray ``X − C`` and
+photograph ``i``'s ray ``X − C_i`` (Fig. 5.11's ``b_1, b_2``; the paper's
+weights are "inversely proportional to the angles", ``power = 1``;
+``ε = 10⁻⁹`` rad keeps the new view equal to a photograph a copy of it).
+
+``method="view-map"`` (1998). Per polygon (mesh triangle), the directions
+from its centroid to the photographs that see it are projected
+orthographically onto the polygon's plane and triangulated (Delaunay): the
+*view map*. The new view's direction is located in it; the three corners of
+its triangle, with their barycentric weights, are the polygon's photographs
+(outside the map's hull, the three nearest by angle, weighted as the blend).
+So each pixel samples at most three photographs, with weights constant over
+its polygon; the per-pixel visibility test stays (a photograph hidden at a
+pixel drops out and the others are renormalised).
+
+Pixels of the model no photograph sees are *holes*, filled from their
+neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
+Values are blended as given: linear radiance stays linear.
+
+Examples
+--------
+A plane seen by two photographs; the new view equals the first: a copy.
+
+>>> K = np.array([[20.0, 0, 7.5], [0, 20.0, 5.5], [0, 0, 1]])
+>>> quad = (np.array([[-2.0, -2, 4], [2, -2, 4], [2, 2, 4], [-2, 2, 4]]), np.array([[0, 1, 2], [0, 2, 3]]))
+>>> rng = np.random.default_rng(0)
+>>> p0 = Photograph(rng.random((12, 16, 3)), K, np.eye(3), np.zeros(3))
+>>> p1 = Photograph(rng.random((12, 16, 3)), K, np.eye(3), np.array([0.3, 0, 0]))
+>>> photos = prepare_photographs(quad, [p0, p1])
+>>> out = render_vdtm(quad, photos, K, np.eye(3), np.zeros(3), (16, 12))
+>>> bool(np.abs(out.image - p0.image).max() < 1e-6)
+True
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.raster import check_mesh, pixel_rays, rasterize
+
+METHODS = ("blend", "view-map")
+EPS_RAD = 1e-9
+
+
+@dataclass(frozen=True)
+class Photograph:
+    """One photograph of the model: its image and its camera.
+
+    ``image`` (H, W) or (H, W, C) float (code values or linear radiance, as
+    they are to be blended); ``K`` (3, 3), ``R, t`` cam_from_world
+    (``x_cam = R x_world + t``); ``depth`` (H, W) its z-buffer of the model
+    (``inf`` off the model), filled by :func:`prepare_photographs`.
+    """
+
+    image: np.ndarray
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    depth: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Camera centre in the world, ``−Rᵀ t``."""
+        return -np.asarray(self.R, np.float64).T @ np.asarray(self.t, np.float64)
+
+
+@dataclass(frozen=True)
+class VDTMImage:
+    """A VDTM rendering.
+
+    Attributes
+    ----------
+    image : ndarray, (H, W, C) float32
+        The rendered view; ``background`` off the model.
+    model : ndarray, (H, W) bool
+        Pixels on the model.
+    filled : ndarray, (H, W) bool
+        Model pixels no photograph saw, filled from their neighbours.
+    info : dict
+        ``method``, ``photographs_per_pixel`` (mean number blended),
+        ``hole_fraction``, ``timings_s``.
+    """
+
+    image: np.ndarray
+    model: np.ndarray
+    filled: np.ndarray
+    info: dict
+
+
+def _mesh(mesh):
+    if hasattr(mesh, "vertices"):
+        return check_mesh(mesh.vertices, mesh.faces, where="mesh")
+    vertices, faces = mesh
+    return check_mesh(vertices, faces, where="mesh")
+
+
+def prepare_photographs(mesh, photographs) -> tuple[Photograph, ...]:
+    """The photographs with their depth maps of ``mesh`` (the visibility
+    every rendering reuses). ``InputError`` naming ``photographs`` when
+    there are none or an image is not 2-D/3-D."""
+    v, f = _mesh(mesh)
+    photographs = list(photographs)
+    if not photographs:
+        raise InputError("photographs", "no photographs: VDTM needs at least one")
+    out = []
+    for i, p in enumerate(photographs):
+        img = np.asarray(p.image)
+        if img.ndim not in (2, 3):
+            raise InputError("photographs", f"photograph {i}: expected an (H, W[, C]) image, "
+                                            f"got shape {img.shape}")
+        h, w = img.shape[:2]
+        r = rasterize(v, f, p.K, p.R, p.t, (w, h))
+        out.append(replace(p, depth=r.depth))
+    return tuple(out)
+
+
+def _sample(photo, X, tolerance):
+    """Bilinear samples ``(N, C)`` of ``photo`` at the world points ``X (N, 3)``
+    and whether each is seen cleanly (all four taps on its surface)."""
+    import cv2
+
+    img = np.asarray(photo.image, np.float32)
+    if img.ndim == 2:
+        img = img[..., None]
+    h, w = img.shape[:2]
+    pc = X @ np.asarray(photo.R, np.float64).T + np.asarray(photo.t, np.float64)
+    z = pc[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = pc @ np.asarray(photo.K, np.float64).T
+        px = q[:, :2] / q[:, 2:3]
+    # inside the frame: pixel footprints reach half a pixel past the centres
+    # (taps clipped to the border there, as remap's BORDER_REPLICATE)
+    ok = ((z > 0) & (px[:, 0] >= -0.5) & (px[:, 0] <= w - 0.5)
+          & (px[:, 1] >= -0.5) & (px[:, 1] <= h - 0.5))
+    pxs = np.where(ok[:, None], px, 0.0)
+    x0 = np.clip(np.floor(pxs[:, 0]).astype(int), 0, w - 1)
+    y0 = np.clip(np.floor(pxs[:, 1]).astype(int), 0, h - 1)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    d = photo.depth
+    tol = tolerance * np.abs(z)
+    for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
+        ok &= np.abs(d[yy, xx] - z) <= tol
+    m = pxs.astype(np.float32)
+    if img.shape[2] <= 4:
+        s = cv2.remap(img, m[:, None, 0], m[:, None, 1], cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE).reshape(len(X), -1)
+    else:  # cv2.remap takes at most 4 channels
+        s = np.concatenate([cv2.remap(np.ascontiguousarray(img[..., c:c + 4]), m[:, None, 0],
+                                      m[:, None, 1], cv2.INTER_LINEAR,
+                                      borderMode=cv2.BORDER_REPLICATE).reshape(len(X), -1)
+                            for c in range(0, img.shape[2], 4)], 1)
+    return s, ok
+
+
+def _angle(a, b):
+    """Angles (rad) between rows of ``a`` and ``b`` (N, 3), accurate near 0."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+
+
+def _blend(X, C, photos, tolerance, power, channels):
+    acc = np.zeros((len(X), channels))
+    wsum = np.zeros(len(X))
+    n = np.zeros(len(X))
+    ray = X - C
+    for p in photos:
+        s, ok = _sample(p, X, tolerance)
+        wt = np.where(ok, (_angle(ray, X - p.centre) + EPS_RAD) ** -power, 0.0)
+        acc += wt[:, None] * s
+        wsum += wt
+        n += ok
+    return acc, wsum, n
+
+
+def view_maps(mesh, photos, C, *, tolerance=0.01, power=1.0):
+    """Per polygon (triangle), the at most three photographs and weights the
+    view map gives the view from ``C`` (Debevec, Yu & Borshukov 1998).
+
+    Returns ``(ids (M, 3) int, -1 = none; weights (M, 3) float, summing to 1
+    where any)``. A photograph enters a polygon's map when it sees the
+    polygon's centroid or one of its corners pulled 10 % towards it.
+    """
+    from scipy.spatial import Delaunay
+
+    v, f = _mesh(mesh)
+    tri = v[f]
+    cen = tri.mean(1)
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+    samples = np.concatenate([cen[:, None], 0.9 * tri + 0.1 * cen[:, None]], 1)  # (M, 4, 3)
+    M = len(f)
+    sees = np.zeros((M, len(photos)), bool)
+    for j, p in enumerate(photos):
+        _, ok = _sample(p, samples.reshape(-1, 3), tolerance)
+        sees[:, j] = ok.reshape(M, 4).any(1)
+    ids = np.full((M, 3), -1)
+    wts = np.zeros((M, 3))
+    centres = np.array([p.centre for p in photos])
+    for m in range(M):
+        js = np.flatnonzero(sees[m])
+        if not len(js):
+            continue
+        dirs = centres[js] - cen[m]
+        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+        dv = C - cen[m]
+        dv /= np.linalg.norm(dv)
+        # the plane's axes: the view map is the hemisphere seen from above
+        u = np.cross(nrm[m], [1.0, 0, 0] if abs(nrm[m][0]) < 0.9 else [0, 1.0, 0])
+        u /= np.linalg.norm(u)
+        w = np.cross(nrm[m], u)
+        pts = np.stack([dirs @ u, dirs @ w], 1)
+        q = np.array([dv @ u, dv @ w])
+        done = False
+        if len(js) >= 3:
+            try:
+                d = Delaunay(pts)
+                s = int(d.find_simplex(q))
+                if s >= 0:
+                    T = d.transform[s]
+                    b = T[:2] @ (q - T[2])
+                    bc = np.clip(np.append(b, 1 - b.sum()), 0, None)
+                    ids[m] = js[d.simplices[s]]
+                    wts[m] = bc / bc.sum()
+                    done = True
+            except Exception:  # collinear directions (QhullError): no triangle to locate in
+                done = False
+        if not done:
+            ang = np.arccos(np.clip(dirs @ dv, -1, 1))
+            order = np.argsort(ang)[:3]
+            wk = (ang[order] + EPS_RAD) ** -power
+            ids[m, :len(order)] = js[order]
+            wts[m, :len(order)] = wk / wk.sum()
+    return ids, wts
+
+
+def _view_map(X, face, ids, wts, photos, tolerance, channels):
+    acc = np.zeros((len(X), channels))
+    wsum = np.zeros(len(X))
+    n = np.zeros(len(X))
+    fi, fw = ids[face], wts[face]  # (P, 3)
+    for j, p in enumerate(photos):
+        wj = np.where(fi == j, fw, 0.0).sum(1)
+        sel = np.flatnonzero(wj > 0)
+        if not len(sel):
+            continue
+        s, ok = _sample(p, X[sel], tolerance)
+        wt = np.where(ok, wj[sel], 0.0)
+        acc[sel] += wt[:, None] * s
+        wsum[sel] += wt
+        n[sel] += ok
+    return acc, wsum, n
+
+
+def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, C) with the pixels of ``region`` that are not
+    ``known`` filled by push–pull: weighted means over a pyramid of 2×2
+    blocks, the finest level that has data used (Gortler et al., "The
+    Lumigraph", SIGGRAPH 1996). Known pixels are unchanged."""
+    img = np.where(known[..., None], image, 0.0).astype(np.float64)
+    wgt = known.astype(np.float64)
+    levels = [(img, wgt)]
+    while min(img.shape[:2]) > 1 and wgt.min() == 0:
+        h, w = img.shape[:2]
+        ph, pw = h % 2, w % 2
+        im = np.pad(img * wgt[..., None], ((0, ph), (0, pw), (0, 0)))
+        wg = np.pad(wgt, ((0, ph), (0, pw)))
+        s = im.reshape(im.shape[0] // 2, 2, im.shape[1] // 2, 2, -1).sum((1, 3))
+        ws = wg.reshape(wg.shape[0] // 2, 2, wg.shape[1] // 2, 2).sum((1, 3))
+        img = np.where(ws[..., None] > 0, s / np.maximum(ws, 1e-300)[..., None], 0.0)
+        wgt = np.minimum(ws, 1.0)
+        levels.append((img, wgt))
+    up = levels[-1][0]
+    for im, wg in reversed(levels[:-1]):
+        h, w = im.shape[:2]
+        coarse = np.repeat(np.repeat(up, 2, 0), 2, 1)[:h, :w]
+        up = wg[..., None] * im + (1 - wg[..., None]) * coarse
+    out = np.array(image, np.float64, copy=True)
+    hole = region & ~known
+    out[hole] = up[hole]
+    return out
+
+
+def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
+                tolerance: float = 0.01, power: float = 1.0, background: float = 0.0,
+                fill: bool = True) -> VDTMImage:
+    """Render ``mesh`` from the camera ``K, R, t`` (``x_cam = R x_world +
+    t``, ``size = (W, H)``) textured from ``photographs`` (see the module
+    docstring for both methods).
+
+    Parameters
+    ----------
+    mesh : ``(vertices, faces)`` or an object with ``vertices``/``faces``
+        World coordinates.
+    photographs : sequence of Photograph
+        As :func:`prepare_photographs` returns them (with depth maps; those
+        without are prepared here).
+    method : {"blend", "view-map"}
+    tolerance : float
+        Visibility: relative depth difference still "the same surface".
+    power : float
+        Weights ``θ^−power``; 1 is the paper's.
+    background : float
+        Value off the model.
+    fill : bool
+        Fill holes (model pixels no photograph sees).
+
+    Returns
+    -------
+    VDTMImage
+        Float32 image with the photographs' channels, model and hole masks.
+    """
+    if method not in METHODS:
+        raise InputError("method", f"expected one of {', '.join(METHODS)}, got {method!r}")
+    if not (np.isfinite(tolerance) and tolerance > 0):
+        raise InputError("tolerance", f"expected a positive relative depth tolerance, got {tolerance}")
+    if not (np.isfinite(power) and power > 0):
+        raise InputError("power", f"expected a positive weight exponent, got {power}")
+    v, f = _mesh(mesh)
+    photos = list(photographs)
+    if not photos:
+        raise InputError("photographs", "no photographs: VDTM needs at least one")
+    if any(p.depth is None for p in photos):
+        photos = list(prepare_photographs((v, f), photos))
+    first = np.asarray(photos[0].image)
+    channels = 1 if first.ndim == 2 else first.shape[2]
+    for i, p in enumerate(photos):
+        img = np.asarray(p.image)
+        if (1 if img.ndim == 2 else img.shape[2]) != channels:
+            raise InputError("photographs", f"photograph {i} has {1 if img.ndim == 2 else img.shape[2]} "
+                                            f"channels, photograph 0 has {channels}")
+    w, h = (int(s) for s in size)
+    R = np.asarray(R, np.float64)
+    t = np.asarray(t, np.float64).reshape(3)
+    C = -R.T @ t
+    t0 = time.perf_counter()
+    rays = pixel_rays(K, (w, h))
+    r = rasterize(v, f, K, R, t, (w, h), rays=rays)
+    t1 = time.perf_counter()
+    model = r.hit
+    idx = np.flatnonzero(model.ravel())
+    # the world point of each model pixel: its ray scaled to the depth
+    Xc = rays.reshape(-1, 3)[idx] * r.depth.ravel()[idx, None]
+    X = (Xc - t) @ R  # R^T (x_cam - t)
+    if method == "blend":
+        acc, wsum, n = _blend(X, C, photos, tolerance, power, channels)
+    else:
+        ids, wts = view_maps((v, f), photos, C, tolerance=tolerance, power=power)
+        acc, wsum, n = _view_map(X, r.face.ravel()[idx], ids, wts, photos, tolerance, channels)
+    t2 = time.perf_counter()
+    seen = wsum > 0
+    out = np.full((h * w, channels), float(background))
+    out[idx[seen]] = acc[seen] / wsum[seen, None]
+    known = np.zeros(h * w, bool)
+    known[idx[seen]] = True
+    out = out.reshape(h, w, channels)
+    known = known.reshape(h, w)
+    filled = model & ~known
+    if fill and filled.any() and known.any():
+        out = fill_holes(out, known, model)
+    elif not fill:
+        filled = np.zeros_like(model)
+    t3 = time.perf_counter()
+    info = {"method": method, "tolerance": tolerance, "power": power,
+            "photographs": len(photos),
+            "photographs_per_pixel": float(n.mean()) if len(n) else 0.0,
+            "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
+            "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
+    return VDTMImage(out.astype(np.float32), model, filled, info)
