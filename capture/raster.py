@@ -173,23 +173,29 @@ def rasterize(vertices, faces, K, R, t, size, *, dist=None, rays=None) -> Raster
     # a triangle wholly behind the camera, edge-on (its plane through the
     # centre) or off the frame is skipped
     todo = (zc > 0).any(1) & (np.abs(det) > 1e-12 * scale ** 3) & (hi >= lo).all(1)
+    dflat, fflat, bflat = depth.ravel(), face.ravel(), bary.reshape(-1, 3)
     for m in np.flatnonzero(todo):
         x0, y0 = lo[m]
         x1, y1 = hi[m]
-        r = rays[y0:y1 + 1, x0:x1 + 1]
+        bw = x1 - x0 + 1
         a, b, c = tri[m]
         # α, β, γ through the edge normals: det(r, b, c) = r · (b × c), …
         n = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], 1) / det[m]
-        abc = r @ n
-        s = abc.sum(-1)
-        inside = (abc >= 0).all(-1) & (s > 0)
-        with np.errstate(divide="ignore"):
-            z = np.where(inside, 1.0 / np.where(inside, s, 1.0), np.inf)
-        sub = depth[y0:y1 + 1, x0:x1 + 1]
-        win = z < sub
+        abc = rays[y0:y1 + 1, x0:x1 + 1].reshape(-1, 3) @ n
+        inside = np.flatnonzero((abc[:, 0] >= 0) & (abc[:, 1] >= 0) & (abc[:, 2] >= 0))
+        if not len(inside):
+            continue
+        abc = abc[inside]
+        ssum = abc[:, 0] + abc[:, 1] + abc[:, 2]
+        front = ssum > 0
+        inside, abc, ssum = inside[front], abc[front], ssum[front]
+        z = 1.0 / ssum
+        flat = (inside // bw + y0) * w + inside % bw + x0
+        win = z < dflat[flat]
         if not win.any():
             continue
-        sub[win] = z[win]
-        face[y0:y1 + 1, x0:x1 + 1][win] = m
-        bary[y0:y1 + 1, x0:x1 + 1][win] = abc[win] * z[win][:, None]
+        flat, z = flat[win], z[win]
+        dflat[flat] = z
+        fflat[flat] = m
+        bflat[flat] = abc[win] * z[:, None]
     return Raster(depth, face, bary)
