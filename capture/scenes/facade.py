@@ -509,7 +509,7 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
               for k in range(novel)}
     ss = int(supersample)
     images, arrays = [], {}
-    for i, (name, cam) in enumerate(cams.items()):
+    for i, cam in enumerate(cams.values()):
         img = _shade_view(V, F, n_model, mesh_kind, frames, cam["K"], cam["R"], cam["t"], size, ss,
                              lambertian)
         codes = img * 200.0
