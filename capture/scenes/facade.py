@@ -17,7 +17,8 @@ model-based stereo).
 
 Files: ``photo_NN.png`` (8-bit, linear codes with read noise), ``stack.json``
 (naming the photographs, ``blocks.json`` and ``edges.json``: the folder is an
-input of ``lumigraph stereo facade solve`` as it stands), ``blocks.json`` (the
+input of ``lumigraph stereo facade solve`` as it stands), ``camera.json`` (the
+photographs' shared intrinsics), ``blocks.json`` (the
 model with rough starting values: free parameters off by up to ±15 %, the
 house width fixed at its true value, the scale), ``edges.json`` (every
 visible model edge's 2-D segment per photograph, from the true model and
@@ -540,6 +541,10 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
     files = {"blocks.json": blocks_document(start),
              "edges.json": {"schema": "lumigraph.facade.edges", "schema_version": 1,
                             "noise_px": float(edge_noise), "photographs": marks}}
+    # the photographs' shared intrinsics (what 'stereo facade solve' reads), then each pose
+    shared = _camera_doc(next(iter(cams.values())))
+    del shared["cam_from_world"]
+    files["camera.json"] = shared
     for p, cam in cams.items():
         files[f"cameras/{p.rsplit('.', 1)[0]}.json"] = _camera_doc(cam)
     for p, cam in novels.items():

@@ -11,8 +11,8 @@ Eurographics Rendering Workshop 1998, doi:10.1007/978-3-7091-6453-2_10
 
 ``method="blend"`` (1996). The new camera's z-buffer of the model gives the
 surface point ``X`` of each pixel. Photograph ``i`` (centre ``C_i``) sees
-``X`` when ``X`` projects inside its frame and all four bilinear taps of its
-depth map lie on ``X``'s surface (``|z_tap − z_i(X)| ≤ tolerance · z_i(X)``,
+``X`` when ``X`` projects inside its frame and the bilinear taps (of
+non-zero weight) of its depth map lie on ``X``'s surface (``|z_tap − z_i(X)| ≤ tolerance · z_i(X)``,
 so a sample never mixes an occluder's or the background's colour in). The
 colour is the weighted mean of the visible photographs' bilinear samples,
 
@@ -31,7 +31,8 @@ its triangle, with their barycentric weights, are the polygon's photographs
 (outside the map's hull, the three nearest by angle, weighted as the blend).
 So each pixel samples at most three photographs, with weights constant over
 its polygon; the per-pixel visibility test stays (a photograph hidden at a
-pixel drops out and the others are renormalised).
+pixel drops out and the others are renormalised; a pixel none of the three
+sees is blended from every photograph, as ``"blend"``).
 
 Pixels of the model no photograph sees are *holes*, filled from their
 neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
@@ -64,6 +65,9 @@ from lumigraph.capture.raster import check_mesh, pixel_rays, rasterize
 
 METHODS = ("blend", "view-map")
 EPS_RAD = 1e-9
+# weights θ^-power: 1 is the paper's "inversely proportional"; 2 is tuned on the
+# glossy facade scene (docs/decisions/facade-vdtm.md)
+DEFAULT_POWER = 2.0
 
 
 @dataclass(frozen=True)
@@ -73,7 +77,8 @@ class Photograph:
     ``image`` (H, W) or (H, W, C) float (code values or linear radiance, as
     they are to be blended); ``K`` (3, 3), ``R, t`` cam_from_world
     (``x_cam = R x_world + t``); ``depth`` (H, W) its z-buffer of the model
-    (``inf`` off the model), filled by :func:`prepare_photographs`.
+    (``inf`` off the model) and ``face_pixels`` (M,) how many of its pixels
+    see each triangle, filled by :func:`prepare_photographs`.
     """
 
     image: np.ndarray
@@ -81,6 +86,7 @@ class Photograph:
     R: np.ndarray
     t: np.ndarray
     depth: np.ndarray | None = field(default=None, repr=False)
+    face_pixels: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def centre(self) -> np.ndarray:
@@ -134,7 +140,8 @@ def prepare_photographs(mesh, photographs) -> tuple[Photograph, ...]:
                                             f"got shape {img.shape}")
         h, w = img.shape[:2]
         r = rasterize(v, f, p.K, p.R, p.t, (w, h))
-        out.append(replace(p, depth=r.depth))
+        counts = np.bincount(r.face[r.hit].ravel(), minlength=len(f))
+        out.append(replace(p, depth=r.depth, face_pixels=counts))
     return tuple(out)
 
 
@@ -157,9 +164,16 @@ def _sample(photo, X, tolerance):
     ok = ((z > 0) & (px[:, 0] >= -0.5) & (px[:, 0] <= w - 0.5)
           & (px[:, 1] >= -0.5) & (px[:, 1] <= h - 0.5))
     pxs = np.where(ok[:, None], px, 0.0)
+    # a point a rounding error off a pixel centre is on it (its own photograph's view)
+    near = np.rint(pxs)
+    pxs = np.where(np.abs(pxs - near) < 1e-6, near, pxs)
     x0 = np.clip(np.floor(pxs[:, 0]).astype(int), 0, w - 1)
     y0 = np.clip(np.floor(pxs[:, 1]).astype(int), 0, h - 1)
     x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    # a tap with no weight (the point on a pixel centre's row or column) is not
+    # looked at: a photograph seeing its own pixel centres needs no neighbour
+    x1 = np.where(pxs[:, 0] - x0 > 1e-9, x1, x0)
+    y1 = np.where(pxs[:, 1] - y0 > 1e-9, y1, y0)
     d = photo.depth
     tol = tolerance * np.abs(z)
     for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
@@ -195,13 +209,13 @@ def _blend(X, C, photos, tolerance, power, channels):
     return acc, wsum, n
 
 
-def view_maps(mesh, photos, C, *, tolerance=0.01, power=1.0):
+def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
     """Per polygon (triangle), the at most three photographs and weights the
     view map gives the view from ``C`` (Debevec, Yu & Borshukov 1998).
 
     Returns ``(ids (M, 3) int, -1 = none; weights (M, 3) float, summing to 1
     where any)``. A photograph enters a polygon's map when it sees the
-    polygon's centroid or one of its corners pulled 10 % towards it.
+    polygon in at least one of its pixels (its z-buffer's face ids).
     """
     from scipy.spatial import Delaunay
 
@@ -210,12 +224,8 @@ def view_maps(mesh, photos, C, *, tolerance=0.01, power=1.0):
     cen = tri.mean(1)
     nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
-    samples = np.concatenate([cen[:, None], 0.9 * tri + 0.1 * cen[:, None]], 1)  # (M, 4, 3)
     M = len(f)
-    sees = np.zeros((M, len(photos)), bool)
-    for j, p in enumerate(photos):
-        _, ok = _sample(p, samples.reshape(-1, 3), tolerance)
-        sees[:, j] = ok.reshape(M, 4).any(1)
+    sees = np.stack([p.face_pixels > 0 for p in photos], 1)
     ids = np.full((M, 3), -1)
     wts = np.zeros((M, 3))
     centres = np.array([p.centre for p in photos])
@@ -304,7 +314,7 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
 
 
 def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
-                tolerance: float = 0.01, power: float = 1.0, background: float = 0.0,
+                tolerance: float = 0.01, power: float = DEFAULT_POWER, background: float = 0.0,
                 fill: bool = True) -> VDTMImage:
     """Render ``mesh`` from the camera ``K, R, t`` (``x_cam = R x_world +
     t``, ``size = (W, H)``) textured from ``photographs`` (see the module
@@ -321,7 +331,8 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     tolerance : float
         Visibility: relative depth difference still "the same surface".
     power : float
-        Weights ``θ^−power``; 1 is the paper's.
+        Weights ``θ^−power``; 1 is the paper's, the default
+        :data:`DEFAULT_POWER` was tuned on the glossy facade scene.
     background : float
         Value off the model.
     fill : bool
@@ -342,7 +353,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     photos = list(photographs)
     if not photos:
         raise InputError("photographs", "no photographs: VDTM needs at least one")
-    if any(p.depth is None for p in photos):
+    if any(p.depth is None or p.face_pixels is None for p in photos):
         photos = list(prepare_photographs((v, f), photos))
     first = np.asarray(photos[0].image)
     channels = 1 if first.ndim == 2 else first.shape[2]
@@ -367,8 +378,13 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     if method == "blend":
         acc, wsum, n = _blend(X, C, photos, tolerance, power, channels)
     else:
-        ids, wts = view_maps((v, f), photos, C, tolerance=tolerance, power=power)
+        ids, wts = view_maps((v, f), photos, C, power=power)
         acc, wsum, n = _view_map(X, r.face.ravel()[idx], ids, wts, photos, tolerance, channels)
+        # where none of a polygon's three sees the point, every photograph is asked
+        again = np.flatnonzero(wsum == 0)
+        if len(again):
+            acc[again], wsum[again], n[again] = _blend(X[again], C, photos, tolerance, power,
+                                                       channels)
     t2 = time.perf_counter()
     seen = wsum > 0
     out = np.full((h * w, channels), float(background))
@@ -389,3 +405,52 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
             "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
             "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
     return VDTMImage(out.astype(np.float32), model, filled, info)
+
+
+def load_posed_camera(path):
+    """A ``camera.json`` with its pose, ``"cam_from_world": {"R": 3x3, "t":
+    [3]}`` (as ``lumigraph stereo facade solve`` writes per photograph and
+    ``lumigraph render facade`` per view): ``(Camera, R, t)``.
+    :class:`InputError` naming the file and the key: not a camera, no pose,
+    ``R`` not a rotation, ``t`` not 3 finite numbers."""
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import require_rotation
+    from lumigraph.capture.schema import require
+
+    cam = Camera.load(path)
+    pose = cam.extra.get("cam_from_world")
+    if not isinstance(pose, dict):
+        raise InputError(path, "key 'cam_from_world': missing; expected the camera's pose "
+                               "{\"R\": 3x3, \"t\": [3]} (x_cam = R x_world + t)")
+    R = require_rotation(pose, "R", path=path, where="cam_from_world")
+    t = require(pose, "t", "vector", shape=(3,), path=path, where="cam_from_world")
+    return cam, np.asarray(R, float), np.asarray(t, float)
+
+
+def load_model_mesh(path):
+    """The mesh of a block model file: ``blocks.json``, or a solve's
+    ``model.json`` (its fitted parameter values applied to the
+    ``blocks.json`` beside it). Returns ``(mesh, model.json body or None)``."""
+    from pathlib import Path
+
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    p = Path(path)
+    body = load_json_artifact(p, "model", schemas=None) if p.is_file() else None
+    if body is not None and body.get("schema") == "lumigraph.facade.model":
+        blocks = p.parent / "blocks.json"
+        if not blocks.is_file():
+            raise InputError(p, f"a model.json needs its blocks.json beside it ({blocks} not found)")
+        model = load_blocks(blocks)
+        params = body.get("parameters")
+        if not isinstance(params, dict):
+            raise InputError(p, "key 'parameters': expected {name: {\"value\": ...}}")
+        values = {}
+        for n, v in params.items():
+            if n in model.parameter_names:
+                if not (isinstance(v, dict) and isinstance(v.get("value"), (int, float))):
+                    raise InputError(p, f"key 'parameters.{n}': expected {{\"value\": number}}")
+                values[n] = float(v["value"])
+        return model.with_values(values).mesh(), body
+    return load_blocks(p).mesh(), None
