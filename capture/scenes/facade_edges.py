@@ -183,3 +183,73 @@ def write_facade_edges(folder: str | os.PathLike, model, cameras: dict[str, dict
                                                    "noise_px": noise_px, "photographs": marks})
     g = save_json_artifact(folder / "gt.json", facade_gt(model, cameras, params=params))
     return e, g
+
+
+def paint_facade(model, cam: dict, *, params=None, noise: float = 1.0,
+                 rng: np.random.Generator | None = None) -> np.ndarray:
+    """A crude grey photograph of the model for tests of automatic marking:
+    flat-shaded faces (a fixed sun, a grey level per block) drawn far to near
+    (painter's algorithm: exact for these convex blocks seen from outside,
+    approximate where blocks interpenetrate), anti-aliased, over a sky
+    gradient, 8-bit with Gaussian noise of ``noise`` codes. Not a renderer:
+    ``lumigraph render facade`` draws the real scene."""
+    import cv2
+
+    rng = rng or np.random.default_rng(0)
+    K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
+    t = t.ravel()
+    w, h = (int(v) for v in cam["image_size"])
+    img = np.tile(np.linspace(200, 150, h)[:, None], (1, w))
+    img = np.round(img).astype(np.uint8)
+    mesh = model.mesh(params)
+    V = mesh.vertices
+    Y = V @ R.T + t
+    sun = np.array([0.4, -0.7, 0.6])
+    sun /= np.linalg.norm(sun)
+    blocks = list(dict.fromkeys(mesh.face_block.tolist()))
+    depth = Y[mesh.faces][:, :, 2].mean(1)
+    for f in np.argsort(-depth):
+        tri = mesh.faces[f]
+        if np.any(Y[tri, 2] <= 1e-6):
+            continue
+        n = np.cross(V[tri[1]] - V[tri[0]], V[tri[2]] - V[tri[0]])
+        n /= np.linalg.norm(n)
+        if np.dot(n, -R.T @ t - V[tri[0]]) <= 0:
+            continue                                      # back face
+        albedo = 0.55 + 0.35 * (blocks.index(mesh.face_block[f]) % 3) / 2
+        level = 25 + 190 * albedo * (0.35 + 0.65 * max(np.dot(n, sun), 0.0))
+        uv = Y[tri] @ K.T
+        uv = uv[:, :2] / uv[:, 2:]
+        pts = np.round(uv * 16).astype(np.int32)  # 4 fractional bits (shift=4)
+        cv2.fillPoly(img, [pts.reshape(-1, 1, 2)], int(round(level)), cv2.LINE_AA, shift=4)
+    out = img.astype(float) + rng.normal(0, noise, img.shape) if noise > 0 else img.astype(float)
+    return np.clip(np.round(out), 0, 255).astype(np.uint8)
+
+
+def write_facade_folder(folder: str | os.PathLike, model, cameras: dict[str, dict], *,
+                        start=None, params=None, noise_px: float = 0.0, image_noise: float = 1.0,
+                        rng: np.random.Generator | None = None) -> Path:
+    """A complete input folder for ``lumigraph stereo facade solve``: the
+    painted photographs (:func:`paint_facade`), ``stack.json``, the shared
+    ``camera.json``, ``blocks.json`` (``start``: a model with the starting
+    values, default ``model``), ``edges.json`` and ``gt.json``
+    (:func:`write_facade_edges`)."""
+    from lumigraph.capture.artifact import save_json_artifact
+    from lumigraph.capture.io import write_image
+
+    rng = rng or np.random.default_rng(0)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for photo, cam in cameras.items():
+        write_image(folder / photo, paint_facade(model, cam, params=params, noise=image_noise,
+                                                 rng=rng))
+    first = next(iter(cameras.values()))
+    save_json_artifact(folder / "stack.json", {"schema": "lumigraph.stack", "schema_version": 1,
+                                               "scene": "facade", "images": list(cameras)})
+    save_json_artifact(folder / "camera.json", {
+        "schema": "lumigraph.camera", "schema_version": 1,
+        "image_size": [int(v) for v in first["image_size"]],
+        "K": np.asarray(first["K"], float).tolist(), "dist": [], "model": "none"})
+    save_json_artifact(folder / "blocks.json", (start or model).to_dict())
+    write_facade_edges(folder, model, cameras, params=params, noise_px=noise_px, rng=rng)
+    return folder

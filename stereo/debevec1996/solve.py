@@ -74,7 +74,7 @@ Examples
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -395,8 +395,16 @@ def _rank_deficient(J, names, *, rcond=1e-9):
     the null space of the column-scaled Jacobian."""
     J = np.asarray(J)
     norms = np.linalg.norm(J, axis=0)
-    bad = {names[i] for i in np.flatnonzero(norms == 0)}
-    keep = np.flatnonzero(norms > 0)
+    # a column is zero when it is round-off next to the largest of its kind (a
+    # parameter that only slides an edge along its own line: a box's height
+    # seen through its vertical edges alone)
+    kind = np.array([n.split(":")[-1] if ":" in n else "param" for n in names])
+    zero = np.zeros(len(names), bool)
+    for k in set(kind):
+        sel = kind == k
+        zero[sel] = norms[sel] <= 1e-9 * norms[sel].max()
+    bad = {names[i] for i in np.flatnonzero(zero)}
+    keep = np.flatnonzero(~zero)
     Js = J[:, keep] / norms[keep]
     _, s, Vt = np.linalg.svd(Js, full_matrices=False)
     null = Vt[s < rcond * s[0]] if s.size else Vt[:0]
@@ -415,7 +423,8 @@ def check_solve_options(*, noise_px: float, max_iterations: int) -> None:
 
 def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                  free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
-                 max_iterations: int = 200, where: str = "edges.json") -> FacadeSolution:
+                 max_iterations: int = 200, hold_unconstrained: bool = False,
+                 where: str = "edges.json") -> FacadeSolution:
     """Fit the free block parameters and every photograph's pose to the
     marked edges (module docstring).
 
@@ -439,6 +448,10 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         the mis-marked test.
     robust : bool
         Find and leave out mis-marked edges first.
+    hold_unconstrained : bool
+        Instead of refusing, hold the parameters the marks do not constrain
+        at their starting values and leave out the photographs whose pose
+        they do not constrain (a rough solve, as automatic marking uses).
 
     Returns
     -------
@@ -514,6 +527,22 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
     names = prob.column_names()
     Aw = prob.weights(True)
     bad = _rank_deficient(prob.jacobian(x0, Aw, dense=True), names)
+    if bad and hold_unconstrained:
+        # hold the model's unconstrained parameters first; only a photograph
+        # still unconstrained with them held is left out
+        held = [b for b in bad if ":" not in b and b != "focal_scale"]
+        lost = [] if held else sorted({b.split(":")[0] for b in bad if ":" in b})
+        if held:
+            warnings.append("held at their starting values (no mark constrains them): "
+                            + ", ".join(held))
+        if lost:
+            warnings.append("left out (their marks do not fix their pose): " + ", ".join(lost))
+        sol = solve_facade(model.with_fixed(held), _without(marks, lost) if lost else marks, K,
+                           rough_rotations=rough_rotations,
+                           free_focal=free_focal and "focal_scale" not in bad, noise_px=noise_px,
+                           robust=robust, max_iterations=max_iterations, where=where,
+                           hold_unconstrained=True)
+        return replace(sol, warnings=warnings + sol.warnings, dropped=dropped + lost + sol.dropped)
     if bad:
         raise EstimationError(where, "the marks do not constrain " + ", ".join(dict.fromkeys(bad))
                               + ": mark more edges of those blocks / photographs, share or fix "
@@ -545,6 +574,12 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                           max_iterations, where, warnings, dropped, outliers, t0, nfev)
         x0 = r.x
     return _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where)
+
+
+def _without(marks, photos):
+    """``marks`` without the photographs ``photos``."""
+    return replace(marks, marks=tuple(m for m in marks.marks if m.photo not in photos),
+                   photographs=tuple(p for p in marks.photographs if p not in photos))
 
 
 def _again(model, marks, K, R0, photos, kept, out, x, prob, free_focal, noise_px, max_iterations,
