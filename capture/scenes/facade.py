@@ -6,7 +6,9 @@ model-based stereo).
 ``facade``
     A house (box) with a gable roof (wedge), a tower (box) flush with its
     front and a pyramid spire, and a lower wing at the back left, standing on
-    a ground plane (not part of the model) under a sky. Walls are bricks with
+    a ground plane (not part of the model) under a sky; three pilasters stand
+    0.3 m proud of the house front (relief the block model lacks, for
+    model-based stereo). Walls are bricks with
     framed glass windows (procedural, in each wall's own coordinates), roofs
     glazed tiles, flat tops gravel. Materials are glossy: Blinn–Phong
     specular under a directional sun plus a Fresnel-weighted reflection of
@@ -30,10 +32,11 @@ Ground truth: ``gt.json`` ``parameters`` (every block parameter, by its
 stable name, shared ones too), ``cameras`` (``{photo: {K, R, t,
 image_size}}``, ``x_cam = R x_world + t``, world ``z`` up, metres),
 ``novel_cameras`` (likewise, ``view_N``); arrays ``depth_NN`` (camera ``z`` of
-the visible surface, ground included; NaN on the sky), ``model_depth_NN``
-(camera ``z`` of the model alone, NaN off it: the rough model of model-based
-stereo), and per novel view ``novel_N`` (noise-free float code values,
-clipped as the sensor clips) with ``novel_model_N`` (its model mask).
+the visible surface, relief and ground included; NaN on the sky),
+``model_depth_NN`` (camera ``z`` of the block model alone, NaN off it: the
+rough model of model-based stereo), and per novel view ``novel_N`` (noise-free float code values,
+clipped as the sensor clips) with ``novel_model_N`` (where it sees the block
+model's own surface: on the model, not behind relief).
 
 The building's geometry is the block model's (``blocks.json`` read by
 :class:`lumigraph.stereo.debevec1996.BlockModel`, which this ground-floor
@@ -68,6 +71,7 @@ BLOCKS = (
      {"width": 4.0, "depth": 4.0, "height": 4.0, "offset_x": -7.0}),
 )
 FIXED = ("house/width",)  # the scale
+PILASTER_M = 0.3  # relief the model lacks: pilasters this far proud of the house front
 GROUND_HALF_M = 80.0
 SUN = np.array([-0.45, -0.6, 0.66]) / np.linalg.norm([-0.45, -0.6, 0.66])  # towards the sun
 
@@ -334,28 +338,60 @@ def _materials(X, m, kind, n, u, w, ext, lambertian):
     return albedo, ks, shin, kr
 
 
+def _box_triangles(lo, hi, base):
+    """An axis-aligned box's 8 corners and 12 outward triangles (indices from ``base``)."""
+    V = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    F = []
+    c = V.mean(0)
+    for q in quads:
+        p = V[list(q)]
+        if np.dot(np.cross(p[1] - p[0], p[2] - p[0]), p.mean(0) - c) < 0:
+            q = q[::-1]
+        F += [(q[0], q[1], q[2]), (q[0], q[2], q[3])]
+    return V, np.array(F) + base
+
+
+def _relief(values):
+    """Detail the block model lacks (what model-based stereo recovers): three
+    pilasters ``PILASTER_M`` proud of the house's front wall, between its
+    window columns, as tall as the house."""
+    y0 = -values["house/depth"] / 2
+    return [((x - 0.25, y0 - PILASTER_M, 0.0), (x + 0.25, y0, values["house/height"]))
+            for x in (-2.2, 0.0, 2.2)]
+
+
 def _scene_mesh(building):
-    """The model's triangles plus the ground's two (indices ``n_model``,
-    ``n_model + 1``): the ground is not rasterised (it reaches behind every
-    camera, so its bounding box would be the frame) but intersected per ray
+    """The model's triangles (``[0, n_model)``), the relief's (``[n_model,
+    n_solid)``) and the ground's two (``n_solid``, ``n_solid + 1``): the
+    ground is not rasterised (it reaches behind every camera, so its
+    bounding box would be the frame) but intersected per ray
     (:func:`_scene_raster`); its triangles give it a normal and a kind."""
     mesh = building.mesh()
-    V, F = mesh.vertices, mesh.faces
+    V, F = [mesh.vertices], [mesh.faces]
+    n = len(mesh.vertices)
+    for lo, hi in _relief(building.values):
+        v, f = _box_triangles(lo, hi, n)
+        V.append(v)
+        F.append(f)
+        n += len(v)
     g = GROUND_HALF_M
-    Vg = np.array([[-g, -g, 0.0], [g, -g, 0], [g, g, 0], [-g, g, 0]])
-    Fg = np.array([[0, 1, 2], [0, 2, 3]]) + len(V)
-    return np.concatenate([V, Vg]), np.concatenate([F, Fg]), len(F)
+    V.append(np.array([[-g, -g, 0.0], [g, -g, 0], [g, g, 0], [-g, g, 0]]))
+    F.append(np.array([[0, 1, 2], [0, 2, 3]]) + n)
+    F = np.concatenate(F)
+    return np.concatenate(V), F, len(mesh.faces), len(F) - 2
 
 
-def _scene_raster(V, F, n_model, K, R, t, size, rays=None):
-    """Depth and face per pixel of the model and the ground plane z = 0
-    (within ``GROUND_HALF_M``): the model by the z-buffer, the ground by its
-    ray–plane intersection, the nearer wins."""
+def _scene_raster(V, F, n_solid, K, R, t, size, rays=None):
+    """Depth and face per pixel of the building (model and relief, the first
+    ``n_solid`` triangles) and the ground plane z = 0 (within
+    ``GROUND_HALF_M``, face ``n_solid``): the building by the z-buffer, the
+    ground by its ray–plane intersection, the nearer wins."""
     from lumigraph.capture.raster import pixel_rays, rasterize
 
     if rays is None:
         rays = pixel_rays(K, size)
-    r = rasterize(V, F[:n_model], K, R, t, size, rays=rays)
+    r = rasterize(V, F[:n_solid], K, R, t, size, rays=rays)
     C = -R.T @ t
     d = rays @ R  # world direction per unit camera z
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -364,16 +400,16 @@ def _scene_raster(V, F, n_model, K, R, t, size, rays=None):
     ground = (lam > 0) & (np.abs(P[..., 0]) <= GROUND_HALF_M) & (np.abs(P[..., 1]) <= GROUND_HALF_M)
     ground &= lam < r.depth
     depth = np.where(ground, lam, r.depth)
-    face = np.where(ground, n_model, r.face)
+    face = np.where(ground, n_solid, r.face)
     return depth, face, rays
 
 
-def _shade_view(V, F, n_model, kinds, frames, K, R, t, size, ss, lambertian):
+def _shade_view(V, F, n_solid, kinds, frames, K, R, t, size, ss, lambertian):
     """Noise-free float radiance (H, W, 3) of one view, ``ss²`` samples a pixel."""
     w, h = size
     S = np.array([[ss, 0, (ss - 1) / 2], [0, ss, (ss - 1) / 2], [0, 0, 1.0]])
     Ks = S @ K
-    depth, face, rays = _scene_raster(V, F, n_model, Ks, R, t, (w * ss, h * ss))
+    depth, face, rays = _scene_raster(V, F, n_solid, Ks, R, t, (w * ss, h * ss))
     d_world = rays.reshape(-1, 3) @ R  # R^T ray, per unit camera z
     dn = d_world / np.linalg.norm(d_world, axis=1, keepdims=True)
     hit = face.ravel() >= 0
@@ -424,14 +460,14 @@ def _gt_cam(cam):
             "t": np.asarray(cam["t"]).ravel().tolist(), "image_size": list(cam["image_size"])}
 
 
-def _edge_visibility(V, F, n_model, normals, cam, size):
+def _edge_visibility(V, F, n_solid, normals, cam, size):
     """``visible(points)`` for one photograph: in front of the z-buffer of the
     whole scene (within 0.2 %) and on a crease or silhouette (the surface on
     the two sides of the projected edge differs in normal or depth), so an
     edge lying inside a coplanar join of two blocks is not a visible edge."""
     K, R, t = cam["K"], cam["R"], cam["t"]
     w, h = size
-    zbuf, face, _ = _scene_raster(V, F, n_model, K, R, t, size)
+    zbuf, face, _ = _scene_raster(V, F, n_solid, K, R, t, size)
 
     def visible(P, direction):
         # P (k, 3): samples along one edge, direction its 3-D direction
@@ -484,13 +520,13 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
     w, h = size
     truth = true_values()
     building = Building(truth)
-    V, F, n_model = _scene_mesh(building)
+    V, F, n_model, n_solid = _scene_mesh(building)
     mesh_kind = np.full(len(F), 3)  # 0 wall, 1 roof, 2 flat top, 3 ground
     frames = _face_frames(V, F)
     nz = frames[0][:, 2]
     owner = building.mesh().face_block
-    for i in range(n_model):
-        kind = building.kinds[owner[i]]
+    for i in range(n_solid):
+        kind = building.kinds[owner[i]] if i < n_model else "box"
         mesh_kind[i] = 0 if abs(nz[i]) < 1e-9 else 2 if nz[i] > 0.999 else 1 if kind != "box" else 2
     K = np.array([[1.05 * w, 0, (w - 1) / 2], [0, 1.05 * w, (h - 1) / 2], [0, 0, 1.0]])
     centre = np.array([-0.5, 0.0, 4.0])
@@ -511,23 +547,26 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
     ss = int(supersample)
     images, arrays = [], {}
     for i, cam in enumerate(cams.values()):
-        img = _shade_view(V, F, n_model, mesh_kind, frames, cam["K"], cam["R"], cam["t"], size, ss,
+        img = _shade_view(V, F, n_solid, mesh_kind, frames, cam["K"], cam["R"], cam["t"], size, ss,
                              lambertian)
         codes = img * 200.0
         if noise > 0:
             codes = codes + rng.normal(0.0, noise, codes.shape)
         images.append(np.clip(np.round(codes), 0, 255).astype(np.uint8))
-        arrays.update(_depths(V, F, n_model, cam, size, f"{i:02d}"))
+        arrays.update(_depths(V, F, n_model, n_solid, cam, size, f"{i:02d}"))
     for name, cam in novels.items():
-        img = _shade_view(V, F, n_model, mesh_kind, frames, cam["K"], cam["R"], cam["t"], size, ss,
+        img = _shade_view(V, F, n_solid, mesh_kind, frames, cam["K"], cam["R"], cam["t"], size, ss,
                              lambertian)
         arrays[name.replace("view", "novel")] = np.clip(img * 200.0, 0, 255).astype(np.float32)
-        d = _depths(V, F, n_model, cam, size, "")
-        arrays[name.replace("view", "novel_model")] = np.isfinite(d["model_depth_"])
+        d = _depths(V, F, n_model, n_solid, cam, size, "")
+        # the model's own surface in view (not hidden by relief the model lacks)
+        with np.errstate(invalid="ignore"):
+            arrays[name.replace("view", "novel_model")] = (np.abs(d["depth_"] - d["model_depth_"])
+                                                           <= 1e-5 * d["model_depth_"])
     # the marks: every visible model edge, clipped by each photograph's z-buffer
     from lumigraph.capture.scenes.facade_edges import project_edges
 
-    vis = {p: _edge_visibility(V, F, n_model, frames[0], c, size) for p, c in cams.items()}
+    vis = {p: _edge_visibility(V, F, n_solid, frames[0], c, size) for p, c in cams.items()}
     marks = project_edges(building, cams, noise_px=edge_noise, rng=rng, samples=41,
                           min_length_px=12.0, visible=lambda p, P: vis[p](P, P[-1] - P[0]))
     # rough starting values for the solver: ±15 % off the truth
@@ -560,11 +599,14 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
                          files=files)
 
 
-def _depths(V, F, n_model, cam, size, tag):
-    depth, face, _ = _scene_raster(V, F, n_model, cam["K"], cam["R"], cam["t"], size)
+def _depths(V, F, n_model, n_solid, cam, size, tag):
+    from lumigraph.capture.raster import rasterize
+
+    depth, face, _ = _scene_raster(V, F, n_solid, cam["K"], cam["R"], cam["t"], size)
     z = np.where(face >= 0, depth, np.nan).astype(np.float32)
-    # the model alone: the ground (z = 0) hides none of it, the building stands on it
-    zm = np.where((face >= 0) & (face < n_model), depth, np.nan).astype(np.float32)
+    # the model alone, without its relief (the ground, z = 0, hides none of it)
+    r = rasterize(V, F[:n_model], cam["K"], cam["R"], cam["t"], size)
+    zm = np.where(r.hit, r.depth, np.nan).astype(np.float32)
     return {f"depth_{tag}": z, f"model_depth_{tag}": zm}
 
 
@@ -576,4 +618,4 @@ SPECS = {"facade": SceneSpec("facade", (160, 120), (
     Option("edge_noise", float, 0.0, "Gaussian noise (px) on each marked endpoint coordinate",
            low=0),
     Option("lambertian", bool, False, "no specular or mirror terms (a diffuse building)"),
-), version=3, min_size=(48, 36))}
+), version=4, min_size=(48, 36))}

@@ -60,7 +60,8 @@ def add_facade(sp) -> None:
     ``lumigraph stereo``'s verbs ``sp``."""
     g = add_verb(sp, "facade", "Façade photogrammetric modelling: block model and cameras from "
                  "marked edges (Debevec, Taylor & Malik 1996)",
-                 epilog="verbs: solve, automark (see 'lumigraph stereo facade VERB --help')")
+                 epilog="verbs: solve, automark, depth, render (see 'lumigraph stereo facade VERB "
+                        "--help')")
     fs = g.add_subparsers(title="facade verbs", dest="facade_verb", metavar="VERB",
                           parser_class=type(g))
     fs.required = True
@@ -93,6 +94,10 @@ def add_facade(sp) -> None:
     v.add_argument("--out", required=True, type=output_file(".json"),
                    help="the edges.json to write (hand marks and proposals)")
     v.set_defaults(func=_automark)
+
+    from lumigraph.stereo.debevec1996.cli_vdtm import add_verbs  # depth, render (VDTM)
+
+    add_verbs(fs)
 
 
 def _common(v) -> None:

@@ -48,6 +48,17 @@ def add_verbs(fs) -> None:
                    help="depth .pfm (inf = no model) or .npy (NaN = no model)")
     v.set_defaults(func=_depth)
 
+    v = add_verb(fs, "pair", "the rig.json of two posed cameras (key = left, offset = right), "
+                 "for 'stereo model-based --rig'",
+                 epilog="Each camera is a camera.json with cam_from_world (a solve's "
+                        "cameras/<photo>.json): the rig's R, T are the offset camera's pose "
+                        "relative to the key camera's, x_offset = R x_key + T.")
+    v.add_argument("--key", required=True, type=input_path, help="the key camera (posed camera.json)")
+    v.add_argument("--offset", required=True, type=input_path,
+                   help="the offset camera (posed camera.json)")
+    v.add_argument("--out", required=True, type=output_file(".json"), help="rig.json")
+    v.set_defaults(func=_pair)
+
     v = add_verb(fs, "render", "view-dependent texture mapping: the model seen from a new camera, "
                  "textured from the photographs", epilog=RENDER_EPILOG)
     v.add_argument("--model", required=True, type=input_path,
@@ -100,6 +111,19 @@ def _depth(args) -> int:
     return 0
 
 
+def _pair(args) -> int:
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.stereo.debevec1996.vdtm import load_posed_camera, rig_between
+
+    key, off = load_posed_camera(args.key), load_posed_camera(args.offset)
+    args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "offset": args.offset}
+    rig = rig_between(key, off)
+    rig.save(args.out, meta=make_meta("lumigraph.rig", inputs=[args.key, args.offset],
+                                      extra={"left": "key", "right": "offset"}))
+    say(args, f"wrote {args.out} (baseline {np.linalg.norm(rig.T):.4g})")
+    return 0
+
+
 def _photographs(args, model_body):
     """The photographs of ``--photos`` with their posed cameras."""
     from lumigraph.capture.io import read_image, read_stack_json
@@ -135,7 +159,7 @@ def _photographs(args, model_body):
                                              "solve?); give --cameras")
             c = cams[name]
             R = require_rotation(c, "R", path=args.model, where=f"cameras.{name}")
-            t = require(c, "t", "vector", shape=(3,), path=args.model, where=f"cameras.{name}")
+            t = require(c, "t", "matrix", shape=(3,), path=args.model, where=f"cameras.{name}")
             K = require(c, "K", "matrix", shape=(3, 3), path=args.model, where=f"cameras.{name}")
             size, where = img.shape[1::-1], args.model
         if tuple(img.shape[1::-1]) != tuple(size):

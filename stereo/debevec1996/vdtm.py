@@ -423,7 +423,7 @@ def load_posed_camera(path):
         raise InputError(path, "key 'cam_from_world': missing; expected the camera's pose "
                                "{\"R\": 3x3, \"t\": [3]} (x_cam = R x_world + t)")
     R = require_rotation(pose, "R", path=path, where="cam_from_world")
-    t = require(pose, "t", "vector", shape=(3,), path=path, where="cam_from_world")
+    t = require(pose, "t", "matrix", shape=(3,), path=path, where="cam_from_world")
     return cam, np.asarray(R, float), np.asarray(t, float)
 
 
@@ -454,3 +454,26 @@ def load_model_mesh(path):
                 values[n] = float(v["value"])
         return model.with_values(values).mesh(), body
     return load_blocks(p).mesh(), None
+
+
+def rig_between(key, offset):
+    """The stereo rig of two posed cameras ``(Camera, R, t)`` (as
+    :func:`load_posed_camera` returns them): left = ``key``, right =
+    ``offset``, ``x_offset = R_rel x_key + T`` with ``R_rel = R_o R_kᵀ``,
+    ``T = t_o − R_rel t_k`` — what ``lumigraph stereo model-based --rig``
+    takes for a key/offset pair of a Façade solve.
+
+    >>> from lumigraph.capture.camera import Camera
+    >>> c = Camera(np.diag([100.0, 100, 1]), [], (64, 48))
+    >>> rig = rig_between((c, np.eye(3), np.zeros(3)), (c, np.eye(3), np.array([-0.5, 0, 0])))
+    >>> rig.T.tolist()
+    [-0.5, 0.0, 0.0]
+    """
+    from lumigraph.capture.rig import Rig
+
+    (ck, Rk, tk), (co, Ro, to) = key, offset
+    R = np.asarray(Ro, float) @ np.asarray(Rk, float).T
+    T = np.asarray(to, float) - R @ np.asarray(tk, float)
+    if not np.linalg.norm(T) > 0:
+        raise InputError("offset", "the two cameras share their centre: no baseline for stereo")
+    return Rig.from_pose(ck, co, R, T)
