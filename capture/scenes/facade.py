@@ -354,10 +354,10 @@ def _box_triangles(lo, hi, base):
 
 def _relief(values):
     """Detail the block model lacks (what model-based stereo recovers): three
-    pilasters ``PILASTER_M`` proud of the house's front wall, between its
+    pilasters 0.8 m wide, ``PILASTER_M`` proud of the house's front wall, between its
     window columns, as tall as the house."""
     y0 = -values["house/depth"] / 2
-    return [((x - 0.25, y0 - PILASTER_M, 0.0), (x + 0.25, y0, values["house/height"]))
+    return [((x - 0.4, y0 - PILASTER_M, 0.0), (x + 0.4, y0, values["house/height"]))
             for x in (-2.2, 0.0, 2.2)]
 
 
@@ -618,4 +618,4 @@ SPECS = {"facade": SceneSpec("facade", (160, 120), (
     Option("edge_noise", float, 0.0, "Gaussian noise (px) on each marked endpoint coordinate",
            low=0),
     Option("lambertian", bool, False, "no specular or mirror terms (a diffuse building)"),
-), version=4, min_size=(48, 36))}
+), version=5, min_size=(48, 36))}
