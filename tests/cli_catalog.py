@@ -273,6 +273,10 @@ def _model_stereo(d: Path) -> None:
     scene("model-stereo", d / "facade", size=(96, 72), seed=0)
 
 
+def _facade(d: Path) -> None:
+    scene("facade", d / "facade", size=(96, 72), seed=0, photos=6, novel=1, supersample=1)
+
+
 SFM_VIEWS = 4
 
 
@@ -411,6 +415,27 @@ ENTRIES: list[Entry] = [
           _model_stereo, ("{in}/facade/key.png", "{in}/facade/offset.png", "{in}/facade/gt.json",
                           "{in}/facade/gt/model_depth.npy"),
           ("{out}/depth.pfm", "{out}/warped.png")),
+    Entry("stereo facade depth", ("stereo", "facade", "depth", "--model", "{in}/facade/blocks.json",
+                                  "--camera", "{in}/facade/cameras/photo_02.json",
+                                  "--out", "{out}/model.pfm", "-q"),
+          _facade, ("{in}/facade/blocks.json", "{in}/facade/cameras/photo_02.json"),
+          ("{out}/model.pfm",)),
+    Entry("stereo facade pair", ("stereo", "facade", "pair", "--key", "{in}/facade/cameras/photo_02.json",
+                                 "--offset", "{in}/facade/cameras/photo_03.json",
+                                 "--out", "{out}/rig.json", "-q"),
+          _facade, ("{in}/facade/cameras/photo_02.json", "{in}/facade/cameras/photo_03.json"),
+          ("{out}/rig.json",)),
+    Entry("stereo facade render", ("stereo", "facade", "render", "--model", "{in}/facade/blocks.json",
+                                   "--photos", "{in}/facade", "--view", "{in}/facade/novel/view_0.json",
+                                   "--out", "{out}/view.png", "-q"),
+          _facade, ("{in}/facade/blocks.json", "{in}/facade", "{in}/facade/novel/view_0.json"),
+          ("{out}/view.png",)),
+    Entry("stereo facade render (view map)", ("stereo", "facade", "render", "--model",
+                                              "{in}/facade/blocks.json", "--photos", "{in}/facade",
+                                              "--view", "{in}/facade/novel/view_0.json",
+                                              "--method", "view-map", "--out", "{out}/view.exr", "-q"),
+          _facade, ("{in}/facade/blocks.json", "{in}/facade", "{in}/facade/novel/view_0.json"),
+          ("{out}/view.exr",)),
     Entry("stereo triangulate", ("stereo", "triangulate", "{in}/matches.txt", "--rig", "{in}/rig.json",
                                  "--out", "{out}/points.json", "-q"),
           _matches, ("{in}/matches.txt", "{in}/rig.json"), ("{out}/points.json",)),
