@@ -178,15 +178,15 @@ def _sample(photo, X, tolerance):
     tol = tolerance * np.abs(z)
     for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
         ok &= np.abs(d[yy, xx] - z) <= tol
-    m = pxs.astype(np.float32)
-    if img.shape[2] <= 4:
-        s = cv2.remap(img, m[:, None, 0], m[:, None, 1], cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_REPLICATE).reshape(len(X), -1)
-    else:  # cv2.remap takes at most 4 channels
-        s = np.concatenate([cv2.remap(np.ascontiguousarray(img[..., c:c + 4]), m[:, None, 0],
-                                      m[:, None, 1], cv2.INTER_LINEAR,
-                                      borderMode=cv2.BORDER_REPLICATE).reshape(len(X), -1)
-                            for c in range(0, img.shape[2], 4)], 1)
+    # the sample positions as a map of rows of 1024 (remap wants fewer than 2^15 rows)
+    n = len(X)
+    rows = max(-(-n // 1024), 1)
+    m = np.zeros((rows * 1024, 2), np.float32)
+    m[:n] = pxs
+    mx, my = m[:, 0].reshape(rows, 1024), m[:, 1].reshape(rows, 1024)
+    s = np.concatenate([cv2.remap(np.ascontiguousarray(img[..., c:c + 4]), mx, my, cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_REPLICATE).reshape(rows * 1024, -1)[:n]
+                        for c in range(0, img.shape[2], 4)], 1)  # at most 4 channels a call
     return s, ok
 
 
