@@ -55,11 +55,16 @@ class Raster:
     bary : ndarray, (H, W, 3) float64
         Perspective-correct barycentrics of the hit in its triangle (sum 1);
         0 where none.
+    covered : ndarray, (M,) int64
+        Pixel centres inside each triangle's projection (in the frame), before
+        the depth test: a triangle is wholly visible (in the frame) when as
+        many pixels show it.
     """
 
     depth: np.ndarray
     face: np.ndarray
     bary: np.ndarray
+    covered: np.ndarray | None = None
 
     @property
     def hit(self) -> np.ndarray:
@@ -149,8 +154,9 @@ def rasterize(vertices, faces, K, R, t, size, *, dist=None, rays=None) -> Raster
     depth = np.full((h, w), np.inf)
     face = np.full((h, w), -1, np.int32)
     bary = np.zeros((h, w, 3))
+    covered = np.zeros(len(f), np.int64)
     if not len(f):
-        return Raster(depth, face, bary)
+        return Raster(depth, face, bary, covered)
     K = np.asarray(K, np.float64)
     distorted = dist is not None and np.any(np.asarray(dist) != 0)
     tri = vc[f]  # (M, 3, 3): corners a, b, c
@@ -189,6 +195,7 @@ def rasterize(vertices, faces, K, R, t, size, *, dist=None, rays=None) -> Raster
         ssum = abc[:, 0] + abc[:, 1] + abc[:, 2]
         front = ssum > 0
         inside, abc, ssum = inside[front], abc[front], ssum[front]
+        covered[m] = len(inside)
         z = 1.0 / ssum
         flat = (inside // bw + y0) * w + inside % bw + x0
         win = z < dflat[flat]
@@ -198,4 +205,4 @@ def rasterize(vertices, faces, K, R, t, size, *, dist=None, rays=None) -> Raster
         dflat[flat] = z
         fflat[flat] = m
         bflat[flat] = abc[win] * z[:, None]
-    return Raster(depth, face, bary)
+    return Raster(depth, face, bary, covered)

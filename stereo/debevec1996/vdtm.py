@@ -77,8 +77,11 @@ class Photograph:
     ``image`` (H, W) or (H, W, C) float (code values or linear radiance, as
     they are to be blended); ``K`` (3, 3), ``R, t`` cam_from_world
     (``x_cam = R x_world + t``); ``depth`` (H, W) its z-buffer of the model
-    (``inf`` off the model) and ``face_pixels`` (M,) how many of its pixels
-    see each triangle, filled by :func:`prepare_photographs`.
+    (``inf`` off the model), ``face_pixels`` (M,) how many of its pixels
+    see each triangle and ``whole`` (M,) which triangles it sees whole (every
+    pixel centre their projection covers shows them) and ``cells`` (H, W)
+    which bilinear cells (pixels ``[y, y+1] × [x, x+1]``) lie on one
+    continuous surface, filled by :func:`prepare_photographs`.
     """
 
     image: np.ndarray
@@ -87,6 +90,8 @@ class Photograph:
     t: np.ndarray
     depth: np.ndarray | None = field(default=None, repr=False)
     face_pixels: np.ndarray | None = field(default=None, repr=False)
+    whole: np.ndarray | None = field(default=None, repr=False)
+    cells: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def centre(self) -> np.ndarray:
@@ -124,9 +129,20 @@ def _mesh(mesh):
     return check_mesh(vertices, faces, where="mesh")
 
 
-def prepare_photographs(mesh, photographs) -> tuple[Photograph, ...]:
+def _cells(depth, tolerance):
+    """(H, W) bool: the four depths of the bilinear cell at each pixel (the
+    last row and column repeat theirs) are finite and agree within
+    ``tolerance`` relative: the cell lies on one continuous surface."""
+    d = np.pad(depth, ((0, 1), (0, 1)), mode="edge")
+    taps = np.stack([d[:-1, :-1], d[:-1, 1:], d[1:, :-1], d[1:, 1:]])
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(taps).all(0) & (taps.max(0) - taps.min(0) <= tolerance * taps.min(0))
+
+
+def prepare_photographs(mesh, photographs, *, tolerance: float = 0.01) -> tuple[Photograph, ...]:
     """The photographs with their depth maps of ``mesh`` (the visibility
-    every rendering reuses). ``InputError`` naming ``photographs`` when
+    every rendering reuses; ``tolerance`` as :func:`render_vdtm`'s, for the
+    view map's per-cell test). ``InputError`` naming ``photographs`` when
     there are none or an image is not 2-D/3-D."""
     v, f = _mesh(mesh)
     photographs = list(photographs)
@@ -141,13 +157,16 @@ def prepare_photographs(mesh, photographs) -> tuple[Photograph, ...]:
         h, w = img.shape[:2]
         r = rasterize(v, f, p.K, p.R, p.t, (w, h))
         counts = np.bincount(r.face[r.hit].ravel(), minlength=len(f))
-        out.append(replace(p, depth=r.depth, face_pixels=counts))
+        out.append(replace(p, depth=r.depth, face_pixels=counts,
+                           whole=(counts > 0) & (counts == r.covered), cells=_cells(r.depth, tolerance)))
     return tuple(out)
 
 
-def _sample(photo, X, tolerance):
+def _sample(photo, X, tolerance, check=True):
     """Bilinear samples ``(N, C)`` of ``photo`` at the world points ``X (N, 3)``
-    and whether each is seen cleanly (all four taps on its surface)."""
+    and whether each is seen cleanly (all four taps on its surface; with
+    ``check="cells"`` the caller knows the points' polygon is seen whole and
+    only the cell's continuity is looked up)."""
     import cv2
 
     img = np.asarray(photo.image, np.float32)
@@ -172,12 +191,17 @@ def _sample(photo, X, tolerance):
     x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
     # a tap with no weight (the point on a pixel centre's row or column) is not
     # looked at: a photograph seeing its own pixel centres needs no neighbour
-    x1 = np.where(pxs[:, 0] - x0 > 1e-9, x1, x0)
-    y1 = np.where(pxs[:, 1] - y0 > 1e-9, y1, y0)
-    d = photo.depth
-    tol = tolerance * np.abs(z)
-    for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
-        ok &= np.abs(d[yy, xx] - z) <= tol
+    if check == "cells":  # the polygon is seen whole: its cell must lie on one surface
+        # (a point on a pixel centre has one tap: that pixel's depth must agree)
+        centre = (pxs[:, 0] == x0) & (pxs[:, 1] == y0)
+        ok &= photo.cells[y0, x0] | (centre & (np.abs(photo.depth[y0, x0] - z) <= tolerance * np.abs(z)))
+    elif check:
+        x1 = np.where(pxs[:, 0] - x0 > 1e-9, x1, x0)
+        y1 = np.where(pxs[:, 1] - y0 > 1e-9, y1, y0)
+        d = photo.depth
+        tol = tolerance * np.abs(z)
+        for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
+            ok &= np.abs(d[yy, xx] - z) <= tol
     # the sample positions as a map of rows of 1024 (remap wants fewer than 2^15 rows)
     n = len(X)
     rows = max(-(-n // 1024), 1)
@@ -209,78 +233,126 @@ def _blend(X, C, photos, tolerance, power, channels):
     return acc, wsum, n
 
 
-def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
-    """Per polygon (triangle), the at most three photographs and weights the
-    view map gives the view from ``C`` (Debevec, Yu & Borshukov 1998).
+@dataclass(frozen=True)
+class ViewMaps:
+    """Every polygon's view map (Debevec, Yu & Borshukov 1998), built once
+    for a mesh and its photographs by :func:`prepare_view_maps`: the
+    photographs that see the polygon, their directions from its centroid
+    projected onto its plane, and their Delaunay triangulation."""
 
-    Returns ``(ids (M, 3) int, -1 = none; weights (M, 3) float, summing to 1
-    where any)``. A photograph enters a polygon's map when it sees the
-    polygon in at least one of its pixels (its z-buffer's face ids).
-    """
-    from scipy.spatial import Delaunay
+    centroids: np.ndarray
+    axes: np.ndarray  # (M, 2, 3): the plane's u, w
+    photos: tuple  # per polygon: ids of the photographs that see it
+    points: tuple  # per polygon: (k, 2) projected directions
+    triangulations: tuple  # per polygon: scipy Delaunay or None
+    centres: np.ndarray  # (N, 3) the photographs' centres
 
-    v, f = _mesh(mesh)
-    tri = v[f]
-    cen = tri.mean(1)
-    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
-    M = len(f)
-    sees = np.stack([p.face_pixels > 0 for p in photos], 1)
-    ids = np.full((M, 3), -1)
-    wts = np.zeros((M, 3))
-    centres = np.array([p.centre for p in photos])
-    for m in range(M):
-        js = np.flatnonzero(sees[m])
-        if not len(js):
-            continue
-        dirs = centres[js] - cen[m]
-        dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-        dv = C - cen[m]
-        dv /= np.linalg.norm(dv)
-        # the plane's axes: the view map is the hemisphere seen from above
-        u = np.cross(nrm[m], [1.0, 0, 0] if abs(nrm[m][0]) < 0.9 else [0, 1.0, 0])
-        u /= np.linalg.norm(u)
-        w = np.cross(nrm[m], u)
-        pts = np.stack([dirs @ u, dirs @ w], 1)
-        q = np.array([dv @ u, dv @ w])
-        done = False
-        if len(js) >= 3:
-            try:
-                d = Delaunay(pts)
-                s = int(d.find_simplex(q))
+    def lookup(self, C, *, power: float = DEFAULT_POWER):
+        """The at most three photographs and weights of each polygon for the
+        view from ``C``: ``(ids (M, 3) int, -1 = none; weights (M, 3))``.
+        Inside the map's hull, the containing triangle's corners with their
+        barycentric weights; outside it (or with fewer than three), the three
+        nearest by angle, weighted ``θ^−power``."""
+        M = len(self.centroids)
+        ids = np.full((M, 3), -1)
+        wts = np.zeros((M, 3))
+        dv = C - self.centroids
+        dv /= np.linalg.norm(dv, axis=1, keepdims=True)
+        q = np.einsum("mkj,mj->mk", self.axes, dv)
+        for m in range(M):
+            js = self.photos[m]
+            if not len(js):
+                continue
+            d = self.triangulations[m]
+            if d is not None:
+                s = int(d.find_simplex(q[m]))
                 if s >= 0:
                     T = d.transform[s]
-                    b = T[:2] @ (q - T[2])
-                    bc = np.clip(np.append(b, 1 - b.sum()), 0, None)
+                    b = T[:2] @ (q[m] - T[2])
+                    bc = np.append(b, 1 - b.sum())
+                    bc = np.where(bc > 1e-9, bc, 0.0)  # on a corner: that photograph alone
                     ids[m] = js[d.simplices[s]]
                     wts[m] = bc / bc.sum()
-                    done = True
-            except Exception:  # collinear directions (QhullError): no triangle to locate in
-                done = False
-        if not done:
-            ang = np.arccos(np.clip(dirs @ dv, -1, 1))
+                    continue
+            dirs = self.centres[js] - self.centroids[m]
+            dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+            ang = np.arccos(np.clip(dirs @ dv[m], -1, 1))
             order = np.argsort(ang)[:3]
             wk = (ang[order] + EPS_RAD) ** -power
             ids[m, :len(order)] = js[order]
             wts[m, :len(order)] = wk / wk.sum()
-    return ids, wts
+        return ids, wts
+
+
+def prepare_view_maps(mesh, photos) -> ViewMaps:
+    """The view map of every polygon (triangle) of ``mesh``: a photograph
+    enters a polygon's map when it sees the polygon in at least one pixel
+    (its z-buffer's face ids, :func:`prepare_photographs`)."""
+    from scipy.spatial import Delaunay
+
+    v, f = _mesh(mesh)
+    photos = list(photos)
+    tri = v[f]
+    cen = tri.mean(1)
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+    ref = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    u = np.cross(nrm, ref)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(nrm, u)
+    sees = np.stack([p.face_pixels > 0 for p in photos], 1)
+    centres = np.array([p.centre for p in photos])
+    ids, pts, dels = [], [], []
+    for m in range(len(f)):
+        js = np.flatnonzero(sees[m])
+        dirs = centres[js] - cen[m]
+        dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+        pm = np.stack([dirs @ u[m], dirs @ w[m]], 1)
+        d = None
+        if len(js) >= 3:
+            try:
+                d = Delaunay(pm)
+            except Exception:  # collinear directions (QhullError): no triangle to locate in
+                d = None
+        ids.append(js)
+        pts.append(pm)
+        dels.append(d)
+    return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres)
+
+
+def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
+    """Per polygon (triangle), the at most three photographs and weights the
+    view map gives the view from ``C`` (:meth:`ViewMaps.lookup` of
+    :func:`prepare_view_maps`). Returns ``(ids (M, 3), weights (M, 3))``."""
+    return prepare_view_maps(mesh, photos).lookup(C, power=power)
 
 
 def _view_map(X, face, ids, wts, photos, tolerance, channels):
     acc = np.zeros((len(X), channels))
     wsum = np.zeros(len(X))
     n = np.zeros(len(X))
-    fi, fw = ids[face], wts[face]  # (P, 3)
+    M = len(ids)
+    W = np.zeros((M, len(photos)))  # polygon -> weight of each photograph
+    for k in range(3):
+        ok = ids[:, k] >= 0
+        np.add.at(W, (np.flatnonzero(ok), ids[ok, k]), wts[ok, k])
     for j, p in enumerate(photos):
-        wj = np.where(fi == j, fw, 0.0).sum(1)
-        sel = np.flatnonzero(wj > 0)
-        if not len(sel):
+        on = W[:, j] > 0
+        if not on.any():
             continue
-        s, ok = _sample(p, X[sel], tolerance)
-        wt = np.where(ok, wj[sel], 0.0)
-        acc[sel] += wt[:, None] * s
-        wsum[sel] += wt
-        n[sel] += ok
+        # a polygon the photograph sees whole needs no per-pixel depth test (the
+        # 1998 paper's polygons are split at visibility edges beforehand), only
+        # a look-up that the bilinear cell does not straddle its outline
+        for whole in (True, False):
+            faces = on & (p.whole == whole)
+            sel = np.flatnonzero(faces[face])
+            if not len(sel):
+                continue
+            s, ok = _sample(p, X[sel], tolerance, check="cells" if whole else True)
+            wt = np.where(ok, W[face[sel], j], 0.0)
+            acc[sel] += wt[:, None] * s
+            wsum[sel] += wt
+            n[sel] += ok
     return acc, wsum, n
 
 
@@ -289,7 +361,21 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
     ``known`` filled by push–pull: weighted means over a pyramid of 2×2
     blocks, the finest level that has data used (Gortler et al., "The
     Lumigraph", SIGGRAPH 1996). Known pixels are unchanged."""
-    img = np.where(known[..., None], image, 0.0).astype(np.float64)
+    out = np.array(image, np.float64, copy=True)
+    hole = region & ~known
+    if not hole.any() or not known.any():
+        return out
+    # only the region's bounding box takes part (the rest is outside the model)
+    rows, cols = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
+    box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+    if not known[box].any():
+        box = np.s_[:, :]
+    out[box] = _push_pull(out[box], known[box], hole[box])
+    return out
+
+
+def _push_pull(image, known, hole):
+    img = np.where(known[..., None], image, 0.0)
     wgt = known.astype(np.float64)
     levels = [(img, wgt)]
     while min(img.shape[:2]) > 1 and wgt.min() == 0:
@@ -307,15 +393,14 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
         h, w = im.shape[:2]
         coarse = np.repeat(np.repeat(up, 2, 0), 2, 1)[:h, :w]
         up = wg[..., None] * im + (1 - wg[..., None]) * coarse
-    out = np.array(image, np.float64, copy=True)
-    hole = region & ~known
+    out = np.array(image, copy=True)
     out[hole] = up[hole]
     return out
 
 
 def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
                 tolerance: float = 0.01, power: float = DEFAULT_POWER, background: float = 0.0,
-                fill: bool = True) -> VDTMImage:
+                fill: bool = True, maps: ViewMaps | None = None) -> VDTMImage:
     """Render ``mesh`` from the camera ``K, R, t`` (``x_cam = R x_world +
     t``, ``size = (W, H)``) textured from ``photographs`` (see the module
     docstring for both methods).
@@ -337,6 +422,9 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         Value off the model.
     fill : bool
         Fill holes (model pixels no photograph sees).
+    maps : ViewMaps, optional
+        ``"view-map"``: the polygons' view maps, built once for many views
+        by :func:`prepare_view_maps` (built here when not given).
 
     Returns
     -------
@@ -353,7 +441,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     photos = list(photographs)
     if not photos:
         raise InputError("photographs", "no photographs: VDTM needs at least one")
-    if any(p.depth is None or p.face_pixels is None for p in photos):
+    if any(p.depth is None or p.whole is None for p in photos):
         photos = list(prepare_photographs((v, f), photos))
     first = np.asarray(photos[0].image)
     channels = 1 if first.ndim == 2 else first.shape[2]
@@ -378,7 +466,9 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     if method == "blend":
         acc, wsum, n = _blend(X, C, photos, tolerance, power, channels)
     else:
-        ids, wts = view_maps((v, f), photos, C, power=power)
+        if maps is None:
+            maps = prepare_view_maps((v, f), photos)
+        ids, wts = maps.lookup(C, power=power)
         acc, wsum, n = _view_map(X, r.face.ravel()[idx], ids, wts, photos, tolerance, channels)
         # where none of a polygon's three sees the point, every photograph is asked
         again = np.flatnonzero(wsum == 0)
