@@ -599,6 +599,17 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
                          files=files)
 
 
+def scene_depth(values: dict[str, float], K, R, t, size) -> np.ndarray:
+    """Camera ``z`` (H, W) float32 of the scene's surface (building, relief
+    and ground; NaN on the sky) seen by any camera ``K, R, t`` (``x_cam = R
+    x_world + t``), for the block parameters ``values``: the truth of a depth
+    map made from a solved, slightly wrong camera, along its own rays."""
+    V, F, _, n_solid = _scene_mesh(Building(values))
+    depth, face, _ = _scene_raster(V, F, n_solid, np.asarray(K, float), np.asarray(R, float),
+                                   np.asarray(t, float).ravel(), size)
+    return np.where(face >= 0, depth, np.nan).astype(np.float32)
+
+
 def _depths(V, F, n_model, n_solid, cam, size, tag):
     from lumigraph.capture.raster import rasterize
 

@@ -68,6 +68,8 @@ EPS_RAD = 1e-9
 # weights θ^-power: 1 is the paper's "inversely proportional"; 2 is tuned on the
 # glossy facade scene (docs/decisions/facade-vdtm.md)
 DEFAULT_POWER = 2.0
+# a view-map triangle with a smaller angle is a sliver: the nearest three are used instead
+SLIVER_DEG = 15.0
 
 
 @dataclass(frozen=True)
@@ -173,10 +175,11 @@ def _sample(photo, X, tolerance, check=True):
     if img.ndim == 2:
         img = img[..., None]
     h, w = img.shape[:2]
-    pc = X @ np.asarray(photo.R, np.float64).T + np.asarray(photo.t, np.float64)
-    z = pc[:, 2]
+    # one product: K (R X + t), whose third row is the camera z (K's is [0, 0, 1])
+    KR = np.asarray(photo.K, np.float64) @ np.asarray(photo.R, np.float64)
+    q = X @ KR.T + np.asarray(photo.K, np.float64) @ np.asarray(photo.t, np.float64)
+    z = q[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        q = pc @ np.asarray(photo.K, np.float64).T
         px = q[:, :2] / q[:, 2:3]
     # inside the frame: pixel footprints reach half a pixel past the centres
     # (taps clipped to the border there, as remap's BORDER_REPLICATE)
@@ -193,8 +196,11 @@ def _sample(photo, X, tolerance, check=True):
     # looked at: a photograph seeing its own pixel centres needs no neighbour
     if check == "cells":  # the polygon is seen whole: its cell must lie on one surface
         # (a point on a pixel centre has one tap: that pixel's depth must agree)
-        centre = (pxs[:, 0] == x0) & (pxs[:, 1] == y0)
-        ok &= photo.cells[y0, x0] | (centre & (np.abs(photo.depth[y0, x0] - z) <= tolerance * np.abs(z)))
+        cell = photo.cells[y0, x0]
+        centre = np.flatnonzero(~cell & (pxs[:, 0] == x0) & (pxs[:, 1] == y0))
+        cell[centre] = (np.abs(photo.depth[y0[centre], x0[centre]] - z[centre])
+                        <= tolerance * np.abs(z[centre]))
+        ok &= cell
     elif check:
         x1 = np.where(pxs[:, 0] - x0 > 1e-9, x1, x0)
         y1 = np.where(pxs[:, 1] - y0 > 1e-9, y1, y0)
@@ -246,13 +252,15 @@ class ViewMaps:
     points: tuple  # per polygon: (k, 2) projected directions
     triangulations: tuple  # per polygon: scipy Delaunay or None
     centres: np.ndarray  # (N, 3) the photographs' centres
+    good: tuple = ()  # per polygon: which of its triangles are not slivers
 
     def lookup(self, C, *, power: float = DEFAULT_POWER):
         """The at most three photographs and weights of each polygon for the
         view from ``C``: ``(ids (M, 3) int, -1 = none; weights (M, 3))``.
         Inside the map's hull, the containing triangle's corners with their
-        barycentric weights; outside it (or with fewer than three), the three
-        nearest by angle, weighted ``θ^−power``."""
+        barycentric weights; outside it, in a sliver triangle (smallest angle
+        below :data:`SLIVER_DEG`) or with fewer than three, the three nearest
+        by angle, weighted ``θ^−power``."""
         M = len(self.centroids)
         ids = np.full((M, 3), -1)
         wts = np.zeros((M, 3))
@@ -266,7 +274,7 @@ class ViewMaps:
             d = self.triangulations[m]
             if d is not None:
                 s = int(d.find_simplex(q[m]))
-                if s >= 0:
+                if s >= 0 and self.good[m][s]:
                     T = d.transform[s]
                     b = T[:2] @ (q[m] - T[2])
                     bc = np.append(b, 1 - b.sum())
@@ -302,7 +310,7 @@ def prepare_view_maps(mesh, photos) -> ViewMaps:
     w = np.cross(nrm, u)
     sees = np.stack([p.face_pixels > 0 for p in photos], 1)
     centres = np.array([p.centre for p in photos])
-    ids, pts, dels = [], [], []
+    ids, pts, dels, good = [], [], [], []
     for m in range(len(f)):
         js = np.flatnonzero(sees[m])
         dirs = centres[js] - cen[m]
@@ -317,7 +325,23 @@ def prepare_view_maps(mesh, photos) -> ViewMaps:
         ids.append(js)
         pts.append(pm)
         dels.append(d)
-    return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres)
+        good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
+    return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
+                    tuple(good))
+
+
+def _not_sliver(tri, min_deg=SLIVER_DEG):
+    """(T,) bool: the triangles ``tri`` (T, 3, 2) whose smallest angle is at
+    least ``min_deg``: barycentric weights in a sliver blend photographs far
+    apart (the photographs of a ring seen from a wall project to a line)."""
+    angles = []
+    for k in range(3):
+        a = tri[:, (k + 1) % 3] - tri[:, k]
+        b = tri[:, (k + 2) % 3] - tri[:, k]
+        cos = np.einsum("ij,ij->i", a, b) / np.maximum(
+            np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return np.min(angles, axis=0) >= min_deg
 
 
 def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
@@ -328,32 +352,46 @@ def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
 
 
 def _view_map(X, face, ids, wts, photos, tolerance, channels):
-    acc = np.zeros((len(X), channels))
-    wsum = np.zeros(len(X))
-    n = np.zeros(len(X))
     M = len(ids)
     W = np.zeros((M, len(photos)))  # polygon -> weight of each photograph
     for k in range(3):
         ok = ids[:, k] >= 0
         np.add.at(W, (np.flatnonzero(ok), ids[ok, k]), wts[ok, k])
+    # the pixels sorted by polygon (16-bit ids sort by radix, in linear time): a
+    # photograph's pixels are then runs, its weight constant along each
+    order = np.argsort(face.astype(np.int16) if M < 2 ** 15 else face, kind="stable")
+    Xs = X[order]
+    counts = np.bincount(face, minlength=M)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    acc = np.zeros((len(X), channels))
+    wsum = np.zeros(len(X))
+    n = np.zeros(len(X))
     for j, p in enumerate(photos):
-        on = W[:, j] > 0
+        on = (W[:, j] > 0) & (counts > 0)
         if not on.any():
             continue
         # a polygon the photograph sees whole needs no per-pixel depth test (the
         # 1998 paper's polygons are split at visibility edges beforehand), only
         # a look-up that the bilinear cell does not straddle its outline
         for whole in (True, False):
-            faces = on & (p.whole == whole)
-            sel = np.flatnonzero(faces[face])
-            if not len(sel):
+            faces = np.flatnonzero(on & (p.whole == whole))
+            if not len(faces):
                 continue
-            s, ok = _sample(p, X[sel], tolerance, check="cells" if whole else True)
-            wt = np.where(ok, W[face[sel], j], 0.0)
-            acc[sel] += wt[:, None] * s
-            wsum[sel] += wt
-            n[sel] += ok
-    return acc, wsum, n
+            s, ok = _sample(p, np.concatenate([Xs[starts[f]:starts[f + 1]] for f in faces]),
+                            tolerance, check="cells" if whole else True)
+            pos = 0
+            for f in faces:
+                a, b = starts[f], starts[f + 1]
+                okf = ok[pos:pos + b - a]
+                wt = W[f, j] * okf
+                acc[a:b] += wt[:, None] * s[pos:pos + b - a]
+                wsum[a:b] += wt
+                n[a:b] += okf
+                pos += b - a
+    # back to the pixels' order
+    out_acc, out_w, out_n = np.empty_like(acc), np.empty_like(wsum), np.empty_like(n)
+    out_acc[order], out_w[order], out_n[order] = acc, wsum, n
+    return out_acc, out_w, out_n
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
