@@ -229,7 +229,7 @@ def _perturbed_rotation(R, rng, max_deg):
 
     axis = rng.normal(size=3)
     axis /= np.linalg.norm(axis)
-    return Rotation.from_rotvec(axis * np.radians(rng.uniform(0, max_deg))).as_matrix() @ R
+    return Rotation.from_rotvec(axis * np.radians(max_deg)).as_matrix() @ R
 
 
 def random_starts(quick: bool):
