@@ -19,14 +19,17 @@ Each proposal is refined to sub-pixel precision first: the intensity profile
 across the segment is sampled at points along it, the gradient peak located
 by a parabola through the three largest samples, and a line fitted to the
 peaks (total least squares); the proposal is the detected stretch on that
-line. An edge already marked by hand in a photograph keeps the hand mark;
-of several detections of one edge the longest is proposed.
+line; a proposal whose refinement finds too few gradient peaks or moves it
+more than 1.5 px is dropped. An edge already marked by hand in a photograph
+keeps the hand mark (its detections are matched to it and dropped, so they
+are not taken for a neighbour); of several detections of one edge the
+longest is proposed.
 
 Examples
 --------
 >>> import numpy as np
 >>> img = np.zeros((40, 60), np.uint8); img[:, 30:] = 200      # a vertical step at x = 29.5
->>> seg = refine_segment(img.astype(float), np.array([29.0, 5.0, 29.0, 35.0]))
+>>> seg = refine_segment(img.astype(float), np.array([29.0, 5.0, 29.0, 35.0]))   # 0.5 px off
 >>> bool(abs(seg[0] - 29.5) < 0.05 and abs(seg[2] - 29.5) < 0.05)
 True
 """
@@ -82,16 +85,18 @@ def detect_segments(grey: np.ndarray, *, min_length_px: float = 12.0) -> np.ndar
 
 
 def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0,
-                   samples: int = 24) -> np.ndarray:
+                   samples: int = 24) -> np.ndarray | None:
     """The segment moved onto the intensity edge it lies on (sub-pixel; the
-    module docstring); returned unchanged when too few profiles peak."""
+    module docstring); None when fewer than a quarter of the profiles peak
+    (a faint edge) or the fitted line is more than 1.5 px from the detection
+    (another edge nearby)."""
     from scipy.ndimage import map_coordinates
 
     a, b = seg[:2], seg[2:]
     d = b - a
     L = np.hypot(*d)
     if L < 2:
-        return seg
+        return None
     u = d / L
     n = np.array([-u[1], u[0]])
     ts = np.linspace(0.08, 0.92, samples)
@@ -109,8 +114,8 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
             den = y0 - 2 * y1 + y2
             off = mids[i] + (0.5 * 0.5 * (y0 - y2) / den if den < 0 else 0.0)
             pts.append(a + ts[k] * d + off * n)
-    if len(pts) < 6:
-        return seg
+    if len(pts) < max(6, samples // 4):
+        return None
     pts = np.array(pts)
     for _ in range(2):                                  # total least squares, one trim
         c = pts.mean(0)
@@ -124,7 +129,10 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
     c = pts.mean(0)
     _, _, Vt = np.linalg.svd(pts - c)
     dirn = Vt[0]
-    return np.r_[c + ((a - c) @ dirn) * dirn, c + ((b - c) @ dirn) * dirn]
+    out = np.r_[c + ((a - c) @ dirn) * dirn, c + ((b - c) @ dirn) * dirn]
+    if max(abs((a - out[:2]) @ n), abs((b - out[2:]) @ n)) > 1.5:
+        return None
+    return out
 
 
 def _associate(det, visible, *, max_angle_deg, max_distance_px):
@@ -151,14 +159,17 @@ def _associate(det, visible, *, max_angle_deg, max_distance_px):
                 continue
             ta, tb = sorted(((a - p) @ de, (b - p) @ de))
             overlap = max(0.0, min(tb, L) - max(ta, 0.0))
-            if overlap < 0.5 * (tb - ta):
-                continue
-            scores.append((float(np.abs(h).mean()), j))
+            scores.append((float(np.abs(h).mean()), j, overlap >= 0.5 * (tb - ta)))
         if not scores:
             continue
         scores.sort()
+        # the nearest line must hold the detection; any other line in the gates
+        # (even one the detection overruns: a silhouette spanning several
+        # edges) nearly as near makes it ambiguous
+        if not scores[0][2]:
+            continue
         if len(scores) > 1 and scores[1][0] < 1.5 * scores[0][0] + 0.5:
-            continue                                    # two edges fit about as well
+            continue
         out[i] = scores[0][1]
     return out
 
@@ -196,8 +207,10 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             cam = {"K": sol.K[photo], "R": R, "t": t, "image_size": list(img.shape[1::-1])}
             vis = project_edges(sol.model, {photo: cam}, min_length_px=min_length_px,
                                 samples=41)[photo]
+            # hand-marked edges stay candidates, so that their detections are not
+            # taken for a neighbouring edge; what they win is dropped
             hand = {m.edge for m in marks.of(photo)}
-            vis = [(v["edge"], np.array(v["segment"])) for v in vis if v["edge"] not in hand]
+            vis = [(v["edge"], np.array(v["segment"])) for v in vis]
             det = found[photo]
             which = _associate(det, vis, max_angle_deg=min(widen * max_angle_deg, 20.0),
                                max_distance_px=widen * max_distance_px)
@@ -206,11 +219,15 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 if j < 0:
                     continue
                 name = vis[j][0]
+                if name in hand:
+                    continue
                 if name not in best or (np.hypot(*(s[2:] - s[:2]))
                                         > np.hypot(*(best[name][2:] - best[name][:2]))):
                     best[name] = s
-            new += [Mark(photo, name, refine_segment(greys[photo], s), proposed=True)
-                    for name, s in best.items()]
+            for name, s in best.items():
+                seg = refine_segment(greys[photo], s)
+                if seg is not None:
+                    new.append(Mark(photo, name, seg, proposed=True))
         if widen == 1.0 and len(new) == len(proposals) and all(a.edge == b.edge and a.photo == b.photo
                                               for a, b in zip(new, proposals, strict=True)):
             proposals = new

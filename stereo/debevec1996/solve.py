@@ -168,6 +168,7 @@ class _Problem:
         self.seg = np.array([m.segment for m in marks], float).reshape(-1, 4)
         self.C0, self.C1 = model.edge_matrices([m.edge for m in marks])
         self.free = ~model.fixed
+        self.Cf = (self.C0[:, :, self.free], self.C1[:, :, self.free])
         self.base = model.values
         self.P = int(self.free.sum())
         self.nc = len(self.photos)
@@ -222,7 +223,7 @@ class _Problem:
             g = p[i] / n12[:, None] - ((lvec * p[i]).sum(1) / n12**3)[:, None] * l12
             b = [np.cross(u[1], g), np.cross(g, u[0])]              # dh/du0, dh/du1
             a = [np.einsum("nji,nj->ni", Kn, bk) for bk in b]         # dh/dY_k
-            dth = sum(np.einsum("nj,nji,nis->ns", a[k], R[c], (self.C0, self.C1)[k][:, :, self.free])
+            dth = sum(np.einsum("ni,nis->ns", np.einsum("nj,nji->ni", a[k], R[c]), self.Cf[k])
                       for k in range(2))
             dt = a[0] + a[1]
             dw = np.zeros((self.n, 3))
@@ -258,6 +259,17 @@ class _Problem:
         from scipy.sparse import csr_matrix
 
         _, cols, vals = self.distances(x, jac=True)
+        if dense:  # each row's columns are distinct: plain fancy assignment
+            rows = np.arange(self.n)[:, None]
+            Jh = []
+            for j in range(2):
+                M = np.zeros((self.n, self.ncol))
+                M[rows, cols[j]] = vals[j]
+                Jh.append(M)
+            J = np.empty((self.n, 2, self.ncol))
+            for i in range(2):
+                J[:, i] = A[:, i, 0, None] * Jh[0] + A[:, i, 1, None] * Jh[1]
+            return J.reshape(2 * self.n, self.ncol)
         # rows of r = A h: r_i = Σ_j A_ij h_j, so each residual row mixes both endpoints' rows
         rows, cc, vv = [], [], []
         for i in range(2):
@@ -556,8 +568,10 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         Am = prob.weights(False)
         r = least_squares(lambda x: prob.residuals(x, Am), x0,
                           jac=lambda x: prob.jacobian(x, Am, dense=dense),
-                          loss="soft_l1", f_scale=3.0 * noise_px, **{**kw, "ftol": 1e-10,
-                                                                    "xtol": 1e-10, "gtol": 1e-10})
+                          loss="soft_l1", f_scale=3.0 * noise_px,
+                          # only a start and the mis-mark test: loose tolerances, and the
+                          # iterative trust-region solver (an SVD per step costs more)
+                          **{**kw, "ftol": 1e-8, "xtol": 1e-8, "gtol": 1e-8, "tr_solver": "lsmr"})
         nfev += r.nfev
         h = prob.distances(r.x)
         d = np.sqrt((h[:, 0] ** 2 + h[:, 0] * h[:, 1] + h[:, 1] ** 2) / 3.0)
@@ -616,6 +630,9 @@ def _again(model, marks, K, R0, photos, kept, out, x, prob, free_focal, noise_px
 def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     Aw = prob.weights(True)
     dense = kw["tr_solver"] == "exact"
+    if dense:  # MINPACK's Levenberg-Marquardt (QR steps): the quickest on small problems
+        kw = dict(method="lm", ftol=1e-15, xtol=1e-15, gtol=1e-15, x_scale="jac",
+                  max_nfev=kw["max_nfev"])
     r = least_squares(lambda x: prob.residuals(x, Aw), x0,
                       jac=lambda x: prob.jacobian(x, Aw, dense=dense), **kw)
     nfev += r.nfev
