@@ -367,7 +367,15 @@ def solve_time(quick: bool):
                                    "rough poses")]
 
 
-ROW_PROVIDERS = [noise_free, noise_calibration, random_starts, automatic_marking, solve_time]
+def _stages_2_3():
+    # VDTM and model-based stereo fed by the solved model (stereo/bench_facade_vdtm.py)
+    from lumigraph.stereo.bench_facade_vdtm import ROW_PROVIDERS as more
+
+    return more
+
+
+ROW_PROVIDERS = [noise_free, noise_calibration, random_starts, automatic_marking, solve_time,
+                 *_stages_2_3()]
 
 
 def _extra(quick):

@@ -9,7 +9,7 @@ looking at its views); every check is on the REPORTED seeds 1–3 (quick:
 seed 1), median and worst over their views, the tuned seed's rows shown
 beside them, labelled.
 
-- VDTM (glossy, 320x240; quick 160x120): PSNR (dB, 8-bit scale) against the
+- VDTM (glossy, 640x480; quick 160x120): PSNR (dB, 8-bit scale) against the
   noise-free novel view, over the pixels where the view sees the model's
   own surface, of the blend (Debevec, Taylor & Malik 1996), the view-map
   variant (Debevec, Yu & Borshukov 1998), the uniform average of the
@@ -97,7 +97,7 @@ def vdtm(quick: bool):
     from lumigraph.stereo.debevec1996.vdtm import render_vdtm
 
     cv2.setNumThreads(1)
-    size = (160, 120) if quick else (320, 240)
+    size = (160, 120) if quick else (640, 480)
     seeds = TUNED_SEEDS + (REPORTED_SEEDS[:1] if quick else REPORTED_SEEDS)
     rows, gains_u, gains_n, vm_diff, speed, speed_all = [], [], [], [], [], []
     for seed in seeds:
