@@ -86,3 +86,30 @@ def test_bad_input_is_one_line(folder, tmp_path):
     r = lumigraph("stereo", "facade", "render", "--model", bad / "blocks.json", "--photos", bad,
                   "--view", bad / "novel" / "view_0.json", "--out", tmp_path / "v.png")
     assert_clean_error(r, "photo_01.png", "camera")
+
+
+def test_linear_photographs_stay_linear(folder, tmp_path):
+    f, s = folder
+    lin = tmp_path / "linear"
+    shutil.copytree(f, lin)
+    names = []
+    for name, img in zip(s.image_names, s.images, strict=True):
+        exr = name.replace(".png", ".exr")
+        io.write_exr(lin / exr, (img / 200.0).astype(np.float32))  # radiance = code / 200
+        names.append(exr)
+    io.write_stack_json(lin, names, blocks="blocks.json", edges="edges.json")
+    for n in s.image_names:  # the cameras are found by the photographs' stems
+        assert (lin / "cameras" / n.replace(".png", ".json")).is_file()
+    args = ("stereo", "facade", "render", "--model", lin / "blocks.json", "--photos", lin,
+            "--view", lin / "novel" / "view_0.json")
+    r = lumigraph(*args, "--out", tmp_path / "view.exr", "-q")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph(*args, "--out", tmp_path / "codes.png", "--photos", f, "-q")
+    assert r.returncode == 0, r.stderr
+    v = io.read_exr(tmp_path / "view.exr")
+    codes = io.read_image(tmp_path / "codes.png").astype(np.float64)
+    # the same blend of radiance as of codes, up to the PNG's rounding (half a code)
+    assert np.abs(v * 200.0 - codes).max() <= 0.5 + 1e-3
+    # radiance into an 8-bit PNG would not be linear: refused
+    r = lumigraph(*args, "--out", tmp_path / "view.png")
+    assert_clean_error(r, "view.png", ".exr")
