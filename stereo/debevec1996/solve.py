@@ -21,9 +21,11 @@ add to ``Err``. The unknowns are the free block parameters, a rotation
 one focal-length scale shared by every photograph. The Jacobian is analytic
 (the edge endpoints are linear in ``θ``, :meth:`BlockModel.edge_matrices`);
 it is block-sparse (a mark touches its own photograph's six pose columns and
-its block's parameters) and is handed to ``scipy.optimize.least_squares``
-as a sparse matrix when it is large, dense (exact trust-region solves) when
-it is small.
+its block's parameters). ``scipy.optimize.least_squares`` gets it as a
+``scipy.sparse`` matrix (trust region, LSMR steps) when it has more than 600
+columns; below that it is assembled dense and the final solve is MINPACK's
+Levenberg–Marquardt (QR steps: a ten-block, eight-photograph, 1200-segment
+solve takes 0.6 s instead of 1.4 s with SVD trust-region steps).
 
 **Initialisation (eqs. 5.4, 5.5).** Rotations first: a marked edge whose
 model direction ``v`` is known (axis-aligned block edges) and its image
@@ -85,6 +87,7 @@ from lumigraph.stereo.debevec1996.model import BlockModel
 
 _A0 = np.array([[1.0, 0.5], [0.0, np.sqrt(3.0) / 2.0]])  # h -> residuals: rᵀr = h1² + h1h2 + h2²
 MIN_MARKS = 3
+DENSE_MAX_COLUMNS = 600  # above: a sparse Jacobian and LSMR trust-region steps
 
 FIXTURE = {"blocks": [
     {"name": "house", "kind": "box",
@@ -580,7 +583,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         raise EstimationError(where, "the marks do not constrain " + ", ".join(dict.fromkeys(bad))
                               + ": mark more edges of those blocks / photographs, share or fix "
                                 "those parameters")
-    dense = prob.ncol <= 600
+    dense = prob.ncol <= DENSE_MAX_COLUMNS
     kw = dict(method="trf", x_scale="jac", ftol=1e-14, xtol=1e-14, gtol=1e-14,
               max_nfev=max_iterations, tr_solver="exact" if dense else "lsmr")
     nfev = 0
