@@ -49,7 +49,7 @@ with its rough model, the wall plane, the key and offset views 20, 35, 50
 and 65° apart (the key camera sees the wall 12° off its normal, the offset
 camera 8, 23, 38 and 53°: the larger the angle, the more differently the two
 views foreshorten the wall and the more of it the relief hides). Ours:
-model-based stereo (Debevec, Taylor & Malik 1996, ``stereo/debevec1996.py``;
+model-based stereo (Debevec, Taylor & Malik 1996, ``stereo/debevec1996/model_stereo.py``;
 knob: window). Baseline, the plain approach on the same pair: rectify, search
 the ground truth's disparity range (with a 4 px margin) by our SSD block
 matching and by OpenCV StereoSGBM, and take each key pixel's disparity back

@@ -136,47 +136,87 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
 
 
 def _associate(det, visible, *, max_angle_deg, max_distance_px):
-    """Index of the visible edge each detection belongs to, or -1."""
+    """Index of the visible edge each detection belongs to, or -1
+    (vectorised over detections x edges; the gates of the module docstring)."""
     out = np.full(len(det), -1)
     if not len(visible) or not len(det):
         return out
-    cos_gate = np.cos(np.radians(max_angle_deg))
-    for i, s in enumerate(det):
-        a, b = s[:2], s[2:]
-        ds = (b - a) / max(np.hypot(*(b - a)), 1e-9)
-        scores = []
-        for j, (_, e) in enumerate(visible):
-            p, q = e[:2], e[2:]
-            L = np.hypot(*(q - p))
-            if L < 1e-9:
-                continue
-            de = (q - p) / L
-            if abs(ds @ de) < cos_gate:
-                continue
-            nrm = np.array([-de[1], de[0]])
-            h = np.array([(a - p) @ nrm, (b - p) @ nrm])
-            if np.abs(h).max() > max_distance_px:
-                continue
-            ta, tb = sorted(((a - p) @ de, (b - p) @ de))
-            overlap = max(0.0, min(tb, L) - max(ta, 0.0))
-            scores.append((float(np.abs(h).mean()), j, overlap >= 0.5 * (tb - ta)))
-        if not scores:
-            continue
-        scores.sort()
-        # the nearest line must hold the detection; any other line in the gates
-        # (even one the detection overruns: a silhouette spanning several
-        # edges) nearly as near makes it ambiguous
-        if not scores[0][2]:
-            continue
-        if len(scores) > 1 and scores[1][0] < 1.5 * scores[0][0] + 0.5:
-            continue
-        out[i] = scores[0][1]
+    E = np.array([e for _, e in visible], float)
+    a, b = det[:, None, :2], det[:, None, 2:]
+    p, q = E[None, :, :2], E[None, :, 2:]
+    L = np.hypot(*(E[:, 2:] - E[:, :2]).T)[None]
+    Ls = np.maximum(L, 1e-9)
+    de = (q - p) / Ls[..., None]
+    ds = (b - a) / np.maximum(np.hypot(*(det[:, 2:] - det[:, :2]).T), 1e-9)[:, None, None]
+    cos = np.abs((ds * de).sum(-1))
+    nrm = np.stack([-de[..., 1], de[..., 0]], -1)
+    ha, hb = ((a - p) * nrm).sum(-1), ((b - p) * nrm).sum(-1)
+    ta, tb = ((a - p) * de).sum(-1), ((b - p) * de).sum(-1)
+    lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
+    overlap = np.clip(np.minimum(hi, L) - np.maximum(lo, 0.0), 0.0, None)
+    gate = ((cos >= np.cos(np.radians(max_angle_deg))) & (np.maximum(np.abs(ha), np.abs(hb))
+                                                          <= max_distance_px) & (L > 1e-9))
+    score = np.where(gate, (np.abs(ha) + np.abs(hb)) / 2, np.inf)
+    j = np.argmin(score, 1)
+    rows = np.arange(len(det))
+    first = score[rows, j]
+    score[rows, j] = np.inf
+    second = score.min(1)
+    # the nearest line must hold the detection; any other line in the gates
+    # (even one the detection overruns: a silhouette spanning several
+    # edges) nearly as near makes it ambiguous
+    ok = np.isfinite(first) & (overlap[rows, j] >= 0.5 * (hi - lo)[rows, j]) \
+        & ~(second < 1.5 * first + 0.5)
+    out[ok] = j[ok]
     return out
+
+
+def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
+    """Values for the parameters ``names`` that the marks left unconstrained
+    (held at their starting values), one after the other: each is scanned
+    over ±30 % of its value and set where the most detected length matches
+    the edges it moves (the others' detections count too, through the
+    ambiguity test). ``views``: (visible edge names, K, R, t, detections)
+    per photograph."""
+    C0, C1 = model.edge_matrices()
+    index = {n: i for i, n in enumerate(model.edge_names)}
+    values = values.copy()
+    for name in names:
+        slot = model.slot_of(name)
+        moves = (np.abs(C0[:, :, slot]).sum(1) + np.abs(C1[:, :, slot]).sum(1)) > 0
+
+        def support(v, slot=slot, moves=moves):
+            th = values.copy()
+            th[slot] = v
+            total = 0.0
+            for vis, K, R, t, det in views:
+                idx = np.array([index[e] for e in vis], int)
+                if not len(idx) or not len(det):
+                    continue
+                P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
+                if np.any(P[:, 2] <= 1e-9):
+                    continue
+                uv = P @ K.T
+                uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
+                segs = [(None, np.r_[uv[0, k], uv[1, k]]) for k in range(len(idx))]
+                got = _associate(det, segs, max_angle_deg=max_angle_deg,
+                                 max_distance_px=max_distance_px)
+                hit = got >= 0
+                hit[hit] = moves[idx[got[hit]]]
+                total += float(np.hypot(*(det[hit, 2:] - det[hit, :2]).T).sum())
+            return total
+
+        v0 = values[slot]
+        cands = v0 * np.linspace(0.7, 1.3, 31)
+        scores = np.array([support(v) for v in cands])
+        if scores.max() > support(v0):
+            values[slot] = cands[int(np.argmax(scores))]
+    return values
 
 
 def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise_px: float = 1.0,
              max_angle_deg: float = 3.0, max_distance_px: float = 6.0,
-             min_length_px: float = 15.0, rounds: int = 6,
+             min_length_px: float = 15.0, rounds: int = 8,
              where: str = "edges.json") -> AutomarkResult:
     """Propose marks for the model edges the hand ``marks`` left unmarked
     (module docstring). ``images``: photo -> image (8/16-bit or float in
@@ -188,16 +228,21 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
     greys = {p: _grey(images[p]) for p in marks.photographs}
     found = {p: detect_segments(greys[p], min_length_px=min_length_px) for p in marks.photographs}
-    proposals: list = []
+    kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
+    current = model
     for k in range(rounds):
         widen = max(1.0, 4.0 - k)   # wide gates first: held parameters start far off
-        # each round solves from the hand marks and the last round's proposals:
-        # parameters the hand marks leave free get fixed by the proposals
-        cur = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
-        sol = solve_facade(model, cur, K, rough_rotations=rough_rotations, noise_px=noise_px,
+        # each round solves from the hand marks and the proposals so far
+        # (a proposal the robust solve rejects is forgotten): parameters the
+        # hand marks leave free get fixed by the proposals
+        cur = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        sol = solve_facade(current, cur, K, rough_rotations=rough_rotations, noise_px=noise_px,
                            hold_unconstrained=True, where=where)
+        for p, e, _ in sol.outliers:
+            kept.pop((p, e), None)
         warnings = list(sol.warnings)
-        new = []
+        before = set(kept)
+        views = []
         for photo in marks.photographs:
             if photo not in sol.poses:
                 warnings.append(f"photograph {photo!r}: no pose from the marks, nothing proposed")
@@ -212,6 +257,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             hand = {m.edge for m in marks.of(photo)}
             vis = [(v["edge"], np.array(v["segment"])) for v in vis]
             det = found[photo]
+            views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
             which = _associate(det, vis, max_angle_deg=min(widen * max_angle_deg, 20.0),
                                max_distance_px=widen * max_distance_px)
             best: dict[str, np.ndarray] = {}
@@ -227,11 +273,15 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             for name, s in best.items():
                 seg = refine_segment(greys[photo], s)
                 if seg is not None:
-                    new.append(Mark(photo, name, seg, proposed=True))
-        if widen == 1.0 and len(new) == len(proposals) and all(a.edge == b.edge and a.photo == b.photo
-                                              for a, b in zip(new, proposals, strict=True)):
-            proposals = new
+                    kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
+        if sol.held:
+            # what the marks leave free stays at its starting value: find it by
+            # the detections it would explain, so the next round can match them
+            v = _vote(sol.model, sol.model.values, sol.held, views,
+                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+            current = current.with_values({n: float(v[sol.model.slot_of(n)]) for n in sol.held})
+        elif widen == 1.0 and set(kept) == before:
             break
-        proposals = new
+    proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
     return AutomarkResult(merged, len(proposals), sol, warnings)

@@ -47,7 +47,7 @@ pose unconstrained: exit 2 naming them.
 """
 
 AUTOMARK_EPILOG = """\
-Solves from the marks already in FOLDER/edges.json (at least 4 per photograph work well),
+Solves from the marks already in FOLDER/edges.json (or --edges) (at least 4 per photograph work well),
 detects line segments in each photograph (OpenCV's fast line detector), refines each to
 sub-pixel precision and proposes those that match a reprojected model edge within
 --max-angle degrees and --max-distance px, over at least half their length. Writes an
@@ -101,6 +101,8 @@ def add_facade(sp) -> None:
 
 
 def _common(v) -> None:
+    v.add_argument("--edges", type=input_path,
+                   help="the marked edges (default FOLDER/edges.json; e.g. automark's output)")
     v.add_argument("--camera", type=input_path,
                    help="camera.json of the photographs (default FOLDER/camera.json)")
     v.add_argument("--rough-poses", type=input_path,
@@ -186,7 +188,7 @@ def _solve(args) -> int:
     folder, photos, images, model, camera, cam_path = _folder(args)
     check_planned([out / n for n in planned_outputs(photos)])
     sizes = {p: img.shape[1::-1] for p, img in images.items()}
-    edges_path = folder / "edges.json"
+    edges_path = Path(args.edges) if args.edges else folder / "edges.json"
     marks = load_edges(edges_path, model=model, photographs=photos, image_sizes=sizes)
     rough = _rough(args, photos)
     sol = solve_facade(model, _undistorted(marks, camera), {p: camera.K for p in photos},
@@ -217,7 +219,7 @@ def _automark(args) -> int:
 
     check_automark_options(max_angle_deg=args.max_angle, max_distance_px=args.max_distance)
     folder, photos, images, model, camera, cam_path = _folder(args)
-    edges_path = folder / "edges.json"
+    edges_path = Path(args.edges) if args.edges else folder / "edges.json"
     if os.path.abspath(args.out) == os.path.abspath(edges_path):
         raise InputError("--out", "would replace the input edges.json; write another file")
     sizes = {p: img.shape[1::-1] for p, img in images.items()}
