@@ -95,6 +95,10 @@ SCENES = Registry("scene", [
     Method("model-stereo", _S + "model_stereo:render_facade",
            "wide-baseline key/offset views of a facade with pillars and recessed windows, with "
            "its rough model (the wall plane) for model-based stereo"),
+    Method("facade", _S + "facade:render_facade",
+           "a building of blocks (house, gable roof, tower, spire, wing) photographed from around "
+           "it, glossy walls and windows: Facade's blocks.json, edges.json, true parameters and "
+           "cameras, depth per view, novel views for view-dependent texture mapping"),
 ])
 GT_SCHEMA = "lumigraph.gt"
 
@@ -229,6 +233,9 @@ class RenderedScene:
         JSON-able ground truth (K, poses, response, times, …) -> ``gt.json``.
     gt_arrays : dict of str -> ndarray
         Dense ground truth (radiance, disparity, flow, depth, …) -> ``gt/*.npy``.
+    files : dict of str -> dict
+        Further JSON documents by relative path (a scene's model file, marks,
+        one ``camera.json`` per view), written beside the images.
     """
 
     scene: str
@@ -238,6 +245,7 @@ class RenderedScene:
     stack: dict = field(default_factory=dict)
     gt: dict = field(default_factory=dict)
     gt_arrays: dict = field(default_factory=dict)
+    files: dict = field(default_factory=dict)
 
     def __post_init__(self):
         if len(self.images) != len(self.image_names):
@@ -265,9 +273,13 @@ class RenderedScene:
         for name, arr in self.gt_arrays.items():
             with atomic_path(folder / "gt" / f"{name}.npy") as tmp:
                 np.save(tmp, np.asarray(arr), allow_pickle=False)
+        for name, doc in self.files.items():
+            (folder / name).parent.mkdir(parents=True, exist_ok=True)
+            write_json(folder / name, doc)
+        files = {"files": sorted(self.files)} if self.files else {}
         write_json(folder / "gt.json", {"schema": GT_SCHEMA, "schema_version": 1,
                                         "scene": self.scene, "params": self.params,
-                                        "arrays": sorted(self.gt_arrays), **self.gt})
+                                        "arrays": sorted(self.gt_arrays), **files, **self.gt})
         write_stack_json(folder, list(self.image_names), scene=self.scene, **self.stack)
         return folder
 
@@ -285,12 +297,13 @@ class RenderedScene:
         scene = gt.pop("scene")
         params = gt.pop("params")
         arrays = {n: np.load(folder / "gt" / f"{n}.npy") for n in gt.pop("arrays")}
+        files = {n: json.loads((folder / n).read_text()) for n in gt.pop("files", [])}
         for k in ("schema", "schema_version"):
             stack.pop(k, None)
             gt.pop(k, None)
         stack.pop("scene", None)
         images = tuple(read_image(folder / n) for n in names)
-        return cls(scene, params, images, names, stack, gt, arrays)
+        return cls(scene, params, images, names, stack, gt, arrays, files)
 
 
 def _spec(method: Method) -> SceneSpec:
@@ -364,7 +377,8 @@ def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
     rng = np.random.default_rng(seed)
     result = SCENES[name](size=(w, h), seed=seed, rng=rng, **opts)
     result = RenderedScene(result.scene, {"size": [w, h], "seed": seed, **opts}, result.images,
-                           result.image_names, result.stack, result.gt, result.gt_arrays)
+                           result.image_names, result.stack, result.gt, result.gt_arrays,
+                           result.files)
     if cache:
         _MEMORY[key] = result
         try:

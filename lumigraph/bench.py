@@ -25,6 +25,8 @@ BENCH_STAGES = Registry("bench stage", [
            "optical flow and video matching against exact ground truth"),
     Method("stereo", "lumigraph.stereo.bench_stereo:stage",
            "block matching against OpenCV, triangulation, SfM"),
+    Method("facade", "lumigraph.stereo.bench_facade:stage",
+           "Façade photogrammetric modelling: block parameters and cameras from marked edges"),
     Method("lightfield", "lumigraph.lightfield.bench:stage",
            "refocusing, lenslet decoding, light-slab rendering, depth"),
     Method("separation", "lumigraph.separation.bench:stage",

@@ -67,6 +67,7 @@ examples:
       --model out/facade/gt/model_depth.npy --max-offset 0.35 --out out/facade_depth.pfm
   lumigraph stereo triangulate tracks.json --out points.json
   lumigraph stereo sfm out/views/*.png --camera out/views/gt.json --out out/sfm
+  lumigraph stereo facade solve FOLDER --out out/facade   (FOLDER: stack.json, blocks.json, edges.json)
 
 Disparity: left image is the reference, x_right = x_left - d, unknown = inf in the PFM.
 """
@@ -759,6 +760,10 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--out", required=True, type=output_dir,
                    help="folder for cameras.json, points.ply and the COLMAP text model")
     v.set_defaults(func=_sfm, arg_flags={"images": "IMAGES"})
+
+    from lumigraph.stereo.debevec1996.cli import add_facade
+
+    add_facade(sp)
     return p
 
 

@@ -33,3 +33,34 @@ $(OUT)/stereo/facade_depth.pfm $(OUT)/stereo/facade_warped.png &: $(OUT)/scenes/
 DEMO_OUTPUTS += $(OUT)/stereo/facade_depth.pfm
 # every file a grouped step writes, so a rerun rebuilds whichever a kill left missing
 DEMO_OUTPUTS += $(OUT)/stereo/facade_warped.png
+
+# Facade's chain (Debevec, Taylor & Malik 1996), through a user's files: the
+# building's photographs with blocks.json and edges.json -> solve (block
+# parameters and camera poses) -> the solved model's depth from photo_03 (the
+# key view) -> model-based stereo against photo_04 (the pilasters the block
+# model lacks) -> a view-dependent rendering from a new viewpoint. The
+# rendered scene is Lambertian: model-based stereo's SSD needs the two views
+# to agree in brightness, which the glossy variant's highlights break.
+$(OUT)/scenes/facade/stack.json: $(STAMP)
+	$(LUMI) render facade --out $(@D) --size 640x480 --lambertian 1 --quiet
+
+$(OUT)/stereo/facade/solve/model.json: $(OUT)/scenes/facade/stack.json
+	$(LUMI) stereo facade solve $(<D) --out $(@D) --force --quiet
+
+$(OUT)/stereo/facade/key_model.pfm: $(OUT)/stereo/facade/solve/model.json
+	$(LUMI) stereo facade depth --model $< --camera $(<D)/cameras/photo_03.json --out $@ --quiet
+
+$(OUT)/stereo/facade/rig.json: $(OUT)/stereo/facade/solve/model.json
+	$(LUMI) stereo facade pair --key $(<D)/cameras/photo_03.json --offset $(<D)/cameras/photo_04.json \
+	  --out $@ --quiet
+
+$(OUT)/stereo/facade/key_refined.pfm: $(OUT)/stereo/facade/key_model.pfm $(OUT)/stereo/facade/rig.json
+	$(LUMI) stereo model-based $(OUT)/scenes/facade/photo_03.png $(OUT)/scenes/facade/photo_04.png \
+	  --rig $(OUT)/stereo/facade/rig.json --model $< --max-offset 0.5 --out $@ --quiet
+
+$(OUT)/stereo/facade/view_1.png: $(OUT)/stereo/facade/solve/model.json $(OUT)/stereo/facade/key_refined.pfm
+	$(LUMI) stereo facade render --model $< --photos $(OUT)/scenes/facade \
+	  --view $(OUT)/scenes/facade/novel/view_1.json --out $@ --quiet
+
+DEMO_OUTPUTS += $(OUT)/stereo/facade/key_model.pfm $(OUT)/stereo/facade/rig.json
+DEMO_OUTPUTS += $(OUT)/stereo/facade/key_refined.pfm $(OUT)/stereo/facade/view_1.png

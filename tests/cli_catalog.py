@@ -273,6 +273,10 @@ def _model_stereo(d: Path) -> None:
     scene("model-stereo", d / "facade", size=(96, 72), seed=0)
 
 
+def _facade(d: Path) -> None:
+    scene("facade", d / "facade", size=(96, 72), seed=0, photos=6, novel=1, supersample=1)
+
+
 SFM_VIEWS = 4
 
 
@@ -314,6 +318,25 @@ def _nothing(d: Path) -> None:
 
 def _names(prefix: str, names: Sequence[str]) -> tuple[str, ...]:
     return tuple(f"{prefix}/{n}" for n in names)
+
+
+def _facade_folder(d: Path) -> None:
+    # a hand-written block model, 4 painted 96x72 photographs, exact marks
+    from lumigraph.capture.scenes.facade_edges import ring_cameras, write_facade_folder
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    m = load_blocks(FIXTURES / "facade" / "blocks.json")
+    cams = ring_cameras(4, target=[1.5, 0, 4], radius=30, height=4, focal_px=100,
+                        image_size=(96, 72), arc_deg=(-130.0, -50.0))
+    write_facade_folder(d / "facade", m, cams, start=m.with_values(m.values[~m.fixed] * 1.05))
+
+
+_FACADE_PHOTOS = tuple(f"photo_{k:02d}" for k in range(4))
+_FACADE_INPUTS = ("{in}/facade",)
+_FACADE_OUTPUTS = (*_names("{out}/facade", ("model.json", "blocks.json", "model.obj", "model.ply",
+                                            "cameras.txt", "images.txt", "points3D.txt")),
+                   *(f"{{out}}/facade/cameras/{p}.json" for p in _FACADE_PHOTOS),
+                   *(f"{{out}}/facade/overlay/{p}.png" for p in _FACADE_PHOTOS))
 
 
 _LF_VIEWS = tuple(f"view-{u:02d}-{v:02d}.exr" for u in range(3) for v in range(3))
@@ -425,6 +448,27 @@ ENTRIES: list[Entry] = [
           _model_stereo, ("{in}/facade/key.png", "{in}/facade/offset.png", "{in}/facade/gt.json",
                           "{in}/facade/gt/model_depth.npy"),
           ("{out}/depth.pfm", "{out}/warped.png")),
+    Entry("stereo facade depth", ("stereo", "facade", "depth", "--model", "{in}/facade/blocks.json",
+                                  "--camera", "{in}/facade/cameras/photo_02.json",
+                                  "--out", "{out}/model.pfm", "-q"),
+          _facade, ("{in}/facade/blocks.json", "{in}/facade/cameras/photo_02.json"),
+          ("{out}/model.pfm",)),
+    Entry("stereo facade pair", ("stereo", "facade", "pair", "--key", "{in}/facade/cameras/photo_02.json",
+                                 "--offset", "{in}/facade/cameras/photo_03.json",
+                                 "--out", "{out}/rig.json", "-q"),
+          _facade, ("{in}/facade/cameras/photo_02.json", "{in}/facade/cameras/photo_03.json"),
+          ("{out}/rig.json",)),
+    Entry("stereo facade render", ("stereo", "facade", "render", "--model", "{in}/facade/blocks.json",
+                                   "--photos", "{in}/facade", "--view", "{in}/facade/novel/view_0.json",
+                                   "--out", "{out}/view.png", "-q"),
+          _facade, ("{in}/facade/blocks.json", "{in}/facade", "{in}/facade/novel/view_0.json"),
+          ("{out}/view.png",)),
+    Entry("stereo facade render (view map)", ("stereo", "facade", "render", "--model",
+                                              "{in}/facade/blocks.json", "--photos", "{in}/facade",
+                                              "--view", "{in}/facade/novel/view_0.json",
+                                              "--method", "view-map", "--out", "{out}/view.exr", "-q"),
+          _facade, ("{in}/facade/blocks.json", "{in}/facade", "{in}/facade/novel/view_0.json"),
+          ("{out}/view.exr",)),
     Entry("stereo triangulate", ("stereo", "triangulate", "{in}/matches.txt", "--rig", "{in}/rig.json",
                                  "--out", "{out}/points.json", "-q"),
           _matches, ("{in}/matches.txt", "{in}/rig.json"), ("{out}/points.json",)),
@@ -433,6 +477,12 @@ ENTRIES: list[Entry] = [
           _views, (*(f"{{in}}/views/view{k:02d}.png" for k in range(SFM_VIEWS)), "{in}/views/gt.json"),
           ("{out}/sfm/cameras.json", "{out}/sfm/points.ply", "{out}/sfm/cameras.txt",
            "{out}/sfm/images.txt", "{out}/sfm/points3D.txt"), fresh_process=True),
+    Entry("stereo facade solve", ("stereo", "facade", "solve", "{in}/facade", "--noise-px", "0.5",
+                                  "--out", "{out}/facade", "-q"),
+          _facade_folder, _FACADE_INPUTS, _FACADE_OUTPUTS),
+    Entry("stereo facade automark", ("stereo", "facade", "automark", "{in}/facade",
+                                     "--out", "{out}/edges.json", "-q"),
+          _facade_folder, _FACADE_INPUTS, ("{out}/edges.json",)),
     # lightfield -------------------------------------------------------------
     Entry("lightfield import", ("lightfield", "import", "{in}/array", "--out", "{out}/lf", "-q"),
           _array, ("{in}/array",), (*_names("{out}/lf", _LF_VIEWS), "{out}/lf/lightfield.json")),
@@ -492,14 +542,16 @@ def command_words() -> set[str]:
         verbs = []
 
         def add_parser(self, name, *args, _verbs=verbs, **kw):
-            _verbs.append(name)
+            # a verb group's verbs (stereo facade solve) carry the group's words
+            _verbs.append(" ".join([*self._prog_prefix.split()[2:], name]))
             return original(self, name, *args, **kw)
 
         with mock.patch.object(argparse._SubParsersAction, "add_parser", add_parser):
             rc, _, err = run_cli([stage, "--help"])
         if rc != 0:
             raise RuntimeError(f"lumigraph {stage} --help: exit {rc}: {err}")
-        words |= {f"{stage} {v}" for v in verbs} or {stage}
+        groups = {v for v in verbs if any(w.startswith(v + " ") for w in verbs)}
+        words |= {f"{stage} {v}" for v in verbs if v not in groups} or {stage}
     # `separate patterns` is picked before the separation parser runs (its
     # options differ from the method's); its help names it
     rc, out, _ = run_cli(["separate", "patterns", "--help"])

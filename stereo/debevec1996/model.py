@@ -424,6 +424,20 @@ class BlockModel:
         gl = {g: upd(s, g) for g, s in self.globals.items()}
         return BlockModel(blocks, gl, self.where)
 
+    def with_fixed(self, names) -> BlockModel:
+        """The same model with the parameters ``names`` (slot names) held at
+        their current values."""
+        names = set(names)
+
+        def upd(spec, name):
+            if name not in names or (isinstance(spec, dict) and "same_as" in spec):
+                return spec
+            return {"value": float(spec["value"] if isinstance(spec, dict) else spec), "fixed": True}
+
+        blocks = tuple(Block(b.name, b.kind, {p: upd(s, f"{b.name}/{p}") for p, s in b.params.items()},
+                             b.parent, b.on, b.x, b.y) for b in self.blocks)
+        return BlockModel(blocks, {g: upd(s, g) for g, s in self.globals.items()}, self.where)
+
     def to_dict(self) -> dict:
         """The ``blocks.json`` layout (:meth:`from_dict` reads it back)."""
         out = []

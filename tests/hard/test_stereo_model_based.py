@@ -1,4 +1,4 @@
-"""Hard cases for model-based stereo (stereo/debevec1996.py): a textureless
+"""Hard cases for model-based stereo (stereo/debevec1996/model_stereo.py): a textureless
 patch, parts of the key view the offset camera does not see, and a model
 that is badly wrong. Each is unknown or refused, not silently wrong."""
 

@@ -1,4 +1,4 @@
-"""Model-based stereo (stereo/debevec1996.py) on the model-stereo facade: exact
+"""Model-based stereo (stereo/debevec1996/model_stereo.py) on the model-stereo facade: exact
 ground truth, the warped offset image of Fig. 5.12c, and the CLI verb."""
 
 import json

@@ -1,0 +1,260 @@
+"""Ground truth for Façade's photogrammetric modelling without images: the
+model edges a set of cameras sees, as marked 2-D segments.
+
+Given a block model (any object with ``edges(params)``, ``mesh(params)`` and
+``named_values(params)``, i.e. :class:`lumigraph.stereo.debevec1996.BlockModel`;
+this module sits on the ground floor and does not import it), the true
+parameters and true cameras (``K``, ``R``, ``t``, ``image_size``; pose
+``x_cam = R x_world + t``, pixels with the OpenCV convention), every model
+edge is projected into every camera and kept where it is visible:
+
+- sample points along the edge (``samples``, edge ends excluded) are tested
+  for occlusion by the model's own triangles (a ray to the camera centre),
+  in front of the camera and inside the frame; the marked segment is the
+  projection of the stretch between the first and last visible sample (a
+  user marks the part they see: any stretch of the line serves the solver);
+- edges of no projected length worth marking (< ``min_length_px``) and
+  repeats of an edge already marked (two blocks sharing a line) are left out.
+
+Visibility is approximate (samples, not exact clipping); the renderer of
+``lumigraph render facade`` can pass its own visibility test.
+
+Examples
+--------
+>>> class Box:  # a 2 x 2 x 2 box standing on the ground, as a BlockModel would give it
+...     V = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (0, 2)], float)
+...     def edges(self, params=None):
+...         return {"box/top-front": (self.V[1], self.V[5]), "box/front-left": (self.V[0], self.V[1])}
+...     def mesh(self, params=None):
+...         return None
+...     def named_values(self, params=None):
+...         return {"box/width": 2.0}
+>>> R, t = look_at([0, -10, 1], [0, 0, 1])
+>>> cams = {"a.png": {"K": [[100, 0, 50], [0, 100, 40], [0, 0, 1]], "R": R, "t": t,
+...                   "image_size": [100, 80]}}
+>>> marks = project_edges(Box(), cams)
+>>> [(m["edge"], [round(v, 3) for v in m["segment"]]) for m in marks["a.png"]]
+[('box/top-front', [40.0, 28.889, 60.0, 28.889]), ('box/front-left', [38.889, 50.0, 38.889, 30.0])]
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+EDGES_SCHEMA = "lumigraph.facade.edges"
+GT_SCHEMA = "lumigraph.gt"
+
+
+def look_at(centre, target, up=(0.0, 0.0, 1.0)) -> tuple[np.ndarray, np.ndarray]:
+    """The pose ``(R, t)`` (``x_cam = R x + t``; camera ``z`` forward, ``y``
+    down) of a camera at ``centre`` looking at ``target``, world ``up``."""
+    c, g = np.asarray(centre, float), np.asarray(target, float)
+    z = g - c
+    z /= np.linalg.norm(z)
+    x = np.cross(z, np.asarray(up, float))
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    R = np.stack([x, y, z])
+    return R, -R @ c
+
+
+def ring_cameras(n: int, *, target, radius: float, height: float, focal_px: float,
+                 image_size=(640, 480), arc_deg: tuple[float, float] = (-150.0, -30.0),
+                 rng: np.random.Generator | None = None, jitter: float = 0.0) -> dict[str, dict]:
+    """``n`` cameras on an arc around ``target`` (angles in degrees about
+    ``z``, −90 = in front, on the −y side), each looking at it, named
+    ``photo_00.png``…; ``jitter`` moves each centre by up to that fraction of
+    ``radius`` and its aim point likewise (with ``rng``)."""
+    rng = rng or np.random.default_rng(0)
+    w, h = image_size
+    K = np.array([[focal_px, 0, (w - 1) / 2], [0, focal_px, (h - 1) / 2], [0, 0, 1]])
+    out = {}
+    tg = np.asarray(target, float)
+    for i, a in enumerate(np.radians(np.linspace(*arc_deg, n))):
+        c = tg + np.array([radius * np.cos(a), radius * np.sin(a), height])
+        c += jitter * radius * rng.uniform(-1, 1, 3)
+        aim = tg + jitter * radius * rng.uniform(-1, 1, 3)
+        R, t = look_at(c, aim)
+        out[f"photo_{i:02d}.png"] = {"K": K.copy(), "R": R, "t": t, "image_size": [w, h]}
+    return out
+
+
+def _occluded(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Which points ``P`` (K, 3) have a model triangle (T, 3, 3) between them
+    and ``centre`` (Möller–Trumbore; hits at the point itself, the faces the
+    edge lies on, do not count)."""
+    if tris is None or len(tris) == 0:
+        return np.zeros(len(P), bool)
+    d = centre[None, :] - P                        # (K, 3) towards the camera
+    v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    pv = np.cross(d[:, None, :], e2[None])          # (K, T, 3)
+    det = np.einsum("ktj,tj->kt", pv, e1)
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = P[:, None, :] - v0[None]
+    u = np.einsum("ktj,ktj->kt", s, pv) * inv
+    q = np.cross(s, e1[None])
+    v = np.einsum("kj,ktj->kt", d, q) * inv
+    tt = np.einsum("ktj,tj->kt", q, e2) * inv
+    eps = 1e-9
+    hit = ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (tt > 1e-6) & (tt < 1 - 1e-9)
+    return hit.any(axis=1)
+
+
+def project_edges(model, cameras: dict[str, dict], *, params=None, noise_px: float = 0.0,
+                  rng: np.random.Generator | None = None, min_length_px: float = 8.0,
+                  samples: int = 21, occlusion: bool = True, visible=None) -> dict[str, list]:
+    """Every visible model edge in every camera, as ``edges.json``'s
+    ``photographs`` entry: ``{photo: [{"edge": name, "segment": [x0, y0, x1,
+    y1]}, …]}`` (pixels). ``noise_px``: Gaussian noise of that standard
+    deviation added to each endpoint coordinate (with ``rng``). ``visible``:
+    an optional ``visible(photo, points (K, 3)) -> (K,) bool`` that replaces
+    the built-in occlusion test."""
+    rng = rng or np.random.default_rng(0)
+    edges = model.edges(params)
+    tris = None
+    if occlusion and visible is None:
+        mesh = model.mesh(params)
+        if mesh is not None:
+            tris = mesh.vertices[mesh.faces]
+    s = np.linspace(0.0, 1.0, samples)[1:-1] if samples > 2 else np.array([0.5])
+    out: dict[str, list] = {}
+    for photo, cam in cameras.items():
+        K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
+        t = t.ravel()
+        w, h = cam["image_size"]
+        centre = -R.T @ t
+        marks, seen = [], set()
+        for name, (p0, p1) in edges.items():
+            key = tuple(sorted((tuple(np.round(p0, 9)), tuple(np.round(p1, 9)))))
+            if key in seen:
+                continue
+            P = p0[None] + s[:, None] * (p1 - p0)[None]
+            Y = P @ R.T + t
+            ok = Y[:, 2] > 1e-6
+            uv = np.full((len(P), 2), np.nan)
+            uv[ok] = (Y[ok] @ K.T)[:, :2] / (Y[ok] @ K.T)[:, 2:]
+            ok &= (uv[:, 0] >= 0) & (uv[:, 0] <= w - 1) & (uv[:, 1] >= 0) & (uv[:, 1] <= h - 1)
+            if visible is not None:
+                ok &= np.asarray(visible(photo, P), bool)
+            elif tris is not None:
+                ok &= ~_occluded(P, centre, tris)
+            if ok.sum() < 2:
+                continue
+            i, j = np.flatnonzero(ok)[[0, -1]]
+            a, b = uv[i].copy(), uv[j].copy()
+            if np.hypot(*(b - a)) < min_length_px:
+                continue
+            if noise_px > 0:
+                a += rng.normal(0, noise_px, 2)
+                b += rng.normal(0, noise_px, 2)
+            seen.add(key)
+            marks.append({"edge": name, "segment": [float(a[0]), float(a[1]),
+                                                    float(b[0]), float(b[1])]})
+        out[photo] = marks
+    return out
+
+
+def facade_gt(model, cameras: dict[str, dict], *, params=None) -> dict:
+    """``gt.json``'s body: ``"parameters": {name: value}`` (every block
+    parameter, shared ones included) and ``"cameras": {photo: {K, R, t,
+    image_size}}``."""
+    cams = {p: {"K": np.asarray(c["K"], float).tolist(), "R": np.asarray(c["R"], float).tolist(),
+                "t": np.asarray(c["t"], float).ravel().tolist(),
+                "image_size": [int(v) for v in c["image_size"]]} for p, c in cameras.items()}
+    return {"schema": GT_SCHEMA, "schema_version": 1, "scene": "facade",
+            "parameters": dict(model.named_values(params)), "cameras": cams}
+
+
+def write_facade_edges(folder: str | os.PathLike, model, cameras: dict[str, dict], *,
+                       params=None, noise_px: float = 0.0, rng: np.random.Generator | None = None,
+                       **options) -> tuple[Path, Path]:
+    """Write ``edges.json`` (the marks, :func:`project_edges` with
+    ``options``) and ``gt.json`` (:func:`facade_gt`) into ``folder``."""
+    from lumigraph.capture.artifact import save_json_artifact
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    marks = project_edges(model, cameras, params=params, noise_px=noise_px, rng=rng, **options)
+    e = save_json_artifact(folder / "edges.json", {"schema": EDGES_SCHEMA, "schema_version": 1,
+                                                   "noise_px": noise_px, "photographs": marks})
+    g = save_json_artifact(folder / "gt.json", facade_gt(model, cameras, params=params))
+    return e, g
+
+
+def paint_facade(model, cam: dict, *, params=None, noise: float = 1.0, supersample: int = 8,
+                 rng: np.random.Generator | None = None) -> np.ndarray:
+    """A crude grey photograph of the model for tests of automatic marking:
+    flat-shaded faces (a fixed sun, a grey level per block) drawn far to near
+    (painter's algorithm: exact for these convex blocks seen from outside,
+    approximate where blocks interpenetrate) at ``supersample``² samples per
+    pixel and box-filtered (area coverage; OpenCV's anti-aliased fill grows a
+    polygon by about 0.7 px, which would bias every edge), over a sky
+    gradient, 8-bit with Gaussian noise of ``noise`` codes. Not a renderer:
+    ``lumigraph render facade`` draws the real scene."""
+    import cv2
+
+    rng = rng or np.random.default_rng(0)
+    K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
+    t = t.ravel()
+    w, h = (int(v) for v in cam["image_size"])
+    ss = int(supersample)
+    img = np.tile(np.linspace(200, 150, h * ss)[:, None], (1, w * ss)).astype(np.float32)
+    mesh = model.mesh(params)
+    V = mesh.vertices
+    Y = V @ R.T + t
+    sun = np.array([0.4, -0.7, 0.6])
+    sun /= np.linalg.norm(sun)
+    blocks = list(dict.fromkeys(mesh.face_block.tolist()))
+    depth = Y[mesh.faces][:, :, 2].mean(1)
+    for f in np.argsort(-depth):
+        tri = mesh.faces[f]
+        if np.any(Y[tri, 2] <= 1e-6):
+            continue
+        n = np.cross(V[tri[1]] - V[tri[0]], V[tri[2]] - V[tri[0]])
+        n /= np.linalg.norm(n)
+        if np.dot(n, -R.T @ t - V[tri[0]]) <= 0:
+            continue                                      # back face
+        albedo = 0.55 + 0.35 * (blocks.index(mesh.face_block[f]) % 3) / 2
+        level = 25 + 190 * albedo * (0.35 + 0.65 * max(np.dot(n, sun), 0.0))
+        uv = Y[tri] @ K.T
+        uv = uv[:, :2] / uv[:, 2:]
+        # sample (i, j) of the fine grid sits at ((i + 0.5) / ss - 0.5) pixels (centres at integers);
+        # a non-anti-aliased fill takes the fine samples inside, boundary included (1/(2 ss) px)
+        pts = np.round(((uv + 0.5) * ss - 0.5) * 16).astype(np.int32)   # 4 fractional bits
+        cv2.fillPoly(img, [pts.reshape(-1, 1, 2)], float(level), cv2.LINE_8, shift=4)
+    img = img.reshape(h, ss, w, ss).mean(axis=(1, 3), dtype=np.float64)
+    out = img + rng.normal(0, noise, img.shape) if noise > 0 else img
+    return np.clip(np.round(out), 0, 255).astype(np.uint8)
+
+
+def write_facade_folder(folder: str | os.PathLike, model, cameras: dict[str, dict], *,
+                        start=None, params=None, noise_px: float = 0.0, image_noise: float = 1.0,
+                        rng: np.random.Generator | None = None) -> Path:
+    """A complete input folder for ``lumigraph stereo facade solve``: the
+    painted photographs (:func:`paint_facade`), ``stack.json``, the shared
+    ``camera.json``, ``blocks.json`` (``start``: a model with the starting
+    values, default ``model``), ``edges.json`` and ``gt.json``
+    (:func:`write_facade_edges`)."""
+    from lumigraph.capture.artifact import save_json_artifact
+    from lumigraph.capture.io import write_image
+
+    rng = rng or np.random.default_rng(0)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    for photo, cam in cameras.items():
+        write_image(folder / photo, paint_facade(model, cam, params=params, noise=image_noise,
+                                                 rng=rng))
+    first = next(iter(cameras.values()))
+    save_json_artifact(folder / "stack.json", {"schema": "lumigraph.stack", "schema_version": 1,
+                                               "scene": "facade", "images": list(cameras)})
+    save_json_artifact(folder / "camera.json", {
+        "schema": "lumigraph.camera", "schema_version": 1,
+        "image_size": [int(v) for v in first["image_size"]],
+        "K": np.asarray(first["K"], float).tolist(), "dist": [], "model": "none"})
+    save_json_artifact(folder / "blocks.json", (start or model).to_dict())
+    write_facade_edges(folder, model, cameras, params=params, noise_px=noise_px, rng=rng)
+    return folder

@@ -1,0 +1,287 @@
+"""Automatic edge marking for Façade's photogrammetric modelling (beyond the
+paper: Debevec, Taylor & Malik 1996 mark every edge by hand).
+
+From a few hand marks per photograph (four work well: eight constraints on
+the six pose unknowns), :func:`~lumigraph.stereo.debevec1996.solve.solve_facade`
+gives rough cameras and a rough model. Every model edge visible in a
+photograph (its sampled points in front, in frame and not hidden by the
+model's own faces) is reprojected; line segments are detected in the
+photograph (OpenCV contrib's ``ximgproc`` fast line detector, Lee et al.
+2014; LSD where ``ximgproc`` is missing), and a detection is proposed as a
+mark of a reprojected edge when
+
+- its direction is within ``max_angle_deg`` of the edge's,
+- both its ends lie within ``max_distance_px`` of the edge's line,
+- at least half its length overlaps the edge's visible stretch,
+- no other edge passes these gates nearly as well (ambiguous: left out).
+
+Each proposal is refined to sub-pixel precision first: the intensity profile
+across the segment is sampled at points along it, the gradient peak located
+by a parabola through the three largest samples, and a line fitted to the
+peaks (total least squares); the proposal is the detected stretch on that
+line; a proposal whose refinement finds too few gradient peaks or moves it
+more than 1.5 px is dropped. An edge already marked by hand in a photograph
+keeps the hand mark (its detections are matched to it and dropped, so they
+are not taken for a neighbour); of several detections of one edge the
+longest is proposed.
+
+Examples
+--------
+>>> import numpy as np
+>>> img = np.zeros((40, 60), np.uint8); img[:, 30:] = 200      # a vertical step at x = 29.5
+>>> seg = refine_segment(img.astype(float), np.array([29.0, 5.0, 29.0, 35.0]))   # 0.5 px off
+>>> bool(abs(seg[0] - 29.5) < 0.05 and abs(seg[2] - 29.5) < 0.05)
+True
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from lumigraph.capture.errors import InputError
+
+
+@dataclass(frozen=True)
+class AutomarkResult:
+    """marks : EdgeMarks (the hand marks, then the proposals); proposed :
+    how many were proposed; solution : the rough solve they came from."""
+
+    marks: object
+    proposed: int
+    solution: object = field(repr=False)
+    warnings: list = field(default_factory=list)
+
+
+def check_automark_options(*, max_angle_deg: float, max_distance_px: float) -> None:
+    if not (0 < max_angle_deg <= 45):
+        raise InputError("max_angle_deg", f"expected an angle in (0, 45] degrees, got {max_angle_deg}")
+    if not (max_distance_px > 0 and np.isfinite(max_distance_px)):
+        raise InputError("max_distance_px", f"expected a positive distance in px, got "
+                                            f"{max_distance_px}")
+
+
+def _grey(image) -> np.ndarray:
+    img = np.asarray(image)
+    if img.ndim == 3:
+        img = img[..., :3].astype(float) @ np.array([0.299, 0.587, 0.114])
+    img = img.astype(float)
+    peak = 65535.0 if np.asarray(image).dtype == np.uint16 else (255.0 if img.max() > 1.5 else 1.0)
+    return img * (255.0 / peak)
+
+
+def detect_segments(grey: np.ndarray, *, min_length_px: float = 12.0) -> np.ndarray:
+    """Line segments ``(N, 4)`` ``x0, y0, x1, y1`` in an 8-bit-scaled grey image."""
+    import cv2
+
+    u8 = np.clip(np.round(grey), 0, 255).astype(np.uint8)
+    if hasattr(cv2, "ximgproc"):
+        fld = cv2.ximgproc.createFastLineDetector(int(min_length_px), 1.414, 30.0, 60.0, 3, True)
+        found = fld.detect(u8)
+    else:  # pragma: no cover - opencv-contrib is a dependency
+        found = cv2.createLineSegmentDetector().detect(u8)[0]
+    return np.zeros((0, 4)) if found is None else found.reshape(-1, 4).astype(float)
+
+
+def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0,
+                   samples: int = 24) -> np.ndarray | None:
+    """The segment moved onto the intensity edge it lies on (sub-pixel; the
+    module docstring); None when fewer than a quarter of the profiles peak
+    (a faint edge) or the fitted line is more than 1.5 px from the detection
+    (another edge nearby)."""
+    from scipy.ndimage import map_coordinates
+
+    a, b = seg[:2], seg[2:]
+    d = b - a
+    L = np.hypot(*d)
+    if L < 2:
+        return None
+    u = d / L
+    n = np.array([-u[1], u[0]])
+    ts = np.linspace(0.08, 0.92, samples)
+    offs = np.arange(-half_width, half_width + 1e-9, 0.5)
+    P = a[None, None] + ts[:, None, None] * d[None, None] + offs[None, :, None] * n[None, None]
+    prof = map_coordinates(grey, [P[..., 1].ravel(), P[..., 0].ravel()], order=1,
+                           mode="nearest").reshape(len(ts), len(offs))
+    g = np.abs(np.diff(prof, axis=1))                   # between samples: offsets + 0.25
+    mids = offs[:-1] + 0.25
+    pts = []
+    for k in range(len(ts)):
+        i = int(np.argmax(g[k]))
+        if 0 < i < g.shape[1] - 1 and g[k, i] > 4.0:
+            y0, y1, y2 = g[k, i - 1], g[k, i], g[k, i + 1]
+            den = y0 - 2 * y1 + y2
+            off = mids[i] + (0.5 * 0.5 * (y0 - y2) / den if den < 0 else 0.0)
+            pts.append(a + ts[k] * d + off * n)
+    if len(pts) < max(6, samples // 4):
+        return None
+    pts = np.array(pts)
+    for _ in range(2):                                  # total least squares, one trim
+        c = pts.mean(0)
+        _, _, Vt = np.linalg.svd(pts - c)
+        nn = Vt[1]
+        r = (pts - c) @ nn
+        keep = np.abs(r) <= max(3 * 1.4826 * np.median(np.abs(r)), 0.05)
+        if keep.all() or keep.sum() < 6:
+            break
+        pts = pts[keep]
+    c = pts.mean(0)
+    _, _, Vt = np.linalg.svd(pts - c)
+    dirn = Vt[0]
+    out = np.r_[c + ((a - c) @ dirn) * dirn, c + ((b - c) @ dirn) * dirn]
+    if max(abs((a - out[:2]) @ n), abs((b - out[2:]) @ n)) > 1.5:
+        return None
+    return out
+
+
+def _associate(det, visible, *, max_angle_deg, max_distance_px):
+    """Index of the visible edge each detection belongs to, or -1
+    (vectorised over detections x edges; the gates of the module docstring)."""
+    out = np.full(len(det), -1)
+    if not len(visible) or not len(det):
+        return out
+    E = np.array([e for _, e in visible], float)
+    a, b = det[:, None, :2], det[:, None, 2:]
+    p, q = E[None, :, :2], E[None, :, 2:]
+    L = np.hypot(*(E[:, 2:] - E[:, :2]).T)[None]
+    Ls = np.maximum(L, 1e-9)
+    de = (q - p) / Ls[..., None]
+    ds = (b - a) / np.maximum(np.hypot(*(det[:, 2:] - det[:, :2]).T), 1e-9)[:, None, None]
+    cos = np.abs((ds * de).sum(-1))
+    nrm = np.stack([-de[..., 1], de[..., 0]], -1)
+    ha, hb = ((a - p) * nrm).sum(-1), ((b - p) * nrm).sum(-1)
+    ta, tb = ((a - p) * de).sum(-1), ((b - p) * de).sum(-1)
+    lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
+    overlap = np.clip(np.minimum(hi, L) - np.maximum(lo, 0.0), 0.0, None)
+    gate = ((cos >= np.cos(np.radians(max_angle_deg))) & (np.maximum(np.abs(ha), np.abs(hb))
+                                                          <= max_distance_px) & (L > 1e-9))
+    score = np.where(gate, (np.abs(ha) + np.abs(hb)) / 2, np.inf)
+    j = np.argmin(score, 1)
+    rows = np.arange(len(det))
+    first = score[rows, j]
+    score[rows, j] = np.inf
+    second = score.min(1)
+    # the nearest line must hold the detection; any other line in the gates
+    # (even one the detection overruns: a silhouette spanning several
+    # edges) nearly as near makes it ambiguous
+    ok = np.isfinite(first) & (overlap[rows, j] >= 0.5 * (hi - lo)[rows, j]) \
+        & ~(second < 1.5 * first + 0.5)
+    out[ok] = j[ok]
+    return out
+
+
+def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
+    """Values for the parameters ``names`` that the marks left unconstrained
+    (held at their starting values), one after the other: each is scanned
+    over ±30 % of its value and set where the most detected length matches
+    the edges it moves (the others' detections count too, through the
+    ambiguity test). ``views``: (visible edge names, K, R, t, detections)
+    per photograph."""
+    C0, C1 = model.edge_matrices()
+    index = {n: i for i, n in enumerate(model.edge_names)}
+    values = values.copy()
+    for name in names:
+        slot = model.slot_of(name)
+        moves = (np.abs(C0[:, :, slot]).sum(1) + np.abs(C1[:, :, slot]).sum(1)) > 0
+
+        def support(v, slot=slot, moves=moves):
+            th = values.copy()
+            th[slot] = v
+            total = 0.0
+            for vis, K, R, t, det in views:
+                idx = np.array([index[e] for e in vis], int)
+                if not len(idx) or not len(det):
+                    continue
+                P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
+                if np.any(P[:, 2] <= 1e-9):
+                    continue
+                uv = P @ K.T
+                uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
+                segs = [(None, np.r_[uv[0, k], uv[1, k]]) for k in range(len(idx))]
+                got = _associate(det, segs, max_angle_deg=max_angle_deg,
+                                 max_distance_px=max_distance_px)
+                hit = got >= 0
+                hit[hit] = moves[idx[got[hit]]]
+                total += float(np.hypot(*(det[hit, 2:] - det[hit, :2]).T).sum())
+            return total
+
+        v0 = values[slot]
+        cands = v0 * np.linspace(0.7, 1.3, 31)
+        scores = np.array([support(v) for v in cands])
+        if scores.max() > support(v0):
+            values[slot] = cands[int(np.argmax(scores))]
+    return values
+
+
+def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise_px: float = 1.0,
+             max_angle_deg: float = 3.0, max_distance_px: float = 6.0,
+             min_length_px: float = 15.0, rounds: int = 8,
+             where: str = "edges.json") -> AutomarkResult:
+    """Propose marks for the model edges the hand ``marks`` left unmarked
+    (module docstring). ``images``: photo -> image (8/16-bit or float in
+    [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs)."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import Mark
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+    greys = {p: _grey(images[p]) for p in marks.photographs}
+    found = {p: detect_segments(greys[p], min_length_px=min_length_px) for p in marks.photographs}
+    kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
+    current = model
+    for k in range(rounds):
+        widen = max(1.0, 4.0 - k)   # wide gates first: held parameters start far off
+        # each round solves from the hand marks and the proposals so far
+        # (a proposal the robust solve rejects is forgotten): parameters the
+        # hand marks leave free get fixed by the proposals
+        cur = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        sol = solve_facade(current, cur, K, rough_rotations=rough_rotations, noise_px=noise_px,
+                           hold_unconstrained=True, where=where)
+        for p, e, _ in sol.outliers:
+            kept.pop((p, e), None)
+        warnings = list(sol.warnings)
+        before = set(kept)
+        views = []
+        for photo in marks.photographs:
+            if photo not in sol.poses:
+                warnings.append(f"photograph {photo!r}: no pose from the marks, nothing proposed")
+                continue
+            R, t = sol.poses[photo]
+            img = images[photo]
+            cam = {"K": sol.K[photo], "R": R, "t": t, "image_size": list(img.shape[1::-1])}
+            vis = project_edges(sol.model, {photo: cam}, min_length_px=min_length_px,
+                                samples=41)[photo]
+            # hand-marked edges stay candidates, so that their detections are not
+            # taken for a neighbouring edge; what they win is dropped
+            hand = {m.edge for m in marks.of(photo)}
+            vis = [(v["edge"], np.array(v["segment"])) for v in vis]
+            det = found[photo]
+            views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
+            which = _associate(det, vis, max_angle_deg=min(widen * max_angle_deg, 20.0),
+                               max_distance_px=widen * max_distance_px)
+            best: dict[str, np.ndarray] = {}
+            for s, j in zip(det, which, strict=True):
+                if j < 0:
+                    continue
+                name = vis[j][0]
+                if name in hand:
+                    continue
+                if name not in best or (np.hypot(*(s[2:] - s[:2]))
+                                        > np.hypot(*(best[name][2:] - best[name][:2]))):
+                    best[name] = s
+            for name, s in best.items():
+                seg = refine_segment(greys[photo], s)
+                if seg is not None:
+                    kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
+        if sol.held:
+            # what the marks leave free stays at its starting value: find it by
+            # the detections it would explain, so the next round can match them
+            v = _vote(sol.model, sol.model.values, sol.held, views,
+                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+            current = current.with_values({n: float(v[sol.model.slot_of(n)]) for n in sol.held})
+        elif widen == 1.0 and set(kept) == before:
+            break
+    proposals = list(kept.values())
+    merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
+    return AutomarkResult(merged, len(proposals), sol, warnings)

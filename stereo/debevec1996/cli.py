@@ -1,0 +1,245 @@
+"""``lumigraph stereo facade``: Façade's photogrammetric modelling, file to file.
+
+The verb group is added to ``lumigraph stereo`` by :func:`add_facade`;
+``solve`` and ``automark`` live here. A FOLDER holds ``stack.json`` (naming
+the photographs), ``blocks.json`` (:func:`~lumigraph.stereo.debevec1996.model.load_blocks`),
+``edges.json`` (:func:`~lumigraph.stereo.debevec1996.edges.load_edges`) and
+``camera.json`` (the photographs' shared intrinsics, or ``--camera``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from lumigraph.capture.commandline import (
+    add_verb,
+    check_output_dir,
+    check_planned,
+    input_path,
+    number,
+    output_dir,
+    output_file,
+    say,
+    warn,
+)
+from lumigraph.capture.errors import InputError
+
+SOLVE_EPILOG = """\
+FOLDER holds:
+  stack.json    {"images": ["photo_00.png", ...]}: the photographs
+  blocks.json   the block model and its starting values (see 'lumigraph.stereo.debevec1996.model');
+                at least one length fixed (it sets the scale)
+  edges.json    {"photographs": {"photo_00.png": [{"edge": "house/top-front",
+                                                   "segment": [x0, y0, x1, y1]}, ...]}}
+  camera.json   the photographs' intrinsics (one camera), unless --camera names another
+Writes into --out: model.json (every parameter's value and first-order std, every camera's
+pose with std), blocks.json (the fitted model), model.obj and model.ply (the mesh),
+cameras/<photo>.json (camera.json with cam_from_world), COLMAP's text model (cameras.txt,
+images.txt, points3D.txt: the model's vertices) and overlay/<photo>.png (marked segments in
+green, mis-marked ones in magenta, the marked edges reprojected in red, every other model edge
+in blue, each mark's RMS distance in px).
+A mark farther than 5x --noise-px from its reprojected edge is reported and left out; a
+photograph with fewer than 3 marks is left out (warning). Marks that leave a parameter or a
+pose unconstrained: exit 2 naming them.
+"""
+
+AUTOMARK_EPILOG = """\
+Solves from the marks already in FOLDER/edges.json (or --edges) (at least 4 per photograph work well),
+detects line segments in each photograph (OpenCV's fast line detector), refines each to
+sub-pixel precision and proposes those that match a reprojected model edge within
+--max-angle degrees and --max-distance px, over at least half their length. Writes an
+edges.json with the hand marks and the proposals ("proposed": true); run 'solve' on it.
+"""
+
+
+def add_facade(sp) -> None:
+    """Add the ``facade`` verb group (``solve``, ``automark``) to
+    ``lumigraph stereo``'s verbs ``sp``."""
+    g = add_verb(sp, "facade", "Façade photogrammetric modelling: block model and cameras from "
+                 "marked edges (Debevec, Taylor & Malik 1996)",
+                 epilog="verbs: solve, automark, depth, render (see 'lumigraph stereo facade VERB "
+                        "--help')")
+    fs = g.add_subparsers(title="facade verbs", dest="facade_verb", metavar="VERB",
+                          parser_class=type(g))
+    fs.required = True
+
+    v = add_verb(fs, "solve", "fit the block parameters and the camera poses to the marked edges",
+                 epilog=SOLVE_EPILOG)
+    v.add_argument("folder", type=input_path,
+                   help="folder with stack.json, blocks.json, edges.json, camera.json")
+    _common(v)
+    v.add_argument("--free-focal", action="store_true",
+                   help="also fit one focal-length scale shared by every photograph")
+    v.add_argument("--no-robust", action="store_true",
+                   help="skip the search for mis-marked edges (plain least squares)")
+    v.add_argument("--out", required=True, type=output_dir,
+                   help="folder for model.json, the mesh, the cameras and the overlays")
+    v.set_defaults(func=_solve)
+
+    v = add_verb(fs, "automark", "propose edge marks: detected line segments matched to the "
+                 "reprojected model", epilog=AUTOMARK_EPILOG)
+    v.add_argument("folder", type=input_path,
+                   help="folder with stack.json, blocks.json, edges.json (a few hand marks), "
+                        "camera.json")
+    _common(v)
+    v.add_argument("--max-angle", type=number(float, lo=0.1, hi=20), default=3.0,
+                   help="largest angle between a detected segment and the reprojected edge "
+                        "(degrees, default 3)")
+    v.add_argument("--max-distance", type=number(float, lo=0.5, hi=100), default=6.0,
+                   help="largest distance of a detected segment's ends from the reprojected "
+                        "edge (px, default 6)")
+    v.add_argument("--out", required=True, type=output_file(".json"),
+                   help="the edges.json to write (hand marks and proposals)")
+    v.set_defaults(func=_automark)
+
+    from lumigraph.stereo.debevec1996.cli_vdtm import add_verbs  # depth, render (VDTM)
+
+    add_verbs(fs)
+
+
+def _common(v) -> None:
+    v.add_argument("--edges", type=input_path,
+                   help="the marked edges (default FOLDER/edges.json; e.g. automark's output)")
+    v.add_argument("--camera", type=input_path,
+                   help="camera.json of the photographs (default FOLDER/camera.json)")
+    v.add_argument("--rough-poses", type=input_path,
+                   help="a JSON with \"cameras\": {photo: {\"R\": 3x3}} (a gt.json works): rough "
+                        "rotations to start from (default: from each photograph's vanishing "
+                        "directions)")
+    v.add_argument("--noise-px", type=number(float, lo=0.01, hi=100), default=1.0,
+                   help="the marks' endpoint noise (px, default 1): the robust loss's scale")
+
+
+# ----------------------------------------------------------------- loading
+def _folder(args):
+    """(folder, photos, images, model, marks path, K per photo, camera)."""
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.io import read_image, read_stack_json
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        raise InputError(folder, "expected a folder with stack.json, blocks.json, edges.json")
+    sj = folder / "stack.json"
+    if not sj.exists():
+        raise InputError(folder, "folder has no stack.json naming the photographs")
+    photos = list(read_stack_json(sj)["images"])
+    images = {}
+    for i, name in enumerate(photos):
+        if not (folder / name).is_file():
+            raise InputError(sj, f"key 'images[{i}]': {name} is not a file in {folder}")
+        images[name] = read_image(folder / name)
+    model = load_blocks(folder / "blocks.json")
+    cam_path = Path(args.camera) if args.camera else folder / "camera.json"
+    camera = Camera.load(cam_path)
+    for name, img in images.items():
+        if tuple(img.shape[1::-1]) != tuple(camera.image_size):
+            raise InputError(folder / name, f"is {img.shape[1]}x{img.shape[0]}, the camera "
+                                            f"({cam_path}) is {camera.image_size[0]}x"
+                                            f"{camera.image_size[1]}")
+    return folder, photos, images, model, camera, cam_path
+
+
+def _rough(args, photos):
+    if not args.rough_poses:
+        return None
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.capture.schema import require, require_object
+
+    path = args.rough_poses
+    body = load_json_artifact(path, "rough poses")
+    cams = require(body, "cameras", "object", path=path)
+    out = {}
+    for p in photos:
+        if p in cams:
+            require_object(cams[p], path=path, where=f"cameras.{p}", what="a pose (R)", keys=("R",))
+            R = require(cams[p], "R", "matrix", shape=(3, 3), path=path, where=f"cameras.{p}")
+            U, _, Vt = np.linalg.svd(R)
+            out[p] = U @ Vt
+    return out
+
+
+def _undistorted(marks, camera):
+    """Marks with endpoints undistorted (the solver is pinhole)."""
+    from dataclasses import replace
+
+    if not np.any(camera.dist):
+        return marks
+    out = []
+    for m in marks.marks:
+        ray = camera.unproject(m.segment.reshape(2, 2))
+        uv = ray @ camera.K.T
+        out.append(replace(m, segment=(uv[:, :2] / uv[:, 2:]).ravel()))
+    return replace(marks, marks=tuple(out))
+
+
+# ----------------------------------------------------------------- solve
+def _solve(args) -> int:
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.stereo.debevec1996.edges import load_edges
+    from lumigraph.stereo.debevec1996.outputs import planned_outputs, save_solution
+    from lumigraph.stereo.debevec1996.solve import check_solve_options, solve_facade
+
+    check_solve_options(noise_px=args.noise_px, max_iterations=200)
+    out = check_output_dir(args.out)
+    folder, photos, images, model, camera, cam_path = _folder(args)
+    check_planned([out / n for n in planned_outputs(photos)])
+    sizes = {p: img.shape[1::-1] for p, img in images.items()}
+    edges_path = Path(args.edges) if args.edges else folder / "edges.json"
+    marks = load_edges(edges_path, model=model, photographs=photos, image_sizes=sizes)
+    rough = _rough(args, photos)
+    sol = solve_facade(model, _undistorted(marks, camera), {p: camera.K for p in photos},
+                       rough_rotations=rough, free_focal=args.free_focal,
+                       noise_px=args.noise_px, robust=not args.no_robust, where=str(edges_path))
+    for w in sol.warnings:
+        warn(w)
+    meta = make_meta("lumigraph.facade.model",
+                     inputs=[folder / "stack.json", folder / "blocks.json", edges_path, cam_path,
+                             *[folder / p for p in photos]]
+                     + ([args.rough_poses] if args.rough_poses else []),
+                     params={"noise_px": args.noise_px, "free_focal": args.free_focal,
+                             "robust": not args.no_robust},
+                     quality={"rms_px": sol.rms_px, "sigma_px": sol.sigma_px,
+                              "outliers": len(sol.outliers), "dropped": sol.dropped},
+                     timings_s={"solve": sol.seconds}, warnings=sol.warnings)
+    save_solution(out, sol, photos, images, marks, camera, meta=meta)
+    say(args, f"{len(sol.poses)} photographs, {len(sol.mark_rms_px)} marks, RMS {sol.rms_px:.3f} "
+              f"px -> {out}/model.json, model.obj, model.ply, cameras/, overlay/")
+    return 0
+
+
+# ----------------------------------------------------------------- automark
+def _automark(args) -> int:
+    from lumigraph.capture.artifact import make_meta, save_json_artifact
+    from lumigraph.stereo.debevec1996.automark import automark, check_automark_options
+    from lumigraph.stereo.debevec1996.edges import load_edges
+
+    check_automark_options(max_angle_deg=args.max_angle, max_distance_px=args.max_distance)
+    folder, photos, images, model, camera, cam_path = _folder(args)
+    edges_path = Path(args.edges) if args.edges else folder / "edges.json"
+    if os.path.abspath(args.out) == os.path.abspath(edges_path):
+        raise InputError("--out", "would replace the input edges.json; write another file")
+    sizes = {p: img.shape[1::-1] for p, img in images.items()}
+    marks = load_edges(edges_path, model=model, photographs=photos, image_sizes=sizes)
+    if np.any(camera.dist):
+        raise InputError(cam_path, "automatic marking needs undistorted photographs "
+                                   "('lumigraph calib undistort' them first)")
+    res = automark(model, _undistorted(marks, camera), images, {p: camera.K for p in photos},
+                   rough_rotations=_rough(args, photos), noise_px=args.noise_px,
+                   max_angle_deg=args.max_angle, max_distance_px=args.max_distance,
+                   where=str(edges_path))
+    for w in res.warnings:
+        warn(w)
+    meta = make_meta("lumigraph.facade.edges",
+                     inputs=[folder / "stack.json", folder / "blocks.json", edges_path, cam_path,
+                             *[folder / p for p in photos]],
+                     params={"max_angle_deg": args.max_angle, "max_distance_px": args.max_distance,
+                             "noise_px": args.noise_px},
+                     quality={"proposed": res.proposed, "hand": len(marks.marks)},
+                     warnings=res.warnings)
+    save_json_artifact(args.out, res.marks.to_dict(), meta=meta)
+    say(args, f"{len(marks.marks)} hand marks, {res.proposed} proposed -> {args.out}")
+    return 0

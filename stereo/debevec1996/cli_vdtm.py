@@ -1,0 +1,226 @@
+"""``lumigraph stereo facade depth`` and ``… render``: a block model's depth
+from a camera (the rough model of ``stereo model-based``) and view-dependent
+texture mapping. Added to the ``facade`` verb group by :func:`add_verbs`.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lumigraph.capture.commandline import add_verb, input_path, number, output_file, say, warn
+from lumigraph.capture.errors import InputError
+
+DEPTH_EPILOG = """\
+--model is a blocks.json (the starting model, or the fitted one a solve writes) or a solve's
+model.json (its values applied to the blocks.json beside it). --camera is a camera.json with
+its pose, "cam_from_world": {"R": 3x3, "t": [3]} (x_cam = R x_world + t): a solve's
+cameras/<photo>.json, or a rendered facade's cameras/ or novel/ file. The depth is the camera
+z of the model (the model's unit), exact per pixel centre; no model = inf in the PFM, NaN in
+a .npy. It is what 'lumigraph stereo model-based --model' takes.
+"""
+
+RENDER_EPILOG = """\
+Renders the model from --view, each pixel textured from the photographs that see its surface
+point (visibility by each photograph's depth of the model, --tolerance), weighted by
+(angle between the new and the photograph's viewing rays)^-power (--method blend; Debevec,
+Taylor & Malik 1996), or from at most three photographs per polygon chosen and weighted by
+its view map (--method view-map; Debevec, Yu & Borshukov 1998, faster). Model pixels no
+photograph sees are filled from their neighbours; pixels off the model are 0.
+--photos names a folder with stack.json; each photograph's pose comes from --cameras DIR
+(<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
+"cameras". 8-bit/16-bit photographs give a PNG or EXR of code values; EXR photographs
+(linear radiance) stay linear: write .exr.
+"""
+
+
+def add_verbs(fs) -> None:
+    """Add ``depth`` and ``render`` to the ``facade`` verbs ``fs``."""
+    v = add_verb(fs, "depth", "the block model's depth map from a camera (the rough model for "
+                 "'stereo model-based')", epilog=DEPTH_EPILOG)
+    v.add_argument("--model", required=True, type=input_path,
+                   help="blocks.json, or a solve's model.json (with blocks.json beside it)")
+    v.add_argument("--camera", required=True, type=input_path,
+                   help="camera.json with cam_from_world (the pose)")
+    v.add_argument("--out", required=True, type=output_file(".pfm", ".npy"),
+                   help="depth .pfm (inf = no model) or .npy (NaN = no model)")
+    v.set_defaults(func=_depth)
+
+    v = add_verb(fs, "pair", "the rig.json of two posed cameras (key = left, offset = right), "
+                 "for 'stereo model-based --rig'",
+                 epilog="Each camera is a camera.json with cam_from_world (a solve's "
+                        "cameras/<photo>.json): the rig's R, T are the offset camera's pose "
+                        "relative to the key camera's, x_offset = R x_key + T.")
+    v.add_argument("--key", required=True, type=input_path, help="the key camera (posed camera.json)")
+    v.add_argument("--offset", required=True, type=input_path,
+                   help="the offset camera (posed camera.json)")
+    v.add_argument("--out", required=True, type=output_file(".json"), help="rig.json")
+    v.set_defaults(func=_pair)
+
+    v = add_verb(fs, "render", "view-dependent texture mapping: the model seen from a new camera, "
+                 "textured from the photographs", epilog=RENDER_EPILOG)
+    v.add_argument("--model", required=True, type=input_path,
+                   help="blocks.json, or a solve's model.json (with blocks.json beside it)")
+    v.add_argument("--photos", required=True, type=input_path,
+                   help="folder with stack.json naming the photographs")
+    v.add_argument("--cameras", type=input_path,
+                   help="folder of <photo stem>.json posed cameras (default FOLDER/cameras, or "
+                        "the cameras of a model.json)")
+    v.add_argument("--view", required=True, type=input_path,
+                   help="camera.json with cam_from_world: the new viewpoint")
+    v.add_argument("--method", choices=("blend", "view-map"), default="blend",
+                   help="blend: every photograph, per-pixel angle weights (default); view-map: "
+                        "at most three per polygon (faster)")
+    v.add_argument("--tolerance", type=number(float, lo=0, lo_open=True, hi=1), default=0.01,
+                   help="visibility: relative depth difference still on the same surface "
+                        "(default 0.01)")
+    v.add_argument("--power", type=number(float, lo=0, lo_open=True, hi=64), default=None,
+                   help="weights fall as angle^-power (default: the library's)")
+    v.add_argument("--out", required=True, type=output_file(".png", ".exr"),
+                   help="the rendered view (.png, or .exr to keep linear values)")
+    v.set_defaults(func=_render)
+
+
+def _depth(args) -> int:
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_pfm
+    from lumigraph.stereo.debevec1996.raster import model_depth
+    from lumigraph.stereo.debevec1996.vdtm import load_model_mesh, load_posed_camera
+
+    mesh, _ = load_model_mesh(args.model)
+    cam, R, t = load_posed_camera(args.camera)
+    t0 = time.perf_counter()
+    z = model_depth(mesh, cam.K, R, t, cam.image_size, dist=cam.dist)
+    dt = time.perf_counter() - t0
+    out = Path(args.out)
+    meta = make_meta("lumigraph.depth", inputs=[args.model, args.camera],
+                     quality={"model_fraction": float(np.isfinite(z).mean())},
+                     timings_s={"total": dt},
+                     extra={"convention": "depth = z in the camera frame, the model's unit; "
+                                          "no model = " + ("inf" if out.suffix.lower() == ".pfm"
+                                                           else "NaN")})
+    if out.suffix.lower() == ".pfm":
+        write_artifact(out, lambda tmp: write_pfm(tmp, np.where(np.isnan(z), np.inf, z)), meta=meta)
+    else:
+        write_artifact(out, lambda tmp: np.save(tmp, z, allow_pickle=False), meta=meta)
+    if not np.isfinite(z).any():
+        warn(f"the model is nowhere in view of {args.camera}: the depth map is empty")
+    say(args, f"wrote {out} ({100 * np.isfinite(z).mean():.0f}% of pixels on the model)")
+    return 0
+
+
+def _pair(args) -> int:
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.stereo.debevec1996.vdtm import load_posed_camera, rig_between
+
+    key, off = load_posed_camera(args.key), load_posed_camera(args.offset)
+    args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "offset": args.offset}
+    rig = rig_between(key, off)
+    rig.save(args.out, meta=make_meta("lumigraph.rig", inputs=[args.key, args.offset],
+                                      extra={"left": "key", "right": "offset"}))
+    say(args, f"wrote {args.out} (baseline {np.linalg.norm(rig.T):.4g})")
+    return 0
+
+
+def _photographs(args, model_body):
+    """The photographs of ``--photos`` with their posed cameras."""
+    from lumigraph.capture.io import read_image, read_stack_json
+    from lumigraph.capture.rig import require_rotation
+    from lumigraph.capture.schema import require
+    from lumigraph.stereo.debevec1996.vdtm import Photograph, load_posed_camera
+
+    folder = Path(args.photos)
+    sj = folder / "stack.json"
+    if not folder.is_dir() or not sj.is_file():
+        raise InputError(folder, "expected a folder with stack.json naming the photographs")
+    names = list(read_stack_json(sj)["images"])
+    cams_dir = Path(args.cameras) if args.cameras else None
+    if cams_dir is None and model_body is None:
+        cams_dir = folder / "cameras"
+    photos, kinds = [], set()
+    for i, name in enumerate(names):
+        path = folder / name
+        if not path.is_file():
+            raise InputError(sj, f"key 'images[{i}]': {name} is not a file in {folder}")
+        img = read_image(path)
+        if cams_dir is not None:
+            cp = cams_dir / f"{Path(name).stem}.json"
+            if not cp.is_file():
+                raise InputError(cams_dir, f"no camera for {name}: expected {cp.name} (a camera.json "
+                                           "with cam_from_world)")
+            cam, R, t = load_posed_camera(cp)
+            K, size, where = cam.K, cam.image_size, cp
+        else:
+            cams = model_body.get("cameras")
+            if not isinstance(cams, dict) or name not in cams:
+                raise InputError(args.model, f"key 'cameras': no pose for {name} (left out of the "
+                                             "solve?); give --cameras")
+            c = cams[name]
+            R = require_rotation(c, "R", path=args.model, where=f"cameras.{name}")
+            t = require(c, "t", "matrix", shape=(3,), path=args.model, where=f"cameras.{name}")
+            K = require(c, "K", "matrix", shape=(3, 3), path=args.model, where=f"cameras.{name}")
+            size, where = img.shape[1::-1], args.model
+        if tuple(img.shape[1::-1]) != tuple(size):
+            raise InputError(path, f"is {img.shape[1]}x{img.shape[0]}, its camera ({where}) is for "
+                                   f"{size[0]}x{size[1]} images")
+        kinds.add(img.dtype.kind if img.dtype.kind == "f" else img.dtype.name)
+        photos.append(Photograph(img.astype(np.float32), np.asarray(K, float), np.asarray(R, float),
+                                 np.asarray(t, float)))
+    if not photos:
+        raise InputError(sj, "names no photographs")
+    if len(kinds) > 1:
+        raise InputError(folder, f"photographs mix kinds ({', '.join(sorted(kinds))}): blend one kind")
+    return photos, kinds.pop()
+
+
+def _render(args) -> int:
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.io import write_exr, write_image
+    from lumigraph.stereo.debevec1996.vdtm import (
+        DEFAULT_POWER,
+        load_model_mesh,
+        load_posed_camera,
+        render_vdtm,
+    )
+
+    out = Path(args.out)
+    mesh, body = load_model_mesh(args.model)
+    cam, R, t = load_posed_camera(args.view)
+    photos, kind = _photographs(args, body)
+    if kind == "f" and out.suffix.lower() != ".exr":
+        raise InputError(out, "the photographs are linear radiance (float): write .exr to keep "
+                              "them linear")
+    power = DEFAULT_POWER if args.power is None else args.power
+    t0 = time.perf_counter()
+    res = render_vdtm(mesh, photos, cam.K, R, t, cam.image_size, method=args.method,
+                      tolerance=args.tolerance, power=power)
+    dt = time.perf_counter() - t0
+    img = res.image
+    if img.shape[2] == 1:
+        img = img[..., 0]
+    warnings = []
+    if res.info["hole_fraction"] > 0.2:
+        warnings.append(f"{100 * res.info['hole_fraction']:.0f}% of the model in view is seen by "
+                        "no photograph (filled from its neighbours)")
+        warn(warnings[-1])
+    meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", args.view],
+                     warnings=warnings,
+                     params={"method": args.method, "tolerance": args.tolerance, "power": power},
+                     quality={"model_fraction": float(res.model.mean()),
+                              "hole_fraction": res.info["hole_fraction"],
+                              "photographs_per_pixel": res.info["photographs_per_pixel"]},
+                     timings_s={"total": dt, **res.info["timings_s"]},
+                     extra={"what": "view-dependent texture mapping of the model "
+                                    "(Debevec, Taylor & Malik 1996); 0 off the model"})
+    if out.suffix.lower() == ".exr":
+        write_artifact(out, lambda tmp: write_exr(tmp, np.ascontiguousarray(img, np.float32)),
+                       meta=meta)
+    else:
+        hi = 65535 if kind == "uint16" else 255
+        codes = np.clip(np.rint(img), 0, hi).astype(np.uint16 if hi == 65535 else np.uint8)
+        write_artifact(out, lambda tmp: write_image(tmp, codes), meta=meta)
+    say(args, f"wrote {out} ({args.method}, {100 * res.model.mean():.0f}% of pixels on the model, "
+              f"{100 * res.info['hole_fraction']:.1f}% of them filled)")
+    return 0

@@ -1,0 +1,607 @@
+"""View-dependent texture mapping (VDTM): a model rendered from a new
+viewpoint, each surface point textured from the photographs that see it.
+
+P. E. Debevec, C. J. Taylor and J. Malik, "Modeling and Rendering
+Architecture from Photographs: A hybrid geometry- and image-based approach",
+SIGGRAPH 1996, doi:10.1145/237170.237191 (reference ch. 5, §5.3.2 "Stage 2",
+Fig. 5.11); P. E. Debevec, Y. Yu and G. Borshukov, "Efficient
+View-Dependent Image-Based Rendering with Projective Texture-Mapping",
+Eurographics Rendering Workshop 1998, doi:10.1007/978-3-7091-6453-2_10
+(the per-polygon *view map*).
+
+``method="blend"`` (1996). The new camera's z-buffer of the model gives the
+surface point ``X`` of each pixel. Photograph ``i`` (centre ``C_i``) sees
+``X`` when ``X`` projects inside its frame and the bilinear taps (of
+non-zero weight) of its depth map lie on ``X``'s surface (``|z_tap − z_i(X)| ≤ tolerance · z_i(X)``,
+so a sample never mixes an occluder's or the background's colour in). The
+colour is the weighted mean of the visible photographs' bilinear samples,
+
+    c(X) = Σ_i w_i c_i(X) / Σ_i w_i,      w_i = (θ_i + ε)^(−power)
+
+with ``θ_i`` the angle at ``X`` between the new viewing ray ``X − C`` and
+photograph ``i``'s ray ``X − C_i`` (Fig. 5.11's ``b_1, b_2``; the paper's
+weights are "inversely proportional to the angles", ``power = 1``;
+``ε = 10⁻⁹`` rad keeps the new view equal to a photograph a copy of it).
+
+``method="view-map"`` (1998). Per polygon (mesh triangle), the directions
+from its centroid to the photographs that see it are projected
+orthographically onto the polygon's plane and triangulated (Delaunay): the
+*view map*. The new view's direction is located in it; the three corners of
+its triangle, with their barycentric weights, are the polygon's photographs
+(outside the map's hull, the three nearest by angle, weighted as the blend).
+So each pixel samples at most three photographs, with weights constant over
+its polygon; the per-pixel visibility test stays (a photograph hidden at a
+pixel drops out and the others are renormalised; a pixel none of the three
+sees is blended from every photograph, as ``"blend"``).
+
+Pixels of the model no photograph sees are *holes*, filled from their
+neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
+Values are blended as given: linear radiance stays linear.
+
+Examples
+--------
+A plane seen by two photographs; the new view equals the first: a copy.
+
+>>> K = np.array([[20.0, 0, 7.5], [0, 20.0, 5.5], [0, 0, 1]])
+>>> quad = (np.array([[-2.0, -2, 4], [2, -2, 4], [2, 2, 4], [-2, 2, 4]]), np.array([[0, 1, 2], [0, 2, 3]]))
+>>> rng = np.random.default_rng(0)
+>>> p0 = Photograph(rng.random((12, 16, 3)), K, np.eye(3), np.zeros(3))
+>>> p1 = Photograph(rng.random((12, 16, 3)), K, np.eye(3), np.array([0.3, 0, 0]))
+>>> photos = prepare_photographs(quad, [p0, p1])
+>>> out = render_vdtm(quad, photos, K, np.eye(3), np.zeros(3), (16, 12))
+>>> bool(np.abs(out.image - p0.image).max() < 1e-6)
+True
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.raster import check_mesh, pixel_rays, rasterize
+
+METHODS = ("blend", "view-map")
+EPS_RAD = 1e-9
+# weights θ^-power: 1 is the paper's "inversely proportional"; 2 is tuned on the
+# glossy facade scene (docs/decisions/facade-vdtm.md)
+DEFAULT_POWER = 2.0
+# a view-map triangle with a smaller angle is a sliver: the nearest three are used instead
+SLIVER_DEG = 15.0
+
+
+@dataclass(frozen=True)
+class Photograph:
+    """One photograph of the model: its image and its camera.
+
+    ``image`` (H, W) or (H, W, C) float (code values or linear radiance, as
+    they are to be blended); ``K`` (3, 3), ``R, t`` cam_from_world
+    (``x_cam = R x_world + t``); ``depth`` (H, W) its z-buffer of the model
+    (``inf`` off the model), ``face_pixels`` (M,) how many of its pixels
+    see each triangle and ``whole`` (M,) which triangles it sees whole (every
+    pixel centre their projection covers shows them) and ``cells`` (H, W)
+    which bilinear cells (pixels ``[y, y+1] × [x, x+1]``) lie on one
+    continuous surface, filled by :func:`prepare_photographs`.
+    """
+
+    image: np.ndarray
+    K: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    depth: np.ndarray | None = field(default=None, repr=False)
+    face_pixels: np.ndarray | None = field(default=None, repr=False)
+    whole: np.ndarray | None = field(default=None, repr=False)
+    cells: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def centre(self) -> np.ndarray:
+        """Camera centre in the world, ``−Rᵀ t``."""
+        return -np.asarray(self.R, np.float64).T @ np.asarray(self.t, np.float64)
+
+
+@dataclass(frozen=True)
+class VDTMImage:
+    """A VDTM rendering.
+
+    Attributes
+    ----------
+    image : ndarray, (H, W, C) float32
+        The rendered view; ``background`` off the model.
+    model : ndarray, (H, W) bool
+        Pixels on the model.
+    filled : ndarray, (H, W) bool
+        Model pixels no photograph saw, filled from their neighbours.
+    info : dict
+        ``method``, ``photographs_per_pixel`` (mean number blended),
+        ``hole_fraction``, ``timings_s``.
+    """
+
+    image: np.ndarray
+    model: np.ndarray
+    filled: np.ndarray
+    info: dict
+
+
+def _mesh(mesh):
+    if hasattr(mesh, "vertices"):
+        return check_mesh(mesh.vertices, mesh.faces, where="mesh")
+    vertices, faces = mesh
+    return check_mesh(vertices, faces, where="mesh")
+
+
+def _cells(depth, tolerance):
+    """(H, W) bool: the four depths of the bilinear cell at each pixel (the
+    last row and column repeat theirs) are finite and agree within
+    ``tolerance`` relative: the cell lies on one continuous surface."""
+    d = np.pad(depth, ((0, 1), (0, 1)), mode="edge")
+    taps = np.stack([d[:-1, :-1], d[:-1, 1:], d[1:, :-1], d[1:, 1:]])
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(taps).all(0) & (taps.max(0) - taps.min(0) <= tolerance * taps.min(0))
+
+
+def prepare_photographs(mesh, photographs, *, tolerance: float = 0.01) -> tuple[Photograph, ...]:
+    """The photographs with their depth maps of ``mesh`` (the visibility
+    every rendering reuses; ``tolerance`` as :func:`render_vdtm`'s, for the
+    view map's per-cell test). ``InputError`` naming ``photographs`` when
+    there are none or an image is not 2-D/3-D."""
+    v, f = _mesh(mesh)
+    photographs = list(photographs)
+    if not photographs:
+        raise InputError("photographs", "no photographs: VDTM needs at least one")
+    out = []
+    for i, p in enumerate(photographs):
+        img = np.asarray(p.image)
+        if img.ndim not in (2, 3):
+            raise InputError("photographs", f"photograph {i}: expected an (H, W[, C]) image, "
+                                            f"got shape {img.shape}")
+        h, w = img.shape[:2]
+        r = rasterize(v, f, p.K, p.R, p.t, (w, h))
+        counts = np.bincount(r.face[r.hit].ravel(), minlength=len(f))
+        out.append(replace(p, depth=r.depth, face_pixels=counts,
+                           whole=(counts > 0) & (counts == r.covered), cells=_cells(r.depth, tolerance)))
+    return tuple(out)
+
+
+def _sample(photo, X, tolerance, check=True):
+    """Bilinear samples ``(N, C)`` of ``photo`` at the world points ``X (N, 3)``
+    and whether each is seen cleanly (all four taps on its surface; with
+    ``check="cells"`` the caller knows the points' polygon is seen whole and
+    only the cell's continuity is looked up)."""
+    import cv2
+
+    img = np.asarray(photo.image, np.float32)
+    if img.ndim == 2:
+        img = img[..., None]
+    h, w = img.shape[:2]
+    # one product: K (R X + t), whose third row is the camera z (K's is [0, 0, 1])
+    KR = np.asarray(photo.K, np.float64) @ np.asarray(photo.R, np.float64)
+    q = X @ KR.T + np.asarray(photo.K, np.float64) @ np.asarray(photo.t, np.float64)
+    z = q[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = q[:, :2] / q[:, 2:3]
+    # inside the frame: pixel footprints reach half a pixel past the centres
+    # (taps clipped to the border there, as remap's BORDER_REPLICATE)
+    ok = ((z > 0) & (px[:, 0] >= -0.5) & (px[:, 0] <= w - 0.5)
+          & (px[:, 1] >= -0.5) & (px[:, 1] <= h - 0.5))
+    pxs = np.where(ok[:, None], px, 0.0)
+    # a point a rounding error off a pixel centre is on it (its own photograph's view)
+    near = np.rint(pxs)
+    pxs = np.where(np.abs(pxs - near) < 1e-6, near, pxs)
+    x0 = np.clip(np.floor(pxs[:, 0]).astype(int), 0, w - 1)
+    y0 = np.clip(np.floor(pxs[:, 1]).astype(int), 0, h - 1)
+    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    # a tap with no weight (the point on a pixel centre's row or column) is not
+    # looked at: a photograph seeing its own pixel centres needs no neighbour
+    if check == "cells":  # the polygon is seen whole: its cell must lie on one surface
+        # (a point on a pixel centre has one tap: that pixel's depth must agree)
+        cell = photo.cells[y0, x0]
+        centre = np.flatnonzero(~cell & (pxs[:, 0] == x0) & (pxs[:, 1] == y0))
+        cell[centre] = (np.abs(photo.depth[y0[centre], x0[centre]] - z[centre])
+                        <= tolerance * np.abs(z[centre]))
+        ok &= cell
+    elif check:
+        x1 = np.where(pxs[:, 0] - x0 > 1e-9, x1, x0)
+        y1 = np.where(pxs[:, 1] - y0 > 1e-9, y1, y0)
+        d = photo.depth
+        tol = tolerance * np.abs(z)
+        for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
+            ok &= np.abs(d[yy, xx] - z) <= tol
+    # the sample positions as a map of rows of 1024 (remap wants fewer than 2^15 rows)
+    n = len(X)
+    rows = max(-(-n // 1024), 1)
+    m = np.zeros((rows * 1024, 2), np.float32)
+    m[:n] = pxs
+    mx, my = m[:, 0].reshape(rows, 1024), m[:, 1].reshape(rows, 1024)
+    s = np.concatenate([cv2.remap(np.ascontiguousarray(img[..., c:c + 4]), mx, my, cv2.INTER_LINEAR,
+                                  borderMode=cv2.BORDER_REPLICATE).reshape(rows * 1024, -1)[:n]
+                        for c in range(0, img.shape[2], 4)], 1)  # at most 4 channels a call
+    return s, ok
+
+
+def _angle(a, b):
+    """Angles (rad) between rows of ``a`` and ``b`` (N, 3), accurate near 0."""
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+
+
+def _blend(X, C, photos, tolerance, power, channels):
+    acc = np.zeros((len(X), channels))
+    wsum = np.zeros(len(X))
+    n = np.zeros(len(X))
+    ray = X - C
+    for p in photos:
+        s, ok = _sample(p, X, tolerance)
+        wt = np.where(ok, (_angle(ray, X - p.centre) + EPS_RAD) ** -power, 0.0)
+        acc += wt[:, None] * s
+        wsum += wt
+        n += ok
+    return acc, wsum, n
+
+
+@dataclass(frozen=True)
+class ViewMaps:
+    """Every polygon's view map (Debevec, Yu & Borshukov 1998), built once
+    for a mesh and its photographs by :func:`prepare_view_maps`: the
+    photographs that see the polygon, their directions from its centroid
+    projected onto its plane, and their Delaunay triangulation."""
+
+    centroids: np.ndarray
+    axes: np.ndarray  # (M, 2, 3): the plane's u, w
+    photos: tuple  # per polygon: ids of the photographs that see it
+    points: tuple  # per polygon: (k, 2) projected directions
+    triangulations: tuple  # per polygon: scipy Delaunay or None
+    centres: np.ndarray  # (N, 3) the photographs' centres
+    good: tuple = ()  # per polygon: which of its triangles are not slivers
+
+    def lookup(self, C, *, power: float = DEFAULT_POWER):
+        """The at most three photographs and weights of each polygon for the
+        view from ``C``: ``(ids (M, 3) int, -1 = none; weights (M, 3))``.
+        Inside the map's hull, the containing triangle's corners with their
+        barycentric weights; outside it, in a sliver triangle (smallest angle
+        below :data:`SLIVER_DEG`) or with fewer than three, the three nearest
+        by angle, weighted ``θ^−power``."""
+        M = len(self.centroids)
+        ids = np.full((M, 3), -1)
+        wts = np.zeros((M, 3))
+        dv = C - self.centroids
+        dv /= np.linalg.norm(dv, axis=1, keepdims=True)
+        q = np.einsum("mkj,mj->mk", self.axes, dv)
+        for m in range(M):
+            js = self.photos[m]
+            if not len(js):
+                continue
+            d = self.triangulations[m]
+            if d is not None:
+                s = int(d.find_simplex(q[m]))
+                if s >= 0 and self.good[m][s]:
+                    T = d.transform[s]
+                    b = T[:2] @ (q[m] - T[2])
+                    bc = np.append(b, 1 - b.sum())
+                    bc = np.where(bc > 1e-9, bc, 0.0)  # on a corner: that photograph alone
+                    ids[m] = js[d.simplices[s]]
+                    wts[m] = bc / bc.sum()
+                    continue
+            dirs = self.centres[js] - self.centroids[m]
+            dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+            ang = np.arccos(np.clip(dirs @ dv[m], -1, 1))
+            order = np.argsort(ang)[:3]
+            wk = (ang[order] + EPS_RAD) ** -power
+            ids[m, :len(order)] = js[order]
+            wts[m, :len(order)] = wk / wk.sum()
+        return ids, wts
+
+
+def prepare_view_maps(mesh, photos) -> ViewMaps:
+    """The view map of every polygon (triangle) of ``mesh``: a photograph
+    enters a polygon's map when it sees the polygon in at least one pixel
+    (its z-buffer's face ids, :func:`prepare_photographs`)."""
+    from scipy.spatial import Delaunay
+
+    v, f = _mesh(mesh)
+    photos = list(photos)
+    tri = v[f]
+    cen = tri.mean(1)
+    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+    ref = np.where(np.abs(nrm[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    u = np.cross(nrm, ref)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    w = np.cross(nrm, u)
+    sees = np.stack([p.face_pixels > 0 for p in photos], 1)
+    centres = np.array([p.centre for p in photos])
+    ids, pts, dels, good = [], [], [], []
+    for m in range(len(f)):
+        js = np.flatnonzero(sees[m])
+        dirs = centres[js] - cen[m]
+        dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+        pm = np.stack([dirs @ u[m], dirs @ w[m]], 1)
+        d = None
+        if len(js) >= 3:
+            try:
+                d = Delaunay(pm)
+            except Exception:  # collinear directions (QhullError): no triangle to locate in
+                d = None
+        ids.append(js)
+        pts.append(pm)
+        dels.append(d)
+        good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
+    return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
+                    tuple(good))
+
+
+def _not_sliver(tri, min_deg=SLIVER_DEG):
+    """(T,) bool: the triangles ``tri`` (T, 3, 2) whose smallest angle is at
+    least ``min_deg``: barycentric weights in a sliver blend photographs far
+    apart (the photographs of a ring seen from a wall project to a line)."""
+    angles = []
+    for k in range(3):
+        a = tri[:, (k + 1) % 3] - tri[:, k]
+        b = tri[:, (k + 2) % 3] - tri[:, k]
+        cos = np.einsum("ij,ij->i", a, b) / np.maximum(
+            np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+        angles.append(np.degrees(np.arccos(np.clip(cos, -1, 1))))
+    return np.min(angles, axis=0) >= min_deg
+
+
+def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
+    """Per polygon (triangle), the at most three photographs and weights the
+    view map gives the view from ``C`` (:meth:`ViewMaps.lookup` of
+    :func:`prepare_view_maps`). Returns ``(ids (M, 3), weights (M, 3))``."""
+    return prepare_view_maps(mesh, photos).lookup(C, power=power)
+
+
+def _view_map(X, face, ids, wts, photos, tolerance, channels):
+    M = len(ids)
+    W = np.zeros((M, len(photos)))  # polygon -> weight of each photograph
+    for k in range(3):
+        ok = ids[:, k] >= 0
+        np.add.at(W, (np.flatnonzero(ok), ids[ok, k]), wts[ok, k])
+    # the pixels sorted by polygon (16-bit ids sort by radix, in linear time): a
+    # photograph's pixels are then runs, its weight constant along each
+    order = np.argsort(face.astype(np.int16) if M < 2 ** 15 else face, kind="stable")
+    Xs = X[order]
+    counts = np.bincount(face, minlength=M)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    acc = np.zeros((len(X), channels))
+    wsum = np.zeros(len(X))
+    n = np.zeros(len(X))
+    for j, p in enumerate(photos):
+        on = (W[:, j] > 0) & (counts > 0)
+        if not on.any():
+            continue
+        # a polygon the photograph sees whole needs no per-pixel depth test (the
+        # 1998 paper's polygons are split at visibility edges beforehand), only
+        # a look-up that the bilinear cell does not straddle its outline
+        for whole in (True, False):
+            faces = np.flatnonzero(on & (p.whole == whole))
+            if not len(faces):
+                continue
+            s, ok = _sample(p, np.concatenate([Xs[starts[f]:starts[f + 1]] for f in faces]),
+                            tolerance, check="cells" if whole else True)
+            pos = 0
+            for f in faces:
+                a, b = starts[f], starts[f + 1]
+                okf = ok[pos:pos + b - a]
+                wt = W[f, j] * okf
+                acc[a:b] += wt[:, None] * s[pos:pos + b - a]
+                wsum[a:b] += wt
+                n[a:b] += okf
+                pos += b - a
+    # back to the pixels' order
+    out_acc, out_w, out_n = np.empty_like(acc), np.empty_like(wsum), np.empty_like(n)
+    out_acc[order], out_w[order], out_n[order] = acc, wsum, n
+    return out_acc, out_w, out_n
+
+
+def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """``image`` (H, W, C) with the pixels of ``region`` that are not
+    ``known`` filled by push–pull: weighted means over a pyramid of 2×2
+    blocks, the finest level that has data used (Gortler et al., "The
+    Lumigraph", SIGGRAPH 1996). Known pixels are unchanged."""
+    out = np.array(image, np.float64, copy=True)
+    hole = region & ~known
+    if not hole.any() or not known.any():
+        return out
+    # only the region's bounding box takes part (the rest is outside the model)
+    rows, cols = np.flatnonzero(region.any(1)), np.flatnonzero(region.any(0))
+    box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+    if not known[box].any():
+        box = np.s_[:, :]
+    out[box] = _push_pull(out[box], known[box], hole[box])
+    return out
+
+
+def _push_pull(image, known, hole):
+    img = np.where(known[..., None], image, 0.0)
+    wgt = known.astype(np.float64)
+    levels = [(img, wgt)]
+    while min(img.shape[:2]) > 1 and wgt.min() == 0:
+        h, w = img.shape[:2]
+        ph, pw = h % 2, w % 2
+        im = np.pad(img * wgt[..., None], ((0, ph), (0, pw), (0, 0)))
+        wg = np.pad(wgt, ((0, ph), (0, pw)))
+        s = im.reshape(im.shape[0] // 2, 2, im.shape[1] // 2, 2, -1).sum((1, 3))
+        ws = wg.reshape(wg.shape[0] // 2, 2, wg.shape[1] // 2, 2).sum((1, 3))
+        img = np.where(ws[..., None] > 0, s / np.maximum(ws, 1e-300)[..., None], 0.0)
+        wgt = np.minimum(ws, 1.0)
+        levels.append((img, wgt))
+    up = levels[-1][0]
+    for im, wg in reversed(levels[:-1]):
+        h, w = im.shape[:2]
+        coarse = np.repeat(np.repeat(up, 2, 0), 2, 1)[:h, :w]
+        up = wg[..., None] * im + (1 - wg[..., None]) * coarse
+    out = np.array(image, copy=True)
+    out[hole] = up[hole]
+    return out
+
+
+def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
+                tolerance: float = 0.01, power: float = DEFAULT_POWER, background: float = 0.0,
+                fill: bool = True, maps: ViewMaps | None = None) -> VDTMImage:
+    """Render ``mesh`` from the camera ``K, R, t`` (``x_cam = R x_world +
+    t``, ``size = (W, H)``) textured from ``photographs`` (see the module
+    docstring for both methods).
+
+    Parameters
+    ----------
+    mesh : ``(vertices, faces)`` or an object with ``vertices``/``faces``
+        World coordinates.
+    photographs : sequence of Photograph
+        As :func:`prepare_photographs` returns them (with depth maps; those
+        without are prepared here).
+    method : {"blend", "view-map"}
+    tolerance : float
+        Visibility: relative depth difference still "the same surface".
+    power : float
+        Weights ``θ^−power``; 1 is the paper's, the default
+        :data:`DEFAULT_POWER` was tuned on the glossy facade scene.
+    background : float
+        Value off the model.
+    fill : bool
+        Fill holes (model pixels no photograph sees).
+    maps : ViewMaps, optional
+        ``"view-map"``: the polygons' view maps, built once for many views
+        by :func:`prepare_view_maps` (built here when not given).
+
+    Returns
+    -------
+    VDTMImage
+        Float32 image with the photographs' channels, model and hole masks.
+    """
+    if method not in METHODS:
+        raise InputError("method", f"expected one of {', '.join(METHODS)}, got {method!r}")
+    if not (np.isfinite(tolerance) and tolerance > 0):
+        raise InputError("tolerance", f"expected a positive relative depth tolerance, got {tolerance}")
+    if not (np.isfinite(power) and power > 0):
+        raise InputError("power", f"expected a positive weight exponent, got {power}")
+    v, f = _mesh(mesh)
+    photos = list(photographs)
+    if not photos:
+        raise InputError("photographs", "no photographs: VDTM needs at least one")
+    if any(p.depth is None or p.whole is None for p in photos):
+        photos = list(prepare_photographs((v, f), photos))
+    first = np.asarray(photos[0].image)
+    channels = 1 if first.ndim == 2 else first.shape[2]
+    for i, p in enumerate(photos):
+        img = np.asarray(p.image)
+        if (1 if img.ndim == 2 else img.shape[2]) != channels:
+            raise InputError("photographs", f"photograph {i} has {1 if img.ndim == 2 else img.shape[2]} "
+                                            f"channels, photograph 0 has {channels}")
+    w, h = (int(s) for s in size)
+    R = np.asarray(R, np.float64)
+    t = np.asarray(t, np.float64).reshape(3)
+    C = -R.T @ t
+    t0 = time.perf_counter()
+    rays = pixel_rays(K, (w, h))
+    r = rasterize(v, f, K, R, t, (w, h), rays=rays)
+    t1 = time.perf_counter()
+    model = r.hit
+    idx = np.flatnonzero(model.ravel())
+    # the world point of each model pixel: its ray scaled to the depth
+    Xc = rays.reshape(-1, 3)[idx] * r.depth.ravel()[idx, None]
+    X = (Xc - t) @ R  # R^T (x_cam - t)
+    if method == "blend":
+        acc, wsum, n = _blend(X, C, photos, tolerance, power, channels)
+    else:
+        if maps is None:
+            maps = prepare_view_maps((v, f), photos)
+        ids, wts = maps.lookup(C, power=power)
+        acc, wsum, n = _view_map(X, r.face.ravel()[idx], ids, wts, photos, tolerance, channels)
+        # where none of a polygon's three sees the point, every photograph is asked
+        again = np.flatnonzero(wsum == 0)
+        if len(again):
+            acc[again], wsum[again], n[again] = _blend(X[again], C, photos, tolerance, power,
+                                                       channels)
+    t2 = time.perf_counter()
+    seen = wsum > 0
+    out = np.full((h * w, channels), float(background))
+    out[idx[seen]] = acc[seen] / wsum[seen, None]
+    known = np.zeros(h * w, bool)
+    known[idx[seen]] = True
+    out = out.reshape(h, w, channels)
+    known = known.reshape(h, w)
+    filled = model & ~known
+    if fill and filled.any() and known.any():
+        out = fill_holes(out, known, model)
+    elif not fill:
+        filled = np.zeros_like(model)
+    t3 = time.perf_counter()
+    info = {"method": method, "tolerance": tolerance, "power": power,
+            "photographs": len(photos),
+            "photographs_per_pixel": float(n.mean()) if len(n) else 0.0,
+            "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
+            "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
+    return VDTMImage(out.astype(np.float32), model, filled, info)
+
+
+def load_posed_camera(path):
+    """A ``camera.json`` with its pose, ``"cam_from_world": {"R": 3x3, "t":
+    [3]}`` (as ``lumigraph stereo facade solve`` writes per photograph and
+    ``lumigraph render facade`` per view): ``(Camera, R, t)``.
+    :class:`InputError` naming the file and the key: not a camera, no pose,
+    ``R`` not a rotation, ``t`` not 3 finite numbers."""
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.rig import require_rotation
+    from lumigraph.capture.schema import require
+
+    cam = Camera.load(path)
+    pose = cam.extra.get("cam_from_world")
+    if not isinstance(pose, dict):
+        raise InputError(path, "key 'cam_from_world': missing; expected the camera's pose "
+                               "{\"R\": 3x3, \"t\": [3]} (x_cam = R x_world + t)")
+    R = require_rotation(pose, "R", path=path, where="cam_from_world")
+    t = require(pose, "t", "matrix", shape=(3,), path=path, where="cam_from_world")
+    return cam, np.asarray(R, float), np.asarray(t, float)
+
+
+def load_model_mesh(path):
+    """The mesh of a block model file: ``blocks.json``, or a solve's
+    ``model.json`` (its fitted parameter values applied to the
+    ``blocks.json`` beside it). Returns ``(mesh, model.json body or None)``."""
+    from pathlib import Path
+
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    p = Path(path)
+    body = load_json_artifact(p, "model", schemas=None) if p.is_file() else None
+    if body is not None and body.get("schema") == "lumigraph.facade.model":
+        blocks = p.parent / "blocks.json"
+        if not blocks.is_file():
+            raise InputError(p, f"a model.json needs its blocks.json beside it ({blocks} not found)")
+        model = load_blocks(blocks)
+        params = body.get("parameters")
+        if not isinstance(params, dict):
+            raise InputError(p, "key 'parameters': expected {name: {\"value\": ...}}")
+        values = {}
+        for n, v in params.items():
+            if n in model.parameter_names:
+                if not (isinstance(v, dict) and isinstance(v.get("value"), (int, float))):
+                    raise InputError(p, f"key 'parameters.{n}': expected {{\"value\": number}}")
+                values[n] = float(v["value"])
+        return model.with_values(values).mesh(), body
+    return load_blocks(p).mesh(), None
+
+
+def rig_between(key, offset):
+    """The stereo rig of two posed cameras ``(Camera, R, t)`` (as
+    :func:`load_posed_camera` returns them): left = ``key``, right =
+    ``offset``, ``x_offset = R_rel x_key + T`` with ``R_rel = R_o R_kᵀ``,
+    ``T = t_o − R_rel t_k`` — what ``lumigraph stereo model-based --rig``
+    takes for a key/offset pair of a Façade solve.
+
+    >>> from lumigraph.capture.camera import Camera
+    >>> c = Camera(np.diag([100.0, 100, 1]), [], (64, 48))
+    >>> rig = rig_between((c, np.eye(3), np.zeros(3)), (c, np.eye(3), np.array([-0.5, 0, 0])))
+    >>> rig.T.tolist()
+    [-0.5, 0.0, 0.0]
+    """
+    from lumigraph.capture.rig import Rig
+
+    (ck, Rk, tk), (co, Ro, to) = key, offset
+    R = np.asarray(Ro, float) @ np.asarray(Rk, float).T
+    T = np.asarray(to, float) - R @ np.asarray(tk, float)
+    if not np.linalg.norm(T) > 0:
+        raise InputError("offset", "the two cameras share their centre: no baseline for stereo")
+    return Rig.from_pose(ck, co, R, T)

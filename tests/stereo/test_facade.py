@@ -1,0 +1,199 @@
+"""Façade photogrammetric modelling (stereo/debevec1996/): the block model,
+the marks, the solver and the command line, on exact synthetic marks
+(capture/scenes/facade_edges.py). Tolerances: noise-free marks give the true
+parameters to round-off (1e-8 relative, a million times the double epsilon
+times the problem's conditioning); noisy marks are judged in units of the
+standard deviation the solver reports (which the bench checks against 50
+noise draws)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_catalog import run_cli
+
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.scenes.facade_edges import project_edges, ring_cameras, write_facade_folder
+from lumigraph.stereo.debevec1996.edges import EdgeMarks
+from lumigraph.stereo.debevec1996.model import BlockModel, load_blocks
+from lumigraph.stereo.debevec1996.solve import _Problem, solve_facade
+
+ROOT = Path(__file__).resolve().parents[2]
+BLOCKS = ROOT / "fixtures" / "facade" / "blocks.json"
+
+
+@pytest.fixture(scope="module")
+def model():
+    return load_blocks(BLOCKS)
+
+
+@pytest.fixture(scope="module")
+def cams():
+    return ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700,
+                        rng=np.random.default_rng(1), jitter=0.05)
+
+
+def marks_of(model, cams, **kw):
+    return EdgeMarks.from_dict({"photographs": project_edges(model, cams, **kw)}, model=model,
+                               photographs=list(cams))
+
+
+def K(cams):
+    return {p: c["K"] for p, c in cams.items()}
+
+
+# ------------------------------------------------------------------ the model
+def test_model_geometry(model):
+    assert model.parameter_names == ("house/depth", "house/height", "roof/height", "tower/width",
+                                     "tower/height", "tower/offset_x", "spire/height")
+    e = model.edges()
+    np.testing.assert_allclose(e["roof/ridge"][0], [-5, 0, 8.5])
+    np.testing.assert_allclose(e["tower/top-front"][1], [8, -3, 9])      # flush with the front
+    np.testing.assert_allclose(e["spire/hip-front-left"][1], [6.5, -1.5, 11])
+    mesh = model.mesh()
+    V = mesh.vertices
+    for b in set(mesh.face_block):
+        F = mesh.faces[mesh.face_block == b]
+        # outward counter-clockwise faces: the signed volume of each closed block is positive
+        vol = np.einsum("ij,ij->i", V[F[:, 0]], np.cross(V[F[:, 1]], V[F[:, 2]])).sum() / 6
+        assert vol > 0, b
+    C0, C1 = model.edge_matrices(["tower/top-front"])
+    np.testing.assert_allclose(C1[0] @ model.values, e["tower/top-front"][1])
+    again = BlockModel.from_dict(model.to_dict(), where="x")
+    assert again.named_values() == model.named_values()
+    bigger = model.with_values({"tower/width": 4.0})
+    assert bigger.named_values()["spire/depth"] == 4.0                 # shared through same_as
+
+
+@pytest.mark.parametrize("change, fragment", [
+    (lambda d: d["blocks"][0].update(parent="spire"), "cycle in the hierarchy"),
+    (lambda d: d["blocks"][1].update(kind="dome"), "unknown kind 'dome'"),
+    (lambda d: d["blocks"][2].update(parent="garage"), "unknown parent 'garage'"),
+    (lambda d: d["blocks"][1]["params"].update(height={"same_as": "chimney/height"}),
+     "unknown shared reference 'chimney/height'"),
+    (lambda d: d["blocks"][1]["params"].pop("height"), "missing parameter 'height'"),
+])
+def test_bad_models_are_refused_naming_the_entry(change, fragment):
+    d = json.loads(BLOCKS.read_text())
+    change(d)
+    with pytest.raises(InputError) as e:
+        BlockModel.from_dict(d, where="blocks.json")
+    assert e.value.where == "blocks.json" and fragment in e.value.problem
+    assert "blocks[" in e.value.problem and "\n" not in str(e.value)
+
+
+# ------------------------------------------------------------------ the solver
+def test_analytic_jacobian_matches_finite_differences(model, cams):
+    marks = marks_of(model, cams)
+    R0 = np.array([c["R"] for c in cams.values()])
+    prob = _Problem(model, list(marks.marks), list(cams), K(cams), R0, free_focal=True)
+    rng = np.random.default_rng(0)
+    x = prob.pack(model.values * 1.1, rng.normal(0, 0.1, (len(cams), 3)),
+                  np.array([c["t"] for c in cams.values()]), 1.05)
+    A = prob.weights(True)
+    J = prob.jacobian(x, A, dense=True)
+    Jn = np.zeros_like(J)
+    for i in range(len(x)):
+        e = np.zeros_like(x)
+        e[i] = 1e-6 * max(1.0, abs(x[i]))
+        Jn[:, i] = (prob.residuals(x + e, A) - prob.residuals(x - e, A)) / (2 * e[i])
+    # central differences: error ~ h² f''' ≪ 1e-5 of the largest entry
+    assert np.abs(J - Jn).max() < 1e-5 * np.abs(J).max()
+
+
+def test_noise_free_marks_give_the_truth(model, cams):
+    start = model.with_values(model.values[~model.fixed] * 1.2)      # 20 % off, no rough poses
+    sol = solve_facade(start, marks_of(model, cams), K(cams))
+    for n, v in model.named_values().items():
+        assert abs(sol.params[n] - v) <= 1e-8 * abs(v), n
+    for p, c in cams.items():
+        R, t = sol.poses[p]
+        assert np.abs(R - c["R"]).max() < 1e-8
+        np.testing.assert_allclose(sol.centres[p], -c["R"].T @ c["t"], atol=1e-8 * 30)
+    assert sol.outliers == [] and sol.dropped == []
+
+
+def test_sparse_path_gives_the_truth(model, cams, monkeypatch):
+    import lumigraph.stereo.debevec1996.solve as solve
+
+    monkeypatch.setattr(solve, "DENSE_MAX_COLUMNS", 0)   # what a large problem takes
+    start = model.with_values(model.values[~model.fixed] * 1.2)
+    sol = solve_facade(start, marks_of(model, cams), K(cams))
+    # LSMR steps stop at their own tolerance: 1e-6 relative, the bench's target
+    for n, v in model.named_values().items():
+        assert abs(sol.params[n] - v) <= 1e-6 * abs(v), n
+
+
+def test_free_focal_is_recovered(model, cams):
+    wrong = {p: k @ np.diag([1.1, 1.1, 1.0]) for p, k in K(cams).items()}   # 10 % long focal
+    wrong = {p: np.array([[k[0, 0], 0, c["K"][0, 2]], [0, k[1, 1], c["K"][1, 2]], [0, 0, 1]])
+             for (p, k), c in zip(wrong.items(), cams.values(), strict=True)}
+    sol = solve_facade(model, marks_of(model, cams), wrong, free_focal=True)
+    assert abs(sol.focal_scale - 1 / 1.1) < 1e-8
+    assert abs(sol.params["tower/height"] - 9.0) < 1e-7
+
+
+def test_noisy_marks_within_the_reported_deviation(model, cams):
+    rng = np.random.default_rng(5)
+    sol = solve_facade(model, marks_of(model, cams, noise_px=0.5, rng=rng), K(cams), noise_px=0.5)
+    assert 0.5 / 1.5 < sol.sigma_px < 0.5 * 1.5       # the endpoint noise, estimated
+    for n, v in model.named_values().items():
+        if sol.std[n] > 0:
+            assert abs(sol.params[n] - v) < 5 * sol.std[n], n
+
+
+# ------------------------------------------------------------------ the command line
+def _folder(tmp_path, model, n=4, **kw):
+    cams = ring_cameras(n, target=[1.5, 0, 4], radius=30, height=4, focal_px=120,
+                        image_size=(128, 96), arc_deg=(-130.0, -50.0))
+    start = model.with_values(model.values[~model.fixed] * 1.1)
+    return write_facade_folder(tmp_path / "f", model, cams, start=start, **kw), cams
+
+
+def test_cli_solve_writes_the_model_and_cameras(tmp_path, model):
+    folder, cams = _folder(tmp_path, model)
+    rc, _, err = run_cli(["stereo", "facade", "solve", str(folder), "--out", str(tmp_path / "o"),
+                          "-q"])
+    assert rc == 0, err
+    body = json.loads((tmp_path / "o" / "model.json").read_text())
+    gt = json.loads((folder / "gt.json").read_text())
+    assert set(body["parameters"]) == set(gt["parameters"])
+    for n, v in gt["parameters"].items():
+        assert abs(body["parameters"][n]["value"] - v) <= 1e-8 * v, n
+    for p, c in gt["cameras"].items():
+        np.testing.assert_allclose(body["cameras"][p]["R"], c["R"], atol=1e-8)
+        cam = json.loads((tmp_path / "o" / "cameras" / f"{Path(p).stem}.json").read_text())
+        np.testing.assert_allclose(cam["cam_from_world"]["t"], c["t"], atol=1e-6)
+    assert (tmp_path / "o" / "model.ply").read_bytes().startswith(b"ply\n")
+    assert "PINHOLE" in (tmp_path / "o" / "cameras.txt").read_text()
+
+
+@pytest.mark.parametrize("edit, fragment", [
+    (lambda d: d["blocks"][3].update(parent="spire"), "cycle in the hierarchy"),
+    (lambda d: d["blocks"][3].update(kind="dome"), "unknown kind 'dome'"),
+])
+def test_cli_bad_model_is_exit_2_naming_file_and_entry(tmp_path, model, edit, fragment):
+    folder, _ = _folder(tmp_path, model, n=3)
+    d = json.loads((folder / "blocks.json").read_text())
+    edit(d)
+    (folder / "blocks.json").write_text(json.dumps(d))
+    rc, _, err = run_cli(["stereo", "facade", "solve", str(folder), "--out", str(tmp_path / "o")])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2 and len(lines) == 1, err
+    assert "blocks.json" in lines[0] and "blocks[3]" in lines[0] and fragment in lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_unknown_edge_name_is_exit_2_naming_file_and_entry(tmp_path, model):
+    folder, _ = _folder(tmp_path, model, n=3)
+    d = json.loads((folder / "edges.json").read_text())
+    d["photographs"]["photo_01.png"][2]["edge"] = "tower/top-middle"
+    (folder / "edges.json").write_text(json.dumps(d))
+    rc, _, err = run_cli(["stereo", "facade", "solve", str(folder), "--out", str(tmp_path / "o")])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2 and len(lines) == 1, err
+    assert "edges.json" in lines[0] and "photo_01.png[2]" in lines[0]
+    assert "'tower/top-middle'" in lines[0]

@@ -1,0 +1,115 @@
+"""The Façade chain on the command line: render the building, solve the
+model from its marks, the model's depth from the key photograph, model-based
+stereo for the relief the model lacks, and a view-dependent rendering."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+from conftest import assert_clean_error, lumigraph
+
+from lumigraph.capture import io
+from lumigraph.capture.render import render
+from lumigraph.capture.scenes.facade import PILASTER_M
+
+SIZE = (240, 180)
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    s = render("facade", size=SIZE, seed=2, photos=6, novel=1, supersample=1, lambertian=True)
+    return s.save(tmp_path_factory.mktemp("facade") / "photos"), s
+
+
+def test_chain(folder, tmp_path):
+    f, s = folder
+    sol = tmp_path / "solve"
+    r = lumigraph("stereo", "facade", "solve", f, "--out", sol, "-q")
+    assert r.returncode == 0, r.stderr
+    model = json.loads((sol / "model.json").read_text())
+    for name, v in s.gt["parameters"].items():  # exact marks: the true model, to rounding
+        assert model["parameters"][name]["value"] == pytest.approx(v, rel=1e-6)
+    key, off = "photo_02", "photo_03"
+    r = lumigraph("stereo", "facade", "depth", "--model", sol / "model.json", "--camera",
+                  sol / "cameras" / f"{key}.json", "--out", tmp_path / "model.pfm", "-q")
+    assert r.returncode == 0, r.stderr
+    zm = io.read_pfm(tmp_path / "model.pfm")
+    true_zm = s.gt_arrays["model_depth_02"]
+    np.testing.assert_array_equal(np.isfinite(zm), np.isfinite(true_zm))
+    np.testing.assert_allclose(zm[np.isfinite(zm)], true_zm[np.isfinite(zm)], rtol=1e-5)
+    r = lumigraph("stereo", "facade", "pair", "--key", sol / "cameras" / f"{key}.json", "--offset",
+                  sol / "cameras" / f"{off}.json", "--out", tmp_path / "rig.json", "-q")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph("stereo", "model-based", f / f"{key}.png", f / f"{off}.png", "--rig",
+                  tmp_path / "rig.json", "--model", tmp_path / "model.pfm", "--max-offset", "0.5",
+                  "--out", tmp_path / "refined.pfm", "-q")
+    assert r.returncode == 0, r.stderr
+    z = io.read_pfm(tmp_path / "refined.pfm")
+    truth = s.gt_arrays["depth_02"]
+    relief = np.abs(truth - true_zm) > PILASTER_M / 2
+    ok = np.isfinite(z) & np.isfinite(truth)
+    assert (ok & relief).sum() > 20
+    # the pilasters stand out of the model: recovered to better than half their relief
+    assert np.median(np.abs(z - truth)[ok & relief]) < PILASTER_M / 2
+    r = lumigraph("stereo", "facade", "render", "--model", sol / "model.json", "--photos", f,
+                  "--view", f / "novel" / "view_0.json", "--out", tmp_path / "view.png", "-q")
+    assert r.returncode == 0, r.stderr
+    v = io.read_image(tmp_path / "view.png")
+    assert v.shape == (SIZE[1], SIZE[0], 3)
+    on = s.gt_arrays["novel_model_0"]
+    # a diffuse building: the rendering is the novel view up to resampling (PSNR well above a
+    # grey guess's ~10 dB)
+    err = v[on].astype(float) - s.gt_arrays["novel_0"][on]
+    assert 10 * np.log10(255 ** 2 / np.mean(err ** 2)) > 25
+
+
+def test_bad_input_is_one_line(folder, tmp_path):
+    f, _ = folder
+    # a camera without a pose
+    r = lumigraph("stereo", "facade", "depth", "--model", f / "blocks.json", "--camera",
+                  f / "camera.json", "--out", tmp_path / "d.pfm")
+    assert_clean_error(r, "camera.json", "cam_from_world")
+    # a photograph whose camera is missing
+    bad = tmp_path / "photos"
+    shutil.copytree(f, bad)
+    (bad / "cameras" / "photo_01.json").unlink()
+    r = lumigraph("stereo", "facade", "render", "--model", bad / "blocks.json", "--photos", bad,
+                  "--view", bad / "novel" / "view_0.json", "--out", tmp_path / "v.png")
+    assert_clean_error(r, "photo_01")
+    # a photograph of another size than its camera's
+    shutil.copy(f / "cameras" / "photo_01.json", bad / "cameras" / "photo_01.json")
+    img = io.read_image(bad / "photo_01.png")
+    io.write_image(bad / "photo_01.png", np.ascontiguousarray(img[:-2]))
+    r = lumigraph("stereo", "facade", "render", "--model", bad / "blocks.json", "--photos", bad,
+                  "--view", bad / "novel" / "view_0.json", "--out", tmp_path / "v.png")
+    assert_clean_error(r, "photo_01.png", "camera")
+
+
+def test_linear_photographs_stay_linear(folder, tmp_path):
+    f, s = folder
+    lin = tmp_path / "linear"
+    shutil.copytree(f, lin)
+    names = []
+    for name, img in zip(s.image_names, s.images, strict=True):
+        exr = name.replace(".png", ".exr")
+        io.write_exr(lin / exr, (img / 200.0).astype(np.float32))  # radiance = code / 200
+        names.append(exr)
+    io.write_stack_json(lin, names, blocks="blocks.json", edges="edges.json")
+    for n in s.image_names:  # the cameras are found by the photographs' stems
+        assert (lin / "cameras" / n.replace(".png", ".json")).is_file()
+    args = ("stereo", "facade", "render", "--model", lin / "blocks.json", "--photos", lin,
+            "--view", lin / "novel" / "view_0.json")
+    r = lumigraph(*args, "--out", tmp_path / "view.exr", "-q")
+    assert r.returncode == 0, r.stderr
+    r = lumigraph(*args, "--out", tmp_path / "codes.png", "--photos", f, "-q")
+    assert r.returncode == 0, r.stderr
+    v = io.read_exr(tmp_path / "view.exr")
+    codes = io.read_image(tmp_path / "codes.png").astype(np.float64)
+    # the same blend of radiance as of codes, up to the PNG's rounding (half a code)
+    assert np.abs(v * 200.0 - codes).max() <= 0.5 + 1e-3
+    # radiance into an 8-bit PNG would not be linear: refused
+    r = lumigraph(*args, "--out", tmp_path / "view.png")
+    assert_clean_error(r, "view.png", ".exr")

@@ -1,0 +1,126 @@
+"""View-dependent texture mapping: a photograph's own view is a copy of it; a
+diffuse surface is reproduced within the bilinear resampling error."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lumigraph.capture.errors import InputError
+from lumigraph.capture.raster import pixel_rays, rasterize
+from lumigraph.capture.render import render
+from lumigraph.capture.scenes.facade import Building
+from lumigraph.stereo.debevec1996.vdtm import (
+    Photograph,
+    fill_holes,
+    prepare_photographs,
+    render_vdtm,
+)
+
+SIZE = (96, 72)
+
+
+@pytest.fixture(scope="module")
+def facade():
+    s = render("facade", size=SIZE, seed=5, photos=6, novel=1, supersample=1)
+    b = Building(s.gt["parameters"]).mesh()
+    mesh = (b.vertices, b.faces)
+    photos = prepare_photographs(mesh, [
+        Photograph(im.astype(np.float32), np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
+        for im, c in zip(s.images, s.gt["cameras"].values(), strict=True)])
+    return s, mesh, photos
+
+
+@pytest.mark.parametrize("method", ["blend", "view-map"])
+def test_own_view_is_a_copy(facade, method):
+    s, mesh, photos = facade
+    for j in (0, 3):
+        p = photos[j]
+        out = render_vdtm(mesh, photos, p.K, p.R, p.t, SIZE, method=method)
+        m = out.model
+        assert m.sum() > 500 and not out.filled[m].any()
+        # within 8-bit rounding of the photograph itself
+        assert np.abs(np.rint(out.image[m]) - p.image[m]).max() == 0
+
+
+def _plane_photos(f, cams, V, F):
+    """Images of the plane (V, F) whose radiance is ``f(X)``, point-sampled
+    at pixel centres (no noise): bilinear interpolation is then the only error."""
+    photos = []
+    for K, R, t in cams:
+        r = rasterize(V, F, K, R, t, SIZE)
+        X = r.points(V, F)
+        img = np.where(r.hit[..., None], f(np.nan_to_num(X)), 0.0)
+        photos.append(Photograph(img.astype(np.float64), K, R, t))
+    return photos
+
+
+def _look(C, target):
+    fwd = (target - C) / np.linalg.norm(target - C)
+    right = np.cross(fwd, [0, 0, 1.0])
+    right /= np.linalg.norm(right)
+    R = np.stack([right, np.cross(fwd, right), fwd])
+    return R, -R @ C
+
+
+def test_lambertian_within_the_bilinear_bound():
+    # a wall x in [-4, 4], z in [0, 5] at y = 0 with a smooth texture
+    V = np.array([[-4.0, 0, 0], [4, 0, 0], [4, 0, 5], [-4, 0, 5]])
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    K = np.array([[70.0, 0, 47.5], [0, 70.0, 35.5], [0, 0, 1]])
+
+    def f(X):
+        return np.stack([100 + 60 * np.sin(0.9 * X[..., 0]) * np.cos(0.7 * X[..., 2]),
+                         120 + 50 * np.cos(1.3 * X[..., 0] + 0.4 * X[..., 2]),
+                         90 + 40 * np.sin(0.8 * X[..., 2])], -1)
+
+    target = np.array([0.0, 0, 2.5])
+    cams = [_look(np.array([12 * np.sin(a), -12 * np.cos(a), 2.5 + 1.5 * np.sin(3 * a)]), target)
+            for a in np.radians([-40, -15, 10, 35])]
+    photos = prepare_photographs((V, F), [Photograph(p.image, p.K, p.R, p.t)
+                                          for p in _plane_photos(f, [(K, R, t) for R, t in cams], V, F)])
+    # the bound: linear interpolation along x, then along y, errs by at most
+    # (max|g_xx| + max|g_yy|) / 8 at one pixel spacing, g the photograph (its second
+    # differences inside the wall); a weighted mean of samples errs by at most the
+    # largest photograph's bound
+    bound = 0.0
+    for p in photos:
+        g, inner = p.image, np.isfinite(p.depth)
+        gyy = np.abs(g[2:] - 2 * g[1:-1] + g[:-2])[inner[2:] & inner[1:-1] & inner[:-2]]
+        gxx = np.abs(g[:, 2:] - 2 * g[:, 1:-1] + g[:, :-2])[inner[:, 2:] & inner[:, 1:-1] & inner[:, :-2]]
+        bound = max(bound, (gxx.max() + gyy.max()) / 8)
+    for a in np.radians([-27, 22]):
+        R, t = _look(np.array([11 * np.sin(a), -11 * np.cos(a), 3.0]), target)
+        truth_r = rasterize(V, F, K, R, t, SIZE)
+        truth = f(truth_r.points(V, F))
+        for method in ("blend", "view-map"):
+            out = render_vdtm((V, F), photos, K, R, t, SIZE, method=method)
+            m = out.model & ~out.filled
+            assert m.sum() > 0.9 * truth_r.hit.sum()
+            err = np.abs(out.image[m] - truth[m])
+            assert err.max() <= bound, (method, err.max(), bound)
+
+
+def test_holes_are_filled_from_neighbours():
+    img = np.zeros((8, 8, 1))
+    img[:, :4] = 10.0
+    img[:, 4:] = 20.0
+    known = np.ones((8, 8), bool)
+    known[3:5, 3:5] = False
+    out = fill_holes(img * known[..., None], known, np.ones((8, 8), bool))
+    assert (out[known] == img[known]).all()
+    assert (out[~known] >= 10).all() and (out[~known] <= 20).all()
+
+
+def test_bad_arguments():
+    V = np.array([[-1.0, -1, 4], [1, -1, 4], [0, 1, 4]])
+    K = np.array([[20.0, 0, 7.5], [0, 20.0, 5.5], [0, 0, 1]])
+    p = Photograph(np.zeros((12, 16, 3)), K, np.eye(3), np.zeros(3))
+    with pytest.raises(InputError, match="method"):
+        render_vdtm((V, [[0, 1, 2]]), [p], K, np.eye(3), np.zeros(3), (16, 12), method="nearest")
+    with pytest.raises(InputError, match="photographs"):
+        render_vdtm((V, [[0, 1, 2]]), [], K, np.eye(3), np.zeros(3), (16, 12))
+    q = Photograph(np.zeros((12, 16)), K, np.eye(3), np.zeros(3))
+    with pytest.raises(InputError, match="channels"):
+        render_vdtm((V, [[0, 1, 2]]), [p, q], K, np.eye(3), np.zeros(3), (16, 12))
+    assert pixel_rays(K, (16, 12)).shape == (12, 16, 3)
