@@ -223,7 +223,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs)."""
     from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.edges import Mark
-    from lumigraph.stereo.debevec1996.solve import solve_facade
+    from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
 
     check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
     greys = {p: _grey(images[p]) for p in marks.photographs}
@@ -240,6 +240,19 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                            hold_unconstrained=True, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
+        # a proposal made under wider gates stays only while it passes this
+        # round's gates against the re-solved model (wrong early matches go)
+        gate = widen * max_distance_px
+        for key, m in list(kept.items()):
+            if m.photo not in sol.poses:
+                kept.pop(key)
+                continue
+            R, t = sol.poses[m.photo]
+            a, b = project_model_edges(sol.model, sol.K[m.photo], R, t)[m.edge]
+            d = b - a
+            nrm = np.array([-d[1], d[0]]) / max(np.hypot(*d), 1e-9)
+            if max(abs((m.segment[:2] - a) @ nrm), abs((m.segment[2:] - a) @ nrm)) > gate:
+                kept.pop(key)
         warnings = list(sol.warnings)
         before = set(kept)
         views = []

@@ -30,8 +30,17 @@ from lumigraph.capture.errors import InputError
 SOLVE_EPILOG = """\
 FOLDER holds:
   stack.json    {"images": ["photo_00.png", ...]}: the photographs
-  blocks.json   the block model and its starting values (see 'lumigraph.stereo.debevec1996.model');
-                at least one length fixed (it sets the scale)
+  blocks.json   the block model and its starting values; at least one length fixed (the scale):
+    {"blocks": [{"name": "house", "kind": "box",
+                 "params": {"width": {"value": 10, "fixed": true}, "depth": 6, "height": 6}},
+                {"name": "roof", "kind": "wedge", "parent": "house",
+                 "params": {"width": {"same_as": "house/width"},
+                            "depth": {"same_as": "house/depth"}, "height": 2.5}}]}
+    kinds: box, wedge (gable roof, ridge along x), pyramid (width x, depth y, height z up);
+    placement on the parent: "on": top (default) | base | offset (param offset_z),
+    "x": centre | left | right | offset (offset_x), "y": centre | front | back | offset (offset_y)
+    edges are named block/edge: house/top-front, house/front-left (vertical), roof/ridge,
+    roof/rake-front-left, spire/hip-back-right, ... (front = -y, left = -x)
   edges.json    {"photographs": {"photo_00.png": [{"edge": "house/top-front",
                                                    "segment": [x0, y0, x1, y1]}, ...]}}
   camera.json   the photographs' intrinsics (one camera), unless --camera names another

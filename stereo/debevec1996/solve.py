@@ -561,7 +561,9 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
     if not np.all(np.isfinite(J0)):
         raise EstimationError(where, "the starting model projects a marked edge to a point "
                               "(a block of zero size?): check the starting values in blocks.json")
-    bad = _rank_deficient(J0, names)
+    # a rough solve (hold_unconstrained) also holds what the marks barely
+    # constrain: with four noisy marks a weak direction wanders far
+    bad = _rank_deficient(J0, names, rcond=1e-3 if hold_unconstrained else 1e-9)
     if bad and hold_unconstrained:
         # hold the model's unconstrained parameters first; only a photograph
         # still unconstrained with them held is left out
