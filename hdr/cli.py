@@ -533,10 +533,13 @@ def _tonemap_by_rows(args, plan) -> int:
         dtype = "uint8" if args.bit_depth == 8 else "uint16"
         with atomic_path(out) as tmp:
             writer = row_writer(tmp, w, h, 3, dtype, rows=plan.rows)
-            cleanup.callback(writer.close)
-            r = tonemap_rows(src, rows=plan.rows, write=writer.write, method=args.method,
-                             key=args.key, bit_depth=args.bit_depth)
-            writer.close()
+            # closed inside atomic_path: a writer thread (TIFF) must be done with
+            # the temporary before an error's cleanup removes it
+            try:
+                r = tonemap_rows(src, rows=plan.rows, write=writer.write, method=args.method,
+                                 key=args.key, bit_depth=args.bit_depth)
+            finally:
+                writer.close()
             meta = make_meta("lumigraph.tonemapped", inputs=[args.input],
                              params={"method": args.method, "key": args.key,
                                      "bit_depth": args.bit_depth},
