@@ -95,6 +95,9 @@ _SET: contextvars.ContextVar[ResultSet | None] = contextvars.ContextVar("lumigra
                                                                        default=None)
 _GUARD: contextvars.ContextVar[OutputGuard | None] = contextvars.ContextVar("lumigraph_guard",
                                                                            default=None)
+# The batch item being run (lumigraph.capture.batch): every sidecar written
+# while it is set records it, so a rerun can tell a finished item's artifacts.
+_BATCH: contextvars.ContextVar[dict | None] = contextvars.ContextVar("lumigraph_batch", default=None)
 _TEMPS: set[str] = set()  # our own temporaries: a writer nested in another replaces them directly
 JOURNAL_PREFIX = ".lumigraph-commit."
 
@@ -603,9 +606,23 @@ def make_meta(schema: str, *, inputs: Iterable[str | os.PathLike] = (), params: 
     g = _GUARD.get()
     if g is not None:  # which command wrote it: an earlier output it may replace (OutputGuard)
         meta["producer"] = g.producer
+    stamp = _BATCH.get()
+    if stamp is not None:  # written as one item of a batch: its key (inputs + options)
+        meta["batch"] = dict(stamp)
     if extra:
         meta.update(extra)
     return meta
+
+
+@contextlib.contextmanager
+def batch_stamp(stamp: dict):
+    """Record ``stamp`` (a batch item's name and key) in every sidecar built
+    inside the block (:func:`make_meta`)."""
+    token = _BATCH.set(dict(stamp))
+    try:
+        yield
+    finally:
+        _BATCH.reset(token)
 
 
 def write_artifact(path: str | os.PathLike, write: Callable[[Path], object], *, meta: dict) -> Path:
