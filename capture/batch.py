@@ -432,11 +432,15 @@ def run_batch(items: Sequence[Item], *, out_dir: str | os.PathLike, workers: int
         with artifact.unstaged():  # the record of progress is visible at once (resume)
             artifact.write_json(index, body)
 
+    crash_after = artifact._failpoint("batch")
+
     def arrived(o: Outcome) -> None:
         outcomes[o.name] = o
         if on_outcome is not None:
             on_outcome(o)
         write_index()
+        if crash_after is not None and sum(x.status == "done" for x in outcomes.values()) >= crash_after:
+            os.kill(os.getpid(), 9)  # tests: the client killed mid-batch (LUMIGRAPH_FAILPOINT=batch:N)
 
     out_dir.mkdir(parents=True, exist_ok=True)
     write_index(final=True)
