@@ -138,6 +138,26 @@ class ItemFailed(Exception):
         super().__init__(reason)
 
 
+def stack_folders(paths: Sequence[str | os.PathLike]) -> list[Path] | None:
+    """The stacks of a batch given as inputs: several folders holding
+    ``stack.json`` (or several ``stack.json`` files), or one folder of such
+    folders; None when ``paths`` are one stack (its images, or its folder)."""
+    ins = [Path(p) for p in paths]
+    folders = [p.parent if p.name == "stack.json" and p.is_file() else p for p in ins]
+    if len(folders) > 1 and all((f / "stack.json").is_file() for f in folders):
+        return folders
+    if len(ins) == 1 and ins[0].is_dir() and not (ins[0] / "stack.json").exists():
+        subs = sorted(d for d in ins[0].iterdir() if d.is_dir() and (d / "stack.json").is_file())
+        if subs:
+            return subs
+    return None
+
+
+def item_name(folder: Path) -> str:
+    """An item's name from its input folder (``.`` named after the real folder)."""
+    return folder.name if folder.name not in ("", ".", "..") else folder.resolve().name
+
+
 # ---------------------------------------------------------------- keys
 
 

@@ -269,25 +269,11 @@ def _noise(args) -> tuple[dict, dict]:
     return given, {**given, "source": "given (--noise)"}
 
 
-def _brackets(images) -> list[Path] | None:
-    """The brackets of a batch merge (several folders with stack.json, several
-    stack.json files, or one folder of such folders), or None for one bracket."""
-    ins = [Path(p) for p in images]
-    folders = [p.parent if p.name == "stack.json" and p.is_file() else p for p in ins]
-    if len(folders) > 1 and all((f / "stack.json").is_file() for f in folders):
-        return folders
-    if len(ins) == 1 and ins[0].is_dir() and not (ins[0] / "stack.json").exists():
-        subs = sorted(d for d in ins[0].iterdir() if d.is_dir() and (d / "stack.json").is_file())
-        if subs:
-            return subs
-    return None
-
-
 def _merge_batch(args, brackets: list[Path]) -> int:
     """``hdr merge B1 B2 ... --out DIR`` (or a folder of brackets): each bracket
     is one item, ``DIR/<bracket>.exr`` and its mask, merged by the very
     command that merges one bracket."""
-    from lumigraph.capture.batch import Item, report, run_batch
+    from lumigraph.capture.batch import Item, item_name, report, run_batch
     from lumigraph.capture.commandline import batch_item_argv
 
     out = Path(args.out)
@@ -296,7 +282,7 @@ def _merge_batch(args, brackets: list[Path]) -> int:
                                 f"name a folder, not one file ({out})")
     items = []
     for b in brackets:
-        name = b.name if b.name not in ("", ".") else b.resolve().name
+        name = item_name(b)
         target = out / f"{name}.exr"
         items.append(Item(name, inputs=(str(b), str(args.response)),
                           outputs=(str(_mask_path(target)), str(target)),
@@ -313,11 +299,12 @@ def _merge(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.batch import stack_folders
     from lumigraph.capture.io import write_exr, write_image
     from lumigraph.hdr.merge import merge
     from lumigraph.hdr.response import ResponseCurve
 
-    brackets = _brackets(args.images)
+    brackets = stack_folders(args.images)
     if brackets is not None:
         return _merge_batch(args, brackets)
     out = Path(args.out)
