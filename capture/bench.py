@@ -163,6 +163,9 @@ class Stage:
     # interleaved timings of one call against its peer) that do not fit the
     # case x method grid; run after the grid, before ``checks``.
     extra: Callable[[], tuple[list[Row], list[Check]]] | None = None
+    # ``plot(path, stage, rows)`` draws ``<stage>.png`` when error against time
+    # is not the stage's picture (throughput against workers)
+    plot: Callable[[Path, Stage, list[Row]], None] | None = None
 
 
 def _is_number(x) -> bool:
@@ -298,7 +301,7 @@ def write_report(out_dir: str | Path, results: dict[str, tuple[Stage, list[Row],
                           f"{_fmt(r.error)} | {r.status} |")
             md.append("")
         md += [f"![{name}]({name}.png)", ""]
-        _plot(out / f"{name}.png", stage, rows)
+        (stage.plot or _plot)(out / f"{name}.png", stage, rows)
         js["stages"][name] = {"error_name": stage.error_name,
                               "rows": [asdict(r) for r in rows],
                               "checks": [asdict(c) for c in checks]}

@@ -29,6 +29,8 @@ BENCH_STAGES = Registry("bench stage", [
            "refocusing, lenslet decoding, light-slab rendering, depth"),
     Method("separation", "lumigraph.separation.bench:stage",
            "Nayar 2006 separation against Mitsuba ground truth"),
+    Method("scale", "lumigraph.bench_scale:stage",
+           "batch throughput: in-process, 1 and 2 Dask workers, one command per item"),
 ])
 
 EPILOG = """\
