@@ -21,8 +21,9 @@ records the item's *key* (a hash of its options and of every input file's
 bytes). A rerun skips an item whose artifacts are all present with the
 current key, so a batch killed half-way resumes where it stopped. An item
 that fails is reported by name with its one-line reason; the others complete.
-``index.json`` in the output folder lists the items, their status, timings
-and input hashes.
+``index.json`` in the output folder lists the items, their status, outputs
+and input hashes; its ``index.json.meta.json`` adds each item's time, worker,
+key and warnings, and the engine.
 
 Examples
 --------
@@ -431,26 +432,38 @@ def run_batch(items: Sequence[Item], *, out_dir: str | os.PathLike, workers: int
     index = out_dir / INDEX_NAME
     state = {"written": 0.0}
 
+    def rel(p: str) -> str:
+        with contextlib.suppress(ValueError):
+            return os.path.relpath(p, out_dir) if Path(p).is_absolute() == out_dir.is_absolute() else p
+        return p
+
     def write_index(final: bool = False) -> None:
+        # index.json says what is done, from what (stable: a rerun that does
+        # the same writes the same bytes); its sidecar, when and where
         now = time.monotonic()
         if not final and now - state["written"] < 0.5:  # a long batch rewrites it twice a second at most
             return
         state["written"] = now
-        rows = []
+        rows, runs = [], []
         for it in items:
             o = outcomes.get(it.name)
             rows.append({"name": it.name, "status": o.status if o else "pending",
-                         "reason": o.reason if o else "", "seconds": o.seconds if o else None,
-                         "worker": o.worker if o else "", "outputs": list(it.outputs),
-                         "inputs": hashes[it.name], "key": keys[it.name],
+                         "reason": o.reason if o else "", "outputs": [rel(p) for p in it.outputs],
+                         "inputs": hashes[it.name]})
+            runs.append({"name": it.name, "seconds": o.seconds if o else None,
+                         "worker": o.worker if o else "", "key": keys[it.name],
                          "warnings": list(o.warnings) if o else []})
         body = {"schema": INDEX_SCHEMA, "schema_version": 1,
-                "command": list(sys.argv if command is None else command), "engine": engine,
                 "counts": {s: sum(r["status"] == s for r in rows)
                            for s in ("done", "skipped", "failed", "pending")},
-                "wall_s": time.perf_counter() - t_start, "items": rows}
+                "items": rows}
+        meta = artifact.make_meta(INDEX_SCHEMA, command=command,
+                                  timings_s={"wall": time.perf_counter() - t_start},
+                                  warnings=[f"{r['name']}: {w}" for r in runs for w in r["warnings"]],
+                                  extra={"engine": engine, "items": runs})
         with artifact.unstaged():  # the record of progress is visible at once (resume)
-            artifact.write_json(index, body)
+            artifact.write_artifact(index, lambda p: p.write_text(artifact.dumps_json(body)),
+                                    meta=meta)
 
     crash_after = artifact._failpoint("batch")
 

@@ -308,6 +308,19 @@ def _projector(d: Path) -> None:
     fixture("projector", d / "projector")  # 48x36
 
 
+def _brackets_and_response(d: Path) -> None:
+    """Two brackets in one folder (a batch merge) and their response."""
+    _bracket_and_response(d)
+    for b in ("b0", "b1"):
+        shutil.copytree(d / "bracket", d / "shots" / b)
+
+
+def _projectors(d: Path) -> None:
+    """Two projector stacks in one folder (a batch separation)."""
+    for p in ("p0", "p1"):
+        fixture("projector", d / "stacks" / p)
+
+
 def _nothing(d: Path) -> None:
     pass
 
@@ -361,6 +374,10 @@ ENTRIES: list[Entry] = [
                         "--out", "{out}/radiance.exr", "-q"),
           _bracket_and_response, ("{in}/bracket", "{in}/response.json"),
           ("{out}/radiance.exr", "{out}/radiance.mask.png")),
+    Entry("hdr merge (batch)", ("hdr", "merge", "{in}/shots", "--response", "{in}/response.json",
+                                "--out", "{out}/radiance", "-q"),
+          _brackets_and_response, ("{in}/shots", "{in}/response.json"),
+          _names("{out}/radiance", ("b0.exr", "b0.mask.png", "b1.exr", "b1.mask.png", "index.json"))),
     Entry("hdr align", ("hdr", "align", *(f"{{in}}/bracket/exposure_{k:02d}.png" for k in range(5)),
                         "--out", "{out}/aligned", "-q"),
           _bracket, tuple(f"{{in}}/bracket/exposure_{k:02d}.png" for k in range(5)),
@@ -442,6 +459,12 @@ ENTRIES: list[Entry] = [
                        "-q"),
           _projector, ("{in}/projector",),
           _names("{out}/separation", ("direct.exr", "global.exr", "mask.png"))),
+    Entry("separate (batch)", ("separate", "{in}/stacks", "--method", "checker", "--out",
+                               "{out}/separation", "-q"),
+          _projectors, ("{in}/stacks",),
+          _names("{out}/separation", ("index.json", *(f"{p}/{f}" for p in ("p0", "p1")
+                                                      for f in ("direct.exr", "global.exr",
+                                                                "mask.png"))))),
     Entry("separate patterns", ("separate", "patterns", "--kind", "checker", "--size", "64x48",
                                 "--square", "8", "--shifts", "2", "--out", "{out}/patterns", "-q"),
           _nothing, (),

@@ -154,7 +154,10 @@ def reference(brackets):
 
 
 def _index(out: Path) -> dict:
-    return {it["name"]: it for it in json.loads((out / "index.json").read_text())["items"]}
+    """Each item's row of index.json with its time and worker from the sidecar."""
+    runs = {r["name"]: r for r in json.loads((out / "index.json.meta.json").read_text())["items"]}
+    return {it["name"]: {**it, **runs[it["name"]]}
+            for it in json.loads((out / "index.json").read_text())["items"]}
 
 
 def _no_leftovers(out: Path) -> None:
