@@ -100,6 +100,7 @@ _GUARD: contextvars.ContextVar[OutputGuard | None] = contextvars.ContextVar("lum
 _BATCH: contextvars.ContextVar[dict | None] = contextvars.ContextVar("lumigraph_batch", default=None)
 _TEMPS: set[str] = set()  # our own temporaries: a writer nested in another replaces them directly
 JOURNAL_PREFIX = ".lumigraph-commit."
+STALE_EMPTY_JOURNAL_S = 60.0  # an unlocked empty journal temporary older than this is a dead writer's
 
 
 def _temp_pattern(final: Path) -> re.Pattern:
@@ -250,7 +251,12 @@ def recover_commits(folder: str | os.PathLike) -> int:
             fd = os.open(jtmp, os.O_RDONLY)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                jtmp.unlink()
+                st = os.fstat(fd)
+                # unlocked and empty: a writer between creating it and locking
+                # it (batch workers commit into one folder at once) -- or one
+                # killed there; only the latter grows old
+                if st.st_size > 0 or time.time() - st.st_mtime > STALE_EMPTY_JOURNAL_S:
+                    jtmp.unlink()
             except BlockingIOError:
                 pass  # alive
             finally:

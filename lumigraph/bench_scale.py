@@ -82,7 +82,8 @@ def _call(module: str, argv: list[str]) -> None:
     with contextlib.redirect_stderr(err):
         rc = importlib.import_module(module).main(argv)
     if rc != 0:
-        raise RuntimeError(f"{module} {argv[:2]}...: exit {rc}: {err.getvalue()[-300:]}")
+        errors = [ln for ln in err.getvalue().splitlines() if ln.startswith("error: ")]
+        raise RuntimeError(f"{module}: exit {rc}: {' | '.join(errors)[:600]}")
 
 
 def _fresh(out: Path) -> Path:

@@ -111,3 +111,22 @@ def test_bad_batch_options_are_refused_before_any_work(shots, tmp_path, extra, f
 def test_many_brackets_need_an_output_folder(shots, tmp_path):
     rc, err = _merge(shots, shots / "shots", tmp_path / "one.exr")
     assert rc == 2 and "name a folder" in err, err
+
+
+def test_a_journal_being_created_is_not_taken_for_a_dead_one(tmp_path):
+    """Workers commit into one folder at once: a journal temporary that another
+    writer has just created, not yet locked (empty), is left alone; an old
+    empty one is a writer's killed in that window, removed."""
+    import os
+    import time
+
+    from lumigraph.capture.artifact import JOURNAL_PREFIX, STALE_EMPTY_JOURNAL_S, recover_commits
+
+    fresh = tmp_path / f"{JOURNAL_PREFIX}fresh123.json.tmp"
+    old = tmp_path / f"{JOURNAL_PREFIX}old12345.json.tmp"
+    fresh.touch()
+    old.touch()
+    t = time.time() - 2 * STALE_EMPTY_JOURNAL_S
+    os.utime(old, (t, t))
+    recover_commits(tmp_path)
+    assert fresh.exists() and not old.exists()
