@@ -247,6 +247,15 @@ def _pair(d: Path) -> None:
     fixture("rig.json", d / "rig.json")
 
 
+def _pairs(d: Path) -> None:
+    """Two pairs as a left and a right folder (a batch match)."""
+    _pair(d)
+    for side in ("left", "right"):
+        for k in (0, 1):
+            (d / side).mkdir(exist_ok=True)
+            shutil.copy(d / "pair" / f"{side}.png", d / side / f"p{k}.png")
+
+
 def _pair_and_disparity(d: Path) -> None:
     from lumigraph.capture.io import write_pfm
 
@@ -413,6 +422,10 @@ ENTRIES: list[Entry] = [
                            "--out", "{out}/disparity.pfm", "-q"),
           _pair, ("{in}/pair/left.png", "{in}/pair/right.png", "{in}/rig.json"),
           ("{out}/disparity.pfm",)),
+    Entry("stereo match (batch)", ("stereo", "match", "{in}/left", "{in}/right", "--rig",
+                                   "{in}/rig.json", "--max-disp", "16", "--out", "{out}/disp", "-q"),
+          _pairs, ("{in}/left", "{in}/right", "{in}/rig.json"),
+          _names("{out}/disp", ("p0.pfm", "p1.pfm", "index.json"))),
     Entry("stereo depth", ("stereo", "depth", "{in}/disparity.pfm", "--rig", "{in}/rig.json",
                            "--image", "{in}/pair/left.png", "--out", "{out}/points.ply", "-q"),
           _pair_and_disparity, ("{in}/disparity.pfm", "{in}/rig.json", "{in}/pair/left.png"),
