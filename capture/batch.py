@@ -49,6 +49,7 @@ import json
 import os
 import socket
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -274,6 +275,9 @@ def execute(item: Item, key: str, *, pin: bool = True) -> Outcome:
                    f"{socket.gethostname()}:{os.getpid()}", warnings)
 
 
+_COMMAND_LOCK = threading.Lock()
+
+
 def run_command(*, module: str, argv: Sequence[str], prog: str) -> list[str]:
     """An item that is one run of a lumigraph command (``module``'s ``main``,
     e.g. ``lumigraph.hdr.cli`` with ``["merge", BRACKET, "--response", R,
@@ -286,15 +290,18 @@ def run_command(*, module: str, argv: Sequence[str], prog: str) -> list[str]:
     from lumigraph.capture.artifact import unstaged
 
     main = importlib.import_module(module).main
-    saved_err, saved_argv = sys.stderr, sys.argv
     buf = io.StringIO()
-    sys.stderr = buf
-    sys.argv = [*prog.split(), *argv]  # what the sidecars record as the command
-    try:
-        with unstaged():  # in-process: the item's own result set commits now, not the batch's
-            rc = main(list(argv), prog=prog)
-    finally:
-        sys.stderr, sys.argv = saved_err, saved_argv
+    # sys.stderr and sys.argv are the process's: a worker started with several
+    # threads runs its commands one at a time (start workers with --nthreads 1)
+    with _COMMAND_LOCK:
+        saved_err, saved_argv = sys.stderr, sys.argv
+        sys.stderr = buf
+        sys.argv = [*prog.split(), *argv]  # what the sidecars record as the command
+        try:
+            with unstaged():  # in-process: the item's own result set commits now, not the batch's
+                rc = main(list(argv), prog=prog)
+        finally:
+            sys.stderr, sys.argv = saved_err, saved_argv
     lines = buf.getvalue().splitlines()
     if rc != 0:
         errors = [ln for ln in lines if ln.startswith("error: ")]
