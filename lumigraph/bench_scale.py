@@ -11,7 +11,7 @@ with one response recovered from the first, and a 200-frame flow sequence
 
 Protocol: the clusters are started once, before the timing, and warmed (one
 untimed batch each: the workers import the stages); then every form runs in
-turn, ``repeats`` times interleaved, output folder emptied before each run,
+turn, twice, interleaved, output folder emptied before each run,
 and the minimum wall time is kept (the fastest run is the one least disturbed
 by the machine's other load). Each run is the command line's own code path
 (``lumigraph hdr merge DIR --out D [--scheduler ADDRESS]``, ``lumigraph flow
@@ -164,6 +164,8 @@ def _measure(quick: bool, repeats: int) -> tuple[list[Row], list[Check]]:
                         t0 = time.perf_counter()
                         run()
                         times.setdefault((case, name), []).append(time.perf_counter() - t0)
+                        print(f"  scale: {case} {name}: {times[(case, name)][-1]:.2f} s",
+                              file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
     w, h = data["bracket_size"]
@@ -226,7 +228,9 @@ def _plot(path: Path, stage: Stage, rows: list[Row]) -> None:
 
 def stage(*, quick: bool = False) -> Stage:
     def extra():
-        rows, checks = _measure(quick, repeats=2 if quick else 3)
+        # two interleaved repeats, the faster kept: a third doubled the run
+        # (about 30 min on a loaded 2-core machine) without moving the minimum much
+        rows, checks = _measure(quick, repeats=2)
         for provider in ROW_PROVIDERS:
             more_rows, more_checks = provider(quick)
             rows, checks = [*rows, *more_rows], [*checks, *more_checks]
