@@ -275,8 +275,11 @@ def _merge_batch(args, brackets: list[Path]) -> int:
     command that merges one bracket."""
     from lumigraph.capture.batch import Item, item_name, report, run_batch
     from lumigraph.capture.commandline import batch_item_argv
+    from lumigraph.hdr.response import ResponseCurve
 
     out = Path(args.out)
+    _noise(args)  # the options every item uses, checked once before any work
+    ResponseCurve.load(args.response)  # and the file every item reads: a bad one is exit 2
     if out.suffix.lower() in MERGE_EXTS:
         raise InputError("out", f"{len(brackets)} brackets give {len(brackets)} radiance maps: "
                                 f"name a folder, not one file ({out})")

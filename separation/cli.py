@@ -130,8 +130,20 @@ def _separate_batch(args, stacks: list[Path]) -> int:
     one item, ``DIR/<stack>/`` written by the very command that separates one."""
     from lumigraph.capture.batch import Item, item_name, report, run_batch
     from lumigraph.capture.commandline import batch_item_argv
+    from lumigraph.capture.io import read_stack
     from lumigraph.separation.result import FILES
+    from lumigraph.separation.separate import check_options
 
+    # the options and files every item uses, checked before any work: exit 2, not N failures
+    check_options(alpha=args.alpha, b=args.b, tile=args.tile, noise_sigma=args.noise,
+                  saturation=args.saturation)
+    if args.response:
+        from lumigraph.hdr.response import ResponseCurve
+
+        ResponseCurve.load(args.response)
+    for p in (args.black, args.white):
+        if p:
+            read_stack([p])
     out = Path(args.out)
     shared = [str(p) for p in (args.response, args.black, args.white) if p]
     items = []

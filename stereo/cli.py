@@ -181,6 +181,15 @@ def _match_batch(args) -> int:
     if missing:
         raise InputError(rights / missing[0], f"the left folder has {missing[0]} but this is "
                                               "missing; a batch pairs images of one name")
+    # the files every pair shares, read before any work: a bad one is exit 2, not N failed items
+    if args.rig:
+        from lumigraph.capture.rig import Rig
+
+        Rig.load(args.rig)
+    if args.rectification:
+        from lumigraph.calib.rectify import Rectification
+
+        Rectification.load(args.rectification)
     shared = [str(p) for p in (args.rig, args.rectification) if p]
     items = []
     for n in names:

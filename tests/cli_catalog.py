@@ -324,12 +324,6 @@ def _brackets_and_response(d: Path) -> None:
         shutil.copytree(d / "bracket", d / "shots" / b)
 
 
-def _projectors(d: Path) -> None:
-    """Two projector stacks in one folder (a batch separation)."""
-    for p in ("p0", "p1"):
-        fixture("projector", d / "stacks" / p)
-
-
 def _nothing(d: Path) -> None:
     pass
 
@@ -472,12 +466,6 @@ ENTRIES: list[Entry] = [
                        "-q"),
           _projector, ("{in}/projector",),
           _names("{out}/separation", ("direct.exr", "global.exr", "mask.png"))),
-    Entry("separate (batch)", ("separate", "{in}/stacks", "--method", "checker", "--out",
-                               "{out}/separation", "-q"),
-          _projectors, ("{in}/stacks",),
-          _names("{out}/separation", ("index.json", *(f"{p}/{f}" for p in ("p0", "p1")
-                                                      for f in ("direct.exr", "global.exr",
-                                                                "mask.png"))))),
     Entry("separate patterns", ("separate", "patterns", "--kind", "checker", "--size", "64x48",
                                 "--square", "8", "--shifts", "2", "--out", "{out}/patterns", "-q"),
           _nothing, (),

@@ -130,3 +130,18 @@ def test_a_journal_being_created_is_not_taken_for_a_dead_one(tmp_path):
     os.utime(old, (t, t))
     recover_commits(tmp_path)
     assert fresh.exists() and not old.exists()
+
+
+def test_separate_over_many_stacks_is_the_single_command_per_stack(tmp_path):
+    """(Not in the catalog: its inputs are a folder of stacks, whose damage
+    is one item's failure, exit 4, not the corpus's exit 2.)"""
+    root = Path(__file__).resolve().parents[2]
+    for p in ("p0", "p1"):
+        shutil.copytree(root / "fixtures" / "projector", tmp_path / "stacks" / p)
+    rc, _, err = run_cli(["separate", tmp_path / "stacks", "--out", tmp_path / "sep", "-q"])
+    assert rc == 0, err
+    rc, _, err = run_cli(["separate", tmp_path / "stacks" / "p1", "--out", tmp_path / "one", "-q"])
+    assert rc == 0, err
+    for f in ("direct.exr", "global.exr", "mask.png"):
+        assert (tmp_path / "sep" / "p1" / f).read_bytes() == (tmp_path / "one" / f).read_bytes()
+    assert _status(tmp_path / "sep") == {"p0": "done", "p1": "done"}
