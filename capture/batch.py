@@ -276,6 +276,7 @@ def execute(item: Item, key: str, *, pin: bool = True) -> Outcome:
 
 
 _COMMAND_LOCK = threading.Lock()
+RUNS = [0]  # batches run by this process (the command line warns when --workers found none)
 
 
 def run_command(*, module: str, argv: Sequence[str], prog: str) -> list[str]:
@@ -424,6 +425,7 @@ def run_batch(items: Sequence[Item], *, out_dir: str | os.PathLike, workers: int
     from lumigraph.capture.commandline import progress
 
     t_start = time.perf_counter()
+    RUNS[0] += 1
     items = list(items)
     check_items(items)
     engine = engine_from(workers, scheduler)

@@ -491,8 +491,16 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             with artifact.guard(inputs, producer=producer, force=getattr(args, "force", False)) as g:
                 for where, path, kind in outputs:
                     locks.append(prepare_output(path, kind=kind, where=where, guard=g))
+                asked = getattr(args, "workers", None) is not None or \
+                    getattr(args, "scheduler", None) is not None
+                if asked:
+                    from lumigraph.capture.batch import RUNS
+                    before = RUNS[0]
                 with artifact.result_set([(p, k) for _, p, k in outputs]):
                     rc = args.func(args)
+                if asked and RUNS[0] == before:
+                    warn("--workers/--scheduler: these inputs are one item, not a batch; it ran "
+                         "in this process")
             return EXIT_OK if rc is None else int(rc)
         except (InputError, EstimationError) as e:
             if debug:
