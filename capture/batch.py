@@ -484,14 +484,17 @@ def run_batch(items: Sequence[Item], *, out_dir: str | os.PathLike, workers: int
         if crash_after is not None and sum(x.status == "done" for x in outcomes.values()) >= crash_after:
             os.kill(os.getpid(), 9)  # tests: the client killed mid-batch (LUMIGRAPH_FAILPOINT=batch:N)
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_index(final=True)
-    if todo:
-        if engine == "in-process":
+    # the cluster is reached before anything is written: an unreachable one is
+    # bad input (exit 2) with nothing in the output folder
+    remote = engine != "in-process" and bool(todo)
+    with _client(engine) if remote else contextlib.nullcontext() as client:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        write_index(final=True)
+        if remote:
+            _run_distributed(client, todo, keys, arrived, quiet=quiet, description=description)
+        elif todo:
             for it in progress(todo, total=len(todo), description=description, quiet=quiet):
                 arrived(execute(it, keys[it.name], pin=False))
-        else:
-            _run_distributed(engine, todo, keys, arrived, quiet=quiet, description=description)
     # a worker killed while writing leaves its temporaries (never a final
     # name): the folder's own are removed, a commit it left is completed
     artifact.recover_commits(out_dir)
@@ -503,26 +506,25 @@ def run_batch(items: Sequence[Item], *, out_dir: str | os.PathLike, workers: int
                        time.perf_counter() - t_start)
 
 
-def _run_distributed(engine: str, todo: list[Item], keys: dict[str, str],
+def _run_distributed(client, todo: list[Item], keys: dict[str, str],
                      arrived: Callable[[Outcome], None], *, quiet: bool, description: str) -> None:
+    from distributed import as_completed
+
     from lumigraph.capture.commandline import progress
 
-    with _client(engine) as client:
-        from distributed import as_completed
-
-        # a key per item and key: a rerun of a changed item is new work, and
-        # two batches on one cluster never share a result
-        futures = {client.submit(execute, it, keys[it.name], key=f"lumigraph-{it.name}-"
-                                 f"{keys[it.name][:16]}", pure=False): it for it in todo}
-        for fut in progress(as_completed(futures), total=len(futures), description=description,
-                            quiet=quiet):
-            it = futures[fut]
-            try:
-                o = fut.result()
-            except Exception as e:  # the cluster gave up on it (workers lost too often)
-                o = Outcome(it.name, "failed", f"the cluster could not run it ({type(e).__name__}: "
-                                               f"{' '.join(str(e).split())})")
-            arrived(o)
+    # a key per item and key: a rerun of a changed item is new work, and
+    # two batches on one cluster never share a result
+    futures = {client.submit(execute, it, keys[it.name], key=f"lumigraph-{it.name}-"
+                             f"{keys[it.name][:16]}", pure=False): it for it in todo}
+    for fut in progress(as_completed(futures), total=len(futures), description=description,
+                        quiet=quiet):
+        it = futures[fut]
+        try:
+            o = fut.result()
+        except Exception as e:  # the cluster gave up on it (workers lost too often)
+            o = Outcome(it.name, "failed", f"the cluster could not run it ({type(e).__name__}: "
+                                           f"{' '.join(str(e).split())})")
+        arrived(o)
 
 
 def report(result: BatchResult, *, quiet: bool = False) -> int:
