@@ -214,3 +214,31 @@ def test_a_killed_client_resumes_with_the_missing_items_only(cluster, brackets, 
     assert sum(i["status"] == "done" for i in index.values()) == N_BRACKETS - len(before)
     assert _artifacts(out) == reference
     _no_leftovers(out)
+
+
+def _lumigraph(*argv, env=None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "lumigraph", *map(str, argv)], capture_output=True,
+                          text=True, env=env or _env(), timeout=300)
+
+
+def test_flow_and_undistort_on_the_cluster_write_what_they_write_in_process(cluster, tmp_path):
+    """The sequence commands that batch only on request: the same bytes either way."""
+    from lumigraph.capture.render import render
+
+    root = Path(__file__).resolve().parents[2]
+    frames = render("flow-sequence", size=SIZE, seed=1, frames=4).save(tmp_path / "seq")
+    frames = sorted(Path(frames).glob("frame*.png"))
+    shots = [root / "fixtures" / "flow" / f"frame0{k}.png" for k in (0, 1)]
+    cluster.add_worker("w1")
+    cluster.add_worker("w2")
+    cluster.wait_for(["w1", "w2"])
+    for where, extra in (("plain", ()), ("cluster", ("--scheduler", cluster.address))):
+        r = _lumigraph("flow", *frames, "--out", tmp_path / where / "flow", "-q", *extra)
+        assert r.returncode == 0, r.stderr
+        r = _lumigraph("calib", "undistort", "--camera", root / "fixtures" / "camera.json", *shots,
+                       "--out", tmp_path / where / "undistorted", "-q", *extra)
+        assert r.returncode == 0, r.stderr
+    for what in ("flow", "undistorted"):
+        plain, batch = _artifacts(tmp_path / "plain" / what), _artifacts(tmp_path / "cluster" / what)
+        assert plain and plain == batch, what
+        assert {i["status"] for i in _index(tmp_path / "cluster" / what).values()} == {"done"}
