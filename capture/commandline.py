@@ -325,8 +325,9 @@ BATCH_HELP = """batches (independent items: several brackets, frames, images or 
   processes (one thread each); --scheduler tcp://HOST:PORT (or
   $DASK_SCHEDULER_ADDRESS) uses a running cluster ('dask scheduler' on one
   machine, 'dask worker tcp://HOST:8786 --nthreads 1' on each). The output
-  folder gets index.json (items, status, timings, input hashes); a rerun
-  skips the items already written with the same inputs and options.
+  folder gets index.json (items, status, input hashes; times and workers in
+  its .meta.json); a rerun skips the items already written with the same
+  inputs and options.
   Exit status 0 all done, 2 bad input found before any work, 4 some items
   failed (each named on an 'error: ITEM: reason' line; the others are written).
 """
