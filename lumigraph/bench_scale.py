@@ -51,7 +51,7 @@ def _inputs(folder: Path, *, quick: bool) -> dict:
     from lumigraph.capture.render import render
     from lumigraph.hdr.cli import main as hdr
 
-    n_brackets, bracket_size = (6, (96, 72)) if quick else (20, (320, 240))
+    n_brackets, bracket_size = (6, (96, 72)) if quick else (20, (640, 480))
     sequences, per_sequence = (2, 12) if quick else (4, 50)
     shots = folder / "brackets"
     for i in range(n_brackets):
@@ -236,7 +236,7 @@ def stage(*, quick: bool = False) -> Stage:
             rows, checks = [*rows, *more_rows], [*checks, *more_checks]
         return rows, checks
 
-    n, size = (6, "96x72") if quick else (20, "320x240")
+    n, size = (6, "96x72") if quick else (20, "640x480")
     frames = 24 if quick else 200
     cases = (Case(f"{n} brackets {size}", lambda: None,
                   "hdr merge, one item per bracket; 'one command per item' is today's way"),
