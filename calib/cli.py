@@ -19,7 +19,10 @@ from pathlib import Path
 from lumigraph.calib.rectify import ALPHA_RANGE
 from lumigraph.calib.zhang2000 import MODELS
 from lumigraph.capture.commandline import (
+    BATCH_HELP,
+    add_batch_options,
     add_verb,
+    batch_requested,
     check_output_dir,
     check_output_path,
     check_planned,
@@ -186,11 +189,65 @@ def _calibrate(args) -> int:
     return 0
 
 
+def _write_undistorted(u, path: Path, im, target: Path, *, device=None) -> None:
+    """One undistorted image, written to ``target`` (16-bit codes keep their
+    significant bits)."""
+    from lumigraph.capture.io import write_image
+
+    bd = None
+    if im.dtype.kind == "u" and im.dtype.itemsize == 2:
+        from lumigraph.capture.io import png_significant_bits
+        bd = png_significant_bits(path) if path.suffix.lower() == ".png" else 16
+    write_image(target, u.apply(im) if device is None else u.apply(im, device=device), bit_depth=bd)
+
+
+def undistort_image(*, image: str, camera: str, out: str, keep_all: bool = False) -> None:
+    """One image of ``calib undistort`` as a batch item (:mod:`lumigraph.capture.batch`):
+    the same undistorter and writer as the command's loop, the image written
+    atomically to ``out`` with its sidecar."""
+    from lumigraph.calib.undistort import undistorter
+    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.camera import Camera
+    from lumigraph.capture.io import read_image
+
+    cam = Camera.load(camera)
+    p = Path(image)
+    im = read_image(p)
+    if im.shape[1::-1] != tuple(cam.image_size):
+        raise InputError(p, f"is {im.shape[1]}x{im.shape[0]} but {camera} was calibrated for "
+                            f"{cam.image_size[0]}x{cam.image_size[1]}; use that camera's images")
+    u = undistorter(cam, keep_all=keep_all)
+    write_artifact(out, lambda tmp: _write_undistorted(u, p, im, tmp),
+                   meta=make_meta("lumigraph.undistorted_image", inputs=[camera, image],
+                                  params={"keep_all": keep_all}))
+
+
+def _undistort_batch(args, cam, paths: list[Path], names: list[str]) -> int:
+    """``calib undistort`` on a Dask cluster: each image one item."""
+    from lumigraph.calib.undistort import undistorter
+    from lumigraph.capture.artifact import make_meta, write_json
+    from lumigraph.capture.batch import Item, report, run_batch
+
+    out = Path(args.out)
+    items = [Item(Path(name).stem, inputs=(str(p), str(args.camera)), outputs=(str(out / name),),
+                  func="lumigraph.calib.cli:undistort_image",
+                  kwargs={"image": str(p), "camera": str(args.camera), "out": str(out / name),
+                          "keep_all": bool(args.keep_all)}) for p, name in zip(paths, names, strict=True)]
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="undistorting")
+    u = undistorter(cam, keep_all=args.keep_all)
+    u.camera.save(out / "camera.json", meta=make_meta("lumigraph.camera",
+                                                      inputs=[Path(args.camera), *paths],
+                                                      params={"keep_all": args.keep_all}))
+    write_json(out / "undistorted.json", {"schema": "lumigraph.undistorted", "schema_version": 1,
+                                          "images": names, "camera": "camera.json"})
+    return report(result, quiet=args.quiet)
+
+
 def _undistort(args) -> int:
     from lumigraph.calib.undistort import undistorter
     from lumigraph.capture.artifact import atomic_path, make_meta, write_json
     from lumigraph.capture.camera import Camera
-    from lumigraph.capture.io import write_image
 
     out = check_output_dir(args.out)
     cam = Camera.load(args.camera)
@@ -203,6 +260,8 @@ def _undistort(args) -> int:
     # none of the folder's files may replace a photograph (--out = the input folder)
     check_planned([out / n for n in (*names, "camera.json", "undistorted.json")])
     device = resolve_device(args.device)  # before any image is read: a missing GPU is exit 2
+    if batch_requested(args):
+        return _undistort_batch(args, cam, paths, names)
     u = undistorter(cam, keep_all=args.keep_all)
     plan = _undistort_plan(args, u)
     whole = [] if plan.rows is not None else paths  # by rows: _undistort_by_rows reads them
@@ -217,12 +276,8 @@ def _undistort(args) -> int:
     for p, im, name in progress(list(zip(whole, images, names[:len(whole)], strict=True)),
                                 total=len(whole),
                                 description="undistorting", quiet=args.quiet):
-        bd = None
-        if im.dtype.kind == "u" and im.dtype.itemsize == 2:
-            from lumigraph.capture.io import png_significant_bits
-            bd = png_significant_bits(p) if p.suffix.lower() == ".png" else 16
         with atomic_path(out / name) as tmp:
-            write_image(tmp, u.apply(im, device=device), bit_depth=bd)
+            _write_undistorted(u, p, im, tmp, device=device)
     meta = make_meta("lumigraph.camera", inputs=[Path(args.camera), *paths],
                      params={"keep_all": args.keep_all, "device": device.name},
                      extra={"tiles": plan.as_meta(cam.image_size[1])})
@@ -383,7 +438,10 @@ def build_parser(prog: str = "lumigraph calib"):
     c.set_defaults(func=_calibrate)
 
     u = add_verb(sp, "undistort", "remove lens distortion from images",
-                 epilog="example:\n  lumigraph calib undistort --camera camera.json shots/*.png --out undistorted/")
+                 epilog="examples:\n  lumigraph calib undistort --camera camera.json shots/*.png --out undistorted/\n"
+                        "  lumigraph calib undistort --camera camera.json shots/ --out undistorted/ --workers 2\n"
+                        "(with --workers or --scheduler each image is one batch item, written with its "
+                        "sidecar, and the folder gets index.json)\n\n" + BATCH_HELP)
     u.add_argument("images", nargs="+", type=input_path, help="image files, or a folder with stack.json")
     u.add_argument("--camera", required=True, type=input_path, help="camera.json of the camera that took the images")
     u.add_argument("--keep-all", action="store_true", help="keep every source pixel (black corners) "
@@ -391,6 +449,7 @@ def build_parser(prog: str = "lumigraph calib"):
     u.add_argument("--out", required=True, type=output_dir, help="output folder (undistorted PNGs + camera.json)")
     add_device_option(u)
     add_tile_options(u, "each image", "PNG")
+    add_batch_options(u)
     u.set_defaults(func=_undistort)
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",

@@ -95,8 +95,12 @@ _SET: contextvars.ContextVar[ResultSet | None] = contextvars.ContextVar("lumigra
                                                                        default=None)
 _GUARD: contextvars.ContextVar[OutputGuard | None] = contextvars.ContextVar("lumigraph_guard",
                                                                            default=None)
+# The batch item being run (lumigraph.capture.batch): every sidecar written
+# while it is set records it, so a rerun can tell a finished item's artifacts.
+_BATCH: contextvars.ContextVar[dict | None] = contextvars.ContextVar("lumigraph_batch", default=None)
 _TEMPS: set[str] = set()  # our own temporaries: a writer nested in another replaces them directly
 JOURNAL_PREFIX = ".lumigraph-commit."
+STALE_EMPTY_JOURNAL_S = 60.0  # an unlocked empty journal temporary older than this is a dead writer's
 
 
 def _temp_pattern(final: Path) -> re.Pattern:
@@ -247,7 +251,12 @@ def recover_commits(folder: str | os.PathLike) -> int:
             fd = os.open(jtmp, os.O_RDONLY)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                jtmp.unlink()
+                st = os.fstat(fd)
+                # unlocked and empty: a writer between creating it and locking
+                # it (batch workers commit into one folder at once) -- or one
+                # killed there; only the latter grows old
+                if st.st_size > 0 or time.time() - st.st_mtime > STALE_EMPTY_JOURNAL_S:
+                    jtmp.unlink()
             except BlockingIOError:
                 pass  # alive
             finally:
@@ -603,9 +612,23 @@ def make_meta(schema: str, *, inputs: Iterable[str | os.PathLike] = (), params: 
     g = _GUARD.get()
     if g is not None:  # which command wrote it: an earlier output it may replace (OutputGuard)
         meta["producer"] = g.producer
+    stamp = _BATCH.get()
+    if stamp is not None:  # written as one item of a batch: its key (inputs + options)
+        meta["batch"] = dict(stamp)
     if extra:
         meta.update(extra)
     return meta
+
+
+@contextlib.contextmanager
+def batch_stamp(stamp: dict):
+    """Record ``stamp`` (a batch item's name and key) in every sidecar built
+    inside the block (:func:`make_meta`)."""
+    token = _BATCH.set(dict(stamp))
+    try:
+        yield
+    finally:
+        _BATCH.reset(token)
 
 
 def write_artifact(path: str | os.PathLike, write: Callable[[Path], object], *, meta: dict) -> Path:

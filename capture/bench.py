@@ -166,6 +166,9 @@ class Stage:
     extra: Callable[[], tuple[list[Row], list[Check]]] | None = None
     # More columns of the report's tables: (heading, key of a row's ``extra``).
     columns: tuple[tuple[str, str], ...] = ()
+    # ``plot(path, stage, rows)`` draws ``<stage>.png`` when error against time
+    # is not the stage's picture (throughput against workers)
+    plot: Callable[[Path, Stage, list[Row]], None] | None = None
 
 
 def _is_number(x) -> bool:
@@ -318,7 +321,7 @@ def write_report(out_dir: str | Path, results: dict[str, tuple[Stage, list[Row],
                           f"{_fmt(r.error)} |{cells} {r.status} |")
             md.append("")
         md += [f"![{name}]({name}.png)", ""]
-        _plot(out / f"{name}.png", stage, rows)
+        (stage.plot or _plot)(out / f"{name}.png", stage, rows)
         js["stages"][name] = {"error_name": stage.error_name,
                               "rows": [asdict(r) for r in rows],
                               "checks": [asdict(c) for c in checks]}

@@ -7,7 +7,9 @@ itself is :mod:`lumigraph.command` (the shell, on top of every stage).
 
 Exit status (DESIGN §5): 0 success; 2 bad input or usage, with one line
 ``error: <file>: <problem>`` on stderr (traceback only with ``--debug``);
-1 an internal fault.
+1 an internal fault; 3 a result that cannot be used; 4 a batch
+(:mod:`lumigraph.capture.batch`) in which some items failed, each named on
+its own ``error: <item>: <reason>`` line while the others completed.
 
 Examples
 --------
@@ -306,6 +308,114 @@ def add_verb(sp, name: str, help: str, *, description: str | None = None,
     return v
 
 
+def scheduler_address(text: str) -> str:
+    """An argparse ``type`` for a Dask scheduler address (``tcp://HOST:PORT``)."""
+    m = re.fullmatch(r"(tcp|tls|ucx|inproc)://[^\s:/]+(:\d+)?/?", text or "")
+    if not m:
+        raise argparse.ArgumentTypeError(f"expected a scheduler address such as "
+                                         f"tcp://10.0.0.5:8786, got {text!r}")
+    return text
+
+
+scheduler_address.__name__ = "scheduler address"
+
+
+BATCH_HELP = """batches (independent items: several brackets, frames, images or stacks):
+  in-process by default; --workers N starts a local Dask cluster of N worker
+  processes (one thread each); --scheduler tcp://HOST:PORT (or
+  $DASK_SCHEDULER_ADDRESS) uses a running cluster ('dask scheduler' on one
+  machine, 'dask worker tcp://HOST:8786 --nthreads 1' on each). The output
+  folder gets index.json (items, status, input hashes; times and workers in
+  its .meta.json); a rerun skips the items already written with the same
+  inputs and options.
+  Exit status 0 all done, 2 bad input found before any work, 4 some items
+  failed (each named on an 'error: ITEM: reason' line; the others are written).
+"""
+
+
+def add_batch_options(v: argparse.ArgumentParser) -> None:
+    """``--workers`` and ``--scheduler``: where a batch's items run
+    (:mod:`lumigraph.capture.batch`)."""
+    v.add_argument("--workers", type=number(int, lo=1, hi=1024), default=None, metavar="N",
+                   help="batch: run the items on a local Dask cluster of N worker processes")
+    v.add_argument("--scheduler", type=scheduler_address, default=None, metavar="ADDRESS",
+                   help="batch: run the items on the Dask cluster at ADDRESS (tcp://HOST:PORT; "
+                        "default $DASK_SCHEDULER_ADDRESS); neither option: in this process")
+
+
+def batch_requested(args: argparse.Namespace) -> bool:
+    """Whether the command line asks for a cluster (``--workers``,
+    ``--scheduler`` or ``$DASK_SCHEDULER_ADDRESS``)."""
+    return (getattr(args, "workers", None) is not None or getattr(args, "scheduler", None) is not None
+            or bool(os.environ.get("DASK_SCHEDULER_ADDRESS")))
+
+
+def item_options(parser: argparse.ArgumentParser, argv: Sequence[str], *,
+                 drop: Iterable[str] = ()) -> list[str]:
+    """The option tokens of ``argv`` that every item of a batch repeats: the
+    positionals (the batch's inputs, the verb words) are left out, and so are
+    the options whose ``dest`` is in ``drop`` (``out``, the batch options),
+    whose values differ per item.
+
+    Examples
+    --------
+    >>> p = make_parser("t", "t")
+    >>> _ = p.add_argument("images", nargs="+")
+    >>> _ = p.add_argument("--out")
+    >>> _ = p.add_argument("--weights", nargs=2)
+    >>> item_options(p, ["a", "b", "--weights", "1", "2", "--out=o", "-q", "c"], drop=["out"])
+    ['--weights', '1', '2', '-q']
+    """
+    drop = {*drop, "workers", "scheduler"}
+    by_flag = {o: a for a in parser._actions for o in a.option_strings}
+    longs = [o for o in by_flag if o.startswith("--")]
+    kept: list[str] = []
+    tokens = list(argv)
+    i = 0
+    while i < len(tokens):
+        t = tokens[i]
+        i += 1
+        if t == "--":
+            break  # the rest are positionals
+        if not t.startswith("-") or t == "-" or re.fullmatch(r"-\d.*", t):
+            continue  # a positional
+        flag, eq, _ = t.partition("=")
+        a = by_flag.get(flag)
+        if a is None and flag.startswith("--"):  # argparse accepts a unique prefix
+            hits = [o for o in longs if o.startswith(flag)]
+            a = by_flag[hits[0]] if len(hits) == 1 else None
+        if a is None:
+            kept.append(t)
+            continue
+        values: list[str] = []
+        if not eq:
+            n = a.nargs
+            if n is None:
+                n = 1
+            if isinstance(n, int):
+                values, i = tokens[i:i + n], i + n
+            elif n == "?":
+                if i < len(tokens) and not tokens[i].startswith("-"):
+                    values, i = [tokens[i]], i + 1
+            else:  # "*", "+": up to the next option
+                while i < len(tokens) and (not tokens[i].startswith("-")
+                                           or re.fullmatch(r"-\d.*", tokens[i])):
+                    values.append(tokens[i])
+                    i += 1
+        if a.dest not in drop:
+            kept += [t, *values]
+    return kept
+
+
+def batch_item_argv(args: argparse.Namespace, inputs: Sequence[str], *,
+                    drop: Iterable[str] = ("out",), add: Sequence[str] = ()) -> list[str]:
+    """One item's command line (for :func:`lumigraph.capture.batch.run_command`):
+    the verb, the item's ``inputs``, every option the batch was given except
+    those in ``drop`` and the batch options, then ``add`` (``["--out", ITEM]``)."""
+    opts = item_options(args.batch_parser, args.batch_argv, drop=drop)
+    return [*args.batch_verbs, *map(str, inputs), *opts, *add]
+
+
 def argument_flags(parser: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, str]:
     """Library argument name -> the command-line flag that sets it.
 
@@ -368,6 +478,9 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     if getattr(args, "max_pixels", None):
         os.environ["LUMIGRAPH_MAX_PIXELS"] = str(args.max_pixels)
     producer = " ".join([_command_name(parser.prog), *_verbs(parser, args)])
+    # a batch verb builds its items' command lines from these (batch_item_argv)
+    args.batch_argv, args.batch_prog = argv, parser.prog
+    args.batch_verbs, args.batch_parser = _verbs(parser, args), _chosen_parser(parser, args)
     locks: list[_Lock] = []
     with _foreign_messages(debug) as said:
         try:
@@ -379,8 +492,16 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             with artifact.guard(inputs, producer=producer, force=getattr(args, "force", False)) as g:
                 for where, path, kind in outputs:
                     locks.append(prepare_output(path, kind=kind, where=where, guard=g))
+                asked = getattr(args, "workers", None) is not None or \
+                    getattr(args, "scheduler", None) is not None
+                if asked:
+                    from lumigraph.capture.batch import RUNS
+                    before = RUNS[0]
                 with artifact.result_set([(p, k) for _, p, k in outputs]):
                     rc = args.func(args)
+                if asked and RUNS[0] == before:
+                    warn("--workers/--scheduler: these inputs are one item, not a batch; it ran "
+                         "in this process")
             return EXIT_OK if rc is None else int(rc)
         except (InputError, EstimationError) as e:
             if debug:
@@ -464,6 +585,16 @@ def _verbs(parser: argparse.ArgumentParser, args: argparse.Namespace) -> list[st
                 out.append(chosen)
                 out += _verbs(a.choices[chosen], args)
     return out
+
+
+def _chosen_parser(parser: argparse.ArgumentParser, args: argparse.Namespace):
+    """The (sub-)parser of the verb chosen in ``args``."""
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            chosen = getattr(args, a.dest, None)
+            if chosen in a.choices:
+                return _chosen_parser(a.choices[chosen], args)
+    return parser
 
 
 def _chosen_actions(parser: argparse.ArgumentParser, args: argparse.Namespace):

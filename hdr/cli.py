@@ -9,6 +9,8 @@ import time
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
+    BATCH_HELP,
+    add_batch_options,
     add_verb,
     check_planned,
     input_path,
@@ -17,6 +19,7 @@ from lumigraph.capture.commandline import (
     numbers,
     output_dir,
     output_file,
+    output_file_or_dir,
     run,
     say,
     subparsers,
@@ -42,6 +45,16 @@ Inputs are image files in bracket order or a folder with stack.json; exposure
 times come from EXIF or stack.json unless --times gives them (fractions such
 as 1/250 are fine). Every output gets a <output>.meta.json sidecar.
 """
+
+
+MERGE_EPILOG = """\
+examples:
+  lumigraph hdr merge out/bracket --response response.json --out radiance.exr
+  lumigraph hdr merge shots/ --response response.json --out radiance/            (shots/*/stack.json)
+  lumigraph hdr merge shots/ --response response.json --out radiance/ --workers 2
+  lumigraph hdr merge shots/ --response response.json --out radiance/ --scheduler tcp://10.0.0.5:8786
+
+""" + BATCH_HELP
 
 
 # The library names the times by its argument; --times sets them.
@@ -258,17 +271,53 @@ def _noise(args) -> tuple[dict, dict]:
     return given, {**given, "source": "given (--noise)"}
 
 
+def _merge_batch(args, brackets: list[Path]) -> int:
+    """``hdr merge B1 B2 ... --out DIR`` (or a folder of brackets): each bracket
+    is one item, ``DIR/<bracket>.exr`` and its mask, merged by the very
+    command that merges one bracket."""
+    from lumigraph.capture.batch import Item, item_name, report, run_batch
+    from lumigraph.capture.commandline import batch_item_argv
+    from lumigraph.hdr.response import ResponseCurve
+
+    out = Path(args.out)
+    _noise(args)  # the options every item uses, checked once before any work
+    ResponseCurve.load(args.response)  # and the file every item reads: a bad one is exit 2
+    if out.suffix.lower() in MERGE_EXTS:
+        raise InputError("out", f"{len(brackets)} brackets give {len(brackets)} radiance maps: "
+                                f"name a folder, not one file ({out})")
+    items = []
+    for b in brackets:
+        name = item_name(b)
+        target = out / f"{name}.exr"
+        items.append(Item(name, inputs=(str(b), str(args.response)),
+                          outputs=(str(_mask_path(target)), str(target)),
+                          func="lumigraph.capture.batch:run_command",
+                          kwargs={"module": "lumigraph.hdr.cli", "prog": "lumigraph hdr",
+                                  "argv": batch_item_argv(args, [b], add=["--out", str(target)])}))
+    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="merging")
+    return report(result, quiet=args.quiet)
+
+
 def _merge(args) -> int:
     import numpy as np
 
     from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.batch import stack_folders
     from lumigraph.capture.device import resolve_device
     from lumigraph.capture.io import write_exr, write_image
     from lumigraph.hdr.merge import merge
     from lumigraph.hdr.response import ResponseCurve
 
+    brackets = stack_folders(args.images)
+    if brackets is not None:
+        return _merge_batch(args, brackets)
     out = Path(args.out)
     dev = resolve_device(args.device)  # before the bracket is read
+    if out.suffix.lower() not in MERGE_EXTS:
+        raise InputError("out", f"one bracket gives one radiance map: name a file ending in "
+                                f"{' or '.join(MERGE_EXTS)} (a folder is for several brackets)")
     given, noise = _noise(args)
     curve = ResponseCurve.load(args.response)
     plan = _merge_plan(args)
@@ -716,15 +765,18 @@ def build_parser(prog: str = "lumigraph hdr"):
     _bit_depth_option(v, "images")
     v.set_defaults(func=_response, arg_flags={**TIMES_FLAG, **NOISE_FLAG, "noise": "--noise",
                                               "reference_times": "--reference-time"})
-    v = add_verb(sp, "merge", "merge a bracket into a radiance map")
+    v = add_verb(sp, "merge", "merge a bracket (or a batch of brackets) into radiance maps",
+                 epilog=MERGE_EPILOG)
     v.add_argument("images", nargs="+", type=input_path,
-                   help="bracket images, or a folder with stack.json")
+                   help="bracket images, or a folder with stack.json; for a batch several such "
+                        "folders (or their stack.json files), or one folder of them")
     v.add_argument("--response", required=True, type=input_path,
                    help="response.json from 'hdr response'")
     v.add_argument("--times", type=TIMES, help="exposure times T1,T2,... (seconds)")
-    v.add_argument("--out", required=True, type=output_file(*MERGE_EXTS),
+    v.add_argument("--out", required=True, type=output_file_or_dir(*MERGE_EXTS),
                    help="radiance.exr (or .hdr, .tif LogLuv, .pfm); the flags PNG "
-                        "NAME.mask.png is written beside it")
+                        "NAME.mask.png is written beside it. A batch: a folder, which gets "
+                        "BRACKET.exr and BRACKET.mask.png per bracket and index.json")
     v.add_argument("--weights", choices=WEIGHTS, default="variance")
     v.add_argument("--deghost", action="store_true", help="leave out moving content")
     v.add_argument("--noise", metavar="FULL_WELL_E,READ_NOISE_E", type=_noise_pair,
@@ -733,8 +785,10 @@ def build_parser(prog: str = "lumigraph hdr"):
     _bit_depth_option(v, "images")
     add_device_option(v)
     add_tile_options(v, "the bracket", "the radiance as OpenEXR (.exr only) and its mask PNG")
+    add_batch_options(v)
     v.set_defaults(func=_merge, arg_flags={**TIMES_FLAG, **NOISE_FLAG},
-                   derived_outputs=lambda a: [("--out", _mask_path(a.out))])
+                   derived_outputs=lambda a: [("--out", _mask_path(a.out))]
+                   if Path(a.out).suffix.lower() in MERGE_EXTS else [])
     v = add_verb(sp, "align", "align a hand-held bracket (Ward's median threshold bitmaps)",
                  epilog=_methods_epilog(ALIGN_METHODS))
     v.add_argument("images", nargs="+", type=input_path,

@@ -17,8 +17,11 @@ import time
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
+    BATCH_HELP,
     NumberList,
+    add_batch_options,
     add_verb,
+    batch_requested,
     check_output_dir,
     check_planned,
     input_path,
@@ -308,6 +311,29 @@ def _decode(args) -> int:
 
 
 # --------------------------------------------------------------------- refocus
+def _refocus_batch(args, kind: str, given: list[float], out: Path) -> int:
+    """Many values on a Dask cluster (``--workers``/``--scheduler``): each value
+    one item, ``refocus-NNN.exr`` written by the one-value command. Its
+    ``--method`` as given: ``auto`` is then one value's choice (shift-add);
+    the whole set's Fourier slice shares one 4-D FFT, which items cannot."""
+    from lumigraph.capture.batch import Item, report, run_batch
+    from lumigraph.capture.commandline import batch_item_argv
+
+    items = []
+    for k, g in enumerate(given):
+        target = out / f"refocus-{k:03d}.exr"
+        add = [f"--{kind}={g!r}", "--out", str(target)]
+        items.append(Item(target.stem, inputs=(str(args.lightfield),), outputs=(str(target),),
+                          func="lumigraph.capture.batch:run_command",
+                          kwargs={"module": "lumigraph.lightfield.cli", "prog": "lumigraph lightfield",
+                                  "argv": batch_item_argv(args, [args.lightfield],
+                                                          drop=("out", "alpha", "depth", "slope"),
+                                                          add=add)}))
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="refocusing")
+    return report(result, quiet=args.quiet)
+
+
 def _refocus(args) -> int:
     import numpy as np
 
@@ -349,6 +375,8 @@ def _refocus(args) -> int:
         method = choose_method(lf, len(slopes))
         reason = (f"auto: {len(slopes)} value(s); Fourier slice pays its one-time 4-D FFT "
                   f"back from about 6 values")
+    if not single and batch_requested(args):
+        return _refocus_batch(args, kind, given, out)
     m = REFOCUS_METHODS.resolve(method)
     options = {k: v for k, v in (("kernel", args.kernel),) if k in m.options}
     t0 = time.perf_counter()
@@ -513,7 +541,11 @@ def build_parser(prog: str = "lumigraph lightfield"):
 
     v = add_verb(sp, "refocus", "refocused photographs (one file, or a folder + index.json)",
                  epilog="methods:\n" + REFOCUS_METHODS.help_text() +
-                        "\n  auto       shift-add for up to 3 values, fourier from 4 on")
+                        "\n  auto       shift-add for up to 3 values, fourier from 4 on\n\n"
+                        "With --workers or --scheduler, several values are a batch: each value "
+                        "one item (refocus-NNN.exr with its sidecar, by the one-value command: "
+                        "auto is then shift-add), and index.json is the batch's index.\n\n"
+                        + BATCH_HELP)
     v.add_argument("lightfield", type=input_path, help="light-field folder")
     g = v.add_mutually_exclusive_group(required=True)
     g.add_argument("--alpha", nargs="+", type=numbers(positive), help="Ng's alpha values")
@@ -526,6 +558,7 @@ def build_parser(prog: str = "lumigraph lightfield"):
                    help="shift-add's interpolation (default lanczos3)")
     v.add_argument("--out", required=True, type=output_file_or_dir(".exr"), help="OUT.exr for one value, a folder for several")
     add_device_option(v)
+    add_batch_options(v)
     v.set_defaults(func=_refocus)
 
     v = add_verb(sp, "render", "render a novel pinhole view from the light slab")

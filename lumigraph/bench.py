@@ -33,6 +33,8 @@ BENCH_STAGES = Registry("bench stage", [
            "Nayar 2006 separation against Mitsuba ground truth"),
     Method("gpu", "lumigraph.bench_gpu:stage",
            "the torch/kornia ports on cpu, torch-cpu and cuda beside our CPU code and peers"),
+    Method("scale", "lumigraph.bench_scale:stage",
+           "batch throughput: in-process, 1 and 2 Dask workers, one command per item"),
 ])
 
 EPILOG = """\

@@ -13,6 +13,8 @@ import time
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
+    BATCH_HELP,
+    add_batch_options,
     check_planned,
     input_path,
     make_parser,
@@ -35,6 +37,7 @@ examples:
   lumigraph separate raw8/*.png --method checker --response response.json --out sep/
   lumigraph separate Curtain.mpg --method occluder --stride 2 --out sep/
   lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
+  lumigraph separate stacks/ --method checker --out sep/ --workers 2   (stacks/*/stack.json)
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
@@ -50,7 +53,8 @@ input: its frames, every --stride-th, at most --max-frames, are the
 captures; without --response its codes are linearised with the BT.709 curve.
 
 mask.png: 0 trusted; otherwise 1 never lit, 2 saturated, 4 L+ - L- within noise.
-"""
+
+""" + BATCH_HELP
 
 
 def _linear(stack, response, where):
@@ -122,6 +126,41 @@ def _load(args):
     return stack, extra, files, complement_of, alpha
 
 
+def _separate_batch(args, stacks: list[Path]) -> int:
+    """``separate S1 S2 ... --out DIR`` (or a folder of stacks): each stack is
+    one item, ``DIR/<stack>/`` written by the very command that separates one."""
+    from lumigraph.capture.batch import Item, item_name, report, run_batch
+    from lumigraph.capture.commandline import batch_item_argv
+    from lumigraph.capture.io import read_stack
+    from lumigraph.separation.result import FILES
+    from lumigraph.separation.separate import check_options
+
+    # the options and files every item uses, checked before any work: exit 2, not N failures
+    check_options(alpha=args.alpha, b=args.b, tile=args.tile, noise_sigma=args.noise,
+                  saturation=args.saturation)
+    if args.response:
+        from lumigraph.hdr.response import ResponseCurve
+
+        ResponseCurve.load(args.response)
+    for p in (args.black, args.white):
+        if p:
+            read_stack([p])
+    out = Path(args.out)
+    shared = [str(p) for p in (args.response, args.black, args.white) if p]
+    items = []
+    for st in stacks:
+        target = out / item_name(st)
+        items.append(Item(item_name(st), inputs=(str(st), *shared),
+                          outputs=tuple(str(target / f) for f in FILES),
+                          func="lumigraph.capture.batch:run_command",
+                          kwargs={"module": "lumigraph.separation.cli", "prog": "lumigraph separate",
+                                  "argv": batch_item_argv(args, [st], add=["--out", str(target)])}))
+    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="separating")
+    return report(result, quiet=args.quiet)
+
+
 def _separate(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.separation import separate
@@ -131,6 +170,11 @@ def _separate(args) -> int:
     # before any capture is read
     check_options(alpha=args.alpha, b=args.b, tile=args.tile, noise_sigma=args.noise,
                   saturation=args.saturation)
+    from lumigraph.capture.batch import stack_folders
+
+    stacks = stack_folders(args.images)
+    if stacks is not None:
+        return _separate_batch(args, stacks)
     out = Path(args.out)
     # 'separate D --out D' would put them beside the captures: refused now, not after the work
     check_planned([out / n for f in FILES for n in (f, f + ".meta.json")])
@@ -256,7 +300,8 @@ def build_parser(prog: str = "lumigraph separate"):
                     "projector patterns (Nayar et al. 2006).",
                     epilog=f"{EPILOG}\nmethods:\n{METHODS.help_text()}\n")
     p.add_argument("images", nargs="+", type=input_path,
-                   help="captures (files, or a folder with stack.json)")
+                   help="captures (files, or a folder with stack.json); for a batch several "
+                        "such folders, or one folder of them (DIR/<stack>/ each)")
     p.add_argument("--method", default="checker", choices=METHODS.names,
                    help="separation method (listed below)")
     p.add_argument("--alpha", type=number(float, lo=0, hi=1, lo_open=True, hi_open=True),
@@ -288,6 +333,7 @@ def build_parser(prog: str = "lumigraph separate"):
         if a.dest == "device":
             a.help += (". Ported here: the per-pixel estimators of every method; the "
                        "pairing, the noise model and the masks run on the CPU")
+    add_batch_options(p)
     p.set_defaults(func=_separate, arg_flags={"noise_sigma": "--noise"})
     return p
 

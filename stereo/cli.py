@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from lumigraph.capture.commandline import (
+    BATCH_HELP,
+    add_batch_options,
     add_verb,
     check_output_dir,
     check_output_path,
@@ -39,6 +41,7 @@ from lumigraph.capture.commandline import (
     number,
     output_dir,
     output_file,
+    output_file_or_dir,
     run,
     say,
     subparsers,
@@ -165,6 +168,53 @@ def _device_help(parser, what: str) -> None:
             a.help = f"{a.help}. {what}"
 
 
+_IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".exr", ".pfm")
+
+
+def _match_batch(args) -> int:
+    """``stereo match LEFT_DIR RIGHT_DIR --out DIR``: the pairs are the images
+    of one name in both folders, each one item written by the one-pair
+    command as ``DIR/<name>.pfm``."""
+    from lumigraph.capture.batch import Item, report, run_batch
+    from lumigraph.capture.commandline import batch_item_argv
+
+    lefts, rights = Path(args.left), Path(args.right)
+    out = Path(args.out)
+    if out.suffix.lower() == ".pfm":
+        raise InputError("out", f"two folders give a disparity map per pair: name a folder, not "
+                                f"{out}")
+    names = sorted(p.name for p in lefts.iterdir() if p.suffix.lower() in _IMAGE_SUFFIXES)
+    missing = [n for n in names if not (rights / n).is_file()]
+    if not names:
+        raise InputError(lefts, "no images in this folder (a batch pairs the images of one name "
+                                "in the left and the right folder)")
+    if missing:
+        raise InputError(rights / missing[0], f"the left folder has {missing[0]} but this is "
+                                              "missing; a batch pairs images of one name")
+    # the files every pair shares, read before any work: a bad one is exit 2, not N failed items
+    if args.rig:
+        from lumigraph.capture.rig import Rig
+
+        Rig.load(args.rig)
+    if args.rectification:
+        from lumigraph.calib.rectify import Rectification
+
+        Rectification.load(args.rectification)
+    shared = [str(p) for p in (args.rig, args.rectification) if p]
+    items = []
+    for n in names:
+        target = out / (Path(n).stem + ".pfm")
+        items.append(Item(Path(n).stem, inputs=(str(lefts / n), str(rights / n), *shared),
+                          outputs=(str(target),), func="lumigraph.capture.batch:run_command",
+                          kwargs={"module": "lumigraph.stereo.cli", "prog": "lumigraph stereo",
+                                  "argv": batch_item_argv(args, [lefts / n, rights / n],
+                                                          add=["--out", str(target)])}))
+    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="matching")
+    return report(result, quiet=args.quiet)
+
+
 def _match(args) -> int:
     from lumigraph.capture.artifact import make_meta
     from lumigraph.stereo.block_matching import (
@@ -177,6 +227,8 @@ def _match(args) -> int:
     from lumigraph.stereo.hirschmuller2008 import check_sgm_options
     from lumigraph.stereo.hirschmuller2008 import match as sgm_match
 
+    if Path(args.left).is_dir() and Path(args.right).is_dir():
+        return _match_batch(args)
     out = check_output_path(args.out, suffixes=(".pfm",))
     _distinct_files(args.left, args.right)
     device = resolve_device(args.device)  # before any image is read: a missing GPU is exit 2
@@ -609,9 +661,15 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "--method ssd: SSD window matching; --window auto picks per pixel the "
                         "smallest of 5, 9, 15 whose texture passes --texture-snr; the choice is "
                         "recorded in the .meta.json. --window, --channels and --prefilter apply to "
-                        "ssd only, --cost to sgm only.")
-    v.add_argument("left", type=input_path, help="left image (the reference)")
-    v.add_argument("right", type=input_path, help="right image")
+                        "ssd only, --cost to sgm only.\n\n"
+                        "A sequence of pairs: LEFT and RIGHT are folders, the images of one name "
+                        "in both are a pair:\n"
+                        "  lumigraph stereo match left/ right/ --max-disp 64 --out disp/ --workers 2\n\n"
+                        + BATCH_HELP)
+    v.add_argument("left", type=input_path,
+                   help="left image (the reference); for a batch, a folder of left images")
+    v.add_argument("right", type=input_path,
+                   help="right image; for a batch, a folder of right images of the same names")
     g = v.add_mutually_exclusive_group()
     g.add_argument("--rig", type=input_path, help="rig.json (or a scene gt.json): rectify the pair first")
     g.add_argument("--rectification", type=input_path,
@@ -640,11 +698,14 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--prefilter", choices=("none", "local-mean"), default="none",
                    help="local-mean: match each image minus its 9x9 mean, clipped (StereoBM's "
                         "normalised response); cancels a gain/offset between the views")
-    v.add_argument("--out", required=True, type=output_file(".pfm"), help="disparity .pfm (unknown stored as inf)")
+    v.add_argument("--out", required=True, type=output_file_or_dir(".pfm"),
+                   help="disparity .pfm (unknown stored as inf); for a batch a folder, which gets "
+                        "NAME.pfm per pair and index.json")
     add_device_option(v)
     _device_help(v, "Ported here: sgm's aggregation along the paths (its census, costs and "
                     "checks stay on the CPU), ssd's cost volume and aggregation, and the "
                     "rectification with --rig/--rectification")
+    add_batch_options(v)
     v.set_defaults(func=_match)
 
     v = add_verb(sp, "depth", "3-D points from a disparity map and its rig (PLY, with colours)",

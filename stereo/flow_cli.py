@@ -10,6 +10,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from lumigraph.capture.commandline import (
+    BATCH_HELP,
+    add_batch_options,
+    batch_requested,
     check_output_path,
     check_planned,
     input_path,
@@ -48,7 +51,10 @@ with its .prob.exr and .meta.json, plus index.json summarising every pair;
 --viz then names a folder for the pictures:
   lumigraph render flow-sequence --out out/scenes/seq
   lumigraph flow out/scenes/seq/frame*.png --out out/flow/seq --viz out/flow/seq-viz
-"""
+A sequence runs on a Dask cluster with --workers N or --scheduler ADDRESS:
+each pair is then one item, and index.json is the batch's index (below).
+
+""" + BATCH_HELP
 
 
 def _load(path: str):
@@ -103,6 +109,29 @@ def _derived(args):
     return []
 
 
+def _flow_batch(args, outs, vizs) -> int:
+    """A sequence on a Dask cluster (``--workers``/``--scheduler``): each pair
+    is one item, the two-image command itself writing ``flow_NNN.flo``."""
+    from lumigraph.capture.batch import Item, report, run_batch
+    from lumigraph.capture.commandline import batch_item_argv
+    from lumigraph.stereo.pyramid_flow import prob_path
+
+    items = []
+    for i, (out, viz) in enumerate(zip(outs, vizs, strict=True)):
+        a, b = args.images[i], args.images[i + 1]
+        add = ["--out", str(out), *(["--viz", str(viz)] if viz is not None else [])]
+        items.append(Item(out.stem, inputs=(str(a), str(b)),
+                          outputs=(*([str(viz)] if viz is not None else []), str(prob_path(out)),
+                                   str(out)),
+                          func="lumigraph.capture.batch:run_command",
+                          kwargs={"module": "lumigraph.stereo.flow_cli", "prog": "lumigraph flow",
+                                  "argv": batch_item_argv(args, [a, b], drop=("out", "viz"),
+                                                          add=add)}))
+    result = run_batch(items, out_dir=outs[0].parent, workers=args.workers,
+                       scheduler=args.scheduler, quiet=args.quiet, description="flow")
+    return report(result, quiet=args.quiet)
+
+
 def _flow(args) -> int:
     import time
 
@@ -120,6 +149,8 @@ def _flow(args) -> int:
     options = check_options(args.method, preset=args.preset, levels=args.levels, window=args.window,
                             iterations=args.iterations, finest_level=args.finest_level,
                             median_radius=args.median_radius)
+    if len(outs) > 1 and batch_requested(args):
+        return _flow_batch(args, outs, vizs)
     frames = [_load(p) for p in args.images]
     for p, im in zip(args.images[1:], frames[1:], strict=True):
         i0 = frames[0]
@@ -211,6 +242,7 @@ def build_parser(prog: str = "lumigraph flow"):
     p.add_argument("--viz", type=output_file_or_dir(".png"), help="(a folder, for a sequence) also write a Middlebury colour-coded picture (.png)")
     p.add_argument("--mask-viz", action="store_true",
                    help="paint occluded/unreliable pixels black in --viz")
+    add_batch_options(p)
     p.set_defaults(func=_flow, derived_outputs=_derived)
     return p
 

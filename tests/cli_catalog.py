@@ -247,6 +247,15 @@ def _pair(d: Path) -> None:
     fixture("rig.json", d / "rig.json")
 
 
+def _pairs(d: Path) -> None:
+    """Two pairs as a left and a right folder (a batch match)."""
+    _pair(d)
+    for side in ("left", "right"):
+        for k in (0, 1):
+            (d / side).mkdir(exist_ok=True)
+            shutil.copy(d / "pair" / f"{side}.png", d / side / f"p{k}.png")
+
+
 def _pair_and_disparity(d: Path) -> None:
     from lumigraph.capture.io import write_pfm
 
@@ -310,6 +319,13 @@ def _lightfield(d: Path) -> None:
 
 def _projector(d: Path) -> None:
     fixture("projector", d / "projector")  # 48x36
+
+
+def _brackets_and_response(d: Path) -> None:
+    """Two brackets in one folder (a batch merge) and their response."""
+    _bracket_and_response(d)
+    for b in ("b0", "b1"):
+        shutil.copytree(d / "bracket", d / "shots" / b)
 
 
 def _nothing(d: Path) -> None:
@@ -394,6 +410,10 @@ ENTRIES: list[Entry] = [
                                   "--tile", "16", "-q"),
           _bracket_and_response, ("{in}/bracket", "{in}/response.json"),
           ("{out}/radiance.exr", "{out}/radiance.mask.png")),
+    Entry("hdr merge (batch)", ("hdr", "merge", "{in}/shots", "--response", "{in}/response.json",
+                                "--out", "{out}/radiance", "-q"),
+          _brackets_and_response, ("{in}/shots", "{in}/response.json"),
+          _names("{out}/radiance", ("b0.exr", "b0.mask.png", "b1.exr", "b1.mask.png", "index.json"))),
     Entry("hdr align", ("hdr", "align", *(f"{{in}}/bracket/exposure_{k:02d}.png" for k in range(5)),
                         "--out", "{out}/aligned", "-q"),
           _bracket, tuple(f"{{in}}/bracket/exposure_{k:02d}.png" for k in range(5)),
@@ -433,6 +453,10 @@ ENTRIES: list[Entry] = [
                            "--out", "{out}/disparity.pfm", "-q"),
           _pair, ("{in}/pair/left.png", "{in}/pair/right.png", "{in}/rig.json"),
           ("{out}/disparity.pfm",)),
+    Entry("stereo match (batch)", ("stereo", "match", "{in}/left", "{in}/right", "--rig",
+                                   "{in}/rig.json", "--max-disp", "16", "--out", "{out}/disp", "-q"),
+          _pairs, ("{in}/left", "{in}/right", "{in}/rig.json"),
+          _names("{out}/disp", ("p0.pfm", "p1.pfm", "index.json"))),
     Entry("stereo depth", ("stereo", "depth", "{in}/disparity.pfm", "--rig", "{in}/rig.json",
                            "--image", "{in}/pair/left.png", "--out", "{out}/points.ply", "-q"),
           _pair_and_disparity, ("{in}/disparity.pfm", "{in}/rig.json", "{in}/pair/left.png"),
