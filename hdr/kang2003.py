@@ -310,8 +310,8 @@ def _remap(img, m, *, linear=True, border_value=0.0):
     import cv2
 
     interp = cv2.INTER_LINEAR if linear else cv2.INTER_NEAREST
-    return cv2.remap(np.ascontiguousarray(img, np.float32), m, None, interp,
-                     borderMode=cv2.BORDER_CONSTANT, borderValue=border_value)
+    return _keep_axis(img, cv2.remap(np.ascontiguousarray(img, np.float32), m, None, interp,
+                                     borderMode=cv2.BORDER_CONSTANT, borderValue=border_value))
 
 
 def _grid(h, w):
@@ -319,16 +319,21 @@ def _grid(h, w):
     return np.stack([xs, ys], axis=-1)
 
 
+def _keep_axis(a, out):
+    """OpenCV drops a single channel's axis: give (H, W, 1) back for (H, W, 1)."""
+    return out[..., None] if np.ndim(a) == 3 and out.ndim == 2 else out
+
+
 def _dilate(a, k):
     import cv2
 
-    return cv2.dilate(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    return _keep_axis(a, cv2.dilate(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE))
 
 
 def _erode(a, k):
     import cv2
 
-    return cv2.erode(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE)
+    return _keep_axis(a, cv2.erode(a, np.ones((k, k), np.uint8), borderType=cv2.BORDER_REPLICATE))
 
 
 def _flat_within(xw, radius, tol2):
@@ -353,7 +358,8 @@ def _flat_within(xw, radius, tol2):
 def _box_mean(a, k):
     import cv2
 
-    return cv2.blur(np.ascontiguousarray(a, np.float32), (k, k), borderType=cv2.BORDER_REFLECT)
+    return _keep_axis(a, cv2.blur(np.ascontiguousarray(a, np.float32), (k, k),
+                                  borderType=cv2.BORDER_REFLECT))
 
 
 # --------------------------------------------------------------- the method

@@ -246,3 +246,27 @@ def test_cli_bad_inputs_write_nothing(folder, tmp_path):
     assert_clean_error(r, "--temporal")
     assert not out.exists()
     shutil.rmtree(tmp_path / "o", ignore_errors=True)
+
+
+def test_grey_video_is_the_colour_path_on_one_channel():
+    # OpenCV drops a single channel's axis; a grey (N, H, W, 1) video used to stop
+    # with a broadcast error. Against three copies of the channel: the same flags,
+    # and every pixel kept from its own frame (neither warped nor a fallback) is
+    # the same number in every channel. Warped pixels follow the flow, which sees
+    # a luminance one rounding away, so they are only required to be finite.
+    from lumigraph.capture.render import render as render_scene
+    from lumigraph.hdr.kang2003 import FALLBACK, WARPED
+    from lumigraph.hdr.kang2003 import hdr_video as video
+    from lumigraph.hdr.response import ResponseCurve as Curve
+
+    s = render_scene("bracket_video", size=(64, 48), frames=4)
+    z = np.stack(s.images)[..., :1]
+    t = s.stack["exposure_times_s"]
+    grey = video(z, t, Curve.linear(8, 1))
+    colour = video(np.repeat(z, 3, axis=3), t, Curve.linear(8, 3))
+    assert grey.radiance.shape == grey.flags.shape == (4, 48, 64, 1)
+    assert np.isfinite(grey.radiance).all()
+    own = (grey.flags[..., 0] & (WARPED | FALLBACK)) == 0
+    assert 0 < own.mean() < 1
+    for c in range(3):
+        np.testing.assert_array_equal(grey.radiance[..., 0][own], colour.radiance[..., c][own])
