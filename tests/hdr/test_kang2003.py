@@ -250,8 +250,8 @@ def test_cli_bad_inputs_write_nothing(folder, tmp_path):
 
 def test_grey_video_is_the_colour_path_on_one_channel():
     # OpenCV drops a single channel's axis; a grey (N, H, W, 1) video used to stop
-    # with a broadcast error. Against three copies of the channel: the same flags,
-    # and every pixel kept from its own frame (neither warped nor a fallback) is
+    # with a broadcast error. Against three copies of the channel: every pixel
+    # the grey run kept from its own frame (neither warped nor a fallback) is
     # the same number in every channel. Warped pixels follow the flow, which sees
     # a luminance one rounding away, so they are only required to be finite.
     from lumigraph.capture.render import render as render_scene
