@@ -38,6 +38,7 @@ Examples
 
 from __future__ import annotations
 
+import abc
 import argparse
 import math
 import os
@@ -187,7 +188,7 @@ def plan_rows(tile, memory: int | None, *, width: int, height: int, bytes_per_pi
 
 
 # ------------------------------------------------------------------- sources
-class RowSource:
+class RowSource(abc.ABC):
     """Rows of one image: ``shape`` ``(H, W, C)``, ``dtype``, ``path``,
     ``read(y0, y1)`` -> ``(y1 - y0, W, C)`` and ``whole`` (read in full)."""
 
@@ -197,11 +198,12 @@ class RowSource:
     whole: bool = False
     orientation: int = 1  # the EXIF Orientation applied when read (1: as stored)
 
-    def read(self, y0: int, y1: int) -> np.ndarray:  # pragma: no cover - interface
-        raise NotImplementedError
+    @abc.abstractmethod
+    def read(self, y0: int, y1: int) -> np.ndarray:
+        """Rows ``y0:y1`` as ``(y1 - y0, W, C)``; each reader says how."""
 
-    def close(self) -> None:
-        pass
+    def close(self) -> None:  # noqa: B027 - readers without a file have nothing to close
+        """Release the file, if the reader holds one."""
 
 
 class ArrayRows(RowSource):
