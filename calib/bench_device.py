@@ -24,7 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from lumigraph.capture.bench_device import DeviceRow, measure, skipped
+from lumigraph.capture.bench_device import (
+    DeviceRow,
+    device_rows,
+    measure,
+    repeats_for,
+    single_thread,
+)
 
 
 def _g(x, y, w, h):
@@ -71,72 +77,6 @@ def _rms(out, truth, inside):
     return float(np.sqrt(np.mean(d[inside] ** 2)))
 
 
-def not_run(stage, name, dev, devices, quick):
-    """The skipped row of a device not run here, or None: a device not asked
-    or absent, and torch-cpu at full size (minutes on torch's CPU device;
-    ``--quick`` and ``tests/device`` check the port there)."""
-    if dev not in devices:
-        why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
-        return skipped(stage, name, dev, why)
-    if dev == "torch-cpu" and not quick:
-        return skipped(stage, name, dev, "full size: minutes on torch's CPU device; --quick "
-                                         "and tests/device check the port")
-    return None
-
-
-def repeats_for(dev: str, quick: bool) -> int:
-    """Repeats of a timing (min taken): the full-size CPU rows take seconds each."""
-    return 3 if quick else (5 if dev == "cuda" else 2)
-
-
-def _device_rows(out_rows, stage, name, devices, call, truth, quick):
-    ref = None
-    for dev in ("cpu", "torch-cpu", "cuda"):
-        skip = not_run(stage, name, dev, devices, quick)
-        if skip is not None:
-            out_rows.append(skip)
-            continue
-        call(dev)  # the maps are built once per object and device: not the per-image cost
-        row, out = measure(stage, name, dev, lambda dev=dev: call(dev), reference=ref,
-                           truth=truth, repeats=repeats_for(dev, quick))
-        out_rows.append(row)
-        if dev == "cpu":
-            ref = out
-    return ref
-
-
-def single_thread():
-    """Context: cv2 and torch at one thread (restored after): the bench compares
-    single-threaded library calls. Here, on the lowest floor with device rows,
-    so that every stage's bench_device can import it."""
-    import contextlib
-
-    @contextlib.contextmanager
-    def ctx():
-        import cv2
-
-        prev = cv2.getNumThreads()
-        cv2.setNumThreads(1)
-        tprev = None
-        try:
-            import torch
-
-            tprev = torch.get_num_threads()
-            torch.set_num_threads(1)
-        except ImportError:
-            pass
-        try:
-            yield
-        finally:
-            cv2.setNumThreads(prev)
-            if tprev is not None:
-                import torch
-
-                torch.set_num_threads(tprev)
-
-    return ctx()
-
-
 def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The undistort and rectify rows (module docstring)."""
     import cv2
@@ -157,9 +97,10 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
         u = undistorter(cam)
         t, inside = _truth(img.shape, _truth_maps(cam, np.eye(3), u.camera.K, (w, h)), (w, h))
         stage, name = "calib undistort", f"{w}x{h} RGB 8-bit"
-        ref = _device_rows(out_rows, stage, name, devices,
-                           lambda dev: u.apply(img, device=dev),
-                           lambda out: _rms(out, t, inside), quick)
+        # warmed on every device: the maps are built once per object and device,
+        # not the per-image cost
+        ref = device_rows(out_rows, stage, name, devices, lambda dev: u.apply(img, device=dev),
+                          truth=lambda out: _rms(out, t, inside), quick=quick, warmup=True)
         K_new = u.camera.K
         row, _ = measure(stage, name, "opencv", lambda: cv2.undistort(img, cam.K, cam.dist,
                                                                        None, K_new),
@@ -183,9 +124,10 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
         truth_pair = np.stack([tl, tr])
         inside_pair = np.stack([il, ir])
         stage, name = "calib rectify", f"pair of {w}x{h} grey 8-bit"
-        ref = _device_rows(out_rows, stage, name, devices,
-                           lambda dev: np.stack(rect.apply(*imgs, device=dev)),
-                           lambda out: _rms(out, truth_pair, inside_pair), quick)
+        ref = device_rows(out_rows, stage, name, devices,
+                          lambda dev: np.stack(rect.apply(*imgs, device=dev)),
+                          truth=lambda out: _rms(out, truth_pair, inside_pair), quick=quick,
+                          warmup=True)
 
         def peer():
             out = []

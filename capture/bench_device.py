@@ -133,3 +133,73 @@ def skipped(stage: str, case: str, device: str, why: str, *, target: float | Non
     """The row of a device (or peer) that was not run here, saying why."""
     return DeviceRow(stage, case, device, math.nan, math.nan, math.nan, peer, target,
                      f"skipped: {why}")
+
+
+def not_run(stage, name, dev, devices, quick):
+    """The skipped row of a device not run here, or None: a device not asked
+    or absent, and torch-cpu at full size (minutes on torch's CPU device;
+    ``--quick`` and ``tests/device`` check the port there)."""
+    if dev not in devices:
+        why = "torch sees no CUDA GPU" if dev == "cuda" else "not asked (--device)"
+        return skipped(stage, name, dev, why)
+    if dev == "torch-cpu" and not quick:
+        return skipped(stage, name, dev, "full size: minutes on torch's CPU device; --quick "
+                                         "and tests/device check the port")
+    return None
+
+
+def repeats_for(dev: str, quick: bool) -> int:
+    """Repeats of a timing (min taken): the full-size CPU rows take seconds each."""
+    return 3 if quick else (5 if dev == "cuda" else 2)
+
+
+def device_rows(out_rows: list, stage: str, case: str, devices, call: Callable[[str], Any], *,
+                truth, quick: bool, note: str = "", warmup: bool | None = None):
+    """The cpu, torch-cpu and cuda rows of ``call(device)``: a :func:`not_run`
+    row for each device not run here, the others :func:`measure`d against the
+    cpu row's output, appended to ``out_rows``. Returns the cpu output (the
+    peers' ``reference``; None when cpu was not run)."""
+    ref = None
+    for dev in ("cpu", "torch-cpu", "cuda"):
+        skip = not_run(stage, case, dev, devices, quick)
+        if skip is not None:
+            out_rows.append(skip)
+            continue
+        row, out = measure(stage, case, dev, lambda dev=dev: call(dev), reference=ref,
+                           truth=truth, repeats=repeats_for(dev, quick), note=note,
+                           warmup=warmup)
+        out_rows.append(row)
+        if dev == "cpu":
+            ref = out
+    return ref
+
+
+def single_thread():
+    """Context: cv2 and torch at one thread (restored after): the bench compares
+    single-threaded library calls."""
+    import contextlib
+
+    @contextlib.contextmanager
+    def ctx():
+        import cv2
+
+        prev = cv2.getNumThreads()
+        cv2.setNumThreads(1)
+        tprev = None
+        try:
+            import torch
+
+            tprev = torch.get_num_threads()
+            torch.set_num_threads(1)
+        except ImportError:
+            pass
+        try:
+            yield
+        finally:
+            cv2.setNumThreads(prev)
+            if tprev is not None:
+                import torch
+
+                torch.set_num_threads(tprev)
+
+    return ctx()

@@ -38,7 +38,7 @@ def _case(quick: bool):
 
 def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The checker rows (module docstring)."""
-    from lumigraph.calib.bench_device import not_run, repeats_for, single_thread
+    from lumigraph.capture.bench_device import device_rows, repeats_for, single_thread
     from lumigraph.separation import nayar2006
 
     ims, comp, d_true, b = _case(quick)
@@ -59,18 +59,8 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
         return np.stack([r[0], r[1]])
 
     out_rows: list[DeviceRow] = []
-    ref = None
     with single_thread():
-        for dev in ("cpu", "torch-cpu", "cuda"):
-            skip = not_run(stage, name, dev, devices, quick)
-            if skip is not None:
-                out_rows.append(skip)
-                continue
-            row, out = measure(stage, name, dev, lambda dev=dev: call(dev), reference=ref,
-                               truth=truth, repeats=repeats_for(dev, quick))
-            out_rows.append(row)
-            if dev == "cpu":
-                ref = out
+        ref = device_rows(out_rows, stage, name, devices, call, truth=truth, quick=quick)
 
         def maxmin():
             r = nayar2006.checker(ims, complement_of=comp, b=b, estimator="maxmin")

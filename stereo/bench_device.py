@@ -72,7 +72,7 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
     """The block-matching and flow-warp rows (module docstring)."""
     import cv2
 
-    from lumigraph.calib.bench_device import not_run, repeats_for, single_thread
+    from lumigraph.capture.bench_device import device_rows, repeats_for, single_thread
     from lumigraph.stereo.block_matching import match
     from lumigraph.stereo.hirschmuller2008 import match as sgm_match
     from lumigraph.stereo.pyramid import warp
@@ -91,18 +91,9 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
             r = match(left, right, max_disp=D - 1, window=9, device=dev, threads=1)
             return np.where(np.isfinite(r.disparity), r.disparity, -1.0)
 
-        ref = None
-        for dev in ("cpu", "torch-cpu", "cuda"):
-            skip = not_run(stage, name, dev, devices, quick)
-            if skip is not None:
-                out_rows.append(skip)
-                continue
-            row, out = measure(stage, name, dev, lambda dev=dev: ours(dev), reference=ref,
-                               truth=lambda o: _bad2(o, gt, mask), repeats=repeats_for(dev, quick),
-                               note="unknown stored as -1 in the difference")
-            out_rows.append(row)
-            if dev == "cpu":
-                ref = out
+        ref = device_rows(out_rows, stage, name, devices, ours,
+                          truth=lambda o: _bad2(o, gt, mask), quick=quick,
+                          note="unknown stored as -1 in the difference")
         bm = cv2.StereoBM_create(numDisparities=D, blockSize=9)
         sgbm = cv2.StereoSGBM_create(minDisparity=0, numDisparities=D, blockSize=5,
                                      P1=8 * 25, P2=32 * 25, uniquenessRatio=5)
@@ -123,18 +114,9 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
             r = sgm_match(left, right, max_disp=D - 1, device=dev)
             return np.where(np.isfinite(r.disparity), r.disparity, -1.0)
 
-        ref = None
-        for dev in ("cpu", "torch-cpu", "cuda"):
-            skip = not_run(stage, name, dev, devices, quick)
-            if skip is not None:
-                out_rows.append(skip)
-                continue
-            row, out = measure(stage, name, dev, lambda dev=dev: ours_sgm(dev), reference=ref,
-                               truth=lambda o: _bad2(o, gt, mask), repeats=repeats_for(dev, quick),
-                               note="aggregation on the device; census, costs, checks on the CPU")
-            out_rows.append(row)
-            if dev == "cpu":
-                ref = out
+        ref = device_rows(out_rows, stage, name, devices, ours_sgm,
+                          truth=lambda o: _bad2(o, gt, mask), quick=quick,
+                          note="aggregation on the device; census, costs, checks on the CPU")
 
         def sgbm_peer():
             d = sgbm.compute(left, right).astype(np.float32) / 16.0
@@ -163,17 +145,8 @@ def rows(*, devices: tuple[str, ...], quick: bool) -> list[DeviceRow]:
         def rms(o):
             return float(np.sqrt(np.mean((o - truth_img)[inner] ** 2)))
 
-        ref = None
-        for dev in ("cpu", "torch-cpu", "cuda"):
-            skip = not_run(stage, name, dev, devices, quick)
-            if skip is not None:
-                out_rows.append(skip)
-                continue
-            row, out = measure(stage, name, dev, lambda dev=dev: warp(img, flow, device=dev),
-                               reference=ref, truth=rms, repeats=repeats_for(dev, quick))
-            out_rows.append(row)
-            if dev == "cpu":
-                ref = out
+        ref = device_rows(out_rows, stage, name, devices, lambda dev: warp(img, flow, device=dev),
+                          truth=rms, quick=quick)
 
         def scipy_peer():
             from scipy.ndimage import map_coordinates
