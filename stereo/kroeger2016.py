@@ -9,10 +9,10 @@ Gauss-Newton (their eq. 2-4, ``descent_iterations`` steps), propagated to
 their neighbours, and densified by the overlap-weighted average of eq. 5. What
 we add around it, each a handful of OpenCV/numpy passes at full size:
 
-* **finest scale 0** and **one variational step per level** (not 5): the
-  refinement DIS's "medium" preset runs at every level costs more than the
-  patch search and gains less than solving at full size (our bench,
-  ``docs/decisions/flow-default.md``);
+* **finest scale 0** and **no variational step per level** in the default (DIS's
+  "medium" preset runs 5 at every level): one step per level costs as much
+  as the whole patch search and gains less than solving at full size (our
+  bench, ``docs/decisions/flow-default.md``);
 * a **5x5 median** of the dense field (the robust filtering of Sun, Roth &
   Black 2010, doi:10.1109/CVPR.2010.5539939), which removes the isolated
   bad patches the densification averages in;
@@ -105,10 +105,12 @@ PRESETS = {
     "fast": Preset(patch_stride=6, descent_iterations=8, level_refine_iterations=0,
                    refine_iterations=0, median=5),
     # The default: a denser search at full size (stride 5 saves ~20 % but
-    # loses market_5's large motion, 24.2 px vs 15.4), one variational step per
-    # level (five, as DIS-medium, or a separate full-size refinement,
-    # double the time for little gain; docs/decisions/flow-default.md), the median.
-    "default": Preset(patch_stride=4, descent_iterations=16, level_refine_iterations=1,
+    # loses market_5's large motion, 24.2 px vs 15.4), no variational step:
+    # one step per level cost as much as the whole patch search (CPU time on
+    # Sintel 3.2-3.5x DIS-medium with it, 1.6x without) and 10 descent steps
+    # instead of 16 recover its accuracy on the tuning scenes
+    # (docs/decisions/flow-default.md), the median.
+    "default": Preset(patch_stride=4, descent_iterations=10, level_refine_iterations=0,
                       refine_iterations=0, median=5),
     # The accuracy end: dense patches, fusion with 16-px patches, more
     # refinement, the weighted median.
