@@ -228,7 +228,9 @@ def build_parser(prog: str = "lumigraph flow"):
                         "(about 2-3x its time), accurate (about DeepFlow's time); each a point on "
                         "`lumigraph bench flow`'s speed-error curve (default: default)")
     p.add_argument("--levels", type=number(int, lo=1, hi=MAX_LEVELS, allow=("auto",)), default="auto",
-                   help="pyramid methods: levels, or 'auto' from the estimated largest motion (default)")
+                   help="pyramid methods: levels, or 'auto' from the estimated largest motion "
+                        "(default); with video-matching a number selects the paper's pyramid "
+                        "search instead of the default dense search")
     p.add_argument("--window", type=number(int, lo=3, odd=True), default=9,
                    help="pyramid methods: matching window side, odd (default 9)")
     p.add_argument("--iterations", type=number(int, lo=1), default=3, help="pyramid methods: warps per level (default 3)")

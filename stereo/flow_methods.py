@@ -42,7 +42,8 @@ FLOW_METHODS = Registry("flow", [
            "areas", options=PYRAMID_OPTIONS, bound={"method": "dense"}),
     Method("video-matching", "lumigraph.stereo.sand2004:video_matching",
            "Sand & Teller 2004: robust to lighting change, added/removed objects, small camera "
-           "shifts", options=("levels",)),
+           "shifts (dense inverse search on contrast-normalised frames; --levels: the paper's "
+           "pyramid search)", options=("levels",)),
 ])
 
 # Refinements only the pyramid methods have; 0 is "off".
