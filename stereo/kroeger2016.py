@@ -19,10 +19,14 @@ we add around it, each a handful of OpenCV/numpy passes at full size:
 * for the accurate end, **variational refinement at full size** (the energy of the DIS
   paper's §2.3: brightness and gradient constancy, robust smoothness; solved
   by ``cv2.VariationalRefinement``, ``refine_iterations`` fixed-point steps);
-* for the accurate end, **fusion** of the fields of several patch sizes (per
-  pixel the one with the lowest windowed colour residual, as in fusion moves,
-  Lempitsky et al. 2008) and a **colour-guided weighted median**
-  (``cv2.ximgproc``) that keeps motion boundaries on image edges;
+* for the accurate end, the search **both ways**, the forward-backward
+  inconsistent pixels (occluded or wrong) **filled** by the consistent flow
+  of their colour region (:func:`fill_inconsistent`, an edge-aware
+  interpolation as in EpicFlow) before the refinement, and a
+  **colour-guided weighted median** (``cv2.ximgproc``) that keeps motion
+  boundaries on image edges; optionally **fusion** of the fields of several
+  patch sizes (per pixel the one with the lowest windowed colour residual,
+  as in fusion moves, Lempitsky et al. 2008);
 * **large motion**: DIS's coarsest level reaches about half a patch there,
   ``patch_size / 2 * 2**coarsest`` px, and OpenCV picks ``coarsest`` from the
   image size (about a width / 8), and a small frame's coarse levels are too
@@ -88,6 +92,10 @@ class Preset:
         Further patch sizes whose fields are fused with the main one.
     wmf_radius : int
         Radius (px) of the final colour-guided weighted median (0: none).
+    fill_occlusions : bool
+        Also search backward, and replace the forward-backward inconsistent
+        pixels by the consistent flow of their colour region
+        (:func:`fill_inconsistent`) before the refinement (doubles the search).
     """
 
     patch_size: int = 8
@@ -98,6 +106,7 @@ class Preset:
     median: int = 5
     fuse_patch_sizes: tuple = ()
     wmf_radius: int = 0
+    fill_occlusions: bool = False
 
 
 PRESETS = {
@@ -112,10 +121,13 @@ PRESETS = {
     # (docs/decisions/flow-default.md), the median.
     "default": Preset(patch_stride=4, descent_iterations=10, level_refine_iterations=0,
                       refine_iterations=0, median=5),
-    # The accuracy end: dense patches, fusion with 16-px patches, more
-    # refinement, the weighted median.
-    "accurate": Preset(patch_stride=2, descent_iterations=16, level_refine_iterations=0,
-                       refine_iterations=5, median=5, fuse_patch_sizes=(16,), wmf_radius=7),
+    # The accuracy end: denser patches, both directions with the
+    # forward-backward inconsistent pixels filled from their colour region,
+    # full-size refinement, the weighted median (stride 2 or fusion with
+    # 16-px patches cost more and lose market_5's large motion;
+    # docs/decisions/flow-default.md).
+    "accurate": Preset(patch_stride=3, descent_iterations=16, level_refine_iterations=0,
+                       refine_iterations=5, median=5, wmf_radius=7, fill_occlusions=True),
 }
 
 
@@ -338,7 +350,11 @@ def _wmf(flow, guide, radius):
                                                                   sigma=25.5)[..., :2])
 
 
-def _one_way(g0, g1, c0, c1, p: Preset, init):
+def _one_way(g0, g1, c0, c1, p: Preset, init, finish=True):
+    return _pinned(_one_way_pinned, g0, g1, c0, c1, p, init, finish)
+
+
+def _pinned(fn, *args):
     import cv2
 
     # OpenCV's DIS splits the frame into one stripe per thread, and its
@@ -347,18 +363,49 @@ def _one_way(g0, g1, c0, c1, p: Preset, init):
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     try:
-        return _one_way_pinned(g0, g1, c0, c1, p, init)
+        return fn(*args)
     finally:
         cv2.setNumThreads(threads)
 
 
-def _one_way_pinned(g0, g1, c0, c1, p: Preset, init):
+def _one_way_pinned(g0, g1, c0, c1, p: Preset, init, finish=True):
     f = _search(g0, g1, p, p.patch_size, init)
     if p.fuse_patch_sizes:
         f = _fuse(c0, c1, [f] + [_search(g0, g1, p, s, init) for s in p.fuse_patch_sizes])
     f = _median(f, p.median)
+    return _finish(g0, c0, g1, f, p) if finish else f
+
+
+def _finish(g0, c0, g1, f, p: Preset):
     f = variational_refine(g0, g1, f, p.refine_iterations)
     return _wmf(f, c0, p.wmf_radius)
+
+
+def fill_inconsistent(guide: np.ndarray, flow: np.ndarray, inconsistent: np.ndarray, *,
+                      lam: float = 1000.0, sigma_colour: float = 5.0) -> np.ndarray:
+    """``flow`` (px, ``(H, W, 2)``) with its ``inconsistent`` pixels (bool
+    ``(H, W)``: forward-backward check failed, i.e. occluded or wrong)
+    replaced by the consistent flow of their colour region: the ratio
+    ``FGS(w f) / FGS(w)`` of two fast global smoother passes (Min et al.
+    2014, doi:10.1109/TIP.2014.2366600) guided by ``guide`` (uint8, grey or
+    RGB), ``w`` = consistent. An occluded pixel has no match in the other
+    frame; it moves with the visible surface it belongs to, as in the
+    edge-aware interpolation of EpicFlow (Revaud et al. 2015). Float32.
+
+    >>> g = np.zeros((16, 16), np.uint8); g[:, 8:] = 200
+    >>> f = np.zeros((16, 16, 2), np.float32); f[:, 8:, 0] = 3
+    >>> bad = np.zeros((16, 16), bool); bad[4:12, 10:14] = True
+    >>> f[bad] = 50
+    >>> float(np.abs(fill_inconsistent(g, f, bad)[bad, 0] - 3).max()) < 0.1
+    True
+    """
+    import cv2
+
+    w = (~inconsistent).astype(np.float32)
+    moments = np.dstack([flow * w[..., None], w]).astype(np.float32)
+    num = cv2.ximgproc.fastGlobalSmootherFilter(guide, moments, lam, sigma_colour)
+    fill = num[..., :2] / np.maximum(num[..., 2:3], 1e-4)
+    return np.where(inconsistent[..., None], fill, flow).astype(np.float32)
 
 
 def texture_confidence(gray8: np.ndarray, *, window: int = 9) -> np.ndarray:
@@ -474,13 +521,19 @@ def dense_inverse_search(reference: np.ndarray, moving: np.ndarray, *, preset: s
         shifts = [t["shift_px"] for t in tiles if t["response"] > 0.1] if tiles else []
         if shifts:
             seed_f = initial_flow(g0, g1, shifts)
-            if consistency:
+            if consistency or p.fill_occlusions:
                 seed_b = initial_flow(g1, g0, [(-x, -y) for x, y in shifts])
     levels = coarsest_scale(shape, p.patch_size) + 1
     identical = np.array_equal(a, b)
     if identical:
         # Identical frames: zero is the exact minimiser of every term.
         fwd = np.zeros((*shape, 2), np.float32)
+    elif p.fill_occlusions:
+        from lumigraph.stereo.pyramid import forward_backward
+
+        raw = _one_way(g0, g1, c0, c1, p, seed_f, finish=False)
+        inconsistent, _ = forward_backward(raw, _one_way(g1, g0, c1, c0, p, seed_b, finish=False))
+        fwd = _pinned(_finish, g0, c0, g1, fill_inconsistent(c0, raw, inconsistent), p)
     else:
         fwd = _one_way(g0, g1, c0, c1, p, seed_f)
     t_fwd = time.perf_counter() - t0
@@ -501,7 +554,10 @@ def dense_inverse_search(reference: np.ndarray, moving: np.ndarray, *, preset: s
                              "max_motion_px": motion, "source": source,
                              "candidates": tiles or []},
             "seed_shifts_px": [list(map(float, x)) for x in shifts], "warnings": warnings}
-    if consistency and not identical:  # identical: every pixel is seen in both
+    if consistency and not identical and p.fill_occlusions:
+        occluded = inconsistent  # the check before the fill (the fill makes them agree)
+        info["occluded_fraction"] = float(occluded.mean())
+    elif consistency and not identical:  # identical: every pixel is seen in both
         from lumigraph.stereo.pyramid import forward_backward
 
         bwd = _one_way(g1, g0, c1, c0, p, seed_b)
