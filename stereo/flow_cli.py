@@ -32,7 +32,7 @@ examples:
   lumigraph render flow --out out/scenes/flow
   lumigraph flow out/scenes/flow/frame00.png out/scenes/flow/frame01.png \\
       --out out/flow/flow.flo --viz out/flow/flow.png
-  lumigraph flow a.png b.png --preset accurate --out sharp.flo   # accuracy end (~30x slower)
+  lumigraph flow a.png b.png --preset accurate --out sharp.flo   # accuracy end (~10-15x slower)
   lumigraph flow a.png b.png --preset fast --out quick.flo       # speed end (~DIS-medium's time)
   lumigraph flow take1.png take2.png --method video-matching --out match.flo
   lumigraph flow a.png b.png --method pyramid --median-radius 10 --out lk.flo
@@ -225,7 +225,8 @@ def build_parser(prog: str = "lumigraph flow"):
                    help="flow method (default: dis)")
     p.add_argument("--preset", choices=("fast", "default", "accurate"), default=None,
                    help="dis only: fast (about DIS-medium's time, more accurate), default "
-                        "(about 2-3x its time), accurate (about DeepFlow's time); each a point on "
+                        "(about 1.5-2x its time), accurate (below DeepFlow's time, occlusions filled); "
+                        "each a point on "
                         "`lumigraph bench flow`'s speed-error curve (default: default)")
     p.add_argument("--levels", type=number(int, lo=1, hi=MAX_LEVELS, allow=("auto",)), default="auto",
                    help="pyramid methods: levels, or 'auto' from the estimated largest motion "

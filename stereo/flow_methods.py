@@ -32,7 +32,8 @@ PYRAMID_OPTIONS = ("levels", "window", "iterations", "finest_level", "median_rad
 FLOW_METHODS = Registry("flow", [
     Method("dis", "lumigraph.stereo.kroeger2016:dense_inverse_search",
            "dense inverse search (Kroeger et al. 2016; OpenCV's DIS as inner solver) at full size, "
-           "median-filtered, variational refinement; --preset picks speed or accuracy (default)",
+           "median-filtered (accurate: occlusions filled, variational refinement); --preset picks "
+           "speed or accuracy (default)",
            options=("preset",)),
     Method("pyramid", "lumigraph.stereo.pyramid_flow:pyramid_flow",
            "coarse-to-fine Lucas-Kanade pyramid flow (reference 5.1.3, Fig. 5.5)",
