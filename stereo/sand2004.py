@@ -16,8 +16,8 @@ of the confident ones spread edge-aware over the reference's colour regions
 (a fast global smoother; it plays the part of step 4's weighted regression,
 which blends across region edges), and a few variational steps on the
 normalised frames give the sub-pixel part. The output probability is the
-one described after the list. On the lighting-change family it is 2-4x more accurate than
-the pyramid search below at about 0.7x its time.
+one described after the list. On the lighting-change family it is 1.5-3x more accurate than
+the pyramid search below at about three quarters of its time.
 
 **The pyramid search** (``search="pyramid"``, the paper's own): coarse to
 fine over a 2x2-average pyramid, at each level:
