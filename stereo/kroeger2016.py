@@ -93,9 +93,10 @@ class Preset:
     wmf_radius : int
         Radius (px) of the final colour-guided weighted median (0: none).
     fill_occlusions : bool
-        Also search backward, and replace the forward-backward inconsistent
-        pixels by the consistent flow of their colour region
-        (:func:`fill_inconsistent`) before the refinement (doubles the search).
+        Also search backward; average the two where they agree and replace
+        the forward-backward inconsistent pixels by the consistent flow of
+        their colour region (:func:`fill_inconsistent`) before the
+        refinement (doubles the search).
     """
 
     patch_size: int = 8
@@ -532,7 +533,12 @@ def dense_inverse_search(reference: np.ndarray, moving: np.ndarray, *, preset: s
         from lumigraph.stereo.pyramid import forward_backward
 
         raw = _one_way(g0, g1, c0, c1, p, seed_f, finish=False)
-        inconsistent, _ = forward_backward(raw, _one_way(g1, g0, c1, c0, p, seed_b, finish=False))
+        raw_b = _one_way(g1, g0, c1, c0, p, seed_b, finish=False)
+        inconsistent, _ = forward_backward(raw, raw_b)
+        # Where the two agree they are two estimates of one motion: their
+        # mean (the backward one negated, taken where the forward one lands).
+        bw = _warp(raw_b, raw)
+        raw = np.where(inconsistent[..., None], raw, 0.5 * (raw - bw)).astype(np.float32)
         fwd = _pinned(_finish, g0, c0, g1, fill_inconsistent(c0, raw, inconsistent), p)
     else:
         fwd = _one_way(g0, g1, c0, c1, p, seed_f)
