@@ -315,7 +315,7 @@ def variational_refine(g0: np.ndarray, g1: np.ndarray, flow: np.ndarray,
     DIS paper (§2.3: brightness and gradient constancy, robust smoothness;
     OpenCV's ``VariationalRefinement`` with DIS's own weights) on uint8 grey
     frames ``g0``, ``g1``, starting from ``flow`` (px, ``(H, W, 2)``); a new
-    float32 array.
+    float32 array (``flow`` itself when ``iterations`` is 0).
 
     >>> a = np.tile((np.arange(32) * 8 % 256).astype(np.uint8), (32, 1))
     >>> variational_refine(a, a, np.zeros((32, 32, 2), np.float32), 2).any()
@@ -400,13 +400,29 @@ def fill_inconsistent(guide: np.ndarray, flow: np.ndarray, inconsistent: np.ndar
     >>> float(np.abs(fill_inconsistent(g, f, bad)[bad, 0] - 3).max()) < 0.1
     True
     """
+    fill = weighted_fill(guide, flow, (~inconsistent).astype(np.float32), lam=lam,
+                         sigma_colour=sigma_colour)
+    return np.where(inconsistent[..., None], fill, flow).astype(np.float32)
+
+
+def weighted_fill(guide: np.ndarray, flow: np.ndarray, weight: np.ndarray, *,
+                  lam: float = 1000.0, sigma_colour: float = 5.0) -> np.ndarray:
+    """The ``weight``-weighted (``(H, W)``, >= 0) edge-aware average of
+    ``flow`` at every pixel, ``FGS(w f) / FGS(w)``: OpenCV's fast global
+    smoother (Min et al. 2014) guided by ``guide`` (uint8, grey or RGB;
+    smoothness ``lam``, colour difference ``sigma_colour`` codes at which
+    it cuts). Where no weight reaches, 0. Float32 ``(H, W, 2)``.
+
+    >>> g = np.zeros((8, 8), np.uint8)
+    >>> f = np.ones((8, 8, 2), np.float32); w = np.zeros((8, 8), np.float32); w[0, 0] = 1
+    >>> bool(np.allclose(weighted_fill(g, f, w), 1, atol=1e-3))
+    True
+    """
     import cv2
 
-    w = (~inconsistent).astype(np.float32)
-    moments = np.dstack([flow * w[..., None], w]).astype(np.float32)
+    moments = np.dstack([flow * weight[..., None], weight]).astype(np.float32)
     num = cv2.ximgproc.fastGlobalSmootherFilter(guide, moments, lam, sigma_colour)
-    fill = num[..., :2] / np.maximum(num[..., 2:3], 1e-4)
-    return np.where(inconsistent[..., None], fill, flow).astype(np.float32)
+    return (num[..., :2] / np.maximum(num[..., 2:3], 1e-4)).astype(np.float32)
 
 
 def texture_confidence(gray8: np.ndarray, *, window: int = 9) -> np.ndarray:

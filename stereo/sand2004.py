@@ -542,17 +542,17 @@ def _dis_search(reference, n0, n1, mm1, tex, *, region, max_motion_px=None):
     whatever the patch search drifted to. A few variational steps on the
     normalised frames (:func:`stereo.kroeger2016.variational_refine`) give
     the sub-pixel part."""
-    import cv2
-
-    from lumigraph.stereo.kroeger2016 import dense_inverse_search, variational_refine
+    from lumigraph.stereo.kroeger2016 import (
+        dense_inverse_search,
+        variational_refine,
+        weighted_fill,
+    )
 
     c0, c1 = _codes(n0), _codes(n1)
     f = dense_inverse_search(c0, c1, consistency=False, max_motion_px=max_motion_px).flow
     prob = (tex * np.exp(-_cost_at(n0, _warp(mm1, f), region) / MATCH_SCALE)).astype(np.float32)
-    moments = np.dstack([f * prob[..., None], prob]).astype(np.float32)
-    num = cv2.ximgproc.fastGlobalSmootherFilter(_guide8(reference), moments, FILL_LAMBDA,
-                                                FILL_SIGMA_COLOR)
-    fill = num[..., :2] / np.maximum(num[..., 2:3], 1e-4)
+    fill = weighted_fill(_guide8(reference), f, prob, lam=FILL_LAMBDA,
+                         sigma_colour=FILL_SIGMA_COLOR)
     w = np.minimum(1.0, prob / FILL_KNEE)[..., None]
     f = (w * f + (1 - w) * fill).astype(np.float32)
     return variational_refine(c0, c1, f, DIS_REFINE_ITERATIONS)
