@@ -283,8 +283,8 @@ PARITY_SCENES = (
 SWEEP = {"full": ("9x9", 256), "quick": ("5x5", 96)}
 SWEEP_SLOPES = 50
 #: the issue's own sweep size (U = V, pixels), measured in a child process so
-#: its peak resident memory is the sweep's own: (full, quick)
-SWEEP_ISSUE = {"full": (9, 512), "quick": (5, 96)}
+#: its peak resident memory is the sweep's own (full bench only: a minute or two)
+SWEEP_ISSUE = (9, 512)
 
 # The child: random views (time and memory do not depend on the content; the
 # accuracy is the parity and sweep cases'), then each method once, in the
@@ -367,8 +367,8 @@ def _sweep_case(quick: bool):
                 "memory: tracemalloc's peak above the call's start, in an untimed extra run")
 
 
-def _sweep_issue_case(quick: bool):
-    g, n = SWEEP_ISSUE["quick" if quick else "full"]
+def _sweep_issue_case():
+    g, n = SWEEP_ISSUE
 
     def load():
         return {"kind": "sweep child", "grid": g, "size": n, "runs": []}
@@ -378,7 +378,7 @@ def _sweep_issue_case(quick: bool):
                 f"{SWEEP_SLOPES} slopes -1..1, single-threaded, both methods in one child "
                 "process per repeat, alternating which goes first (time: min over the repeats; "
                 "peak: the child's resident high-water mark above the call's start, output "
-                "stack included, reset before each call)" + (" (quick: small)" if quick else ""))
+                "stack included, reset before each call); full bench only")
 
 
 def sweep_child(grid: int, size: int, slopes: int = SWEEP_SLOPES,
@@ -546,25 +546,24 @@ def _fourier_checks(res: Results, quick: bool) -> list[Check]:
                             "channels at once)" if quick else "")))
     except (KeyError, ValueError) as e:
         out.append(Check("refocus sweep rows present", math.nan, None, False, str(e)))
-    g, n = SWEEP_ISSUE["quick" if quick else "full"]
-    size = f"{g}x{g}x{n}x{n}x3" + (" (quick)" if quick else " (the issue's size)")
+    if quick:
+        return out
+    g, n = SWEEP_ISSUE
+    size = f"{g}x{g}x{n}x{n}x3 (the issue's size)"
     try:
         x = res.get(f"refocus sweep {g}x{g}x{n}x{n}x3 (child)", "sweep 50 in a child: both").extra
         r = x["ratio"]
         out.append(Check(f"{SWEEP_SLOPES} slopes: Fourier total <= 0.3x shift-and-add, {size}, "
-                         "single thread, child process", r, 0.3, r <= 0.3 or quick,
+                         "single thread, child process", r, 0.3, r <= 0.3,
                          f"min of {x['runs']} children: {x['fourier_s']:.2f} s vs "
-                         f"{x['shift_add_s']:.2f} s"
-                         + (" (informational in quick mode)" if quick else "")))
+                         f"{x['shift_add_s']:.2f} s"))
         r = x["fourier_peak_over_lf"]
         out.append(Check(f"{SWEEP_SLOPES} slopes: Fourier peak memory <= 2x the light field, "
-                         f"{size}, child's resident high-water mark", r, 2.0, r <= 2.0 or quick,
+                         f"{size}, child's resident high-water mark", r, 2.0, r <= 2.0,
                          f"{x['fourier_peak_mb']:.0f} MB above the call's start (output stack "
                          f"included; the worst of {x['runs']} children) for a "
                          f"{x['lf_mb']:.0f} MB light field; shift-add "
-                         f"{x['shift_add_peak_mb']:.0f} MB"
-                         + (" (informational in quick mode: spectra under 64 MB keep all "
-                            "channels at once)" if quick else "")))
+                         f"{x['shift_add_peak_mb']:.0f} MB"))
     except (KeyError, ValueError) as e:
         out.append(Check("refocus sweep (child) rows present", math.nan, None, False, str(e)))
     return out
@@ -901,7 +900,7 @@ def _depth_checks(res: Results) -> list[Check]:
 def stage(*, quick: bool = False) -> Stage:
     cases = (_array_case(quick), _lenslet_case("square", quick), _lenslet_case("hex", quick),
              _novel_case(quick), _hci_case(), _parity_case(quick), _sweep_case(quick),
-             _sweep_issue_case(quick),
+             *(() if quick else (_sweep_issue_case(),)),
              *(_depth_case(k + q, seed, quick) for q in ("", "q") for k in DEPTH_SCENES
                for seed in (0, 1, 2)))
     # HCI antinous: both methods in one row, interleaved (speed target)
@@ -928,7 +927,7 @@ def stage(*, quick: bool = False) -> Stage:
         Method("sweep 50: fourier slice (ours)", _sweep_run("fourier"), cases=("refocus sweep",),
                prepare=_sweep_peak("fourier")),
         Method("sweep 50 in a child: both", _sweep_child_run,
-               cases=(_sweep_issue_case(quick).name,)),
+               cases=(_sweep_issue_case().name,)),
         Method("depth wang2015 (ours)", _depth("wang2015"), cases=depth_cases),
         Method("depth variance (baseline)", _depth("variance"), cases=depth_cases),
         Method("depth wang2015 vs variance, interleaved", _depth_interleaved,
