@@ -20,10 +20,12 @@ disparity):
   x 100, 15 px boundary left out); held out (nothing was tuned on it). One
   row runs ours and the baseline alternately on it (times: min over the
   repeats; the speed target is scaled by the baseline's time measured there).
-- ``depth A/B/C/K seed N``: rendered 5x5 light fields of textured planes with
-  exact disparity; four scene kinds (K: bright planes before a dark,
-  low-contrast one, :func:`dark_background_scene`); seeds 0, 3, 4, 5 (K: 0,
-  3-6) were the tuning set (seed 0 shown), seeds 1-2 are reported.
+- ``depth A/B/C/K/S seed N``: rendered 5x5 light fields with exact
+  disparity; five scene kinds (A/B/C: textured planes; K: bright planes
+  before a dark, low-contrast one, :func:`dark_background_scene`; S: a shaded
+  ellipse before a dark wall and a steeply slanted floor, supersampled,
+  :func:`slanted_floor_scene`); seeds 0, 3, 4, 5 (K: 0, 3-6; S: 0, 3) were
+  the tuning set (seed 0 shown), seeds 1-2 are reported.
   ``depth Aq/Bq/Cq/Kq seed N``: the same views quantised to 8-bit gamma
   codes (as PNG light fields such as HCI antinous are); seed 0 and, for the
   dead zone of :mod:`lightfield.wang2015`, seed 3 were tuned on, seeds 1-2
@@ -34,7 +36,10 @@ disparity):
   synthetic aperture on several rendered scenes x slopes (PSNR of each in the
   extras; the check: the worst difference).
 - ``refocus sweep``: 50 slopes, single-threaded, both methods: total time and
-  peak resident memory above the call's start (9x9x256x256x3; quick 5x5x96x96x3).
+  peak traced memory above the call's start (9x9x256x256x3; quick 5x5x96x96x3).
+- ``refocus sweep 9x9x512x512x3 (child)``: the issue's size, in a child
+  process per repeat (:func:`sweep_child`): both methods' total times and
+  each one's resident high-water mark above its start (full bench only).
 """
 
 from __future__ import annotations
