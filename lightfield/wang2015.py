@@ -45,7 +45,10 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    ``cv2.ximgproc.weightedMedianFilter``) guided by the centre view over the
    confident pixels fills the unsure ones from like-coloured neighbours
    without crossing colour edges (:func:`refill`); where a window holds too
-   few confident pixels the estimate is kept.
+   few confident pixels the estimate is kept. Where a window holds no depth
+   edge, the least-squares plane through its confident pixels replaces the
+   median (:func:`plane_fit`): a median assumes piecewise-constant depth and
+   is biased on slanted surfaces (a floor), a plane fit is not.
 7. **Foreground fattening.** Next to a nearer surface a textureless
    background has two photo-consistent explanations: its own disparity
    (on the unoccluded half-aperture, step 2) and the foreground's (at the
