@@ -20,10 +20,12 @@ disparity):
   x 100, 15 px boundary left out); held out (nothing was tuned on it). One
   row runs ours and the baseline alternately on it (times: min over the
   repeats; the speed target is scaled by the baseline's time measured there).
-- ``depth A/B/C/K seed N``: rendered 5x5 light fields of textured planes with
-  exact disparity; four scene kinds (K: bright planes before a dark,
-  low-contrast one, :func:`dark_background_scene`); seeds 0, 3, 4, 5 (K: 0,
-  3-6) were the tuning set (seed 0 shown), seeds 1-2 are reported.
+- ``depth A/B/C/K/S seed N``: rendered 5x5 light fields with exact
+  disparity; five scene kinds (A/B/C: textured planes; K: bright planes
+  before a dark, low-contrast one, :func:`dark_background_scene`; S: a shaded
+  ellipse before a dark wall and a steeply slanted floor, supersampled,
+  :func:`slanted_floor_scene`); seeds 0, 3, 4, 5 (K: 0, 3-6; S: 0, 3) were
+  the tuning set (seed 0 shown), seeds 1-2 are reported.
   ``depth Aq/Bq/Cq/Kq seed N``: the same views quantised to 8-bit gamma
   codes (as PNG light fields such as HCI antinous are); seed 0 and, for the
   dead zone of :mod:`lightfield.wang2015`, seed 3 were tuned on, seeds 1-2
@@ -34,7 +36,10 @@ disparity):
   synthetic aperture on several rendered scenes x slopes (PSNR of each in the
   extras; the check: the worst difference).
 - ``refocus sweep``: 50 slopes, single-threaded, both methods: total time and
-  peak resident memory above the call's start (9x9x256x256x3; quick 5x5x96x96x3).
+  peak traced memory above the call's start (9x9x256x256x3; quick 5x5x96x96x3).
+- ``refocus sweep 9x9x512x512x3 (child)``: the issue's size, in a child
+  process per repeat (:func:`sweep_child`): both methods' total times and
+  each one's resident high-water mark above its start (full bench only).
 """
 
 from __future__ import annotations
@@ -126,7 +131,8 @@ def _hci_case():
 DEPTH_SCENES = {"A": {"planes": 3, "disparity_near": 1.0, "disparity_far": 0.2},
                 "B": {"planes": 4, "disparity_near": 2.0, "disparity_far": 0.3, "texel_px": 3.0},
                 "C": {"planes": 2, "disparity_near": 1.5, "disparity_far": 0.1, "texel_px": 1.0},
-                "K": {"dark_background": True}}
+                "K": {"dark_background": True},
+                "S": {"slanted_floor": True}}
 
 
 def dark_background_scene(seed: int, size=(160, 120)):
@@ -154,6 +160,75 @@ def dark_background_scene(seed: int, size=(160, 120)):
     return LightField(views, spacing=1.0), (w / sc.depth_at(xs, ys)).astype(np.float32)
 
 
+def slanted_floor_scene(seed: int, size=(160, 120), supersample: int = 3):
+    """``(LightField, disparity)``: a 5x5 array looking at a shaded, textured
+    ellipse (a curved silhouette, disparity 1.6 px/view, dimmed towards its
+    rim) in front of a dark, low-contrast wall (0.3) that creases into a
+    floor slanting towards the camera (0.3 at the crease, 1.0 at the bottom
+    row; disparity linear in the image row, as for any plane): HCI
+    antinous's silhouette and floor strip. Each pixel is the mean of
+    ``supersample`` x ``supersample`` point samples (so silhouette pixels are
+    blends, as in a rendered image); textures are smooth random fields
+    (feature size ~2 px), sampled bilinearly on a 4x finer grid. Returns
+    noise-free float views and the exact disparity at the centre view's
+    pixel centres."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+
+    from lumigraph.lightfield.field import LightField
+
+    rng = np.random.default_rng(seed)
+    w, h = size
+    d_wall, d_bottom, d_fg = -0.3, 2.0, 2.3
+    crease = h * rng.uniform(0.55, 0.7)
+    slope = (d_bottom - d_wall) / (h - 1 - crease)
+    cx, cy = w * rng.uniform(0.4, 0.6), h * rng.uniform(0.35, 0.5)
+    ax, ay = w * rng.uniform(0.18, 0.26), h * rng.uniform(0.3, 0.4)
+    tilt = rng.uniform(-0.5, 0.5)
+    fine, pad = 4, 12      # texture grid: 4 samples per px, 12 px beyond the image
+
+    def texture(lo, hi):
+        t = gaussian_filter(rng.standard_normal(((h + 2 * pad) * fine, (w + 2 * pad) * fine, 3)),
+                            (2 * fine, 2 * fine, 0))
+        t = (t - t.min()) / (t.max() - t.min())
+        return (lo + (hi - lo) * t).astype(np.float32)
+
+    back, front = texture(0.012, 0.04), texture(0.15, 0.8)
+
+    def sample(tex, x, y):
+        c = [(y + pad) * fine, (x + pad) * fine]
+        return np.stack([map_coordinates(tex[..., k], c, order=1, mode="nearest")
+                         for k in range(3)], -1)
+
+    def inside(x, y):
+        xr, yr = x - cx, y - cy
+        xt = xr * np.cos(tilt) + yr * np.sin(tilt)
+        yt = -xr * np.sin(tilt) + yr * np.cos(tilt)
+        return (xt / ax) ** 2 + (yt / ay) ** 2
+
+    sub = (np.arange(supersample) + 0.5) / supersample - 0.5
+    shape = (h, w, supersample, supersample)   # (row, column, sub-row, sub-column)
+    ys = np.broadcast_to((np.arange(h)[:, None] + sub)[:, None, :, None], shape)
+    xs = np.broadcast_to((np.arange(w)[:, None] + sub)[None, :, None, :], shape)
+    views = np.empty((5, 5, h, w, 3), np.float32)
+    for i in range(5):
+        for j in range(5):
+            du, dv = i - 2, j - 2
+            # background: the centre-view point (x0, y0) seen at (x, y) solves
+            # y0 - d(y0) du = y with d(y0) = d_wall + slope (y0 - crease) below the crease
+            y0 = (ys + (d_wall - slope * crease) * du) / (1 - slope * du)
+            y0 = np.where(y0 >= crease, y0, ys + d_wall * du)
+            d0 = d_wall + slope * np.maximum(y0 - crease, 0)
+            img = sample(back, xs + d0 * dv, y0)
+            xf, yf = xs + d_fg * dv, ys + d_fg * du
+            r2 = inside(xf, yf)
+            shade = np.clip(1.1 - 0.9 * r2, 0.05, 1)[..., None]
+            img = np.where((r2 <= 1)[..., None], shade * sample(front, xf, yf), img)
+            views[i, j] = img.mean((2, 3))
+    yc, xc = np.mgrid[0:h, 0:w].astype(np.float64)
+    gt = np.where(inside(xc, yc) <= 1, d_fg, d_wall + slope * np.maximum(yc - crease, 0))
+    return LightField(views, spacing=1.0), gt.astype(np.float32)
+
+
 def quantise_8bit(lf):
     """The light field's views as 8-bit gamma-2.2 codes, decoded back to
     linear radiance (what a PNG light field holds)."""
@@ -173,6 +248,8 @@ def _depth_case(kind: str, seed: int, quick: bool):
 
         if base == "K":
             lf, gt = dark_background_scene(seed, size)
+        elif base == "S":
+            lf, gt = slanted_floor_scene(seed, size)
         else:
             s = render("lightfield-array", size=size, grid="5x5", seed=seed, thin_lens=False,
                        **DEPTH_SCENES[base])
@@ -184,6 +261,8 @@ def _depth_case(kind: str, seed: int, quick: bool):
     return Case(f"depth {kind} seed {seed}", load,
                 f"5x5 views of {size[0]}x{size[1]}, "
                 + ("bright planes 1.6, 0.9 before a dark one at 0.2 px/view" if base == "K"
+                   else "a shaded ellipse at 1.6 px/view before a dark wall and slanted floor "
+                        "(0.3..1.0), 3x3 supersampled" if base == "S"
                    else f"planes {DEPTH_SCENES[base]}")
                 + (", 8-bit gamma codes" if quantised else "")
                 + (" (tuning set)" if seed == 0 else ""))
@@ -208,6 +287,46 @@ PARITY_SCENES = (
 )
 SWEEP = {"full": ("9x9", 256), "quick": ("5x5", 96)}
 SWEEP_SLOPES = 50
+#: the issue's own sweep size (U = V, pixels), measured in a child process so
+#: its peak resident memory is the sweep's own (full bench only: a minute or two)
+SWEEP_ISSUE = (9, 512)
+
+# The child: random views (time and memory do not depend on the content; the
+# accuracy is the parity and sweep cases'), then each method once, in the
+# given order (after a warm-up on a crop), each with its own peak: the kernel's high-water mark (VmHWM)
+# is reset to the current size before each call (/proc/self/clear_refs "5",
+# Linux >= 4.0), so the peak above the call's start is its own, output
+# stack included. One JSON line on stdout.
+_SWEEP_CHILD = """
+import json, sys, time
+import numpy as np
+from lumigraph.lightfield.bench import _sweep_stack
+from lumigraph.lightfield.field import LightField
+
+g, n, k = int(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+order = sys.argv[4].split(",")
+
+def status(key):
+    return [int(ln.split()[1]) * 1024 for ln in open("/proc/self/status") if ln.startswith(key)][0]
+
+rng = np.random.default_rng(0)
+lf = LightField(rng.random((g, g, n, n, 3), dtype=np.float32))
+data = {"lf": lf, "slopes": np.linspace(-1.0, 1.0, k)}
+out = {"lf_bytes": lf.data.nbytes}
+small = {"lf": LightField(lf.data[:, :, :16, :16]), "slopes": [-1.0, 0.5]}
+for name in order:   # imports and first-call set-up out of the timings
+    _sweep_stack(name, small)
+for name in order:
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+    base = status("VmRSS:")
+    t0 = time.perf_counter()
+    stack = _sweep_stack(name, data)
+    out[name + "_s"] = time.perf_counter() - t0
+    out[name + "_peak"] = status("VmHWM:") - base
+    del stack
+print("SWEEP " + json.dumps(out))
+"""
 
 
 def _parity_case(quick: bool):
@@ -251,6 +370,46 @@ def _sweep_case(quick: bool):
                 f"are in docs/decisions/fourier-refocus.md), {SWEEP_SLOPES} slopes -1..1; "
                 "single-threaded (FFT workers 1, BLAS 1 thread where it can be set); peak "
                 "memory: tracemalloc's peak above the call's start, in an untimed extra run")
+
+
+def _sweep_issue_case():
+    g, n = SWEEP_ISSUE
+
+    def load():
+        return {"kind": "sweep child", "grid": g, "size": n, "runs": []}
+
+    return Case(f"refocus sweep {g}x{g}x{n}x{n}x3 (child)", load,
+                f"the issue's size: {g}x{g} random views of {n}x{n}x3 float32, "
+                f"{SWEEP_SLOPES} slopes -1..1, single-threaded, both methods in one child "
+                "process per repeat, alternating which goes first (time: min over the repeats; "
+                "peak: the child's resident high-water mark above the call's start, output "
+                "stack included, reset before each call); full bench only")
+
+
+def sweep_child(grid: int, size: int, slopes: int = SWEEP_SLOPES,
+                order=("fourier", "shift-add")) -> dict:
+    """Run the 50-slope sweep of both methods in a fresh Python process (see
+    ``_SWEEP_CHILD``): ``{"lf_bytes", "<method>_s", "<method>_peak"}``."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1",
+           "MKL_NUM_THREADS": "1"}
+    p = subprocess.run([sys.executable, "-c", _SWEEP_CHILD, str(grid), str(size), str(slopes),
+                        ",".join(order)], capture_output=True, text=True, env=env, check=False)
+    for line in p.stdout.splitlines():
+        if line.startswith("SWEEP "):
+            return json.loads(line[len("SWEEP "):])
+    raise RuntimeError(f"sweep child exited {p.returncode}: {p.stderr.strip()[-300:]}")
+
+
+def _sweep_child_run(data, _):
+    # the first method of a child pays its page faults on fresh memory: alternate
+    order = ("fourier", "shift-add") if len(data["runs"]) % 2 == 0 else ("shift-add", "fourier")
+    data["runs"].append(sweep_child(data["grid"], data["size"], order=order))
+    return {"runs": list(data["runs"])}
 
 
 def _parity_run(method):
@@ -337,6 +496,17 @@ def _parity_error(data, out):
                 extra[f"psnr_db {sc['name']} slope {s:g}"] = p
                 worst = min(worst, p)
         return {"error": worst, "psnr_db_worst": worst, **extra}
+    if "runs" in out:   # the issue-size sweep in a child process
+        runs = out["runs"]
+        lf_bytes = runs[0]["lf_bytes"]
+        res = {m: {"s": min(r[f"{m}_s"] for r in runs), "peak": max(r[f"{m}_peak"] for r in runs)}
+               for m in ("fourier", "shift-add")}
+        return {"error": math.nan, "runs": len(runs), "lf_mb": lf_bytes / 2 ** 20,
+                "fourier_s": res["fourier"]["s"], "shift_add_s": res["shift-add"]["s"],
+                "fourier_peak_mb": res["fourier"]["peak"] / 2 ** 20,
+                "shift_add_peak_mb": res["shift-add"]["peak"] / 2 ** 20,
+                "fourier_peak_over_lf": res["fourier"]["peak"] / lf_bytes,
+                "ratio": res["fourier"]["s"] / res["shift-add"]["s"]}
     images, idx = out["sweep"], data["truth_idx"]
     mse = float(np.mean((images[idx].astype(np.float64) - data["truth"]) ** 2))
     lf_bytes = data["lf"].data.nbytes
@@ -381,6 +551,26 @@ def _fourier_checks(res: Results, quick: bool) -> list[Check]:
                             "channels at once)" if quick else "")))
     except (KeyError, ValueError) as e:
         out.append(Check("refocus sweep rows present", math.nan, None, False, str(e)))
+    if quick:
+        return out
+    g, n = SWEEP_ISSUE
+    size = f"{g}x{g}x{n}x{n}x3 (the issue's size)"
+    try:
+        x = res.get(f"refocus sweep {g}x{g}x{n}x{n}x3 (child)", "sweep 50 in a child: both").extra
+        r = x["ratio"]
+        out.append(Check(f"{SWEEP_SLOPES} slopes: Fourier total <= 0.3x shift-and-add, {size}, "
+                         "single thread, child process", r, 0.3, r <= 0.3,
+                         f"min of {x['runs']} children: {x['fourier_s']:.2f} s vs "
+                         f"{x['shift_add_s']:.2f} s"))
+        r = x["fourier_peak_over_lf"]
+        out.append(Check(f"{SWEEP_SLOPES} slopes: Fourier peak memory <= 2x the light field, "
+                         f"{size}, child's resident high-water mark", r, 2.0, r <= 2.0,
+                         f"{x['fourier_peak_mb']:.0f} MB above the call's start (output stack "
+                         f"included; the worst of {x['runs']} children) for a "
+                         f"{x['lf_mb']:.0f} MB light field; shift-add "
+                         f"{x['shift_add_peak_mb']:.0f} MB"))
+    except (KeyError, ValueError) as e:
+        out.append(Check("refocus sweep (child) rows present", math.nan, None, False, str(e)))
     return out
 
 
@@ -549,7 +739,7 @@ def _depth_metrics(disp, truth) -> dict:
 
 def _error(data, out):
     kind = data["kind"]
-    if kind in ("parity", "sweep"):
+    if kind in ("parity", "sweep", "sweep child"):
         return _parity_error(data, out)
     if kind == "refocus":
         if "spec" in out:   # the FFT alone: error of the slices it enables (untimed)
@@ -715,6 +905,7 @@ def _depth_checks(res: Results) -> list[Check]:
 def stage(*, quick: bool = False) -> Stage:
     cases = (_array_case(quick), _lenslet_case("square", quick), _lenslet_case("hex", quick),
              _novel_case(quick), _hci_case(), _parity_case(quick), _sweep_case(quick),
+             *(() if quick else (_sweep_issue_case(),)),
              *(_depth_case(k + q, seed, quick) for q in ("", "q") for k in DEPTH_SCENES
                for seed in (0, 1, 2)))
     # HCI antinous: both methods in one row, interleaved (speed target)
@@ -740,6 +931,8 @@ def stage(*, quick: bool = False) -> Stage:
                cases=("refocus sweep",), prepare=_sweep_peak("shift-add")),
         Method("sweep 50: fourier slice (ours)", _sweep_run("fourier"), cases=("refocus sweep",),
                prepare=_sweep_peak("fourier")),
+        Method("sweep 50 in a child: both", _sweep_child_run,
+               cases=(_sweep_issue_case().name,)),
         Method("depth wang2015 (ours)", _depth("wang2015"), cases=depth_cases),
         Method("depth variance (baseline)", _depth("variance"), cases=depth_cases),
         Method("depth wang2015 vs variance, interleaved", _depth_interleaved,
