@@ -20,8 +20,10 @@ by alternating its two closed-form partial minimisers:
 - normalise ``I`` so the middle code maps to 1 (the scale is free),
 
 until the largest change of ``ln I`` between iterations is below ``tol``.
-The weight is the papers' Gaussian-like certainty function
-``w(y) = exp(−4 (y − y_mid)² / y_mid²)`` (``y_mid = z_max / 2``).
+The papers' weight is a Gaussian-like certainty function
+``w(y) = exp(−4 (y − y_mid)² / y_mid²)`` (``y_mid = z_max / 2``), standing
+in for the inverse noise variance their estimator derives (used here by
+default, below).
 
 What this implementation adds:
 
@@ -489,7 +491,9 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
         if weight == "noise" or bias_draws > 0:
             nz = _noise(fc, y, tt, bd, lo, hi, rng)
             noise_ab.append((float(nz[0]), float(nz[1])))
-        wtab = noise_weight(fc["g"], nz, lo, hi) if weight == "noise" else None
+        # (no noise measured, e.g. a noise-free render: the certainty weight)
+        wtab = (noise_weight(fc["g"], nz, lo, hi)
+                if weight == "noise" and (nz[0] > 0 or nz[1] > 0) else None)
         if wtab is not None or leave_one_out:
             fc = _fit_channel(y, tt, bd, n_bins, lo, hi, max_iter, tol, wtab, leave_one_out) or fc
         it, change, obj0, obj = fc["it"], fc["change"], fc["obj0"], fc["obj"]
