@@ -22,8 +22,9 @@ Cases
 - ``family <kind> <b>-bit (tuned|reported)``: capture.scenes.brackets' family
   (room, walls, outdoor, night, studio; each its own response and noise;
   seeds 0-2; 8/12/16 bits): Debevec against CalibrateDebevec over codes
-  10/255..95 % (median over seeds, worst in the JSON), merge against
-  MergeDebevec, Mitsunaga-Nayar monotone; ``tuned`` kinds may have set our
+  10/255..95 % (median over seeds, worst in the JSON), our Robertson against
+  CalibrateRobertson (8 bits, full runs), merge against MergeDebevec,
+  Mitsunaga-Nayar monotone; ``tuned`` kinds may have set our
   defaults, ``reported`` ones are held out;
 - real sets: ``memorial`` (against Debevec's memorial.hdr), ``canon 5D Mk II``
   (the chart's neutral patches' ratios across channels), ``iphone`` (against
