@@ -53,7 +53,11 @@ order at 3 and skips the ratio update):
   the 2-fold held-out error of predicting one exposure's code from another's
   (code units, each error divided by its predicted variance from the sensor
   noise Debevec's fit estimates from the bracket: the Gaussian likelihood; an
-  ln error is ruled by the darkest codes); the best order and the next are
+  ln error is ruled by the darkest codes). The likelihood's N is the number
+  of independent held-out residuals (a pixel with P valid codes gives P − 1),
+  not of pixels: counting pixels divided the data's evidence by the codes
+  per pixel, and the walls' sRGB toe was fitted at order 3 where 4–5 is what
+  the data support (docs/decisions/hdr-mitsunaga-stable.md). The best order and the next are
   scored again with the joint refinement and the better taken; every
   candidate recorded. The former rule ("lowest order within one
   standard error of the best") picked 6/9/6 and 6/9/9 on Memorial with seeds
@@ -792,7 +796,6 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     # order the data cannot support is reported, not silently used.
     orders = list(range(1, MAX_ORDER + 1))
     fold = np.arange(zs_sel.shape[1]) % 2
-    n_pix = max(int(np.ceil(zs_sel.shape[1] / 2)), 2)
     g = np.empty((c, zmax + 1))
     warnings: list[str] = []
     chans, ranges, chans_sel = [], [], []
@@ -841,9 +844,15 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
             else:
                 mse[i, ch] = total
                 fold_le[n, ch] = les
+        # BIC per channel, N its independent held-out residuals (not its pixels: a
+        # pixel seen in P exposures gives P - 1 code predictions that share no noise)
         with np.errstate(divide="ignore"):
-            bic[i] = float(np.sum(n_pix * np.log(mse[i]))) + c * n * math.log(n_pix)
+            bic[i] = float(np.sum(n_obs * np.log(mse[i]))) + n * float(np.sum(np.log(n_obs)))
 
+    # independent held-out residuals per channel: each pixel's valid codes less one,
+    # averaged over the two folds
+    n_obs = np.array([max(float(np.sum(np.maximum(v.sum(axis=1) - 1, 0))) / 2, 2.0)
+                      for _, v in chans_sel])
     mse = np.full((len(orders), c), np.inf)
     reasons: dict[tuple[int, int], str] = {}
     fold_le: dict[tuple[int, int], list] = {}
@@ -889,7 +898,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
             warnings.append(f"order {n_use} was rejected on held-out pixels ({bad[0]}); its "
                             "curve is kept monotone by constraint: use --order auto "
                             f"(chooses {n_auto})")
-        elif bic[i] > bic[orders.index(n_auto)] + c * math.log(n_pix):
+        elif bic[i] > bic[orders.index(n_auto)] + float(np.sum(np.log(n_obs))):
             warnings.append(f"order {n_use} does not fit held-out pixels as well as order "
                             f"{n_auto} (BIC {bic[i]:.1f} against {bic[orders.index(n_auto)]:.1f}): "
                             "use --order auto")
@@ -940,13 +949,15 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
                              "rejected": reasons.get((n, ch))}
                             for i, n in enumerate(orders)] for ch in range(c)}
     sel_scores["bic"] = [float(x) if np.isfinite(x) else None for x in bic]
+    sel_scores["bic_n_per_channel"] = [float(x) for x in n_obs]
     sel_scores["bic_jointly_refined"] = {str(k): v for k, v in bic_refined.items()}
     refined = np.empty(p)
     refined[perm] = np.exp(ln_e)
     ratios = np.exp(np.diff(ln_e))  # e_{q+1}/e_q in ascending exposure order
     sel = {"parameter": "order", "chosen": chosen, "candidates": sel_scores, "auto": n_auto,
            "rule": "given" if order != "auto" else
-           "one order for all channels: least BIC (N ln MSE + k ln N, N held-out pixels) of "
+           "one order for all channels: least BIC (sum over channels of N ln MSE + k ln N, "
+           "N the channel's independent held-out residuals: per pixel its valid codes - 1) of "
            "the 2-fold held-out code-prediction error (noise-weighted); the best and the next "
            "order re-scored with the joint refinement; non-monotone candidates rejected",
            "channel_disagreement_rms_sigma": [math.sqrt(x) for x, _ in disagree],
