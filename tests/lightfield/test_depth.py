@@ -179,3 +179,29 @@ def test_slanted_floor_scene_beats_the_baseline():
     old = refocus.estimate_disparity(lf, SLOPES).disparity
     bad = lambda d: float((np.abs(d - gt) > 0.07)[15:-15, 15:-15].mean())  # noqa: E731
     assert bad(new) <= 0.5 * bad(old)
+
+
+def test_despeckle_replaces_isolated_errors_and_keeps_slopes_and_edges():
+    # step 7b: on a slanted plane (antinous's floor slope) with a straight
+    # depth edge, isolated gross errors (1 and 2 px) go back onto the plane
+    # and nothing else moves. The bound is the plane's own: with k of 25
+    # window values wrong, the median lies within k ranks of the clean
+    # window's median, i.e. within the spread of its middle 2k + 1 values.
+    y, x = np.mgrid[0:40, 0:60]
+    plane = (0.2 + 0.055 * y - 0.01 * x).astype(np.float32)
+    truth = np.where(x >= 40, np.float32(2.5), plane)
+    noise = np.random.default_rng(3).uniform(-0.1, 0.1, truth.shape).astype(np.float32)
+    d = truth + noise                                  # small errors: below the edge step
+    specks = [(10, 10, 1), (20, 20, 2), (30, 12, 1)]   # (row, column, size)
+    for r, c, k in specks:
+        d[r:r + k, c:c + k] = -2.0 if k == 1 else 2.4
+    out = wang2015.despeckle(d)
+    clean = np.sort((0.055 * np.arange(-2, 3)[:, None] - 0.01 * np.arange(-2, 3)).ravel())
+    for r, c, k in specks:
+        spread = clean[12 + k * k] - clean[12 - k * k] + 0.2     # + the noise's full range
+        assert np.abs(out[r:r + k, c:c + k] - plane[r:r + k, c:c + k]).max() <= spread
+    speck = np.zeros(d.shape, bool)
+    for r, c, k in specks:
+        speck[r:r + k, c:c + k] = True
+    # everything else within the noise: the slope, the edge, the small errors
+    assert np.array_equal(out[~speck], d[~speck])
