@@ -26,6 +26,9 @@ disparity):
   ellipse before a dark wall and a steeply slanted floor, supersampled,
   :func:`slanted_floor_scene`); seeds 0, 3, 4, 5 (K: 0, 3-6; S: 0, 3) were
   the tuning set (seed 0 shown), seeds 1-2 are reported.
+  ``depth F seed N``: kind S dimmer, partly texture-less, noisy and 8-bit
+  (:func:`dim_floor_scene`: isolated gross floor errors); seeds 0, 3 tuned,
+  1-2 reported, outside the issue's 0.5x check (harder than antinous's floor).
   ``depth Aq/Bq/Cq/Kq seed N``: the same views quantised to 8-bit gamma
   codes (as PNG light fields such as HCI antinous are); seed 0 and, for the
   dead zone of :mod:`lightfield.wang2015`, seed 3 were tuned on, seeds 1-2
@@ -132,7 +135,11 @@ DEPTH_SCENES = {"A": {"planes": 3, "disparity_near": 1.0, "disparity_far": 0.2},
                 "B": {"planes": 4, "disparity_near": 2.0, "disparity_far": 0.3, "texel_px": 3.0},
                 "C": {"planes": 2, "disparity_near": 1.5, "disparity_far": 0.1, "texel_px": 1.0},
                 "K": {"dark_background": True},
-                "S": {"slanted_floor": True}}
+                "S": {"slanted_floor": True},
+                "F": {"dim_floor": True}}      # 8-bit already: no "Fq" rows
+#: the kinds the issue's 0.5x target covers; F (round 6) is harder than
+#: antinous's floor (noise and texture-less patches) and is reported on its own
+ISSUE_KINDS = ("A", "B", "C", "K", "S")
 
 
 def dark_background_scene(seed: int, size=(160, 120)):
@@ -229,6 +236,79 @@ def slanted_floor_scene(seed: int, size=(160, 120), supersample: int = 3):
     return LightField(views, spacing=1.0), gt.astype(np.float32)
 
 
+def dim_floor_scene(seed: int, size=(160, 120), supersample: int = 3, noise: float = 0.0012):
+    """``(LightField, disparity)``: kind S (:func:`slanted_floor_scene`) made
+    harder where HCI antinous's floor is: the wall and floor dimmer and
+    weaker in texture (linear 0.012 .. 0.045) with a quarter of their area
+    texture-less (smooth patches at the texture's mean), lit with a fall-off
+    towards the crease (x 0.6 .. 1.4, fixed to the surface), sensor noise
+    (Gaussian, ``noise`` at linear 0.05, growing with the square root of the
+    signal, independent per view) and 8-bit gamma codes. Its flat cost
+    curves leave isolated gross errors on the floor (the round-6 tuning
+    kind of docs/decisions/lightfield-depth.md). Random draws from seed
+    ``1000 + seed``; the disparity is exact at the centre view's pixels."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+
+    from lumigraph.lightfield.field import LightField
+
+    rng = np.random.default_rng(1000 + seed)
+    w, h = size
+    d_wall, d_bottom, d_fg = -0.3, 2.0, 2.3
+    crease = h * rng.uniform(0.5, 0.6)
+    slope = (d_bottom - d_wall) / (h - 1 - crease)
+    cx, cy = w * rng.uniform(0.4, 0.6), h * rng.uniform(0.3, 0.45)
+    ax, ay = w * rng.uniform(0.18, 0.26), h * rng.uniform(0.25, 0.35)
+    tilt = rng.uniform(-0.5, 0.5)
+    fine, pad = 4, 12
+
+    def texture(lo, hi, flat=0.0):
+        t = gaussian_filter(rng.standard_normal(((h + 2 * pad) * fine, (w + 2 * pad) * fine, 3)),
+                            (2 * fine, 2 * fine, 0))
+        t = (t - t.min()) / (t.max() - t.min())
+        if flat > 0:
+            m = gaussian_filter(rng.standard_normal(t.shape[:2]), 6 * fine)
+            m = gaussian_filter((m > np.quantile(m, 1 - flat)).astype(float), fine)[..., None]
+            t = t * (1 - m) + t.mean((0, 1)) * m
+        return (lo + (hi - lo) * t).astype(np.float32)
+
+    back, front = texture(0.012, 0.045, flat=0.25), texture(0.15, 0.8)
+
+    def sample(tex, x, y):
+        c = [(y + pad) * fine, (x + pad) * fine]
+        return np.stack([map_coordinates(tex[..., k], c, order=1, mode="nearest")
+                         for k in range(3)], -1)
+
+    def inside(x, y):
+        xr, yr = x - cx, y - cy
+        xt = xr * np.cos(tilt) + yr * np.sin(tilt)
+        yt = -xr * np.sin(tilt) + yr * np.cos(tilt)
+        return (xt / ax) ** 2 + (yt / ay) ** 2
+
+    sub = (np.arange(supersample) + 0.5) / supersample - 0.5
+    shape = (h, w, supersample, supersample)
+    ys = np.broadcast_to((np.arange(h)[:, None] + sub)[:, None, :, None], shape)
+    xs = np.broadcast_to((np.arange(w)[:, None] + sub)[None, :, None, :], shape)
+    views = np.empty((5, 5, h, w, 3), np.float32)
+    for i in range(5):
+        for j in range(5):
+            du, dv = i - 2, j - 2
+            y0 = (ys + (d_wall - slope * crease) * du) / (1 - slope * du)
+            y0 = np.where(y0 >= crease, y0, ys + d_wall * du)
+            d0 = d_wall + slope * np.maximum(y0 - crease, 0)
+            img = sample(back, xs + d0 * dv, y0)
+            img = img * (0.6 + 0.8 * np.clip((y0 - crease) / (h - crease), 0, 1))[..., None]
+            xf, yf = xs + d_fg * dv, ys + d_fg * du
+            r2 = inside(xf, yf)
+            shade = np.clip(1.1 - 0.9 * r2, 0.05, 1)[..., None]
+            img = np.where((r2 <= 1)[..., None], shade * sample(front, xf, yf), img)
+            views[i, j] = img.mean((2, 3))
+    views = views + rng.normal(0, noise, views.shape).astype(np.float32) * np.sqrt(
+        np.maximum(views, 1e-4) / 0.05).clip(0.3, 3)
+    yc, xc = np.mgrid[0:h, 0:w].astype(np.float64)
+    gt = np.where(inside(xc, yc) <= 1, d_fg, d_wall + slope * np.maximum(yc - crease, 0))
+    return quantise_8bit(LightField(np.clip(views, 0, 1), spacing=1.0)), gt.astype(np.float32)
+
+
 def quantise_8bit(lf):
     """The light field's views as 8-bit gamma-2.2 codes, decoded back to
     linear radiance (what a PNG light field holds)."""
@@ -250,6 +330,8 @@ def _depth_case(kind: str, seed: int, quick: bool):
             lf, gt = dark_background_scene(seed, size)
         elif base == "S":
             lf, gt = slanted_floor_scene(seed, size)
+        elif base == "F":
+            lf, gt = dim_floor_scene(seed, size)
         else:
             s = render("lightfield-array", size=size, grid="5x5", seed=seed, thin_lens=False,
                        **DEPTH_SCENES[base])
@@ -263,6 +345,8 @@ def _depth_case(kind: str, seed: int, quick: bool):
                 + ("bright planes 1.6, 0.9 before a dark one at 0.2 px/view" if base == "K"
                    else "a shaded ellipse at 1.6 px/view before a dark wall and slanted floor "
                         "(0.3..1.0), 3x3 supersampled" if base == "S"
+                   else "kind S dimmer, texture-less patches, light fall-off, sensor noise, "
+                        "8-bit" if base == "F"
                    else f"planes {DEPTH_SCENES[base]}")
                 + (", 8-bit gamma codes" if quantised else "")
                 + (" (tuning set)" if seed == 0 else ""))
@@ -884,7 +968,7 @@ def _depth_checks(res: Results) -> list[Check]:
                                 ("q", 1.0, "8-bit quantised views, BadPix(0.07) <= the "
                                            "baseline's (no issue target: tracks a weakness)")):
         ratios = []
-        for k in DEPTH_SCENES:
+        for k in ISSUE_KINDS:
             for s in (1, 2):
                 try:
                     n = res.get(f"depth {k}{suffix} seed {s}", "depth wang2015 (ours)")
@@ -907,9 +991,11 @@ def stage(*, quick: bool = False) -> Stage:
              _novel_case(quick), _hci_case(), _parity_case(quick), _sweep_case(quick),
              *(() if quick else (_sweep_issue_case(),)),
              *(_depth_case(k + q, seed, quick) for q in ("", "q") for k in DEPTH_SCENES
+               if not (q and k == "F")
                for seed in (0, 1, 2)))
     # HCI antinous: both methods in one row, interleaved (speed target)
     depth_cases = tuple(f"depth {k}{q} seed {s}" for q in ("", "q") for k in DEPTH_SCENES
+                        if not (q and k == "F")
                         for s in (0, 1, 2))
     arr = ("array",)
     methods = (

@@ -66,6 +66,10 @@ Method (``wang2015`` in :data:`lightfield.methods.DEPTH_METHODS`):
    far). The cost is the unfiltered one of step 2 (the guided filter
    fattens by its radius itself); three rounds, since a flipped pixel can
    expose the next; ``2 x HALO_PASSES`` more passes over the views.
+7b. **Specks** (:func:`despeckle`): a pixel farther than ``HALO_JUMP``
+   from the median of its ``SPECKLE`` x ``SPECKLE`` window takes the
+   median (flat cost curves on dark, weakly textured, quantised surfaces
+   leave isolated gross errors; step 7 passes a far speck on).
 8. **Mixed edge pixels** (:func:`soften`, ``soft_edges=True``): a pixel on
    a depth edge takes a disparity between the two sides' by its colour's
    position between their mean colours (the least-squares answer for a
@@ -117,6 +121,7 @@ SOFT_RADIUS = 4     # window (px) of the side colours for mixed edge pixels (ste
 SOFT_SNAP = 0.3     # mixing fractions within this of 0 or 1 snap to the side
 SOFT_TOL = 0.3      # disparity tolerance (px/view) of the two sides' colour classes
 SOFT_CONTRAST = 0.03  # least colour difference (L2, gamma-encoded) of the two sides
+SPECKLE = 5         # window (px) of the isolated-outlier check (step 7b); 0: none
 DEADZONE = 0.5      # dead zone of the colour difference, in quantisation steps of the input
 
 
@@ -508,6 +513,29 @@ def unfatten(disp: np.ndarray, guide: np.ndarray, cost, *, trusted: np.ndarray |
     return np.where(flip, far, disp).astype(np.float32)
 
 
+def despeckle(disp: np.ndarray, *, size: int = SPECKLE, jump: float = HALO_JUMP) -> np.ndarray:
+    """Step 7b: a pixel farther than ``jump`` (px/view, the depth-edge step
+    of steps 6b-8) from the median of its ``size`` x ``size`` window (3 or 5)
+    takes that median. Such a pixel is a speck: a surface holds no
+    structure smaller than half the window, and a median is unbiased on a
+    plane (any slant) and keeps a straight or convex depth edge. The specks
+    come from flat cost curves (dark, weakly textured, quantised surfaces)
+    that steps 6-7 leave alone or make (step 7 passes a far speck on to its
+    neighbours). ``disp`` (H, W); returns (H, W) float32.
+
+    >>> d = np.add.outer(0.05 * np.arange(12), np.zeros(12)).astype(np.float32)
+    >>> d[6, 6] = -1.0; d[:, 9:] = 2.5                  # a speck; a depth edge
+    >>> out = despeckle(d)
+    >>> round(float(out[6, 6]), 2), float(out[6, 9]), bool((out[:, :6] == d[:, :6]).all())
+    (0.3, 2.5, True)
+    """
+    import cv2
+
+    disp = np.ascontiguousarray(disp, np.float32)
+    med = cv2.medianBlur(disp, size)       # float input: 3 or 5 only
+    return np.where(np.abs(disp - med) > jump, med, disp).astype(np.float32)
+
+
 def soften(disp: np.ndarray, guide: np.ndarray, *, radius: int = SOFT_RADIUS,
            jump: float = HALO_JUMP, tol: float = SOFT_TOL, snap: float = SOFT_SNAP,
            min_contrast: float = SOFT_CONTRAST) -> np.ndarray:
@@ -643,6 +671,8 @@ def estimate_disparity(lf: LightField, slopes, *, views=None, occlusion: bool = 
         raw = lambda d: slice_cost(d, filtered=False)  # noqa: E731
         for _ in range(HALO_PASSES):
             disp = unfatten(disp, guide, raw, trusted=trusted, radius=halo_radius)
+    if SPECKLE > 0:
+        disp = despeckle(disp, size=SPECKLE)
     if soft_edges and SOFT_RADIUS > 0:
         disp = soften(disp, guide)
     return DisparityEstimate(np.ascontiguousarray(disp, np.float32), conf, slopes)

@@ -75,7 +75,7 @@ def test_cli_writes_disparity_and_confidence_and_keeps_the_old_method(tmp_path):
 def test_hci_antinous_beats_the_baseline():
     """Real-data check (held out: nothing was tuned on it). Centre 160x160 crop
     to keep the test short; the issue's targets on the whole view are in the
-    bench (BadPix 0.07 <= 20 % met, MSE x 100 <= 5 not yet:
+    bench (BadPix 0.07 <= 20 % and MSE x 100 <= 5, both met since round 6:
     docs/decisions/lightfield-depth.md), so here only the comparison with the
     baseline on the same input is asserted."""
     from lumigraph.capture.io import read_image, read_pfm
@@ -179,3 +179,56 @@ def test_slanted_floor_scene_beats_the_baseline():
     old = refocus.estimate_disparity(lf, SLOPES).disparity
     bad = lambda d: float((np.abs(d - gt) > 0.07)[15:-15, 15:-15].mean())  # noqa: E731
     assert bad(new) <= 0.5 * bad(old)
+
+
+def test_despeckle_replaces_isolated_errors_and_keeps_slopes_and_edges():
+    # step 7b: on a slanted plane (antinous's floor slope) with a straight
+    # depth edge, isolated gross errors (1 and 2 px) go back onto the plane
+    # and nothing else moves. The bound is the plane's own: with n of the 25
+    # window values wrong (a k x k speck: n = k^2), the median lies within n
+    # ranks of the clean window's median, i.e. within the spread of its
+    # middle 2n + 1 values, widened by the noise's full range (0.2).
+    y, x = np.mgrid[0:40, 0:60]
+    plane = (0.2 + 0.055 * y - 0.01 * x).astype(np.float32)
+    truth = np.where(x >= 40, np.float32(2.5), plane)
+    noise = np.random.default_rng(3).uniform(-0.1, 0.1, truth.shape).astype(np.float32)
+    d = truth + noise                                  # small errors: below the edge step
+    specks = [(10, 10, 1), (20, 20, 2), (30, 12, 1)]   # (row, column, size)
+    for r, c, k in specks:
+        d[r:r + k, c:c + k] = -2.0 if k == 1 else 2.4
+    out = wang2015.despeckle(d)
+    clean = np.sort((0.055 * np.arange(-2, 3)[:, None] - 0.01 * np.arange(-2, 3)).ravel())
+    for r, c, k in specks:
+        spread = clean[12 + k * k] - clean[12 - k * k] + 0.2     # + the noise's full range
+        assert np.abs(out[r:r + k, c:c + k] - plane[r:r + k, c:c + k]).max() <= spread
+    speck = np.zeros(d.shape, bool)
+    for r, c, k in specks:
+        speck[r:r + k, c:c + k] = True
+    # everything else within the noise: the slope, the edge, the small errors
+    assert np.array_equal(out[~speck], d[~speck])
+
+
+def test_despeckle_removes_gross_floor_errors_of_the_dim_floor_scene(monkeypatch):
+    from lumigraph.lightfield.bench import dim_floor_scene
+
+    # the bench's kind F (dim, partly texture-less 8-bit floor with sensor
+    # noise: flat cost curves leave isolated gross errors); seed 7 is neither
+    # a tuning nor a reported seed. Gross = off by more than the depth-edge
+    # step (0.3 px/view) away from the silhouette, on the floor and wall
+    lf, gt = dim_floor_scene(7, size=(96, 72))
+    with_7b = wang2015.estimate_disparity(lf, SLOPES).disparity
+    monkeypatch.setattr(wang2015, "SPECKLE", 0)
+    without = wang2015.estimate_disparity(lf, SLOPES).disparity
+    import cv2
+    edge = (cv2.dilate(gt, np.ones((5, 5))) - cv2.erode(gt, np.ones((5, 5)))) > 0.3
+    region = ~edge
+    region[:15], region[-15:], region[:, :15], region[:, -15:] = False, False, False, False
+
+    def gross(d):
+        return int((np.abs(d - gt)[region] > 0.3).sum())
+
+    def mse(d):
+        return float(((d - gt)[15:-15, 15:-15] ** 2).mean())
+
+    assert gross(with_7b) < gross(without)
+    assert mse(with_7b) < mse(without)
