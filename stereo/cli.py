@@ -695,9 +695,11 @@ def build_parser(prog: str = "lumigraph stereo"):
     v.add_argument("--channels", choices=("luma", "color"), default="luma",
                    help="compare luma (default) or the sum over R, G, B (slower; helps "
                         "colourful scenes of equal-luma hues)")
-    v.add_argument("--prefilter", choices=("none", "local-mean"), default="none",
-                   help="local-mean: match each image minus its 9x9 mean, clipped (StereoBM's "
-                        "normalised response); cancels a gain/offset between the views")
+    v.add_argument("--prefilter", choices=("none", "local-mean"), default="local-mean",
+                   help="ssd: local-mean (default) matches each image minus its 9x9 mean, the "
+                        "right one's contrast matched to the left's, clipped (StereoBM's "
+                        "normalised response): cancels a gain/offset between the views; none "
+                        "matches the raw luma (better only for views of one exposure)")
     v.add_argument("--out", required=True, type=output_file_or_dir(".pfm"),
                    help="disparity .pfm (unknown stored as inf); for a batch a folder, which gets "
                         "NAME.pfm per pair and index.json")

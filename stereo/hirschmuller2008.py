@@ -430,7 +430,10 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
         Aggregation directions.
     uniqueness : float
         The runner-up outside ``d ± 1`` must cost at least ``(1 + uniqueness)``
-        times the best (0 disables).
+        times the best (0 disables). With ``subpixel``, ``d ± 2`` on the side
+        where the parabola puts the minimum is left out too: the far wall of
+        the minimum's own valley, 1.5 px from it at most, is not a second
+        match (docs/decisions/stereo-sgm.md).
     lr_tolerance : int
         Largest left–right disagreement in pixels (−1 disables).
     speckle_size, speckle_range : int, float
@@ -507,7 +510,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, cost: str = DEF
     del C
     t3 = time.perf_counter()
     disp, counts = _decide(win, D=D, uniqueness=uniqueness, lr_tolerance=lr_tolerance,
-                           subpixel=subpixel, lr_check=lr_check, kernel=kernel)
+                           subpixel=subpixel, lr_check=lr_check, kernel=kernel, S=S)
     sigma = None
     if texture_snr > 0:
         from lumigraph.stereo.luma import noise_sigma_smooth_blocks
@@ -588,8 +591,39 @@ def claims(best: np.ndarray, sb: np.ndarray, ok: np.ndarray, *, kernel=None) -> 
     return np.where(d == big, -1, d).reshape(h, w).astype(np.int16)
 
 
-def _decide(win, *, D, uniqueness, lr_tolerance, subpixel, lr_check="winners", kernel=None):
-    """Disparity (float32, NaN unknown) from the winners, and how many pixels each test rejected."""
+def _one_valley(S, best, sm, sp, sb, cand, uniqueness):
+    """Of the pixels ``cand`` (bool (H, W)), whose runner-up outside
+    ``best ± 1`` costs less than ``(1 + uniqueness)`` times the best, those
+    whose runner-up clears that margin once the valley holding the sub-pixel
+    minimum is left out on its side too: ``best − 1 .. best + 2`` when the
+    parabola puts the minimum between ``best`` and ``best + 1`` (``sp < sm``),
+    ``best − 2 .. best + 1`` when between ``best − 1`` and ``best``. Such a
+    runner-up lies 1.5 px or less from the minimum: the far wall of one broad
+    valley, not a second match. ``S`` (H, W, D) the aggregated costs, the
+    others (H, W) as in :func:`winners` (float64)."""
+    ys, xs = np.nonzero(cand)
+    if not ys.size:
+        return np.zeros(cand.shape, bool)
+    b = best[ys, xs]
+    m, p = sm[ys, xs], sp[ys, xs]
+    fit = (m >= 0) & (p >= 0) & (m + p - 2 * sb[ys, xs] > 0)
+    side = np.where(fit, np.sign(m - p), 0).astype(np.int64)  # +1: the minimum lies towards best + 1
+    ds = np.arange(S.shape[2])[None, :]
+    lo = np.minimum(b - 1, b + 2 * side)[:, None]
+    hi = np.maximum(b + 1, b + 2 * side)[:, None]
+    far = ((ds < lo) | (ds > hi)) & (ds <= xs[:, None])
+    second = np.where(far, S[ys, xs].astype(np.int64), np.iinfo(np.int64).max).min(1)
+    out = np.zeros(cand.shape, bool)
+    out[ys, xs] = second >= sb[ys, xs] * (1.0 + uniqueness)
+    return out
+
+
+def _decide(win, *, D, uniqueness, lr_tolerance, subpixel, lr_check="winners", kernel=None,
+            S=None):
+    """Disparity (float32, NaN unknown) from the winners, and how many pixels
+    each test rejected. With ``S`` (the aggregated costs) and ``subpixel``,
+    the uniqueness test leaves out the valley of the sub-pixel minimum
+    (:func:`_one_valley`)."""
     best = win["best"].astype(np.int64)
     h, w = best.shape
     xs = np.arange(w)[None, :]
@@ -601,6 +635,8 @@ def _decide(win, *, D, uniqueness, lr_tolerance, subpixel, lr_check="winners", k
     if uniqueness > 0:
         second = win["second"].astype(np.float64)
         bad = ok & (second < sb * (1.0 + uniqueness))
+        if S is not None and subpixel:
+            bad &= ~_one_valley(S, best, sm, sp, sb, bad, uniqueness)
         counts["not_unique"] = int(bad.sum())
         ok &= ~bad
     d = best.astype(np.float64)

@@ -131,3 +131,24 @@ def test_option_checks_name_the_argument():
     a = np.zeros((20, 30), np.uint8)
     with pytest.raises(InputError, match="^right: size 29x20 differs"):
         sgm.match(a, a[:, :29], max_disp=4)
+
+
+@pytest.mark.parametrize("row, kept", [
+    ([9000, 9000, 2000, 1000, 1200, 1002, 9000, 9000], True),   # minimum towards 4; 5 is its valley's far wall
+    ([9000, 1002, 1200, 1000, 2000, 9000, 9000, 9000], True),   # the mirror image: minimum towards 3
+    ([9000, 9000, 2000, 1000, 1200, 9000, 1002, 9000], False),  # a second minimum 3 px away
+    ([9000, 9000, 1200, 1000, 2000, 1002, 9000, 9000], False),  # near-tie on the side away from the minimum
+])
+def test_uniqueness_leaves_out_the_valley_of_the_subpixel_minimum(row, kept):
+    # best d = 4 (cost 1000); the runner-up within 0.5 % of it is refused by the
+    # plain test unless it is the far wall of the valley the parabola puts the
+    # minimum in (1.5 px from it at most)
+    S = np.full((1, 8, 8), 9000, np.uint16)
+    S[0, 7] = np.roll(row, 1)  # pixel x = 7 sees every d; the minimum moves to d = 4
+    win = sgm.winners(S, right=False)
+    assert win["best"][0, 7] == 4
+    kw = dict(D=8, uniqueness=0.005, lr_tolerance=-1, subpixel=True)
+    plain, _ = sgm._decide(win, **kw)
+    valley, _ = sgm._decide(win, **kw, S=S)
+    assert np.isnan(plain[0, 7])
+    assert np.isfinite(valley[0, 7]) == kept

@@ -237,7 +237,7 @@ def test_match_channels_and_prefilter_flags(pairs, tmp_path):
     # the options reach the matcher and its record; both still match the pair
     folder, s = pairs["rectified"]
     gt = s.gt_arrays["disparity"]
-    for flags, channels, prefilter in ((["--channels", "color"], "rgb", "none"),
+    for flags, channels, prefilter in ((["--channels", "color", "--prefilter", "none"], "rgb", "none"),
                                        (["--prefilter", "local-mean"], "luma", "local-mean")):
         d = tmp_path / f"{channels}-{prefilter}.pfm"
         r = lumigraph("stereo", "match", folder / "left.png", folder / "right.png", "--max-disp", "40",
