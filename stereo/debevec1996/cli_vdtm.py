@@ -25,10 +25,11 @@ a .npy. It is what 'lumigraph stereo model-based --model' takes.
 RENDER_EPILOG = """\
 Renders the model from --view, each pixel textured from the photographs that see its surface
 point (visibility by each photograph's depth of the model, --tolerance), weighted by
-(angle between the new and the photograph's viewing rays)^-power (--method blend; Debevec,
-Taylor & Malik 1996), or from at most three photographs per polygon chosen and weighted by
-its view map (--method view-map; Debevec, Yu & Borshukov 1998, faster). Model pixels no
-photograph sees are filled from their neighbours; pixels off the model are 0.
+(angle between the new and the photograph's viewing rays)^-power over the --neighbours
+nearest, tapered to 0 at the next (--method blend; Debevec, Taylor & Malik 1996; the taper of
+Buehler et al. 2001), or the same weights among at most three photographs per polygon, the
+three the blend weights most over it (--method view-map; Debevec, Yu & Borshukov 1998).
+Model pixels no photograph sees are filled from their neighbours; pixels off the model are 0.
 --photos names a folder with stack.json; each photograph's pose comes from --cameras DIR
 (<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
 "cameras". 8-bit/16-bit photographs give a PNG or EXR of code values; EXR photographs
@@ -77,7 +78,11 @@ def add_verbs(fs) -> None:
                    help="visibility: relative depth difference still on the same surface "
                         "(default 0.01)")
     v.add_argument("--power", type=number(float, lo=0, lo_open=True, hi=64), default=None,
-                   help="weights fall as angle^-power (default: the library's)")
+                   help="weights fall as angle^-power (default: the library's, 1 = the paper's)")
+    v.add_argument("--neighbours", type=number(int, lo=0, hi=64), default=None,
+                   help="only the N nearest photographs by angle blend, each weight tapered to 0 "
+                        "at the next nearest (default: the library's, 2); 0 = every photograph "
+                        "that sees the point")
     v.add_argument("--out", required=True, type=output_file(".png", ".exr"),
                    help="the rendered view (.png, or .exr to keep linear values)")
     v.set_defaults(func=_render)
@@ -179,6 +184,7 @@ def _render(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_exr, write_image
     from lumigraph.stereo.debevec1996.vdtm import (
+        DEFAULT_NEIGHBOURS,
         DEFAULT_POWER,
         load_model_mesh,
         load_posed_camera,
@@ -193,9 +199,10 @@ def _render(args) -> int:
         raise InputError(out, "the photographs are linear radiance (float): write .exr to keep "
                               "them linear")
     power = DEFAULT_POWER if args.power is None else args.power
+    neighbours = DEFAULT_NEIGHBOURS if args.neighbours is None else args.neighbours
     t0 = time.perf_counter()
     res = render_vdtm(mesh, photos, cam.K, R, t, cam.image_size, method=args.method,
-                      tolerance=args.tolerance, power=power)
+                      tolerance=args.tolerance, power=power, neighbours=neighbours)
     dt = time.perf_counter() - t0
     img = res.image
     if img.shape[2] == 1:
@@ -207,7 +214,8 @@ def _render(args) -> int:
         warn(warnings[-1])
     meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", args.view],
                      warnings=warnings,
-                     params={"method": args.method, "tolerance": args.tolerance, "power": power},
+                     params={"method": args.method, "tolerance": args.tolerance, "power": power,
+                             "neighbours": neighbours},
                      quality={"model_fraction": float(res.model.mean()),
                               "hole_fraction": res.info["hole_fraction"],
                               "photographs_per_pixel": res.info["photographs_per_pixel"]},

@@ -95,7 +95,9 @@ def test_linear_photographs_stay_linear(folder, tmp_path):
     names = []
     for name, img in zip(s.image_names, s.images, strict=True):
         exr = name.replace(".png", ".exr")
-        io.write_exr(lin / exr, (img / 200.0).astype(np.float32))  # radiance = code / 200
+        # radiance = 4 x code: far above 1 and above 255, so a tone curve or an
+        # 8-bit clip on the way would show
+        io.write_exr(lin / exr, (img * 4.0).astype(np.float32))
         names.append(exr)
     io.write_stack_json(lin, names, blocks="blocks.json", edges="edges.json")
     for n in s.image_names:  # the cameras are found by the photographs' stems
@@ -108,8 +110,10 @@ def test_linear_photographs_stay_linear(folder, tmp_path):
     assert r.returncode == 0, r.stderr
     v = io.read_exr(tmp_path / "view.exr")
     codes = io.read_image(tmp_path / "codes.png").astype(np.float64)
-    # the same blend of radiance as of codes, up to the PNG's rounding (half a code)
-    assert np.abs(v * 200.0 - codes).max() <= 0.5 + 1e-3
+    # the same blend of radiance as of codes, up to the PNG's rounding (half a code):
+    # linear (no tone curve) and not clipped (the bright pixels are above 255)
+    assert np.abs(v / 4.0 - codes).max() <= 0.5 + 1e-3
+    assert v.max() > 255.0 and v.max() == pytest.approx(4.0 * codes.max(), abs=4 * 0.5 + 1e-3)
     # radiance into an 8-bit PNG would not be linear: refused
     r = lumigraph(*args, "--out", tmp_path / "view.png")
     assert_clean_error(r, "view.png", ".exr")
