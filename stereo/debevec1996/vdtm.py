@@ -16,23 +16,30 @@ non-zero weight) of its depth map lie on ``X``'s surface (``|z_tap − z_i(X)| �
 so a sample never mixes an occluder's or the background's colour in). The
 colour is the weighted mean of the visible photographs' bilinear samples,
 
-    c(X) = Σ_i w_i c_i(X) / Σ_i w_i,      w_i = (θ_i + ε)^(−power)
+    c(X) = Σ_i w_i c_i(X) / Σ_i w_i,
+    w_i = (θ_i + ε)^(−power) · max(0, 1 − θ_i / θ_(k+1))  for the k nearest
 
 with ``θ_i`` the angle at ``X`` between the new viewing ray ``X − C`` and
 photograph ``i``'s ray ``X − C_i`` (Fig. 5.11's ``b_1, b_2``; the paper's
 weights are "inversely proportional to the angles", ``power = 1``;
 ``ε = 10⁻⁹`` rad keeps the new view equal to a photograph a copy of it).
+Only the ``k = neighbours`` nearest visible photographs take part, each
+tapered to 0 at the next nearest angle ``θ_(k+1)`` (C. Buehler et al.,
+"Unstructured Lumigraph Rendering", SIGGRAPH 2001,
+doi:10.1145/383259.383309), so no seam appears where the nearest change;
+``neighbours = 0`` blends every photograph that sees ``X``.
 
-``method="view-map"`` (1998). Per polygon (mesh triangle), the directions
-from its centroid to the photographs that see it are projected
-orthographically onto the polygon's plane and triangulated (Delaunay): the
-*view map*. The new view's direction is located in it; the three corners of
-its triangle, with their barycentric weights, are the polygon's photographs
-(outside the map's hull, the three nearest by angle, weighted as the blend).
-So each pixel samples at most three photographs, with weights constant over
-its polygon; the per-pixel visibility test stays (a photograph hidden at a
-pixel drops out and the others are renormalised; a pixel none of the three
-sees is blended from every photograph, as ``"blend"``).
+``method="view-map"`` (1998). Each polygon (mesh triangle) is textured
+from at most three photographs, chosen once per polygon and view: the
+three the blend gives the most weight over points spread on the polygon
+(:meth:`ViewMaps.choose`; the points' visibility is computed once per model
+by :func:`prepare_view_maps`, with the 1998 paper's per-polygon map of the
+photographs' directions, :meth:`ViewMaps.lookup`). A pixel blends its
+polygon's three with the blend's weights among them, so the view map is the
+blend wherever they hold the pixel's nearest; the visibility test stays per
+pixel (only a bilinear-cell look-up for a polygon the photograph sees
+whole), and a pixel fewer of the three see than the blend would take is
+blended from every photograph when others see part of its polygon.
 
 Pixels of the model no photograph sees are *holes*, filled from their
 neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
