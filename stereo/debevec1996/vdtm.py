@@ -454,36 +454,40 @@ def _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels):
     """Each pixel blended from its polygon's (at most) three photographs
     ``ids[face]``, with the blend's weights (:func:`_weights`) among them."""
     n, P = len(X), len(photos)
-    theta = np.empty((3, n))
-    samples = np.empty((3, n, channels), np.float32)
-    ray = _unit(X - C)
-    ids3 = ids[face]
-    for k in range(3):
-        pk = ids3[:, k]
-        # the pixels grouped by their slot-k photograph (small ids: a radix sort);
-        # worked on in that order (slices, no gathers), put back once
-        order = np.argsort(pk.astype(np.int16), kind="stable")
-        starts = np.concatenate([[0], np.cumsum(np.bincount(pk + 1, minlength=P + 1))])
-        Xk, rayk, facek = X[order], ray[order], face[order]
-        th = np.full(n, np.inf)
-        sk = np.zeros((n, channels), np.float32)
-        for j in range(P):
-            a, b = starts[j + 1], starts[j + 2]
-            if a == b:
+    # the pixels grouped by their polygon's three photographs (one radix sort of
+    # small keys): each group's slot is one photograph, worked on as a slice
+    key = ((ids[:, 0] + 1) * (P + 1) + ids[:, 1] + 1) * (P + 1) + ids[:, 2] + 1
+    uniq, inv = np.unique(key, return_inverse=True)
+    pix_group = inv[face]
+    order = np.argsort(pix_group.astype(np.int16 if len(uniq) < 2 ** 15 else np.int64),
+                       kind="stable")
+    starts = np.concatenate([[0], np.cumsum(np.bincount(pix_group, minlength=len(uniq)))])
+    Xs, fs = X[order], face[order]
+    rays = _unit(Xs - C)
+    theta = np.full((3, n), np.inf)
+    samples = np.zeros((3, n, channels), np.float32)
+    for g, kv in enumerate(uniq):
+        a, b = starts[g], starts[g + 1]
+        if a == b:
+            continue
+        trio = (kv // (P + 1) ** 2 - 1, kv // (P + 1) % (P + 1) - 1, kv % (P + 1) - 1)
+        for k, j in enumerate(trio):
+            if j < 0:
                 continue
             p = photos[j]
             # a polygon the photograph sees whole needs no per-pixel depth test (the
             # 1998 paper's polygons are split at visibility edges beforehand), only
             # a look-up that the bilinear cell does not straddle its outline
-            sk[a:b], ok = _sample(p, Xk[a:b], tolerance, whole=p.whole[facek[a:b]])
-            th[a:b] = np.where(ok, _angle_to(rayk[a:b], Xk[a:b], p.centre), np.inf)
-        theta[k, order] = th
-        samples[k, order] = sk
+            samples[k, a:b], ok = _sample(p, Xs[a:b], tolerance, whole=p.whole[fs[a:b]])
+            theta[k, a:b] = np.where(ok, _angle_to(rays[a:b], Xs[a:b], p.centre), np.inf)
     W = _weights(theta, power, neighbours)
-    acc = W[0][:, None] * samples[0]
-    acc += W[1][:, None] * samples[1]
-    acc += W[2][:, None] * samples[2]
-    return acc, W.sum(0), (W > 0).sum(0)
+    acc_s = W[0][:, None] * samples[0]
+    acc_s += W[1][:, None] * samples[1]
+    acc_s += W[2][:, None] * samples[2]
+    acc, wsum, cnt = np.empty_like(acc_s), np.empty(n), np.empty(n, np.int64)
+    acc[order], wsum[order], cnt[order] = acc_s, W.sum(0), (W > 0).sum(0)
+    return acc, wsum, cnt
+
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
