@@ -12,8 +12,11 @@ Eurographics Rendering Workshop 1998, doi:10.1007/978-3-7091-6453-2_10
 ``method="blend"`` (1996). The new camera's z-buffer of the model gives the
 surface point ``X`` of each pixel. Photograph ``i`` (centre ``C_i``) sees
 ``X`` when ``X`` projects inside its frame and the bilinear taps (of
-non-zero weight) of its depth map lie on ``X``'s surface (``|z_tap − z_i(X)| ≤ tolerance · z_i(X)``,
-so a sample never mixes an occluder's or the background's colour in). The
+non-zero weight) of its depth map lie on ``X``'s surface: they lie on one
+continuous surface (their depths within ``2 · tolerance`` relative of each
+other: a slanted surface's depth changes across a pixel) and ``z_i(X)`` is
+within ``tolerance · z_i(X)`` of their range. So a sample never mixes an
+occluder's or the background's colour in. The
 colour is the weighted mean of the visible photographs' bilinear samples,
 
     c(X) = Σ_i w_i c_i(X) / Σ_i w_i,
@@ -170,16 +173,19 @@ def prepare_photographs(mesh, photographs, *, tolerance: float = 0.01) -> tuple[
         r = rasterize(v, f, p.K, p.R, p.t, (w, h))
         counts = np.bincount(r.face[r.hit].ravel(), minlength=len(f))
         out.append(replace(p, depth=r.depth, face_pixels=counts,
-                           whole=(counts > 0) & (counts == r.covered), cells=_cells(r.depth, tolerance)))
+                           whole=(counts > 0) & (counts == r.covered),
+                           # one continuous surface: as _sample's tap test
+                           cells=_cells(r.depth, 2 * tolerance)))
     return tuple(out)
 
 
 def _sample(photo, X, tolerance, whole=None):
     """Bilinear samples ``(N, C)`` float32 of ``photo`` at the world points
-    ``X (N, 3)``, whether each is seen cleanly and its camera ``z``. Seen
-    cleanly: every bilinear tap of non-zero weight lies on the point's
-    surface; where ``whole (N,)`` is true the caller knows the point's polygon
-    is seen whole, and only the bilinear cell's continuity is looked up."""
+    ``X (N, 3)`` and whether each is seen cleanly: the bilinear taps of
+    non-zero weight lie on one continuous surface and the point on it (the
+    module docstring); where ``whole (N,)`` is true the caller knows the
+    point's polygon is seen whole, and only the cell's continuity is looked
+    up."""
     import cv2
 
     img = photo.image
@@ -226,11 +232,16 @@ def _sample(photo, X, tolerance, whole=None):
         dx = (pxs[full, 0] - fx0 > 1e-9) & (fx0 < w - 1)  # the right tap has weight
         dy = (pxs[full, 1] - fy0 > 1e-9) & (fy0 < h - 1)
         at = fy0 * w + fx0
+        taps = (depth[at], depth[at + dx], depth[at + w * dy], depth[at + dx + w * dy])
+        lo = np.minimum(np.minimum(taps[0], taps[1]), np.minimum(taps[2], taps[3]))
+        hi = np.maximum(np.maximum(taps[0], taps[1]), np.maximum(taps[2], taps[3]))
         tol = tolerance * np.abs(zf)
-        good = ok[full] & (np.abs(depth[at] - zf) <= tol)
-        good &= np.abs(depth[at + dx] - zf) <= tol
-        good &= np.abs(depth[at + w * dy] - zf) <= tol
-        good &= np.abs(depth[at + dx + w * dy] - zf) <= tol
+        # the taps lie on one continuous surface (as _cells: a slanted one's depth
+        # changes across the cell, by more than tolerance at a coarse resolution)
+        # and the point on it: within tolerance of the taps' depth range
+        with np.errstate(invalid="ignore"):
+            good = (ok[full] & (hi - lo <= 2 * tolerance * lo)
+                    & (zf >= lo - tol) & (zf <= hi + tol))
         ok[full] = good
     # the sample positions as a map of rows of 1024 (remap wants fewer than 2^15 rows)
     n = len(X)
@@ -401,7 +412,9 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
     bc = np.stack([g[:, 0], g[:, 1], 1 - g.sum(1)], 1)
     grid = np.einsum("gk,mkc->mgc", bc, tri)
     grid = cen[:, None] + 0.98 * (grid - cen[:, None])  # off the outline
-    grid_seen = np.stack([_sample(p, grid.reshape(-1, 3), tolerance)[1].reshape(len(f), -1)
+    # seen: the nearest pixel's depth agrees (looser than the bilinear taps: a
+    # point near the polygon's outline at a coarse resolution still counts)
+    grid_seen = np.stack([_seen_nearest(p, grid.reshape(-1, 3), tolerance).reshape(len(f), -1)
                           for p in photos])  # (N, M, G)
     sees = np.stack([p.face_pixels > 0 for p in photos], 1) | grid_seen.any(2).T  # (M, N)
     # the centroid joins the grid, counted as seen by every photograph that sees
@@ -427,6 +440,21 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
         good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
     return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
                     tuple(good), grid, grid_seen)
+
+
+def _seen_nearest(photo, X, tolerance):
+    """(N,) bool: ``photo`` sees the points ``X`` at their nearest pixel (its
+    depth within ``tolerance`` relative of theirs)."""
+    q = X @ (np.asarray(photo.K, np.float64) @ np.asarray(photo.R, np.float64)).T
+    q += np.asarray(photo.K, np.float64) @ np.asarray(photo.t, np.float64)
+    h, w = photo.depth.shape
+    z = q[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = np.rint(q[:, :2] / z[:, None])
+    ok = (z > 0) & (px[:, 0] >= 0) & (px[:, 0] <= w - 1) & (px[:, 1] >= 0) & (px[:, 1] <= h - 1)
+    xi = np.where(ok, px[:, 0], 0).astype(np.intp)
+    yi = np.where(ok, px[:, 1], 0).astype(np.intp)
+    return ok & (np.abs(photo.depth[yi, xi] - z) <= tolerance * np.abs(z))
 
 
 def _not_sliver(tri, min_deg=SLIVER_DEG):
