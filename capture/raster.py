@@ -52,9 +52,10 @@ class Raster:
         no triangle is hit.
     face : ndarray, (H, W) int32
         Index of the triangle seen; ``-1`` where none.
-    bary : ndarray, (H, W, 3) float64
+    bary : ndarray, (H, W, 3) float64, or None
         Perspective-correct barycentrics of the hit in its triangle (sum 1);
-        0 where none.
+        0 where none (``None`` when :func:`rasterize` was asked not to keep
+        them).
     covered : ndarray, (M,) int64
         Pixel centres inside each triangle's projection (in the frame), before
         the depth test: a triangle is wholly visible (in the frame) when as
@@ -74,6 +75,8 @@ class Raster:
     def points(self, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         """``(H, W, 3)`` world points of the hits (NaN where none), from the
         barycentrics: exact for the mesh's own vertices."""
+        if self.bary is None:  # a caller's slip, not bad input
+            raise ValueError("this Raster kept no barycentrics (rasterize(..., bary=False))")
         f = np.maximum(self.face, 0)
         tri = np.asarray(vertices, np.float64)[np.asarray(faces)[f]]  # (H, W, 3, 3)
         p = np.einsum("hwk,hwkc->hwc", self.bary, tri)
