@@ -47,6 +47,10 @@ def add_verbs(fs) -> None:
                    help="camera.json with cam_from_world (the pose)")
     v.add_argument("--out", required=True, type=output_file(".pfm", ".npy"),
                    help="depth .pfm (inf = no model) or .npy (NaN = no model)")
+    v.add_argument("--std-out", type=output_file(".pfm", ".npy"),
+                   help="also the depth's standard deviation from the fitted parameters' "
+                        "covariance (--model must be a solve's model.json): what 'stereo "
+                        "model-based --model-std' takes; inf where a model edge may cross the pixel")
     v.set_defaults(func=_depth)
 
     v = add_verb(fs, "pair", "the rig.json of two posed cameras (key = left, offset = right), "
@@ -91,15 +95,34 @@ def add_verbs(fs) -> None:
 def _depth(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_pfm
-    from lumigraph.stereo.debevec1996.raster import model_depth
-    from lumigraph.stereo.debevec1996.vdtm import load_model_mesh, load_posed_camera
+    from lumigraph.stereo.debevec1996.raster import model_depth, model_depth_sigma
+    from lumigraph.stereo.debevec1996.vdtm import (
+        load_fitted_model,
+        load_model_mesh,
+        load_posed_camera,
+    )
 
     mesh, _ = load_model_mesh(args.model)
     cam, R, t = load_posed_camera(args.camera)
+    fitted = load_fitted_model(args.model) if args.std_out else None
     t0 = time.perf_counter()
     z = model_depth(mesh, cam.K, R, t, cam.image_size, dist=cam.dist)
     dt = time.perf_counter() - t0
     out = Path(args.out)
+    if fitted is not None:
+        model, values, cov = fitted
+        sd = model_depth_sigma(model, values, cov, cam.K, R, t, cam.image_size, dist=cam.dist)
+        sout = Path(args.std_out)
+        smeta = make_meta("lumigraph.depth-std", inputs=[args.model, args.camera],
+                          extra={"what": "first-order standard deviation of the model's depth "
+                                         "from its parameters' covariance (the model's unit); "
+                                         "inf: a model edge may cross the pixel; no model = "
+                                         + ("inf" if sout.suffix.lower() == ".pfm" else "NaN")})
+        if sout.suffix.lower() == ".pfm":
+            write_artifact(sout, lambda tmp: write_pfm(tmp, np.where(np.isnan(sd), np.inf, sd)
+                                                       .astype(np.float32)), meta=smeta)
+        else:
+            write_artifact(sout, lambda tmp: np.save(tmp, sd, allow_pickle=False), meta=smeta)
     meta = make_meta("lumigraph.depth", inputs=[args.model, args.camera],
                      quality={"model_fraction": float(np.isfinite(z).mean())},
                      timings_s={"total": dt},

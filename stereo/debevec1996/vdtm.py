@@ -757,6 +757,45 @@ def load_model_mesh(path):
     return load_blocks(p).mesh(), None
 
 
+def load_fitted_model(path):
+    """A solve's ``model.json`` as ``(BlockModel with the fitted values,
+    {free name: value}, covariance (n, n) in that order)``: the covariance
+    from its ``"parameter_covariance"``, or the ``"std"`` of each parameter
+    squared on the diagonal (an older file). :class:`InputError` naming the
+    file when it is not a solve's model.json (a blocks.json has no σ)."""
+    from pathlib import Path
+
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    p = Path(path)
+    body = load_json_artifact(p, "model", schemas=None) if p.is_file() else None
+    if body is None or body.get("schema") != "lumigraph.facade.model":
+        raise InputError(p, "expected a solve's model.json (fitted values with their standard "
+                            "deviations); a blocks.json has no uncertainty")
+    blocks = p.parent / "blocks.json"
+    if not blocks.is_file():
+        raise InputError(p, f"a model.json needs its blocks.json beside it ({blocks} not found)")
+    mesh_model = load_blocks(blocks)
+    params = body.get("parameters")
+    names = list(mesh_model.parameter_names)
+    try:
+        values = {n: float(params[n]["value"]) for n in names}
+        std = np.array([float(params[n]["std"]) for n in names])
+    except (TypeError, KeyError, ValueError):
+        raise InputError(p, "key 'parameters': expected {name: {\"value\": v, \"std\": s}} for "
+                            f"every free parameter ({', '.join(names)})") from None
+    cov = np.diag(std ** 2)
+    pc = body.get("parameter_covariance")
+    if isinstance(pc, dict) and pc.get("names") == names:
+        m = np.asarray(pc.get("matrix"), dtype=float)
+        if m.shape != (len(names), len(names)) or not np.isfinite(m).all():
+            raise InputError(p, f"key 'parameter_covariance.matrix': expected a finite "
+                                f"{len(names)}x{len(names)} matrix")
+        cov = m
+    return mesh_model.with_values(values), values, cov
+
+
 def rig_between(key, offset):
     """The stereo rig of two posed cameras ``(Camera, R, t)`` (as
     :func:`load_posed_camera` returns them): left = ``key``, right =

@@ -54,6 +54,27 @@ def test_chain(folder, tmp_path):
     assert (ok & relief).sum() > 20
     # the pilasters stand out of the model: recovered to better than half their relief
     assert np.median(np.abs(z - truth)[ok & relief]) < PILASTER_M / 2
+    # the search following the model's σ: exact marks, so σ is round-off and the
+    # answer that of the plain search up to the pixels a model edge may cross
+    r = lumigraph("stereo", "facade", "depth", "--model", sol / "model.json", "--camera",
+                  sol / "cameras" / f"{key}.json", "--out", tmp_path / "model2.pfm",
+                  "--std-out", tmp_path / "std.pfm", "-q")
+    assert r.returncode == 0, r.stderr
+    sd = io.read_pfm(tmp_path / "std.pfm")
+    assert np.array_equal(io.read_pfm(tmp_path / "model2.pfm"), zm, equal_nan=True)
+    assert np.isfinite(sd[np.isfinite(zm)]).mean() > 0.9 and np.nanmax(sd[np.isfinite(sd)]) < 1e-3
+    r = lumigraph("stereo", "model-based", f / f"{key}.png", f / f"{off}.png", "--rig",
+                  tmp_path / "rig.json", "--model", tmp_path / "model.pfm", "--max-offset", "0.5",
+                  "--model-std", tmp_path / "std.pfm", "--out", tmp_path / "refined2.pfm", "-q")
+    assert r.returncode == 0, r.stderr
+    z2 = io.read_pfm(tmp_path / "refined2.pfm")
+    assert not (np.isfinite(z2) & ~np.isfinite(sd)).any()  # a model edge may cross: no answer
+    assert np.isfinite(z2).sum() > 0.9 * np.isfinite(z).sum()
+    # a blocks.json has no σ: refused, naming it
+    r = lumigraph("stereo", "facade", "depth", "--model", f / "blocks.json", "--camera",
+                  sol / "cameras" / f"{key}.json", "--out", tmp_path / "m3.pfm",
+                  "--std-out", tmp_path / "s3.pfm")
+    assert_clean_error(r, "blocks.json", "model.json")
     r = lumigraph("stereo", "facade", "render", "--model", sol / "model.json", "--photos", f,
                   "--view", f / "novel" / "view_0.json", "--out", tmp_path / "view.png", "-q")
     assert r.returncode == 0, r.stderr
