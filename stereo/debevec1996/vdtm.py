@@ -683,9 +683,13 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         # polygon, every photograph is asked
         more = np.array([len(js) for js in maps.photos]) > (ids >= 0).sum(1)
         again = np.flatnonzero((n < min(neighbours or 1, 3)) & more[face])
-        if len(again):
-            acc[again], wsum[again], n[again] = _blend(X[again], C, photos, tolerance, power,
-                                                       neighbours, channels)
+        # asked of the photographs that see some of the pixel's polygon (the others
+        # cannot see it), one polygon at a time
+        for m in np.unique(face[again]):
+            rows = again[face[again] == m]
+            js = maps.photos[m]
+            acc[rows], wsum[rows], n[rows] = _blend(X[rows], C, [photos[j] for j in js],
+                                                    tolerance, power, neighbours, channels)
     t2 = time.perf_counter()
     seen = wsum > 0
     out = np.full((h * w, channels), float(background), np.float32)
