@@ -684,10 +684,13 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         more = np.array([len(js) for js in maps.photos]) > (ids >= 0).sum(1)
         again = np.flatnonzero((n < min(neighbours or 1, 3)) & more[face])
         # asked of the photographs that see some of the pixel's polygon (the others
-        # cannot see it), one polygon at a time
+        # cannot see it): one call per set of such photographs (calls cost more
+        # than these few pixels)
+        sets: dict = {}
         for m in np.unique(face[again]):
-            rows = again[face[again] == m]
-            js = maps.photos[m]
+            sets.setdefault(tuple(maps.photos[m]), []).append(m)
+        for js, ms in sets.items():
+            rows = again[np.isin(face[again], ms)]
             acc[rows], wsum[rows], n[rows] = _blend(X[rows], C, [photos[j] for j in js],
                                                     tolerance, power, neighbours, channels)
     t2 = time.perf_counter()
