@@ -3,27 +3,29 @@ view-dependent texture mapping on the glossy building, and model-based
 stereo fed by the solved model (issue 17).
 
 Scenes: ``lumigraph render facade`` (8 photographs on a 240° arc, 4 novel
-views half-way between photographs). Seed 0 is the TUNED scene (the blend's
-weight exponent ``DEFAULT_POWER`` and the scene's materials were set
-looking at its views); every check is on the REPORTED seeds 1–3 (quick:
-seed 1), median and worst over their views, the tuned seed's rows shown
-beside them, labelled.
+views half-way between photographs). Seeds 0, 4 and 5 are the TUNED scenes
+(the blend's weights ``DEFAULT_POWER``/``DEFAULT_NEIGHBOURS``, the view
+map's choice of three and the scene's materials were set looking at their
+views; the bench shows seed 0's rows, labelled); every check is on the
+REPORTED seeds 1–3 (quick: seed 1) and holds at the WORST reported view
+(the median is in the note).
 
 - VDTM (glossy, 640x480; quick 160x120): PSNR (dB, 8-bit scale) against the
   noise-free novel view, over the pixels where the view sees the model's
   own surface, of the blend (Debevec, Taylor & Malik 1996), the view-map
   variant (Debevec, Yu & Borshukov 1998), the uniform average of the
-  photographs that see each point (the blend with equal weights) and the
-  nearest photograph's texture alone (the photograph whose centre is
-  nearest the new one; what it does not see filled as VDTM fills holes).
-  Targets: blend ≥ 2 dB above the uniform average and above the nearest
-  photograph; view map within 0.5 dB of the blend at ≥ 3× its speed. The
-  speed is library call against library call, one thread, the minimum of
-  three, with the photographs' depth maps and the view maps prepared once
-  beforehand (both papers precompute visibility; the 1998 view maps are
-  built once per model); the check compares the texturing stage (after the
-  shared z-buffer of the new view and before the shared hole filling) and
-  the row also gives the whole call's ratio.
+  photographs that see each point (the blend with equal weights over all
+  of them) and the nearest photograph's texture alone (the photograph whose
+  centre is nearest the new one; what it does not see filled as VDTM fills
+  holes). Targets (the issue's sentence read strictly): blend ≥ 2 dB above
+  the uniform average AND ≥ 2 dB above the nearest photograph; view map
+  within ±0.5 dB of the blend at ≥ 3× its speed. The speed is the whole
+  library call against the whole call (the shared z-buffer of the new view
+  and hole filling included), one thread, calls interleaved, the minimum
+  of three each, with the photographs' depth maps and the view maps
+  prepared once beforehand (both papers precompute visibility; the 1998
+  view maps are built once per model); the texturing stage's ratio is in
+  the row.
 - Model-based stereo (Lambertian building, 640x480, quick 320x240; the
   glossy variant's highlights break SSD matching between two views): key
   ``photo_03``, offset ``photo_04``; marks with 0.5 px endpoint noise. The
@@ -35,8 +37,13 @@ beside them, labelled.
   off the truth by more than 1 % (of the pixels the method answers), the
   truth taken along the rays of the key camera the depth map is in (the
   solved camera's rays are a little off the true one's: this measures the
-  stereo, not the pose; the rig's error stays in).
-  Target: with the solved model within 1.2× the error with the true one.
+  stereo, not the pose; the rig's error stays in). With a solved model the
+  search follows the model's depth σ (``model_std``, from the solve's
+  parameter covariance, :func:`~lumigraph.stereo.debevec1996.raster.model_depth_sigma`):
+  pixels whose model can be off by more than the search are not answered,
+  the range widens by 3 median σ.
+  Target: with the solved model within 1.2× the error with the true one,
+  at the worst reported seed.
 
 No public library does VDTM or Façade's model-based stereo (issue 17): no peer row.
 """
@@ -50,7 +57,7 @@ import numpy as np
 
 from lumigraph.capture.bench import Check, Row
 
-TUNED_SEEDS = (0,)
+TUNED_SEEDS = (0,)  # seeds 4 and 5 were tuned on too (not run here: bench time)
 REPORTED_SEEDS = (1, 2, 3)
 
 
@@ -80,12 +87,15 @@ def _photos(s):
     return mesh, photos, prepare_view_maps(mesh, photos)
 
 
-def _timed(fn, repeats=3):
-    best, out = math.inf, None
+def _interleaved(fns, repeats=3):
+    """``(outputs, best seconds)`` of each of ``fns``, called in turn
+    ``repeats`` times (interleaved, so a load change hits all alike)."""
+    best, out = [math.inf] * len(fns), [None] * len(fns)
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
+        for i, fn in enumerate(fns):
+            t0 = time.perf_counter()
+            out[i] = fn()
+            best[i] = min(best[i], time.perf_counter() - t0)
     return out, best
 
 
@@ -112,9 +122,8 @@ def vdtm(quick: bool):
             def call(method, K=K, R=R, t=t, mesh=mesh, photos=photos, maps=maps):
                 return render_vdtm(mesh, photos, K, R, t, size, method=method, maps=maps)
 
-            blend, tb = _timed(lambda: call("blend"))
-            vmap, tv = _timed(lambda: call("view-map"))
-            uniform = render_vdtm(mesh, photos, K, R, t, size, power=1e-9)
+            (blend, vmap), (tb, tv) = _interleaved([lambda: call("blend"), lambda: call("view-map")])
+            uniform = render_vdtm(mesh, photos, K, R, t, size, power=1e-9, neighbours=0)
             C = -R.T @ t
             j = int(np.argmin([np.linalg.norm(p.centre - C) for p in photos]))
             nearest = render_vdtm(mesh, [photos[j]], K, R, t, size)
@@ -124,7 +133,8 @@ def vdtm(quick: bool):
             tex_v = vmap.info["timings_s"]["texture"]
             rows += [_row(case, "VDTM blend: PSNR dB", p_b, tb, texture_s=tex_b,
                           holes=blend.info["hole_fraction"]),
-                     _row(case, "VDTM view map: PSNR dB", p_v, tv, texture_s=tex_v),
+                     _row(case, "VDTM view map: PSNR dB", p_v, tv, texture_s=tex_v,
+                          speedup=tb / tv, texture_speedup=tex_b / tex_v),
                      _row(case, "uniform average: PSNR dB", p_u),
                      _row(case, "nearest photograph: PSNR dB", p_n, photograph=s.image_names[j])]
             if seed in REPORTED_SEEDS:
@@ -135,21 +145,21 @@ def vdtm(quick: bool):
                 speed_all.append(tb / tv)
     med, worst = float(np.median(gains_u)), float(np.min(gains_u))
     medn, worstn = float(np.median(gains_n)), float(np.min(gains_n))
-    medv, worstv = float(np.median(vm_diff)), float(np.min(vm_diff))
-    meds, worsts = float(np.median(speed)), float(np.min(speed))
+    medv, worstv = float(np.median(vm_diff)), float(np.max(np.abs(vm_diff)))
+    meds, worsts = float(np.median(speed_all)), float(np.min(speed_all))
     n = len(gains_u)
     checks = [
         Check(f"VDTM blend >= 2 dB above the uniform average of the visible photographs "
-              f"(median of {n} reported views)", med, 2.0, med >= 2.0,
-              f"worst view {worst:+.2f} dB; no peer (no public VDTM)"),
-        Check(f"VDTM blend above the nearest photograph's texture (median of {n} reported views)",
-              medn, 0.0, medn > 0.0, f"worst view {worstn:+.2f} dB"),
-        Check("view map within 0.5 dB of the blend (median of the reported views, PSNR view map "
-              "- blend)", medv, -0.5, medv >= -0.5, f"worst view {worstv:+.2f} dB"),
-        Check("view map at >= 3x the blend's speed (texturing stage, median of the reported "
-              "views; min of 3 calls, one thread)", meds, 3.0, meds >= 3.0,
-              f"worst {worsts:.2f}x; whole call (with the shared z-buffer and hole filling) "
-              f"median {float(np.median(speed_all)):.2f}x"),
+              f"(worst of {n} reported views)", worst, 2.0, worst >= 2.0,
+              f"median {med:+.2f} dB; no peer (no public VDTM)"),
+        Check(f"VDTM blend >= 2 dB above the nearest photograph's texture (worst of {n} reported "
+              "views)", worstn, 2.0, worstn >= 2.0, f"median {medn:+.2f} dB"),
+        Check(f"view map within 0.5 dB of the blend (worst |PSNR view map - blend| of {n} "
+              "reported views)", worstv, 0.5, worstv <= 0.5, f"median {medv:+.2f} dB"),
+        Check(f"view map at >= 3x the blend's speed (whole call, worst of {n} reported views; "
+              "interleaved, min of 3 calls, one thread)", worsts, 3.0, worsts >= 3.0,
+              f"median {meds:.2f}x; texturing stage alone median "
+              f"{float(np.median(speed)):.2f}x, worst {float(np.min(speed)):.2f}x"),
     ]
     return rows, checks
 
@@ -163,7 +173,7 @@ def _model_case(seed, size):
     from lumigraph.stereo.debevec1996.edges import EdgeMarks
     from lumigraph.stereo.debevec1996.model import BlockModel
     from lumigraph.stereo.debevec1996.model_stereo import model_stereo
-    from lumigraph.stereo.debevec1996.raster import model_depth
+    from lumigraph.stereo.debevec1996.raster import model_depth, model_depth_sigma
     from lumigraph.stereo.debevec1996.solve import solve_facade
     from lumigraph.stereo.debevec1996.vdtm import rig_between
 
@@ -180,14 +190,21 @@ def _model_case(seed, size):
                                    if n in model.parameter_names}).mesh()
     # the solved model lives in the model's own frame (root block centred on the
     # origin, the fixed width's scale): the true cameras see it where they see the truth
+    # the solved parameters' covariance (the first columns of the solve's unknowns)
+    names = sol.model.parameter_names
+    assert tuple(sol.unknowns[:len(names)]) == tuple(names)
+    cov = sol.covariance[:len(names), :len(names)]
     for label, poses, mesh in (("true model", true_poses, true_mesh),
                                ("solved model", true_poses, sol.model.mesh()),
                                ("solved model and cameras", sol.poses, sol.model.mesh())):
         (Rk, tk), (Ro, to) = poses[key], poses[off]
         zm = model_depth(mesh, Ks[key], Rk, tk, size)
         rig = rig_between((cam, Rk, tk), (Camera(Ks[off], [], size), Ro, to))
+        # the solved model's depth σ (its parameters' covariance) sets the search
+        std = None if label == "true model" else model_depth_sigma(
+            sol.model, {n: sol.params[n] for n in names}, cov, Ks[key], Rk, tk, size)
         t0 = time.perf_counter()
-        res = model_stereo(s.images[3], s.images[4], zm, rig, max_offset=0.5)
+        res = model_stereo(s.images[3], s.images[4], zm, rig, max_offset=0.5, model_std=std)
         dt = time.perf_counter() - t0
         z = np.where(res.valid, res.depth, np.nan)
         # the truth along the rays of the camera the depth map is in (the solved
@@ -215,10 +232,10 @@ def model_stereo_solved(quick: bool):
             ratios.append(r["solved model"][0] / max(r["true model"][0], 1e-9))
             chain.append(r["solved model and cameras"][0] / max(r["true model"][0], 1e-9))
     med, worst = float(np.median(ratios)), float(np.max(ratios))
-    return rows, [Check(f"model-based stereo fed by the solved model (0.5 px marks; the true rig) "
-                        f"within 1.2x its error with the true model (median of {len(ratios)} "
-                        "reported seeds)", med, 1.2, med <= 1.2,
-                        f"worst seed {worst:.2f}x; with the solved cameras too (the whole chain) "
+    return rows, [Check(f"model-based stereo fed by the solved model (0.5 px marks; the true rig; "
+                        f"the search following the model's σ) within 1.2x its error with the true "
+                        f"model (worst of {len(ratios)} reported seeds)", worst, 1.2, worst <= 1.2,
+                        f"median {med:.2f}x; with the solved cameras too (the whole chain) "
                         f"median {float(np.median(chain)):.2f}x; key photo_03, offset photo_04, "
                         "Lambertian building")]
 

@@ -593,6 +593,12 @@ def _model_based(args) -> int:
     if model.shape != key.shape[:2]:
         raise InputError(args.model, f"size {model.shape[1]}x{model.shape[0]} differs from the key "
                                      f"image's {key.shape[1]}x{key.shape[0]}")
+    std = None
+    if args.model_std is not None:
+        std = _read_model(args.model_std)
+        if std.shape != model.shape:
+            raise InputError(args.model_std, f"size {std.shape[1]}x{std.shape[0]} differs from the "
+                                             f"model's {model.shape[1]}x{model.shape[0]}")
     rig = Rig.load(args.rig)
     for cam, name in ((rig.left, "left (key)"), (rig.right, "right (offset)")):
         if tuple(cam.image_size) != (key.shape[1], key.shape[0]):
@@ -600,12 +606,14 @@ def _model_based(args) -> int:
                                        f"images, the pair is {key.shape[1]}x{key.shape[0]}")
     # the library names its inputs: report their files
     args.arg_flags = {**(getattr(args, "arg_flags", None) or {}), "key": args.key,
-                      "offset": args.offset, "model_depth": args.model, "rig": args.rig}
+                      "offset": args.offset, "model_depth": args.model, "rig": args.rig,
+                      "model_std": args.model_std}
     t0 = time.perf_counter()
     try:
         res = model_stereo(key, off, model, rig, max_offset=args.max_offset, window=args.window,
                            step=args.step, texture_snr=args.texture_snr, uniqueness=args.uniqueness,
-                           max_cost=max_cost, left_right=left_right, cost=args.cost)
+                           max_cost=max_cost, left_right=left_right, cost=args.cost,
+                           model_std=std)
     except (InputError, EstimationError):
         raise
     except ValueError as e:
@@ -615,9 +623,11 @@ def _model_based(args) -> int:
         warn(w)
     params = {"max_offset": args.max_offset, "window": args.window, "step": args.step,
               "texture_snr": args.texture_snr, "uniqueness": args.uniqueness,
-              "max_cost": max_cost, "left_right": left_right, "cost": args.cost}
+              "max_cost": max_cost, "left_right": left_right, "cost": args.cost,
+              "model_std": None if args.model_std is None else str(args.model_std)}
     info = {k: v for k, v in res.info.items() if k not in ("warnings", "timings_s")}
-    meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig],
+    meta = make_meta("lumigraph.depth", inputs=[args.key, args.offset, args.model, args.rig,
+                                                *([args.model_std] if args.model_std else [])],
                      params=params, model={"model_based_stereo": info},
                      quality={"valid_fraction": res.valid_fraction,
                               "valid_fraction_of_seen": res.info["valid_fraction_of_seen"],
@@ -755,6 +765,10 @@ def build_parser(prog: str = "lumigraph stereo"):
                         "or .npy, NaN = no model), z in the rig's unit")
     v.add_argument("--max-offset", type=positive, required=True,
                    help="largest offset of the detail from the model searched (rig's unit)")
+    v.add_argument("--model-std", type=input_path,
+                   help="the model depth's standard deviation per pixel (.pfm/.npy, as 'stereo "
+                        "facade depth --std-out' writes): pixels whose model may be off by more "
+                        "than --max-offset/3 are not answered, the search widens by 3x the median")
     v.add_argument("--window", type=number(int, lo=MODEL_WINDOW_RANGE[0], hi=MODEL_WINDOW_RANGE[1],
                                            odd=True),
                    default=9, help="odd window side of the SSD cost, and of the texture and "

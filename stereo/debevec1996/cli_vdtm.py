@@ -25,10 +25,11 @@ a .npy. It is what 'lumigraph stereo model-based --model' takes.
 RENDER_EPILOG = """\
 Renders the model from --view, each pixel textured from the photographs that see its surface
 point (visibility by each photograph's depth of the model, --tolerance), weighted by
-(angle between the new and the photograph's viewing rays)^-power (--method blend; Debevec,
-Taylor & Malik 1996), or from at most three photographs per polygon chosen and weighted by
-its view map (--method view-map; Debevec, Yu & Borshukov 1998, faster). Model pixels no
-photograph sees are filled from their neighbours; pixels off the model are 0.
+(angle between the new and the photograph's viewing rays)^-power over the --neighbours
+nearest, tapered to 0 at the next (--method blend; Debevec, Taylor & Malik 1996; the taper of
+Buehler et al. 2001), or the same weights among at most three photographs per polygon, the
+three the blend weights most over it (--method view-map; Debevec, Yu & Borshukov 1998).
+Model pixels no photograph sees are filled from their neighbours; pixels off the model are 0.
 --photos names a folder with stack.json; each photograph's pose comes from --cameras DIR
 (<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
 "cameras". 8-bit/16-bit photographs give a PNG or EXR of code values; EXR photographs
@@ -46,6 +47,10 @@ def add_verbs(fs) -> None:
                    help="camera.json with cam_from_world (the pose)")
     v.add_argument("--out", required=True, type=output_file(".pfm", ".npy"),
                    help="depth .pfm (inf = no model) or .npy (NaN = no model)")
+    v.add_argument("--std-out", type=output_file(".pfm", ".npy"),
+                   help="also the depth's standard deviation from the fitted parameters' "
+                        "covariance (--model must be a solve's model.json): what 'stereo "
+                        "model-based --model-std' takes; inf where a model edge may cross the pixel")
     v.set_defaults(func=_depth)
 
     v = add_verb(fs, "pair", "the rig.json of two posed cameras (key = left, offset = right), "
@@ -77,7 +82,11 @@ def add_verbs(fs) -> None:
                    help="visibility: relative depth difference still on the same surface "
                         "(default 0.01)")
     v.add_argument("--power", type=number(float, lo=0, lo_open=True, hi=64), default=None,
-                   help="weights fall as angle^-power (default: the library's)")
+                   help="weights fall as angle^-power (default: the library's, 1 = the paper's)")
+    v.add_argument("--neighbours", type=number(int, lo=0, hi=64), default=None,
+                   help="only the N nearest photographs by angle blend, each weight tapered to 0 "
+                        "at the next nearest (default: the library's, 2); 0 = every photograph "
+                        "that sees the point")
     v.add_argument("--out", required=True, type=output_file(".png", ".exr"),
                    help="the rendered view (.png, or .exr to keep linear values)")
     v.set_defaults(func=_render)
@@ -86,15 +95,34 @@ def add_verbs(fs) -> None:
 def _depth(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_pfm
-    from lumigraph.stereo.debevec1996.raster import model_depth
-    from lumigraph.stereo.debevec1996.vdtm import load_model_mesh, load_posed_camera
+    from lumigraph.stereo.debevec1996.raster import model_depth, model_depth_sigma
+    from lumigraph.stereo.debevec1996.vdtm import (
+        load_fitted_model,
+        load_model_mesh,
+        load_posed_camera,
+    )
 
     mesh, _ = load_model_mesh(args.model)
     cam, R, t = load_posed_camera(args.camera)
+    fitted = load_fitted_model(args.model) if args.std_out else None
     t0 = time.perf_counter()
     z = model_depth(mesh, cam.K, R, t, cam.image_size, dist=cam.dist)
     dt = time.perf_counter() - t0
     out = Path(args.out)
+    if fitted is not None:
+        model, values, cov = fitted
+        sd = model_depth_sigma(model, values, cov, cam.K, R, t, cam.image_size, dist=cam.dist)
+        sout = Path(args.std_out)
+        smeta = make_meta("lumigraph.depth-std", inputs=[args.model, args.camera],
+                          extra={"what": "first-order standard deviation of the model's depth "
+                                         "from its parameters' covariance (the model's unit); "
+                                         "inf: a model edge may cross the pixel; no model = "
+                                         + ("inf" if sout.suffix.lower() == ".pfm" else "NaN")})
+        if sout.suffix.lower() == ".pfm":
+            write_artifact(sout, lambda tmp: write_pfm(tmp, np.where(np.isnan(sd), np.inf, sd)
+                                                       .astype(np.float32)), meta=smeta)
+        else:
+            write_artifact(sout, lambda tmp: np.save(tmp, sd, allow_pickle=False), meta=smeta)
     meta = make_meta("lumigraph.depth", inputs=[args.model, args.camera],
                      quality={"model_fraction": float(np.isfinite(z).mean())},
                      timings_s={"total": dt},
@@ -179,6 +207,7 @@ def _render(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact
     from lumigraph.capture.io import write_exr, write_image
     from lumigraph.stereo.debevec1996.vdtm import (
+        DEFAULT_NEIGHBOURS,
         DEFAULT_POWER,
         load_model_mesh,
         load_posed_camera,
@@ -193,9 +222,10 @@ def _render(args) -> int:
         raise InputError(out, "the photographs are linear radiance (float): write .exr to keep "
                               "them linear")
     power = DEFAULT_POWER if args.power is None else args.power
+    neighbours = DEFAULT_NEIGHBOURS if args.neighbours is None else args.neighbours
     t0 = time.perf_counter()
     res = render_vdtm(mesh, photos, cam.K, R, t, cam.image_size, method=args.method,
-                      tolerance=args.tolerance, power=power)
+                      tolerance=args.tolerance, power=power, neighbours=neighbours)
     dt = time.perf_counter() - t0
     img = res.image
     if img.shape[2] == 1:
@@ -207,7 +237,8 @@ def _render(args) -> int:
         warn(warnings[-1])
     meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", args.view],
                      warnings=warnings,
-                     params={"method": args.method, "tolerance": args.tolerance, "power": power},
+                     params={"method": args.method, "tolerance": args.tolerance, "power": power,
+                             "neighbours": neighbours},
                      quality={"model_fraction": float(res.model.mean()),
                               "hole_fraction": res.info["hole_fraction"],
                               "photographs_per_pixel": res.info["photographs_per_pixel"]},

@@ -510,6 +510,30 @@ def _check_inputs(key, offset, model_depth, rig, *, max_offset, window, step, te
     return zm, key, offset, max_offset
 
 
+# model_std: pixels whose model depth can be off by more than max_offset within
+# this many σ are not answered; the range widens by as many median σ (3: a
+# Gaussian error leaves ±3σ with probability 0.3 %)
+MODEL_STD_K = 3.0
+
+
+def _follow_model_std(zm, model_std, max_offset):
+    """``(model depth, max_offset)`` following the model's σ (see
+    :func:`model_stereo`'s ``model_std``)."""
+    sd = np.asarray(model_std, np.float64)
+    if sd.shape != zm.shape:
+        raise InputError("model_std", f"expected the model depth's shape {zm.shape}, got {sd.shape}")
+    has = np.isfinite(zm)
+    if np.any(sd[has] < 0) or np.isnan(sd[has]).any():
+        raise InputError("model_std", "expected standard deviations >= 0 (inf: the model may "
+                                      "leave the pixel) wherever there is a model")
+    keep = has & (MODEL_STD_K * sd <= max_offset)
+    if not keep.any():
+        raise InputError("model_std", f"the model's depth is uncertain by more than max_offset="
+                                      f"{max_offset} / {MODEL_STD_K:g} at every pixel: widen "
+                                      "max_offset or mark more edges")
+    return np.where(keep, zm, np.nan), max_offset + MODEL_STD_K * float(np.median(sd[keep]))
+
+
 def _key_noise(key, gk, noise_sigma):
     """The key image's noise σ (code values): as given, or estimated from its
     luma ``gk`` and floored at the quantisation noise of integer codes."""
@@ -879,7 +903,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
                  texture_snr: float = 1.0, uniqueness: float = 0.02, max_cost: float = 1.0,
                  occlusion_tolerance: float | None = 0.01, max_median_cost: float | None = 0.8,
                  left_right: float | None = 1.25, subpixel: bool = True,
-                 noise_sigma: float | None = None, cost: str = "sgm") -> ModelStereo:
+                 noise_sigma: float | None = None, cost: str = "sgm",
+                 model_std: np.ndarray | None = None) -> ModelStereo:
     """Depth of the key view as offsets from a rough model (model-based stereo).
 
     Parameters
@@ -965,6 +990,15 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         bench's facade sweep is 0.41-0.66 x the SSD cost's and 0.53-0.61 x
         StereoSGBM's on the rectified pair, in about the same time (the
         left-right check's second search dominates either).
+    model_std : ndarray, (H, W), optional
+        Standard deviation of ``model_depth`` per key pixel, for a fitted
+        model (:func:`lumigraph.stereo.debevec1996.raster.model_depth_sigma`
+        from a Façade solve's covariance): the search follows the model's
+        own uncertainty. A pixel where ``MODEL_STD_K`` σ exceeds
+        ``max_offset`` is not answered (the model can be another surface
+        there: an edge within its error), and the range widens by
+        ``MODEL_STD_K`` × the median σ (the model's error on top of the
+        detail's). ``None``: the model is taken as exact.
 
     Returns
     -------
@@ -989,6 +1023,8 @@ def model_stereo(key: np.ndarray, offset: np.ndarray, model_depth: np.ndarray, r
         key, offset, model_depth, rig, max_offset=max_offset, window=window, step=step,
         texture_snr=texture_snr, uniqueness=uniqueness, max_cost=max_cost, left_right=left_right,
         cost=cost)
+    if model_std is not None:
+        zm, max_offset = _follow_model_std(zm, model_std, max_offset)
     gk, go = luma_codes(key), luma_codes(offset)
     sigma = _key_noise(key, gk, noise_sigma)
     warnings: list[str] = []

@@ -5,6 +5,7 @@ with its uncertainties, the mesh, the cameras and the overlays.
 
     {"schema": "lumigraph.facade.model", "schema_version": 1,
      "parameters": {"house/depth": {"value": 6.0, "std": 0.002, "fixed": false}, ...},
+     "parameter_covariance": {"names": [free names], "matrix": n x n} (or null),
      "cameras": {"photo_00.png": {"K": 3x3, "R": 3x3, "t": [3], "centre": [3],
                                   "std": {"rotation_rad": [3], "t": [3], "centre": [3]}}},
      "focal_scale": {"value", "std"}, "sigma_px", "rms_px",
@@ -13,6 +14,9 @@ with its uncertainties, the mesh, the cameras and the overlays.
 Every parameter name of the model (shared and fixed ones too) is a key, as
 in a rendered scene's ``gt.json``. ``R, t``: ``x_cam = R x_world + t``;
 ``rotation_rad`` is the std of a small rotation applied in the camera frame.
+``parameter_covariance`` is the free parameters' first-order covariance
+(their correlations: what ``stereo facade depth --std-out`` propagates to
+the depth).
 
 >>> mesh_obj_text(np.zeros((3, 3)), np.array([[0, 1, 2]])).splitlines()[-1]
 'f 1 2 3'
@@ -48,9 +52,15 @@ def model_dict(sol) -> dict:
         cams[p] = {"K": sol.K[p].tolist(), "R": R.tolist(), "t": t.tolist(),
                    "centre": (-R.T @ t).tolist(),
                    "std": {k: np.asarray(v).tolist() for k, v in s.items()}}
+    free = list(sol.model.parameter_names)
+    cov = None  # the free parameters' covariance block (the solve's first unknowns)
+    if tuple(sol.unknowns[:len(free)]) == tuple(free):
+        cov = {"names": free,
+               "matrix": np.asarray(sol.covariance)[:len(free), :len(free)].tolist()}
     return {"schema": MODEL_SCHEMA, "schema_version": 1,
             "parameters": {n: {"value": v, "std": sol.std[n], "fixed": fixed[n]}
                            for n, v in sol.params.items()},
+            "parameter_covariance": cov,
             "cameras": cams,
             "focal_scale": {"value": sol.focal_scale, "std": sol.focal_scale_std},
             "sigma_px": sol.sigma_px, "rms_px": sol.rms_px,

@@ -12,27 +12,37 @@ Eurographics Rendering Workshop 1998, doi:10.1007/978-3-7091-6453-2_10
 ``method="blend"`` (1996). The new camera's z-buffer of the model gives the
 surface point ``X`` of each pixel. Photograph ``i`` (centre ``C_i``) sees
 ``X`` when ``X`` projects inside its frame and the bilinear taps (of
-non-zero weight) of its depth map lie on ``X``'s surface (``|z_tap − z_i(X)| ≤ tolerance · z_i(X)``,
-so a sample never mixes an occluder's or the background's colour in). The
+non-zero weight) of its depth map lie on ``X``'s surface: they lie on one
+continuous surface (their depths within ``2 · tolerance`` relative of each
+other: a slanted surface's depth changes across a pixel) and ``z_i(X)`` is
+within ``tolerance · z_i(X)`` of their range. So a sample never mixes an
+occluder's or the background's colour in. The
 colour is the weighted mean of the visible photographs' bilinear samples,
 
-    c(X) = Σ_i w_i c_i(X) / Σ_i w_i,      w_i = (θ_i + ε)^(−power)
+    c(X) = Σ_i w_i c_i(X) / Σ_i w_i,
+    w_i = (θ_i + ε)^(−power) · max(0, 1 − θ_i / θ_(k+1))  for the k nearest
 
 with ``θ_i`` the angle at ``X`` between the new viewing ray ``X − C`` and
 photograph ``i``'s ray ``X − C_i`` (Fig. 5.11's ``b_1, b_2``; the paper's
 weights are "inversely proportional to the angles", ``power = 1``;
 ``ε = 10⁻⁹`` rad keeps the new view equal to a photograph a copy of it).
+Only the ``k = neighbours`` nearest visible photographs take part, each
+tapered to 0 at the next nearest angle ``θ_(k+1)`` (C. Buehler et al.,
+"Unstructured Lumigraph Rendering", SIGGRAPH 2001,
+doi:10.1145/383259.383309), so no seam appears where the nearest change;
+``neighbours = 0`` blends every photograph that sees ``X``.
 
-``method="view-map"`` (1998). Per polygon (mesh triangle), the directions
-from its centroid to the photographs that see it are projected
-orthographically onto the polygon's plane and triangulated (Delaunay): the
-*view map*. The new view's direction is located in it; the three corners of
-its triangle, with their barycentric weights, are the polygon's photographs
-(outside the map's hull, the three nearest by angle, weighted as the blend).
-So each pixel samples at most three photographs, with weights constant over
-its polygon; the per-pixel visibility test stays (a photograph hidden at a
-pixel drops out and the others are renormalised; a pixel none of the three
-sees is blended from every photograph, as ``"blend"``).
+``method="view-map"`` (1998). Each polygon (mesh triangle) is textured
+from at most three photographs, chosen once per polygon and view: the
+three the blend gives the most weight over points spread on the polygon
+(:meth:`ViewMaps.choose`; the points' visibility is computed once per model
+by :func:`prepare_view_maps`, with the 1998 paper's per-polygon map of the
+photographs' directions, :meth:`ViewMaps.lookup`). A pixel blends its
+polygon's three with the blend's weights among them, so the view map is the
+blend wherever they hold the pixel's nearest; the visibility test stays per
+pixel (only a bilinear-cell look-up for a polygon the photograph sees
+whole), and a pixel fewer of the three see than the blend would take is
+blended from every photograph when others see part of its polygon.
 
 Pixels of the model no photograph sees are *holes*, filled from their
 neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
@@ -65,9 +75,12 @@ from lumigraph.capture.raster import check_mesh, pixel_rays, rasterize
 
 METHODS = ("blend", "view-map")
 EPS_RAD = 1e-9
-# weights θ^-power: 1 is the paper's "inversely proportional"; 2 is tuned on the
-# glossy facade scene (docs/decisions/facade-vdtm.md)
-DEFAULT_POWER = 2.0
+# weights θ^-power: 1 is the paper's "inversely proportional"
+DEFAULT_POWER = 1.0
+# only the nearest NEIGHBOURS by angle blend, tapered to 0 at the next one (Buehler et
+# al. 2001); 2 was chosen on the glossy facade scene's tuning seeds
+# (docs/decisions/facade-vdtm.md); 0 = every photograph that sees the point
+DEFAULT_NEIGHBOURS = 2
 # a view-map triangle with a smaller angle is a sliver: the nearest three are used instead
 SLIVER_DEG = 15.0
 
@@ -160,27 +173,34 @@ def prepare_photographs(mesh, photographs, *, tolerance: float = 0.01) -> tuple[
         r = rasterize(v, f, p.K, p.R, p.t, (w, h))
         counts = np.bincount(r.face[r.hit].ravel(), minlength=len(f))
         out.append(replace(p, depth=r.depth, face_pixels=counts,
-                           whole=(counts > 0) & (counts == r.covered), cells=_cells(r.depth, tolerance)))
+                           whole=(counts > 0) & (counts == r.covered),
+                           # one continuous surface: as _sample's tap test
+                           cells=_cells(r.depth, 2 * tolerance)))
     return tuple(out)
 
 
-def _sample(photo, X, tolerance, check=True):
-    """Bilinear samples ``(N, C)`` of ``photo`` at the world points ``X (N, 3)``
-    and whether each is seen cleanly (all four taps on its surface; with
-    ``check="cells"`` the caller knows the points' polygon is seen whole and
-    only the cell's continuity is looked up)."""
+def _sample(photo, X, tolerance, whole=None):
+    """Bilinear samples ``(N, C)`` float32 of ``photo`` at the world points
+    ``X (N, 3)`` and whether each is seen cleanly: the bilinear taps of
+    non-zero weight lie on one continuous surface and the point on it (the
+    module docstring); where ``whole (N,)`` is true the caller knows the
+    point's polygon is seen whole, and only the cell's continuity is looked
+    up."""
     import cv2
 
-    img = np.asarray(photo.image, np.float32)
+    img = photo.image
+    if img.dtype != np.float32:
+        img = np.asarray(img, np.float32)
     if img.ndim == 2:
         img = img[..., None]
     h, w = img.shape[:2]
     # one product: K (R X + t), whose third row is the camera z (K's is [0, 0, 1])
     KR = np.asarray(photo.K, np.float64) @ np.asarray(photo.R, np.float64)
-    q = X @ KR.T + np.asarray(photo.K, np.float64) @ np.asarray(photo.t, np.float64)
+    q = X @ KR.T
+    q += np.asarray(photo.K, np.float64) @ np.asarray(photo.t, np.float64)
     z = q[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        px = q[:, :2] / q[:, 2:3]
+        px = q[:, :2] / z[:, None]
     # inside the frame: pixel footprints reach half a pixel past the centres
     # (taps clipped to the border there, as remap's BORDER_REPLICATE)
     ok = ((z > 0) & (px[:, 0] >= -0.5) & (px[:, 0] <= w - 0.5)
@@ -189,54 +209,108 @@ def _sample(photo, X, tolerance, check=True):
     # a point a rounding error off a pixel centre is on it (its own photograph's view)
     near = np.rint(pxs)
     pxs = np.where(np.abs(pxs - near) < 1e-6, near, pxs)
-    x0 = np.clip(np.floor(pxs[:, 0]).astype(int), 0, w - 1)
-    y0 = np.clip(np.floor(pxs[:, 1]).astype(int), 0, h - 1)
-    x1, y1 = np.minimum(x0 + 1, w - 1), np.minimum(y0 + 1, h - 1)
+    # floor (the coordinates are >= -0.5), the taps clipped to the frame
+    x0 = np.floor(pxs[:, 0]).astype(np.intp)
+    y0 = np.floor(pxs[:, 1]).astype(np.intp)
+    np.clip(x0, 0, w - 1, out=x0)
+    np.clip(y0, 0, h - 1, out=y0)
+    depth = photo.depth.ravel()
     # a tap with no weight (the point on a pixel centre's row or column) is not
     # looked at: a photograph seeing its own pixel centres needs no neighbour
-    if check == "cells":  # the polygon is seen whole: its cell must lie on one surface
+    full = np.arange(len(X)) if whole is None else np.flatnonzero(~whole)
+    if whole is not None and whole.any():  # polygons seen whole: the cell must lie on one surface
+        cw = np.flatnonzero(whole)
+        at = y0[cw] * w + x0[cw]
+        cell = photo.cells.ravel()[at]
         # (a point on a pixel centre has one tap: that pixel's depth must agree)
-        cell = photo.cells[y0, x0]
-        centre = np.flatnonzero(~cell & (pxs[:, 0] == x0) & (pxs[:, 1] == y0))
-        cell[centre] = (np.abs(photo.depth[y0[centre], x0[centre]] - z[centre])
-                        <= tolerance * np.abs(z[centre]))
-        ok &= cell
-    elif check:
-        x1 = np.where(pxs[:, 0] - x0 > 1e-9, x1, x0)
-        y1 = np.where(pxs[:, 1] - y0 > 1e-9, y1, y0)
-        d = photo.depth
-        tol = tolerance * np.abs(z)
-        for yy, xx in ((y0, x0), (y0, x1), (y1, x0), (y1, x1)):
-            ok &= np.abs(d[yy, xx] - z) <= tol
+        centre = np.flatnonzero(~cell & (pxs[cw, 0] == x0[cw]) & (pxs[cw, 1] == y0[cw]))
+        cc = cw[centre]
+        cell[centre] = np.abs(depth[at[centre]] - z[cc]) <= tolerance * np.abs(z[cc])
+        ok[cw] &= cell
+    if len(full):
+        fx0, fy0, zf = x0[full], y0[full], z[full]
+        dx = (pxs[full, 0] - fx0 > 1e-9) & (fx0 < w - 1)  # the right tap has weight
+        dy = (pxs[full, 1] - fy0 > 1e-9) & (fy0 < h - 1)
+        at = fy0 * w + fx0
+        taps = (depth[at], depth[at + dx], depth[at + w * dy], depth[at + dx + w * dy])
+        lo = np.minimum(np.minimum(taps[0], taps[1]), np.minimum(taps[2], taps[3]))
+        hi = np.maximum(np.maximum(taps[0], taps[1]), np.maximum(taps[2], taps[3]))
+        tol = tolerance * np.abs(zf)
+        # the taps lie on one continuous surface (as _cells: a slanted one's depth
+        # changes across the cell, by more than tolerance at a coarse resolution)
+        # and the point on it: within tolerance of the taps' depth range
+        with np.errstate(invalid="ignore"):
+            good = (ok[full] & (hi - lo <= 2 * tolerance * lo)
+                    & (zf >= lo - tol) & (zf <= hi + tol))
+        ok[full] = good
     # the sample positions as a map of rows of 1024 (remap wants fewer than 2^15 rows)
     n = len(X)
     rows = max(-(-n // 1024), 1)
     m = np.zeros((rows * 1024, 2), np.float32)
     m[:n] = pxs
     mx, my = m[:, 0].reshape(rows, 1024), m[:, 1].reshape(rows, 1024)
-    s = np.concatenate([cv2.remap(np.ascontiguousarray(img[..., c:c + 4]), mx, my, cv2.INTER_LINEAR,
-                                  borderMode=cv2.BORDER_REPLICATE).reshape(rows * 1024, -1)[:n]
-                        for c in range(0, img.shape[2], 4)], 1)  # at most 4 channels a call
+    if img.shape[2] <= 4:
+        s = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        s = s.reshape(rows * 1024, -1)[:n]
+    else:  # at most 4 channels a call
+        s = np.concatenate([cv2.remap(np.ascontiguousarray(img[..., c:c + 4]), mx, my,
+                                      cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+                                      ).reshape(rows * 1024, -1)[:n]
+                            for c in range(0, img.shape[2], 4)], 1)
     return s, ok
 
 
-def _angle(a, b):
-    """Angles (rad) between rows of ``a`` and ``b`` (N, 3), accurate near 0."""
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), np.einsum("ij,ij->i", a, b))
+def _unit(v):
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
 
 
-def _blend(X, C, photos, tolerance, power, channels):
-    acc = np.zeros((len(X), channels))
-    wsum = np.zeros(len(X))
-    n = np.zeros(len(X))
-    ray = X - C
-    for p in photos:
+def _angle_to(ray_unit, X, centre):
+    """Angles (rad) at the points ``X (N, 3)`` between the unit new viewing
+    rays ``ray_unit`` and the rays from ``centre``; accurate near 0 (the
+    chord: θ = 2 asin(|a − b| / 2) for unit a, b)."""
+    d = X - centre
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d -= ray_unit
+    chord = np.sqrt(np.einsum("ij,ij->i", d, d))
+    return 2 * np.arcsin(np.minimum(chord / 2, 1.0))
+
+
+def _weights(theta, power, neighbours):
+    """Blend weights ``(P, N)`` from the angles ``theta (P, N)`` (``inf``
+    where the photograph does not see the point): ``(θ + ε)^−power``, and
+    with ``neighbours = k`` only the ``k`` nearest take part, each weight
+    times ``1 − θ / θ_(k+1)`` (``θ_(k+1)`` the next nearest angle; Buehler
+    et al. 2001), so a photograph's weight falls to 0 where it stops being
+    one of the ``k`` nearest: no seam where the choice changes."""
+    seen = np.isfinite(theta)
+    with np.errstate(over="ignore"):
+        w = np.where(seen, (np.where(seen, theta, 1.0) + EPS_RAD) ** -power, 0.0)
+    if neighbours and len(theta) > neighbours:
+        if len(theta) == neighbours + 1:
+            nxt = theta.max(0)
+        else:
+            nxt = np.partition(theta.T, neighbours, axis=1)[:, neighbours]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            taper = np.where(np.isfinite(nxt), np.clip(1 - theta / nxt, 0, None), 1.0)
+        tapered = w * np.where(seen, taper, 0.0)
+        # ties at the threshold (equal angles) would leave no weight: untapered there
+        w = np.where((tapered.sum(0) > 0) | ~seen.any(0), tapered, w)
+    return w
+
+
+def _blend(X, C, photos, tolerance, power, neighbours, channels):
+    ray = _unit(X - C)
+    theta = np.full((len(photos), len(X)), np.inf)
+    samples = []
+    for j, p in enumerate(photos):
         s, ok = _sample(p, X, tolerance)
-        wt = np.where(ok, (_angle(ray, X - p.centre) + EPS_RAD) ** -power, 0.0)
-        acc += wt[:, None] * s
-        wsum += wt
-        n += ok
-    return acc, wsum, n
+        samples.append(s)
+        theta[j, ok] = _angle_to(ray[ok], X[ok], p.centre)
+    W = _weights(theta, power, neighbours)
+    acc = np.zeros((len(X), channels))
+    for j, s in enumerate(samples):
+        acc += W[j][:, None] * s
+    return acc, W.sum(0), (W > 0).sum(0)
 
 
 @dataclass(frozen=True)
@@ -253,6 +327,27 @@ class ViewMaps:
     triangulations: tuple  # per polygon: scipy Delaunay or None
     centres: np.ndarray  # (N, 3) the photographs' centres
     good: tuple = ()  # per polygon: which of its triangles are not slivers
+    grid: np.ndarray | None = None  # (M, G, 3) points spread over each polygon
+    grid_seen: np.ndarray | None = None  # (N, M, G) which photograph sees which point
+
+    def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+        """The three photographs of each polygon for the view from ``C``
+        (``ids (M, 3)``, -1 = none): those the blend (:func:`_weights`, the
+        same ``power`` and ``neighbours``) gives the most weight over the
+        polygon's grid points, each point's weights summing to 1."""
+        M, G = self.grid.shape[:2]
+        ray = _unit((self.grid - C).reshape(-1, 3))
+        X = self.grid.reshape(-1, 3)
+        theta = np.stack([np.where(self.grid_seen[i].ravel(), _angle_to(ray, X, c), np.inf)
+                          for i, c in enumerate(self.centres)])
+        W = _weights(theta, power, neighbours)
+        W /= np.maximum(W.sum(0), 1e-300)
+        score = W.reshape(len(self.centres), M, G).sum(2).T  # (M, N)
+        # then the photographs that see more of the polygon
+        score += 1e-6 * self.grid_seen.mean(2).T
+        order = np.argsort(-score, axis=1, kind="stable")[:, :3]
+        ids = np.where(np.take_along_axis(score, order, 1) > 0, order, -1)
+        return ids
 
     def lookup(self, C, *, power: float = DEFAULT_POWER):
         """The at most three photographs and weights of each polygon for the
@@ -260,7 +355,8 @@ class ViewMaps:
         Inside the map's hull, the containing triangle's corners with their
         barycentric weights; outside it, in a sliver triangle (smallest angle
         below :data:`SLIVER_DEG`) or with fewer than three, the three nearest
-        by angle, weighted ``θ^−power``."""
+        by angle, weighted ``θ^−power``. (:func:`render_vdtm` takes its
+        three from :meth:`choose`.)"""
         M = len(self.centroids)
         ids = np.full((M, 3), -1)
         wts = np.zeros((M, 3))
@@ -292,10 +388,11 @@ class ViewMaps:
         return ids, wts
 
 
-def prepare_view_maps(mesh, photos) -> ViewMaps:
+def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
     """The view map of every polygon (triangle) of ``mesh``: a photograph
     enters a polygon's map when it sees the polygon in at least one pixel
-    (its z-buffer's face ids, :func:`prepare_photographs`)."""
+    (its z-buffer's face ids, :func:`prepare_photographs`) or sees one of
+    28 points spread over it (depth ``tolerance`` as :func:`render_vdtm`'s)."""
     from scipy.spatial import Delaunay
 
     v, f = _mesh(mesh)
@@ -308,7 +405,22 @@ def prepare_view_maps(mesh, photos) -> ViewMaps:
     u = np.cross(nrm, ref)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
     w = np.cross(nrm, u)
-    sees = np.stack([p.face_pixels > 0 for p in photos], 1)
+    # a photograph sees a polygon when its z-buffer shows it, or when it sees one
+    # of a grid of points on it: coplanar neighbours (the tower's front flush with
+    # the house's) tie in depth and the z-buffer keeps one face id of the two
+    g = np.array([(i, j) for i in range(7) for j in range(7 - i)], np.float64) / 6
+    bc = np.stack([g[:, 0], g[:, 1], 1 - g.sum(1)], 1)
+    grid = np.einsum("gk,mkc->mgc", bc, tri)
+    grid = cen[:, None] + 0.98 * (grid - cen[:, None])  # off the outline
+    # seen: the nearest pixel's depth agrees (looser than the bilinear taps: a
+    # point near the polygon's outline at a coarse resolution still counts)
+    grid_seen = np.stack([_seen_nearest(p, grid.reshape(-1, 3), tolerance).reshape(len(f), -1)
+                          for p in photos])  # (N, M, G)
+    sees = np.stack([p.face_pixels > 0 for p in photos], 1) | grid_seen.any(2).T  # (M, N)
+    # the centroid joins the grid, counted as seen by every photograph that sees
+    # the polygon (a small polygon's pixels can fall between the grid's points)
+    grid = np.concatenate([grid, cen[:, None]], 1)
+    grid_seen = np.concatenate([grid_seen, sees.T[..., None]], 2)
     centres = np.array([p.centre for p in photos])
     ids, pts, dels, good = [], [], [], []
     for m in range(len(f)):
@@ -327,7 +439,22 @@ def prepare_view_maps(mesh, photos) -> ViewMaps:
         dels.append(d)
         good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
     return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
-                    tuple(good))
+                    tuple(good), grid, grid_seen)
+
+
+def _seen_nearest(photo, X, tolerance):
+    """(N,) bool: ``photo`` sees the points ``X`` at their nearest pixel (its
+    depth within ``tolerance`` relative of theirs)."""
+    q = X @ (np.asarray(photo.K, np.float64) @ np.asarray(photo.R, np.float64)).T
+    q += np.asarray(photo.K, np.float64) @ np.asarray(photo.t, np.float64)
+    h, w = photo.depth.shape
+    z = q[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = np.rint(q[:, :2] / z[:, None])
+    ok = (z > 0) & (px[:, 0] >= 0) & (px[:, 0] <= w - 1) & (px[:, 1] >= 0) & (px[:, 1] <= h - 1)
+    xi = np.where(ok, px[:, 0], 0).astype(np.intp)
+    yi = np.where(ok, px[:, 1], 0).astype(np.intp)
+    return ok & (np.abs(photo.depth[yi, xi] - z) <= tolerance * np.abs(z))
 
 
 def _not_sliver(tri, min_deg=SLIVER_DEG):
@@ -351,55 +478,54 @@ def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
     return prepare_view_maps(mesh, photos).lookup(C, power=power)
 
 
-def _view_map(X, face, ids, wts, photos, tolerance, channels):
-    M = len(ids)
-    W = np.zeros((M, len(photos)))  # polygon -> weight of each photograph
-    for k in range(3):
-        ok = ids[:, k] >= 0
-        np.add.at(W, (np.flatnonzero(ok), ids[ok, k]), wts[ok, k])
-    # the pixels sorted by polygon (16-bit ids sort by radix, in linear time): a
-    # photograph's pixels are then runs, its weight constant along each
-    order = np.argsort(face.astype(np.int16) if M < 2 ** 15 else face, kind="stable")
-    Xs = X[order]
-    counts = np.bincount(face, minlength=M)
-    starts = np.concatenate([[0], np.cumsum(counts)])
-    acc = np.zeros((len(X), channels))
-    wsum = np.zeros(len(X))
-    n = np.zeros(len(X))
-    for j, p in enumerate(photos):
-        on = (W[:, j] > 0) & (counts > 0)
-        if not on.any():
+def _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels):
+    """Each pixel blended from its polygon's (at most) three photographs
+    ``ids[face]``, with the blend's weights (:func:`_weights`) among them."""
+    n, P = len(X), len(photos)
+    # the pixels grouped by their polygon's three photographs (one radix sort of
+    # small keys): each group's slot is one photograph, worked on as a slice
+    key = ((ids[:, 0] + 1) * (P + 1) + ids[:, 1] + 1) * (P + 1) + ids[:, 2] + 1
+    uniq, inv = np.unique(key, return_inverse=True)
+    pix_group = inv[face]
+    order = np.argsort(pix_group.astype(np.int16 if len(uniq) < 2 ** 15 else np.int64),
+                       kind="stable")
+    starts = np.concatenate([[0], np.cumsum(np.bincount(pix_group, minlength=len(uniq)))])
+    Xs, fs = X[order], face[order]
+    rays = _unit(Xs - C)
+    theta = np.full((3, n), np.inf)
+    samples = np.zeros((3, n, channels), np.float32)
+    for g, kv in enumerate(uniq):
+        a, b = starts[g], starts[g + 1]
+        if a == b:
             continue
-        # a polygon the photograph sees whole needs no per-pixel depth test (the
-        # 1998 paper's polygons are split at visibility edges beforehand), only
-        # a look-up that the bilinear cell does not straddle its outline
-        for whole in (True, False):
-            faces = np.flatnonzero(on & (p.whole == whole))
-            if not len(faces):
+        trio = (kv // (P + 1) ** 2 - 1, kv // (P + 1) % (P + 1) - 1, kv % (P + 1) - 1)
+        for k, j in enumerate(trio):
+            if j < 0:
                 continue
-            s, ok = _sample(p, np.concatenate([Xs[starts[f]:starts[f + 1]] for f in faces]),
-                            tolerance, check="cells" if whole else True)
-            pos = 0
-            for f in faces:
-                a, b = starts[f], starts[f + 1]
-                okf = ok[pos:pos + b - a]
-                wt = W[f, j] * okf
-                acc[a:b] += wt[:, None] * s[pos:pos + b - a]
-                wsum[a:b] += wt
-                n[a:b] += okf
-                pos += b - a
-    # back to the pixels' order
-    out_acc, out_w, out_n = np.empty_like(acc), np.empty_like(wsum), np.empty_like(n)
-    out_acc[order], out_w[order], out_n[order] = acc, wsum, n
-    return out_acc, out_w, out_n
+            p = photos[j]
+            # a polygon the photograph sees whole needs no per-pixel depth test (the
+            # 1998 paper's polygons are split at visibility edges beforehand), only
+            # a look-up that the bilinear cell does not straddle its outline
+            samples[k, a:b], ok = _sample(p, Xs[a:b], tolerance, whole=p.whole[fs[a:b]])
+            theta[k, a:b] = np.where(ok, _angle_to(rays[a:b], Xs[a:b], p.centre), np.inf)
+    W = _weights(theta, power, neighbours)
+    acc_s = W[0][:, None] * samples[0]
+    acc_s += W[1][:, None] * samples[1]
+    acc_s += W[2][:, None] * samples[2]
+    acc, wsum, cnt = np.empty_like(acc_s), np.empty(n), np.empty(n, np.int64)
+    acc[order], wsum[order], cnt[order] = acc_s, W.sum(0), (W > 0).sum(0)
+    return acc, wsum, cnt
+
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
     """``image`` (H, W, C) with the pixels of ``region`` that are not
     ``known`` filled by push–pull: weighted means over a pyramid of 2×2
     blocks, the finest level that has data used (Gortler et al., "The
-    Lumigraph", SIGGRAPH 1996). Known pixels are unchanged."""
-    out = np.array(image, np.float64, copy=True)
+    Lumigraph", SIGGRAPH 1996). Known pixels are unchanged; float32 in,
+    float32 out, else float64."""
+    out = np.array(image, np.float32 if np.asarray(image).dtype == np.float32 else np.float64,
+                   copy=True)
     hole = region & ~known
     if not hole.any() or not known.any():
         return out
@@ -412,32 +538,68 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
     return out
 
 
+def _resize(a, size, interp):
+    """``cv2.resize`` of an (H, W, C) array keeping the channel axis (at most
+    four channels a call)."""
+    import cv2
+
+    out = [cv2.resize(np.ascontiguousarray(a[..., c:c + 4]), size, interpolation=interp)
+           for c in range(0, a.shape[2], 4)]
+    out = [o[..., None] if o.ndim == 2 else o for o in out]
+    return out[0] if len(out) == 1 else np.concatenate(out, 2)
+
+
 def _push_pull(image, known, hole):
-    img = np.where(known[..., None], image, 0.0)
-    wgt = known.astype(np.float64)
+    import cv2
+
+    img = np.where(known[..., None], image, 0.0).astype(np.float32)
+    wgt = known.astype(np.float32)[..., None]
     levels = [(img, wgt)]
     while min(img.shape[:2]) > 1 and wgt.min() == 0:
         h, w = img.shape[:2]
         ph, pw = h % 2, w % 2
-        im = np.pad(img * wgt[..., None], ((0, ph), (0, pw), (0, 0)))
-        wg = np.pad(wgt, ((0, ph), (0, pw)))
-        s = im.reshape(im.shape[0] // 2, 2, im.shape[1] // 2, 2, -1).sum((1, 3))
-        ws = wg.reshape(wg.shape[0] // 2, 2, wg.shape[1] // 2, 2).sum((1, 3))
-        img = np.where(ws[..., None] > 0, s / np.maximum(ws, 1e-300)[..., None], 0.0)
-        wgt = np.minimum(ws, 1.0)
+        im = img * wgt
+        wg = wgt
+        if ph or pw:
+            im = np.pad(im, ((0, ph), (0, pw), (0, 0)))
+            wg = np.pad(wg, ((0, ph), (0, pw), (0, 0)))
+        half = (im.shape[1] // 2, im.shape[0] // 2)
+        # 2x2 block means (INTER_AREA at exactly half the size): their ratio is the
+        # weighted mean, four times the weight mean the block's weight
+        s = _resize(im, half, cv2.INTER_AREA)
+        ws = _resize(wg, half, cv2.INTER_AREA)
+        img = np.where(ws > 0, s / np.maximum(ws, 1e-30), 0.0).astype(np.float32)
+        wgt = np.minimum(4 * ws, 1.0)
         levels.append((img, wgt))
     up = levels[-1][0]
     for im, wg in reversed(levels[:-1]):
         h, w = im.shape[:2]
-        coarse = np.repeat(np.repeat(up, 2, 0), 2, 1)[:h, :w]
-        up = wg[..., None] * im + (1 - wg[..., None]) * coarse
+        coarse = _resize(up, (2 * up.shape[1], 2 * up.shape[0]), cv2.INTER_NEAREST)[:h, :w]
+        up = wg * im + (1 - wg) * coarse
     out = np.array(image, copy=True)
     out[hole] = up[hole]
     return out
 
 
+_RAYS: dict = {}
+
+
+def _rays(K, size):
+    """:func:`pixel_rays`, the last few cameras' kept (a viewer renders one
+    camera size again and again)."""
+    key = (np.asarray(K, np.float64).tobytes(), tuple(size))
+    r = _RAYS.get(key)
+    if r is None:
+        if len(_RAYS) >= 4:
+            _RAYS.pop(next(iter(_RAYS)))
+        r = _RAYS[key] = pixel_rays(K, size)
+        r.flags.writeable = False
+    return r
+
+
 def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
-                tolerance: float = 0.01, power: float = DEFAULT_POWER, background: float = 0.0,
+                tolerance: float = 0.01, power: float = DEFAULT_POWER,
+                neighbours: int = DEFAULT_NEIGHBOURS, background: float = 0.0,
                 fill: bool = True, maps: ViewMaps | None = None) -> VDTMImage:
     """Render ``mesh`` from the camera ``K, R, t`` (``x_cam = R x_world +
     t``, ``size = (W, H)``) textured from ``photographs`` (see the module
@@ -454,8 +616,11 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     tolerance : float
         Visibility: relative depth difference still "the same surface".
     power : float
-        Weights ``θ^−power``; 1 is the paper's, the default
-        :data:`DEFAULT_POWER` was tuned on the glossy facade scene.
+        Weights ``θ^−power``; 1 (the default) is the paper's.
+    neighbours : int
+        Only the ``neighbours`` nearest photographs by angle blend, tapered
+        to 0 at the next nearest (:data:`DEFAULT_NEIGHBOURS`, chosen on the
+        glossy facade scene); 0: every photograph that sees the point.
     background : float
         Value off the model.
     fill : bool
@@ -475,6 +640,9 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         raise InputError("tolerance", f"expected a positive relative depth tolerance, got {tolerance}")
     if not (np.isfinite(power) and power > 0):
         raise InputError("power", f"expected a positive weight exponent, got {power}")
+    if isinstance(neighbours, bool) or not isinstance(neighbours, (int, np.integer)) or neighbours < 0:
+        raise InputError("neighbours", f"expected a whole number >= 0 (0 = every photograph), "
+                                       f"got {neighbours!r}")
     v, f = _mesh(mesh)
     photos = list(photographs)
     if not photos:
@@ -493,8 +661,8 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     t = np.asarray(t, np.float64).reshape(3)
     C = -R.T @ t
     t0 = time.perf_counter()
-    rays = pixel_rays(K, (w, h))
-    r = rasterize(v, f, K, R, t, (w, h), rays=rays)
+    rays = _rays(K, (w, h))
+    r = rasterize(v, f, K, R, t, (w, h), rays=rays, bary=False)
     t1 = time.perf_counter()
     model = r.hit
     idx = np.flatnonzero(model.ravel())
@@ -502,20 +670,32 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     Xc = rays.reshape(-1, 3)[idx] * r.depth.ravel()[idx, None]
     X = (Xc - t) @ R  # R^T (x_cam - t)
     if method == "blend":
-        acc, wsum, n = _blend(X, C, photos, tolerance, power, channels)
+        acc, wsum, n = _blend(X, C, photos, tolerance, power, neighbours, channels)
     else:
         if maps is None:
             maps = prepare_view_maps((v, f), photos)
-        ids, wts = maps.lookup(C, power=power)
-        acc, wsum, n = _view_map(X, r.face.ravel()[idx], ids, wts, photos, tolerance, channels)
+        ids = maps.choose(C, power=power, neighbours=neighbours)
+        face = r.face.ravel()[idx]
+        acc, wsum, n = _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels)
         # where none of a polygon's three sees the point, every photograph is asked
-        again = np.flatnonzero(wsum == 0)
-        if len(again):
-            acc[again], wsum[again], n[again] = _blend(X[again], C, photos, tolerance, power,
-                                                       channels)
+        # where fewer of the polygon's three see the point than the blend would
+        # take (a partly hidden polygon) and other photographs see some of the
+        # polygon, every photograph is asked
+        more = np.array([len(js) for js in maps.photos]) > (ids >= 0).sum(1)
+        again = np.flatnonzero((n < min(neighbours or 1, 3)) & more[face])
+        # asked of the photographs that see some of the pixel's polygon (the others
+        # cannot see it): one call per set of such photographs (calls cost more
+        # than these few pixels)
+        sets: dict = {}
+        for m in np.unique(face[again]):
+            sets.setdefault(tuple(maps.photos[m]), []).append(m)
+        for js, ms in sets.items():
+            rows = again[np.isin(face[again], ms)]
+            acc[rows], wsum[rows], n[rows] = _blend(X[rows], C, [photos[j] for j in js],
+                                                    tolerance, power, neighbours, channels)
     t2 = time.perf_counter()
     seen = wsum > 0
-    out = np.full((h * w, channels), float(background))
+    out = np.full((h * w, channels), float(background), np.float32)
     out[idx[seen]] = acc[seen] / wsum[seen, None]
     known = np.zeros(h * w, bool)
     known[idx[seen]] = True
@@ -527,12 +707,12 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     elif not fill:
         filled = np.zeros_like(model)
     t3 = time.perf_counter()
-    info = {"method": method, "tolerance": tolerance, "power": power,
+    info = {"method": method, "tolerance": tolerance, "power": power, "neighbours": neighbours,
             "photographs": len(photos),
             "photographs_per_pixel": float(n.mean()) if len(n) else 0.0,
             "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
             "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
-    return VDTMImage(out.astype(np.float32), model, filled, info)
+    return VDTMImage(out.astype(np.float32, copy=False), model, filled, info)
 
 
 def load_posed_camera(path):
@@ -582,6 +762,45 @@ def load_model_mesh(path):
                 values[n] = float(v["value"])
         return model.with_values(values).mesh(), body
     return load_blocks(p).mesh(), None
+
+
+def load_fitted_model(path):
+    """A solve's ``model.json`` as ``(BlockModel with the fitted values,
+    {free name: value}, covariance (n, n) in that order)``: the covariance
+    from its ``"parameter_covariance"``, or the ``"std"`` of each parameter
+    squared on the diagonal (an older file). :class:`InputError` naming the
+    file when it is not a solve's model.json (a blocks.json has no σ)."""
+    from pathlib import Path
+
+    from lumigraph.capture.artifact import load_json_artifact
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    p = Path(path)
+    body = load_json_artifact(p, "model", schemas=None) if p.is_file() else None
+    if body is None or body.get("schema") != "lumigraph.facade.model":
+        raise InputError(p, "expected a solve's model.json (fitted values with their standard "
+                            "deviations); a blocks.json has no uncertainty")
+    blocks = p.parent / "blocks.json"
+    if not blocks.is_file():
+        raise InputError(p, f"a model.json needs its blocks.json beside it ({blocks} not found)")
+    mesh_model = load_blocks(blocks)
+    params = body.get("parameters")
+    names = list(mesh_model.parameter_names)
+    try:
+        values = {n: float(params[n]["value"]) for n in names}
+        std = np.array([float(params[n]["std"]) for n in names])
+    except (TypeError, KeyError, ValueError):
+        raise InputError(p, "key 'parameters': expected {name: {\"value\": v, \"std\": s}} for "
+                            f"every free parameter ({', '.join(names)})") from None
+    cov = np.diag(std ** 2)
+    pc = body.get("parameter_covariance")
+    if isinstance(pc, dict) and pc.get("names") == names:
+        m = np.asarray(pc.get("matrix"), dtype=float)
+        if m.shape != (len(names), len(names)) or not np.isfinite(m).all():
+            raise InputError(p, f"key 'parameter_covariance.matrix': expected a finite "
+                                f"{len(names)}x{len(names)} matrix")
+        cov = m
+    return mesh_model.with_values(values), values, cov
 
 
 def rig_between(key, offset):

@@ -54,6 +54,27 @@ def test_chain(folder, tmp_path):
     assert (ok & relief).sum() > 20
     # the pilasters stand out of the model: recovered to better than half their relief
     assert np.median(np.abs(z - truth)[ok & relief]) < PILASTER_M / 2
+    # the search following the model's σ: exact marks, so σ is round-off and the
+    # answer that of the plain search up to the pixels a model edge may cross
+    r = lumigraph("stereo", "facade", "depth", "--model", sol / "model.json", "--camera",
+                  sol / "cameras" / f"{key}.json", "--out", tmp_path / "model2.pfm",
+                  "--std-out", tmp_path / "std.pfm", "-q")
+    assert r.returncode == 0, r.stderr
+    sd = io.read_pfm(tmp_path / "std.pfm")
+    assert np.array_equal(io.read_pfm(tmp_path / "model2.pfm"), zm, equal_nan=True)
+    assert np.isfinite(sd[np.isfinite(zm)]).mean() > 0.9 and np.nanmax(sd[np.isfinite(sd)]) < 1e-3
+    r = lumigraph("stereo", "model-based", f / f"{key}.png", f / f"{off}.png", "--rig",
+                  tmp_path / "rig.json", "--model", tmp_path / "model.pfm", "--max-offset", "0.5",
+                  "--model-std", tmp_path / "std.pfm", "--out", tmp_path / "refined2.pfm", "-q")
+    assert r.returncode == 0, r.stderr
+    z2 = io.read_pfm(tmp_path / "refined2.pfm")
+    assert not (np.isfinite(z2) & ~np.isfinite(sd)).any()  # a model edge may cross: no answer
+    assert np.isfinite(z2).sum() > 0.9 * np.isfinite(z).sum()
+    # a blocks.json has no σ: refused, naming it
+    r = lumigraph("stereo", "facade", "depth", "--model", f / "blocks.json", "--camera",
+                  sol / "cameras" / f"{key}.json", "--out", tmp_path / "m3.pfm",
+                  "--std-out", tmp_path / "s3.pfm")
+    assert_clean_error(r, "blocks.json", "model.json")
     r = lumigraph("stereo", "facade", "render", "--model", sol / "model.json", "--photos", f,
                   "--view", f / "novel" / "view_0.json", "--out", tmp_path / "view.png", "-q")
     assert r.returncode == 0, r.stderr
@@ -95,7 +116,9 @@ def test_linear_photographs_stay_linear(folder, tmp_path):
     names = []
     for name, img in zip(s.image_names, s.images, strict=True):
         exr = name.replace(".png", ".exr")
-        io.write_exr(lin / exr, (img / 200.0).astype(np.float32))  # radiance = code / 200
+        # radiance = 4 x code: far above 1 and above 255, so a tone curve or an
+        # 8-bit clip on the way would show
+        io.write_exr(lin / exr, (img * 4.0).astype(np.float32))
         names.append(exr)
     io.write_stack_json(lin, names, blocks="blocks.json", edges="edges.json")
     for n in s.image_names:  # the cameras are found by the photographs' stems
@@ -108,8 +131,10 @@ def test_linear_photographs_stay_linear(folder, tmp_path):
     assert r.returncode == 0, r.stderr
     v = io.read_exr(tmp_path / "view.exr")
     codes = io.read_image(tmp_path / "codes.png").astype(np.float64)
-    # the same blend of radiance as of codes, up to the PNG's rounding (half a code)
-    assert np.abs(v * 200.0 - codes).max() <= 0.5 + 1e-3
+    # the same blend of radiance as of codes, up to the PNG's rounding (half a code):
+    # linear (no tone curve) and not clipped (the bright pixels are above 255)
+    assert np.abs(v / 4.0 - codes).max() <= 0.5 + 1e-3
+    assert v.max() > 255.0 and v.max() == pytest.approx(4.0 * codes.max(), abs=4 * 0.5 + 1e-3)
     # radiance into an 8-bit PNG would not be linear: refused
     r = lumigraph(*args, "--out", tmp_path / "view.png")
     assert_clean_error(r, "view.png", ".exr")

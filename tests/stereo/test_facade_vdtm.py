@@ -124,3 +124,36 @@ def test_bad_arguments():
     with pytest.raises(InputError, match="channels"):
         render_vdtm((V, [[0, 1, 2]]), [p, q], K, np.eye(3), np.zeros(3), (16, 12))
     assert pixel_rays(K, (16, 12)).shape == (12, 16, 3)
+
+
+def test_weights_taper_at_the_next_nearest():
+    from lumigraph.stereo.debevec1996.vdtm import EPS_RAD, _weights
+
+    th = np.array([[0.1], [0.2], [0.4], [np.inf]])  # the fourth photograph does not see
+    w = _weights(th, 1.0, 2)[:, 0]
+    expect = [(0.1 + EPS_RAD) ** -1 * (1 - 0.1 / 0.4), (0.2 + EPS_RAD) ** -1 * (1 - 0.2 / 0.4), 0, 0]
+    np.testing.assert_allclose(w, expect, rtol=1e-12)
+    # every photograph (neighbours 0); two seen: no third to taper at
+    np.testing.assert_allclose(_weights(th, 1.0, 0)[:3, 0], (th[:3, 0] + EPS_RAD) ** -1)
+    np.testing.assert_allclose(_weights(th[[0, 1, 3]], 1.0, 2)[:2, 0], (th[:2, 0] + EPS_RAD) ** -1)
+    # equal angles at the threshold would taper everything away: untapered there
+    eq = _weights(np.full((3, 1), 0.3), 1.0, 2)[:, 0]
+    assert (eq > 0).all() and np.ptp(eq) == 0
+
+
+@pytest.mark.parametrize("neighbours", [0, 1, 2])
+def test_view_map_is_the_blend_with_three_photographs(facade, neighbours):
+    # with three photographs every polygon's three are all of them: the view map
+    # blends the same samples with the same weights (the sums in another order:
+    # within 1e-4 of full scale, far above float rounding)
+    s, mesh, _ = facade
+    photos = prepare_photographs(mesh, [
+        Photograph(im.astype(np.float32), np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
+        for im, c in list(zip(s.images, s.gt["cameras"].values(), strict=True))[1:4]])
+    cam = s.gt["novel_cameras"]["view_0"]
+    K, R, t = (np.array(cam[x]) for x in ("K", "R", "t"))
+    a = render_vdtm(mesh, photos, K, R, t, SIZE, neighbours=neighbours)
+    b = render_vdtm(mesh, photos, K, R, t, SIZE, neighbours=neighbours, method="view-map")
+    assert a.model.sum() > 500
+    np.testing.assert_array_equal(a.filled, b.filled)
+    np.testing.assert_allclose(b.image, a.image, atol=1e-4 * 255)
