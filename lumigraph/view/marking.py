@@ -52,7 +52,7 @@ import numpy as np
 from lumigraph.capture.errors import EstimationError, InputError
 
 SNAP_ANGLE_DEG = 5.0     # a drag by hand is rarely further off an edge's direction
-SNAP_DISTANCE_PX = 4.0   # ... or further from its line; beyond, a parallel line (a window frame) is as likely
+SNAP_DISTANCE_PX = 3.0   # ... or further from its line; beyond, a parallel line (a window frame) is as likely
 UNASSIGNED_KEY = "unassigned"
 
 
@@ -93,7 +93,12 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
             best = refined
     p, q = best[:2], best[2:]
     d = (q - p) / max(np.hypot(*(q - p)), 1e-9)
-    return np.r_[p + ((a - p) @ d) * d, p + ((b - p) @ d) * d]
+    out = np.r_[p + ((a - p) @ d) * d, p + ((b - p) @ d) * d]
+    # the refined line, carried out to the dragged ends, must still be near
+    # them: a short detection a few degrees off would swing a long drag's ends
+    if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > max_distance_px:
+        return None
+    return out
 
 
 class FacadeSession:
@@ -121,6 +126,7 @@ class FacadeSession:
         self.marks: dict[int, dict] = {}
         self.proposals: dict[int, dict] = {}
         self.solution: dict | None = None
+        self.proposal_warnings: list[str] = []
         self._next = 1
         self._lock = threading.RLock()
         self._detected: dict[str, np.ndarray] = {}
@@ -259,7 +265,7 @@ class FacadeSession:
                                     f"({w}x{h})")
         return s
 
-    def _find(self, mark_id, table=None) -> dict:
+    def find(self, mark_id, table=None) -> dict:
         table = self.marks if table is None else table
         try:
             return table[int(mark_id)]
@@ -391,7 +397,7 @@ class FacadeSession:
         """Tie a mark to a model edge (None: untie it); saved."""
         edge = self._edge(edge)
         with self._lock:
-            m = self._find(mark_id)
+            m = self.find(mark_id)
             if edge is not None:
                 self._drop_same(m["photo"], edge, keep=m["id"])
             m["edge"] = edge
@@ -402,14 +408,14 @@ class FacadeSession:
     def move(self, mark_id, segment) -> dict:
         """Replace a mark's segment (no snapping); saved."""
         with self._lock:
-            m = self._find(mark_id)
+            m = self.find(mark_id)
             m["segment"] = [float(v) for v in self._segment(segment, "segment", m["photo"])]
             self.save()
             return m
 
     def delete(self, mark_id) -> dict:
         with self._lock:
-            m = self._find(mark_id)
+            m = self.find(mark_id)
             del self.marks[m["id"]]
             self.save()
             return m
@@ -477,7 +483,7 @@ class FacadeSession:
     def accept(self, proposal_id) -> dict:
         """A pending proposal becomes a mark (``"proposed": true``); saved."""
         with self._lock:
-            p = self._find(proposal_id, self.proposals)
+            p = self.find(proposal_id, self.proposals)
             del self.proposals[p["id"]]
             self._drop_same(p["photo"], p["edge"])
             self.marks[p["id"]] = p
@@ -496,7 +502,7 @@ class FacadeSession:
 
     def reject(self, proposal_id) -> dict:
         with self._lock:
-            p = self._find(proposal_id, self.proposals)
+            p = self.find(proposal_id, self.proposals)
             del self.proposals[p["id"]]
             return p
 
