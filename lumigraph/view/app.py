@@ -104,6 +104,10 @@ def create_app(*, artifacts=(), facade=None):
     def index():
         return send_from_directory(STATIC, "index.html")
 
+    @app.get("/favicon.ico")
+    def favicon():
+        return Response(status=204)
+
     @app.get("/api/mode")
     def mode():
         return jsonify({"facade": app.config["LUMI_FACADE"] is not None,
@@ -176,6 +180,7 @@ def start_server(app, *, port: int | None = None, default: int | None = None, qu
     (``port``); otherwise ``default`` is tried, then any free port."""
     import errno
     import logging
+    import socket
 
     from werkzeug.serving import make_server
 
@@ -183,15 +188,25 @@ def start_server(app, *, port: int | None = None, default: int | None = None, qu
         logging.getLogger("werkzeug").setLevel(logging.WARNING)
     tries = [port] if port is not None else ([default] if default else []) + [0]
     for k, p in enumerate(tries):
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # not over a live listener
         try:
-            return make_server("127.0.0.1", int(p), app, threaded=True)
+            # bound here, not by werkzeug, which prints and exits on a port in use
+            sock.bind(("127.0.0.1", int(p)))
+            sock.listen(64)
         except OSError as e:
+            sock.close()
             if k + 1 < len(tries):  # the default is taken: any free port
                 continue
             if port is not None and e.errno in (errno.EADDRINUSE, errno.EACCES):
                 raise InputError("port", f"port {port} on 127.0.0.1 is {_why(e)}; choose another, "
                                          "or leave out --port to take a free one") from None
             raise
+        try:
+            return make_server("127.0.0.1", sock.getsockname()[1], app, threaded=True,
+                               fd=sock.fileno())
+        finally:
+            sock.close()  # the server holds its own duplicate
     raise AssertionError("unreachable")  # pragma: no cover
 
 

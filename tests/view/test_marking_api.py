@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-EDGE_NOISE_PX = 0.5
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, truth_lines  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -61,26 +62,6 @@ def _valid(path: Path, folder: Path | None = None):
     photos = json.loads((folder / "stack.json").read_text())["images"]
     marks = load_edges(path, model=model, photographs=photos)
     return marks, json.loads(path.read_text())["unassigned"]
-
-
-def _truth_lines(folder: Path) -> dict:
-    """photo -> edge -> the true model edge projected by the true camera."""
-    from lumigraph.stereo.debevec1996.model import load_blocks
-    from lumigraph.stereo.debevec1996.solve import project_model_edges
-
-    gt = json.loads((folder / "gt.json").read_text())
-    model = load_blocks(folder / "blocks.json")
-    model = model.with_values({n: gt["parameters"][n] for n in model.parameter_names})
-    return {p: project_model_edges(model, c["K"], c["R"], c["t"]) for p, c in gt["cameras"].items()}
-
-
-def _distance(seg, line) -> float:
-    """Largest distance (px) of a segment's ends from an infinite line."""
-    a, b = np.asarray(line[0]), np.asarray(line[1])
-    d = (b - a) / np.hypot(*(b - a))
-    n = np.array([-d[1], d[0]])
-    s = np.asarray(seg, float)
-    return float(max(abs((s[:2] - a) @ n), abs((s[2:] - a) @ n)))
 
 
 def test_every_edit_leaves_a_valid_edges_json(scene, tmp_path):
@@ -122,7 +103,7 @@ def test_every_edit_leaves_a_valid_edges_json(scene, tmp_path):
 
 def test_a_dragged_segment_snaps_onto_the_edge(scene, tmp_path):
     folder, _ = scene
-    truth = _truth_lines(folder)
+    truth = truth_lines(folder)
     c, _ = _client(folder, tmp_path / "e.json")
     full = json.loads((folder / "edges.json").read_text())["photographs"]
     # the longest marked edge of photo_00, dragged 1.5 px off its line and 1° turned
@@ -132,11 +113,11 @@ def test_a_dragged_segment_snaps_onto_the_edge(scene, tmp_path):
     d = (b - a) / np.hypot(*(b - a))
     n = np.array([-d[1], d[0]])
     drag = np.r_[a + 1.5 * n, b + 1.5 * n + 0.017 * np.hypot(*(b - a)) * n]
-    before = _distance(drag, truth["photo_00.png"][m["edge"]])
+    before = distance(drag, truth["photo_00.png"][m["edge"]])
     r = c.post("/api/facade/marks", json={"photo": "photo_00.png", "segment": drag.tolist()})
     got = r.get_json()
     assert got["snapped"], got
-    after = _distance(got["segment"], truth["photo_00.png"][m["edge"]])
+    after = distance(got["segment"], truth["photo_00.png"][m["edge"]])
     # the photographs are rendered one sample per pixel: an edge is located to
     # within half a pixel
     assert before > 1.5 and after <= 0.5, (before, after)
@@ -267,23 +248,6 @@ def test_a_writer_failing_mid_file_leaves_the_old_file(scene, tmp_path, monkeypa
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".edges")] == []
 
 
-def _four_hand_marks(model, marks):
-    """Two vertical and two horizontal edges, the longest (as a user picks:
-    ``lumigraph bench facade`` does the same)."""
-    from lumigraph.stereo.debevec1996.solve import _known_axis
-
-    ax = _known_axis(model, [m["edge"] for m in marks])
-    L = [np.hypot(m["segment"][2] - m["segment"][0], m["segment"][3] - m["segment"][1])
-         for m in marks]
-    order = list(np.argsort(L)[::-1])
-    out = [i for i in order if ax[i] == 2][:2]
-    for a in (0, 1):
-        pick = [i for i in order if ax[i] == a][:2]
-        if len(pick) == 2:
-            return [marks[i] for i in out + pick]
-    return [marks[i] for i in order[:4]]
-
-
 def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_path):
     """Issue 18's done-when, as a new user would go: four edges per
     photograph dragged by hand (σ = 0.5 px) and snapped, Propose, each
@@ -294,7 +258,7 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     folder, _ = scene
-    truth = _truth_lines(folder)
+    truth = truth_lines(folder)
     full = json.loads((folder / "edges.json").read_text())["photographs"]
     c, s = _client(folder, tmp_path / "edges.json")
     rng = np.random.default_rng(7)
@@ -307,13 +271,13 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
         assert r.status_code == 200
 
     for p in s.photos:
-        for m in _four_hand_marks(s.model, full[p]):
+        for m in four_hand_marks(s.model, full[p]):
             drag(p, m)
     r = c.post("/api/facade/propose")
     assert r.status_code == 200, r.get_json()
     for q in r.get_json()["proposals"]:
         line = truth[q["photo"]][q["edge"]]
-        verdict = "accept" if _distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
+        verdict = "accept" if distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
         assert c.post(f"/api/facade/proposals/{q['id']}/{verdict}").status_code == 200
     for _ in range(3):
         r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})

@@ -397,6 +397,7 @@
     get ready() { return !!S.ready; },
     get photo() { return S.photo; },
     get selected() { return S.selected; },
+    get scale() { return S.view.s; },
     toScreen, toImage, choosePhoto, refresh,
   };
   start().catch((e) => showError(String(e.message || e)));
