@@ -269,6 +269,45 @@ class Artifact:
         raise InputError(self.path, f"a {self.kind} has no 3-D geometry; ask for its image")
 
 
+# The display copy of a radiance map is kept as a log2 index: LOG_STEPS codes
+# per stop over LOG_STOPS stops below its brightest value (darker: index 0,
+# black at any exposure the slider reaches). An exposure move is then one
+# 65536-entry table (the sRGB code of each index at that exposure) and one
+# gather, instead of a multiply, a clip and a table on floats. Rounding to
+# the index moves ln L by at most ln 2 / (2 LOG_STEPS); the code moves by at
+# most 112.1 times that (255 x srgb'(x) peaks at 255 * 1.055 / 2.4 at x = 1),
+# 0.038 of a code, on top of the table's own rounding to whole codes.
+LOG_STEPS = 1024
+LOG_STOPS = 63  # LOG_STEPS * LOG_STOPS + 1 indices fit in uint16
+
+
+def log_index(radiance: np.ndarray) -> tuple[np.ndarray, float]:
+    """``(index, top)``: ``index = round(LOG_STEPS (log2 L - log2 top)) + LOG_STEPS
+    LOG_STOPS`` as uint16 (0: at or below ``top 2^-LOG_STOPS``, zero, negative or
+    unknown), ``top`` the largest finite value (1 when there is none)."""
+    x = np.asarray(radiance, np.float32)
+    finite = np.isfinite(x)
+    top = float(x[finite].max()) if finite.any() else 1.0
+    top = top if top > 0 else 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.log2(x / np.float32(top))
+    q *= np.float32(LOG_STEPS)
+    q += np.float32(LOG_STEPS * LOG_STOPS + 0.5)
+    q = np.nan_to_num(q, nan=0.0, neginf=0.0, posinf=0.0)
+    np.clip(q, 0, LOG_STEPS * LOG_STOPS, out=q)
+    return q.astype(np.uint16), top
+
+
+def log_exposure_table(top: float, stops: float) -> np.ndarray:
+    """The sRGB code (uint8) of each :func:`log_index` value at ``stops``."""
+    from lumigraph.hdr.reinhard2002 import srgb_encode
+
+    q = np.arange(LOG_STEPS * LOG_STOPS + 1, dtype=np.float64)
+    lin = top * np.exp2(stops + (q - LOG_STEPS * LOG_STOPS) / LOG_STEPS)
+    lin[0] = 0.0
+    return np.round(255.0 * srgb_encode(lin)).astype(np.uint8)
+
+
 class Radiance(Artifact):
     """Linear radiance (EXR, RGBE, LogLuv TIFF, three-channel PFM)."""
 
@@ -281,6 +320,7 @@ class Radiance(Artifact):
         self.full = full
         self.display, self.scale = display_copy(full)
         self.default_stops = auto_stops(self.display)
+        self.index, self.top = log_index(self.display)
 
     def controls(self):
         return [Control("exposure", "slider", self.default_stops, -STOPS, STOPS, 0.1,
@@ -297,6 +337,8 @@ class Radiance(Artifact):
         return {"display_size": [w, h], "display_scale": self.scale}
 
     def image(self, values):
+        if values["tone"] == "linear":
+            return _rgb(log_exposure_table(self.top, values["exposure"])[self.index])
         return tone_map(self.display, stops=values["exposure"], tone=values["tone"])
 
     def probe(self, x, y, values):
@@ -601,7 +643,11 @@ class Geometry(Artifact):
             step = math.ceil(len(pts) / MAX_POINTS)
             pts = pts[::step]
             cols = cols[::step] if cols is not None else None
-        return {"kind": self.kind, "positions": np.round(pts.astype(np.float32), 6).ravel().tolist(),
+        # decimals to 1e-7 of the model's extent: compact JSON, far below a pixel
+        extent = float(np.abs(pts).max()) if len(pts) else 1.0
+        decimals = max(0, 7 - math.ceil(math.log10(extent))) if extent > 0 else 7
+        return {"kind": self.kind, "positions": np.round(pts, decimals).ravel().tolist(),
+                "decimals": decimals,
                 "colors": None if cols is None else cols.ravel().tolist(),
                 "faces": None if self.faces is None else self.faces.ravel().tolist(),
                 "every": step, "count": int(len(self.points))}
