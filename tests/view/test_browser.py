@@ -183,7 +183,38 @@ def _four_hand_marks_sorted(folder, marks):
                                                 m["segment"][3] - m["segment"][1]))
 
 
-def test_the_page_loads_without_a_facade_session(browser, tmp_path):
+def test_an_unreadable_artifact_shows_its_one_line_error_and_the_server_keeps_serving(browser,
+                                                                                     tmp_path):
+    """Looking mode: the page opens on a broken EXR; its error line is shown
+    where the picture would be, the marking tab stays hidden, and the server
+    answers the next request."""
+    import urllib.request
+
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.view.app import create_app, start_server
+
+    bad = tmp_path / "broken.exr"
+    bad.write_bytes(b"not an exr at all")
+    server = start_server(create_app(artifacts=[bad]), port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        browser.get(f"http://127.0.0.1:{server.port}/")
+        _wait(browser, "return window.lumiMark && window.lumiMark.ready")
+        shown = _wait(browser, "const e = document.querySelector('#look .look-error');"
+                               "return e && e.textContent")
+        assert shown.startswith(f"{bad}: ") and "\n" not in shown, shown
+        assert not browser.find_element(By.ID, "mode-mark").is_displayed()
+        assert browser.find_element(By.ID, "look").get_attribute("hidden") is None
+        with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/api/mode", timeout=10) as r:
+            assert r.status == 200
+    finally:
+        server.shutdown()
+        thread.join(5)
+
+
+def test_the_page_loads_without_a_facade_session(browser):
     """Looking mode only: the page starts, the marking tab stays hidden."""
     from selenium.webdriver.common.by import By
 
