@@ -93,10 +93,14 @@ def _view(args) -> int:
     if args.check:
         from lumigraph.view import artifacts
 
-        for path in artifacts.expand(args.paths):
+        found = artifacts.expand(args.paths)
+        for path in found:
             artifacts.load(path)
-        say(args, f"{len(args.paths)} artifact path(s)" + (", the Façade session" if session
-                                                           else "") + ": readable")
+        said = [f"{len(found)} artifact(s) readable"] if args.paths else []
+        if session is not None:
+            said.append(f"Façade session: {len(session.photos)} photographs, "
+                        f"{len(session.marks)} marks")
+        say(args, "; ".join(said) or "nothing to open")
         return 0
     app = create_app(artifacts=args.paths, facade=session)
     server = start_server(app, port=args.port, default=DEFAULT_PORT, quiet=not args.debug)
