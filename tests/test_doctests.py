@@ -12,7 +12,7 @@ import pytest
 
 import lumigraph
 
-SUBPACKAGES = ("capture", "calib", "hdr", "stereo", "lightfield", "separation")
+SUBPACKAGES = ("capture", "calib", "hdr", "stereo", "lightfield", "separation", "view")
 
 
 def _modules() -> list[str]:
