@@ -7,7 +7,7 @@
 (function () {
   const COLOURS = {
     mark: "#00dc00", unassigned: "#ffffff", selected: "#ffd400",
-    reprojMarked: "#ff2020", reprojOther: "#3c78ff", proposal: "#ff9a00", detected: "#40d0d0",
+    outlier: "#ff00ff", reprojMarked: "#ff2020", reprojOther: "#3c78ff", proposal: "#ff9a00", detected: "#40d0d0",
   };
   const S = {
     state: null, photo: 0, images: {}, detected: {}, selected: null, selectedProposal: null,
@@ -118,11 +118,17 @@
     }
     const sol = S.state.solution;
     const resid = (sol && sol.residual_by_id) || {};
+    const outliers = new Set(((sol && sol.outliers) || []).filter((o) => o.photo === name).map((o) => o.edge));
     for (const m of marks) {
-      const colour = m.id === S.selected ? COLOURS.selected : m.edge ? COLOURS.mark : COLOURS.unassigned;
+      const colour = m.id === S.selected ? COLOURS.selected : !m.edge ? COLOURS.unassigned
+        : outliers.has(m.edge) ? COLOURS.outlier : COLOURS.mark;
       line(m.segment, colour, m.id === S.selected ? 3 : 2, m.edge ? [] : [4, 3]);
+      // the residual (px) beside every mark; the edge's name where it helps
       const r = resid[m.id];
-      label(m.segment, (m.edge || "(unassigned)") + (r !== undefined ? ` ${r.toFixed(2)} px` : ""), colour);
+      const text = [m.id === S.selected || !m.edge ? (m.edge || "(unassigned)") : "",
+                    outliers.has(m.edge) ? "mis-marked?" : "",
+                    r !== undefined ? `${r.toFixed(2)} px` : ""].filter((t) => t).join(" ");
+      label(m.segment, text, colour);
     }
     // the reprojected model on top, thin, so the marks show around it
     const proj = sol && sol.projected && sol.projected[name];
