@@ -91,6 +91,13 @@ def test_every_edit_leaves_a_valid_edges_json(scene, tmp_path):
     marks, _ = _valid(edges)
     assert sorted(m.photo for m in marks.marks) == ["photo_00.png", "photo_01.png"]
 
+    # a segment moved by hand (no snapping) is saved where it was put
+    moved = [v + 0.25 for v in second["segment"]]
+    sid = c.get("/api/facade/state").get_json()["marks"][-1]["id"]
+    assert c.post(f"/api/facade/marks/{sid}", json={"segment": moved}).get_json()["segment"] == moved
+    marks, _ = _valid(edges)
+    assert marks.of("photo_01.png")[0].segment.tolist() == moved
+
     assert c.delete(f"/api/facade/marks/{mid}").status_code == 200
     marks, _ = _valid(edges)
     assert [m.photo for m in marks.marks] == ["photo_01.png"]
@@ -99,6 +106,19 @@ def test_every_edit_leaves_a_valid_edges_json(scene, tmp_path):
     _, s2 = _client(work, edges)
     assert [(m["photo"], m["edge"]) for m in s2.marks.values()] == [("photo_01.png",
                                                                      second["edge"])]
+
+
+def test_the_photographs_and_their_detected_lines_are_served(scene, tmp_path):
+    import cv2
+
+    folder, s = scene
+    c, _ = _client(folder, tmp_path / "e.json")
+    r = c.get("/api/facade/photo/1")
+    assert r.status_code == 200 and r.mimetype == "image/png"
+    img = cv2.imdecode(np.frombuffer(r.data, np.uint8), cv2.IMREAD_COLOR)[..., ::-1]
+    assert np.array_equal(img, s.images[1])   # the photograph itself, RGB, lossless
+    segs = np.array(c.get("/api/facade/detected/1").get_json()["segments"])
+    assert segs.ndim == 2 and segs.shape[1] == 4 and len(segs) > 10
 
 
 def test_a_dragged_segment_snaps_onto_the_edge(scene, tmp_path):
