@@ -187,15 +187,17 @@ def tone_map(radiance: np.ndarray, *, stops: float, tone: str) -> np.ndarray:
 
 
 def auto_stops(radiance: np.ndarray) -> float:
-    """Exposure (stops, 0.1 steps) that maps the 99th percentile of the largest
-    channel to 1 (a first look that clips 1 % of the pixels)."""
+    """Exposure (stops, 0.1 steps) that brings the log-average of the largest
+    channel to 0.18, middle grey (Reinhard 2002's key: a first look at the
+    scene's body, its highlights clipped), from a subsample of at most
+    512 x 512 pixels."""
     x = radiance if radiance.ndim == 2 else radiance.max(axis=2)
     x = x[::max(1, x.shape[0] // 512), ::max(1, x.shape[1] // 512)]
     x = x[np.isfinite(x) & (x > 0)]
     if x.size == 0:
         return 0.0
-    p = float(np.percentile(x, 99))
-    return float(np.clip(round(-math.log2(p), 1), -STOPS, STOPS)) if p > 0 else 0.0
+    log_mean = float(np.mean(np.log2(x.astype(np.float64))))
+    return float(np.clip(round(math.log2(0.18) - log_mean, 1), -STOPS, STOPS))
 
 
 def _xy(x, y, w: int, h: int) -> tuple[int, int]:
