@@ -27,6 +27,12 @@ Error: RMS difference in 8-bit codes between the served JPEG and the exact
 picture (radiance: ``255 srgb(clip(2^s L))`` of the exact area-mean
 display copy, float64; light field: the same tone curve of the Lanczos-3
 shift-and-add refocus).
+
+Examples
+--------
+>>> st = stage(quick=True)  # the cases are built when the bench runs them
+>>> st.name, len(st.cases), [c.note for c in st.cases[:3]]
+('view', 12, ['tuned', 'reported', 'reported'])
 """
 
 from __future__ import annotations
