@@ -52,6 +52,7 @@ class Shelf:
         self.kinds = [A.kind_of(p) for p in self.paths]
         self.lock = threading.Lock()
         self.loaded: OrderedDict = OrderedDict()
+        self.reading: dict[str, threading.Lock] = {}
 
     def path(self, ident: str) -> Path:
         try:
@@ -75,7 +76,14 @@ class Shelf:
             if key in self.loaded:
                 self.loaded.move_to_end(key)
                 return self.loaded[key]
-        art = A.load(p)  # outside the shelf's lock: another artifact may be drawn meanwhile
+            reading = self.reading.setdefault(key[0], threading.Lock())
+        # one reader per file (two requests at once read a 1 GB light field once);
+        # outside the shelf's lock: other artifacts are drawn meanwhile
+        with reading:
+            with self.lock:
+                if key in self.loaded:
+                    return self.loaded[key]
+            art = A.load(p)
         with self.lock:
             for k in [k for k in self.loaded if k[0] == key[0]]:
                 del self.loaded[k]  # an older version of the same file

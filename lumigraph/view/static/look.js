@@ -162,12 +162,16 @@
   function draw3d(gl, canvas, g) {
     const P = g.positions;
     const n = P.length / 3;
-    const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
-    for (let i = 0; i < n; i++) for (let k = 0; k < 3; k++) {
-      lo[k] = Math.min(lo[k], P[3 * i + k]); hi[k] = Math.max(hi[k], P[3 * i + k]);
-    }
-    const c = lo.map((v, k) => (v + hi[k]) / 2);
-    const r = Math.max(1e-9, Math.hypot(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]) / 2);
+    // centre and size from the median and the 95th-percentile distance of a
+    // sample: a few stray points far away must not shrink the model to a dot
+    const step = Math.max(1, Math.floor(n / 5000));
+    const sample = [];
+    for (let i = 0; i < n; i += step) sample.push(i);
+    const median = (a) => { const b = a.slice().sort((x, y) => x - y); return b[b.length >> 1]; };
+    const c = [0, 1, 2].map((k) => median(sample.map((i) => P[3 * i + k])));
+    const dists = sample.map((i) => Math.hypot(P[3 * i] - c[0], P[3 * i + 1] - c[1], P[3 * i + 2] - c[2]));
+    dists.sort((x, y) => x - y);
+    const r = Math.max(1e-9, g.faces ? dists[dists.length - 1] : dists[Math.floor(0.95 * (dists.length - 1))]);
     let pos, col, mode, count;
     if (g.faces) {  // flat-shaded triangles: each face's vertices with its normal's shade
       const F = g.faces;
@@ -207,12 +211,21 @@
       gl.vertexAttribPointer(loc, 3, gl.FLOAT, false, 0, 0);
     }
     const m = gl.getUniformLocation(prog, "m");
-    let yaw = 0.6, pitch = 0.4, dist = 3 * r;
+    // A mesh (the Façade model) has z up: orbit about z, seen from a little above.
+    // A point cloud is in camera coordinates (x right, y down, z forward): start
+    // from the camera (pitch pi turns y down and z away) and orbit about y.
+    const mesh = !!g.faces;
+    let yaw = mesh ? 0.5 : 0, pitch = mesh ? -1.2 : Math.PI, dist = (mesh ? 3 : 2) * r;
+    const rx = (a) => [1, 0, 0, 0, Math.cos(a), -Math.sin(a), 0, Math.sin(a), Math.cos(a)];
+    const ry = (a) => [Math.cos(a), 0, Math.sin(a), 0, 1, 0, -Math.sin(a), 0, Math.cos(a)];
+    const rz = (a) => [Math.cos(a), -Math.sin(a), 0, Math.sin(a), Math.cos(a), 0, 0, 0, 1];
+    const mul3 = (A, B) => [0, 1, 2].flatMap((i) => [0, 1, 2].map((j) =>
+      A[3 * i] * B[j] + A[3 * i + 1] * B[3 + j] + A[3 * i + 2] * B[6 + j]));
     const render = () => {
-      const cy = Math.cos(yaw), sy = Math.sin(yaw), cp = Math.cos(pitch), sp = Math.sin(pitch);
-      // rotation (yaw about y, then pitch about x), then the camera at distance dist
-      const R = [cy, sp * sy, -cp * sy, 0, 0, cp, sp, 0, sy, -sp * cy, cp * cy, 0, 0, 0, -dist, 1];
-      const f = 1 / Math.tan(0.4), a = canvas.width / canvas.height, near = r / 100, far = dist + 4 * r;
+      const Q = mul3(rx(pitch), mesh ? rz(yaw) : ry(yaw));  // row-major 3x3
+      // column-major 4x4: the rotation, then the camera dist away along -z
+      const R = [Q[0], Q[3], Q[6], 0, Q[1], Q[4], Q[7], 0, Q[2], Q[5], Q[8], 0, 0, 0, -dist, 1];
+      const f = 1 / Math.tan(0.4), a = canvas.width / canvas.height, near = dist / 1000, far = dist + 20 * r;
       const Pm = [f / a, 0, 0, 0, 0, f, 0, 0, 0, 0, (far + near) / (near - far), -1, 0, 0, 2 * far * near / (near - far), 0];
       const M = new Float32Array(16);  // Pm * R, column-major
       for (let i = 0; i < 4; i++) for (let j = 0; j < 4; j++) {
@@ -229,7 +242,7 @@
     canvas.addEventListener("mousemove", (e) => {
       if (!drag) return;
       yaw += (e.clientX - drag[0]) * 0.01; pitch += (e.clientY - drag[1]) * 0.01;
-      pitch = Math.max(-1.5, Math.min(1.5, pitch)); drag = [e.clientX, e.clientY]; render();
+      drag = [e.clientX, e.clientY]; render();
     });
     canvas.addEventListener("wheel", (e) => {
       e.preventDefault(); dist *= Math.exp(e.deltaY * 0.001); render();
