@@ -191,6 +191,10 @@ class FacadeSession:
             loaded[name] = img
         s = cls(model=model, blocks_path=blocks, photos=list(paths), paths=paths, images=loaded,
                 camera=cam, camera_path=cam_path, edges_path=Path(edges), producer=producer)
+        from lumigraph.capture.artifact import remove_stale_temps
+
+        # the temporaries of a session killed mid-save (its file is whole: old or new)
+        remove_stale_temps(edges)
         if Path(edges).exists():
             s._load_edges()
         return s

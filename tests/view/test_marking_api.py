@@ -240,8 +240,9 @@ def test_a_kill_mid_save_leaves_the_old_or_the_new_file(scene, tmp_path):
         p.wait()
         marks, _ = _valid(edges, folder)   # complete and valid: the old or the new state
         assert all(m.photo == "photo_00.png" for m in marks.marks)
-    # and the next session opens it
+    # and the next session opens it, clearing what the killed ones left half-written
     _session(folder, edges)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["edges.json", "edges.json.meta.json"]
 
 
 def test_a_writer_failing_mid_file_leaves_the_old_file(scene, tmp_path, monkeypatch):
