@@ -36,7 +36,8 @@ marking mode (Façade, 'lumigraph stereo facade solve --help' for the files):
   lumigraph view --facade scene/ --edges scene/my_edges.json
                    (a folder with stack.json, blocks.json and camera.json)
   In the page: wheel to zoom, drag with the middle button (or Shift+drag) to pan,
-  drag to draw a segment (it snaps to a detected line when one is near), click
+  drag to draw a segment (it snaps to a detected line when one is near, unless
+  "snap" is unticked), click
   an edge in the list (or its reprojection) to assign the selected segment,
   Delete to remove it. "Solve" fits the model and overlays the reprojected
   edges and each mark's residual (px); "Propose" runs automatic marking (mark

@@ -284,10 +284,12 @@
       const clip = (v, hi) => Math.max(-0.5, Math.min(hi - 0.5, v));
       const seg = [clip(d.a[0], p.width), clip(d.a[1], p.height), clip(d.b[0], p.width), clip(d.b[1], p.height)];
       try {
-        const m = await api("POST", "/api/facade/marks", { photo: photoName(), segment: seg });
+        const m = await api("POST", "/api/facade/marks", { photo: photoName(), segment: seg,
+                                                           snap: $("snap").checked });
         S.selected = m.id;
         status(m.snapped ? "segment snapped to a detected line; click its model edge" :
-                           "segment drawn (no detected line near); click its model edge");
+               $("snap").checked ? "segment drawn (no detected line near); click its model edge" :
+                                   "segment drawn; click its model edge");
       } finally {
         await refresh();
       }
