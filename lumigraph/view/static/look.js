@@ -51,7 +51,11 @@
     root.classList.add("lumi-look");
     const list = el("ul", { class: "look-list" });
     const pane = el("div", { class: "look-pane" });
-    root.replaceChildren(el("div", { class: "look-side" }, el("h2", {}, "Artifacts"), list), pane);
+    // an inner box lays the list beside the pane (the page may hide root itself)
+    pane.style.flex = "1"; pane.style.minWidth = "0";
+    root.replaceChildren(el("div", { class: "look-body", style: "display:flex;gap:1em" },
+      el("div", { class: "look-side", style: "min-width:14em;max-width:24em;overflow:auto" },
+        el("h2", {}, "Artifacts"), list), pane));
     api("/api/look/list").then((rows) => {
       if (!Array.isArray(rows)) { list.append(el("li", { class: "error" }, rows.error)); return; }
       if (!rows.length) list.append(el("li", {}, "no artifacts given"));
@@ -88,7 +92,9 @@
     const values = {};
     const controls = el("div", { class: "look-controls" });
     const probe = el("p", { class: "look-probe" }, "move the cursor over the picture");
-    const img = el("img", { class: "look-image", alt: row.path });
+    // fits the pane whatever the page's stylesheet says; the probe maps back
+    const img = el("img", { class: "look-image", alt: row.path,
+      style: "max-width:100%;height:auto;cursor:crosshair" });
     const query = () => new URLSearchParams(Object.entries(values)
       .filter(([, v]) => v !== "" && v !== null)).toString();
     const draw = latest(() => new Promise((resolve) => {
@@ -126,7 +132,8 @@
         }
         draw(null);
       });
-      controls.append(el("label", { "data-for": c.name }, c.label + " ", input, " ", out));
+      controls.append(el("label", { "data-for": c.name, style: "display:block;margin:0.25em 0" },
+        c.label + " ", input, " ", out));
     }
     const probeAt = latest((ev) => {
       const sx = img.naturalWidth / img.clientWidth, scale = d.display_scale || 1;
@@ -145,7 +152,8 @@
 
   // ------------------------------------------------------------ 3-D view
   function geometryView(id, error) {
-    const canvas = el("canvas", { class: "look-3d", width: 800, height: 600 });
+    const canvas = el("canvas", { class: "look-3d", width: 800, height: 600,
+      style: "max-width:100%;cursor:grab" });
     const note = el("p", { class: "look-info" }, "drag to orbit, wheel to zoom");
     const box = el("div", {}, canvas, note);
     api(`/api/look/${id}/geometry`).then((g) => {
