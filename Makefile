@@ -22,8 +22,8 @@ LUMI       := $(VENV)/bin/lumigraph
 STAMP      := $(VENV)/.installed
 OUT        := out
 SHARED     ?= $(abspath ../shared)
-SYSTOOLS   := pfshdrcalibrate exrheader tiffinfo
-APT_PKGS   := pfstools openexr libtiff-tools
+SYSTOOLS   := pfshdrcalibrate exrheader tiffinfo chromium chromedriver
+APT_PKGS   := pfstools openexr libtiff-tools chromium chromium-driver
 PYTEST_ARGS ?=
 # One BLAS thread per process: the tests run two xdist workers on two cores and
 # the bench times methods side by side; threaded BLAS on small least-squares
@@ -42,7 +42,8 @@ $(STAMP): pyproject.toml
 	touch $@
 
 # System tools used as peers and independent readers (pfstools, OpenEXR's
-# exrheader, libtiff). Installed when missing and we are root; otherwise the
+# exrheader, libtiff), and the headless browser of `lumigraph view`'s page test
+# (Chromium and its chromedriver). Installed when missing and we are root; otherwise the
 # tests that need them say which package to install.
 sysdeps:
 	@missing=""; for t in $(SYSTOOLS); do command -v $$t >/dev/null || missing="$$missing $$t"; done; \

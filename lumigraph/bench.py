@@ -35,6 +35,8 @@ BENCH_STAGES = Registry("bench stage", [
            "the torch/kornia ports on cpu, torch-cpu and cuda beside our CPU code and peers"),
     Method("scale", "lumigraph.bench_scale:stage",
            "batch throughput: in-process, 1 and 2 Dask workers, one command per item"),
+    Method("view", "lumigraph.view.bench:stage",
+           "lumigraph view: server time of an exposure and a refocus slider move"),
 ])
 
 EPILOG = """\

@@ -39,6 +39,8 @@ STAGES = Registry("stage", [
            "direct/global separation with projected patterns"),
     Method("bench", "lumigraph.bench:main", "speed against error, ours beside the peers"),
     Method("inspect", "lumigraph.inspect:main", "describe and validate images, stacks and artifacts"),
+    Method("view", "lumigraph.view.cli:main",
+           "a local web page: look at artifacts, mark Façade edges and solve"),
 ])
 
 

@@ -543,6 +543,11 @@ ENTRIES: list[Entry] = [
     # inspect ----------------------------------------------------------------
     Entry("inspect", ("inspect", "{in}/bracket", "--out", "{out}/summary.json", "-q"),
           _bracket, ("{in}/bracket",), ("{out}/summary.json",)),
+    # view (the local web page; --check opens the inputs as the page would and
+    # exits instead of serving; the marks file is only written by edits)
+    Entry("view", ("view", "--facade", "{in}/facade", "--edges", "{out}/edges.json", "--check",
+                   "-q"),
+          _facade_folder, _FACADE_INPUTS, ()),
 ]
 
 BY_NAME: dict[str, Entry] = {e.name: e for e in ENTRIES}

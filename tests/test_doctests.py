@@ -13,17 +13,19 @@ import pytest
 import lumigraph
 
 SUBPACKAGES = ("capture", "calib", "hdr", "stereo", "lightfield", "separation")
+# packages of the shell whose modules are walked too
+SHELL_PACKAGES = ("view",)
 
 
 def _modules() -> list[str]:
     names = [m.name for m in pkgutil.iter_modules(lumigraph.__path__, "lumigraph.")]
     names.append("lumigraph")
-    for sub in SUBPACKAGES:
+    for sub in SUBPACKAGES + SHELL_PACKAGES:
         pkg = importlib.import_module(f"lumigraph.{sub}")
         names.append(pkg.__name__)
         names += [m.name for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")]
     # __main__ modules run their command on import.
-    return sorted(n for n in names if not n.endswith("__main__"))
+    return sorted({n for n in names if not n.endswith("__main__")})
 
 
 def _examples(name: str) -> list[doctest.DocTest]:

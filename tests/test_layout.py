@@ -74,6 +74,7 @@ def test_wheel_installs_only_the_lumigraph_namespace(wheel):
     assert tops == {"lumigraph"}, tops
     for stage in STAGES:
         assert f"lumigraph/{stage}/__init__.py" in names
+    assert "lumigraph/view/static/look.js" in names  # the page's assets ship (no CDN)
     assert any(n.startswith("lumigraph/stereo/_ssd") and n.endswith(".so") for n in names)
 
 

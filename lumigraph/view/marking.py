@@ -1,0 +1,540 @@
+"""The marking session of ``lumigraph view --facade``: Façade's interactive
+loop (Debevec, Taylor & Malik 1996, doi:10.1145/237170.237191; reference
+ch. 5, §5.3.2: the user marks edges, solves, looks at the reprojected model,
+corrects, solves again), held in memory for the web page.
+
+A :class:`FacadeSession` holds the block model (``blocks.json``), the
+photographs, their shared intrinsics (``camera.json``) and the marks being
+edited. Every change is written at once to ``edges.json`` (the layout of
+:mod:`lumigraph.stereo.debevec1996.edges`) through the project's atomic
+writer (:func:`lumigraph.capture.artifact.write_artifact`: a temporary file
+renamed over the old one), so the file on disk is always a complete, valid
+``edges.json``, whether the browser or the server dies mid-edit. A segment
+drawn but not yet tied to a model edge is kept under the file's extra key
+``"unassigned"`` (``{photo: [[x0, y0, x1, y1], ...]}``), which the solver's
+reader ignores.
+
+Segments are pixels, OpenCV convention (``(0, 0)`` the centre of the
+top-left pixel). A dragged segment is *snapped* to the nearest line segment
+detected in the photograph (OpenCV contrib's fast line detector, the one
+automatic marking uses, cached per photograph) when one lies within
+:data:`SNAP_ANGLE_DEG` and :data:`SNAP_DISTANCE_PX`: the detection is refined
+to sub-pixel precision and the dragged ends are moved onto its line (the edge
+objective of eq. 5.3 measures the distance to the projected model line, so
+the stretch a mark covers along the line matters little; its line matters).
+
+``solve`` runs :func:`~lumigraph.stereo.debevec1996.solve.solve_facade` on
+the assigned marks and returns, per photograph, every model edge reprojected
+and each mark's RMS distance to its edge (px). ``propose`` runs
+:func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
+and keeps its proposals pending until each is accepted (then it is a mark,
+``"proposed": true`` in the file) or rejected.
+
+Examples
+--------
+>>> import numpy as np
+>>> from lumigraph.view.marking import snap_segment
+>>> det = np.array([[10.0, 20.0, 90.0, 20.0]])               # one detected horizontal line
+>>> snap_segment(np.array([15.0, 23.0, 80.0, 22.0]), det, grey=None).tolist()
+[15.0, 20.0, 80.0, 20.0]
+>>> snap_segment(np.array([15.0, 60.0, 80.0, 60.0]), det, grey=None) is None   # too far
+True
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from lumigraph.capture.errors import EstimationError, InputError
+
+SNAP_ANGLE_DEG = 5.0     # a drag by hand is rarely further off an edge's direction
+SNAP_DISTANCE_PX = 3.0   # ... or further from its line; beyond, a parallel line (a window frame) is as likely
+UNASSIGNED_KEY = "unassigned"
+
+
+def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray | None,
+                 max_angle_deg: float = SNAP_ANGLE_DEG,
+                 max_distance_px: float = SNAP_DISTANCE_PX) -> np.ndarray | None:
+    """The dragged ``segment`` ``(4,)`` (x0, y0, x1, y1, px) moved onto the
+    line of the nearest ``detected`` segment ``(N, 4)``, or None when no
+    detection is within ``max_angle_deg`` and (both dragged ends)
+    ``max_distance_px`` of its line and overlaps the drag. With ``grey`` (an
+    8-bit-scaled grey image) the detection is first refined to sub-pixel
+    precision (:func:`~lumigraph.stereo.debevec1996.automark.refine_segment`).
+    The ends keep their place along the line (their orthogonal projections)."""
+    seg = np.asarray(segment, float)
+    a, b = seg[:2], seg[2:]
+    if len(detected) == 0 or np.hypot(*(b - a)) < 1.0:
+        return None
+    p, q = detected[:, :2], detected[:, 2:]
+    L = np.maximum(np.hypot(*(q - p).T), 1e-9)
+    d = (q - p) / L[:, None]
+    n = np.stack([-d[:, 1], d[:, 0]], 1)
+    u = (b - a) / np.hypot(*(b - a))
+    cos = np.abs(d @ u)
+    ha, hb = ((a - p) * n).sum(1), ((b - p) * n).sum(1)
+    ta, tb = ((a - p) * d).sum(1), ((b - p) * d).sum(1)
+    overlap = np.minimum(np.maximum(ta, tb), L) - np.maximum(np.minimum(ta, tb), 0.0)
+    ok = (cos >= np.cos(np.radians(max_angle_deg))) & (np.maximum(np.abs(ha), np.abs(hb))
+                                                       <= max_distance_px) & (overlap > 0)
+    if not ok.any():
+        return None
+    score = np.where(ok, np.abs(ha) + np.abs(hb), np.inf)
+    best = detected[int(np.argmin(score))]
+    if grey is not None:
+        from lumigraph.stereo.debevec1996.automark import refine_segment
+
+        refined = refine_segment(grey, best)
+        if refined is not None:
+            best = refined
+    p, q = best[:2], best[2:]
+    d = (q - p) / max(np.hypot(*(q - p)), 1e-9)
+    out = np.r_[p + ((a - p) @ d) * d, p + ((b - p) @ d) * d]
+    # the refined line, carried out to the dragged ends, must still be near
+    # them: a short detection a few degrees off would swing a long drag's ends
+    if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > max_distance_px:
+        return None
+    return out
+
+
+class FacadeSession:
+    """One photogrammetric-modelling session (module docstring).
+
+    Open with :meth:`open`. Methods that change the marks take the session's
+    lock (the web server answers from several threads), save ``edges.json``
+    and return the changed mark as a dict ``{id, photo, edge (None while
+    unassigned), segment [4], proposed}``. Bad requests raise
+    :class:`InputError` naming the argument; a fit the marks cannot support
+    raises :class:`EstimationError` (the solver's reason)."""
+
+    def __init__(self, *, model, blocks_path: Path, photos: list[str], paths: dict,
+                 images: dict, camera, camera_path: Path, edges_path: Path,
+                 producer: str = "lumigraph view"):
+        self.model = model
+        self.blocks_path = blocks_path
+        self.photos = photos
+        self.paths = paths
+        self.images = images
+        self.camera = camera
+        self.camera_path = camera_path
+        self.edges_path = edges_path
+        self.producer = producer
+        self.marks: dict[int, dict] = {}
+        self.proposals: dict[int, dict] = {}
+        self.solution: dict | None = None
+        self.proposal_warnings: list[str] = []
+        self._next = 1
+        self._lock = threading.RLock()
+        self._detected: dict[str, np.ndarray] = {}
+        self._grey: dict[str, np.ndarray] = {}
+        self._png: dict[str, bytes] = {}
+        self._inputs = None
+
+    # ------------------------------------------------------------- opening
+    @classmethod
+    def open(cls, blocks: str | os.PathLike, images=(), *, edges: str | os.PathLike,
+             camera: str | os.PathLike | None = None,
+             producer: str = "lumigraph view") -> FacadeSession:
+        """Load ``blocks`` (a ``blocks.json``, or a folder with ``stack.json``,
+        ``blocks.json`` and ``camera.json``, as ``stereo facade solve``
+        reads), the photographs ``images`` (files; default: the folder's
+        ``stack.json``), the intrinsics ``camera`` (default ``camera.json``
+        beside the model) and ``edges`` (the file marks are saved to; read
+        when it exists, else the session starts with no marks)."""
+        from lumigraph.capture.camera import Camera
+        from lumigraph.capture.io import read_image, read_stack_json
+        from lumigraph.stereo.debevec1996.model import load_blocks
+
+        blocks = Path(blocks)
+        folder = blocks if blocks.is_dir() else blocks.parent
+        if blocks.is_dir():
+            blocks = folder / "blocks.json"
+        if not blocks.is_file():
+            raise InputError(blocks, "no block model here; give a blocks.json (see 'lumigraph "
+                                     "stereo facade solve --help' for its layout) or a folder "
+                                     "that holds one")
+        paths: dict[str, Path] = {}
+        if images:
+            for p in map(Path, images):
+                if p.is_dir():
+                    raise InputError(p, "is a folder; give the photographs as files (or give "
+                                        "the folder alone, with its stack.json, as the model)")
+                if p.name in paths:
+                    raise InputError(p, f"two photographs are named {p.name}; edges.json keys "
+                                        "marks by file name")
+                paths[p.name] = p
+        else:
+            sj = folder / "stack.json"
+            if not sj.is_file():
+                raise InputError(folder, "no photographs given and no stack.json here naming "
+                                         "them; give the photographs after blocks.json")
+            for i, name in enumerate(read_stack_json(sj)["images"]):
+                if not (folder / name).is_file():
+                    raise InputError(sj, f"key 'images[{i}]': {name} is not a file in {folder}")
+                paths[name] = folder / name
+        model = load_blocks(blocks)
+        cam_path = Path(camera) if camera else folder / "camera.json"
+        if not cam_path.is_file():
+            raise InputError(cam_path, "no camera.json (the photographs' intrinsics); give one "
+                                       "with --camera")
+        cam = Camera.load(cam_path)
+        loaded = {}
+        for name, p in paths.items():
+            img = read_image(p)
+            if tuple(img.shape[1::-1]) != tuple(cam.image_size):
+                raise InputError(p, f"is {img.shape[1]}x{img.shape[0]}, the camera ({cam_path}) "
+                                    f"is {cam.image_size[0]}x{cam.image_size[1]}")
+            loaded[name] = img
+        s = cls(model=model, blocks_path=blocks, photos=list(paths), paths=paths, images=loaded,
+                camera=cam, camera_path=cam_path, edges_path=Path(edges), producer=producer)
+        from lumigraph.capture.artifact import remove_stale_temps
+
+        # the temporaries of a session killed mid-save (its file is whole: old or new)
+        remove_stale_temps(edges)
+        if Path(edges).exists():
+            s._load_edges()
+        return s
+
+    def _load_edges(self) -> None:
+        from lumigraph.capture.artifact import load_json_artifact
+        from lumigraph.capture.schema import check, fail
+        from lumigraph.stereo.debevec1996.edges import EDGES_SCHEMA, EdgeMarks
+
+        path = self.edges_path
+        body = load_json_artifact(path, "marked edges", schemas=(EDGES_SCHEMA,))
+        marks = EdgeMarks.from_dict(body, model=self.model, photographs=self.photos,
+                                    image_sizes=self.sizes, where=path)
+        for m in marks.marks:
+            self._store(m.photo, m.edge, m.segment, m.proposed)
+        extra = body.get(UNASSIGNED_KEY, {})
+        check(extra, "object", path=str(path), key=UNASSIGNED_KEY)
+        for photo, segs in extra.items():
+            if photo not in self.photos:
+                raise fail(str(path), f"{UNASSIGNED_KEY}.{photo}", f"unknown photograph {photo!r}")
+            check(segs, "list", path=str(path), key=f"{UNASSIGNED_KEY}.{photo}")
+            for i, s in enumerate(segs):
+                try:
+                    seg = self._segment(s, f"{UNASSIGNED_KEY}.{photo}[{i}]", photo)
+                except InputError as e:
+                    raise InputError(path, e.problem) from None
+                self._store(photo, None, seg, False)
+
+    # ------------------------------------------------------------- helpers
+    @property
+    def sizes(self) -> dict:
+        return {p: tuple(img.shape[1::-1]) for p, img in self.images.items()}
+
+    def _store(self, photo, edge, seg, proposed, *, into=None) -> dict:
+        m = {"id": self._next, "photo": photo, "edge": edge,
+             "segment": [float(v) for v in seg], "proposed": bool(proposed)}
+        (self.marks if into is None else into)[self._next] = m
+        self._next += 1
+        return m
+
+    def _photo(self, photo) -> str:
+        if isinstance(photo, int) and not isinstance(photo, bool) and 0 <= photo < len(self.photos):
+            return self.photos[photo]
+        if photo not in self.photos:
+            raise InputError("photo", f"unknown photograph {photo!r}; the session's photographs "
+                                      f"are {', '.join(self.photos)}")
+        return photo
+
+    def _edge(self, edge) -> str | None:
+        if edge is None:
+            return None
+        if not isinstance(edge, str) or edge not in self.model.edge_names:
+            raise InputError("edge", f"unknown model edge {edge!r}; the model's edges are named "
+                                     f"like {self.model.edge_names[0]!r} (see the edge list)")
+        return edge
+
+    def _segment(self, seg, where: str, photo: str) -> np.ndarray:
+        try:
+            s = np.asarray(seg, float)
+        except (TypeError, ValueError):
+            s = None
+        if s is None or s.shape != (4,) or not np.all(np.isfinite(s)):
+            raise InputError(where, f"expected a segment [x0, y0, x1, y1] of 4 finite numbers "
+                                    f"(px), got {seg!r}")
+        if np.hypot(s[2] - s[0], s[3] - s[1]) < 1.0:
+            raise InputError(where, "segment is shorter than 1 pixel; drag from one end of the "
+                                    "edge to the other")
+        w, h = self.sizes[photo]
+        if min(s[0], s[2]) < -0.5 or min(s[1], s[3]) < -0.5 or max(s[0], s[2]) > w - 0.5 \
+                or max(s[1], s[3]) > h - 0.5:
+            raise InputError(where, f"segment {s.tolist()} lies outside photograph {photo!r} "
+                                    f"({w}x{h})")
+        return s
+
+    def find(self, mark_id, table=None) -> dict:
+        table = self.marks if table is None else table
+        try:
+            return table[int(mark_id)]
+        except (KeyError, TypeError, ValueError):
+            what = "mark" if table is self.marks else "proposal"
+            raise InputError("id", f"no {what} with id {mark_id!r}") from None
+
+    def grey(self, photo: str) -> np.ndarray:
+        from lumigraph.stereo.debevec1996.automark import _grey
+
+        if photo not in self._grey:
+            self._grey[photo] = _grey(self.images[photo])
+        return self._grey[photo]
+
+    def detected(self, photo) -> np.ndarray:
+        """Line segments ``(N, 4)`` detected in a photograph (cached)."""
+        from lumigraph.stereo.debevec1996.automark import detect_segments
+
+        photo = self._photo(photo)
+        with self._lock:
+            if photo not in self._detected:
+                self._detected[photo] = detect_segments(self.grey(photo), min_length_px=10.0)
+            return self._detected[photo]
+
+    def png(self, photo) -> bytes:
+        """The photograph as 8-bit PNG bytes (cached), for the page."""
+        import cv2
+
+        photo = self._photo(photo)
+        if photo not in self._png:
+            img = np.asarray(self.images[photo])
+            if img.dtype == np.uint16:
+                img = (img / 257.0).round().astype(np.uint8)
+            elif img.dtype != np.uint8:
+                img = np.clip(np.asarray(img, float) ** (1 / 2.2) * 255.0, 0, 255).astype(np.uint8)
+            if img.ndim == 3:
+                img = np.ascontiguousarray(img[..., 2::-1] if img.shape[2] >= 3 else img[..., 0])
+            ok, buf = cv2.imencode(".png", img)
+            if not ok:  # pragma: no cover - encoding an 8-bit array does not fail
+                raise InputError(self.paths[photo], "could not encode the photograph as PNG")
+            self._png[photo] = buf.tobytes()
+        return self._png[photo]
+
+    # ------------------------------------------------------------- the state
+    def state(self) -> dict:
+        """Everything the page shows: photographs (name, size), the model's
+        edge names, the marks, the pending proposals, the last solve."""
+        with self._lock:
+            return {"photos": [{"index": i, "name": p, "width": self.sizes[p][0],
+                                "height": self.sizes[p][1]} for i, p in enumerate(self.photos)],
+                    "edges": list(self.model.edge_names),
+                    "marks": list(self.marks.values()),
+                    "proposals": list(self.proposals.values()),
+                    "solution": self.solution,
+                    "edges_path": str(self.edges_path)}
+
+    def edge_marks(self):
+        """The assigned marks as :class:`~lumigraph.stereo.debevec1996.edges.EdgeMarks`
+        (checked as the solver's reader checks a file)."""
+        from lumigraph.stereo.debevec1996.edges import EdgeMarks
+
+        with self._lock:
+            body = {"photographs": {p: [] for p in self.photos}}
+            for m in self.marks.values():
+                if m["edge"] is not None:
+                    e = {"edge": m["edge"], "segment": m["segment"]}
+                    if m["proposed"]:
+                        e["proposed"] = True
+                    body["photographs"][m["photo"]].append(e)
+            return EdgeMarks.from_dict(body, model=self.model, photographs=self.photos,
+                                       image_sizes=self.sizes, where=self.edges_path)
+
+    def document(self) -> dict:
+        """``edges.json``'s body: the assigned marks, then the unassigned segments."""
+        body = self.edge_marks().to_dict()
+        un: dict[str, list] = {}
+        for m in self.marks.values():
+            if m["edge"] is None:
+                un.setdefault(m["photo"], []).append(m["segment"])
+        body[UNASSIGNED_KEY] = un
+        return body
+
+    def save(self) -> Path:
+        """Write ``edges.json`` atomically (a complete file replaces the old
+        one by a rename; its ``.meta.json`` sidecar first)."""
+        from lumigraph.capture.artifact import dumps_json, make_meta, write_artifact
+
+        with self._lock:
+            body = self.document()
+            if self._inputs is None:  # the inputs' hashes, once per session
+                self._inputs = make_meta("x", inputs=[self.blocks_path, self.camera_path,
+                                                      *self.paths.values()])["inputs"]
+            n = sum(m["edge"] is not None for m in self.marks.values())
+            meta = make_meta("lumigraph.facade.edges", quality={"marks": n},
+                             extra={"inputs": self._inputs, "producer": self.producer})
+            text = dumps_json(body)
+            return write_artifact(self.edges_path, lambda tmp: tmp.write_text(text), meta=meta)
+
+    # ------------------------------------------------------------- edits
+    def add(self, photo, segment, *, edge=None, snap: bool = True) -> dict:
+        """Add a segment to a photograph (snapped to a detected line when one
+        is near and ``snap``), optionally assigned to ``edge``; saved."""
+        photo = self._photo(photo)
+        seg = self._segment(segment, "segment", photo)
+        edge = self._edge(edge)
+        snapped = False
+        if snap:
+            s = snap_segment(seg, self.detected(photo), grey=self.grey(photo))
+            if s is not None:
+                w, h = self.sizes[photo]
+                s[[0, 2]] = np.clip(s[[0, 2]], -0.5, w - 0.5)
+                s[[1, 3]] = np.clip(s[[1, 3]], -0.5, h - 0.5)
+                if np.hypot(s[2] - s[0], s[3] - s[1]) >= 1.0:
+                    seg, snapped = s, True
+        with self._lock:
+            if edge is not None:
+                self._drop_same(photo, edge)
+            m = self._store(photo, edge, seg, False)
+            self.save()
+            return dict(m, snapped=snapped)
+
+    def _drop_same(self, photo, edge, keep=None) -> None:
+        # one mark per model edge and photograph: a new one replaces the old
+        for k, m in list(self.marks.items()):
+            if m["photo"] == photo and m["edge"] == edge and k != keep:
+                del self.marks[k]
+
+    def assign(self, mark_id, edge) -> dict:
+        """Tie a mark to a model edge (None: untie it); saved."""
+        edge = self._edge(edge)
+        with self._lock:
+            m = self.find(mark_id)
+            if edge is not None:
+                self._drop_same(m["photo"], edge, keep=m["id"])
+            m["edge"] = edge
+            m["proposed"] = False
+            self.save()
+            return m
+
+    def move(self, mark_id, segment) -> dict:
+        """Replace a mark's segment (no snapping); saved."""
+        with self._lock:
+            m = self.find(mark_id)
+            m["segment"] = [float(v) for v in self._segment(segment, "segment", m["photo"])]
+            self.save()
+            return m
+
+    def delete(self, mark_id) -> dict:
+        with self._lock:
+            m = self.find(mark_id)
+            del self.marks[m["id"]]
+            self.save()
+            return m
+
+    # ------------------------------------------------------------- solve
+    def _K(self) -> dict:
+        return {p: self.camera.K for p in self.photos}
+
+    def _undistorted(self, marks):
+        from dataclasses import replace
+
+        if not np.any(self.camera.dist):
+            return marks
+        out = []
+        for m in marks.marks:
+            ray = self.camera.unproject(m.segment.reshape(2, 2))
+            uv = ray @ self.camera.K.T
+            out.append(replace(m, segment=(uv[:, :2] / uv[:, 2:]).ravel()))
+        return replace(marks, marks=tuple(out))
+
+    def solve(self, *, noise_px: float = 1.0) -> dict:
+        """Fit the model and the cameras to the assigned marks. Returns
+        ``{parameters: {name: {value, std}}, rms_px, sigma_px, warnings,
+        outliers: [{photo, edge, rms_px}], dropped, projected: {photo:
+        {edge: [x0, y0, x1, y1]}}, residuals: {photo: {edge: rms px}},
+        residual_by_id: {mark id: rms px}}``; kept as the session's
+        solution (the proposals' starting point)."""
+        from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
+
+        with self._lock:
+            marks = self.edge_marks()
+            if not marks.marks:
+                raise EstimationError(self.edges_path, "no marks tied to model edges yet: draw "
+                                                       "segments and assign each to an edge")
+            sol = solve_facade(self.model, self._undistorted(marks), self._K(), noise_px=noise_px,
+                               where=str(self.edges_path))
+            self._sol = sol
+            self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
+            return self.solution
+
+    # ------------------------------------------------------------- propose
+    def propose(self, *, noise_px: float = 1.0) -> list[dict]:
+        """Automatic marking from the marks so far: the proposals (pending,
+        not saved until accepted), replacing any earlier pending ones."""
+        from lumigraph.stereo.debevec1996.automark import automark
+
+        if np.any(self.camera.dist):
+            raise InputError(self.camera_path, "automatic marking needs undistorted photographs "
+                                               "('lumigraph calib undistort' them first)")
+        with self._lock:
+            marks = self.edge_marks()
+            if not marks.marks:
+                raise EstimationError(self.edges_path, "mark a few edges first (four per "
+                                                       "photograph work well), then Propose")
+            res = automark(self.model, marks, self.images, self._K(), noise_px=noise_px,
+                           where=str(self.edges_path))
+            self.proposals = {}
+            have = {(m["photo"], m["edge"]) for m in self.marks.values()}
+            for m in res.marks.marks:
+                if m.proposed and (m.photo, m.edge) not in have:
+                    self._store(m.photo, m.edge, m.segment, True, into=self.proposals)
+            self.proposal_warnings = list(res.warnings)
+            return list(self.proposals.values())
+
+    def accept(self, proposal_id) -> dict:
+        """A pending proposal becomes a mark (``"proposed": true``); saved."""
+        with self._lock:
+            p = self.find(proposal_id, self.proposals)
+            del self.proposals[p["id"]]
+            self._drop_same(p["photo"], p["edge"])
+            self.marks[p["id"]] = p
+            self.save()
+            return p
+
+    def accept_all(self) -> list[dict]:
+        with self._lock:
+            got = list(self.proposals.values())
+            for p in got:
+                self._drop_same(p["photo"], p["edge"])
+                self.marks[p["id"]] = p
+            self.proposals = {}
+            self.save()
+            return got
+
+    def reject(self, proposal_id) -> dict:
+        with self._lock:
+            p = self.find(proposal_id, self.proposals)
+            del self.proposals[p["id"]]
+            return p
+
+
+def solution_dict(sol, photos, marks: dict, project) -> dict:
+    """The JSON answer of :meth:`FacadeSession.solve` from a
+    :class:`~lumigraph.stereo.debevec1996.solve.FacadeSolution`."""
+    projected, residuals = {}, {}
+    for p in photos:
+        if p not in sol.poses:
+            continue
+        R, t = sol.poses[p]
+        proj = project(sol.model, sol.K[p], R, t)
+        projected[p] = {e: [float(v) for v in np.r_[a, b]] for e, (a, b) in proj.items()
+                        if np.all(np.isfinite(a)) and np.all(np.isfinite(b))}
+    for p, e, r in sol.mark_rms_px:
+        residuals.setdefault(p, {})[e] = float(r)
+    out = {(p, e): float(r) for p, e, r in sol.outliers}
+    by_id = {}
+    for m in marks.values():
+        key = (m["photo"], m["edge"])
+        r = residuals.get(m["photo"], {}).get(m["edge"], out.get(key))
+        if r is not None:
+            by_id[m["id"]] = r
+    return {"parameters": {n: {"value": float(v), "std": float(sol.std[n])}
+                           for n, v in sol.params.items()},
+            "rms_px": float(sol.rms_px), "sigma_px": float(sol.sigma_px),
+            "warnings": list(sol.warnings),
+            "outliers": [{"photo": p, "edge": e, "rms_px": float(r)} for p, e, r in sol.outliers],
+            "dropped": list(sol.dropped), "projected": projected, "residuals": residuals,
+            "residual_by_id": by_id}

@@ -1,0 +1,103 @@
+"""Marking the rendered Façade scene from scratch through the marking API, on
+several scenes (not a test: the figures of docs/decisions/view-marking.md).
+
+    OPENBLAS_NUM_THREADS=1 python tests/view/eval_from_scratch.py 320x240 2,3,4,5,6
+    SNAP=0 ... (hand drags not snapped)
+
+Per seed: four hand marks per photograph (the longest two vertical and two
+horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
+of noise), Propose, each proposal accepted when within 1.5 px of its true
+edge line, the blocks a refusal names marked by hand (the four longest
+unmarked edges), Solve; the RMS relative parameter error against the fully
+marked (σ = 0.5 px) solve of the same scene.
+"""
+
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, truth_lines  # noqa: E402
+
+from lumigraph.capture.render import render  # noqa: E402
+from lumigraph.stereo.debevec1996.edges import load_edges  # noqa: E402
+from lumigraph.stereo.debevec1996.solve import solve_facade  # noqa: E402
+from lumigraph.view.app import create_app  # noqa: E402
+from lumigraph.view.marking import FacadeSession  # noqa: E402
+
+
+def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
+    for seed in seeds:
+        t0 = time.time()
+        s = render("facade", size=size, seed=seed, photos=6, novel=0, supersample=2,
+                   edge_noise=EDGE_NOISE_PX)
+        folder = s.save(out / f"{size[0]}_{seed}")
+        edges = out / f"edges_{size[0]}_{seed}.json"
+        edges.unlink(missing_ok=True)
+        truth = truth_lines(folder)
+        full = json.loads((folder / "edges.json").read_text())["photographs"]
+        ses = FacadeSession.open(folder, edges=edges)
+        c = create_app(artifacts=[], facade=ses).test_client()
+        rng = np.random.default_rng(7)
+
+        def drag(p, m, c=c, rng=rng):
+            seg = np.asarray(m["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
+            r = c.post("/api/facade/marks", json={"photo": p, "segment": seg.tolist(), "snap": snap})
+            c.post(f"/api/facade/marks/{r.get_json()['id']}", json={"edge": m["edge"]})
+
+        for p in ses.photos:
+            for m in four_hand_marks(ses.model, full[p]):
+                drag(p, m)
+        props = c.post("/api/facade/propose").get_json().get("proposals", [])
+        accepted = 0
+        for q in props:
+            ok = distance(q["segment"], truth[q["photo"]][q["edge"]]) <= 3 * EDGE_NOISE_PX
+            accepted += ok
+            c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
+        extra = 0
+        for _ in range(3):
+            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+            if r.status_code == 200:
+                break
+            err = r.get_json()["error"]
+            if "do not constrain" not in err:
+                break
+            blocks = {n.split("/")[0] for n in err.split("constrain ")[1].split(":")[0].split(", ")}
+            have = {(m["photo"], m["edge"]) for m in ses.marks.values()}
+            todo = sorted(((np.hypot(m["segment"][2] - m["segment"][0],
+                                     m["segment"][3] - m["segment"][1]), p, m)
+                           for p in ses.photos for m in full[p]
+                           if m["edge"].split("/")[0] in blocks and (p, m["edge"]) not in have),
+                          key=lambda t: -t[0])
+            for _, p, m in todo[:4]:
+                drag(p, m)
+                extra += 1
+        if r.status_code != 200:
+            print(f"seed {seed}: no solve: {r.get_json()['error']}")
+            continue
+        gt = json.loads((folder / "gt.json").read_text())["parameters"]
+        free = list(ses.model.parameter_names)
+
+        def rel(P, gt=gt, free=free):
+            return float(np.sqrt(np.mean([((P[n] - gt[n]) / gt[n]) ** 2 for n in free])))
+
+        scratch = rel({n: v["value"] for n, v in r.get_json()["parameters"].items()})
+        ref = solve_facade(ses.model, load_edges(folder / "edges.json", model=ses.model,
+                                                 photographs=ses.photos),
+                           {p: ses.camera.K for p in ses.photos}, noise_px=EDGE_NOISE_PX)
+        fully = rel(ref.params)
+        off = sum(distance(m["segment"], truth[m["photo"]][m["edge"]]) > 3 * EDGE_NOISE_PX
+                  for m in ses.marks.values())
+        print(f"{size[0]}x{size[1]} seed {seed}: from scratch {scratch:.5f}, fully marked "
+              f"{fully:.5f}, ratio {scratch / fully:.2f}; proposals {len(props)} (accepted "
+              f"{accepted}), extra hand marks {extra}, marks {len(ses.marks)} ({off} > 1.5 px off "
+              f"the true line); {time.time() - t0:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    w, h = (int(v) for v in sys.argv[1].split("x"))
+    main((w, h), [int(v) for v in sys.argv[2].split(",")], snap=os.environ.get("SNAP", "1") == "1")

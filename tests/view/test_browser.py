@@ -1,0 +1,233 @@
+"""Marking mode in a real headless browser: Debian's Chromium driven by
+Selenium 4 through the Debian chromedriver (``make sysdeps`` installs both;
+selenium is in the ``dev`` extra). Skipped with the reason when they are
+missing, except on CI (``CI`` set), where that fails.
+
+The page is served by the real server (``start_server``, 127.0.0.1, a free
+port, in a thread) over a rendered Façade scene (320x240, six photographs,
+σ = 0.5 px marks). Every photograph but the first starts fully marked; the
+first has three of its four hand marks. The test draws the fourth by a mouse
+drag on the canvas, assigns it by clicking its edge in the list, presses
+Propose, accepts or rejects each proposal of that photograph (as a user's eye
+would: accepted when it lies on its true edge), presses Solve, and checks
+the saved ``edges.json`` and a screenshot: the reprojected edge's colour
+(red) drawn along the true line of the edge it drew.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, truth_lines  # noqa: E402
+
+CHROMIUM = "/usr/bin/chromium"
+DRIVER = "/usr/bin/chromedriver"
+
+
+def _need_browser():
+    missing = [p for p in (CHROMIUM, DRIVER) if not os.path.exists(p)]
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        missing.append("selenium (pip install -e '.[dev]')")
+    if missing:
+        msg = (f"headless browser test needs {', '.join(missing)}: install the Debian packages "
+               "chromium and chromium-driver (make sysdeps)")
+        if os.environ.get("CI"):
+            pytest.fail(msg)
+        pytest.skip(msg)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    _need_browser()
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+              "--window-size=1300,900", "--force-device-scale-factor=1"):
+        opts.add_argument(a)
+    d = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    yield d
+    d.quit()
+
+
+def _wait(d, script, timeout=30.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        got = d.execute_script(script)
+        if got:
+            return got
+        time.sleep(0.05)
+    shown = d.execute_script("return document.getElementById('error').textContent")
+    raise AssertionError(f"timed out waiting for: {script}; page error: {shown}")
+
+
+def _idle(d):
+    _wait(d, "return window.lumiMark && window.lumiMark.ready && window.lumiMark.busy === 0")
+
+
+def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.capture.render import render
+    from lumigraph.stereo.debevec1996.edges import load_edges
+    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.marking import FacadeSession
+
+    t0 = time.monotonic()
+    s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
+               edge_noise=EDGE_NOISE_PX)
+    folder = s.save(tmp_path / "scene")
+    truth = truth_lines(folder)
+    body = json.loads((folder / "edges.json").read_text())
+    first = "photo_00.png"
+    hand = _four_hand_marks_sorted(folder, body["photographs"][first])
+    drawn, body["photographs"][first] = hand[0], hand[1:]
+    edges = tmp_path / "edges.json"
+    edges.write_text(json.dumps(body))
+
+    session = FacadeSession.open(folder, edges=edges)
+    server = start_server(create_app(artifacts=[], facade=session), port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    d = browser
+    try:
+        d.get(f"http://127.0.0.1:{server.port}/")
+        _idle(d)
+        canvas = d.find_element(By.ID, "photo-canvas")
+        w, h = canvas.size["width"], canvas.size["height"]
+        # drag along the edge, as a hand would: the marked segment plus 0.5 px noise
+        seg = np.asarray(drawn["segment"]) + np.random.default_rng(3).normal(0, EDGE_NOISE_PX, 4)
+        a = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])", *seg[:2])
+        b = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])", *seg[2:])
+        (ActionChains(d).move_to_element_with_offset(canvas, round(a[0] - w / 2), round(a[1] - h / 2))
+         .click_and_hold().move_by_offset(round((b[0] - a[0]) / 2), round((b[1] - a[1]) / 2))
+         .move_by_offset(round(b[0] - a[0]) - round((b[0] - a[0]) / 2),
+                         round(b[1] - a[1]) - round((b[1] - a[1]) / 2))
+         .release().perform())
+        _wait(d, "return window.lumiMark.selected !== null && window.lumiMark.busy === 0")
+        d.find_element(By.CSS_SELECTOR, f'#edge-list li[data-edge="{drawn["edge"]}"]').click()
+        _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.marks.some("
+                 f"m => m.photo === '{first}' && m.edge === '{drawn['edge']}')")
+
+        saved = load_edges(edges, model=session.model, photographs=session.photos)
+        mine = [m for m in saved.of(first) if m.edge == drawn["edge"]]
+        assert len(mine) == 1
+        # snapped onto the edge: within half a pixel of the true line (one
+        # rendered sample per pixel side pair locates an edge that well)
+        assert distance(mine[0].segment, truth[first][drawn["edge"]]) <= 0.5
+
+        d.find_element(By.ID, "propose").click()
+        _wait(d, "return window.lumiMark.busy === 0 && "
+                 "document.getElementById('status').textContent.includes('proposals')", 60)
+        for q in [q for q in d.execute_script("return window.lumiMark.state.proposals")
+                  if q["photo"] == first]:
+            ok = distance(q["segment"], truth[first][q["edge"]]) <= 3 * EDGE_NOISE_PX
+            d.find_element(By.CSS_SELECTOR, f'#proposal-list li[data-proposal="{q["id"]}"] '
+                                            f'button.{"accept" if ok else "reject"}').click()
+            _wait(d, f"return window.lumiMark.busy === 0 && !window.lumiMark.state.proposals"
+                     f".some(p => p.id === {q['id']})")
+        d.find_element(By.ID, "solve").click()
+        _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.solution !== null", 60)
+        sol = d.execute_script("return window.lumiMark.state.solution")
+        assert d.find_element(By.ID, "solve-rms").text.startswith("RMS")
+        assert d.execute_script("return document.getElementById('error').hidden")
+
+        saved = load_edges(edges, model=session.model, photographs=session.photos)
+        assert len(saved.of(first)) > 4 and any(m.proposed for m in saved.of(first))
+        # every mark's residual is from σ = 0.5 px endpoint noise: within 3σ
+        assert max(sol["residual_by_id"].values()) <= 3 * EDGE_NOISE_PX
+
+        # the screenshot: the drawn edge reprojected in red along its true line
+        import cv2
+
+        shot = cv2.imdecode(np.frombuffer(canvas.screenshot_as_png, np.uint8), cv2.IMREAD_COLOR)
+        red = (shot[..., 2] > 180) & (shot[..., 1] < 100) & (shot[..., 0] < 100)
+        p0, p1 = truth[first][drawn["edge"]]
+        hits = 0
+        ts = np.linspace(0.1, 0.9, 17)
+        for t in ts:
+            x, y = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])",
+                                    *(p0 + t * (p1 - p0)))
+            # the reprojection lies within 0.5 px (image) of the true line;
+            # two screen pixels of slack for the line's width and rounding
+            r = 2 + int(np.ceil(0.5 * d.execute_script("return window.lumiMark.scale")))
+            win = red[max(0, round(y) - r): round(y) + r + 1, max(0, round(x) - r): round(x) + r + 1]
+            hits += bool(win.any())
+        assert hits >= 0.8 * len(ts), f"red reprojection found at {hits} of {len(ts)} points"
+    finally:
+        server.shutdown()
+        thread.join(5)
+    print(f"browser test: {time.monotonic() - t0:.1f} s")
+
+
+def _four_hand_marks_sorted(folder, marks):
+    """The four hand marks of a photograph, longest first."""
+    from lumigraph.stereo.debevec1996.model import load_blocks
+
+    four = four_hand_marks(load_blocks(folder / "blocks.json"), marks)
+    return sorted(four, key=lambda m: -np.hypot(m["segment"][2] - m["segment"][0],
+                                                m["segment"][3] - m["segment"][1]))
+
+
+def test_an_unreadable_artifact_shows_its_one_line_error_and_the_server_keeps_serving(browser,
+                                                                                     tmp_path):
+    """Looking mode: the page opens on a broken EXR; its error line is shown
+    where the picture would be, the marking tab stays hidden, and the server
+    answers the next request."""
+    import urllib.request
+
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.view.app import create_app, start_server
+
+    bad = tmp_path / "broken.exr"
+    bad.write_bytes(b"not an exr at all")
+    server = start_server(create_app(artifacts=[bad]), port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        browser.get(f"http://127.0.0.1:{server.port}/")
+        _wait(browser, "return window.lumiMark && window.lumiMark.ready")
+        shown = _wait(browser, "const e = document.querySelector('#look .look-error');"
+                               "return e && e.textContent")
+        assert shown.startswith(f"{bad}: ") and "\n" not in shown, shown
+        assert not browser.find_element(By.ID, "mode-mark").is_displayed()
+        assert browser.find_element(By.ID, "look").get_attribute("hidden") is None
+        with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/api/mode", timeout=10) as r:
+            assert r.status == 200
+    finally:
+        server.shutdown()
+        thread.join(5)
+
+
+def test_the_page_loads_without_a_facade_session(browser):
+    """Looking mode only: the page starts, the marking tab stays hidden."""
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.view.app import create_app, start_server
+
+    server = start_server(create_app(artifacts=[]), port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        browser.get(f"http://127.0.0.1:{server.port}/")
+        _wait(browser, "return window.lumiMark && window.lumiMark.ready")
+        assert not browser.find_element(By.ID, "mode-mark").is_displayed()
+        assert browser.find_element(By.ID, "look").get_attribute("hidden") is None
+    finally:
+        server.shutdown()
+        thread.join(5)
