@@ -310,3 +310,39 @@ def test_a_rewritten_file_is_read_again(tmp_path):
     st = p.stat()
     os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # a coarse clock: a later mtime
     assert c.get("/api/look/0/probe?x=0&y=0").get_json()["value"] == [2.0] * 3
+
+
+def test_wide_disparity_display_copy_averages_only_known_pixels(tmp_path, rng):
+    w = 2 * A.DISPLAY_MAX_PX
+    disp = (rng.random((4, w)) * 10).astype(np.float32)
+    disp[0:2, 0:2] = np.nan  # a block wholly unknown
+    disp[2, 2] = np.nan  # a block with one unknown pixel
+    p = tmp_path / "disparity.pfm"
+    write_pfm(p, disp)
+    art = A.load(p)
+    blocks = disp.astype(np.float64).reshape(2, 2, A.DISPLAY_MAX_PX, 2)
+    known = np.isfinite(blocks).sum(axis=(1, 3))
+    mean = np.where(known > 0, np.nansum(blocks, axis=(1, 3)) / np.maximum(known, 1), np.nan)
+    assert np.isnan(art.small[0, 0]) and np.isnan(mean[0, 0])
+    ok = np.isfinite(mean)
+    # float32 sums of four and a division: a few float32 roundings of the values (<= 10)
+    assert np.allclose(art.small[ok], mean[ok], rtol=0, atol=8 * 10 * np.finfo(np.float32).eps)
+    pr = client([p]).get("/api/look/0/probe?x=4095&y=3").get_json()
+    assert pr["value"] == [float(disp[3, 4095])]
+
+
+def test_a_folder_lists_its_artifacts(tmp_path, rng):
+    shutil.copytree(ROOT / "fixtures" / "lightfield", tmp_path / "lf")
+    write_image(tmp_path / "a.png", rng.integers(0, 256, (3, 3), dtype=np.uint8))
+    (tmp_path / "sub").mkdir()
+    ResponseCurve.linear(8).save(tmp_path / "sub" / "response.json")
+    (tmp_path / "notes.txt").write_text("not an artifact")
+    (tmp_path / ".hidden.png").write_bytes(b"")
+    c = client([tmp_path, tmp_path / "notes.txt"])
+    rows = c.get("/api/look/list").get_json()
+    names = [(Path(r["path"]).relative_to(tmp_path).as_posix(), r["kind"]) for r in rows]
+    assert names == [("a.png", "image"), ("lf/lightfield.json", "lightfield"),
+                     ("sub/response.json", "response"), ("notes.txt", None)]
+    assert rows[-1]["error"].endswith("not an artifact lumigraph view shows")
+    d = c.get(f"/api/look/{rows[-1]['id']}").get_json()
+    assert d["error"].startswith(f"{tmp_path / 'notes.txt'}: not an artifact")
