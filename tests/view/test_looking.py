@@ -104,15 +104,31 @@ def test_radiance_display_copy_is_the_area_mean_and_probe_reads_full_resolution(
     assert pr["value"] == rad[5, 4001].tolist()
 
 
-@pytest.mark.parametrize("tone", ["reinhard", "reinhard-local"])
-def test_radiance_reinhard_is_the_projects_operator_at_the_key_of_the_exposure(tmp_path, rng,
-                                                                               tone):
+def test_radiance_reinhard_local_is_the_projects_operator_at_the_key_of_the_exposure(tmp_path,
+                                                                                     rng):
     rad = np.exp(rng.normal(0, 1.5, (20, 30, 3))).astype(np.float32)
     p = tmp_path / "r.exr"
     write_hdr_image(p, rad)
+    img = decode(client([p]).get("/api/look/0/image?exposure=1&tone=reinhard-local&format=png"))
+    assert np.array_equal(img, tonemap(rad, method="reinhard-local", key=0.18 * 2.0))
+
+
+@pytest.mark.parametrize("width", [30, 2 * A.DISPLAY_MAX_PX])
+def test_radiance_reinhard_global_within_a_code_of_the_projects_operator(tmp_path, rng, width):
+    # through the log indices: three roundings of 0.038 code at most (artifacts.
+    # Radiance._reinhard_global), so the two rounded pictures differ by at most one code
+    rad = np.exp(rng.normal(0, 2, (8, width, 3))).astype(np.float32)
+    rad[0, 0] = 0.0  # black stays black
+    p = tmp_path / "r.exr"
+    write_hdr_image(p, rad)
     c = client([p])
-    img = decode(c.get(f"/api/look/0/image?exposure=1&tone={tone}&format=png"))
-    assert np.array_equal(img, tonemap(rad, method=tone, key=0.18 * 2.0))
+    art = A.load(p)
+    for stops in (-2.0, 0.0, 3.0):
+        img = decode(c.get(f"/api/look/0/image?exposure={stops}&tone=reinhard&format=png"))
+        ref = tonemap(art.display, method="reinhard", key=0.18 * 2.0 ** stops)
+        assert np.abs(img.astype(int) - ref).max() <= 1
+    if width <= A.DISPLAY_MAX_PX:  # shown as it is: the black pixel stays black
+        assert img[0, 0].tolist() == [0, 0, 0]
 
 
 # -------------------------------------------------------------------- images
