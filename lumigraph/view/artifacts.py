@@ -23,7 +23,8 @@ through :func:`lumigraph.capture.io.read_pfm`; ``.flo`` through
 
 Speed (issue 18): a radiance map is shown from a display copy at most
 :data:`DISPLAY_MAX_PX` wide (area-averaged once, at load), so an exposure move
-is a multiply and a table look-up on at most 3 MP; the probe reads the full
+is one table and one gather over a log2 index of at most 3 MP (Reinhard's
+global curve: the same, with a per-luminance offset); the probe reads the full
 resolution array. A light field refocuses by the Fourier slice theorem
 (:mod:`lumigraph.lightfield.ng2005`): the 4-D FFT once per light field, then a
 2-D slice and one inverse FFT per slider move.
