@@ -23,7 +23,8 @@ through :func:`lumigraph.capture.io.read_pfm`; ``.flo`` through
 
 Speed (issue 18): a radiance map is shown from a display copy at most
 :data:`DISPLAY_MAX_PX` wide (area-averaged once, at load), so an exposure move
-is a multiply and a table look-up on at most 3 MP; the probe reads the full
+is one table and one gather over a log2 index of at most 3 MP (Reinhard's
+global curve: the same, with a per-luminance offset); the probe reads the full
 resolution array. A light field refocuses by the Fourier slice theorem
 (:mod:`lumigraph.lightfield.ng2005`): the 4-D FFT once per light field, then a
 2-D slice and one inverse FFT per slider move.
@@ -311,6 +312,17 @@ def log_exposure_table(top: float, stops: float) -> np.ndarray:
     return np.round(255.0 * srgb_encode(lin)).astype(np.uint8)
 
 
+def _code_table(top: float, top_index: int) -> np.ndarray:
+    """sRGB codes of indices ``0..top_index`` at 0 stops (0: black), as
+    :func:`log_exposure_table` but running past ``top`` (to white)."""
+    from lumigraph.hdr.reinhard2002 import srgb_encode
+
+    q = np.arange(top_index + 1, dtype=np.float64)
+    lin = top * np.exp2((q - LOG_STEPS * LOG_STOPS) / LOG_STEPS)
+    lin[0] = 0.0
+    return np.round(255.0 * srgb_encode(lin)).astype(np.uint8)
+
+
 class Radiance(Artifact):
     """Linear radiance (EXR, RGBE, LogLuv TIFF, three-channel PFM)."""
 
@@ -324,6 +336,7 @@ class Radiance(Artifact):
         self.display, self.scale = display_copy(full)
         self.default_stops = auto_stops(self.display)
         self.index, self.top = log_index(self.display)
+        self._tone = None  # the Reinhard indices, made on first use
 
     def controls(self):
         return [Control("exposure", "slider", self.default_stops, -STOPS, STOPS, 0.1,
@@ -342,7 +355,47 @@ class Radiance(Artifact):
     def image(self, values):
         if values["tone"] == "linear":
             return _rgb(log_exposure_table(self.top, values["exposure"])[self.index])
+        if values["tone"] == "reinhard":
+            return self._reinhard_global(0.18 * 2.0 ** values["exposure"])
         return tone_map(self.display, stops=values["exposure"], tone=values["tone"])
+
+    def _reinhard_global(self, key: float) -> np.ndarray:
+        """Reinhard's global operator (:func:`lumigraph.hdr.reinhard2002.global_operator`,
+        with the display copy's statistics) through the log indices: the operator's
+        ratio ``L_d / L`` depends on the luminance only, so it is evaluated once per
+        luminance index (64513 values, not 3 M pixels) and added, as a log2 offset,
+        to each channel's index; one table gives the sRGB code. Three index roundings
+        (channel, luminance: the ratio's slope in ln L is within (-1, 1), offset) move
+        the code by at most 3 x 0.038 against the project's :func:`tonemap` of the
+        display copy; both round to whole codes, so they differ by at most one."""
+        from lumigraph.hdr.reinhard2002 import global_operator
+
+        if self._tone is None:
+            from lumigraph.hdr.reinhard2002 import _lum, tonemap_statistics
+
+            rgb = self.display[..., :3] if self.display.ndim == 3 else self.display
+            rgb = np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0.0)
+            lum = _lum(rgb if rgb.ndim == 3 else rgb[..., None], "reinhard")  # tonemap's own
+            q_lum, top_lum = log_index(lum)
+            q_rgb = self.index[..., :3] if self.index.ndim == 3 else self.index
+            q_rgb = q_rgb.astype(np.int32)
+            q_rgb[q_rgb == 0] = -(1 << 30)  # zero stays black whatever the offset
+            stats = tonemap_statistics([rgb if rgb.ndim == 3 else rgb[..., None]])
+            self._tone = (q_lum, top_lum, q_rgb, stats)
+        q_lum, top_lum, q_rgb, stats = self._tone
+        n = LOG_STEPS * LOG_STOPS
+        q = np.arange(n + 1, dtype=np.float64)
+        lum_q = top_lum * np.exp2((q - n) / LOG_STEPS)
+        ratio = global_operator(lum_q, key=key, statistics=stats) / lum_q
+        offset = np.round(LOG_STEPS * np.log2(ratio)).astype(np.int32)
+        offset[0] = -(1 << 30)  # zero luminance: black (tonemap's ratio 0)
+        j = q_rgb + (offset[q_lum][..., None] if q_rgb.ndim == 3 else offset[q_lum])
+        # the table runs from index 0 up to the first index at or above 1 (white)
+        stops_up = max(0, math.ceil(-math.log2(self.top))) + 1
+        top_index = n + LOG_STEPS * stops_up
+        np.clip(j, 0, top_index, out=j)
+        table = _code_table(self.top, top_index)
+        return _rgb(table[j])
 
     def probe(self, x, y, values):
         h, w = self.full.shape[:2]

@@ -104,15 +104,31 @@ def test_radiance_display_copy_is_the_area_mean_and_probe_reads_full_resolution(
     assert pr["value"] == rad[5, 4001].tolist()
 
 
-@pytest.mark.parametrize("tone", ["reinhard", "reinhard-local"])
-def test_radiance_reinhard_is_the_projects_operator_at_the_key_of_the_exposure(tmp_path, rng,
-                                                                               tone):
+def test_radiance_reinhard_local_is_the_projects_operator_at_the_key_of_the_exposure(tmp_path,
+                                                                                     rng):
     rad = np.exp(rng.normal(0, 1.5, (20, 30, 3))).astype(np.float32)
     p = tmp_path / "r.exr"
     write_hdr_image(p, rad)
+    img = decode(client([p]).get("/api/look/0/image?exposure=1&tone=reinhard-local&format=png"))
+    assert np.array_equal(img, tonemap(rad, method="reinhard-local", key=0.18 * 2.0))
+
+
+@pytest.mark.parametrize("width", [30, 2 * A.DISPLAY_MAX_PX])
+def test_radiance_reinhard_global_within_a_code_of_the_projects_operator(tmp_path, rng, width):
+    # through the log indices: three roundings of 0.038 code at most (artifacts.
+    # Radiance._reinhard_global), so the two rounded pictures differ by at most one code
+    rad = np.exp(rng.normal(0, 2, (8, width, 3))).astype(np.float32)
+    rad[0, 0] = 0.0  # black stays black
+    p = tmp_path / "r.exr"
+    write_hdr_image(p, rad)
     c = client([p])
-    img = decode(c.get(f"/api/look/0/image?exposure=1&tone={tone}&format=png"))
-    assert np.array_equal(img, tonemap(rad, method=tone, key=0.18 * 2.0))
+    art = A.load(p)
+    for stops in (-2.0, 0.0, 3.0):
+        img = decode(c.get(f"/api/look/0/image?exposure={stops}&tone=reinhard&format=png"))
+        ref = tonemap(art.display, method="reinhard", key=0.18 * 2.0 ** stops)
+        assert np.abs(img.astype(int) - ref).max() <= 1
+    if width <= A.DISPLAY_MAX_PX:  # shown as it is: the black pixel stays black
+        assert img[0, 0].tolist() == [0, 0, 0]
 
 
 # -------------------------------------------------------------------- images
@@ -310,3 +326,39 @@ def test_a_rewritten_file_is_read_again(tmp_path):
     st = p.stat()
     os.utime(p, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # a coarse clock: a later mtime
     assert c.get("/api/look/0/probe?x=0&y=0").get_json()["value"] == [2.0] * 3
+
+
+def test_wide_disparity_display_copy_averages_only_known_pixels(tmp_path, rng):
+    w = 2 * A.DISPLAY_MAX_PX
+    disp = (rng.random((4, w)) * 10).astype(np.float32)
+    disp[0:2, 0:2] = np.nan  # a block wholly unknown
+    disp[2, 2] = np.nan  # a block with one unknown pixel
+    p = tmp_path / "disparity.pfm"
+    write_pfm(p, disp)
+    art = A.load(p)
+    blocks = disp.astype(np.float64).reshape(2, 2, A.DISPLAY_MAX_PX, 2)
+    known = np.isfinite(blocks).sum(axis=(1, 3))
+    mean = np.where(known > 0, np.nansum(blocks, axis=(1, 3)) / np.maximum(known, 1), np.nan)
+    assert np.isnan(art.small[0, 0]) and np.isnan(mean[0, 0])
+    ok = np.isfinite(mean)
+    # float32 sums of four and a division: a few float32 roundings of the values (<= 10)
+    assert np.allclose(art.small[ok], mean[ok], rtol=0, atol=8 * 10 * np.finfo(np.float32).eps)
+    pr = client([p]).get("/api/look/0/probe?x=4095&y=3").get_json()
+    assert pr["value"] == [float(disp[3, 4095])]
+
+
+def test_a_folder_lists_its_artifacts(tmp_path, rng):
+    shutil.copytree(ROOT / "fixtures" / "lightfield", tmp_path / "lf")
+    write_image(tmp_path / "a.png", rng.integers(0, 256, (3, 3), dtype=np.uint8))
+    (tmp_path / "sub").mkdir()
+    ResponseCurve.linear(8).save(tmp_path / "sub" / "response.json")
+    (tmp_path / "notes.txt").write_text("not an artifact")
+    (tmp_path / ".hidden.png").write_bytes(b"")
+    c = client([tmp_path, tmp_path / "notes.txt"])
+    rows = c.get("/api/look/list").get_json()
+    names = [(Path(r["path"]).relative_to(tmp_path).as_posix(), r["kind"]) for r in rows]
+    assert names == [("a.png", "image"), ("lf/lightfield.json", "lightfield"),
+                     ("sub/response.json", "response"), ("notes.txt", None)]
+    assert rows[-1]["error"].endswith("not an artifact lumigraph view shows")
+    d = c.get(f"/api/look/{rows[-1]['id']}").get_json()
+    assert d["error"].startswith(f"{tmp_path / 'notes.txt'}: not an artifact")
