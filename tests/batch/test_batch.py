@@ -108,6 +108,49 @@ def test_bad_batch_options_are_refused_before_any_work(shots, tmp_path, extra, f
     assert not (tmp_path / "out" / "b0.exr").exists()
 
 
+@pytest.mark.parametrize("answer", [None, b"HTTP/1.1 400 Bad Request\r\n\r\n" * 4])
+def test_an_unreachable_scheduler_is_refused_within_the_connect_timeout(shots, tmp_path,
+                                                                         monkeypatch, answer):
+    """A port that accepts and stays silent, or answers bytes that are not
+    Dask's: exit 2, one line naming the address, nothing written, after the
+    connect timeout (not Dask's default 30 s)."""
+    import contextlib
+    import socket
+    import threading
+    import time
+
+    from lumigraph.capture import batch
+
+    monkeypatch.setattr(batch, "CONNECT_TIMEOUT", "1s")
+    server = socket.create_server(("127.0.0.1", 0))
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    held = []
+
+    def serve():
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                if answer:
+                    conn.sendall(answer)
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        t0 = time.monotonic()
+        rc, err = _merge(shots, shots / "shots", tmp_path / "out", "--scheduler", address)
+        took = time.monotonic() - t0
+    finally:
+        server.close()
+        for c in held:
+            c.close()
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and address in lines[0], err
+    assert lines[0].startswith("error: --scheduler: "), lines
+    # the 1 s timeout plus the batch's own set-up; Dask's default would be 30 s
+    assert took < 10, took
+    assert not (tmp_path / "out").exists()
+
+
 def test_many_brackets_need_an_output_folder(shots, tmp_path):
     rc, err = _merge(shots, shots / "shots", tmp_path / "one.exr")
     assert rc == 2 and "name a folder" in err, err
