@@ -188,3 +188,40 @@ def test_separate_over_many_stacks_is_the_single_command_per_stack(tmp_path):
     for f in ("direct.exr", "global.exr", "mask.png"):
         assert (tmp_path / "sep" / "p1" / f).read_bytes() == (tmp_path / "one" / f).read_bytes()
     assert _status(tmp_path / "sep") == {"p0": "done", "p1": "done"}
+
+
+def test_refocus_over_several_light_fields_is_the_single_command_per_light_field(tmp_path):
+    """Each light field one item (one value: NAME.exr; several: the folder
+    NAME/ with its index.json), the same bytes as the one-light-field command;
+    a rerun does nothing."""
+    from lumigraph.capture.render import render
+
+    for k in range(2):
+        render("lightfield-array", size=(24, 20), grid="3x3", thin_lens=False,
+               seed=k).save(tmp_path / "scenes" / f"s{k}")
+        rc, _, err = run_cli(["lightfield", "import", tmp_path / "scenes" / f"s{k}", "--out",
+                              tmp_path / "fields" / f"lf{k}", "-q"])
+        assert rc == 0, err
+    fields = tmp_path / "fields"
+    rc, _, err = run_cli(["lightfield", "refocus", fields, "--slope", "0.5", "--out",
+                          tmp_path / "one", "-q"])
+    assert rc == 0, err
+    rc, _, err = run_cli(["lightfield", "refocus", fields / "lf0", fields / "lf1", "--slope", "0",
+                          "0.5", "--out", tmp_path / "many", "-q"])
+    assert rc == 0, err
+    assert _status(tmp_path / "one") == _status(tmp_path / "many") == {"lf0": "done", "lf1": "done"}
+    for k in range(2):
+        rc, _, err = run_cli(["lightfield", "refocus", fields / f"lf{k}", "--slope", "0.5", "--out",
+                              tmp_path / f"single{k}.exr", "-q"])
+        assert rc == 0, err
+        assert (tmp_path / "one" / f"lf{k}.exr").read_bytes() == \
+            (tmp_path / f"single{k}.exr").read_bytes()
+        rc, _, err = run_cli(["lightfield", "refocus", fields / f"lf{k}", "--slope", "0", "0.5",
+                              "--out", tmp_path / f"stack{k}", "-q"])
+        assert rc == 0, err
+        for name in ("refocus-000.exr", "refocus-001.exr"):
+            assert (tmp_path / "many" / f"lf{k}" / name).read_bytes() == \
+                (tmp_path / f"stack{k}" / name).read_bytes()
+    rc, _, err = run_cli(["lightfield", "refocus", fields, "--slope", "0.5", "--out",
+                          tmp_path / "one", "-q"])
+    assert rc == 0 and _status(tmp_path / "one") == {"lf0": "skipped", "lf1": "skipped"}, err
