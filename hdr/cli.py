@@ -917,7 +917,12 @@ def build_parser(prog: str = "lumigraph hdr"):
     add_device_option(v)
     add_tile_options(v, "the radiance map", "PNG and TIFF")
     v.set_defaults(func=_tonemap)
-    v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
+    v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)",
+                 epilog="With --workers or --scheduler the frames are a batch: each output "
+                        "frame one item, reading the frames it is registered with (its "
+                        "neighbours; at an end also the frame two away), the same radiance as "
+                        "one run; --tonemap and video.meta.json follow in this process, and "
+                        "index.json is the batch's index.\n\n" + BATCH_HELP)
     v.add_argument("frames", nargs="+", type=input_path,
                    help="frames in time order, or a folder with stack.json")
     v.add_argument("--response", required=True, type=input_path,
