@@ -60,9 +60,32 @@ from lumigraph.capture.errors import InputError
 INDEX_NAME = "index.json"
 INDEX_SCHEMA = "lumigraph.batch"
 SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
+THREADS_ENV = "LUMIGRAPH_NUM_THREADS"
 # What a worker process pins to one thread: each worker is one item at a time
-# on one core, so threaded BLAS or OpenCV would oversubscribe the machine.
-ONE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+# on one core, so threaded BLAS, OpenCV or our own thread pools (hdr merge's
+# chunks, block matching's bands: THREADS_ENV) would oversubscribe the machine
+# -- and a 1-worker cluster would already use every core, leaving a second
+# worker nothing to add.
+ONE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                  THREADS_ENV: "1"}
+
+
+def default_threads(cap: int = 4) -> int:
+    """How many threads a library call's own pool may use when the caller
+    does not say: ``$LUMIGRAPH_NUM_THREADS`` (1 in a batch worker), else the
+    machine's cores, at most ``cap``.
+
+    >>> import os
+    >>> os.environ[THREADS_ENV] = "1"; default_threads()
+    1
+    >>> del os.environ[THREADS_ENV]; 1 <= default_threads(cap=2) <= 2
+    True
+    """
+    with contextlib.suppress(ValueError):
+        n = int(os.environ.get(THREADS_ENV, ""))
+        if n >= 1:
+            return min(n, cap)
+    return max(1, min(cap, os.cpu_count() or 1))
 
 
 @dataclass(frozen=True)
@@ -336,29 +359,117 @@ def engine_from(workers: int | None, scheduler: str | None) -> str:
     return scheduler if scheduler else "in-process"
 
 
+# What Dask's workers do beside the items, turned down on the clusters we
+# start: a statistical profiler sampling the running task's stack every 10 ms
+# (it takes the GIL from the item each time), the memory monitor every 100 ms,
+# the system monitor every 500 ms, the event loop's tick every 20 ms. Measured
+# on one worker merging 640x480 brackets (docs/decisions/batch.md): the
+# worker's CPU per item fell from ~1.15x to ~1.0x the in-process item's, its
+# idle CPU from 4 % to 0.3 % of a core. The dashboard is not started either.
+QUIET_WORKER_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.gil.enabled": False,
+    "distributed.worker.memory.monitor-interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.admin.tick.interval": "500ms",
+}
+# How long a client waits for an existing scheduler (--scheduler): a live one
+# on a network answers in milliseconds, and a wrong address should be refused
+# while the user still watches (Dask's default is 30 s).
+CONNECT_TIMEOUT = "5s"
+
+
 @contextlib.contextmanager
-def _client(engine: str):
+def local_cluster(n: int, *, warm: Sequence[str] = ()):
+    """A Dask ``LocalCluster`` of ``n`` worker processes, one thread each,
+    BLAS, OpenCV and our pools pinned to one thread (:data:`ONE_THREAD_ENV`),
+    the workers' own background work turned down
+    (:data:`QUIET_WORKER_CONFIG`), and warm: each has imported the modules
+    ``warm`` (those the items will run) before the cluster is handed over,
+    as the workers of a cluster that has run a batch before have."""
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    # the workers take the configuration current when the nanny starts them
+    with dask.config.set(QUIET_WORKER_CONFIG), \
+            LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                         env=ONE_THREAD_ENV, silence_logs=logging.ERROR) as cluster:
+        with Client(cluster) as client:
+            client.run(warm_worker, list(warm))
+        yield cluster
+
+
+def item_modules(items: Iterable[Item]) -> list[str]:
+    """The modules ``items`` will import where they run: their functions'
+    and, for :func:`run_command` items, their commands'."""
+    out: dict[str, None] = {}
+    for it in items:
+        out[it.func.partition(":")[0]] = None
+        if isinstance(it.kwargs.get("module"), str):
+            out[it.kwargs["module"]] = None
+    return list(out)
+
+
+def warm_worker(modules: Sequence[str]) -> None:
+    """Import the modules a batch item will (the first item on a cold worker
+    otherwise pays for them) and pin the threads."""
+    import importlib
+
+    pin_threads()
+    for m in modules:
+        with contextlib.suppress(ImportError):
+            importlib.import_module(m)
+
+
+def _probe(address: str, timeout: str) -> None:
+    """Connect to ``address`` and exchange Dask's handshake, within
+    ``timeout``, then hang up. ``distributed.Client`` bounds the TCP connect
+    but not the handshake's read: a port that accepts and stays silent (not a
+    Dask scheduler) would hold it forever."""
+    import asyncio
+
+    from dask.utils import parse_timedelta
+    from distributed.comm import connect
+
+    seconds = parse_timedelta(timeout, "s")
+
+    async def probe():
+        comm = await asyncio.wait_for(connect(address, timeout=seconds), seconds)
+        await comm.close()
+
+    try:
+        asyncio.run(probe())
+    except TimeoutError:
+        raise OSError(f"no Dask handshake within {timeout}") from None
+
+
+@contextlib.contextmanager
+def _client(engine: str, *, warm: Sequence[str] = ()):
     """A Dask client on a new local cluster (``local:N``) or an existing one."""
     import logging
 
     try:
-        from distributed import Client, LocalCluster
+        from distributed import Client
     except ImportError:  # pragma: no cover - a dependency
         raise InputError("workers", "needs dask[distributed]: pip install 'dask[distributed]'") from None
     # distributed logs its own life (worker start/stop, a lost worker) at INFO
     # and WARNING on stderr; a run says our lines only (--debug shows more)
     logging.getLogger("distributed").setLevel(logging.ERROR)
     if engine.startswith("local:"):
-        n = int(engine.split(":", 1)[1])
-        with LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                          env=ONE_THREAD_ENV, silence_logs=logging.ERROR) as cluster, \
-                Client(cluster) as client:
+        with local_cluster(int(engine.split(":", 1)[1]), warm=warm) as cluster, Client(cluster) as client:
             yield client
         return
     try:
-        client = Client(engine, timeout="30s")
-    except (OSError, TimeoutError, ValueError) as e:
-        raise InputError("scheduler", f"cannot reach the Dask scheduler at {engine} ({e}); start "
+        _probe(engine, CONNECT_TIMEOUT)
+        client = Client(engine, timeout=CONNECT_TIMEOUT)
+    except Exception as e:  # noqa: BLE001 - a wrong address is the user's input, whatever answers
+        # a refused or silent port times out (OSError); something that is not
+        # a Dask scheduler can answer with bytes Dask reads as a frame length
+        # (MemoryError, ValueError): either way not a scheduler
+        raise InputError("scheduler", f"cannot reach a Dask scheduler at {engine} ({type(e).__name__}: "
+                                      f"{' '.join(str(e).split())[:200]}); start "
                                       "one with 'dask scheduler' or check the address") from None
     with client:
         yield client
@@ -487,7 +598,7 @@ def run_batch(items: Sequence[Item], *, out_dir: str | os.PathLike, workers: int
     # the cluster is reached before anything is written: an unreachable one is
     # bad input (exit 2) with nothing in the output folder
     remote = engine != "in-process" and bool(todo)
-    with _client(engine) if remote else contextlib.nullcontext() as client:
+    with _client(engine, warm=item_modules(todo)) if remote else contextlib.nullcontext() as client:
         out_dir.mkdir(parents=True, exist_ok=True)
         write_index(final=True)
         if remote:

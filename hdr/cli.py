@@ -12,6 +12,7 @@ from lumigraph.capture.commandline import (
     BATCH_HELP,
     add_batch_options,
     add_verb,
+    batch_requested,
     check_planned,
     input_path,
     make_parser,
@@ -616,6 +617,111 @@ def _convert(args) -> int:
     return 0
 
 
+def _frame_meta(src, response, i: int, exposure_s: float, params: dict, quality: dict) -> dict:
+    """The sidecar of an HDR video's frame ``i`` (one run, or one batch item)."""
+    from lumigraph.capture.artifact import make_meta
+
+    return make_meta("lumigraph.radiance", inputs=[src, response],
+                     params={"frame": i, "exposure_s": exposure_s, **params}, quality=quality,
+                     extra={"method": "kang2003",
+                            "units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
+                            "flags": "per pixel-channel in quality: 8 warped from neighbours, "
+                                     "16 fallback (clipping bound), 4 neighbour rejected"})
+
+
+def video_frame(*, paths: list[str], times: list[float], index: int, first: int,
+                bit_depth: int | None, response: str, window: int, consistency_sigma: float,
+                device: str, out: str) -> list[str]:
+    """One batch item of ``hdr video``: frame ``first + index`` of the video,
+    from its neighbour frames ``paths`` (their ``times``, effective seconds),
+    written to ``out`` with its sidecar. Kang et al. complete a frame from
+    frames i-1..i+1 only, so this is the single run's frame to the bit
+    (:func:`lumigraph.hdr.kang2003.hdr_video`'s ``only``). Returns the frame's
+    warnings."""
+    from lumigraph.capture.artifact import write_artifact
+    from lumigraph.capture.device import resolve_device
+    from lumigraph.capture.io import read_stack, write_exr
+    from lumigraph.hdr.kang2003 import hdr_video
+    from lumigraph.hdr.response import ResponseCurve
+
+    curve = ResponseCurve.load(response)
+    stack = read_stack(paths, times=times, need_times=True, bit_depth=bit_depth)
+    v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=window,
+                  consistency_sigma=consistency_sigma, device=resolve_device(device),
+                  only=[index])
+    quality = {**v.frames[0], "frame": first + index}  # indices into the whole video
+    if "pair" in quality["flow"]:
+        quality["flow"] = {**quality["flow"], "pair": [first + k for k in quality["flow"]["pair"]]}
+    write_artifact(out, lambda p: write_exr(p, v.radiance[0]),
+                   meta=_frame_meta(paths[index], response, first + index, v.exposure_times_s[0],
+                                    v.params, quality))
+    return list(v.warnings)
+
+
+def _video_batch(args, stack) -> int:
+    """``hdr video`` on a Dask cluster (``--workers``/``--scheduler``): each
+    output frame one item, whose inputs are its neighbour frames; then, in
+    this process, ``video.meta.json`` from the frames' sidecars and, with
+    ``--tonemap``, the temporal tone mapping over every frame (it needs them
+    all)."""
+    import json
+
+    import numpy as np
+
+    from lumigraph.capture.artifact import make_meta, meta_path, write_artifact, write_json
+    from lumigraph.capture.batch import Item, report, run_batch
+    from lumigraph.capture.io import read_exr, write_image
+    from lumigraph.hdr.kang2003 import frames_used, tonemap_video
+
+    out = Path(args.out)
+    n = len(stack.paths)
+    times = list(stack.effective_exposure_times_s)
+    items = []
+    for i in range(n):
+        r = frames_used(i, n)
+        lo, hi = r.start, r.stop
+        target = out / f"frame_{i:03d}.exr"
+        items.append(Item(target.stem, inputs=(*stack.paths[lo:hi], str(args.response)),
+                          outputs=(str(target),), func="lumigraph.hdr.cli:video_frame",
+                          kwargs={"paths": list(stack.paths[lo:hi]), "times": times[lo:hi],
+                                  "index": i - lo, "first": lo, "bit_depth": stack.bit_depth,
+                                  "response": str(args.response), "window": args.window,
+                                  "consistency_sigma": args.consistency_sigma,
+                                  "device": args.device, "out": str(target)}))
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="hdr video")
+    status = report(result, quiet=args.quiet)
+    if result.failed:
+        return status
+    frames = [json.loads(meta_path(out / f"frame_{i:03d}.exr").read_text())["quality"]
+              for i in range(n)]
+    params = json.loads(meta_path(out / "frame_000.exr").read_text())["params"]
+    params = {k: v for k, v in params.items() if k not in ("frame", "exposure_s")}
+    tm = None
+    if args.tonemap:
+        tm = tonemap_video(np.stack([read_exr(out / f"frame_{i:03d}.exr") for i in range(n)]),
+                           key=args.key, temporal=args.temporal)
+        for i, src in enumerate(stack.paths):
+            write_artifact(out / f"frame_{i:03d}.png", lambda p, i=i: write_image(p, tm.images[i]),
+                           meta=make_meta("lumigraph.tonemapped", inputs=[src], params=tm.params,
+                                          quality={"log_average": float(tm.log_average[i]),
+                                                   "log_average_used":
+                                                       float(tm.log_average_used[i])}))
+    shares = {k: float(np.mean([f["sources"][k] for f in frames])) for k in frames[0]["sources"]}
+    warnings = [w for o in result.outcomes for w in o.warnings]
+    summary = make_meta("lumigraph.hdr_video", inputs=[*stack.paths, args.response],
+                        params={"times_s": times, **params, "tonemap": bool(args.tonemap),
+                                "key": args.key, "temporal": args.temporal,
+                                "bit_depth": stack.bit_depth,
+                                "bit_depth_source": stack.bit_depth_source},
+                        quality={"mean_sources": shares,
+                                 "flicker": None if tm is None else tm.flicker, "frames": frames},
+                        timings_s={"batch": result.wall_s}, warnings=warnings,
+                        extra={"engine": result.engine})
+    write_json(out / "video.meta.json", summary)
+    return status
+
+
 def _video(args) -> int:
     import numpy as np
 
@@ -654,6 +760,8 @@ def _video(args) -> int:
         planned += [f"frame_{i:03d}.png" for i in range(len(stack.paths))]
     check_planned([out / n for n in (*planned, *(n + ".meta.json" for n in planned),
                                      "video.meta.json")])
+    if batch_requested(args):
+        return _video_batch(args, stack)
     t0 = time.perf_counter()
     v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=args.window,
                   consistency_sigma=args.consistency_sigma, device=dev,
@@ -665,15 +773,9 @@ def _video(args) -> int:
     tm = tonemap_video(v.radiance, key=args.key, temporal=args.temporal) if args.tonemap else None
     out.mkdir(parents=True, exist_ok=True)
     for i, src in enumerate(stack.paths):
-        meta = make_meta("lumigraph.radiance", inputs=[src, args.response],
-                         params={"frame": i, "exposure_s": v.exposure_times_s[i], **v.params},
-                         quality=v.frames[i],
-                         extra={"method": "kang2003",
-                                "units": "relative radiance: f^-1(z)/t, f^-1(z_mid)=z_mid/z_max",
-                                "flags": "per pixel-channel in quality: 8 warped from neighbours, "
-                                         "16 fallback (clipping bound), 4 neighbour rejected"})
         write_artifact(out / f"frame_{i:03d}.exr", lambda p, i=i: write_exr(p, v.radiance[i]),
-                       meta=meta)
+                       meta=_frame_meta(src, args.response, i, v.exposure_times_s[i], v.params,
+                                        v.frames[i]))
         if tm is not None:
             write_artifact(out / f"frame_{i:03d}.png", lambda p, i=i: write_image(p, tm.images[i]),
                            meta=make_meta("lumigraph.tonemapped", inputs=[src],
@@ -815,7 +917,12 @@ def build_parser(prog: str = "lumigraph hdr"):
     add_device_option(v)
     add_tile_options(v, "the radiance map", "PNG and TIFF")
     v.set_defaults(func=_tonemap)
-    v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)")
+    v = add_verb(sp, "video", "HDR video from alternating exposures (Kang et al. 2003)",
+                 epilog="With --workers or --scheduler the frames are a batch: each output "
+                        "frame one item, reading the frames it is registered with (its "
+                        "neighbours; at an end also the frame two away), the same radiance as "
+                        "one run; --tonemap and video.meta.json follow in this process, and "
+                        "index.json is the batch's index.\n\n" + BATCH_HELP)
     v.add_argument("frames", nargs="+", type=input_path,
                    help="frames in time order, or a folder with stack.json")
     v.add_argument("--response", required=True, type=input_path,
@@ -836,6 +943,7 @@ def build_parser(prog: str = "lumigraph hdr"):
                         "records)")
     _bit_depth_option(v, "frames")
     add_device_option(v)
+    add_batch_options(v)
     v.set_defaults(func=_video, arg_flags=TIMES_FLAG)
     v = add_verb(sp, "convert", "convert between EXR, RGBE .hdr, LogLuv TIFF and PFM")
     v.add_argument("input", type=input_path, help="an HDR image (.exr, .hdr, LogLuv .tif, .pfm)")

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -368,7 +369,8 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
               neighbourhood: int = 7, outlier_share: float = 0.25,
               bidirectional: bool = True, max_motion_px: float | None = None,
               full_well_e: float = 10000.0, read_noise_e: float = 5.0,
-              clip_margin: float = 0.02, progress=None, device="cpu") -> HDRVideo:
+              clip_margin: float = 0.02, progress=None, device="cpu",
+              only: Sequence[int] | None = None) -> HDRVideo:
     """Radiance of every frame of an alternating-exposure video.
 
     Parameters
@@ -405,6 +407,14 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
     progress : callable, optional
         Wraps the frame loop (``progress(range(N))``), e.g.
         :func:`capture.commandline.progress`.
+    only : sequence of int, optional
+        Complete only these frames (indices into ``frames``): the result is
+        the video of those frames, in that order (their diagnostics keep the
+        indices into ``frames``). Frame ``i`` reads the frames
+        :func:`frames_used` names only, so ``hdr_video(frames[r.start:r.stop],
+        ..., only=[i - r.start])`` with ``r = frames_used(i, N)`` gives frame
+        ``i``'s radiance to the bit (what a batch item of ``hdr video``
+        computes).
     device : {"cpu", "cuda", "torch-cpu", "auto"}
         Where the neighbours are warped onto each frame
         (:mod:`lumigraph.capture.device`; a torch device:
@@ -457,7 +467,10 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
     out = np.empty((n, h, w, c), np.float32)
     flags = np.zeros((n, h, w, c), np.uint8)
     diags = []
-    steps = range(n) if progress is None else progress(range(n))
+    todo = range(n) if only is None else [int(i) for i in only]
+    if any(not 0 <= i < n for i in todo):
+        raise InputError("only", f"frame indices must be within 0..{n - 1}")
+    steps = todo if progress is None else progress(todo)
     for i in steps:
         t0 = time.perf_counter()
         cur = _current_frame(i, z, t, video, rad)
@@ -477,8 +490,24 @@ def hdr_video(frames: np.ndarray, exposure_times_s, response: ResponseCurve, *, 
               "outlier_share": float(outlier_share), "bidirectional": bool(bidirectional),
               "max_motion_px": max_motion_px, "full_well_e": full_well_e,
               "read_noise_e": read_noise_e, "clip_margin": clip_margin}
+    if only is not None:  # the video of the frames asked for, in their order
+        out, flags, t = out[todo], flags[todo], [t[i] for i in todo]
     return HDRVideo(out, flags, tuple(float(x) for x in t), tuple(diags), params,
                     tuple(_fallback_warnings(diags)))
+
+
+def frames_used(i: int, n: int, *, bidirectional: bool = True) -> range:
+    """The frames :func:`hdr_video` reads to complete frame ``i`` of ``n``: its
+    neighbours ``i-1..i+1``; an end frame also the frame two away (same
+    exposure, :func:`_register`).
+
+    >>> frames_used(0, 10), frames_used(5, 10), frames_used(9, 10), frames_used(1, 2)
+    (range(0, 3), range(4, 7), range(7, 10), range(0, 2))
+    """
+    lo, hi = max(0, i - 1), min(n, i + 2)
+    if bidirectional and hi - lo == 2:  # an end frame (of a video of 3 frames or more)
+        lo, hi = max(0, min(lo, i - 2)), min(n, max(hi, i + 3))
+    return range(lo, hi)
 
 
 # ------------------------------------------------------- the method's steps

@@ -40,12 +40,12 @@ Examples
 from __future__ import annotations
 
 import math
-import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.batch import default_threads
 from lumigraph.capture.errors import InputError
 from lumigraph.hdr.response import ResponseCurve
 from lumigraph.hdr.samples import check_stack, hat_weight
@@ -398,7 +398,7 @@ def merge(images: np.ndarray, exposure_times_s, response: ResponseCurve, *,
 
     # The fill of unmeasured pixels runs once per chunk of many blocks (its cost is
     # per call, not per pixel, when few pixels need it).
-    n_workers = workers or min(4, os.cpu_count() or 1)
+    n_workers = workers or default_threads()
     # (~64k pixel-channels a chunk: the fill's temporaries stay small beside the output)
     chunk_rows = max(block_rows, min(-(-h // n_workers), max(1, (1 << 16) // max(w * c, 1))))
 

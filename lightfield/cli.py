@@ -334,6 +334,54 @@ def _refocus_batch(args, kind: str, given: list[float], out: Path) -> int:
     return report(result, quiet=args.quiet)
 
 
+def lightfield_folders(paths) -> list[Path] | None:
+    """The light fields of a batch: several light-field folders (or their
+    ``lightfield.json``), or one folder of such folders; None when ``paths``
+    is one light field."""
+    ins = [Path(p) for p in paths]
+    folders = [p.parent if p.name == "lightfield.json" and p.is_file() else p for p in ins]
+    if len(folders) > 1:
+        return folders
+    if folders[0].is_dir() and not (folders[0] / "lightfield.json").exists():
+        subs = sorted(d for d in folders[0].iterdir()
+                      if d.is_dir() and (d / "lightfield.json").is_file())
+        if subs:
+            return subs
+    return None
+
+
+def _refocus_fields(args, folders: list[Path], given: list[float]) -> int:
+    """Several light fields: each one item, the single command on that light
+    field with every option the batch was given, writing ``OUT/NAME.exr``
+    (one value) or the folder ``OUT/NAME/`` (several: its focal stack in one
+    pass, so Fourier slice keeps its shared FFT)."""
+    from lumigraph.capture.batch import Item, item_name, report, run_batch
+    from lumigraph.capture.commandline import batch_item_argv
+
+    out = Path(args.out)
+    if out.suffix.lower() == ".exr":
+        raise InputError("out", f"{out}: {len(folders)} light fields write a folder (one result "
+                                "per light field) and index.json; name a folder")
+    items = []
+    for f in folders:
+        if not (f / "lightfield.json").is_file():
+            raise InputError(f, "not a light-field folder (no lightfield.json); make one with "
+                                "'lumigraph lightfield import' or 'decode'")
+        name = item_name(f)
+        target = out / (f"{name}.exr" if len(given) == 1 else name)
+        # several values: the folder's index.json carries the sidecar (the
+        # images are written with it, as one result set)
+        outputs = (str(target),) if len(given) == 1 else (str(target / "index.json"),)
+        items.append(Item(name, inputs=(str(f),), outputs=outputs,
+                          func="lumigraph.capture.batch:run_command",
+                          kwargs={"module": "lumigraph.lightfield.cli", "prog": "lumigraph lightfield",
+                                  "argv": batch_item_argv(args, [f], add=["--out", str(target)])}))
+    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
+    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description="refocusing")
+    return report(result, quiet=args.quiet)
+
+
 def _refocus(args) -> int:
     import numpy as np
 
@@ -347,6 +395,10 @@ def _refocus(args) -> int:
     dev = resolve_device(args.device)  # before the light field is read
     given, kind = next((_values(g), k) for g, k in ((args.alpha, "alpha"), (args.depth, "depth"),
                                                     (args.slope, "slope")) if g is not None)
+    folders = lightfield_folders(args.lightfield)
+    if folders is not None:
+        return _refocus_fields(args, folders, given)
+    args.lightfield = args.lightfield[0]
     out = Path(args.out)
     single = len(given) == 1
     if single and out.suffix.lower() != ".exr":
@@ -545,8 +597,13 @@ def build_parser(prog: str = "lumigraph lightfield"):
                         "With --workers or --scheduler, several values are a batch: each value "
                         "one item (refocus-NNN.exr with its sidecar, by the one-value command: "
                         "auto is then shift-add), and index.json is the batch's index.\n\n"
+                        "Several light fields (LF1 LF2 ..., or one folder of light-field folders) "
+                        "are a batch, in this process by default: each light field one item, "
+                        "the one-light-field command writing OUT/NAME.exr (one value) or the "
+                        "folder OUT/NAME/ (several values).\n\n"
                         + BATCH_HELP)
-    v.add_argument("lightfield", type=input_path, help="light-field folder")
+    v.add_argument("lightfield", nargs="+", type=input_path,
+                   help="light-field folder; several (or one folder of them) are a batch")
     g = v.add_mutually_exclusive_group(required=True)
     g.add_argument("--alpha", nargs="+", type=numbers(positive), help="Ng's alpha values")
     g.add_argument("--depth", nargs="+", type=numbers(positive),

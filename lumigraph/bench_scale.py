@@ -9,8 +9,10 @@ with one response recovered from the first, and a 200-frame flow sequence
 (four 50-frame ``flow-sequence`` renders, seeds 0-3, one after the other;
 199 pairs, three of them across a cut).
 
-Protocol: the clusters are started once, before the timing, and warmed (one
-untimed batch each: the workers import the stages); then every form runs in
+Protocol: the clusters (``lumigraph.capture.batch.local_cluster``, what
+``--workers N`` starts) are started once, before the timing, so neither the 1-
+nor the 2-worker time includes a cluster's start-up, and warmed (the workers
+import the stages, then one untimed batch each); then every form runs in
 turn, twice, interleaved, output folder emptied before each run,
 and the minimum wall time is kept (the fastest run is the one least disturbed
 by the machine's other load). Each run is the command line's own code path
@@ -18,8 +20,12 @@ by the machine's other load). Each run is the command line's own code path
 FRAMES --out D [--scheduler ADDRESS]``) called in this process; "one command
 per item" starts ``python -m lumigraph hdr merge BRACKET --out D/B.exr`` once
 per bracket, one after the other. Worker processes run one thread each
-(``threads_per_worker=1``, BLAS and OpenCV pinned), as do the in-process runs
-(the bench sets OPENBLAS_NUM_THREADS=1 and ``cv2.setNumThreads(1)``).
+(``threads_per_worker=1``, BLAS, OpenCV and our own pools pinned), as do the
+in-process runs and the commands (the bench sets OPENBLAS_NUM_THREADS=1,
+LUMIGRAPH_NUM_THREADS=1 and ``cv2.setNumThreads(1)``). The 2-workers check's
+note adds the per-item overhead of a worker (1 worker less in-process, per
+item, paired within a repeat), which the machine's other load moves less
+than the ratio.
 
 :data:`ROW_PROVIDERS` holds further row providers of this stage (the tiled
 merge's peak memory against image size joins here): each is called with
@@ -43,6 +49,7 @@ from lumigraph.capture.bench import Case, Check, Row, Stage
 STAGE = "scale"
 KINDS = ("room", "walls", "outdoor", "night", "studio")
 TARGET_SPEEDUP = 1.7  # 2 workers against 1, on the 20-bracket batch (issue 19)
+WARM = ("lumigraph.hdr.cli", "lumigraph.stereo.flow_cli")  # what the workers run here
 ROW_PROVIDERS: list[Callable[[bool], tuple[list[Row], list[Check]]]] = []
 
 
@@ -137,20 +144,12 @@ def _forms(data: dict, work: Path, clusters: dict[int, str]) -> dict[str, dict[s
 
 @contextlib.contextmanager
 def _clusters(sizes):
-    import logging
-
-    from distributed import LocalCluster
-
-    from lumigraph.capture.batch import ONE_THREAD_ENV
+    # the batch layer's own local cluster (quiet workers, warmed with the
+    # stages the runs use): what `--workers N` starts
+    from lumigraph.capture.batch import local_cluster
 
     with contextlib.ExitStack() as stack:
-        out = {}
-        for n in sizes:
-            c = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                 dashboard_address=None, env=ONE_THREAD_ENV,
-                                                 silence_logs=logging.ERROR))
-            out[n] = c.scheduler_address
-        yield out
+        yield {n: stack.enter_context(local_cluster(n, warm=WARM)).scheduler_address for n in sizes}
 
 
 def _measure(quick: bool, repeats: int) -> tuple[list[Row], list[Check]]:
@@ -158,6 +157,11 @@ def _measure(quick: bool, repeats: int) -> tuple[list[Row], list[Check]]:
 
     cv2.setNumThreads(1)
     os.environ.pop("DASK_SCHEDULER_ADDRESS", None)
+    # one thread per process for every form: our own pools too (hdr merge's
+    # chunks), as in the workers; else the in-process run and each command
+    # would use both cores and 1 worker would be compared with 2 threads
+    saved_threads = os.environ.get("LUMIGRAPH_NUM_THREADS")
+    os.environ["LUMIGRAPH_NUM_THREADS"] = "1"
     work = Path(tempfile.mkdtemp(prefix="lumigraph-bench-scale-"))
     try:
         data = _inputs(work / "in", quick=quick)
@@ -179,6 +183,10 @@ def _measure(quick: bool, repeats: int) -> tuple[list[Row], list[Check]]:
                               file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
+        if saved_threads is None:
+            os.environ.pop("LUMIGRAPH_NUM_THREADS", None)
+        else:
+            os.environ["LUMIGRAPH_NUM_THREADS"] = saved_threads
     w, h = data["bracket_size"]
     fw, fh = data["flow_size"]
     labels = {"brackets": f"{n_items['brackets']} brackets {w}x{h}",
@@ -198,11 +206,19 @@ def _measure(quick: bool, repeats: int) -> tuple[list[Row], list[Check]]:
     speedup = rate("brackets", "workers=2") / rate("brackets", "workers=1")
     flow_speedup = rate("flow", "workers=2") / rate("flow", "workers=1")
     vs_commands = rate("brackets", "in-process") / rate("brackets", "one command per item")
+    # what a worker adds per item over this process (load-insensitive, unlike
+    # the ratio): 1 worker's wall less the in-process wall, per item, paired
+    # within each repeat, the smallest kept
+    overhead = min(a - b for a, b in zip(times[("brackets", "workers=1")],
+                                         times[("brackets", "in-process")], strict=True))
+    overhead /= n_items["brackets"]
+    per_item_in_process = min(times[("brackets", "in-process")]) / n_items["brackets"]
     checks = [
         Check(f"2 local workers >= {TARGET_SPEEDUP}x the throughput of 1 ({labels['brackets']})",
               speedup, TARGET_SPEEDUP, speedup >= TARGET_SPEEDUP,
               f"{rate('brackets', 'workers=2'):.3g} vs {rate('brackets', 'workers=1'):.3g} items/s; "
-              f"flow: {flow_speedup:.2f}x"),
+              f"flow: {flow_speedup:.2f}x; per-item overhead of a worker over in-process "
+              f"{overhead * 1000:.0f} ms ({per_item_in_process * 1000:.0f} ms per item in-process)"),
         Check("in-process batch not slower than one command per item (throughput ratio >= 1)",
               vs_commands, 1.0, vs_commands >= 1.0,
               f"{rate('brackets', 'in-process'):.3g} vs "

@@ -52,7 +52,6 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 import queue
 import time
 import warnings
@@ -61,6 +60,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from lumigraph.capture.batch import default_threads
 from lumigraph.capture.errors import InputError
 from lumigraph.stereo.luma import luma_codes, noise_sigma_smooth_blocks
 
@@ -494,7 +494,7 @@ def _pool():
     threads per call costs as much as matching a small pair)."""
     from concurrent.futures import ThreadPoolExecutor
 
-    return ThreadPoolExecutor(min(4, os.cpu_count() or 1), thread_name_prefix="stereo-ssd")
+    return ThreadPoolExecutor(default_threads(), thread_name_prefix="stereo-ssd")
 
 
 @functools.cache
@@ -993,7 +993,7 @@ def match(left: np.ndarray, right: np.ndarray, *, max_disp: int, window: int | s
     costs = _costs(windows, pick, D=D, integer=L.dtype == np.uint16, span=_span(L, R), nch=nch,
                    code=code)
     Lp, Rp = _padded(L, R, D)
-    n_threads = threads or min(4, os.cpu_count() or 1)
+    n_threads = threads or default_threads()
     kernel = _kernel() if costs.integer and engine != "numpy" and not dev.uses_torch else None
     t1 = time.perf_counter()
     # scan every disparity, then decide: sub-pixel, uniqueness, left-right, texture

@@ -108,6 +108,49 @@ def test_bad_batch_options_are_refused_before_any_work(shots, tmp_path, extra, f
     assert not (tmp_path / "out" / "b0.exr").exists()
 
 
+@pytest.mark.parametrize("answer", [None, b"HTTP/1.1 400 Bad Request\r\n\r\n" * 4])
+def test_an_unreachable_scheduler_is_refused_within_the_connect_timeout(shots, tmp_path,
+                                                                         monkeypatch, answer):
+    """A port that accepts and stays silent, or answers bytes that are not
+    Dask's: exit 2, one line naming the address, nothing written, after the
+    connect timeout (not Dask's default 30 s)."""
+    import contextlib
+    import socket
+    import threading
+    import time
+
+    from lumigraph.capture import batch
+
+    monkeypatch.setattr(batch, "CONNECT_TIMEOUT", "1s")
+    server = socket.create_server(("127.0.0.1", 0))
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    held = []
+
+    def serve():
+        with contextlib.suppress(OSError):
+            while True:
+                conn, _ = server.accept()
+                held.append(conn)
+                if answer:
+                    conn.sendall(answer)
+
+    threading.Thread(target=serve, daemon=True).start()
+    try:
+        t0 = time.monotonic()
+        rc, err = _merge(shots, shots / "shots", tmp_path / "out", "--scheduler", address)
+        took = time.monotonic() - t0
+    finally:
+        server.close()
+        for c in held:
+            c.close()
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and address in lines[0], err
+    assert lines[0].startswith("error: --scheduler: "), lines
+    # the 1 s timeout plus the batch's own set-up; Dask's default would be 30 s
+    assert took < 10, took
+    assert not (tmp_path / "out").exists()
+
+
 def test_many_brackets_need_an_output_folder(shots, tmp_path):
     rc, err = _merge(shots, shots / "shots", tmp_path / "one.exr")
     assert rc == 2 and "name a folder" in err, err
@@ -145,3 +188,40 @@ def test_separate_over_many_stacks_is_the_single_command_per_stack(tmp_path):
     for f in ("direct.exr", "global.exr", "mask.png"):
         assert (tmp_path / "sep" / "p1" / f).read_bytes() == (tmp_path / "one" / f).read_bytes()
     assert _status(tmp_path / "sep") == {"p0": "done", "p1": "done"}
+
+
+def test_refocus_over_several_light_fields_is_the_single_command_per_light_field(tmp_path):
+    """Each light field one item (one value: NAME.exr; several: the folder
+    NAME/ with its index.json), the same bytes as the one-light-field command;
+    a rerun does nothing."""
+    from lumigraph.capture.render import render
+
+    for k in range(2):
+        render("lightfield-array", size=(24, 20), grid="3x3", thin_lens=False,
+               seed=k).save(tmp_path / "scenes" / f"s{k}")
+        rc, _, err = run_cli(["lightfield", "import", tmp_path / "scenes" / f"s{k}", "--out",
+                              tmp_path / "fields" / f"lf{k}", "-q"])
+        assert rc == 0, err
+    fields = tmp_path / "fields"
+    rc, _, err = run_cli(["lightfield", "refocus", fields, "--slope", "0.5", "--out",
+                          tmp_path / "one", "-q"])
+    assert rc == 0, err
+    rc, _, err = run_cli(["lightfield", "refocus", fields / "lf0", fields / "lf1", "--slope", "0",
+                          "0.5", "--out", tmp_path / "many", "-q"])
+    assert rc == 0, err
+    assert _status(tmp_path / "one") == _status(tmp_path / "many") == {"lf0": "done", "lf1": "done"}
+    for k in range(2):
+        rc, _, err = run_cli(["lightfield", "refocus", fields / f"lf{k}", "--slope", "0.5", "--out",
+                              tmp_path / f"single{k}.exr", "-q"])
+        assert rc == 0, err
+        assert (tmp_path / "one" / f"lf{k}.exr").read_bytes() == \
+            (tmp_path / f"single{k}.exr").read_bytes()
+        rc, _, err = run_cli(["lightfield", "refocus", fields / f"lf{k}", "--slope", "0", "0.5",
+                              "--out", tmp_path / f"stack{k}", "-q"])
+        assert rc == 0, err
+        for name in ("refocus-000.exr", "refocus-001.exr"):
+            assert (tmp_path / "many" / f"lf{k}" / name).read_bytes() == \
+                (tmp_path / f"stack{k}" / name).read_bytes()
+    rc, _, err = run_cli(["lightfield", "refocus", fields, "--slope", "0.5", "--out",
+                          tmp_path / "one", "-q"])
+    assert rc == 0 and _status(tmp_path / "one") == {"lf0": "skipped", "lf1": "skipped"}, err

@@ -222,13 +222,21 @@ def _lumigraph(*argv, env=None) -> subprocess.CompletedProcess:
 
 
 def test_flow_and_undistort_on_the_cluster_write_what_they_write_in_process(cluster, tmp_path):
-    """The sequence commands that batch only on request: the same bytes either way."""
+    """The sequence commands that batch only on request (flow, calib undistort,
+    hdr video with its tone mapping): the same bytes either way."""
     from lumigraph.capture.render import render
 
     root = Path(__file__).resolve().parents[2]
     frames = render("flow-sequence", size=SIZE, seed=1, frames=4).save(tmp_path / "seq")
     frames = sorted(Path(frames).glob("frame*.png"))
     shots = [root / "fixtures" / "flow" / f"frame0{k}.png" for k in (0, 1)]
+    # hdr video: each output frame one item reading its neighbour frames
+    from lumigraph.hdr.response import ResponseCurve
+
+    video = tmp_path / "video-in"
+    s = render("bracket_video", size=SIZE, frames=4, seed=2)
+    s.save(video / "vid")
+    ResponseCurve("gt", 8, s.gt_arrays["g"]).save(video / "response.json")
     cluster.add_worker("w1")
     cluster.add_worker("w2")
     cluster.wait_for(["w1", "w2"])
@@ -238,7 +246,10 @@ def test_flow_and_undistort_on_the_cluster_write_what_they_write_in_process(clus
         r = _lumigraph("calib", "undistort", "--camera", root / "fixtures" / "camera.json", *shots,
                        "--out", tmp_path / where / "undistorted", "-q", *extra)
         assert r.returncode == 0, r.stderr
-    for what in ("flow", "undistorted"):
+        r = _lumigraph("hdr", "video", video / "vid", "--response", video / "response.json",
+                       "--out", tmp_path / where / "video", "--tonemap", "-q", *extra)
+        assert r.returncode == 0, r.stderr
+    for what in ("flow", "undistorted", "video"):
         plain, batch = _artifacts(tmp_path / "plain" / what), _artifacts(tmp_path / "cluster" / what)
         assert plain and plain == batch, what
         assert {i["status"] for i in _index(tmp_path / "cluster" / what).values()} == {"done"}

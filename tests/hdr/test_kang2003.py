@@ -270,3 +270,26 @@ def test_grey_video_is_the_colour_path_on_one_channel():
     assert 0 < own.mean() < 1
     for c in range(3):
         np.testing.assert_array_equal(grey.radiance[..., 0][own], colour.radiance[..., c][own])
+
+
+def test_a_frame_from_its_neighbours_alone_is_the_whole_run_frame(folder):
+    """Frame i reads the frames frames_used names only (its neighbours; an
+    end frame also the frame two away): completed from those, its radiance
+    and flags are the whole run's to the bit (what a batch item of ``hdr
+    video`` computes)."""
+    from lumigraph.capture.io import read_stack
+    from lumigraph.hdr.kang2003 import frames_used, hdr_video
+
+    stack = read_stack([folder / "vid"], need_times=True)
+    curve = ResponseCurve.load(folder / "response.json")
+    t = list(stack.effective_exposure_times_s)
+    whole = hdr_video(stack.images, t, curve)
+    n = len(t)
+    for i in range(n):
+        r = frames_used(i, n)
+        lo, hi = r.start, r.stop
+        part = hdr_video(stack.images[lo:hi], t[lo:hi], curve, only=[i - lo])
+        assert np.array_equal(part.radiance[0], whole.radiance[i])
+        assert np.array_equal(part.flags[0], whole.flags[i])
+        assert part.frames[0]["sources"] == whole.frames[i]["sources"]
+    assert n >= 4  # both ends read a frame two away, the inner frames their neighbours
