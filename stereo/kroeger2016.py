@@ -18,7 +18,12 @@ we add around it, each a handful of OpenCV/numpy passes at full size:
   bad patches the densification averages in;
 * for the accurate end, **variational refinement at full size** (the energy of the DIS
   paper's §2.3: brightness and gradient constancy, robust smoothness; solved
-  by ``cv2.VariationalRefinement``, ``refine_iterations`` fixed-point steps);
+  by ``cv2.VariationalRefinement``, ``refine_iterations`` fixed-point steps of
+  ``refine_sor_iterations`` sweeps, weight ``refine_smoothness``), on frames
+  **pre-smoothed** by ``presmooth`` px (the search sees them too): at full
+  size the patches and the energy meet the sensor noise a half-size finest
+  level averages away, and in low-texture regions only a converged
+  smoothness term recovers the flow;
 * for the accurate end, the search **both ways**, the forward-backward
   inconsistent pixels (occluded or wrong) **filled** by the consistent flow
   of their colour region (:func:`fill_inconsistent`, an edge-aware
@@ -373,13 +378,17 @@ def _wmf(flow, guide, radius):
 
     if radius == 0:
         return flow
-    # Both components in one pass (a third, zero channel: the filter takes 1 or 3).
-    three = np.dstack([flow, np.zeros(flow.shape[:2], np.float32)])
-    # The filter draws from OpenCV's global generator: seeded, the flow depends
-    # on its inputs alone (as in stereo.pyramid_flow._median).
-    cv2.setRNGSeed(0)
-    return np.ascontiguousarray(cv2.ximgproc.weightedMedianFilter(guide, three, radius,
-                                                                  sigma=25.5)[..., :2])
+    # One component at a time: the filter takes 1 or 3 channels and filters
+    # each alone, so the same field as a 3-channel pass with a zero third
+    # channel (checked bit-equal), ~10 % sooner.
+    out = []
+    for c in (0, 1):
+        # The filter draws from OpenCV's global generator: seeded, the flow
+        # depends on its inputs alone (as in stereo.pyramid_flow._median).
+        cv2.setRNGSeed(0)
+        out.append(cv2.ximgproc.weightedMedianFilter(guide, np.ascontiguousarray(flow[..., c]),
+                                                     radius, sigma=25.5))
+    return np.dstack(out).astype(np.float32)
 
 
 def _one_way(g0, g1, c0, c1, p: Preset, init, finish=True):
