@@ -13,7 +13,8 @@ the result is mapped back through the homography. A move of more than
 rests on four or five corners can put the saddle elsewhere).
 
 Usage (sets as board:width:seed:blur[:distortion, default normal]; ``old`` = ``calib.detect`` as is,
-``new`` = plus this refinement; ``LF_SCALE`` = tile pixels per image pixel of
+``new`` = plus this refinement, ``lens`` = ``new``, calibrate, refine again through
+the calibrated lens, calibrate; ``LF_SCALE`` = tile pixels per image pixel of
 square spacing, ``LF_IT`` = passes, ``LF_WF`` = window as a share of a square)::
 
     OPENBLAS_NUM_THREADS=1 python docs/decisions/charuco_local_frame.py new charuco:320:12:0.6 charuco:320:4:0.6
@@ -33,10 +34,23 @@ import numpy as np
 MAX_MOVE_PX = 0.25
 
 
-def refine_local_frame(gray, pts, obj, square, *, scale=1.0, passes=1, window=0.4):
+def refine_local_frame(gray, pts, obj, square, *, scale=1.0, passes=1, window=0.4, camera=None):
     """Refined corners ``(N, 2)`` px from corners ``pts`` ``(N, 2)`` px whose
-    board points are ``obj`` ``(N, 3)`` (mm, spacing ``square`` mm)."""
+    board points are ``obj`` ``(N, 3)`` (mm, spacing ``square`` mm). With
+    ``camera`` (K, dist) from a first calibration the homographies are fitted
+    in undistorted normalised coordinates and the tiles pass through the lens
+    (Datta et al. 2009), so the square's edges are straight in the tile."""
     import cv2
+
+    lens = None
+    if camera is not None:
+        Kc, dc = camera
+
+        def lens(xy):  # normalised -> distorted pixels
+            z = np.zeros(3)
+            return cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]), z, z, Kc, dc)[0].reshape(-1, 2)
+        und = cv2.undistortPoints(np.asarray(pts, np.float64).reshape(-1, 1, 2), Kc, dc,
+                                  criteria=(3, 50, 1e-12)).reshape(-1, 2)
 
     g32 = gray.astype(np.float32)
     pts = np.asarray(pts, np.float64).copy()
@@ -72,7 +86,7 @@ def refine_local_frame(gray, pts, obj, square, *, scale=1.0, passes=1, window=0.
                 Hs.append(np.linalg.lstsq(A, pts[j], rcond=None)[0].T)  # (2, 6)
                 idx.append(i)
                 continue
-            H, _ = cv2.findHomography(ob[j] - ob[i], pts[j], 0)
+            H, _ = cv2.findHomography(ob[j] - ob[i], pts[j] if lens is None else und[j], 0)
             if H is not None:
                 Hs.append(H)
                 idx.append(i)
@@ -80,8 +94,12 @@ def refine_local_frame(gray, pts, obj, square, *, scale=1.0, passes=1, window=0.
             return pts
         idx = np.array(idx)
         maps = [_tile_map(H, U, V) for H in Hs]
-        mx = np.concatenate([m[0] for m in maps]).astype(np.float32)
-        my = np.concatenate([m[1] for m in maps]).astype(np.float32)
+        mx = np.concatenate([m[0] for m in maps])
+        my = np.concatenate([m[1] for m in maps])
+        if lens is not None:
+            q = lens(np.column_stack([mx.ravel(), my.ravel()]))
+            mx, my = q[:, 0].reshape(mx.shape), q[:, 1].reshape(my.shape)
+        mx, my = mx.astype(np.float32), my.astype(np.float32)
         mosaic = cv2.remap(g32, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
         init = np.column_stack([np.full(idx.size, c), c + T * np.arange(idx.size)]).astype(np.float32)
         # cornerSubPix refines its argument in place: hand it a copy
@@ -89,6 +107,8 @@ def refine_local_frame(gray, pts, obj, square, *, scale=1.0, passes=1, window=0.
                              (3, 40, 1e-3)).reshape(-1, 2)
         d = (r - init) / S
         new = np.array([_tile_map(H, d[k, 0], d[k, 1]) for k, H in enumerate(Hs)])
+        if lens is not None:
+            new = lens(new)
         keep = np.linalg.norm(new - start[idx], axis=1) < MAX_MOVE_PX
         pts[idx[keep]] = new[keep]
     return pts
@@ -127,7 +147,7 @@ def main(argv):
         t0 = time.perf_counter()
         for k, im in enumerate(s.images):
             d = D.detect(im, bs)
-            if mode == "new" and len(d):
+            if mode in ("new", "lens") and len(d):
                 g = D.to_gray8(im)
                 if bs.kind == "charuco":
                     _, _, mc, _ = cv2.aruco.CharucoDetector(bs._charuco()).detectBoard(g)
@@ -136,6 +156,25 @@ def main(argv):
                 d = D.Detection(d.ids, p, d.object_points, d.image_size)
             dets.append(d)
             if len(d):
+                e = d.image_points - gt[k][d.ids]
+                rv = d.image_points - Kt[:2, 2]
+                rad.append(np.sum(e * rv, 1) / np.linalg.norm(rv, axis=1))
+                errs.append(e)
+        if mode == "lens":
+            cam0 = calibrate(dets, model="auto")
+            dist0 = np.zeros(5) if not np.size(cam0.dist) else np.asarray(cam0.dist, np.float64)
+            rad, errs = [], []
+            for k, im in enumerate(s.images):
+                d = dets[k]
+                if not len(d):
+                    continue
+                g = D.to_gray8(im)
+                if bs.kind == "charuco":
+                    _, _, mc, _ = cv2.aruco.CharucoDetector(bs._charuco()).detectBoard(g)
+                    g = D._paint_out_markers(g, mc, bs.square / bs.marker)
+                p = refine_local_frame(g, d.image_points, d.object_points, bs.square,
+                                       camera=(np.asarray(cam0.K), dist0), **opts)
+                dets[k] = d = D.Detection(d.ids, p, d.object_points, d.image_size)
                 e = d.image_points - gt[k][d.ids]
                 rv = d.image_points - Kt[:2, 2]
                 rad.append(np.sum(e * rv, 1) / np.linalg.norm(rv, axis=1))
