@@ -122,11 +122,8 @@ def candidate_grid(h: int, w: int, n: int) -> int:
     return max(1, int(math.sqrt(h * w / (16.0 * max(n, 1)))))
 
 
-TIE_NOISE = 0.0  # multiple of a stratum's noise floor below which ranges tie (0: exact ranking)
-
-
 def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.Generator,
-                  margin: float = 0.02, tie_noise: float | None = None) -> np.ndarray:
+                  margin: float = 0.02) -> np.ndarray:
     """Flat pixel indices (into ``H·W``) of ``n`` pixels for a response fit.
 
     Candidates are the pixels of a regular grid (:func:`candidate_grid`;
@@ -145,13 +142,6 @@ def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.
         Breaks ties within a radiance stratum (deterministic under a seed).
     margin : float
         Codes within ``margin·z_max`` of 0 or ``z_max`` count as clipped.
-    tie_noise : float or None
-        Ranges within ``tie_noise`` times a stratum's noise floor (the
-        stratum's 10th-percentile range: its smoothest pixels, which on a
-        flat area see only noise) rank as ties, broken at random; ``0``
-        ranks by the exact range. ``None``: :data:`TIE_NOISE`. Why: on a
-        flat wall, a deep code's exact range ranks pixels by their own
-        noise (docs/decisions/hdr-debevec-noise.md, fifth pass).
 
     Returns
     -------
@@ -208,15 +198,6 @@ def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.
     nbins = max(8, min(n, 64))
     edges = np.linspace(s.min(), s.max() + 1e-9, nbins + 1)
     b = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, nbins - 1)
-    k_tie = TIE_NOISE if tie_noise is None else float(tie_noise)
-    if k_tie > 0:
-        # Range in steps of k x the stratum's noise floor: differences below
-        # the noise are ties (as 8-bit codes tie on a flat wall at any depth).
-        floor = np.zeros(nbins)
-        for j in np.unique(b):
-            floor[j] = np.percentile(g[b == j], 10)
-        step = k_tie * floor[b]
-        g = np.where(step > 0, np.floor(g / np.where(step > 0, step, 1.0)) * step, g)
     # Rank within a stratum by local range (jittered so ties spread spatially).
     key = g * (1.0 + 0.25 * rng.random(cand.size)) + 1e-6 * rng.random(cand.size)
     order = np.lexsort((key, b))
