@@ -27,7 +27,9 @@ the stretch a mark covers along the line matters little; its line matters).
 the assigned marks and returns, per photograph, every model edge reprojected
 and each mark's RMS distance to its edge (px). ``propose`` runs
 :func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
-and keeps its proposals pending until each is accepted (then it is a mark,
+moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
+dropped when it lies on none: a texture line), and keeps the proposals
+pending until each is accepted (then it is a mark,
 ``"proposed": true`` in the file) or rejected.
 
 Examples
