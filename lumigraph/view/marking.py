@@ -27,7 +27,9 @@ the stretch a mark covers along the line matters little; its line matters).
 the assigned marks and returns, per photograph, every model edge reprojected
 and each mark's RMS distance to its edge (px). ``propose`` runs
 :func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
-and keeps its proposals pending until each is accepted (then it is a mark,
+moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
+dropped when it lies on none: a texture line), and keeps the proposals
+pending until each is accepted (then it is a mark,
 ``"proposed": true`` in the file) or rejected.
 
 Examples
@@ -54,6 +56,95 @@ from lumigraph.capture.errors import EstimationError, InputError
 SNAP_ANGLE_DEG = 5.0     # a drag by hand is rarely further off an edge's direction
 SNAP_DISTANCE_PX = 3.0   # ... or further from its line; beyond, a parallel line (a window frame) is as likely
 UNASSIGNED_KEY = "unassigned"
+# snapping refines onto the intensity step (refine_on_edge) when True; False,
+# the default: onto the strongest gradient, as automatic marking does -- the
+# tuned seed's choice (docs/decisions/view-marking.md, "Onto the step")
+SNAP_ON_STEP = False
+
+
+EDGE_SUPPORT = 0.5       # a segment whose profiles mostly show no step there lies on texture, not on an edge
+EDGE_HALF_WIDTH_PX = 2.5  # searched either side of the segment; less than the snap radius, more than a drag's error
+
+
+def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
+                   half_width: float = EDGE_HALF_WIDTH_PX, samples: int = 32,
+                   min_support: float = EDGE_SUPPORT) -> np.ndarray | None:
+    """``seg`` ``(4,)`` (px) moved onto the intensity *step* it lies on, or
+    None when fewer than ``min_support`` of its profiles show one.
+
+    Façade's edge term (Debevec, Taylor & Malik 1996, eq. 5.3 of the
+    reference) measures a mark against the projected model edge, and a model
+    edge is seen as a step between two faces (or a face and the sky), one
+    side brighter all along it. Texture inside a face (a brick course, a
+    mortar joint) is a thin line: two opposite steps close together, with
+    the same brightness either side. So, on ``samples`` profiles across the
+    segment (``grey`` 8-bit scaled, ±``half_width`` px, ¼ px steps): the
+    signed derivative; one sign for the whole segment (the side that is
+    brighter along most of it — the face order); per profile its peak of
+    that sign, sub-pixel by a parabola, kept only when the grey level 2 px
+    beyond the peak on either side still differs by half the peak's
+    contrast in that sense (a step, not a line). A total-least-squares line
+    through the kept peaks (one 3σ trim) gives the segment, its ends the
+    orthogonal projections of the given ones; None when it moved an end by
+    more than ``half_width``.
+
+    >>> g = np.zeros((40, 60)); g[:, 30:] = 200.0; g[:, 27] = 120.0  # step at x=29.5, a line at 27
+    >>> np.round(refine_on_edge(g, np.array([28.5, 5.0, 28.5, 35.0])), 1).tolist()
+    [29.5, 5.0, 29.5, 35.0]
+    """
+    from scipy.ndimage import map_coordinates
+
+    seg = np.asarray(seg, float)
+    a, b = seg[:2], seg[2:]
+    d = b - a
+    L = np.hypot(*d)
+    if L < 4:
+        return None
+    u = d / L
+    n = np.array([-u[1], u[0]])
+    ts = np.linspace(0.06, 0.94, samples)
+    reach = half_width + 2.5                            # the step test looks 2 px beyond a peak
+    offs = np.arange(-reach, reach + 1e-9, 0.25)
+    P = a[None, None] + ts[:, None, None] * d[None, None] + offs[None, :, None] * n[None, None]
+    prof = map_coordinates(grey, [P[..., 1].ravel(), P[..., 0].ravel()], order=1,
+                           mode="nearest").reshape(len(ts), len(offs))
+    g = (prof[:, 4:] - prof[:, :-4])                    # 1 px central difference at offs[2:-2]
+    go = offs[2:-2]
+    inside = np.abs(go) <= half_width
+    sign = 1.0 if np.sum(np.max(np.where(inside, g, 0), 1)) >= \
+        np.sum(np.max(np.where(inside, -g, 0), 1)) else -1.0
+    sg = np.where(inside, sign * g, -np.inf)
+    pts = []
+    for k in range(len(ts)):
+        i = int(np.argmax(sg[k]))
+        peak = sg[k, i]
+        if not (peak > 4.0 and 0 < i < len(go) - 1):
+            continue
+        y0, y1, y2 = sg[k, i - 1], sg[k, i], sg[k, i + 1]
+        den = y0 - 2 * y1 + y2
+        off = go[i] + (0.5 * 0.25 * (y0 - y2) / den if den < 0 and np.isfinite(den) else 0.0)
+        j = i + 2                                       # go[i] is offs[i + 2]
+        step = sign * (prof[k, min(j + 8, len(offs) - 1)] - prof[k, max(j - 8, 0)])
+        if step < 0.5 * peak:
+            continue
+        pts.append(a + ts[k] * d + off * n)
+    if len(pts) < max(6, min_support * samples):
+        return None
+    pts = np.array(pts)
+    for _ in range(2):                                  # total least squares, one trim
+        c = pts.mean(0)
+        _, _, Vt = np.linalg.svd(pts - c)
+        nn = Vt[1]
+        r = (pts - c) @ nn
+        keep = np.abs(r) <= max(3 * 1.4826 * np.median(np.abs(r)), 0.05)
+        if keep.all() or keep.sum() < 6:
+            break
+        pts = pts[keep]
+    dd = Vt[0]
+    out = np.r_[c + ((a - c) @ dd) * dd, c + ((b - c) @ dd) * dd]
+    if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > half_width:
+        return None
+    return out
 
 
 def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray | None,
@@ -86,9 +177,14 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
     score = np.where(ok, np.abs(ha) + np.abs(hb), np.inf)
     best = detected[int(np.argmin(score))]
     if grey is not None:
-        from lumigraph.stereo.debevec1996.automark import refine_segment
+        if SNAP_ON_STEP:
+            refined = refine_on_edge(grey, best)
+            if refined is None:                         # no step there: texture, not an edge
+                return None
+        else:
+            from lumigraph.stereo.debevec1996.automark import refine_segment
 
-        refined = refine_segment(grey, best)
+            refined = refine_segment(grey, best)
         if refined is not None:
             best = refined
     p, q = best[:2], best[2:]
@@ -461,9 +557,11 @@ class FacadeSession:
             return self.solution
 
     # ------------------------------------------------------------- propose
-    def propose(self, *, noise_px: float = 1.0) -> list[dict]:
+    def propose(self, *, noise_px: float = 1.0, refine: bool = True) -> list[dict]:
         """Automatic marking from the marks so far: the proposals (pending,
-        not saved until accepted), replacing any earlier pending ones."""
+        not saved until accepted), replacing any earlier pending ones. With
+        ``refine`` each proposal is moved onto the intensity step it lies on
+        (:func:`refine_on_edge`) and dropped when it lies on none."""
         from lumigraph.stereo.debevec1996.automark import automark
 
         if np.any(self.camera.dist):
@@ -480,7 +578,14 @@ class FacadeSession:
             have = {(m["photo"], m["edge"]) for m in self.marks.values()}
             for m in res.marks.marks:
                 if m.proposed and (m.photo, m.edge) not in have:
-                    self._store(m.photo, m.edge, m.segment, True, into=self.proposals)
+                    seg = m.segment
+                    if refine:
+                        # automatic marking's match may sit on a texture line
+                        # near the edge: onto the step, or not proposed at all
+                        seg = refine_on_edge(self.grey(m.photo), np.asarray(seg, float))
+                        if seg is None:
+                            continue
+                    self._store(m.photo, m.edge, seg, True, into=self.proposals)
             self.proposal_warnings = list(res.warnings)
             return list(self.proposals.values())
 

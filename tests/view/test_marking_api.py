@@ -333,3 +333,23 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     assert scratch <= 1.2 * fully
     saved, _ = _valid(tmp_path / "edges.json", folder)
     assert len(saved.marks) == len(s.marks) and any(m.proposed for m in saved.marks)
+
+
+def test_a_segment_refines_onto_the_step_not_onto_a_texture_line():
+    """``refine_on_edge`` (proposals, and snapping when asked): a face edge
+    is a step (one side brighter), a brick course a thin line (the same
+    level either side). A segment between a step and a stronger thin line
+    lands on the step; a thin line alone is refused (no step to land on).
+    Noise-free image: the step's position is known to the ¼ px grid the
+    profiles are sampled on."""
+    from lumigraph.view.marking import refine_on_edge
+
+    g = np.full((60, 80), 60.0)
+    g[:, 40:] = 140.0                       # a step between x = 39 and 40: the edge at 39.5
+    g[:, 37] = 0.0                          # a dark line 2.5 px away, of stronger contrast
+    got = refine_on_edge(g, np.array([38.0, 5.0, 38.5, 55.0]))
+    assert got is not None
+    assert abs(got[0] - 39.5) <= 0.25 and abs(got[2] - 39.5) <= 0.25, got
+    line = np.full((60, 80), 100.0)
+    line[:, 37] = 0.0
+    assert refine_on_edge(line, np.array([37.0, 5.0, 37.0, 55.0])) is None
