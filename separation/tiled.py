@@ -14,9 +14,8 @@ Two passes over the captures, each reading them one band at a time through
    analysis fixed; mask counts and residue flags are integer sums.
 
 Only ``checker`` (the default; either estimator, with complement pairs) is
-done by bands. ``sinusoid``'s phase check and residue, ``single``'s tiles,
-the occluder's lit fraction and a black level measured from black/white
-frames are whole-image statistics not yet gathered by bands: refused with an
+done by bands. ``sinusoid``'s phase check and residue, ``single``'s tiles
+and the occluder's lit fraction are whole-image statistics not yet gathered by bands: refused with an
 :class:`InputError` naming the option (see ``docs/decisions/tiles.md``).
 
 Examples
@@ -53,7 +52,7 @@ TILED_METHODS = ("checker",)
 
 
 def separate_bands(read, *, height: int, rows: int, count: int, method: str = "checker",
-                   alpha: float | None = None, b: float | None = None, measured_b: bool = False,
+                   alpha: float | None = None, b: float | None = None, black=None, white=None,
                    complement_of=None, estimator: str = "pairs", noise_sigma: float = 0.0,
                    quant_step: float = 0.0, saturation: float | None = None, tile: int = 16,
                    names=None) -> Separation:
@@ -66,9 +65,10 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
         rows ``y0`` to ``y1`` (called twice per band: once per pass).
     height, rows, count : int
         Image height, band height (any; need not divide ``height``), number of captures.
-    measured_b : bool
-        The caller has black/white frames and no ``b``: refused (the measured
-        black level is a median over the whole frame).
+    black, white : ndarray, ``(H, W, C)``, optional
+        The all-black/all-white frames, whole: the measured black level is a
+        median over the whole frame (:func:`separation.nayar2006.black_level`),
+        so these two are held whole; the captures are read by bands.
     Other parameters are :func:`separate`'s.
 
     Returns
@@ -80,17 +80,13 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
     Raises
     ------
     InputError
-        ``method`` not in :data:`TILED_METHODS`, ``b`` to be measured,
-        checker captures without complements found, or what
+        ``method`` not in :data:`TILED_METHODS`, checker captures without complements found, or what
         :func:`separate` raises.
     """
     METHODS.resolve(method)
     if method not in TILED_METHODS:
         raise InputError("method", f"{method!r} cannot run by bands yet (its whole-image analysis "
                                    "is not gathered by bands); use tile off, or method checker")
-    if measured_b and b is None:
-        raise InputError("black", "a black level measured from the black/white frames needs the "
-                                  "whole frames; give b, or use tile off")
     if count < MIN_IMAGES[method]:
         raise EstimationError("<images>", f"method {method!r} needs at least "
                                           f"{MIN_IMAGES[method]} images, got {count}")
@@ -168,7 +164,12 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
                                    "residue check, not done by bands yet; use tile off")
     order, comp = pairing.canonical_order(sample, comp, keys=keys)
     names = [names[k] for k in order]
-    if b is None:
+    if b is None and black is not None and white is not None:
+        b = nayar2006.black_level(black, white, floor=floor)
+        params["b_source"] = "measured from the all-black/all-white frames"
+        if not 0.0 <= b < 1.0:
+            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
+    elif b is None:
         b = 0.0
         params["b_source"] = "assumed 0 (no --b and no black/white frames)"
     else:

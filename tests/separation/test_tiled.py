@@ -32,8 +32,12 @@ def test_projector_scene_by_bands_is_the_untiled_run():
     ims = ims[..., None] if ims.ndim == 3 else ims
     ims = ims[np.random.default_rng(3).permutation(len(ims))]  # any file order
     h = ims.shape[1]
-    kw = {"noise_sigma": 1e-3, "quant_step": 1.0 / q, "saturation": 0.98}
+    flat = {k: s.images[s.image_names.index(f"{k}.png")].astype(np.float32) / q
+            for k in ("black", "white")}
+    flat = {k: v[..., None] if v.ndim == 2 else v for k, v in flat.items()}
+    kw = {"noise_sigma": 1e-3, "quant_step": 1.0 / q, "saturation": 0.98, **flat}
     whole = separate(ims, **kw)
+    assert whole.params["b_source"].startswith("measured")  # the flat frames are used
     for rows in (13, 1, h):  # 13 does not divide the height; 1 row; one band
         assert h % 13
         _same(whole, separate_bands(_reader(ims), height=h, rows=rows, count=len(ims), **kw))
@@ -59,6 +63,3 @@ def test_methods_not_done_by_bands_are_refused():
     with pytest.raises(InputError) as e:
         separate_bands(_reader(ims), height=8, rows=3, count=3, method="sinusoid")
     assert e.value.where == "method"
-    with pytest.raises(InputError) as e:
-        separate_bands(_reader(ims), height=8, rows=3, count=3, measured_b=True)
-    assert e.value.where == "black"
