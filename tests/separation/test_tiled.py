@@ -63,3 +63,30 @@ def test_methods_not_done_by_bands_are_refused():
     with pytest.raises(InputError) as e:
         separate_bands(_reader(ims), height=8, rows=3, count=3, method="sinusoid")
     assert e.value.where == "method"
+
+
+def test_cli_by_rows_from_tiffs_is_the_untiled_run(run_cli, tmp_path):
+    """`separate --tile-rows 13` reading 16-bit TIFFs by rows writes the bytes of `--tile-rows off`."""
+    import json
+
+    import tifffile
+
+    s = render("projector")
+    names = s.stack["sets"]["checker"]
+    files = []
+    for n in [*names, "black.png", "white.png"]:
+        f = tmp_path / n.replace(".png", ".tif")
+        tifffile.imwrite(f, s.images[s.image_names.index(n)], rowsperstrip=8)
+        files.append(f)
+    common = ["separate", *files[:-2], "--black", files[-2], "--white", files[-1], "-q"]
+    for t in ("off", "13"):
+        r = run_cli(*common, "--tile-rows", t, "--out", tmp_path / t)
+        assert r.returncode == 0, r.stderr
+    for f in ("direct.exr", "global.exr", "mask.png"):
+        assert (tmp_path / "13" / f).read_bytes() == (tmp_path / "off" / f).read_bytes()
+    tiles = json.loads((tmp_path / "13" / "direct.exr.meta.json").read_text())["tiles"]
+    assert tiles["tiled"] and tiles["rows"] == 13 and tiles["read_whole"] == []
+    r = run_cli(*common[:-5], "--method", "sinusoid", "--tile-rows", "8", "--out", tmp_path / "s")
+    from conftest import assert_clean_error
+
+    assert_clean_error(r, "method", "--tile-rows off")
