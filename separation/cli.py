@@ -38,6 +38,7 @@ examples:
   lumigraph separate Curtain.mpg --method occluder --stride 2 --out sep/
   lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
   lumigraph separate stacks/ --method checker --out sep/ --workers 2   (stacks/*/stack.json)
+  lumigraph separate big/*.tif --method checker --b 0.1 --tile-rows auto --memory 1GB --out sep/
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
