@@ -38,6 +38,7 @@ examples:
   lumigraph separate Curtain.mpg --method occluder --stride 2 --out sep/
   lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
   lumigraph separate stacks/ --method checker --out sep/ --workers 2   (stacks/*/stack.json)
+  lumigraph separate big/*.tif --method checker --b 0.1 --tile-rows auto --memory 1GB --out sep/
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
@@ -83,15 +84,16 @@ def _linear(stack, response, where):
     return (imgs.astype(np.float32) / top), 1.0 / top, 1.0
 
 
-def _load(args):
-    from lumigraph.capture.io import read_stack, read_stack_json
-    from lumigraph.separation.video import read_video_stack, video_input
+def _resolve(args):
+    """The capture files, the black/white frames, the layout's complements and
+    lit fraction (a stack.json folder supplies them), or the video input."""
+    from lumigraph.capture.io import read_stack_json
+    from lumigraph.separation.video import video_input
 
     inputs = [Path(p) for p in args.images]
     video = video_input(inputs, max_frames=args.max_frames, stride=args.stride)
     if video is not None:
-        return (read_video_stack(video, max_frames=args.max_frames, stride=args.stride), {},
-                [str(video)], None, args.alpha)
+        return inputs, None, None, None, args.alpha, video
     black = white = None
     complement_of = None
     alpha = args.alpha
@@ -112,17 +114,37 @@ def _load(args):
                 complement_of = pat["complement_of"]
             if alpha is None and pat.get("lit_fraction") and args.method in ("checker", "occluder"):
                 alpha = float(pat["lit_fraction"][0])
-    stack = read_stack(inputs)
-    files = list(stack.paths)
-    extra = {}
-    for name, p in (("black", args.black or black), ("white", args.white or white)):
+    return inputs, args.black or black, args.white or white, complement_of, alpha, None
+
+
+def _flat_frames(black, white, shape):
+    """The black/white frames, read whole, each checked against the captures' ``shape`` (H, W, C)."""
+    from lumigraph.capture.io import read_stack
+
+    extra, files = {}, []
+    for name, p in (("black", black), ("white", white)):
         if p is not None:
             s = read_stack([p])
-            if s.images.shape[1:] != stack.images.shape[1:]:
+            if s.images.shape[1:] != tuple(shape):
                 raise InputError(p, f"is {s.images.shape[2]}x{s.images.shape[1]}, the captures are "
-                                    f"{stack.images.shape[2]}x{stack.images.shape[1]}")
+                                    f"{shape[1]}x{shape[0]}")
             extra[name] = s
             files.append(str(p))
+    return extra, files
+
+
+def _load(args, resolved):
+    from lumigraph.capture.io import read_stack
+    from lumigraph.separation.video import read_video_stack
+
+    inputs, black, white, complement_of, alpha, video = resolved
+    if video is not None:
+        return (read_video_stack(video, max_frames=args.max_frames, stride=args.stride), {},
+                [str(video)], None, args.alpha)
+    stack = read_stack(inputs)
+    files = list(stack.paths)
+    extra, flat_files = _flat_frames(black, white, stack.images.shape[1:])
+    files += flat_files
     return stack, extra, files, complement_of, alpha
 
 
@@ -185,7 +207,11 @@ def _separate(args) -> int:
 
         response = ResponseCurve.load(args.response)
     t0 = time.perf_counter()
-    stack, extra, files, complement_of, alpha = _load(args)
+    resolved = _resolve(args)
+    plan = _plan(args, resolved, device)
+    if plan.rows is not None:
+        return _separate_rows(args, resolved, plan, response, device, t0)
+    stack, extra, files, complement_of, alpha = _load(args, resolved)
     where = stack.paths[0]
     if response is None and "video" in stack.info:
         from lumigraph.separation.video import video_response
@@ -210,13 +236,121 @@ def _separate(args) -> int:
                              "video": stack.info.get("video"),
                              "noise": args.noise, "saturation": sat, "tile": args.tile,
                              "images": len(images), "device": device.name},
-                     timings_s={"load": t1 - t0, "separate": t2 - t1})
+                     timings_s={"load": t1 - t0, "separate": t2 - t1},
+                     extra={"tiles": plan.as_meta(images.shape[1])})
     sep.save(out, meta=meta)
     for w in sep.warnings:
         warn(w)
     q = sep.quality["mask_counts"]
     say(args, f"separated {len(images)} image(s) with {args.method}: "
               f"{q['valid']}/{q['total']} pixels trusted -> {out}/direct.exr, global.exr, mask.png")
+    return 0
+
+
+def _plan(args, resolved, device):
+    """Whole or by bands (``--tile-rows``, ``--memory``; :func:`capture.tiles.plan_rows`)."""
+    from lumigraph.capture.tiles import TilePlan, plan_rows, stack_geometry
+    from lumigraph.separation.tiled import TILED_METHODS
+
+    inputs, black, white, _, _, video = resolved
+    if args.tile_rows == "off":
+        return TilePlan(None, 0, "--tile-rows off: the whole image at once")
+    why = None
+    if args.method not in TILED_METHODS:
+        why = f"method {args.method!r} is not done by bands (only {', '.join(TILED_METHODS)})"
+    elif video is not None:
+        why = "a video is decoded whole"
+    elif device.uses_torch:
+        why = f"the {device.name} estimator runs whole"
+    geo = None if why else stack_geometry(inputs)
+    if geo is None and why is None:
+        if args.tile_rows is None:
+            return TilePlan(None, 0, "whole: the captures are not in a format read by rows "
+                                     "(TIFF, OpenEXR)")
+        import numpy as np
+
+        from lumigraph.capture.io import _stack_files
+        from lumigraph.capture.tiles import open_rows
+
+        files = _stack_files(inputs)[0]
+        src = open_rows(files[0])  # read whole (the meta says so); only its size is used here
+        try:
+            geo = (len(files), *src.shape, np.dtype(src.dtype).itemsize)
+        finally:
+            src.close()
+    if why is not None:
+        if args.tile_rows is None:
+            return TilePlan(None, 0, f"whole: {why}")
+        raise InputError("method" if "method" in why else "images",
+                         f"cannot work by bands: {why}; use --tile-rows off")
+    n, h, w, c, itemsize = geo
+    # per pixel of a band: the codes, the linear float32 stack, the reordered copy and the
+    # pair temporaries (about 3 float32 per capture), the outputs and masks
+    per = c * (n * (itemsize + 16) + 48)
+    # held whole: the outputs (written after the last band) and the black/white frames
+    held = w * h * (8 * c + 1) + (w * h * c * (itemsize + 12) * 2 if black and white else 0)
+    budget = None if args.memory is None else args.memory
+    from lumigraph.capture.tiles import DEFAULT_MEMORY
+
+    left = (DEFAULT_MEMORY if budget is None else budget) - held
+    if left <= 0:
+        raise InputError("memory", f"{(held / 1e9):.2f} GB of outputs and black/white frames are "
+                                   "held whole; raise it")
+    plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per)
+    return plan
+
+
+def _separate_rows(args, resolved, plan, response, device, t0) -> int:
+    """``separate`` reading the captures by bands (:func:`separation.tiled.separate_bands`)."""
+    from types import SimpleNamespace
+
+    from lumigraph.capture.artifact import make_meta
+    from lumigraph.capture.tiles import read_stack_rows
+    from lumigraph.separation.tiled import separate_bands
+
+    inputs, black, white, complement_of, alpha, _ = resolved
+    out = Path(args.out)
+    stack = read_stack_rows(inputs, rows=plan.rows)
+    try:
+        h, w, c = stack.shape
+        where = stack.paths[0]
+
+        def linear(y0, y1):
+            return _linear(SimpleNamespace(images=stack.read(y0, y1), bit_depth=stack.bit_depth),
+                           response, where)
+
+        _, quant, sat = linear(0, 1)
+        extra, flat_files = _flat_frames(black, white, (h, w, c))
+        bw = {k: _linear(v, response, v.paths[0])[0][0] for k, v in extra.items()}
+        if args.saturation is not None:
+            sat = args.saturation
+        t1 = time.perf_counter()
+        sep = separate_bands(lambda y0, y1: linear(y0, y1)[0], height=h, rows=plan.rows,
+                             count=len(stack.paths), method=args.method, alpha=alpha, b=args.b,
+                             black=bw.get("black"), white=bw.get("white"),
+                             complement_of=complement_of, estimator=args.estimator,
+                             noise_sigma=args.noise, quant_step=quant, saturation=sat,
+                             tile=args.tile, names=stack.paths)
+        read_whole = [s.path for s in stack.sources if s.whole]
+    finally:
+        stack.close()
+    t2 = time.perf_counter()
+    meta = make_meta("lumigraph.separation", inputs=[*stack.paths, *flat_files],
+                     params={"method": args.method, "alpha": alpha, "b_given": args.b,
+                             "estimator": args.estimator,
+                             "response": args.response or (response and response.method),
+                             "video": None, "noise": args.noise, "saturation": sat,
+                             "tile": args.tile, "images": len(stack.paths),
+                             "device": device.name},
+                     timings_s={"load": t1 - t0, "separate": t2 - t1},
+                     extra={"tiles": {**plan.as_meta(h), "read_whole": read_whole}})
+    sep.save(out, meta=meta)
+    for msg in sep.warnings:
+        warn(msg)
+    q = sep.quality["mask_counts"]
+    say(args, f"separated {len(stack.paths)} image(s) with {args.method} in "
+              f"{-(-h // plan.rows)} bands of {plan.rows} rows: {q['valid']}/{q['total']} pixels "
+              f"trusted -> {out}/direct.exr, global.exr, mask.png")
     return 0
 
 
@@ -322,6 +456,22 @@ def build_parser(prog: str = "lumigraph separate"):
                    help="linear clip level")
     p.add_argument("--tile", type=number(int, lo=MIN_TILE), default=16,
                    help="tile size for --method single (px)")
+    from lumigraph.capture.tiles import MIN_ROWS, parse_memory
+
+    p.add_argument(
+        "--tile-rows", type=number(int, lo=MIN_ROWS, allow=("auto", "off")), default=None,
+        metavar="ROWS|auto|off",
+        help="read the captures in bands of ROWS full-width rows (two passes: the whole-image "
+             "analysis, then the per-pixel split), so memory is bounded by the band, not the "
+             "stack; the result is the same as whole, to the bit. auto: the tallest band within "
+             "--memory; off: whole. Default: whole when it fits --memory, else auto (the meta's "
+             "'tiles' says which). --method checker only; read by rows: TIFF and OpenEXR (other "
+             "formats are read whole). Named --tile-rows, not --tile as in 'hdr merge': --tile "
+             "is the single method's tile")
+    p.add_argument(
+        "--memory", type=parse_memory, default=None, metavar="SIZE",
+        help="memory budget for --tile-rows auto and the default, e.g. 1GB, 512MB, 2GiB "
+             "(default 2GB)")
     p.add_argument("--max-frames", type=number(int, lo=1), default=None,
                    help="video input: keep at most this many frames")
     p.add_argument("--stride", type=number(int, lo=1), default=1,

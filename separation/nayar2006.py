@@ -200,11 +200,25 @@ def noise_from_pairs(images: np.ndarray, complement_of) -> tuple[float, float]:
     pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(complement_of) if j >= 0 and j != i})
     if len(pairs) < 2:
         return 0.0, 0.0
-    sums = np.stack([a[i] + a[j] for i, j in pairs])
-    var = sums.var(axis=0, ddof=1).ravel() / 2.0
-    level = (sums.mean(axis=0) / 2.0).ravel()
-    step = max(1, level.size // 20000)
-    x, y = level[::step].astype(np.float64), var[::step].astype(np.float64)
+    step = noise_step(a[0].size)
+    sums = np.stack([(a[i] + a[j]).ravel()[::step] for i, j in pairs])
+    return noise_fit(sums)
+
+
+def noise_step(size: int) -> int:
+    """Stride of the flat pixels :func:`noise_from_pairs` fits (about 20000 of them)."""
+    return max(1, size // 20000)
+
+
+def noise_fit(sums: np.ndarray) -> tuple[float, float]:
+    """:func:`noise_from_pairs`'s line through pair sums ``(P, M)`` already
+    sampled (every :func:`noise_step`-th flat value): the variance and mean are
+    per value, so a sample gathered band by band gives the same numbers."""
+    if len(sums) < 2:
+        return 0.0, 0.0
+    var = sums.var(axis=0, ddof=1) / 2.0
+    level = sums.mean(axis=0) / 2.0
+    x, y = level.astype(np.float64), var.astype(np.float64)
     A = np.stack([np.ones_like(x), x], axis=1)
     s0, s1 = np.linalg.lstsq(A, y, rcond=None)[0]
     return max(float(s0), 0.0), max(float(s1), 0.0)

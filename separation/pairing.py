@@ -210,14 +210,38 @@ def find_pairs(images: np.ndarray, *, names=None, noise: float = 0.0,
     return Pairing(comp_out, score, contrast, bool(decisive), scores, limit)
 
 
+FIXED_SCALE = 2 ** 24  # units per linear unit: rounding <= 2^-25 per value, only exact ties move
+_FIXED_CHUNK = 1 << 16  # values per int64 partial sum: no overflow below 2^23 linear units
+
+
+def fixed_sum(x: np.ndarray) -> int:
+    """Sum of ``x`` in fixed point (``FIXED_SCALE`` units), as a Python int.
+
+    Integer sums do not depend on their order, so summing bands of rows gives
+    the whole image's number to the bit (a float64 ``sum`` is pairwise: its
+    rounding depends on where the array starts and ends).
+
+    >>> v = np.array([0.5, 0.25, 1e-3], np.float32)
+    >>> fixed_sum(v) == fixed_sum(v[:1]) + fixed_sum(v[1:])
+    True
+    """
+    flat = np.asarray(x).reshape(-1)
+    total = 0
+    for k in range(0, flat.size, _FIXED_CHUNK):
+        q = np.rint(flat[k:k + _FIXED_CHUNK].astype(np.float64) * FIXED_SCALE).astype(np.int64)
+        total += int(q.sum())
+    return total
+
+
 def content_keys(images: np.ndarray) -> list[tuple]:
     """A sort key per image that depends on its pixels only.
 
-    ``(sum,)`` in float64; images whose sums tie also get a digest of their
-    bytes (hashing every image would cost more than the separation).
+    ``(sum,)`` in fixed point (:func:`fixed_sum`: order-free, so a sum over
+    bands of rows is the same number); images whose sums tie also get a digest
+    of their bytes (hashing every image would cost more than the separation).
     """
     a = np.asarray(images)
-    sums = [float(im.sum(dtype=np.float64)) for im in a]
+    sums = [fixed_sum(im) for im in a]
     seen: dict[float, int] = {}
     for v in sums:
         seen[v] = seen.get(v, 0) + 1

@@ -14,6 +14,8 @@ Examples
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from lumigraph.capture.errors import EstimationError, InputError
@@ -179,6 +181,51 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
 
         fn = partial(nayar2006_torch.METHODS[method], device=dev)
         params["device"] = dev.name
+    ev = evaluate(a, fn=fn, method=method, alpha=alpha, b=b, comp=comp, estimator=estimator,
+                  var0=var0, var1=var1, saturation=saturation, tile=tile)
+    params.update(ev.params)
+    direct, glob, mask = ev.direct, ev.global_, ev.mask
+    warnings = []
+    quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
+               "mask_counts": ev.counts}
+    if ev.residue_flagged is not None:
+        frac = float(ev.residue_flagged / max(ev.counts["valid"], 1))
+        quality["residue"] = {"check": "per-pair global disagreement", "fraction": frac}
+    else:
+        from lumigraph.separation.residue import spatial_residue
+
+        frac, _ = spatial_residue(glob, ev.mean_image, window=max(5, tile // 2 * 2 + 1),
+                                  valid=mask == 0)
+        quality["residue"] = {"check": "spatial pattern-scale contrast", "fraction": frac}
+    quality["residue"]["warn_above"] = RESIDUE_WARN_FRACTION
+    if frac > RESIDUE_WARN_FRACTION:
+        warnings.append(f"high-frequency residue: the pattern survives into the global image in "
+                        f"{100 * frac:.1f}% of the trusted pixels (a mirror-like surface, or a "
+                        "pattern too coarse for the scene); the split is unreliable there")
+    return Separation(direct, glob, mask, method, params, quality, tuple(warnings))
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """The per-pixel step of :func:`separate` on a stack (whole, or a band of rows)."""
+
+    direct: np.ndarray  # (H, W, C) float32
+    global_: np.ndarray  # (H, W, C) float32
+    mask: np.ndarray  # (H, W) uint8
+    mean_image: np.ndarray  # (H, W, C) float32
+    counts: dict  # mask counts: integers, summed over bands
+    residue_flagged: int | None  # pixels the per-pair residue check flags (None: no pairs)
+    params: dict
+
+
+def evaluate(a, *, fn, method, alpha, b, comp, estimator, var0, var1, saturation,
+             tile) -> Evaluation:
+    """Everything :func:`separate` does per pixel once the whole-image analysis
+    (order, complements, ``b``, the noise line ``var0 + var1·I``) is fixed: the
+    estimator, the masks and the per-pair residue flags. Every output pixel
+    depends on that pixel of ``a`` ``(N, H, W, C)`` only (``single``: on its
+    ``tile``), so bands of rows give the whole image's values."""
+    params: dict = {}
     mean_image = a.mean(axis=0)
     sigma_mean = np.sqrt(var0 + var1 * np.clip(mean_image, 0, None)).astype(np.float32)
     if method == "checker":
@@ -210,28 +257,15 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     low = ((lp - lm) <= 3.0 * sigma_c).all(axis=-1) & ~never
     mask[low] |= nayar2006.MASK_LOW_CONTRAST
     valid = mask == 0
-
-    warnings = []
-    quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
-               "mask_counts": {"never_lit": int(never.sum()),
-                               "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
-                               "low_contrast": int(low.sum()), "valid": int(valid.sum()),
-                               "total": int(mask.size)}}
+    counts = {"never_lit": int(never.sum()),
+              "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
+              "low_contrast": int(low.sum()), "valid": int(valid.sum()), "total": int(mask.size)}
+    flagged = None
     if comp is not None and any(j >= 0 for j in comp):
-        frac, _ = _residue_pairs(a, comp, b=b, alpha=alpha, sigma=sigma, valid=valid)
-        quality["residue"] = {"check": "per-pair global disagreement", "fraction": frac}
-    else:
-        from lumigraph.separation.residue import spatial_residue
-
-        frac, _ = spatial_residue(glob, mean_image, window=max(5, tile // 2 * 2 + 1), valid=valid)
-        quality["residue"] = {"check": "spatial pattern-scale contrast", "fraction": frac}
-    quality["residue"]["warn_above"] = RESIDUE_WARN_FRACTION
-    if frac > RESIDUE_WARN_FRACTION:
-        warnings.append(f"high-frequency residue: the pattern survives into the global image in "
-                        f"{100 * frac:.1f}% of the trusted pixels (a mirror-like surface, or a "
-                        "pattern too coarse for the scene); the split is unreliable there")
-    return Separation(direct.astype(np.float32), glob.astype(np.float32), mask, method, params,
-                      quality, tuple(warnings))
+        _, flags = _residue_pairs(a, comp, b=b, alpha=alpha, sigma=sigma, valid=valid)
+        flagged = int(flags.sum())
+    return Evaluation(direct.astype(np.float32), glob.astype(np.float32), mask, mean_image,
+                      counts, flagged, params)
 
 
 def _arrange(a, names, *, method, complement_of, estimator, noise):

@@ -1,0 +1,227 @@
+"""`separate` by bands of rows: the same arrays as the untiled run, peak memory bounded by the band.
+
+Two passes over the captures, each reading them one band at a time through
+``read(y0, y1) -> (N, y1 - y0, W, C)`` float32 (linear):
+
+1. the whole-image analysis, from order-free statistics gathered band by
+   band: the all-dark check (maxima), the content keys of the canonical order
+   (:func:`separation.pairing.fixed_sum`, and a blake2b of the bytes fed in
+   row order for ties), the complement search on the fixed sample of
+   :func:`separation.pairing.find_pairs` (gathered at the same flat indices)
+   and the noise line (:func:`separation.nayar2006.noise_fit` on the same
+   every-k-th values);
+2. :func:`separation.separate.evaluate`, per pixel, band by band, with the
+   analysis fixed; mask counts and residue flags are integer sums.
+
+Only ``checker`` (the default; either estimator, with complement pairs) is
+done by bands. ``sinusoid``'s phase check and residue, ``single``'s tiles
+and the occluder's lit fraction are whole-image statistics not yet gathered by bands: refused with an
+:class:`InputError` naming the option (see ``docs/decisions/tiles.md``).
+
+Examples
+--------
+>>> import numpy as np
+>>> from lumigraph.capture.patterns import checker_set
+>>> ps = checker_set((16, 20), square=4, shifts=2)
+>>> rng = np.random.default_rng(1)
+>>> d = rng.uniform(0.2, 0.8, (20, 16)); g = np.full((20, 16), 0.2)
+>>> ims = np.stack([d * p + 0.5 * g for p in ps.images])[..., None].astype(np.float32)
+>>> from lumigraph.separation.separate import separate
+>>> whole = separate(ims)
+>>> s = separate_bands(lambda y0, y1: ims[:, y0:y1], height=20, rows=7, count=len(ims))
+>>> bool((s.direct == whole.direct).all() and (s.global_ == whole.global_).all())
+True
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.capture.tiles import bands
+from lumigraph.separation import nayar2006, pairing
+from lumigraph.separation.methods import METHODS, MIN_IMAGES
+from lumigraph.separation.result import Separation
+from lumigraph.separation.separate import RESIDUE_WARN_FRACTION, check_options, evaluate
+
+__all__ = ["TILED_METHODS", "separate_bands"]
+
+TILED_METHODS = ("checker",)
+
+
+def separate_bands(read, *, height: int, rows: int, count: int, method: str = "checker",
+                   alpha: float | None = None, b: float | None = None, black=None, white=None,
+                   complement_of=None, estimator: str = "pairs", noise_sigma: float = 0.0,
+                   quant_step: float = 0.0, saturation: float | None = None, tile: int = 16,
+                   names=None) -> Separation:
+    """:func:`separation.separate.separate` on captures read in bands of ``rows`` rows.
+
+    Parameters
+    ----------
+    read : callable
+        ``read(y0, y1)`` → ``(count, y1 - y0, W, C)`` float32 linear captures,
+        rows ``y0`` to ``y1`` (called twice per band: once per pass).
+    height, rows, count : int
+        Image height, band height (any; need not divide ``height``), number of captures.
+    black, white : ndarray, ``(H, W, C)``, optional
+        The all-black/all-white frames, whole: the measured black level is a
+        median over the whole frame (:func:`separation.nayar2006.black_level`),
+        so these two are held whole; the captures are read by bands.
+    Other parameters are :func:`separate`'s.
+
+    Returns
+    -------
+    Separation
+        Equal, array for array and bit for bit, to :func:`separate` on the
+        whole stack (checked in ``tests/separation/test_tiled.py``).
+
+    Raises
+    ------
+    InputError
+        ``method`` not in :data:`TILED_METHODS`, checker captures without complements found, or what
+        :func:`separate` raises.
+    """
+    METHODS.resolve(method)
+    if method not in TILED_METHODS:
+        raise InputError("method", f"{method!r} cannot run by bands yet (its whole-image analysis "
+                                   "is not gathered by bands); use tile off, or method checker")
+    if count < MIN_IMAGES[method]:
+        raise EstimationError("<images>", f"method {method!r} needs at least "
+                                          f"{MIN_IMAGES[method]} images, got {count}")
+    if isinstance(rows, bool) or not isinstance(rows, int | np.integer) or rows < 1:
+        raise InputError("rows", f"expected a band height of at least 1 row, got {rows!r}")
+    names = list(names) if names is not None else [f"image {i}" for i in range(count)]
+    check_options(alpha=alpha, b=b, tile=tile, noise_sigma=noise_sigma, saturation=saturation)
+    quant = quant_step / np.sqrt(12.0)
+    floor = 3.0 * np.hypot(noise_sigma, quant) + 1e-7
+    noise = float(np.hypot(noise_sigma, quant))
+    plan = bands(height, rows)
+
+    # pass 1: order-free statistics, band by band
+    peak = np.full(count, -np.inf)
+    full_peak = np.full(count, -np.inf)
+    sums = [0] * count
+    hashers = [hashlib.blake2b(digest_size=16) for _ in range(count)]
+    width = chans = None
+    sample_parts = []
+    for band in plan:
+        y0, y1 = band.y0, band.y1
+        a = nayar2006.validate_stack(read(y0, y1), need=1, method=method)
+        if width is None:
+            width, chans = a.shape[2], a.shape[3]
+            per_image = height * width * chans
+            sidx = (pairing._sample_index(per_image) if per_image > pairing.SAMPLES else
+                    np.arange(per_image))
+        first = (-y0) % 4  # the untiled check looks at rows 0, 4, 8, ...
+        if first < len(a[0]):
+            peak = np.maximum(peak, a[:, first::4, ::4].reshape(count, -1).max(axis=1))
+        full_peak = np.maximum(full_peak, a.reshape(count, -1).max(axis=1))
+        for i in range(count):
+            sums[i] += pairing.fixed_sum(a[i])
+            hashers[i].update(np.ascontiguousarray(a[i]).tobytes())
+        lo, hi = y0 * width * chans, y1 * width * chans
+        sel = sidx[(sidx >= lo) & (sidx < hi)] - lo
+        sample_parts.append(a.reshape(count, -1)[:, sel])
+    for i in range(count):
+        p = peak[i] if peak[i] > floor else full_peak[i]
+        if p <= floor:
+            raise InputError(names[i], f"all-dark frame (brightest value {p:.3g} is within the "
+                                       "noise); check the projector and the exposure")
+    seen: dict[int, int] = {}
+    for v in sums:
+        seen[v] = seen.get(v, 0) + 1
+    keys = [(v, h.digest() if seen[v] > 1 else b"") for v, h in zip(sums, hashers, strict=True)]
+    sample = np.concatenate(sample_parts, axis=1)
+    del sample_parts
+    params: dict = {"method": method}
+    pre, _ = pairing.canonical_order(sample, keys=keys)
+    found = None
+    if complement_of is not None and len(complement_of) != count:
+        raise InputError("complement_of", f"expected {count} entries, got {len(complement_of)}")
+    try:
+        # the sample is what find_pairs draws from the whole images: the same scores
+        found = pairing.find_pairs(sample, names=names, noise=noise, order=pre)
+    except InputError:
+        if estimator == "pairs":
+            raise
+    comp = None
+    if complement_of is not None:
+        if found is not None:
+            pairing.check_pairs(found, complement_of, names=names)
+        comp = list(complement_of)
+        params["pairs_source"] = "given (pattern layout), checked against the captures"
+    elif found is not None:
+        comp = list(found.complement_of)
+        params["pairs_source"] = ("found from the captures" if found.decisive else
+                                  "found from the captures (contrast within the noise)")
+    if found is not None:
+        params["pair_score_median"] = float(np.nanmedian(found.score)) if any(
+            j >= 0 for j in found.complement_of) else None
+    if comp is None or not any(j >= 0 for j in comp):
+        raise InputError("method", "checker captures without complement pairs use the spatial "
+                                   "residue check, not done by bands yet; use tile off")
+    order, comp = pairing.canonical_order(sample, comp, keys=keys)
+    names = [names[k] for k in order]
+    if b is None and black is not None and white is not None:
+        b = nayar2006.black_level(black, white, floor=floor)
+        params["b_source"] = "measured from the all-black/all-white frames"
+        if not 0.0 <= b < 1.0:
+            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
+    elif b is None:
+        b = 0.0
+        params["b_source"] = "assumed 0 (no --b and no black/white frames)"
+    else:
+        params["b_source"] = "given"
+    params["b"] = float(b)
+    alpha = 0.5 if alpha is None else alpha
+    var0 = quant ** 2 + noise_sigma ** 2
+    # the noise line: the pair sums at every k-th flat value, gathered band by band
+    pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(comp) if j >= 0 and j != i})
+    step = nayar2006.noise_step(height * width * chans)
+
+    def ordered(y0, y1):
+        a = nayar2006.validate_stack(read(y0, y1), need=1, method=method)
+        return a[order] if order != list(range(count)) else a
+
+    var1 = 0.0
+    if len(pairs) >= 2:
+        parts = []
+        for band in plan:
+            a = ordered(band.y0, band.y1)
+            off = (-band.y0 * width * chans) % step  # first flat index of the band on the stride
+            parts.append(np.stack([(a[i] + a[j]).ravel()[off::step] for i, j in pairs]))
+        s0, s1 = nayar2006.noise_fit(np.concatenate(parts, axis=1))
+        var0, var1 = var0 + s0, s1
+
+    # pass 2: per pixel, band by band
+    fn = METHODS.resolve(method)
+    out_d, out_g, out_m = [], [], []
+    counts: dict = {}
+    flagged = 0
+    ev_params: dict = {}
+    for band in plan:
+        a = ordered(band.y0, band.y1)
+        ev = evaluate(a, fn=fn, method=method, alpha=alpha, b=b, comp=comp, estimator=estimator,
+                      var0=var0, var1=var1, saturation=saturation, tile=tile)
+        ev_params = ev.params
+        for k, v in ev.counts.items():
+            counts[k] = counts.get(k, 0) + v
+        flagged += ev.residue_flagged
+        out_d.append(ev.direct)
+        out_g.append(ev.global_)
+        out_m.append(ev.mask)
+    params.update(ev_params)
+    frac = float(flagged / max(counts["valid"], 1))
+    quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
+               "mask_counts": counts,
+               "residue": {"check": "per-pair global disagreement", "fraction": frac,
+                           "warn_above": RESIDUE_WARN_FRACTION}}
+    warnings = []
+    if frac > RESIDUE_WARN_FRACTION:
+        warnings.append(f"high-frequency residue: the pattern survives into the global image in "
+                        f"{100 * frac:.1f}% of the trusted pixels (a mirror-like surface, or a "
+                        "pattern too coarse for the scene); the split is unreliable there")
+    return Separation(np.concatenate(out_d), np.concatenate(out_g), np.concatenate(out_m),
+                      method, params, quality, tuple(warnings))
