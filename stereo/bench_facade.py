@@ -47,6 +47,11 @@ from lumigraph.capture.bench import Check, Row, Stage
 
 TUNED = [("house", 1)]
 REPORTED = [("house", 2), ("tower", 3), ("ell", 4), ("village", 5)]
+# automatic marking was reworked on tower s3 and village s5 (flush blocks, a
+# hidden annex), so for it they are tuning cases too, and its target is
+# reported on camera seeds no one looked at while tuning
+AUTO_TUNED = [("house", 1), ("tower", 3), ("village", 5)]
+AUTO_REPORTED = [("house", 2), ("ell", 4), ("tower", 6), ("village", 7)]
 
 MODELS = {
     "tower": {"blocks": [
@@ -154,8 +159,8 @@ def _rot_err(A, B) -> float:
     return float(Rotation.from_matrix(A.T @ B).magnitude())
 
 
-def _label(name, seed):
-    return f"{name} s{seed} ({'tuned' if (name, seed) in TUNED else 'reported'})"
+def _label(name, seed, tuned=TUNED):
+    return f"{name} s{seed} ({'tuned' if (name, seed) in tuned else 'reported'})"
 
 
 def _row(case, method, value, err, t=math.nan, **extra):
@@ -289,7 +294,9 @@ def automatic_marking(quick: bool):
 
     seeds = 2 if quick else 4
     rows, ratios, held_by = [], [], {}
-    for name, seed in (TUNED + REPORTED)[: 2 if quick else None]:
+    # quick: one tuning and one reported case, flush blocks both
+    cases = [("tower", 3), ("tower", 6)] if quick else AUTO_TUNED + AUTO_REPORTED
+    for name, seed in cases:
         model, cams = scene(name, seed)
         tv = model.named_values()
         free = list(model.parameter_names)
@@ -313,10 +320,10 @@ def automatic_marking(quick: bool):
             ef.append([(sf.params[n] - tv[n]) / tv[n] for n in free])
         ra = float(np.sqrt(np.mean(np.square(ea))))
         rf = float(np.sqrt(np.mean(np.square(ef))))
-        rows.append(_row(_label(name, seed), "automatic marking (4 hand marks)", None, ra / rf,
-                         auto_rms_rel=ra, full_rms_rel=rf, proposed_mean=float(np.mean(props)),
-                         seeds=seeds, held=sorted(held)))
-        if (name, seed) not in TUNED:
+        rows.append(_row(_label(name, seed, AUTO_TUNED), "automatic marking (4 hand marks)", None,
+                         ra / rf, auto_rms_rel=ra, full_rms_rel=rf,
+                         proposed_mean=float(np.mean(props)), seeds=seeds, held=sorted(held)))
+        if (name, seed) not in AUTO_TUNED:
             ratios.append(ra / rf)
             if held:
                 held_by[name] = sorted(held)
@@ -325,7 +332,10 @@ def automatic_marking(quick: bool):
                     for n, h in held_by.items())
     return rows, [Check("automatic marking from 4 hand marks per photograph: RMS parameter error "
                         "within 1.2x the fully marked solve (reported scenes, worst)", worst, 1.2,
-                        worst <= 1.2, f"per scene {', '.join(f'{v:.2f}' for v in ratios)}; "
+                        worst <= 1.2, "per reported scene " + ", ".join(
+                            f"{n} s{sd} {v:.2f}" for (n, sd), v in zip(
+                                [c for c in cases if c not in AUTO_TUNED], ratios, strict=True))
+                        + "; "
                                       f"{seeds} seeds each, σ = 0.5 px hand and full marks"
                                       + (f"; {why}" if why else ""))]
 

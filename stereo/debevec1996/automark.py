@@ -13,7 +13,23 @@ mark of a reprojected edge when
 - its direction is within ``max_angle_deg`` of the edge's,
 - both its ends lie within ``max_distance_px`` of the edge's line,
 - at least half its length overlaps the edge's visible stretch,
-- no other edge passes these gates nearly as well (ambiguous: left out).
+- no other edge passes these gates nearly as well (ambiguous: left out),
+  except edges whose projected lines coincide with it (a block flush with
+  its neighbour puts its edges on the neighbour's image lines): those share
+  the detection, each taking the part that overlaps its own projected
+  extent.
+
+Only edges visible in the rough model (sampled points not hidden by its
+faces) are candidates, so a hidden edge gets no proposal. Rounds re-solve
+from the hand marks and the proposals so far with gates that start wide
+and tighten; the rough solve holds at its starting value any parameter
+the marks leave free or only pretend to fix (it moves more than ``trust``
+of its value or its σ is a third of that), and a held parameter (one or,
+for two of one block, a pair together) is set by the detected length it
+would explain. After the last round a residual check drops every proposal
+farther than 3x the estimated noise from the solved model and re-solves;
+a parameter that nothing constrains in the end is named in the warnings
+(held at the rough value, never silently).
 
 Each proposal is refined to sub-pixel precision first: the intensity profile
 across the segment is sampled at points along it, the gradient peak located
@@ -274,19 +290,19 @@ def _scale(model, names):
     return {n: max(abs(v[n]), floor) for n in names}
 
 
-def _rough_solve(model, marks, K, *, trust, **kw):
+def _rough_solve(model, marks, K, *, rough, trust, **kw):
     """:func:`solve_facade` holding what the marks leave free, and also
     what they only pretend to fix: a parameter whose fitted value leaves
-    ``trust`` (relative) of its starting value, or whose σ exceeds a third
-    of that, is held at its starting value (with few and noisy marks a weak
+    ``trust`` (relative) of its value in the user's ``rough`` model, or
+    whose σ exceeds a third of that, is held at its current value (with few and noisy marks a weak
     direction wanders, e.g. a depth seen nearly end-on goes negative, and
     every proposal matched against that model is wrong)."""
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     sol = solve_facade(model, marks, K, hold_unconstrained=True, **kw)
-    v0 = model.named_values()
+    v0 = rough.named_values()
     names = [n for n in model.parameter_names if n not in sol.held]
-    sc = _scale(model, names)
+    sc = _scale(rough, names)
     weak = [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
                                      and sol.std[n] <= trust / 3 * sc[n])]
     if not weak:
@@ -313,13 +329,14 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     found = {p: detect_segments(greys[p], min_length_px=min_length_px) for p in marks.photographs}
     kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
     current = model
+    vetted: list[dict] = []
     for k in range(rounds):
         widen = max(1.0, 4.0 - k)   # wide gates first: held parameters start far off
         # each round solves from the hand marks and the proposals so far
         # (a proposal the robust solve rejects is forgotten): parameters the
         # hand marks leave free get fixed by the proposals
         cur = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-        sol = _rough_solve(current, cur, K, trust=trust, rough_rotations=rough_rotations,
+        sol = _rough_solve(current, cur, K, rough=model, trust=trust, rough_rotations=rough_rotations,
                            noise_px=noise_px, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
@@ -338,6 +355,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 kept.pop(key)
         warnings = list(sol.warnings)
         before = set(kept)
+        vetted.append(dict(kept))      # what this round's solve accepted
         views = []
         for photo in marks.photographs:
             if photo not in sol.poses:
@@ -382,10 +400,13 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     # the residual check: solve with every proposal, drop those farther from
     # the solved model's edges than 3x the noise the solve estimates (a
     # detection of a neighbouring line that the gates let through), re-solve
+    # (from the last round's rotations: a vanishing-direction start with a
+    # few wrong proposals among the marks can land in another minimum)
+    last = {p: R for p, (R, _) in sol.poses.items()}
     for _ in range(3):
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-        sol = solve_facade(current, merged, K, rough_rotations=rough_rotations, noise_px=noise_px,
-                           hold_unconstrained=True, where=where)
+        sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
+                           noise_px=noise_px, hold_unconstrained=True, where=where)
         limit = 3.0 * max(sol.sigma_px, 0.1)
         far = {(p, e) for p, e, d in sol.mark_rms_px if d > limit} | {
             (p, e) for p, e, _ in sol.outliers}
@@ -394,6 +415,20 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             break
         for key in far:
             kept.pop(key)
+    if sol.held:
+        # the last round's new proposals can undo what the rounds built (a
+        # flush edge given to the wrong block, the edges that fix the scale
+        # dropped as its outliers): fall back to a set a round's solve
+        # accepted when that leaves fewer parameters unconstrained
+        for old in vetted[::-1][:2]:
+            merged = replace(marks, marks=tuple(marks.marks) + tuple(old.values()))
+            alt = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}),
+                                                                    **last},
+                               noise_px=noise_px, hold_unconstrained=True, where=where)
+            if len(alt.held) < len(sol.held):
+                sol, kept = alt, dict(old)
+                if not sol.held:
+                    break
     warnings = [w for w in warnings if not w.startswith("held at")]
     if sol.held:
         # never silently wrong: what no mark or proposal constrains is named
