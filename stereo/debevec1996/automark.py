@@ -70,7 +70,11 @@ class AutomarkResult:
     warnings: list = field(default_factory=list)
 
 
-def check_automark_options(*, max_angle_deg: float, max_distance_px: float) -> None:
+def check_automark_options(*, max_angle_deg: float, max_distance_px: float,
+                           trust: float = 0.3) -> None:
+    if not (0 < trust < 1):
+        raise InputError("trust", f"expected the rough model's relative accuracy in (0, 1), "
+                                  f"got {trust}")
     if not (0 < max_angle_deg <= 45):
         raise InputError("max_angle_deg", f"expected an angle in (0, 45] degrees, got {max_angle_deg}")
     if not (max_distance_px > 0 and np.isfinite(max_distance_px)):
@@ -319,12 +323,15 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
              where: str = "edges.json") -> AutomarkResult:
     """Propose marks for the model edges the hand ``marks`` left unmarked
     (module docstring). ``images``: photo -> image (8/16-bit or float in
-    [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs)."""
+    [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs);
+    ``trust``: how far (relative) the rough ``model``'s parameters may be
+    from the truth (a rough solve that moves one farther holds it)."""
     from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.edges import Mark
     from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
 
-    check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+    check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
+                           trust=trust)
     greys = {p: _grey(images[p]) for p in marks.photographs}
     found = {p: detect_segments(greys[p], min_length_px=min_length_px) for p in marks.photographs}
     kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
