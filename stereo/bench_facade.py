@@ -303,7 +303,9 @@ def automatic_marking(quick: bool):
         tv = model.named_values()
         free = list(model.parameter_names)
         ea, ef, props, held = [], [], [], set()
-        for k in range(seeds):
+        # the tuning cases are shown for reference: two noise seeds suffice
+        n_seeds = min(seeds, 2) if (name, seed) in AUTO_TUNED else seeds
+        for k in range(n_seeds):
             rng = np.random.default_rng(500 + 10 * seed + k)
             raw, full = _marks(model, cams, noise=0.5, rng=rng)
             hand = EdgeMarks.from_dict({"photographs": {p: _four_hand_marks(model, v)
@@ -324,7 +326,7 @@ def automatic_marking(quick: bool):
         rf = float(np.sqrt(np.mean(np.square(ef))))
         rows.append(_row(_label(name, seed, AUTO_TUNED), "automatic marking (4 hand marks)", None,
                          ra / rf, auto_rms_rel=ra, full_rms_rel=rf,
-                         proposed_mean=float(np.mean(props)), seeds=seeds, held=sorted(held)))
+                         proposed_mean=float(np.mean(props)), seeds=n_seeds, held=sorted(held)))
         if (name, seed) not in AUTO_TUNED:
             ratios.append(ra / rf)
             if held:
@@ -337,9 +339,8 @@ def automatic_marking(quick: bool):
                         worst <= 1.2, "per reported scene " + ", ".join(
                             f"{n} s{sd} {v:.2f}" for (n, sd), v in zip(
                                 [c for c in cases if c not in AUTO_TUNED], ratios, strict=True))
-                        + "; "
-                                      f"{seeds} seeds each, σ = 0.5 px hand and full marks"
-                                      + (f"; {why}" if why else ""))]
+                        + f"; {seeds} noise seeds per reported scene (2 per tuning one), "
+                          "σ = 0.5 px hand and full marks" + (f"; {why}" if why else ""))]
 
 
 def solve_time(quick: bool):
