@@ -51,8 +51,10 @@ TUNED = [("house", 1)]
 REPORTED = [("house", 2), ("tower", 3), ("ell", 4), ("village", 5)]
 # automatic marking was reworked on tower s3 and village s5 (flush blocks, a
 # hidden annex), so for it they are tuning cases too, and its target is
-# reported on camera seeds no one looked at while tuning
-AUTO_TUNED = [("house", 1), ("tower", 3), ("village", 5)]
+# reported on camera seeds no one looked at while tuning; tower s8 and
+# village s9 were looked at after that (the final trust test came from
+# village s9) and are shown as tuning cases, failures included
+AUTO_TUNED = [("house", 1), ("tower", 3), ("village", 5), ("tower", 8), ("village", 9)]
 AUTO_REPORTED = [("house", 2), ("ell", 4), ("tower", 6), ("village", 7)]
 
 MODELS = {
@@ -295,7 +297,7 @@ def automatic_marking(quick: bool):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     seeds = 2 if quick else 4
-    rows, ratios, held_by = [], [], {}
+    rows, ratios, held_by, tuned = [], [], {}, []
     # quick: one tuning and one reported case, flush blocks both
     cases = [("tower", 3), ("tower", 6)] if quick else AUTO_TUNED + AUTO_REPORTED
     for name, seed in cases:
@@ -327,7 +329,9 @@ def automatic_marking(quick: bool):
         rows.append(_row(_label(name, seed, AUTO_TUNED), "automatic marking (4 hand marks)", None,
                          ra / rf, auto_rms_rel=ra, full_rms_rel=rf,
                          proposed_mean=float(np.mean(props)), seeds=n_seeds, held=sorted(held)))
-        if (name, seed) not in AUTO_TUNED:
+        if (name, seed) in AUTO_TUNED:
+            tuned.append(f"{name} s{seed} {ra / rf:.2f}")
+        else:
             ratios.append(ra / rf)
             if held:
                 held_by[name] = sorted(held)
@@ -339,6 +343,7 @@ def automatic_marking(quick: bool):
                         worst <= 1.2, "per reported scene " + ", ".join(
                             f"{n} s{sd} {v:.2f}" for (n, sd), v in zip(
                                 [c for c in cases if c not in AUTO_TUNED], ratios, strict=True))
+                        + f"; tuning cases (outside the target) {', '.join(tuned)}"
                         + f"; {seeds} noise seeds per reported scene (2 per tuning one), "
                           "σ = 0.5 px hand and full marks" + (f"; {why}" if why else ""))]
 

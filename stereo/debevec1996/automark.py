@@ -436,6 +436,28 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 sol, kept = alt, dict(old)
                 if not sol.held:
                     break
+    # the trust test once more, on the final solve: a parameter the proposals
+    # take beyond the rough model's accuracy, or fix only loosely, is not
+    # believed (a block locked onto the wrong lines agrees with itself, which
+    # the residual check cannot see): the proposals on the edges it moves are
+    # withdrawn, the hand marks stay, and it is named
+    v0 = model.named_values()
+    names = list(sol.model.parameter_names)
+    sc = _scale(model, names)
+    weak = [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
+                                     and sol.std[n] <= trust / 3 * sc[n])]
+    if weak:
+        C0, C1 = model.edge_matrices()
+        cols = [model.slot_of(n) for n in weak]
+        hit = (np.abs(C0[:, :, cols]).sum((1, 2)) + np.abs(C1[:, :, cols]).sum((1, 2))) > 0
+        moved_edges = {e for e, h in zip(model.edge_names, hit, strict=True) if h}
+        kept = {key: m for key, m in kept.items() if m.edge not in moved_edges}
+        merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
+                           noise_px=noise_px, hold_unconstrained=True, where=where)
+        warnings.append("the proposals took " + ", ".join(weak) + " beyond the rough model's "
+                        f"accuracy ({trust:.0%}) or fix them loosely: their edges' proposals "
+                        "are withdrawn; mark some of those edges by hand")
     warnings = [w for w in warnings if not w.startswith("held at")]
     if sol.held:
         # never silently wrong: what no mark or proposal constrains is named
