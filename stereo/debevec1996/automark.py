@@ -28,8 +28,10 @@ of its value or its σ is a third of that), and a held parameter (one or,
 for two of one block, a pair together) is set by the detected length it
 would explain. After the last round a residual check drops every proposal
 farther than 3x the estimated noise from the solved model and re-solves;
-a parameter that nothing constrains in the end is named in the warnings
-(held at the rough value, never silently).
+the trust test runs once more on that solve (the proposals on the edges of
+a parameter it fails are withdrawn, the parameter named); a parameter that
+nothing constrains in the end is named in the warnings (held at the rough
+value, never silently).
 
 Each proposal is refined to sub-pixel precision first: the intensity profile
 across the segment is sampled at points along it, the gradient peak located
