@@ -248,7 +248,8 @@ def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
                 continue
             uv = P @ K.T
             uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
-            for _, j, s in _associate(det, np.concatenate([uv[0], uv[1]], 1), max_angle_deg=max_angle_deg,
+            E = np.concatenate([uv[0], uv[1]], 1)
+            for _, j, s in _associate(det, E, max_angle_deg=max_angle_deg,
                                       max_distance_px=max_distance_px):
                 if moves[idx[j]]:
                     total += float(np.hypot(*(s[2:] - s[:2])))
@@ -345,7 +346,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         # (a proposal the robust solve rejects is forgotten): parameters the
         # hand marks leave free get fixed by the proposals
         cur = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-        sol = _rough_solve(current, cur, K, rough=model, trust=trust, rough_rotations=rough_rotations,
+        sol = _rough_solve(current, cur, K, rough=model, trust=trust,
+                           rough_rotations=rough_rotations,
                            noise_px=noise_px, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
@@ -381,7 +383,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             vis = [(v["edge"], np.array(v["segment"])) for v in vis]
             det = found[photo]
             views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
-            pairs = _associate(det, np.array([e for _, e in vis], float), max_angle_deg=min(widen * max_angle_deg, 20.0),
+            pairs = _associate(det, np.array([e for _, e in vis], float),
+                               max_angle_deg=min(widen * max_angle_deg, 20.0),
                                max_distance_px=widen * max_distance_px)
             best: dict[str, np.ndarray] = {}
             for _, j, s in pairs:
