@@ -222,7 +222,7 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
     return out
 
 
-def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
+def _vote(model, values, names, views, *, max_angle_deg, max_distance_px, bounds=None):
     """Values for the parameters ``names`` that the marks left unconstrained
     (held at their starting values): each is scanned over ±30 % of its value
     (coarse to fine)
@@ -277,8 +277,13 @@ def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
             centre = v0.copy()
             for _ in range(2):
                 f = np.linspace(-half, half, n)
-                grid = np.stack(np.meshgrid(*[c + v * f for c, v in zip(centre, v0, strict=True)],
-                                            indexing="ij"), -1).reshape(-1, len(pair))
+                axes = [c + v * f for c, v in zip(centre, v0, strict=True)]
+                if bounds is not None:
+                    # never beyond what the rough model is trusted to (a
+                    # vote's value outside it is a block on the wrong lines)
+                    axes = [np.unique(np.clip(ax, *bounds[n])) for ax, n in zip(axes, pair,
+                                                                               strict=True)]
+                grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(pair))
                 scores = np.array([support(slots, g, moves) for g in grid])
                 if scores.max() > top:
                     best, top = grid[int(np.argmax(scores))], float(scores.max())
@@ -308,16 +313,47 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
 
     sol = solve_facade(model, marks, K, hold_unconstrained=True, **kw)
     v0 = rough.named_values()
-    names = [n for n in model.parameter_names if n not in sol.held]
-    sc = _scale(rough, names)
-    weak = [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
-                                     and sol.std[n] <= trust / 3 * sc[n])]
+    weak: list = []
+    again = sol
+    for _ in range(4):
+        # holding some can let another wander (the re-solve moves what the
+        # held ones pinned): test again until none fails
+        names = [n for n in model.parameter_names if n not in again.held and n not in weak]
+        sc = _scale(rough, names)
+        new = [n for n in names if not (abs(again.params[n] - v0[n]) <= trust * sc[n]
+                                        and again.std[n] <= trust / 3 * sc[n])]
+        if not new:
+            break
+        weak += new
+        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=True, **kw)
     if not weak:
         return sol
-    again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=True, **kw)
     return replace(again, held=tuple(weak) + again.held,
                    warnings=["held at their starting values (the marks barely constrain them): "
                              + ", ".join(weak)] + again.warnings)
+
+
+def _hand_outliers(sol, marks) -> set:
+    """The hand marks (not proposals) the robust solve ``sol`` left out."""
+    hand = {(m.photo, m.edge) for m in marks.marks}
+    return {(p, e) for p, e, _ in sol.outliers} & hand
+
+
+def _weak(sol, rough, trust) -> list:
+    """The parameters ``sol`` takes beyond ``trust`` (relative) of the
+    ``rough`` model's values or fixes only loosely (σ above a third of that)."""
+    v0 = rough.named_values()
+    names = list(sol.model.parameter_names)
+    sc = _scale(rough, names)
+    return [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
+                                     and sol.std[n] <= trust / 3 * sc[n])]
+
+
+def _hand_rms(sol, marks) -> float:
+    """RMS distance of the kept hand marks from the solved model (px)."""
+    hand = {(m.photo, m.edge) for m in marks.marks}
+    d = [r for p, e, r in sol.mark_rms_px if (p, e) in hand]
+    return float(np.sqrt(np.mean(np.square(d)))) if d else 0.0
 
 
 def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise_px: float = 1.0,
@@ -402,8 +438,12 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         if sol.held:
             # what the marks leave free stays at its starting value: find it by
             # the detections it would explain, so the next round can match them
+            sc = _scale(model, sol.held)
+            v0 = model.named_values()
             v = _vote(sol.model, sol.model.values, sol.held, views,
-                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
+                      bounds={n: (v0[n] - trust * sc[n], v0[n] + trust * sc[n])
+                              for n in sol.held})
             new = {n: float(v[sol.model.slot_of(n)]) for n in sol.held}
             moved = any(new[n] != sol.params[n] for n in new)
             current = current.with_values(new)
@@ -441,16 +481,46 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 sol, kept = alt, dict(old)
                 if not sol.held:
                     break
+    hand_out = _hand_outliers(sol, marks)
+    withdrawn: list[str] = []
+    for _ in range(3):
+        if not hand_out:
+            break
+        # a hand mark the robust solve throws out while proposals are in:
+        # the proposals conflict with it (a block locked onto the wrong
+        # image lines pulls the poses away from the hand marks), and hand
+        # marks are trusted more. Each edge's proposals are withdrawn in
+        # turn; the edge whose withdrawal lets the most hand marks back in
+        # (then: the fewest parameters failing the trust test, the fewest
+        # unconstrained, the lowest hand-mark residual) goes, and again
+        best = None
+        for edge in sorted({m.edge for m in kept.values()}):
+            trial = {key: m for key, m in kept.items() if m.edge != edge}
+            merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
+            alt = solve_facade(current, merged, K,
+                               rough_rotations={**(rough_rotations or {}), **last},
+                               noise_px=noise_px, hold_unconstrained=True, where=where)
+            score = (len(_hand_outliers(alt, marks)), len(_weak(alt, model, trust)), len(alt.held),
+                     _hand_rms(alt, marks))
+            if best is None or score < best[0]:
+                best = (score, edge, alt, trial)
+        # only a withdrawal that lets hand marks back in without leaving a
+        # parameter beyond the trust test or unconstrained that was not before
+        if best is None or best[0][0] >= len(hand_out) or best[0][1] > len(
+                _weak(sol, model, trust)) or best[0][2] > len(sol.held):
+            break
+        _, edge, sol, kept = best
+        hand_out = _hand_outliers(sol, marks)
+        withdrawn.append(edge)
+    if withdrawn:
+        warnings.append("proposals of " + ", ".join(withdrawn) + " conflicted with the hand "
+                        "marks (the solve rejected hand marks while they were in): withdrawn")
     # the trust test once more, on the final solve: a parameter the proposals
     # take beyond the rough model's accuracy, or fix only loosely, is not
     # believed (a block locked onto the wrong lines agrees with itself, which
     # the residual check cannot see): the proposals on the edges it moves are
     # withdrawn, the hand marks stay, and it is named
-    v0 = model.named_values()
-    names = list(sol.model.parameter_names)
-    sc = _scale(model, names)
-    weak = [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
-                                     and sol.std[n] <= trust / 3 * sc[n])]
+    weak = _weak(sol, model, trust)
     if weak:
         C0, C1 = model.edge_matrices()
         cols = [model.slot_of(n) for n in weak]
