@@ -30,8 +30,10 @@ Rows and checks:
   horizontal, σ = 0.5 px) on painted photographs: the RMS relative parameter
   error over seeds against the fully (σ = 0.5 px) marked solve — ≤ 1.2×
   (its own split: tuned on house s1, tower s3, village s5, and looked at
-  tower s8, village s9, shown as tuning cases; reported on
-  house s2, ell s4, tower s6, village s7; ``--quick``: tower s3 and s6);
+  tower s8, village s9, village s7, shown as tuning cases; reported on
+  house s2, ell s4, tower s6 and tower s12, village s13, house s14, named
+  before any run; ``--quick``: tower s3 and s6); the detail also names what
+  the full marks of 15 px or more (the detectable ones) leave unconstrained;
 - solve time, ``village`` (10 blocks) × 8 photographs × 150 segments each
   (each visible edge marked as several pieces) — ≤ 1 s.
 
@@ -55,11 +57,13 @@ REPORTED = [("house", 2), ("tower", 3), ("ell", 4), ("village", 5)]
 # reported on camera seeds no one looked at while tuning; tower s8 and
 # village s9 were looked at after that (the final trust test came from
 # village s9) and are shown as tuning cases, failures included
-AUTO_TUNED = [("house", 1), ("tower", 3), ("village", 5), ("tower", 8), ("village", 9)]
-# round 2 (hand marks outrank proposals) named three more held-out camera
-# seeds here before any run on them: tower s12, village s13, house s14
-AUTO_REPORTED = [("house", 2), ("ell", 4), ("tower", 6), ("village", 7), ("tower", 12),
-                 ("village", 13), ("house", 14)]
+# round 2 named three more held-out camera seeds here before any run on
+# them (tower s12, village s13, house s14); it then diagnosed a regression on
+# village s7 (a bounded vote, removed), so village s7 is a tuning case now
+AUTO_TUNED = [("house", 1), ("tower", 3), ("village", 5), ("tower", 8), ("village", 9),
+              ("village", 7)]
+AUTO_REPORTED = [("house", 2), ("ell", 4), ("tower", 6), ("tower", 12), ("village", 13),
+                 ("house", 14)]
 
 MODELS = {
     "tower": {"blocks": [
@@ -301,14 +305,14 @@ def automatic_marking(quick: bool):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     seeds = 2 if quick else 4
-    rows, ratios, held_by, tuned = [], [], {}, []
+    rows, ratios, held_by, tuned, blinds = [], [], {}, [], []
     # quick: one tuning and one reported case, flush blocks both
     cases = [("tower", 3), ("tower", 6)] if quick else AUTO_TUNED + AUTO_REPORTED
     for name, seed in cases:
         model, cams = scene(name, seed)
         tv = model.named_values()
         free = list(model.parameter_names)
-        ea, ef, props, held = [], [], [], set()
+        ea, ef, props, held, blind = [], [], [], set(), set()
         # the tuning cases are shown for reference: two noise seeds suffice
         n_seeds = min(seeds, 2) if (name, seed) in AUTO_TUNED else seeds
         for k in range(n_seeds):
@@ -320,6 +324,17 @@ def automatic_marking(quick: bool):
             images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}
             start = model.with_values(model.values[~model.fixed] * rng.uniform(0.9, 1.1))
             sf = solve_facade(start, full, _K(cams), noise_px=0.5)
+            # like with like: the full marks automatic marking could detect at
+            # all (at least its 15 px minimum length); what they leave
+            # unconstrained (held, or fitted 100 % off) is information the
+            # photographs' detectable lines do not hold, counted, not excused
+            seen = {p: [m for m in v if math.hypot(m["segment"][2] - m["segment"][0],
+                                                   m["segment"][3] - m["segment"][1]) >= 15.0]
+                    for p, v in raw.items()}
+            sv = solve_facade(start, EdgeMarks.from_dict({"photographs": seen}, model=model,
+                                                         photographs=list(cams)),
+                              _K(cams), noise_px=0.5, hold_unconstrained=True)
+            blind |= set(sv.held) | {n for n in free if abs(sv.params[n] - tv[n]) > abs(tv[n])}
             res = automark(start, hand, images, _K(cams), noise_px=0.5)
             # what the proposals leave unconstrained keeps its rough value and
             # counts with that error (a user would have to mark it)
@@ -332,7 +347,10 @@ def automatic_marking(quick: bool):
         rf = float(np.sqrt(np.mean(np.square(ef))))
         rows.append(_row(_label(name, seed, AUTO_TUNED), "automatic marking (4 hand marks)", None,
                          ra / rf, auto_rms_rel=ra, full_rms_rel=rf,
-                         proposed_mean=float(np.mean(props)), seeds=n_seeds, held=sorted(held)))
+                         proposed_mean=float(np.mean(props)), seeds=n_seeds, held=sorted(held),
+                         unconstrained_by_detectable_full_marks=sorted(blind)))
+        if blind:
+            blinds.append(f"{name} s{seed}: {', '.join(sorted(blind))}")
         if (name, seed) in AUTO_TUNED:
             tuned.append(f"{name} s{seed} {ra / rf:.2f}")
         else:
@@ -349,7 +367,9 @@ def automatic_marking(quick: bool):
                                 [c for c in cases if c not in AUTO_TUNED], ratios, strict=True))
                         + f"; tuning cases (outside the target) {', '.join(tuned)}"
                         + f"; {seeds} noise seeds per reported scene (2 per tuning one), "
-                          "σ = 0.5 px hand and full marks" + (f"; {why}" if why else ""))]
+                          "σ = 0.5 px hand and full marks" + (f"; {why}" if why else "")
+                        + ("; the full marks of 15 px or more (what the detector can see) leave "
+                           "unconstrained " + "; ".join(blinds) if blinds else ""))]
 
 
 def solve_time(quick: bool):

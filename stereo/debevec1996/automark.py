@@ -24,11 +24,16 @@ faces) are candidates, so a hidden edge gets no proposal. Rounds re-solve
 from the hand marks and the proposals so far with gates that start wide
 and tighten; the rough solve holds at its starting value any parameter
 the marks leave free or only pretend to fix (it moves more than ``trust``
-of its value or its σ is a third of that), and a held parameter (one or,
+of its value or its σ is a third of that; tested again after each
+re-solve, since holding one can let another wander), and a held parameter (one or,
 for two of one block, a pair together) is set by the detected length it
 would explain. After the last round a residual check drops every proposal
 farther than 3x the estimated noise from the solved model and re-solves;
-the trust test runs once more on that solve (the proposals on the edges of
+a hand mark that solve rejects means proposals conflict with it (hand
+marks outrank proposals): the edge whose proposals' withdrawal lets the
+most hand marks back in, without leaving a parameter failing the trust
+test or unconstrained, is withdrawn (up to three edges); the trust test
+runs once more on that solve (the proposals on the edges of
 a parameter it fails are withdrawn, the parameter named); a parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently).
@@ -222,7 +227,7 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
     return out
 
 
-def _vote(model, values, names, views, *, max_angle_deg, max_distance_px, bounds=None):
+def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     """Values for the parameters ``names`` that the marks left unconstrained
     (held at their starting values): each is scanned over ±30 % of its value
     (coarse to fine)
@@ -277,13 +282,8 @@ def _vote(model, values, names, views, *, max_angle_deg, max_distance_px, bounds
             centre = v0.copy()
             for _ in range(2):
                 f = np.linspace(-half, half, n)
-                axes = [c + v * f for c, v in zip(centre, v0, strict=True)]
-                if bounds is not None:
-                    # never beyond what the rough model is trusted to (a
-                    # vote's value outside it is a block on the wrong lines)
-                    axes = [np.unique(np.clip(ax, *bounds[n])) for ax, n in zip(axes, pair,
-                                                                               strict=True)]
-                grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, len(pair))
+                grid = np.stack(np.meshgrid(*[c + v * f for c, v in zip(centre, v0, strict=True)],
+                                            indexing="ij"), -1).reshape(-1, len(pair))
                 scores = np.array([support(slots, g, moves) for g in grid])
                 if scores.max() > top:
                     best, top = grid[int(np.argmax(scores))], float(scores.max())
@@ -438,12 +438,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         if sol.held:
             # what the marks leave free stays at its starting value: find it by
             # the detections it would explain, so the next round can match them
-            sc = _scale(model, sol.held)
-            v0 = model.named_values()
             v = _vote(sol.model, sol.model.values, sol.held, views,
-                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
-                      bounds={n: (v0[n] - trust * sc[n], v0[n] + trust * sc[n])
-                              for n in sol.held})
+                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
             new = {n: float(v[sol.model.slot_of(n)]) for n in sol.held}
             moved = any(new[n] != sol.params[n] for n in new)
             current = current.with_values(new)
