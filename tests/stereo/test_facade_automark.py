@@ -130,3 +130,19 @@ def test_rough_solve_retests_what_a_re_solve_lets_wander():
     for n, v in model.named_values().items():
         if sol.std[n] > 0:
             assert abs(sol.params[n] - v) <= 5 * sol.std[n], (n, sol.params[n], v, sol.std[n])
+
+
+def test_cli_refuses_to_overwrite_the_input_edges_naming_the_path(tmp_path):
+    # the refusal names the file (the library's convention), not the flag;
+    # --force passes the generic guard against replacing a file it did not
+    # write, which refuses first otherwise
+    from cli_catalog import _facade_folder, run_cli
+
+    _facade_folder(tmp_path)
+    edges = tmp_path / "facade" / "edges.json"
+    before = edges.read_bytes()
+    rc, _, err = run_cli(["stereo", "facade", "automark", tmp_path / "facade", "--out", edges,
+                          "--force", "-q"])
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and lines[0].startswith(f"error: {edges}:"), err
+    assert "--out" not in lines[0] and edges.read_bytes() == before
