@@ -28,7 +28,12 @@ Rows and checks:
   minimum found from the truth (parameters within 1e-6 relative) — ≥ 95 %;
 - automatic marking from four hand marks per photograph (two vertical, two
   horizontal, σ = 0.5 px) on painted photographs: the RMS relative parameter
-  error over seeds against the fully (σ = 0.5 px) marked solve — ≤ 1.2×;
+  error over seeds against the fully (σ = 0.5 px) marked solve — ≤ 1.2×
+  (its own split: tuned on house s1, tower s3, village s5, and looked at
+  tower s8, village s9, village s7, shown as tuning cases; reported on
+  house s2, ell s4, tower s6 and tower s12, village s13, house s14, named
+  before any run; ``--quick``: tower s3 and s6); the detail also names what
+  the full marks of 15 px or more (the detectable ones) leave unconstrained;
 - solve time, ``village`` (10 blocks) × 8 photographs × 150 segments each
   (each visible edge marked as several pieces) — ≤ 1 s.
 
@@ -47,6 +52,18 @@ from lumigraph.capture.bench import Check, Row, Stage
 
 TUNED = [("house", 1)]
 REPORTED = [("house", 2), ("tower", 3), ("ell", 4), ("village", 5)]
+# automatic marking was reworked on tower s3 and village s5 (flush blocks, a
+# hidden annex), so for it they are tuning cases too, and its target is
+# reported on camera seeds no one looked at while tuning; tower s8 and
+# village s9 were looked at after that (the final trust test came from
+# village s9) and are shown as tuning cases, failures included
+# round 2 named three more held-out camera seeds here before any run on
+# them (tower s12, village s13, house s14); it then diagnosed a regression on
+# village s7 (a bounded vote, removed), so village s7 is a tuning case now
+AUTO_TUNED = [("house", 1), ("tower", 3), ("village", 5), ("tower", 8), ("village", 9),
+              ("village", 7)]
+AUTO_REPORTED = [("house", 2), ("ell", 4), ("tower", 6), ("tower", 12), ("village", 13),
+                 ("house", 14)]
 
 MODELS = {
     "tower": {"blocks": [
@@ -154,8 +171,8 @@ def _rot_err(A, B) -> float:
     return float(Rotation.from_matrix(A.T @ B).magnitude())
 
 
-def _label(name, seed):
-    return f"{name} s{seed} ({'tuned' if (name, seed) in TUNED else 'reported'})"
+def _label(name, seed, tuned=TUNED):
+    return f"{name} s{seed} ({'tuned' if (name, seed) in tuned else 'reported'})"
 
 
 def _row(case, method, value, err, t=math.nan, **extra):
@@ -288,13 +305,17 @@ def automatic_marking(quick: bool):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     seeds = 2 if quick else 4
-    rows, ratios, held_by = [], [], {}
-    for name, seed in (TUNED + REPORTED)[: 2 if quick else None]:
+    rows, ratios, held_by, tuned, blinds = [], [], {}, [], []
+    # quick: one tuning and one reported case, flush blocks both
+    cases = [("tower", 3), ("tower", 6)] if quick else AUTO_TUNED + AUTO_REPORTED
+    for name, seed in cases:
         model, cams = scene(name, seed)
         tv = model.named_values()
         free = list(model.parameter_names)
-        ea, ef, props, held = [], [], [], set()
-        for k in range(seeds):
+        ea, ef, props, held, blind = [], [], [], set(), set()
+        # the tuning cases are shown for reference: two noise seeds suffice
+        n_seeds = min(seeds, 2) if (name, seed) in AUTO_TUNED else seeds
+        for k in range(n_seeds):
             rng = np.random.default_rng(500 + 10 * seed + k)
             raw, full = _marks(model, cams, noise=0.5, rng=rng)
             hand = EdgeMarks.from_dict({"photographs": {p: _four_hand_marks(model, v)
@@ -303,6 +324,17 @@ def automatic_marking(quick: bool):
             images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}
             start = model.with_values(model.values[~model.fixed] * rng.uniform(0.9, 1.1))
             sf = solve_facade(start, full, _K(cams), noise_px=0.5)
+            # like with like: the full marks automatic marking could detect at
+            # all (at least its 15 px minimum length); what they leave
+            # unconstrained (held, or fitted 100 % off) is information the
+            # photographs' detectable lines do not hold, counted, not excused
+            seen = {p: [m for m in v if math.hypot(m["segment"][2] - m["segment"][0],
+                                                   m["segment"][3] - m["segment"][1]) >= 15.0]
+                    for p, v in raw.items()}
+            sv = solve_facade(start, EdgeMarks.from_dict({"photographs": seen}, model=model,
+                                                         photographs=list(cams)),
+                              _K(cams), noise_px=0.5, hold_unconstrained=True)
+            blind |= set(sv.held) | {n for n in free if abs(sv.params[n] - tv[n]) > abs(tv[n])}
             res = automark(start, hand, images, _K(cams), noise_px=0.5)
             # what the proposals leave unconstrained keeps its rough value and
             # counts with that error (a user would have to mark it)
@@ -313,10 +345,15 @@ def automatic_marking(quick: bool):
             ef.append([(sf.params[n] - tv[n]) / tv[n] for n in free])
         ra = float(np.sqrt(np.mean(np.square(ea))))
         rf = float(np.sqrt(np.mean(np.square(ef))))
-        rows.append(_row(_label(name, seed), "automatic marking (4 hand marks)", None, ra / rf,
-                         auto_rms_rel=ra, full_rms_rel=rf, proposed_mean=float(np.mean(props)),
-                         seeds=seeds, held=sorted(held)))
-        if (name, seed) not in TUNED:
+        rows.append(_row(_label(name, seed, AUTO_TUNED), "automatic marking (4 hand marks)", None,
+                         ra / rf, auto_rms_rel=ra, full_rms_rel=rf,
+                         proposed_mean=float(np.mean(props)), seeds=n_seeds, held=sorted(held),
+                         unconstrained_by_detectable_full_marks=sorted(blind)))
+        if blind:
+            blinds.append(f"{name} s{seed}: {', '.join(sorted(blind))}")
+        if (name, seed) in AUTO_TUNED:
+            tuned.append(f"{name} s{seed} {ra / rf:.2f}")
+        else:
             ratios.append(ra / rf)
             if held:
                 held_by[name] = sorted(held)
@@ -325,9 +362,14 @@ def automatic_marking(quick: bool):
                     for n, h in held_by.items())
     return rows, [Check("automatic marking from 4 hand marks per photograph: RMS parameter error "
                         "within 1.2x the fully marked solve (reported scenes, worst)", worst, 1.2,
-                        worst <= 1.2, f"per scene {', '.join(f'{v:.2f}' for v in ratios)}; "
-                                      f"{seeds} seeds each, σ = 0.5 px hand and full marks"
-                                      + (f"; {why}" if why else ""))]
+                        worst <= 1.2, "per reported scene " + ", ".join(
+                            f"{n} s{sd} {v:.2f}" for (n, sd), v in zip(
+                                [c for c in cases if c not in AUTO_TUNED], ratios, strict=True))
+                        + f"; tuning cases (outside the target) {', '.join(tuned)}"
+                        + f"; {seeds} noise seeds per reported scene (2 per tuning one), "
+                          "σ = 0.5 px hand and full marks" + (f"; {why}" if why else "")
+                        + ("; the full marks of 15 px or more (what the detector can see) leave "
+                           "unconstrained " + "; ".join(blinds) if blinds else ""))]
 
 
 def solve_time(quick: bool):

@@ -13,7 +13,30 @@ mark of a reprojected edge when
 - its direction is within ``max_angle_deg`` of the edge's,
 - both its ends lie within ``max_distance_px`` of the edge's line,
 - at least half its length overlaps the edge's visible stretch,
-- no other edge passes these gates nearly as well (ambiguous: left out).
+- no other edge passes these gates nearly as well (ambiguous: left out),
+  except edges whose projected lines coincide with it (a block flush with
+  its neighbour puts its edges on the neighbour's image lines): those share
+  the detection, each taking the part that overlaps its own projected
+  extent.
+
+Only edges visible in the rough model (sampled points not hidden by its
+faces) are candidates, so a hidden edge gets no proposal. Rounds re-solve
+from the hand marks and the proposals so far with gates that start wide
+and tighten; the rough solve holds at its starting value any parameter
+the marks leave free or only pretend to fix (it moves more than ``trust``
+of its value or its σ is a third of that; tested again after each
+re-solve, since holding one can let another wander), and a held parameter (one or,
+for two of one block, a pair together) is set by the detected length it
+would explain. After the last round a residual check drops every proposal
+farther than 3x the estimated noise from the solved model and re-solves;
+a hand mark that solve rejects means proposals conflict with it (hand
+marks outrank proposals): the edge whose proposals' withdrawal lets the
+most hand marks back in, without leaving a parameter failing the trust
+test or unconstrained, is withdrawn (up to three edges); the trust test
+runs once more on that solve (the proposals on the edges of
+a parameter it fails are withdrawn, the parameter named); a parameter that
+nothing constrains in the end is named in the warnings (held at the rough
+value, never silently).
 
 Each proposal is refined to sub-pixel precision first: the intensity profile
 across the segment is sampled at points along it, the gradient peak located
@@ -54,7 +77,11 @@ class AutomarkResult:
     warnings: list = field(default_factory=list)
 
 
-def check_automark_options(*, max_angle_deg: float, max_distance_px: float) -> None:
+def check_automark_options(*, max_angle_deg: float, max_distance_px: float,
+                           trust: float = 0.3) -> None:
+    if not (0 < trust < 1):
+        raise InputError("trust", f"expected the rough model's relative accuracy in (0, 1), "
+                                  f"got {trust}")
     if not (0 < max_angle_deg <= 45):
         raise InputError("max_angle_deg", f"expected an angle in (0, 45] degrees, got {max_angle_deg}")
     if not (max_distance_px > 0 and np.isfinite(max_distance_px)):
@@ -135,13 +162,24 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
     return out
 
 
-def _associate(det, visible, *, max_angle_deg, max_distance_px):
-    """Index of the visible edge each detection belongs to, or -1
-    (vectorised over detections x edges; the gates of the module docstring)."""
-    out = np.full(len(det), -1)
-    if not len(visible) or not len(det):
-        return out
-    E = np.array([e for _, e in visible], float)
+def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
+               min_overlap_px=10.0):
+    """The proposals the detections ``det`` (N, 4) make for the projected
+    edges ``E`` (M, 4): ``(i, j, segment)`` for
+    detection ``i`` given to edge ``j`` (vectorised over detections x edges;
+    the gates of the module docstring).
+
+    Edges whose projected lines coincide over the detection (within
+    ``coincident_px`` at both its ends: a block flush with its neighbour,
+    the annex's front corner on the tower's front corner) are one line in
+    the photograph: the detection is no more ambiguous between them than
+    between the two ends of one edge. Each of them whose projected extent
+    overlaps it by ``min_overlap_px`` or more gets the overlapping part
+    (the solver measures distance to the line; the part is where that edge
+    is seen), instead of the detection being dropped as ambiguous."""
+    E = np.asarray(E, float).reshape(-1, 4)
+    if not len(E) or not len(det):
+        return []
     a, b = det[:, None, :2], det[:, None, 2:]
     p, q = E[None, :, :2], E[None, :, 2:]
     L = np.hypot(*(E[:, 2:] - E[:, :2]).T)[None]
@@ -160,84 +198,193 @@ def _associate(det, visible, *, max_angle_deg, max_distance_px):
     j = np.argmin(score, 1)
     rows = np.arange(len(det))
     first = score[rows, j]
-    score[rows, j] = np.inf
-    second = score.min(1)
-    # the nearest line must hold the detection; any other line in the gates
-    # (even one the detection overruns: a silhouette spanning several
-    # edges) nearly as near makes it ambiguous
-    ok = np.isfinite(first) & (overlap[rows, j] >= 0.5 * (hi - lo)[rows, j]) \
-        & ~(second < 1.5 * first + 0.5)
-    out[ok] = j[ok]
+    # edges on the same image line as the nearest: the nearest's feet of the
+    # detection's ends lie within coincident_px of their lines too
+    nn = nrm[0, j] @ nrm[0].T                          # ±1 for parallel lines
+    same = gate & (np.abs(ha - ha[rows, j][:, None] * nn) <= coincident_px) \
+        & (np.abs(hb - hb[rows, j][:, None] * nn) <= coincident_px)
+    other = np.where(same, np.inf, score)
+    # any other line in the gates (even one the detection overruns: a
+    # silhouette spanning several edges) nearly as near makes it ambiguous
+    ok = np.isfinite(first) & ~(other.min(1) < 1.5 * first + 0.5)
+    out = []
+    for i in np.flatnonzero(ok):
+        group = np.flatnonzero(same[i])
+        if len(group) == 1:
+            if overlap[i, j[i]] >= 0.5 * (hi - lo)[i, j[i]]:
+                out.append((int(i), int(j[i]), det[i]))
+            continue
+        for k in group:
+            if overlap[i, k] < min_overlap_px:
+                continue
+            s0, s1 = max(lo[i, k], 0.0), min(hi[i, k], L[0, k])
+            # the detection's own points over [s0, s1] of edge k's extent
+            d = det[i, 2:] - det[i, :2]
+            u = (d @ de[0, k]) or 1e-9
+            c0, c1 = (s0 - ta[i, k]) / u, (s1 - ta[i, k]) / u
+            c0, c1 = sorted((float(np.clip(c0, 0, 1)), float(np.clip(c1, 0, 1))))
+            out.append((int(i), int(k), np.r_[det[i, :2] + c0 * d, det[i, :2] + c1 * d]))
     return out
 
 
 def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     """Values for the parameters ``names`` that the marks left unconstrained
-    (held at their starting values), one after the other: each is scanned
-    over ±30 % of its value and set where the most detected length matches
-    the edges it moves (the others' detections count too, through the
-    ambiguity test). ``views``: (visible edge names, K, R, t, detections)
-    per photograph."""
+    (held at their starting values): each is scanned over ±30 % of its value
+    (coarse to fine)
+    and set where the most detected length matches the edges it moves (the
+    others' detections count too, through the ambiguity test); two held
+    parameters of one block (a width and an offset: the marks may fix one
+    side of the block only) are scanned together, on a grid. ``views``:
+    (visible edge names, K, R, t, detections) per photograph."""
     C0, C1 = model.edge_matrices()
     index = {n: i for i, n in enumerate(model.edge_names)}
     values = values.copy()
+
+    def support(slots, vals, moves):
+        th = values.copy()
+        th[slots] = vals
+        total = 0.0
+        for vis, K, R, t, det in views:
+            idx = np.array([index[e] for e in vis], int)
+            if not len(idx) or not len(det):
+                continue
+            P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
+            if np.any(P[:, 2] <= 1e-9):
+                continue
+            uv = P @ K.T
+            uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
+            E = np.concatenate([uv[0], uv[1]], 1)
+            for _, j, s in _associate(det, E, max_angle_deg=max_angle_deg,
+                                      max_distance_px=max_distance_px):
+                if moves[idx[j]]:
+                    total += float(np.hypot(*(s[2:] - s[:2])))
+        return total
+
+    groups: dict[str, list] = {}
     for name in names:
-        slot = model.slot_of(name)
-        moves = (np.abs(C0[:, :, slot]).sum(1) + np.abs(C1[:, :, slot]).sum(1)) > 0
-
-        def support(v, slot=slot, moves=moves):
-            th = values.copy()
-            th[slot] = v
-            total = 0.0
-            for vis, K, R, t, det in views:
-                idx = np.array([index[e] for e in vis], int)
-                if not len(idx) or not len(det):
-                    continue
-                P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
-                if np.any(P[:, 2] <= 1e-9):
-                    continue
-                uv = P @ K.T
-                uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
-                segs = [(None, np.r_[uv[0, k], uv[1, k]]) for k in range(len(idx))]
-                got = _associate(det, segs, max_angle_deg=max_angle_deg,
-                                 max_distance_px=max_distance_px)
-                hit = got >= 0
-                hit[hit] = moves[idx[got[hit]]]
-                total += float(np.hypot(*(det[hit, 2:] - det[hit, :2]).T).sum())
-            return total
-
-        v0 = values[slot]
-        cands = v0 * np.linspace(0.7, 1.3, 31)
-        scores = np.array([support(v) for v in cands])
-        if scores.max() > support(v0):
-            values[slot] = cands[int(np.argmax(scores))]
+        groups.setdefault(name.split("/")[0], []).append(name)
+    seen = np.zeros(len(C0), bool)
+    for vis, *_ in views:
+        seen[[index[e] for e in vis]] = True
+    for group in groups.values():
+        for pair in ([group] if len(group) == 2 else [[n] for n in group]):
+            slots = np.array([model.slot_of(n) for n in pair])
+            moves = np.zeros(len(C0), bool)
+            for sl in slots:
+                moves |= (np.abs(C0[:, :, sl]).sum(1) + np.abs(C1[:, :, sl]).sum(1)) > 0
+            if not (moves & seen).any():
+                continue        # it moves no edge any photograph shows (a hidden block)
+            v0 = values[slots]
+            best, top = v0.copy(), support(slots, v0, moves)
+            # coarse to fine: ±30 % in 13 (one parameter) or 7 x 7 steps, then
+            # ± one coarse step around the best in 5 (x 5)
+            half, n = 0.3, (13 if len(pair) == 1 else 7)
+            centre = v0.copy()
+            for _ in range(2):
+                f = np.linspace(-half, half, n)
+                grid = np.stack(np.meshgrid(*[c + v * f for c, v in zip(centre, v0, strict=True)],
+                                            indexing="ij"), -1).reshape(-1, len(pair))
+                scores = np.array([support(slots, g, moves) for g in grid])
+                if scores.max() > top:
+                    best, top = grid[int(np.argmax(scores))], float(scores.max())
+                centre, half, n = best.copy(), 2 * half / (n - 1), 5
+            values[slots] = best
     return values
+
+
+def _scale(model, names):
+    """The length against which each parameter's change is judged: its
+    own value, or for one near zero (an offset) a tenth of the model's
+    median size."""
+    v = model.named_values()
+    sizes = [abs(x) for n, x in v.items() if n.rsplit("/", 1)[-1] in ("width", "depth", "height")]
+    floor = 0.1 * float(np.median(sizes)) if sizes else 0.0
+    return {n: max(abs(v[n]), floor) for n in names}
+
+
+def _rough_solve(model, marks, K, *, rough, trust, **kw):
+    """:func:`solve_facade` holding what the marks leave free, and also
+    what they only pretend to fix: a parameter whose fitted value leaves
+    ``trust`` (relative) of its value in the user's ``rough`` model, or
+    whose σ exceeds a third of that, is held at its current value (with few and noisy marks a weak
+    direction wanders, e.g. a depth seen nearly end-on goes negative, and
+    every proposal matched against that model is wrong)."""
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    sol = solve_facade(model, marks, K, hold_unconstrained=True, **kw)
+    v0 = rough.named_values()
+    weak: list = []
+    again = sol
+    for _ in range(4):
+        # holding some can let another wander (the re-solve moves what the
+        # held ones pinned): test again until none fails
+        names = [n for n in model.parameter_names if n not in again.held and n not in weak]
+        sc = _scale(rough, names)
+        new = [n for n in names if not (abs(again.params[n] - v0[n]) <= trust * sc[n]
+                                        and again.std[n] <= trust / 3 * sc[n])]
+        if not new:
+            break
+        weak += new
+        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=True, **kw)
+    if not weak:
+        return sol
+    return replace(again, held=tuple(weak) + again.held,
+                   warnings=["held at their starting values (the marks barely constrain them): "
+                             + ", ".join(weak)] + again.warnings)
+
+
+def _hand_outliers(sol, marks) -> set:
+    """The hand marks (not proposals) the robust solve ``sol`` left out."""
+    hand = {(m.photo, m.edge) for m in marks.marks}
+    return {(p, e) for p, e, _ in sol.outliers} & hand
+
+
+def _weak(sol, rough, trust) -> list:
+    """The parameters ``sol`` takes beyond ``trust`` (relative) of the
+    ``rough`` model's values or fixes only loosely (σ above a third of that)."""
+    v0 = rough.named_values()
+    names = list(sol.model.parameter_names)
+    sc = _scale(rough, names)
+    return [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
+                                     and sol.std[n] <= trust / 3 * sc[n])]
+
+
+def _hand_rms(sol, marks) -> float:
+    """RMS distance of the kept hand marks from the solved model (px)."""
+    hand = {(m.photo, m.edge) for m in marks.marks}
+    d = [r for p, e, r in sol.mark_rms_px if (p, e) in hand]
+    return float(np.sqrt(np.mean(np.square(d)))) if d else 0.0
 
 
 def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise_px: float = 1.0,
              max_angle_deg: float = 3.0, max_distance_px: float = 6.0,
-             min_length_px: float = 15.0, rounds: int = 8,
+             min_length_px: float = 15.0, rounds: int = 8, trust: float = 0.3,
              where: str = "edges.json") -> AutomarkResult:
     """Propose marks for the model edges the hand ``marks`` left unmarked
     (module docstring). ``images``: photo -> image (8/16-bit or float in
-    [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs)."""
+    [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs);
+    ``trust``: how far (relative) the rough ``model``'s parameters may be
+    from the truth (a rough solve that moves one farther holds it)."""
     from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.edges import Mark
     from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
 
-    check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+    check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
+                           trust=trust)
     greys = {p: _grey(images[p]) for p in marks.photographs}
     found = {p: detect_segments(greys[p], min_length_px=min_length_px) for p in marks.photographs}
     kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
     current = model
+    vetted: list[dict] = []
     for k in range(rounds):
         widen = max(1.0, 4.0 - k)   # wide gates first: held parameters start far off
         # each round solves from the hand marks and the proposals so far
         # (a proposal the robust solve rejects is forgotten): parameters the
         # hand marks leave free get fixed by the proposals
         cur = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-        sol = solve_facade(current, cur, K, rough_rotations=rough_rotations, noise_px=noise_px,
-                           hold_unconstrained=True, where=where)
+        sol = _rough_solve(current, cur, K, rough=model, trust=trust,
+                           rough_rotations=rough_rotations,
+                           noise_px=noise_px, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
         # a proposal made under wider gates stays only while it passes this
@@ -255,6 +402,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 kept.pop(key)
         warnings = list(sol.warnings)
         before = set(kept)
+        vetted.append(dict(kept))      # what this round's solve accepted
         views = []
         for photo in marks.photographs:
             if photo not in sol.poses:
@@ -271,12 +419,11 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             vis = [(v["edge"], np.array(v["segment"])) for v in vis]
             det = found[photo]
             views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
-            which = _associate(det, vis, max_angle_deg=min(widen * max_angle_deg, 20.0),
+            pairs = _associate(det, np.array([e for _, e in vis], float),
+                               max_angle_deg=min(widen * max_angle_deg, 20.0),
                                max_distance_px=widen * max_distance_px)
             best: dict[str, np.ndarray] = {}
-            for s, j in zip(det, which, strict=True):
-                if j < 0:
-                    continue
+            for _, j, s in pairs:
                 name = vis[j][0]
                 if name in hand:
                     continue
@@ -287,14 +434,106 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 seg = refine_segment(greys[photo], s)
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
+        moved = False
         if sol.held:
             # what the marks leave free stays at its starting value: find it by
             # the detections it would explain, so the next round can match them
             v = _vote(sol.model, sol.model.values, sol.held, views,
                       max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
-            current = current.with_values({n: float(v[sol.model.slot_of(n)]) for n in sol.held})
-        elif widen == 1.0 and set(kept) == before:
+            new = {n: float(v[sol.model.slot_of(n)]) for n in sol.held}
+            moved = any(new[n] != sol.params[n] for n in new)
+            current = current.with_values(new)
+        if widen == 1.0 and set(kept) == before and not moved:
+            break       # nothing changed: another round would repeat this one
+    # the residual check: solve with every proposal, drop those farther from
+    # the solved model's edges than 3x the noise the solve estimates (a
+    # detection of a neighbouring line that the gates let through), re-solve
+    # (from the last round's rotations: a vanishing-direction start with a
+    # few wrong proposals among the marks can land in another minimum)
+    last = {p: R for p, (R, _) in sol.poses.items()}
+    for _ in range(3):
+        merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
+                           noise_px=noise_px, hold_unconstrained=True, where=where)
+        limit = 3.0 * max(sol.sigma_px, 0.1)
+        far = {(p, e) for p, e, d in sol.mark_rms_px if d > limit} | {
+            (p, e) for p, e, _ in sol.outliers}
+        far &= set(kept)
+        if not far:
             break
+        for key in far:
+            kept.pop(key)
+    if sol.held:
+        # the last round's new proposals can undo what the rounds built (a
+        # flush edge given to the wrong block, the edges that fix the scale
+        # dropped as its outliers): fall back to a set a round's solve
+        # accepted when that leaves fewer parameters unconstrained
+        for old in vetted[::-1][:2]:
+            merged = replace(marks, marks=tuple(marks.marks) + tuple(old.values()))
+            alt = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}),
+                                                                    **last},
+                               noise_px=noise_px, hold_unconstrained=True, where=where)
+            if len(alt.held) < len(sol.held):
+                sol, kept = alt, dict(old)
+                if not sol.held:
+                    break
+    hand_out = _hand_outliers(sol, marks)
+    withdrawn: list[str] = []
+    for _ in range(3):
+        if not hand_out:
+            break
+        # a hand mark the robust solve throws out while proposals are in:
+        # the proposals conflict with it (a block locked onto the wrong
+        # image lines pulls the poses away from the hand marks), and hand
+        # marks are trusted more. Each edge's proposals are withdrawn in
+        # turn; the edge whose withdrawal lets the most hand marks back in
+        # (then: the fewest parameters failing the trust test, the fewest
+        # unconstrained, the lowest hand-mark residual) goes, and again
+        best = None
+        for edge in sorted({m.edge for m in kept.values()}):
+            trial = {key: m for key, m in kept.items() if m.edge != edge}
+            merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
+            alt = solve_facade(current, merged, K,
+                               rough_rotations={**(rough_rotations or {}), **last},
+                               noise_px=noise_px, hold_unconstrained=True, where=where)
+            score = (len(_hand_outliers(alt, marks)), len(_weak(alt, model, trust)), len(alt.held),
+                     _hand_rms(alt, marks))
+            if best is None or score < best[0]:
+                best = (score, edge, alt, trial)
+        # only a withdrawal that lets hand marks back in without leaving a
+        # parameter beyond the trust test or unconstrained that was not before
+        if best is None or best[0][0] >= len(hand_out) or best[0][1] > len(
+                _weak(sol, model, trust)) or best[0][2] > len(sol.held):
+            break
+        _, edge, sol, kept = best
+        hand_out = _hand_outliers(sol, marks)
+        withdrawn.append(edge)
+    if withdrawn:
+        warnings.append("proposals of " + ", ".join(withdrawn) + " conflicted with the hand "
+                        "marks (the solve rejected hand marks while they were in): withdrawn")
+    # the trust test once more, on the final solve: a parameter the proposals
+    # take beyond the rough model's accuracy, or fix only loosely, is not
+    # believed (a block locked onto the wrong lines agrees with itself, which
+    # the residual check cannot see): the proposals on the edges it moves are
+    # withdrawn, the hand marks stay, and it is named
+    weak = _weak(sol, model, trust)
+    if weak:
+        C0, C1 = model.edge_matrices()
+        cols = [model.slot_of(n) for n in weak]
+        hit = (np.abs(C0[:, :, cols]).sum((1, 2)) + np.abs(C1[:, :, cols]).sum((1, 2))) > 0
+        moved_edges = {e for e, h in zip(model.edge_names, hit, strict=True) if h}
+        kept = {key: m for key, m in kept.items() if m.edge not in moved_edges}
+        merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
+                           noise_px=noise_px, hold_unconstrained=True, where=where)
+        warnings.append("the proposals took " + ", ".join(weak) + " beyond the rough model's "
+                        f"accuracy ({trust:.0%}) or fix them loosely: their edges' proposals "
+                        "are withdrawn; mark some of those edges by hand")
+    warnings = [w for w in warnings if not w.startswith("held at")]
+    if sol.held:
+        # never silently wrong: what no mark or proposal constrains is named
+        warnings.append("no hand mark or proposal constrains " + ", ".join(sol.held)
+                        + ": held at the rough model's values; mark an edge that moves them")
     proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
     return AutomarkResult(merged, len(proposals), sol, warnings)

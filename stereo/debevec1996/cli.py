@@ -230,7 +230,8 @@ def _automark(args) -> int:
     folder, photos, images, model, camera, cam_path = _folder(args)
     edges_path = Path(args.edges) if args.edges else folder / "edges.json"
     if os.path.abspath(args.out) == os.path.abspath(edges_path):
-        raise InputError("--out", "would replace the input edges.json; write another file")
+        raise InputError(args.out, f"would replace the input {edges_path}; write the "
+                                     "proposals to another file")
     sizes = {p: img.shape[1::-1] for p, img in images.items()}
     marks = load_edges(edges_path, model=model, photographs=photos, image_sizes=sizes)
     if np.any(camera.dist):

@@ -1,0 +1,148 @@
+"""Automatic edge marking (stereo/debevec1996/automark.py) on the cases that
+broke it: a block flush with its neighbour (its edges on the neighbour's
+image lines), a block the model hides, a rough solve whose weak parameter
+wanders. Marks carry σ = 0.5 px endpoint noise and the photographs 1 code
+of image noise; a recovered parameter is judged in units of the σ the
+solver reports for it (the bench checks that σ against the RMS error over
+50 noise draws)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lumigraph.capture.scenes.facade_edges import paint_facade, project_edges, ring_cameras
+from lumigraph.stereo.debevec1996.automark import _associate, automark
+from lumigraph.stereo.debevec1996.edges import EdgeMarks
+from lumigraph.stereo.debevec1996.model import BlockModel
+from lumigraph.stereo.debevec1996.solve import _known_axis, solve_facade
+
+
+def _hand(model, marks):
+    """Four hand marks per photograph: the two longest vertical and the two
+    longest horizontal edges along one axis (as the bench marks them)."""
+    ax = _known_axis(model, [m["edge"] for m in marks])
+    order = np.argsort([-np.hypot(m["segment"][2] - m["segment"][0],
+                                  m["segment"][3] - m["segment"][1]) for m in marks])
+    pick = [i for i in order if ax[i] == 2][:2]
+    for a in (0, 1):
+        h = [i for i in order if ax[i] == a][:2]
+        if len(h) == 2:
+            return [marks[i] for i in pick + h]
+    raise AssertionError("no two horizontal edges")
+
+
+def _run(spec, *, seed, start_factor=1.08, photos=6, arc=(-160.0, -20.0)):
+    model = BlockModel.from_dict(spec, where="test")
+    V = model.vertices()
+    centre = (V.min(0) + V.max(0)) / 2
+    size = float(np.linalg.norm(np.ptp(V, axis=0)))
+    cams = ring_cameras(photos, target=centre, radius=2.2 * size, height=0.3 * size,
+                        focal_px=700, arc_deg=arc, rng=np.random.default_rng(seed),
+                        jitter=0.05)
+    rng = np.random.default_rng(100 + seed)
+    raw = project_edges(model, cams, noise_px=0.5, rng=rng)
+    hand = EdgeMarks.from_dict({"photographs": {p: _hand(model, v) for p, v in raw.items()}},
+                               model=model, photographs=list(cams))
+    images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}
+    start = model.with_values(model.values[~model.fixed] * start_factor)
+    K = {p: c["K"] for p, c in cams.items()}
+    res = automark(start, hand, images, K, noise_px=0.5)
+    return model, cams, raw, start, K, res
+
+
+FLUSH = {"blocks": [
+    {"name": "tower", "kind": "box",
+     "params": {"width": {"value": 4.0, "fixed": True}, "depth": 4.0, "height": 12.0}},
+    # the annex's left face is the tower's right face and their fronts are
+    # flush: annex/front-left lies on tower/front-right's image line
+    {"name": "annex", "kind": "box", "parent": "tower", "on": "base", "x": "offset", "y": "front",
+     "params": {"width": 5.0, "depth": 3.0, "height": 4.0, "offset_x": 4.5}}]}
+
+
+def test_flush_blocks_parameters_recovered():
+    model, cams, raw, start, K, res = _run(FLUSH, seed=3)
+    sol = solve_facade(start, res.marks, K, noise_px=0.5)      # refuses if one is unconstrained
+    # the flush edge was proposed somewhere: it is what fixes width against offset
+    assert any(m.proposed and m.edge == "annex/front-left" for m in res.marks.marks)
+    for n, v in model.named_values().items():
+        if sol.std[n] > 0:
+            assert abs(sol.params[n] - v) <= 5 * sol.std[n], (n, sol.params[n], v, sol.std[n])
+
+
+def test_collinear_edges_share_a_detection_by_extent():
+    # edge 0 from y = 0 to 100, edge 1 on the same line from y = 60 to 100, a
+    # third parallel line 30 px off: a detection along x = 10 from y = 10 to
+    # 95 gives edge 0 all of it and edge 1 its stretch from y = 60
+    E = np.array([[10, 0, 10, 100], [10, 60, 10, 100], [40, 0, 40, 100]], float)
+    det = np.array([[10.2, 10, 10.2, 95]])
+    got = {j: s for _, j, s in _associate(det, E, max_angle_deg=3, max_distance_px=6)}
+    assert set(got) == {0, 1}
+    np.testing.assert_allclose(got[0], det[0])
+    np.testing.assert_allclose(got[1], [10.2, 60, 10.2, 95])
+    # a distinct line 1.2 px from edge 0 (coincident means within 1 px), the
+    # detection between them: ambiguous, given to neither
+    E[1] = [11.2, 0, 11.2, 100]
+    det[0, [0, 2]] = 10.5
+    assert _associate(det, E, max_angle_deg=3, max_distance_px=6) == []
+
+
+HIDDEN = {"blocks": [
+    {"name": "house", "kind": "box",
+     "params": {"width": {"value": 10.0, "fixed": True}, "depth": 6.0, "height": 6.0}},
+    # a low shed behind the house: no camera of the front arc sees it
+    {"name": "shed", "kind": "box", "parent": "house", "on": "base", "x": "centre", "y": "offset",
+     "params": {"width": 4.0, "depth": 2.0, "height": 2.0, "offset_y": 4.0}}]}
+
+
+def test_hidden_block_gets_no_proposal_and_is_named():
+    model, cams, raw, start, K, res = _run(HIDDEN, seed=2, photos=5, arc=(-120.0, -60.0))
+    seen = {(p, m["edge"]) for p, v in raw.items() for m in v}
+    assert not any(e.startswith("shed/") for _, e in seen)      # the premise: all hidden
+    proposed = {(m.photo, m.edge) for m in res.marks.marks if m.proposed}
+    assert proposed and proposed <= seen
+    # never silently wrong: the shed's parameters are named, not quietly kept
+    named = " ".join(res.warnings)
+    for n in ("shed/width", "shed/depth", "shed/height", "shed/offset_y"):
+        assert n in named, named
+    with pytest.raises(Exception, match="shed/"):
+        solve_facade(start, res.marks, K, noise_px=0.5)
+
+
+
+def test_rough_solve_retests_what_a_re_solve_lets_wander():
+    # the bench's tower, camera seed 8, noise draw 1: holding the parameters
+    # that fail the trust test and re-solving let annex/width go to 0, and
+    # untested it took the annex onto the wrong lines (ratio 18.8). The
+    # parameters must come out within 5 of the σ the solver reports
+    from lumigraph.stereo import bench_facade as B
+
+    model, cams = B.scene("tower", 8)
+    rng = np.random.default_rng(500 + 10 * 8 + 1)
+    raw, _ = B._marks(model, cams, noise=0.5, rng=rng)
+    hand = EdgeMarks.from_dict({"photographs": {p: _hand(model, v) for p, v in raw.items()}},
+                               model=model, photographs=list(cams))
+    images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}
+    start = model.with_values(model.values[~model.fixed] * rng.uniform(0.9, 1.1))
+    K = B._K(cams)
+    res = automark(start, hand, images, K, noise_px=0.5)
+    sol = solve_facade(start, res.marks, K, noise_px=0.5)
+    for n, v in model.named_values().items():
+        if sol.std[n] > 0:
+            assert abs(sol.params[n] - v) <= 5 * sol.std[n], (n, sol.params[n], v, sol.std[n])
+
+
+def test_cli_refuses_to_overwrite_the_input_edges_naming_the_path(tmp_path):
+    # the refusal names the file (the library's convention), not the flag;
+    # --force passes the generic guard against replacing a file it did not
+    # write, which refuses first otherwise
+    from cli_catalog import _facade_folder, run_cli
+
+    _facade_folder(tmp_path)
+    edges = tmp_path / "facade" / "edges.json"
+    before = edges.read_bytes()
+    rc, _, err = run_cli(["stereo", "facade", "automark", tmp_path / "facade", "--out", edges,
+                          "--force", "-q"])
+    lines = err.strip().splitlines()
+    assert rc == 2 and len(lines) == 1 and lines[0].startswith(f"error: {edges}:"), err
+    assert "--out" not in lines[0] and edges.read_bytes() == before
