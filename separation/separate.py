@@ -268,6 +268,38 @@ def evaluate(a, *, fn, method, alpha, b, comp, estimator, var0, var1, saturation
                       counts, flagged, params)
 
 
+def checker_pairs(a, *, names, noise, order, complement_of, estimator, info):
+    """The complement of each checker capture (index, -1 for none) or None:
+    the given ``complement_of`` checked against the pairs found in ``a``
+    (N, ...) (:func:`separation.pairing.find_pairs`, searched in ``order``),
+    else the found pairs; ``info`` (the meta) gets ``pairs_source`` and
+    ``pair_score_median``. The whole-image and the banded runs share it, so
+    they decide the pairs alike (``a`` is the images or the banded run's
+    sample of them)."""
+    from lumigraph.separation import pairing
+
+    try:
+        found = pairing.find_pairs(a, names=names, noise=noise, order=order)
+    except InputError:
+        if estimator == "pairs":
+            raise
+        found = None  # max/min needs no pairs; the residue check then uses none
+    comp = None
+    if complement_of is not None:
+        if found is not None:
+            pairing.check_pairs(found, complement_of, names=names)
+        comp = list(complement_of)
+        info["pairs_source"] = "given (pattern layout), checked against the captures"
+    elif found is not None:
+        comp = list(found.complement_of)
+        info["pairs_source"] = ("found from the captures" if found.decisive else
+                                "found from the captures (contrast within the noise)")
+    if found is not None:
+        info["pair_score_median"] = float(np.nanmedian(found.score)) if any(
+            j >= 0 for j in found.complement_of) else None
+    return comp
+
+
 def _arrange(a, names, *, method, complement_of, estimator, noise):
     """``a`` and ``names`` in canonical order (:func:`separation.pairing.canonical_order`),
     the complements in that order, and what was found (for the meta)."""
@@ -282,24 +314,8 @@ def _arrange(a, names, *, method, complement_of, estimator, noise):
     keys = pairing.content_keys(a)
     pre, _ = pairing.canonical_order(a, keys=keys)
     if method == "checker":
-        try:
-            found = pairing.find_pairs(a, names=names, noise=noise, order=pre)
-        except InputError:
-            if estimator == "pairs":
-                raise
-            found = None  # max/min needs no pairs; the residue check then uses none
-        if complement_of is not None:
-            if found is not None:
-                pairing.check_pairs(found, complement_of, names=names)
-            comp = list(complement_of)
-            info["pairs_source"] = "given (pattern layout), checked against the captures"
-        elif found is not None:
-            comp = list(found.complement_of)
-            info["pairs_source"] = ("found from the captures" if found.decisive else
-                                    "found from the captures (contrast within the noise)")
-        if found is not None:
-            info["pair_score_median"] = float(np.nanmedian(found.score)) if any(
-                j >= 0 for j in found.complement_of) else None
+        comp = checker_pairs(a, names=names, noise=noise, order=pre,
+                             complement_of=complement_of, estimator=estimator, info=info)
     elif method == "sinusoid":
         sp = pairing.phase_spacing(a[pre], names=[names[k] for k in pre], noise=noise)
         iu = np.triu_indices(len(a), 1)

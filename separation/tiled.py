@@ -44,7 +44,12 @@ from lumigraph.capture.tiles import bands
 from lumigraph.separation import nayar2006, pairing
 from lumigraph.separation.methods import METHODS, MIN_IMAGES
 from lumigraph.separation.result import Separation
-from lumigraph.separation.separate import RESIDUE_WARN_FRACTION, check_options, evaluate
+from lumigraph.separation.separate import (
+    RESIDUE_WARN_FRACTION,
+    check_options,
+    checker_pairs,
+    evaluate,
+)
 
 __all__ = ["TILED_METHODS", "separate_bands"]
 
@@ -137,28 +142,11 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
     del sample_parts
     params: dict = {"method": method}
     pre, _ = pairing.canonical_order(sample, keys=keys)
-    found = None
     if complement_of is not None and len(complement_of) != count:
         raise InputError("complement_of", f"expected {count} entries, got {len(complement_of)}")
-    try:
-        # the sample is what find_pairs draws from the whole images: the same scores
-        found = pairing.find_pairs(sample, names=names, noise=noise, order=pre)
-    except InputError:
-        if estimator == "pairs":
-            raise
-    comp = None
-    if complement_of is not None:
-        if found is not None:
-            pairing.check_pairs(found, complement_of, names=names)
-        comp = list(complement_of)
-        params["pairs_source"] = "given (pattern layout), checked against the captures"
-    elif found is not None:
-        comp = list(found.complement_of)
-        params["pairs_source"] = ("found from the captures" if found.decisive else
-                                  "found from the captures (contrast within the noise)")
-    if found is not None:
-        params["pair_score_median"] = float(np.nanmedian(found.score)) if any(
-            j >= 0 for j in found.complement_of) else None
+    # the sample is what find_pairs draws from the whole images: the same scores
+    comp = checker_pairs(sample, names=names, noise=noise, order=pre,
+                         complement_of=complement_of, estimator=estimator, info=params)
     if comp is None or not any(j >= 0 for j in comp):
         raise InputError("method", "checker captures without complement pairs use the spatial "
                                    "residue check, not done by bands yet; use tile off")

@@ -130,17 +130,8 @@ def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
         pts.append(a + ts[k] * d + off * n)
     if len(pts) < max(6, min_support * samples):
         return None
-    pts = np.array(pts)
-    for _ in range(2):                                  # total least squares, one trim
-        c = pts.mean(0)
-        _, _, Vt = np.linalg.svd(pts - c)
-        nn = Vt[1]
-        r = (pts - c) @ nn
-        keep = np.abs(r) <= max(3 * 1.4826 * np.median(np.abs(r)), 0.05)
-        if keep.all() or keep.sum() < 6:
-            break
-        pts = pts[keep]
-    dd = Vt[0]
+    from lumigraph.stereo.debevec1996.automark import fit_line
+    c, dd = fit_line(np.array(pts))
     out = np.r_[c + ((a - c) @ dd) * dd, c + ((b - c) @ dd) * dd]
     if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > half_width:
         return None

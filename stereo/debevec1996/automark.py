@@ -111,6 +111,30 @@ def detect_segments(grey: np.ndarray, *, min_length_px: float = 12.0) -> np.ndar
     return np.zeros((0, 4)) if found is None else found.reshape(-1, 4).astype(float)
 
 
+def fit_line(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The line through the points ``pts`` (N, 2) px by total least squares,
+    refitted once without the points beyond 3 robust sigmas (1.4826 x the
+    median absolute distance, at least 0.05 px): ``(centre (2,), unit
+    direction (2,))``.
+
+    >>> c, d = fit_line(np.array([[0., 0.], [1., 1.], [2., 2.], [3., 3.], [4., 4.], [5., 5.]]))
+    >>> bool(np.allclose(abs(d), np.sqrt(0.5)))
+    True
+    """
+    pts = np.asarray(pts, float)
+    for _ in range(2):
+        c = pts.mean(0)
+        _, _, Vt = np.linalg.svd(pts - c)
+        r = (pts - c) @ Vt[1]
+        keep = np.abs(r) <= max(3 * 1.4826 * np.median(np.abs(r)), 0.05)
+        if keep.all() or keep.sum() < 6:
+            break
+        pts = pts[keep]
+    c = pts.mean(0)
+    _, _, Vt = np.linalg.svd(pts - c)
+    return c, Vt[0]
+
+
 def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0,
                    samples: int = 24) -> np.ndarray | None:
     """The segment moved onto the intensity edge it lies on (sub-pixel; the
@@ -143,19 +167,7 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
             pts.append(a + ts[k] * d + off * n)
     if len(pts) < max(6, samples // 4):
         return None
-    pts = np.array(pts)
-    for _ in range(2):                                  # total least squares, one trim
-        c = pts.mean(0)
-        _, _, Vt = np.linalg.svd(pts - c)
-        nn = Vt[1]
-        r = (pts - c) @ nn
-        keep = np.abs(r) <= max(3 * 1.4826 * np.median(np.abs(r)), 0.05)
-        if keep.all() or keep.sum() < 6:
-            break
-        pts = pts[keep]
-    c = pts.mean(0)
-    _, _, Vt = np.linalg.svd(pts - c)
-    dirn = Vt[0]
+    c, dirn = fit_line(np.array(pts))
     out = np.r_[c + ((a - c) @ dirn) * dirn, c + ((b - c) @ dirn) * dirn]
     if max(abs((a - out[:2]) @ n), abs((b - out[2:]) @ n)) > 1.5:
         return None
