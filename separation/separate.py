@@ -154,17 +154,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
             a, names, method=method, complement_of=complement_of, estimator=estimator,
             noise=float(np.hypot(noise_sigma, quant)))
         params.update(order_info)
-    if b is None and black is not None and white is not None:
-        b = nayar2006.black_level(black, white, floor=floor)
-        params["b_source"] = "measured from the all-black/all-white frames"
-        if not 0.0 <= b < 1.0:
-            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
-    elif b is None:
-        b = 0.0
-        params["b_source"] = "assumed 0 (no --b and no black/white frames)"
-    else:
-        params["b_source"] = "given"
-    params["b"] = float(b)
+    b = black_level_of(b, black=black, white=white, floor=floor, info=params)
     # Noise model: quantisation + given + (checker pairs) measured from pair sums.
     var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
     comp = None
@@ -266,6 +256,25 @@ def evaluate(a, *, fn, method, alpha, b, comp, estimator, var0, var1, saturation
         flagged = int(flags.sum())
     return Evaluation(direct.astype(np.float32), glob.astype(np.float32), mask, mean_image,
                       counts, flagged, params)
+
+
+def black_level_of(b, *, black, white, floor, info):
+    """The projector's black level ``b``: as given, else measured from the
+    all-black and all-white frames (:func:`separation.nayar2006.black_level`),
+    else 0; ``info`` (the meta) gets ``b`` and ``b_source``. The whole-image
+    and the banded runs share it."""
+    if b is None and black is not None and white is not None:
+        b = nayar2006.black_level(black, white, floor=floor)
+        info["b_source"] = "measured from the all-black/all-white frames"
+        if not 0.0 <= b < 1.0:
+            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
+    elif b is None:
+        b = 0.0
+        info["b_source"] = "assumed 0 (no --b and no black/white frames)"
+    else:
+        info["b_source"] = "given"
+    info["b"] = float(b)
+    return b
 
 
 def checker_pairs(a, *, names, noise, order, complement_of, estimator, info):

@@ -46,6 +46,7 @@ from lumigraph.separation.methods import METHODS, MIN_IMAGES
 from lumigraph.separation.result import Separation
 from lumigraph.separation.separate import (
     RESIDUE_WARN_FRACTION,
+    black_level_of,
     check_options,
     checker_pairs,
     evaluate,
@@ -152,17 +153,7 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
                                    "residue check, not done by bands yet; use tile off")
     order, comp = pairing.canonical_order(sample, comp, keys=keys)
     names = [names[k] for k in order]
-    if b is None and black is not None and white is not None:
-        b = nayar2006.black_level(black, white, floor=floor)
-        params["b_source"] = "measured from the all-black/all-white frames"
-        if not 0.0 <= b < 1.0:
-            raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
-    elif b is None:
-        b = 0.0
-        params["b_source"] = "assumed 0 (no --b and no black/white frames)"
-    else:
-        params["b_source"] = "given"
-    params["b"] = float(b)
+    b = black_level_of(b, black=black, white=white, floor=floor, info=params)
     alpha = 0.5 if alpha is None else alpha
     var0 = quant ** 2 + noise_sigma ** 2
     # the noise line: the pair sums at every k-th flat value, gathered band by band
