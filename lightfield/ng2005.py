@@ -72,6 +72,11 @@ WORKERS = -1
 # |f| <= 1/2 - r, 0 from 1/2 + r, linear between (r = 1/6: Lanczos-3's sinc(x/3)).
 INTERPOLATIONS = {"lanczos3": 1.0 / 6.0, "sinc": 0.0}
 
+# Spatial rows per block of the slice: the blocks' reads of those rows stay
+# in cache and mapped across the column runs (8-64 within the noise of each
+# other at 9x9x512², 16 the fastest; docs/decisions/fourier-refocus.md).
+ROWS = 16
+
 
 def _kb(t: np.ndarray, width: int, beta: float) -> np.ndarray:
     from scipy.special import i0
@@ -318,8 +323,9 @@ def refocus(spec: FourierLightField, slope: float, *,
     for the spatial filter's aliases ``p, q`` (module docstring). The
     Kaiser-Bessel taps along u depend on ``ky`` only and those along v on
     ``kx`` only, so the slice is separable. The taps' start is constant over
-    runs of rows (u) and of columns (v); per block of one row run x one column
-    run, one batched BLAS product contracts the k u-taps for the block's k
+    runs of rows (u) and of columns (v); per block of (up to :data:`ROWS`
+    rows of) one row run x one column run, one batched BLAS product contracts
+    the k u-taps for the block's k
     v-bins only, then an einsum the k v-taps, on the (re, im) float pairs (the
     weights are real). The slice thus reads ``k^2 / (Nu Nv)`` of the spectrum
     (it is memory-bound).
@@ -376,42 +382,46 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
     out[...] = 0.0
     # one flat scratch each for every block's products (fresh arrays per
     # block would page-fault their pages anew each time)
-    blk = _scratch(work, "blk", (hp * k * wr * c2,))
-    ein = _scratch(work, "ein", (hp * wr * c2,))
+    blk = _scratch(work, "blk", (ROWS * k * wr * c2,))
+    ein = _scratch(work, "ein", (ROWS * wr * c2,))
     # The slice reads k x k angular bins per spatial frequency, k/Nu * k/Nv of
     # the spectrum: per block (a run of rows with one u-tap start) x (a run of
     # columns with one v-tap start), one batched BLAS product contracts the
     # u-taps for the block's k v-bins only, then the v-taps are a small einsum.
     # (Contracting u over all Nv bins first read Nv/k times more memory: the
     # slice is memory-bound.) Weights are real: they act on (re, im) floats.
+    vblocks = []
     for lo_v, runs_v, wv in terms_v:
         wvx = np.repeat(wv.T, c2, axis=1)                          # (k, cols * 2C)
         for x0, x1, j0 in runs_v:
-            cols = slice((lo_v + x0) * c2, (lo_v + x1) * c2)
-            wc = wvx[:, x0 * c2:x1 * c2]
-            nb = cols.stop - cols.start
             # v-taps wrapping around the (anti-)periodic angular axis
             # (the wrap's sign is in the weights): two contiguous pieces
             m1 = min(k, nv - j0)
-            jpieces = [(0, m1, j0)] + ([(m1, k, 0)] if m1 < k else [])
-            for lo_u, runs_u, wrow in terms_u:                     # wrow: (rows, 1, k)
-                for y0, y1, i0 in runs_u:
-                    for c0, c1, r0 in _stored_slices(lo_u + y0, lo_u + y1, hp // 2, hp):
-                        r1 = r0 + c1 - c0
-                        wt = wrow[c0 - lo_u:c1 - lo_u, :, None, :]  # (rows, 1, 1, k)
-                        n1 = min(k, nu - i0)
-                        pieces = [(wt[..., :n1], i0, i0 + n1)]
-                        if n1 < k:
-                            pieces.append((wt[..., n1:], 0, k - n1))
-                        t = blk[:(r1 - r0) * k * nb].reshape(r1 - r0, k, 1, nb)
+            vblocks.append((slice((lo_v + x0) * c2, (lo_v + x1) * c2), wvx[:, x0 * c2:x1 * c2],
+                            [(0, m1, j0)] + ([(m1, k, 0)] if m1 < k else [])))
+    for lo_u, runs_u, wrow in terms_u:                             # wrow: (rows, 1, k)
+        for y0, y1, i0 in runs_u:
+            n1 = min(k, nu - i0)
+            for c0, c1, r0 in _stored_slices(lo_u + y0, lo_u + y1, hp // 2, hp):
+                # a few rows at a time, all column runs: the rows' pages stay
+                # cached (and mapped) while every column run reads its part
+                for q0 in range(r0, r0 + c1 - c0, ROWS):
+                    q1 = min(q0 + ROWS, r0 + c1 - c0)
+                    wt = wrow[c0 - lo_u + q0 - r0:c0 - lo_u + q1 - r0, :, None, :]
+                    pieces = [(wt[..., :n1], i0, i0 + n1)]
+                    if n1 < k:
+                        pieces.append((wt[..., n1:], 0, k - n1))
+                    for cols, wc, jpieces in vblocks:
+                        nb = cols.stop - cols.start
+                        t = blk[:(q1 - q0) * k * nb].reshape(q1 - q0, k, 1, nb)
                         for m, (wp_, a0, a1) in enumerate(pieces):
                             for b0, b1, jj in jpieces:
-                                taps = s5[r0:r1, a0:a1, jj:jj + b1 - b0, cols].transpose(0, 2, 1, 3)
+                                taps = s5[q0:q1, a0:a1, jj:jj + b1 - b0, cols].transpose(0, 2, 1, 3)
                                 if m == 0:
                                     np.matmul(wp_, taps, out=t[:, b0:b1])
                                 else:
                                     t[:, b0:b1] += np.matmul(wp_, taps)
-                        o, e = out[r0:r1, cols], ein[:(r1 - r0) * nb].reshape(r1 - r0, nb)
+                        o, e = out[q0:q1, cols], ein[:(q1 - q0) * nb].reshape(q1 - q0, nb)
                         np.einsum("ybx,bx->yx", t[:, :, 0], wc, out=e)
                         o += e
     spec2 = out.view(np.complex64).reshape(hp, wr, c)
