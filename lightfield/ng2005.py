@@ -325,10 +325,9 @@ def refocus(spec: FourierLightField, slope: float, *,
     ``kx`` only, so the slice is separable. The taps' start is constant over
     runs of rows (u) and of columns (v); per block of (up to :data:`ROWS`
     rows of) one row run x one column run, one batched BLAS product contracts
-    the k u-taps for the block's k
-    v-bins only, then an einsum the k v-taps, on the (re, im) float pairs (the
-    weights are real). The slice thus reads ``k^2 / (Nu Nv)`` of the spectrum
-    (it is memory-bound).
+    the k u-taps for the block's k v-bins only, then an einsum the k v-taps,
+    on the (re, im) float pairs (the weights are real). The slice thus reads
+    ``k^2 / (Nu Nv)`` of the spectrum (it is memory-bound).
 
     Parameters
     ----------
