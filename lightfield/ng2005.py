@@ -72,6 +72,11 @@ WORKERS = -1
 # |f| <= 1/2 - r, 0 from 1/2 + r, linear between (r = 1/6: Lanczos-3's sinc(x/3)).
 INTERPOLATIONS = {"lanczos3": 1.0 / 6.0, "sinc": 0.0}
 
+# Spatial rows per block of the slice: the blocks' reads of those rows stay
+# in cache and mapped across the column runs (8-64 within the noise of each
+# other at 9x9x512², 16 the fastest; docs/decisions/fourier-refocus.md).
+ROWS = 16
+
 
 def _kb(t: np.ndarray, width: int, beta: float) -> np.ndarray:
     from scipy.special import i0
@@ -317,11 +322,12 @@ def refocus(spec: FourierLightField, slope: float, *,
     The slice reads the spectrum at angular bins ``(s (ky + p) Nu, s (kx + q) Nv)``
     for the spatial filter's aliases ``p, q`` (module docstring). The
     Kaiser-Bessel taps along u depend on ``ky`` only and those along v on
-    ``kx`` only, so the slice is separable: per spatial row, one BLAS product
-    contracts the row's k u-taps over all ``(v, kx)`` (the taps' start is
-    constant over runs of rows: one batched product per run), then the v-taps
-    are k multiply-adds per run of columns, on the (re, im) float pairs (the
-    weights are real).
+    ``kx`` only, so the slice is separable. The taps' start is constant over
+    runs of rows (u) and of columns (v); per block of (up to :data:`ROWS`
+    rows of) one row run x one column run, one batched BLAS product contracts
+    the k u-taps for the block's k v-bins only, then an einsum the k v-taps,
+    on the (re, im) float pairs (the weights are real). The slice thus reads
+    ``k^2 / (Nu Nv)`` of the spectrum (it is memory-bound).
 
     Parameters
     ----------
@@ -369,58 +375,54 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
     u, v = spec.grid
     k = spec.kernel_width
     terms_u, terms_v = plan
-    flat = spec.spectrum.view(np.float32).reshape(hp, nu, nv * wr * c2)
-    # Stage 1, u: acc[y, n, x] = sum_a wu[y, a] S[y, i(y) + a, n, x].
+    s5 = spec.spectrum.view(np.float32).reshape(hp, nu, nv, wr * c2)
     work = spec.workspace
-    acc = _scratch(work, "acc", (hp, 1, nv * wr * c2))
-    tmp = None
-    # The first term (no alias) covers every row and writes acc; the aliases
-    # (rows with |ky| > 1/3 for lanczos3) add to it.
-    for t, (lo, runs, wrow) in enumerate(terms_u):             # wrow: (rows, 1, k)
-        for y0, y1, i0 in runs:
-            for c0, c1, r0 in _stored_slices(lo + y0, lo + y1, hp // 2, hp):
-                r1 = r0 + c1 - c0
-                wt = wrow[c0 - lo:c1 - lo]
-                # taps wrapping around the (anti-)periodic angular axis: two
-                # contiguous pieces (the wrap's sign is in the weights)
-                n1 = min(k, nu - i0)
-                pieces = [(wt[..., :n1], flat[r0:r1, i0:i0 + n1])]
-                if n1 < k:
-                    pieces.append((wt[..., n1:], flat[r0:r1, :k - n1]))
-                for m, (wp_, taps) in enumerate(pieces):
-                    if t == 0 and m == 0:
-                        np.matmul(wp_, taps, out=acc[r0:r1])
-                        continue
-                    if tmp is None:
-                        tmp = _scratch(work, "tmp", acc.shape)
-                    np.matmul(wp_, taps, out=tmp[r0:r1])
-                    acc[r0:r1] += tmp[r0:r1]
-    acc = acc.reshape(hp, nv, wr * c2)
-    # Stage 2, v: out[y, x] = sum_b wv[x, b] acc[y, j(x) + b, x].
     out = _scratch(work, "out", (hp, wr * c2))
-    part = None
-    # The first term covers every column and writes out; the alias adds.
-    for t, (lo, runs, wv) in enumerate(terms_v):
-        # v weights repeated over the (re, im) x channel floats of each column
+    out[...] = 0.0
+    # one flat scratch each for every block's products (fresh arrays per
+    # block would page-fault their pages anew each time)
+    blk = _scratch(work, "blk", (ROWS * k * wr * c2,))
+    ein = _scratch(work, "ein", (ROWS * wr * c2,))
+    # The slice reads k x k angular bins per spatial frequency, k/Nu * k/Nv of
+    # the spectrum: per block (a run of rows with one u-tap start) x (a run of
+    # columns with one v-tap start), one batched BLAS product contracts the
+    # u-taps for the block's k v-bins only, then the v-taps are a small einsum.
+    # (Contracting u over all Nv bins first read Nv/k times more memory: the
+    # slice is memory-bound.) Weights are real: they act on (re, im) floats.
+    vblocks = []
+    for lo_v, runs_v, wv in terms_v:
         wvx = np.repeat(wv.T, c2, axis=1)                          # (k, cols * 2C)
-        for x0, x1, j0 in runs:
-            cols = slice((lo + x0) * c2, (lo + x1) * c2)
-            wc = slice(x0 * c2, x1 * c2)
-            if part is None:
-                part = _scratch(work, "part", out.shape)
-            o, p = out[:, cols], part[:, cols]
-            if j0 + k <= nv:
-                np.einsum("ybx,bx->yx", acc[:, j0:j0 + k, cols], wvx[:, wc],
-                          out=o if t == 0 else p)
-                if t:
-                    o += p
-                continue
-            for b in range(k):     # taps wrapping around the angular axis
-                if t == 0 and b == 0:
-                    np.multiply(acc[:, j0, cols], wvx[0, wc], out=o)
-                    continue
-                np.multiply(acc[:, (j0 + b) % nv, cols], wvx[b, wc], out=p)
-                o += p
+        for x0, x1, j0 in runs_v:
+            # v-taps wrapping around the (anti-)periodic angular axis
+            # (the wrap's sign is in the weights): two contiguous pieces
+            m1 = min(k, nv - j0)
+            vblocks.append((slice((lo_v + x0) * c2, (lo_v + x1) * c2), wvx[:, x0 * c2:x1 * c2],
+                            [(0, m1, j0)] + ([(m1, k, 0)] if m1 < k else [])))
+    for lo_u, runs_u, wrow in terms_u:                             # wrow: (rows, 1, k)
+        for y0, y1, i0 in runs_u:
+            n1 = min(k, nu - i0)
+            for c0, c1, r0 in _stored_slices(lo_u + y0, lo_u + y1, hp // 2, hp):
+                # a few rows at a time, all column runs: the rows' pages stay
+                # cached (and mapped) while every column run reads its part
+                for q0 in range(r0, r0 + c1 - c0, ROWS):
+                    q1 = min(q0 + ROWS, r0 + c1 - c0)
+                    wt = wrow[c0 - lo_u + q0 - r0:c0 - lo_u + q1 - r0, :, None, :]
+                    pieces = [(wt[..., :n1], i0, i0 + n1)]
+                    if n1 < k:
+                        pieces.append((wt[..., n1:], 0, k - n1))
+                    for cols, wc, jpieces in vblocks:
+                        nb = cols.stop - cols.start
+                        t = blk[:(q1 - q0) * k * nb].reshape(q1 - q0, k, 1, nb)
+                        for m, (wp_, a0, a1) in enumerate(pieces):
+                            for b0, b1, jj in jpieces:
+                                taps = s5[q0:q1, a0:a1, jj:jj + b1 - b0, cols].transpose(0, 2, 1, 3)
+                                if m == 0:
+                                    np.matmul(wp_, taps, out=t[:, b0:b1])
+                                else:
+                                    t[:, b0:b1] += np.matmul(wp_, taps)
+                        o, e = out[q0:q1, cols], ein[:(q1 - q0) * nb].reshape(q1 - q0, nb)
+                        np.einsum("ybx,bx->yx", t[:, :, 0], wc, out=e)
+                        o += e
     spec2 = out.view(np.complex64).reshape(hp, wr, c)
     img = sfft.irfft2(spec2, s=(hp_, wp), axes=(0, 1), workers=WORKERS)
     w, h = spec.size
