@@ -283,7 +283,10 @@ def random_starts(quick: bool):
                         f"per scene {', '.join(f'{v:.0%}' for v in fr)}")]
 
 
-def _four_hand_marks(model, marks):
+def four_hand_marks(model, marks):
+    """Two vertical and two horizontal edges of ``marks``, the longest, as a
+    user picks them (the hand marks automatic marking starts from; the view's
+    tests use the same pick)."""
     from lumigraph.stereo.debevec1996.solve import _known_axis
 
     ax = _known_axis(model, [m["edge"] for m in marks])
@@ -318,7 +321,7 @@ def automatic_marking(quick: bool):
         for k in range(n_seeds):
             rng = np.random.default_rng(500 + 10 * seed + k)
             raw, full = _marks(model, cams, noise=0.5, rng=rng)
-            hand = EdgeMarks.from_dict({"photographs": {p: _four_hand_marks(model, v)
+            hand = EdgeMarks.from_dict({"photographs": {p: four_hand_marks(model, v)
                                                         for p, v in raw.items()}},
                                        model=model, photographs=list(cams))
             images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lumigraph.stereo.bench_facade import four_hand_marks  # noqa: F401 - the bench's pick, re-exported
+
 EDGE_NOISE_PX = 0.5  # the scene's endpoint noise on its marks (render --edge-noise)
 
 
@@ -29,20 +31,3 @@ def distance(seg, line) -> float:
     n = np.array([-d[1], d[0]])
     s = np.asarray(seg, float)
     return float(max(abs((s[:2] - a) @ n), abs((s[2:] - a) @ n)))
-
-
-def four_hand_marks(model, marks):
-    """Two vertical and two horizontal edges, the longest (as a user picks:
-    ``lumigraph bench facade`` does the same)."""
-    from lumigraph.stereo.debevec1996.solve import _known_axis
-
-    ax = _known_axis(model, [m["edge"] for m in marks])
-    L = [np.hypot(m["segment"][2] - m["segment"][0], m["segment"][3] - m["segment"][1])
-         for m in marks]
-    order = list(np.argsort(L)[::-1])
-    out = [i for i in order if ax[i] == 2][:2]
-    for a in (0, 1):
-        pick = [i for i in order if ax[i] == a][:2]
-        if len(pick) == 2:
-            return [marks[i] for i in out + pick]
-    return [marks[i] for i in order[:4]]
