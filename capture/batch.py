@@ -302,6 +302,36 @@ _COMMAND_LOCK = threading.Lock()
 RUNS = [0]  # batches run by this process (the command line warns when --workers found none)
 
 
+def command_item(name: str, *, inputs: Iterable, outputs: Iterable, module: str, prog: str,
+                 argv: Sequence[str]) -> Item:
+    """An :class:`Item` that runs one command line ``argv`` of the command
+    module ``module`` (:func:`run_command`): the same call, and so the same
+    bytes, as the single command run by hand.
+
+    >>> it = command_item("a", inputs=["in/a"], outputs=["out/a.exr"],
+    ...                   module="lumigraph.hdr.cli", prog="lumigraph hdr", argv=["merge", "in/a"])
+    >>> it.func, it.outputs
+    ('lumigraph.capture.batch:run_command', ('out/a.exr',))
+    """
+    return Item(name, inputs=tuple(str(p) for p in inputs),
+                outputs=tuple(str(p) for p in outputs), func="lumigraph.capture.batch:run_command",
+                kwargs={"module": module, "prog": prog, "argv": argv})
+
+
+def run_items(items: Sequence[Item], *, out_dir: str | os.PathLike, args,
+              description: str) -> int:
+    """A command's batch from its parsed ``args`` (``workers``, ``scheduler``,
+    ``quiet``): every planned output and ``index.json`` checked before any
+    work, the items run (:func:`run_batch`), the outcome reported; returns
+    the exit status (:func:`report`)."""
+    from lumigraph.capture.commandline import check_planned
+
+    check_planned([p for it in items for p in it.outputs] + [Path(out_dir) / "index.json"])
+    result = run_batch(items, out_dir=out_dir, workers=args.workers, scheduler=args.scheduler,
+                       quiet=args.quiet, description=description)
+    return report(result, quiet=args.quiet)
+
+
 def run_command(*, module: str, argv: Sequence[str], prog: str) -> list[str]:
     """An item that is one run of a lumigraph command (``module``'s ``main``,
     e.g. ``lumigraph.hdr.cli`` with ``["merge", BRACKET, "--response", R,

@@ -276,7 +276,7 @@ def _merge_batch(args, brackets: list[Path]) -> int:
     """``hdr merge B1 B2 ... --out DIR`` (or a folder of brackets): each bracket
     is one item, ``DIR/<bracket>.exr`` and its mask, merged by the very
     command that merges one bracket."""
-    from lumigraph.capture.batch import Item, item_name, report, run_batch
+    from lumigraph.capture.batch import command_item, item_name, run_items
     from lumigraph.capture.commandline import batch_item_argv
     from lumigraph.hdr.response import ResponseCurve
 
@@ -290,15 +290,11 @@ def _merge_batch(args, brackets: list[Path]) -> int:
     for b in brackets:
         name = item_name(b)
         target = out / f"{name}.exr"
-        items.append(Item(name, inputs=(str(b), str(args.response)),
-                          outputs=(str(_mask_path(target)), str(target)),
-                          func="lumigraph.capture.batch:run_command",
-                          kwargs={"module": "lumigraph.hdr.cli", "prog": "lumigraph hdr",
-                                  "argv": batch_item_argv(args, [b], add=["--out", str(target)])}))
-    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
-    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
-                       quiet=args.quiet, description="merging")
-    return report(result, quiet=args.quiet)
+        items.append(command_item(name, inputs=(b, args.response),
+                                  outputs=(_mask_path(target), target),
+                                  module="lumigraph.hdr.cli", prog="lumigraph hdr",
+                                  argv=batch_item_argv(args, [b], add=["--out", str(target)])))
+    return run_items(items, out_dir=out, args=args, description="merging")
 
 
 def _merge(args) -> int:

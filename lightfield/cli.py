@@ -355,7 +355,7 @@ def _refocus_fields(args, folders: list[Path], given: list[float]) -> int:
     field with every option the batch was given, writing ``OUT/NAME.exr``
     (one value) or the folder ``OUT/NAME/`` (several: its focal stack in one
     pass, so Fourier slice keeps its shared FFT)."""
-    from lumigraph.capture.batch import Item, item_name, report, run_batch
+    from lumigraph.capture.batch import command_item, item_name, run_items
     from lumigraph.capture.commandline import batch_item_argv
 
     out = Path(args.out)
@@ -372,14 +372,10 @@ def _refocus_fields(args, folders: list[Path], given: list[float]) -> int:
         # several values: the folder's index.json carries the sidecar (the
         # images are written with it, as one result set)
         outputs = (str(target),) if len(given) == 1 else (str(target / "index.json"),)
-        items.append(Item(name, inputs=(str(f),), outputs=outputs,
-                          func="lumigraph.capture.batch:run_command",
-                          kwargs={"module": "lumigraph.lightfield.cli", "prog": "lumigraph lightfield",
-                                  "argv": batch_item_argv(args, [f], add=["--out", str(target)])}))
-    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
-    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
-                       quiet=args.quiet, description="refocusing")
-    return report(result, quiet=args.quiet)
+        items.append(command_item(name, inputs=(f,), outputs=outputs,
+                                  module="lumigraph.lightfield.cli", prog="lumigraph lightfield",
+                                  argv=batch_item_argv(args, [f], add=["--out", str(target)])))
+    return run_items(items, out_dir=out, args=args, description="refocusing")
 
 
 def _refocus(args) -> int:

@@ -151,7 +151,7 @@ def _load(args, resolved):
 def _separate_batch(args, stacks: list[Path]) -> int:
     """``separate S1 S2 ... --out DIR`` (or a folder of stacks): each stack is
     one item, ``DIR/<stack>/`` written by the very command that separates one."""
-    from lumigraph.capture.batch import Item, item_name, report, run_batch
+    from lumigraph.capture.batch import command_item, item_name, run_items
     from lumigraph.capture.commandline import batch_item_argv
     from lumigraph.capture.io import read_stack
     from lumigraph.separation.result import FILES
@@ -172,15 +172,11 @@ def _separate_batch(args, stacks: list[Path]) -> int:
     items = []
     for st in stacks:
         target = out / item_name(st)
-        items.append(Item(item_name(st), inputs=(str(st), *shared),
-                          outputs=tuple(str(target / f) for f in FILES),
-                          func="lumigraph.capture.batch:run_command",
-                          kwargs={"module": "lumigraph.separation.cli", "prog": "lumigraph separate",
-                                  "argv": batch_item_argv(args, [st], add=["--out", str(target)])}))
-    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
-    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
-                       quiet=args.quiet, description="separating")
-    return report(result, quiet=args.quiet)
+        items.append(command_item(item_name(st), inputs=(st, *shared),
+                                  outputs=[target / f for f in FILES],
+                                  module="lumigraph.separation.cli", prog="lumigraph separate",
+                                  argv=batch_item_argv(args, [st], add=["--out", str(target)])))
+    return run_items(items, out_dir=out, args=args, description="separating")
 
 
 def _separate(args) -> int:

@@ -175,7 +175,7 @@ def _match_batch(args) -> int:
     """``stereo match LEFT_DIR RIGHT_DIR --out DIR``: the pairs are the images
     of one name in both folders, each one item written by the one-pair
     command as ``DIR/<name>.pfm``."""
-    from lumigraph.capture.batch import Item, report, run_batch
+    from lumigraph.capture.batch import command_item, run_items
     from lumigraph.capture.commandline import batch_item_argv
 
     lefts, rights = Path(args.left), Path(args.right)
@@ -204,15 +204,12 @@ def _match_batch(args) -> int:
     items = []
     for n in names:
         target = out / (Path(n).stem + ".pfm")
-        items.append(Item(Path(n).stem, inputs=(str(lefts / n), str(rights / n), *shared),
-                          outputs=(str(target),), func="lumigraph.capture.batch:run_command",
-                          kwargs={"module": "lumigraph.stereo.cli", "prog": "lumigraph stereo",
-                                  "argv": batch_item_argv(args, [lefts / n, rights / n],
-                                                          add=["--out", str(target)])}))
-    check_planned([p for it in items for p in it.outputs] + [out / "index.json"])
-    result = run_batch(items, out_dir=out, workers=args.workers, scheduler=args.scheduler,
-                       quiet=args.quiet, description="matching")
-    return report(result, quiet=args.quiet)
+        items.append(command_item(Path(n).stem, inputs=(lefts / n, rights / n, *shared),
+                                  outputs=(target,), module="lumigraph.stereo.cli",
+                                  prog="lumigraph stereo",
+                                  argv=batch_item_argv(args, [lefts / n, rights / n],
+                                                       add=["--out", str(target)])))
+    return run_items(items, out_dir=out, args=args, description="matching")
 
 
 def _match(args) -> int:
