@@ -9,6 +9,7 @@ after it with a margin for a loaded machine."""
 
 from __future__ import annotations
 
+import re
 import shutil
 import signal
 import subprocess
@@ -19,6 +20,7 @@ from pathlib import Path
 import pytest
 
 FIX = Path(__file__).resolve().parents[2] / "fixtures"
+PKG = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("delay_s", [0.15, 0.25, 0.4, 0.6, 1.0])
@@ -41,7 +43,13 @@ def test_ctrl_c_is_one_line_and_130(delay_s, tmp_path):
         # its own SIGINT handler, or after it restored the default at exit: the
         # default action ends the process, which a shell reports as 130, as it
         # does ours. Either nothing ran, or the command had finished and said so.
-        assert "Traceback" not in err, err
+        # A traceback is allowed only when it has no frame of ours: the
+        # interrupt landed in the interpreter's own start-up (``site``), which
+        # the module docstring leaves to Python.
+        if "Traceback" in err:
+            frames = [Path(f) for f in re.findall(r'File "([^"]+)"', err)]
+            ours = [f for f in frames if PKG in f.parents and PKG / ".venv" not in f.parents]
+            assert not ours, err
         assert not out.exists() or err.startswith("wrote "), err
         return
     assert p.returncode == 130, err
