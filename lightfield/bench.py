@@ -179,61 +179,12 @@ def slanted_floor_scene(seed: int, size=(160, 120), supersample: int = 3):
     (feature size ~2 px), sampled bilinearly on a 4x finer grid. Returns
     noise-free float views and the exact disparity at the centre view's
     pixel centres."""
-    from scipy.ndimage import gaussian_filter, map_coordinates
-
     from lumigraph.lightfield.field import LightField
 
-    rng = np.random.default_rng(seed)
-    w, h = size
-    d_wall, d_bottom, d_fg = -0.3, 2.0, 2.3
-    crease = h * rng.uniform(0.55, 0.7)
-    slope = (d_bottom - d_wall) / (h - 1 - crease)
-    cx, cy = w * rng.uniform(0.4, 0.6), h * rng.uniform(0.35, 0.5)
-    ax, ay = w * rng.uniform(0.18, 0.26), h * rng.uniform(0.3, 0.4)
-    tilt = rng.uniform(-0.5, 0.5)
-    fine, pad = 4, 12      # texture grid: 4 samples per px, 12 px beyond the image
-
-    def texture(lo, hi):
-        t = gaussian_filter(rng.standard_normal(((h + 2 * pad) * fine, (w + 2 * pad) * fine, 3)),
-                            (2 * fine, 2 * fine, 0))
-        t = (t - t.min()) / (t.max() - t.min())
-        return (lo + (hi - lo) * t).astype(np.float32)
-
-    back, front = texture(0.012, 0.04), texture(0.15, 0.8)
-
-    def sample(tex, x, y):
-        c = [(y + pad) * fine, (x + pad) * fine]
-        return np.stack([map_coordinates(tex[..., k], c, order=1, mode="nearest")
-                         for k in range(3)], -1)
-
-    def inside(x, y):
-        xr, yr = x - cx, y - cy
-        xt = xr * np.cos(tilt) + yr * np.sin(tilt)
-        yt = -xr * np.sin(tilt) + yr * np.cos(tilt)
-        return (xt / ax) ** 2 + (yt / ay) ** 2
-
-    sub = (np.arange(supersample) + 0.5) / supersample - 0.5
-    shape = (h, w, supersample, supersample)   # (row, column, sub-row, sub-column)
-    ys = np.broadcast_to((np.arange(h)[:, None] + sub)[:, None, :, None], shape)
-    xs = np.broadcast_to((np.arange(w)[:, None] + sub)[None, :, None, :], shape)
-    views = np.empty((5, 5, h, w, 3), np.float32)
-    for i in range(5):
-        for j in range(5):
-            du, dv = i - 2, j - 2
-            # background: the centre-view point (x0, y0) seen at (x, y) solves
-            # y0 - d(y0) du = y with d(y0) = d_wall + slope (y0 - crease) below the crease
-            y0 = (ys + (d_wall - slope * crease) * du) / (1 - slope * du)
-            y0 = np.where(y0 >= crease, y0, ys + d_wall * du)
-            d0 = d_wall + slope * np.maximum(y0 - crease, 0)
-            img = sample(back, xs + d0 * dv, y0)
-            xf, yf = xs + d_fg * dv, ys + d_fg * du
-            r2 = inside(xf, yf)
-            shade = np.clip(1.1 - 0.9 * r2, 0.05, 1)[..., None]
-            img = np.where((r2 <= 1)[..., None], shade * sample(front, xf, yf), img)
-            views[i, j] = img.mean((2, 3))
-    yc, xc = np.mgrid[0:h, 0:w].astype(np.float64)
-    gt = np.where(inside(xc, yc) <= 1, d_fg, d_wall + slope * np.maximum(yc - crease, 0))
-    return LightField(views, spacing=1.0), gt.astype(np.float32)
+    views, gt = _floor_views(np.random.default_rng(seed), size, supersample,
+                             crease=(0.55, 0.7), cy=(0.35, 0.5), ay=(0.3, 0.4),
+                             back=(0.012, 0.04), flat=0.0, falloff=False)
+    return LightField(views, spacing=1.0), gt
 
 
 def dim_floor_scene(seed: int, size=(160, 120), supersample: int = 3, noise: float = 0.0012):
@@ -247,19 +198,34 @@ def dim_floor_scene(seed: int, size=(160, 120), supersample: int = 3, noise: flo
     curves leave isolated gross errors on the floor (the round-6 tuning
     kind of docs/decisions/lightfield-depth.md). Random draws from seed
     ``1000 + seed``; the disparity is exact at the centre view's pixels."""
-    from scipy.ndimage import gaussian_filter, map_coordinates
-
     from lumigraph.lightfield.field import LightField
 
     rng = np.random.default_rng(1000 + seed)
+    views, gt = _floor_views(rng, size, supersample, crease=(0.5, 0.6), cy=(0.3, 0.45),
+                             ay=(0.25, 0.35), back=(0.012, 0.045), flat=0.25, falloff=True)
+    views = views + rng.normal(0, noise, views.shape).astype(np.float32) * np.sqrt(
+        np.maximum(views, 1e-4) / 0.05).clip(0.3, 3)
+    return quantise_8bit(LightField(np.clip(views, 0, 1), spacing=1.0)), gt
+
+
+def _floor_views(rng, size, supersample, *, crease, cy, ay, back, flat, falloff):
+    """The 5x5 views and exact centre-view disparity shared by kinds S and F:
+    an ellipse (disparity 2.3) before a wall (-0.3) creasing into a floor
+    slanting to 2.0 at the bottom row. ``crease``, ``cy``, ``ay``: ranges of
+    the crease row, the ellipse's centre row and half-height (fractions of
+    the height); ``back``: the wall's texture range, ``flat`` its share of
+    texture-less area; ``falloff``: light falling towards the crease.
+    Every random draw comes from ``rng``, in a fixed order."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+
     w, h = size
     d_wall, d_bottom, d_fg = -0.3, 2.0, 2.3
-    crease = h * rng.uniform(0.5, 0.6)
-    slope = (d_bottom - d_wall) / (h - 1 - crease)
-    cx, cy = w * rng.uniform(0.4, 0.6), h * rng.uniform(0.3, 0.45)
-    ax, ay = w * rng.uniform(0.18, 0.26), h * rng.uniform(0.25, 0.35)
+    crease_y = h * rng.uniform(*crease)
+    slope = (d_bottom - d_wall) / (h - 1 - crease_y)
+    cx, cy_ = w * rng.uniform(0.4, 0.6), h * rng.uniform(*cy)
+    ax, ay_ = w * rng.uniform(0.18, 0.26), h * rng.uniform(*ay)
     tilt = rng.uniform(-0.5, 0.5)
-    fine, pad = 4, 12
+    fine, pad = 4, 12      # texture grid: 4 samples per px, 12 px beyond the image
 
     def texture(lo, hi, flat=0.0):
         t = gaussian_filter(rng.standard_normal(((h + 2 * pad) * fine, (w + 2 * pad) * fine, 3)),
@@ -271,7 +237,7 @@ def dim_floor_scene(seed: int, size=(160, 120), supersample: int = 3, noise: flo
             t = t * (1 - m) + t.mean((0, 1)) * m
         return (lo + (hi - lo) * t).astype(np.float32)
 
-    back, front = texture(0.012, 0.045, flat=0.25), texture(0.15, 0.8)
+    back_tex, front = texture(*back, flat=flat), texture(0.15, 0.8)
 
     def sample(tex, x, y):
         c = [(y + pad) * fine, (x + pad) * fine]
@@ -279,34 +245,35 @@ def dim_floor_scene(seed: int, size=(160, 120), supersample: int = 3, noise: flo
                          for k in range(3)], -1)
 
     def inside(x, y):
-        xr, yr = x - cx, y - cy
+        xr, yr = x - cx, y - cy_
         xt = xr * np.cos(tilt) + yr * np.sin(tilt)
         yt = -xr * np.sin(tilt) + yr * np.cos(tilt)
-        return (xt / ax) ** 2 + (yt / ay) ** 2
+        return (xt / ax) ** 2 + (yt / ay_) ** 2
 
     sub = (np.arange(supersample) + 0.5) / supersample - 0.5
-    shape = (h, w, supersample, supersample)
+    shape = (h, w, supersample, supersample)   # (row, column, sub-row, sub-column)
     ys = np.broadcast_to((np.arange(h)[:, None] + sub)[:, None, :, None], shape)
     xs = np.broadcast_to((np.arange(w)[:, None] + sub)[None, :, None, :], shape)
     views = np.empty((5, 5, h, w, 3), np.float32)
     for i in range(5):
         for j in range(5):
             du, dv = i - 2, j - 2
-            y0 = (ys + (d_wall - slope * crease) * du) / (1 - slope * du)
-            y0 = np.where(y0 >= crease, y0, ys + d_wall * du)
-            d0 = d_wall + slope * np.maximum(y0 - crease, 0)
-            img = sample(back, xs + d0 * dv, y0)
-            img = img * (0.6 + 0.8 * np.clip((y0 - crease) / (h - crease), 0, 1))[..., None]
+            # background: the centre-view point (x0, y0) seen at (x, y) solves
+            # y0 - d(y0) du = y with d(y0) = d_wall + slope (y0 - crease) below the crease
+            y0 = (ys + (d_wall - slope * crease_y) * du) / (1 - slope * du)
+            y0 = np.where(y0 >= crease_y, y0, ys + d_wall * du)
+            d0 = d_wall + slope * np.maximum(y0 - crease_y, 0)
+            img = sample(back_tex, xs + d0 * dv, y0)
+            if falloff:
+                img = img * (0.6 + 0.8 * np.clip((y0 - crease_y) / (h - crease_y), 0, 1))[..., None]
             xf, yf = xs + d_fg * dv, ys + d_fg * du
             r2 = inside(xf, yf)
             shade = np.clip(1.1 - 0.9 * r2, 0.05, 1)[..., None]
             img = np.where((r2 <= 1)[..., None], shade * sample(front, xf, yf), img)
             views[i, j] = img.mean((2, 3))
-    views = views + rng.normal(0, noise, views.shape).astype(np.float32) * np.sqrt(
-        np.maximum(views, 1e-4) / 0.05).clip(0.3, 3)
     yc, xc = np.mgrid[0:h, 0:w].astype(np.float64)
-    gt = np.where(inside(xc, yc) <= 1, d_fg, d_wall + slope * np.maximum(yc - crease, 0))
-    return quantise_8bit(LightField(np.clip(views, 0, 1), spacing=1.0)), gt.astype(np.float32)
+    gt = np.where(inside(xc, yc) <= 1, d_fg, d_wall + slope * np.maximum(yc - crease_y, 0))
+    return views, gt.astype(np.float32)
 
 
 def quantise_8bit(lf):
