@@ -22,10 +22,11 @@ from lumigraph.capture.scenes.facade_edges import (
     ring_cameras,
     write_facade_folder,
 )
+from lumigraph.stereo.bench_facade import four_hand_marks
 from lumigraph.stereo.debevec1996.automark import automark
 from lumigraph.stereo.debevec1996.edges import EdgeMarks
 from lumigraph.stereo.debevec1996.model import load_blocks
-from lumigraph.stereo.debevec1996.solve import _known_axis, solve_facade
+from lumigraph.stereo.debevec1996.solve import solve_facade
 
 BLOCKS = Path(__file__).resolve().parents[2] / "fixtures" / "facade" / "blocks.json"
 
@@ -137,24 +138,10 @@ def test_cli_unknown_photograph_and_unconstrained(tmp_path, model):
     assert not (tmp_path / "o").exists()
 
 
-def _four_hand_marks(model, marks):
-    """Two vertical and two horizontal edges, the longest: what a user marks."""
-    ax = _known_axis(model, [m["edge"] for m in marks])
-    L = [np.hypot(m["segment"][2] - m["segment"][0], m["segment"][3] - m["segment"][1])
-         for m in marks]
-    order = np.argsort(L)[::-1]
-    out = [i for i in order if ax[i] == 2][:2]
-    for a in (0, 1):
-        pick = [i for i in order if ax[i] == a][:2]
-        if len(pick) == 2:
-            return [marks[i] for i in out + pick]
-    raise AssertionError("no two horizontal edges")
-
-
 def test_automatic_marking_from_four_hand_marks(model, cams):
     rng = np.random.default_rng(7)
     raw, mk = marks_of(model, cams, noise_px=0.5, rng=rng)
-    hand = mk({p: _four_hand_marks(model, v) for p, v in raw.items()})
+    hand = mk({p: four_hand_marks(model, v) for p, v in raw.items()})
     images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}
     start = model.with_values(model.values[~model.fixed] * 1.1)
     res = automark(start, hand, images, K(cams), noise_px=0.5)
