@@ -740,3 +740,17 @@ def centre_error(rec: Reconstruction, gt_centres: np.ndarray) -> dict:
     e = np.linalg.norm((s * c[ok] @ R.T + t) - gt[ok], axis=1)
     return {"max": float(e.max()), "rms": float(np.sqrt(np.mean(e ** 2))), "scale": s,
             "aligned_views": int(ok.sum())}
+
+
+def rotation_error_deg(rec: Reconstruction, gt_R: np.ndarray, gt_centres: np.ndarray) -> float:
+    """Largest rotation error (degrees) of the registered views after the
+    similarity that best aligns the camera centres to ground truth (the
+    gauge :func:`centre_error` uses); ``gt_R`` is ``(N, 3, 3)`` cam_from_world."""
+    ok = rec.registered
+    if ok.sum() < 3:
+        raise EstimationError("reconstruction", "fewer than 3 registered views: cannot align")
+    _, R, _ = align_similarity(rec.centres[ok], np.asarray(gt_centres, np.float64)[ok])
+    err = [np.arccos(np.clip((np.trace(np.asarray(gt_R)[i].T @ rec.cam_from_world_R[i] @ R.T) - 1) / 2,
+                             -1.0, 1.0)) for i in np.flatnonzero(ok)]
+    return float(np.degrees(max(err)))
+
