@@ -8,9 +8,13 @@ given centres (Umeyama 1991), relative to the diameter of the camera centres
 relative to the object's bounding-box diagonal, the largest rotation error
 (degrees, after that similarity) and the largest pairwise relative-rotation
 error (gauge free). Camera convention (PROVENANCE.md): ``x ~ K [R | t] X``,
-``C = -Rᵀ t``, metres, one K for all views. Nothing is tuned on this set
-except the SIFT threshold and the registration bounds (``stereo/sfm.py``),
-chosen to register all 16 views; the accuracy figures are reported, not tuned.
+``C = -Rᵀ t``, metres, one K for all views. Tuned on this set: the SIFT
+threshold and the registration bounds (``stereo/sfm.py``), chosen to register
+all 16 views. The final robust bundle adjustment was found looking at this
+set's rotations (its least-squares residuals are heavy-tailed), but its loss
+and scale are set by principle (Cauchy, 2.385 x the residuals' MAD noise), not
+fitted to these numbers; the rendered ``sfm`` case checks it on scenes with
+exact ground truth (docs/decisions/sfm.md).
 """
 
 from __future__ import annotations
@@ -75,6 +79,8 @@ def temple_error(data, rec) -> dict:
             "rotation_max_deg": max(rot), "rotation_median_deg": float(np.median(rot)),
             "relative_rotation_max_deg": max(rel), "registered": int(ok.sum()), "views": len(ok),
             "focal_px": float(rec.camera.K[0, 0]), "points": rec.info["points"],
+            "residual_sigma_px": (rec.info.get("final_bundle_adjustment") or {}).get("sigma_px", float("nan")),
+            "loss_scale_px": (rec.info.get("final_bundle_adjustment") or {}).get("scale_px", float("nan")),
             "usable": not assess(rec)}
 
 
@@ -95,8 +101,9 @@ def _checks(res) -> list[Check]:
         out.append(Check(f"SfM temple ({tag}): rotations within 0.5 deg", e["rotation_max_deg"], 0.5,
                          e["rotation_max_deg"] <= 0.5,
                          f"median {e['rotation_median_deg']:.2f} deg; pairwise relative max "
-                         f"{e['relative_rotation_max_deg']:.2f} deg (the given poses reproject our "
-                         "tracks at 0.45 px RMS, ours at 0.34: docs/decisions/sfm.md)"))
+                         f"{e['relative_rotation_max_deg']:.2f} deg; residual noise "
+                         f"{e['residual_sigma_px']:.2f} px (MAD), the robust loss's scale "
+                         f"{e['loss_scale_px']:.2f} px"))
     return out
 
 
