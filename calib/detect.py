@@ -311,7 +311,7 @@ def _paint_out_markers(gray: np.ndarray, marker_corners, square_over_marker: flo
 # each marker is rendered (its bits through the homography of its square's
 # refined corners, integrated over the pixel, blurred by the image's blur, which
 # is fitted on the markers themselves) and its fitted contrast added back.
-MARKER_BLURS = (0.3, 0.45, 0.6, 0.75, 0.9, 1.1, 1.3, 1.6, 2.0, 2.5)  # px, candidate Gaussian sigmas
+MARKER_BLURS = (0.3, 0.5, 0.75, 1.1, 1.6, 2.5)  # px, candidate Gaussian sigmas (then a parabola)
 _MARKER_SS = 4  # samples per pixel side when rendering a marker's coverage
 _TEXELS_PER_BIT = 8
 # a corner moved by more than this by the second refinement keeps its first one
@@ -370,7 +370,7 @@ def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: B
         own = [(jj - 1) * nc + (ii - 1) for jj in (j, j + 1) for ii in (i, i + 1)
                if 1 <= ii <= nc and 1 <= jj <= nr]
         if len(own) == 4 and found[own].all():
-            src, dst = ob[own], pos[own]
+            H = cv2.getPerspectiveTransform(ob[own].astype(np.float32), pos[own].astype(np.float32))
         else:
             c = obj[k].mean(axis=0)
             blk = np.flatnonzero(found & np.all(np.abs(ob - c) <= 1.5 * s + 1e-9, axis=1))
@@ -379,9 +379,9 @@ def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: B
             src, dst = ob[blk], pos[blk]
             if np.linalg.svd(src - src.mean(axis=0), compute_uv=False)[-1] < 0.15 * s * np.sqrt(blk.size):
                 continue
-        H, _ = cv2.findHomography(src, dst, 0)
-        if H is None:
-            continue
+            H, _ = cv2.findHomography(src, dst, 0)
+            if H is None:
+                continue
         q = obj[k]
         qi = cv2.perspectiveTransform(q[None], H)[0]
         x0, y0 = np.maximum(np.floor(qi.min(axis=0)).astype(int) - pad, 0)
