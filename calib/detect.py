@@ -16,7 +16,12 @@ the board; square ``(0, 0)`` is black; inner corner ``k = j (COLS−1) + i`` sit
 at ``((i+1) s, (j+1) s, 0)``.
 
 Detection uses OpenCV (``findChessboardCorners`` then ``cornerSubPix`` for
-checkerboards, ``aruco.CharucoDetector`` for ChArUco). For large images the
+checkerboards, ``aruco.CharucoDetector`` for ChArUco). ChArUco corners are
+refined twice with the checkerboard's ``cornerSubPix``: first with the markers
+painted white, then with each marker rendered through the homography of its
+square's refined corners, blurred by the image's blur (fitted on the markers)
+and subtracted, so no blurred marker edge is left in a corner's window
+(docs/decisions/charuco-marker-removal.md). For large images the
 checkerboard search runs on a 2× reduced copy and only the sub-pixel refinement
 on the full image; checkerboards whose 180° rotation differs in colour (COLS +
 ROWS odd) are put in the board's own orientation (square (0, 0) black), so the
