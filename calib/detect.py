@@ -317,7 +317,9 @@ def _paint_out_markers(gray: np.ndarray, marker_corners, square_over_marker: flo
 # refined corners, integrated over the pixel, blurred by the image's blur, which
 # is fitted on the markers themselves) and its fitted contrast added back.
 MARKER_BLURS = (0.3, 0.5, 0.75, 1.1, 1.6, 2.5)  # px, candidate Gaussian sigmas (then a parabola)
-_MARKER_SS = 4  # samples per pixel side when rendering a marker's coverage
+# samples per pixel side when rendering a marker's coverage: no farther apart than one texel
+# (whose bilinear ramp then makes the sum a pixel's box integral), 2..4
+_MARKER_SS = (2, 4)
 _TEXELS_PER_BIT = 8
 # a corner moved by more than this by the second refinement keeps its first one
 # (the model then misses something: a marker the detector confused, an occlusion)
@@ -365,9 +367,7 @@ def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: B
     found[ids] = True
     pos = np.zeros((board.n_corners, 2))
     pos[ids] = pts
-    ss = _MARKER_SS
     pad = int(np.ceil(3 * MARKER_BLURS[-1])) + 2
-    up = np.array([[ss, 0, 0.5 * (ss - 1)], [0, ss, 0.5 * (ss - 1)], [0, 0, 1]])
     step = m / side
     patches, done = [], []
     for k in range(len(obj)):
@@ -393,6 +393,9 @@ def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: B
         x1, y1 = np.minimum(np.ceil(qi.max(axis=0)).astype(int) + pad + 1, (w, h))
         if x1 - x0 < 2 or y1 - y0 < 2:
             continue
+        px = np.mean(np.linalg.norm(qi - np.roll(qi, 1, axis=0), axis=1))  # marker side, px
+        ss = int(np.clip(np.ceil(side / max(px, 1e-9)), *_MARKER_SS))
+        up = np.array([[ss, 0, 0.5 * (ss - 1)], [0, ss, 0.5 * (ss - 1)], [0, 0, 1]])
         # texel centres -> board -> image pixel centres -> the ss-times finer grid of this box
         B = np.array([[step, 0, q[0, 0] + 0.5 * step], [0, step, q[0, 1] + 0.5 * step], [0, 0, 1]])
         shift = np.array([[1, 0, -ss * x0], [0, 1, -ss * y0], [0, 0, 1.0]])
