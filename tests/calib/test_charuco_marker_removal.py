@@ -87,6 +87,8 @@ def test_marker_removal_takes_the_markers_out():
             acc.append(v - np.median(v))
     b, a = np.concatenate(before), np.concatenate(after)
     assert len(done) >= 5
-    # a marker is half black (sd ~ 100 codes over the square); a tenth of it left is
-    # the bound, far from a marker left in place and far above the read noise (1 code)
+    # a coarse bound, not a precision claim: a marker left in place, flipped, or
+    # rendered a bit (1/6 of its side) off leaves a spread comparable to the whole
+    # marker's (~100 codes); one modelled to within its blur leaves a small part of
+    # it (the precision is judged by the lean above and the bench's family)
     assert np.sqrt(np.mean(a ** 2)) < 0.1 * np.sqrt(np.mean(b ** 2)), (a.std(), b.std())
