@@ -16,7 +16,12 @@ the board; square ``(0, 0)`` is black; inner corner ``k = j (COLS−1) + i`` sit
 at ``((i+1) s, (j+1) s, 0)``.
 
 Detection uses OpenCV (``findChessboardCorners`` then ``cornerSubPix`` for
-checkerboards, ``aruco.CharucoDetector`` for ChArUco). For large images the
+checkerboards, ``aruco.CharucoDetector`` for ChArUco). ChArUco corners are
+refined twice with the checkerboard's ``cornerSubPix``: first with the markers
+painted white, then with each marker rendered through the homography of its
+square's refined corners, blurred by the image's blur (fitted on the markers)
+and subtracted, so no blurred marker edge is left in a corner's window
+(docs/decisions/charuco-marker-removal.md). For large images the
 checkerboard search runs on a 2× reduced copy and only the sub-pixel refinement
 on the full image; checkerboards whose 180° rotation differs in colour (COLS +
 ROWS odd) are put in the board's own orientation (square (0, 0) black), so the
@@ -36,6 +41,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -301,8 +307,193 @@ def _paint_out_markers(gray: np.ndarray, marker_corners, square_over_marker: flo
     return out
 
 
+# Marker removal by a forward model (docs/decisions/charuco-marker-removal.md).
+# Painting a marker out leaves its blurred edge beyond the paint: at 320 px a
+# marker sits 1.8-3 px from its square's edges, and the dark fringe that the
+# paint cannot reach lies at different pixel distances from a corner on the
+# near and the far side of a tilted board, so the refined corners leaned
+# towards the near side (-0.005 px, focal 0.17 % on one 320 px set). Instead
+# each marker is rendered (its bits through the homography of its square's
+# refined corners, integrated over the pixel, blurred by the image's blur, which
+# is fitted on the markers themselves) and its fitted contrast added back.
+MARKER_BLURS = (0.3, 0.5, 0.75, 1.1, 1.6, 2.5)  # px, candidate Gaussian sigmas (then a parabola)
+# samples per pixel side when rendering a marker's coverage: no farther apart than one texel
+# (whose bilinear ramp then makes the sum a pixel's box integral), 2..4
+_MARKER_SS = (2, 4)
+_TEXELS_PER_BIT = 8
+# a corner moved by more than this by the second refinement keeps its first one
+# (the model then misses something: a marker the detector confused, an occlusion)
+MAX_MARKER_MOVE_PX = 0.5
+
+
+@lru_cache(maxsize=8)
+def _marker_layout(board: BoardSpec):
+    """Each marker's board corners ``(M, 4, 2)``, its square ``(i, j)`` and its
+    darkness texture (1 on black bits and the border, 0 on white bits), as
+    ``cv2.aruco`` draws it: corner 0 top-left, rows along the board's y."""
+    import cv2
+
+    cb = board._charuco()
+    obj = np.asarray(cb.getObjPoints(), np.float64)[:, :, :2]
+    d = cb.getDictionary()
+    side = (d.markerSize + 2) * _TEXELS_PER_BIT
+    texs = tuple(1.0 - cv2.aruco.generateImageMarker(d, int(i), side, borderBits=1).astype(np.float32) / 255.0
+                 for i in np.asarray(cb.getIds()).ravel())
+    squares = np.floor(obj.mean(axis=1) / board.square).astype(int)
+    return obj, squares, texs, side
+
+
+def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: BoardSpec):
+    """``gray`` (H, W) uint8 with the markers next to the refined corners
+    ``pts`` (N, 2) px (board ids ``ids``) taken out: ``(float32 image, set of
+    modelled squares (i, j))``, or None when no marker could be modelled.
+
+    A marker is modelled when its square's four corners were found (their
+    homography), else from the found corners within 1.5 squares of it (at
+    least 6, not collinear: partial boards). The image near each marker is
+    ``a_m + A_m * (G_sigma * C_m)`` with ``C_m`` the marker's darkness
+    integrated over each pixel; sigma is the one of ``MARKER_BLURS`` (refined
+    by a parabola through its neighbours) with the least residual over all
+    markers' insides, ``a_m, A_m`` are fitted per marker (uneven light), and
+    ``A_m G_sigma * C_m`` is subtracted."""
+    import cv2
+
+    h, w = gray.shape
+    s, m = board.square, board.marker
+    nc, nr = board.pattern_size
+    obj, squares, texs, side = _marker_layout(board)
+    ob = board.object_points[:, :2]
+    found = np.zeros(board.n_corners, bool)
+    found[ids] = True
+    pos = np.zeros((board.n_corners, 2))
+    pos[ids] = pts
+    pad = int(np.ceil(3 * MARKER_BLURS[-1])) + 2
+    step = m / side
+    patches, done = [], []
+    for k in range(len(obj)):
+        i, j = squares[k]
+        own = [(jj - 1) * nc + (ii - 1) for jj in (j, j + 1) for ii in (i, i + 1)
+               if 1 <= ii <= nc and 1 <= jj <= nr]
+        if len(own) == 4 and found[own].all():
+            H = cv2.getPerspectiveTransform(ob[own].astype(np.float32), pos[own].astype(np.float32))
+        else:
+            c = obj[k].mean(axis=0)
+            blk = np.flatnonzero(found & np.all(np.abs(ob - c) <= 1.5 * s + 1e-9, axis=1))
+            if blk.size < 6:
+                continue
+            src, dst = ob[blk], pos[blk]
+            if np.linalg.svd(src - src.mean(axis=0), compute_uv=False)[-1] < 0.15 * s * np.sqrt(blk.size):
+                continue
+            H, _ = cv2.findHomography(src, dst, 0)
+            if H is None:
+                continue
+        q = obj[k]
+        qi = cv2.perspectiveTransform(q[None], H)[0]
+        x0, y0 = np.maximum(np.floor(qi.min(axis=0)).astype(int) - pad, 0)
+        x1, y1 = np.minimum(np.ceil(qi.max(axis=0)).astype(int) + pad + 1, (w, h))
+        if x1 - x0 < 2 or y1 - y0 < 2:
+            continue
+        px = np.mean(np.linalg.norm(qi - np.roll(qi, 1, axis=0), axis=1))  # marker side, px
+        ss = int(np.clip(np.ceil(side / max(px, 1e-9)), *_MARKER_SS))
+        up = np.array([[ss, 0, 0.5 * (ss - 1)], [0, ss, 0.5 * (ss - 1)], [0, 0, 1]])
+        # texel centres -> board -> image pixel centres -> the ss-times finer grid of this box
+        B = np.array([[step, 0, q[0, 0] + 0.5 * step], [0, step, q[0, 1] + 0.5 * step], [0, 0, 1]])
+        shift = np.array([[1, 0, -ss * x0], [0, 1, -ss * y0], [0, 0, 1.0]])
+        fine = cv2.warpPerspective(texs[k], shift @ up @ H @ B, ((x1 - x0) * ss, (y1 - y0) * ss),
+                                   flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        cov = cv2.resize(fine, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)  # the pixel's box
+        inside = np.zeros((y1 - y0, x1 - x0), np.uint8)
+        cv2.fillConvexPoly(inside, np.round((qi - (x0, y0)) * 16).astype(np.int32), 1,
+                           lineType=cv2.LINE_8, shift=4)
+        patches.append((x0, y0, x1, y1, cov, inside > 0))
+        done.append((int(i), int(j)))
+    if not patches:
+        return None
+    # one region of interest holds every patch: the blurs run there only
+    X0, Y0 = min(p[0] for p in patches), min(p[1] for p in patches)
+    X1, Y1 = max(p[2] for p in patches), max(p[3] for p in patches)
+    cov = np.zeros((Y1 - Y0, X1 - X0), np.float32)
+    label = np.zeros(cov.shape, np.int32)
+    for n, (x0, y0, x1, y1, c, ins) in enumerate(patches):
+        cov[y0 - Y0:y1 - Y0, x0 - X0:x1 - X0] += c
+        label[y0 - Y0:y1 - Y0, x0 - X0:x1 - X0][ins] = n + 1
+    g = gray[Y0:Y1, X0:X1].astype(np.float32)
+    sel = label.ravel() > 0
+    lab = label.ravel()[sel]
+    val = g.ravel()[sel].astype(np.float64)
+    L = len(patches) + 1
+    cnt = np.maximum(np.bincount(lab, minlength=L), 1).astype(np.float64)
+    si = np.bincount(lab, val, L)
+    vi = np.bincount(lab, val * val, L) - si * si / cnt
+
+    def fit(sigma):
+        mb = cv2.GaussianBlur(cov, (0, 0), sigma).ravel()[sel].astype(np.float64)
+        sm = np.bincount(lab, mb, L)
+        vm = np.bincount(lab, mb * mb, L) - sm * sm / cnt
+        cim = np.bincount(lab, val * mb, L) - si * sm / cnt
+        ok = vm > 1e-9
+        amp = np.where(ok, cim / np.where(ok, vm, 1.0), 0.0)  # the marker's (negative) contrast
+        return float(np.sum((vi - amp * cim)[1:])), amp
+
+    res = [fit(sg)[0] for sg in MARKER_BLURS]
+    b = int(np.argmin(res))
+    sigma = MARKER_BLURS[b]
+    if 0 < b < len(MARKER_BLURS) - 1:
+        # the parabola through the minimum and its neighbours (in sigma)
+        xs, ys = np.array(MARKER_BLURS[b - 1:b + 2]), np.array(res[b - 1:b + 2])
+        a2, a1, _ = np.polyfit(xs, ys, 2)
+        if a2 > 0:
+            sigma = float(np.clip(-a1 / (2 * a2), xs[0], xs[2]))
+    _, amp = fit(sigma)
+    dark = np.zeros(cov.shape, np.float32)
+    for n, (x0, y0, x1, y1, c, _ins) in enumerate(patches):
+        dark[y0 - Y0:y1 - Y0, x0 - X0:x1 - X0] += np.float32(amp[n + 1]) * c
+    out = gray.astype(np.float32)
+    out[Y0:Y1, X0:X1] -= cv2.GaussianBlur(dark, (0, 0), sigma)
+    return out, set(done)
+
+
 def _empty(size) -> Detection:
     return Detection(np.zeros(0, np.int64), np.zeros((0, 2)), np.zeros((0, 3)), size)
+
+
+# the painted refinement alone: False reproduces the corners before the markers were modelled
+REMOVE_MARKERS = True
+
+
+def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
+    """The corners ``pts`` (refined on the painted image) refined again on
+    ``gray`` with the markers rendered and subtracted (:func:`_remove_markers`).
+    A corner keeps its first refinement when one of its two white squares'
+    markers could not be modelled (the paint would then be in its window, and
+    a mix of the two is biased either way) or when it moved by more than
+    ``MAX_MARKER_MOVE_PX``. Detected markers that were not modelled are painted
+    out as before."""
+    import cv2
+
+    removed = _remove_markers(gray, ids, pts, board)
+    if removed is None:
+        return pts
+    clean, done = removed
+    _, squares, _, _ = _marker_layout(board)
+    if mcorners is not None and mids is not None and len(mcorners):
+        by_id = {int(k): tuple(sq) for k, sq in zip(np.asarray(board._charuco().getIds()).ravel(), squares,
+                                                        strict=True)}
+        left = [c for c, k in zip(mcorners, np.asarray(mids).ravel(), strict=True)
+                if by_id.get(int(k)) not in done]
+        if left:
+            clean = _paint_out_markers(clean, left, board.square / board.marker)
+    new = cv2.cornerSubPix(clean, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
+                           _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+    nc = board.cols - 1
+    ii, jj = ids % nc + 1, ids // nc + 1  # the corner is the top-left of square (ii, jj)
+    # its window holds squares (ii-1..ii, jj-1..jj); the white ones ((i + j) odd) carry markers
+    ok = np.array([all((x, y) in done for x in (a - 1, a) for y in (b - 1, b) if (x + y) % 2 == 1)
+                   for a, b in zip(ii.tolist(), jj.tolist(), strict=True)], bool)
+    ok &= np.linalg.norm(new - pts, axis=1) < MAX_MARKER_MOVE_PX
+    out = pts.copy()
+    out[ok] = new[ok]
+    return out
 
 
 def detect(image: np.ndarray, board: BoardSpec) -> Detection:
@@ -325,7 +516,7 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
     h, w = gray.shape
     if board.kind == "charuco":
         det = cv2.aruco.CharucoDetector(board._charuco())
-        corners, ids, mcorners, _ = det.detectBoard(gray)
+        corners, ids, mcorners, mids = det.detectBoard(gray)
         if ids is None or len(ids) < 6:
             return _empty((w, h))
         ids = ids.ravel().astype(np.int64)
@@ -335,12 +526,14 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
         # kept inside the marker-free margin, too few pixels. The markers are
         # found, so paint them out with their square's white and refine as on a
         # plain checkerboard, with the checkerboard's window.
-        gray = _paint_out_markers(gray, mcorners, board.square / board.marker)
+        painted = _paint_out_markers(gray, mcorners, board.square / board.marker)
         dist = np.linalg.norm(pts[:, None] - pts[None], axis=2)
         np.fill_diagonal(dist, np.inf)
         win = int(np.clip(np.floor(0.4 * np.median(dist.min(axis=1))), 2, 10))
-        pts = cv2.cornerSubPix(gray, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
+        pts = cv2.cornerSubPix(painted, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                                _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+        if REMOVE_MARKERS:
+            pts = _refine_without_markers(gray, ids, pts, mcorners, mids, board, win)
         return Detection(ids, pts, board.object_points[ids], (w, h))
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
     found, pts = False, None
