@@ -68,7 +68,9 @@ def compare_cameras(poses: dict, given: dict) -> dict:
     """Recovered ``poses`` (photo -> (R, t), ``x_cam = R x + t``) against the
     ``given`` cameras after the least-squares similarity of the centres:
     per photo the rotation error (deg) and the centre error relative to the
-    diameter of the given ring (all its cameras)."""
+    diameter of the given ring (all its cameras); and, free of the
+    similarity, the rotation between every two photographs against the given
+    one (deg)."""
     from lumigraph.stereo.sfm import align_similarity
 
     names = list(poses)
@@ -79,8 +81,11 @@ def compare_cameras(poses: dict, given: dict) -> dict:
     ring = float(np.max(np.linalg.norm(allC[:, None] - allC[None], axis=-1)))
     err = np.linalg.norm(s * Ce @ Rs.T + t - C, axis=1) / ring
     rot = [_angle_deg(given[p]["R"], poses[p][0] @ Rs.T) for p in names]
+    # gauge-free: the rotation between every two photographs
+    rel = [_angle_deg(given[a]["R"] @ given[b]["R"].T, poses[a][0] @ poses[b][0].T)
+           for i, a in enumerate(names) for b in names[i + 1:]]
     return {"photos": names, "rotation_deg": rot, "centre_rel": err.tolist(), "scale": float(s),
-            "ring_m": ring}
+            "ring_m": ring, "relative_rotation_deg": rel}
 
 
 def _line_distances(model, marks, poses, K, values=None) -> np.ndarray:
@@ -194,8 +199,11 @@ def temple_rows(quick: bool):
     checks = [
         Check("temple (real): recovered rotations within 2 deg of the given ones (worst view)",
               rot, 2.0, rot <= 2.0,
-              f"{c['marks']} hand marks on views {views}, given K; per view {per}; marks fitted "
-              f"at {c['rms_px']:.2f} px RMS"),
+              f"{c['marks']} hand marks on views {views}, given K; per view {per}; pairwise "
+              f"relative rotations median {np.median(s['relative_rotation_deg']):.1f}, max "
+              f"{max(s['relative_rotation_deg']):.1f} deg; marks fitted at {c['rms_px']:.2f} px "
+              "RMS (peer for scale: pycolmap SfM on all 16 views, bench stereo 'sfm temple', "
+              "0.66 deg / 0.55 %)"),
         Check("temple (real): camera centres within 2 % of the ring diameter (worst view)",
               cen, 0.02, cen <= 0.02, f"ring {s['ring_m']:.3f} m; similarity scale {s['scale']:.3f}"),
         Check("temple (real): what limits it: the block model's misfit at the given cameras (px RMS)",
