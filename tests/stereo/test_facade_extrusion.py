@@ -208,3 +208,22 @@ def test_cli_solve_and_depth_with_extrusions(tmp_path, model):
     # depth is camera z: the ray parameter times d's z component, which is 1
     # the solved model is the truth to 1e-6 relative; the PFM stores float32 (6e-8)
     assert float(np.squeeze(depth[v, u])) == pytest.approx(best, rel=1e-6)
+
+
+def test_cli_refuses_a_self_intersecting_polygon_naming_the_block(tmp_path, model):
+    from cli_catalog import run_cli
+
+    from lumigraph.capture.scenes.facade_edges import write_facade_folder
+
+    cams = ring_cameras(3, target=[0, 0, 3], radius=30, height=8, focal_px=150,
+                        image_size=(160, 120), arc_deg=(-130.0, -50.0))
+    folder = write_facade_folder(tmp_path / "f", model, cams)
+    d = json.loads((folder / "blocks.json").read_text())
+    poly = d["blocks"][0]["polygon"]
+    poly[1], poly[2] = poly[2], poly[1]             # two vertices swapped: a bow tie
+    (folder / "blocks.json").write_text(json.dumps(d))
+    rc, _, err = run_cli(["stereo", "facade", "solve", folder, "--out", tmp_path / "o"])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2 and len(lines) == 1, err
+    assert "blocks.json" in lines[0] and "blocks[0].polygon" in lines[0] and "'hall'" in lines[0]
+    assert not (tmp_path / "o").exists()
