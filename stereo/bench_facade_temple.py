@@ -206,8 +206,9 @@ def temple_rows(quick: bool):
               "0.66 deg / 0.55 %)"),
         Check("temple (real): camera centres within 2 % of the ring diameter (worst view)",
               cen, 0.02, cen <= 0.02, f"ring {s['ring_m']:.3f} m; similarity scale {s['scale']:.3f}"),
-        Check("temple (real): what limits it: the block model's misfit at the given cameras (px RMS)",
-              c["misfit_rms_px"], 1.0, c["misfit_rms_px"] <= 1.0,
+        Check("temple (real): what limits it: the block model's misfit at the given cameras, "
+              "px RMS (no more than the marks' own 1.5 px wanted)",
+              c["misfit_rms_px"], 1.5, c["misfit_rms_px"] <= 1.5,
               f"max {c['misfit_max_px']:.1f} px; the marks sit on image steps to < 1.5 px (the "
               f"refinement's move); the same marks moved onto that model's edges give back the "
               f"poses to {xr:.1e} deg / {xc:.1e} (the layout fixes them), and at "
