@@ -7,7 +7,8 @@ detector ran (``automark.detect_segments``, 15-20 px minimum) and its
 segments were drawn numbered on an upright copy of the photograph (the
 temple lies on its side in every view); the segments below were picked *by
 eye* as the model edge named beside them (the given cameras were not used to
-pick or place any mark). Each is then moved onto the intensity step it lies
+pick or place any mark; they were used to diagnose an earlier set, which is
+why the stylobate lines are not here: docs/decisions/facade.md). Each is then moved onto the intensity step it lies
 on (``lumigraph.view.marking.refine_on_edge``, the marking mode's snap); a
 refinement that moves an end more than 1.5 px jumped to a neighbouring edge
 and the detection is kept instead.
