@@ -4,7 +4,8 @@
 Scenes: a family of block models (``house``: the fixture, a two-storey house
 with a gable roof and a tower; ``tower``: a tall tower with a spire and a
 roofed annex; ``ell``: an L-shaped pair of roofed wings; ``village``: ten
-blocks) seen by eight cameras on an arc (640x480, f = 700 px), their marks
+blocks; ``hall``: extrusions, an L-shaped footprint and a gable profile, in
+the noise-free row only) seen by eight cameras on an arc (640x480, f = 700 px), their marks
 projected exactly by :mod:`lumigraph.capture.scenes.facade_edges` (endpoint
 noise added where a row says so). The defaults of the solver and of
 automatic marking (robust scale, mis-mark limit, association gates, rounds)
@@ -35,7 +36,12 @@ Rows and checks:
   before any run; ``--quick``: tower s3 and s6); the detail also names what
   the full marks of 15 px or more (the detectable ones) leave unconstrained;
 - solve time, ``village`` (10 blocks) × 8 photographs × 150 segments each
-  (each visible edge marked as several pieces) — ≤ 1 s.
+  (each visible edge marked as several pieces) — ≤ 1 s;
+- the real case (``stereo/bench_facade_temple.py``, skipped without the
+  shared data): the Middlebury temple from 35 hand marks on 7 photographs,
+  the given K fixed: recovered rotations (≤ 2 deg) and centres (≤ 2 % of the
+  ring) against the given cameras after a similarity, and what limits them
+  (the block model's misfit at the given cameras, the marks' layout).
 
 ``ROW_PROVIDERS`` lists the functions that add rows and checks (VDTM rows
 are to join them): each is ``provider(quick) -> (rows, checks)``.
@@ -52,6 +58,8 @@ from lumigraph.capture.bench import Check, Row, Stage
 
 TUNED = [("house", 1)]
 REPORTED = [("house", 2), ("tower", 3), ("ell", 4), ("village", 5)]
+# the extrusion kind came after the defaults were set: reported only, in the noise-free row
+EXTRUSION_REPORTED = [("hall", 15)]
 # automatic marking was reworked on tower s3 and village s5 (flush blocks, a
 # hidden annex), so for it they are tuning cases too, and its target is
 # reported on camera seeds no one looked at while tuning; tower s8 and
@@ -89,6 +97,24 @@ MODELS = {
         {"name": "wing-roof", "kind": "wedge", "parent": "wing",
          "params": {"width": {"same_as": "wing/width"}, "depth": {"same_as": "wing/depth"},
                     "height": 2.5}}]},
+    # extrusions (issue 17, temple pass): an L-shaped hall (a footprint with a
+    # notch, non-convex), a gable profile extruded along its depth, a box tower
+    "hall": {"blocks": [
+        {"name": "hall", "kind": "extrusion", "axis": "z",
+         "polygon": [["-0.5*width", "-0.5*depth"], ["0.5*width", "-0.5*depth"],
+                     ["0.5*width", "wing - 0.5*depth"], [1.0, "wing - 0.5*depth"],
+                     [1.0, "0.5*depth"], ["-0.5*width", "0.5*depth"]],
+         "params": {"width": {"value": 10.0, "fixed": True}, "depth": 8.0, "wing": 3.0,
+                    "height": 5.0}},
+        {"name": "roof", "kind": "extrusion", "parent": "hall", "axis": "y", "x": "offset",
+         "y": "offset",
+         "polygon": [["-0.5*span", 0], ["0.5*span", 0], ["0.5*span", "eave"],
+                     [0, "eave + pitch"], ["-0.5*span", "eave"]],
+         "params": {"span": 5.0, "depth": 5.0, "eave": 0.8, "pitch": 1.6, "offset_x": -2.0,
+                    "offset_y": 1.5}},
+        {"name": "tower", "kind": "box", "parent": "hall", "on": "base", "x": "right",
+         "y": "front", "params": {"width": 2.0, "depth": {"same_as": "hall/wing"},
+                                  "height": 7.0}}]},
     "village": {"blocks": [
         {"name": "house", "kind": "box",
          "params": {"width": {"value": 10.0, "fixed": True}, "depth": 6.0, "height": 6.0}},
@@ -185,7 +211,7 @@ def noise_free(quick: bool):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     rows, worst = [], []
-    for name, seed in TUNED + REPORTED:
+    for name, seed in TUNED + REPORTED + EXTRUSION_REPORTED:
         model, cams = scene(name, seed)
         _, marks = _marks(model, cams)
         start = model.with_values(model.values[~model.fixed] * 1.2)
@@ -420,8 +446,15 @@ def _stages_2_3():
     return more
 
 
+def _temple():
+    # the real case: the Middlebury temple, hand marks (stereo/bench_facade_temple.py)
+    from lumigraph.stereo.bench_facade_temple import temple_rows
+
+    return [temple_rows]
+
+
 ROW_PROVIDERS = [noise_free, noise_calibration, random_starts, automatic_marking, solve_time,
-                 *_stages_2_3()]
+                 *_stages_2_3(), *_temple()]
 
 
 def _extra(quick):

@@ -79,7 +79,7 @@ def test_fixtures_are_small_and_carry_no_sidecars():
     assert {p.name for p in FIXTURES.iterdir()} - {"__pycache__"} == {*NAMES, "README.md",
                                                                       "make_fixtures.py",
                                                                       "make_bad_inputs.py",
-                                                                      "facade"}
+                                                                      "facade", "facade-temple"}
 
 
 # ------------------------------------------------------------ the brackets

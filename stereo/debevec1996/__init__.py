@@ -5,6 +5,8 @@ Modules
 -------
 ``model``         the block model (``blocks.json``): :class:`BlockModel`,
                   :func:`load_blocks`, :class:`Mesh`.
+``polygon``       the ``extrusion`` block's polygon: coordinate expressions,
+                  the simplicity test, the cap triangulation.
 ``edges``         the marked image edges (``edges.json``).
 ``solve``         photogrammetric modelling: block parameters and camera poses
                   from the marked edges (eqs. 5.3–5.5).

@@ -36,7 +36,13 @@ FOLDER holds:
                 {"name": "roof", "kind": "wedge", "parent": "house",
                  "params": {"width": {"same_as": "house/width"},
                             "depth": {"same_as": "house/depth"}, "height": 2.5}}]}
-    kinds: box, wedge (gable roof, ridge along x), pyramid (width x, depth y, height z up);
+    kinds: box, wedge (gable roof, ridge along x), pyramid (width x, depth y, height z up),
+    extrusion: a polygon extruded along "axis" z (footprint in x,y; up by height), y (profile in
+    x,z; depth centred) or x (profile in y,z; width centred); each coordinate a number or a
+    linear expression of the block's params, e.g. an L footprint:
+      {"name": "hall", "kind": "extrusion", "axis": "z", "params": {"w": 8, "notch": 3, ...},
+       "polygon": [[0, 0], ["w", 0], ["w", "notch"], [2, "notch"], [2, 5], [0, 5]]}
+    (edges hall/bottom-<i>, hall/top-<i>: polygon edge i on each cap; hall/side-<i>);
     placement on the parent: "on": top (default) | base | offset (param offset_z),
     "x": centre | left | right | offset (offset_x), "y": centre | front | back | offset (offset_y)
     edges are named block/edge: house/top-front, house/front-left (vertical), roof/ridge,

@@ -19,6 +19,24 @@ Kinds (local frame: origin at the centre of the block's base):
 - ``wedge``: a gable roof: base ``width`` × ``depth``, ridge along ``x`` at
   ``y = 0`` and height ``height`` (the pitch is ``atan(2 height / depth)``).
 - ``pyramid``: base ``width`` × ``depth``, apex at height ``height``.
+- ``extrusion``: a planar polygon (``"polygon": [[u, v], …]``, at least three
+  vertices, convex or simple non-convex) extruded along ``"axis"``: ``z``
+  (the default; the polygon is a footprint in ``(x, y)``, extruded from
+  ``z = 0`` up by ``height``), ``y`` (a profile in ``(x, z)`` seen from the
+  front, extruded from ``y = −depth/2`` to ``+depth/2``) or ``x`` (a profile
+  in ``(y, z)``, from ``x = −width/2`` to ``+width/2``). Each coordinate is a
+  number (a constant) or a linear expression of the block's own parameters
+  (``"0.5*width"``, ``"-half"``, ``"wall + 0.25"``;
+  :mod:`~lumigraph.stereo.debevec1996.polygon`). Its parameters: the
+  extrusion length (``height`` / ``depth`` / ``width``), every name the
+  polygon uses, and optionally the others of ``width``/``depth``/``height``
+  (children placed against it use them: ``on: top`` needs its ``height``,
+  flush ``left``/``right`` its ``width``, ``front``/``back`` its ``depth``).
+  Vertices ``bottom-<i>`` / ``top-<i>`` (the polygon's vertex ``i`` on the
+  cap at the axis's low end — the ground, the front, the left — and at its
+  high end); edges ``bottom-<i>`` and ``top-<i>`` (cap vertex ``i`` to
+  ``i + 1``) and ``side-<i>`` (``bottom-<i>`` to ``top-<i>``). A polygon that
+  crosses itself at the starting values is refused.
 
 Placement (keys of a block with a ``parent``): ``on`` = ``top`` (its base on
 the parent's top: ``z = parent height``; the default), ``base`` (on the
@@ -60,11 +78,18 @@ from __future__ import annotations
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from dataclasses import replace as dc_replace
 from functools import cached_property
 
 import numpy as np
 
-from lumigraph.capture.errors import InputError
+from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.stereo.debevec1996.polygon import (
+    crossing_edges,
+    parse_coordinate,
+    signed_area,
+    triangulate,
+)
 
 BLOCKS_SCHEMA = "lumigraph.facade.blocks"
 
@@ -138,7 +163,11 @@ _KINDS: dict[str, dict] = {
     },
 }
 
-KINDS = tuple(_KINDS)
+KINDS = (*_KINDS, "extrusion")
+AXES = ("z", "y", "x")
+# extrusion axis -> (world rows of the polygon's u, v; row of the axis; its length parameter)
+_EXTRUDE = {"z": ((0, 1), 2, "height"), "y": ((0, 2), 1, "depth"), "x": ((1, 2), 0, "width")}
+UNIT_SLOT = "1"  # a hidden fixed slot of value 1: the polygon's constant terms multiply it
 PLACE_Z = ("top", "base", "offset")
 PLACE_X = ("centre", "left", "right", "offset")
 PLACE_Y = ("centre", "front", "back", "offset")
@@ -161,7 +190,7 @@ def _oriented_triangles(kind: str) -> list[tuple[str, str, str]]:
     return tris
 
 
-_TRIANGLES = {k: _oriented_triangles(k) for k in KINDS}
+_TRIANGLES = {k: _oriented_triangles(k) for k in _KINDS}
 
 
 @dataclass(frozen=True)
@@ -189,6 +218,17 @@ class Block:
     on: str = "top"
     x: str = "centre"
     y: str = "centre"
+    axis: str = "z"          # extrusion only: the axis it is extruded along
+    polygon: tuple = ()      # extrusion only: ((u, v), …) as written (numbers / expressions)
+
+    @cached_property
+    def coordinates(self) -> tuple:
+        """An extrusion's polygon parsed: ``((const, {param: coef}) × 2, …)``."""
+        return tuple(tuple(parse_coordinate(c) for c in v) for v in self.polygon)
+
+    @property
+    def length_parameter(self) -> str:
+        return _EXTRUDE[self.axis][2]
 
 
 @dataclass(frozen=True)
@@ -221,7 +261,7 @@ class BlockModel:
             if "/" in name:
                 raise fail(where, f"{key}.name", f"block name {name!r} may not contain '/'")
             kind = require(b, "kind", "string", path=where, where=key)
-            if kind not in _KINDS:
+            if kind not in KINDS:
                 raise fail(where, f"{key}.kind", f"block {name!r}: unknown kind {kind!r}; "
                                                   f"expected one of {', '.join(KINDS)}")
             params = check(b["params"], "object", path=where, key=f"{key}.params")
@@ -233,7 +273,33 @@ class BlockModel:
                 if v not in allowed:
                     raise fail(where, f"{key}.{k}", f"block {name!r}: unknown placement {v!r}; "
                                                     f"expected one of {', '.join(allowed)}")
-            blocks.append(Block(name, kind, dict(params), parent, on, px, py))
+            axis, poly = "z", ()
+            if kind == "extrusion":
+                axis = require(b, "axis", "string", path=where, where=key, default="z")
+                if axis not in AXES:
+                    raise fail(where, f"{key}.axis", f"block {name!r}: unknown axis {axis!r}; "
+                                                     f"expected one of {', '.join(AXES)}")
+                raw_poly = require(b, "polygon", "list", path=where, where=key)
+                if len(raw_poly) < 3:
+                    raise fail(where, f"{key}.polygon", f"block {name!r}: a polygon needs at "
+                                                        f"least 3 vertices, got {len(raw_poly)}")
+                for j, v in enumerate(raw_poly):
+                    if not (isinstance(v, list) and len(v) == 2):
+                        raise fail(where, f"{key}.polygon[{j}]", f"block {name!r}: expected a "
+                                                                 f"vertex [u, v], got {shown(v)}")
+                    for c in v:
+                        try:
+                            parse_coordinate(c)
+                        except ValueError as err:
+                            raise fail(where, f"{key}.polygon[{j}]",
+                                       f"block {name!r}: {err}") from None
+                poly = tuple(tuple(v) for v in raw_poly)
+            else:
+                for k in ("axis", "polygon"):
+                    if k in b:
+                        raise fail(where, f"{key}.{k}", f"block {name!r}: {k!r} belongs to an "
+                                                        f"extrusion, not a {kind}")
+            blocks.append(Block(name, kind, dict(params), parent, on, px, py, axis, poly))
         gl = d.get("parameters", {})
         check(gl, "object", path=where, key="parameters")
         for g, spec in gl.items():
@@ -273,7 +339,10 @@ class BlockModel:
             raise fail(self.where, "blocks", f"expected exactly one root block (without a "
                                              f"parent), got {len(roots)}: {roots}")
         for i, b in enumerate(self.blocks):
-            need = set(DIMENSIONS)
+            need, optional = set(DIMENSIONS), set()
+            if b.kind == "extrusion":
+                need = {b.length_parameter} | {n for v in b.coordinates for _, t in v for n in t}
+                optional = set(DIMENSIONS) - need
             if b.parent is not None:
                 need |= {f"offset_{a}" for a, v in (("x", b.x), ("y", b.y), ("z", b.on))
                          if v == "offset"}
@@ -283,15 +352,46 @@ class BlockModel:
             for p in sorted(need - set(b.params)):
                 raise fail(self.where, f"blocks[{i}].params",
                            f"block {b.name!r}: missing parameter {p!r}")
-            for p in sorted(set(b.params) - need):
+            for p in sorted(set(b.params) - need - optional):
                 raise fail(self.where, f"blocks[{i}].params.{p}",
-                           f"block {b.name!r}: unknown parameter {p!r} for a {b.kind} placed "
+                           f"block {b.name!r}: unknown parameter {p!r} for "
+                           f"{'an' if b.kind[0] in 'aeiou' else 'a'} {b.kind} placed "
                            f"this way; expected {', '.join(sorted(need))}")
+            if b.parent is not None:
+                # a placement against the parent uses its dimensions (an extrusion may lack them)
+                uses = [(b.name, "width", b.x in ("left", "right")),
+                        (b.parent, "width", b.x in ("left", "right")),
+                        (b.name, "depth", b.y in ("front", "back")),
+                        (b.parent, "depth", b.y in ("front", "back")),
+                        (b.parent, "height", b.on == "top")]
+                for owner, dim, used in uses:
+                    if used and dim not in by[owner].params:
+                        raise fail(self.where, f"blocks[{i}]",
+                                   f"block {b.name!r}: its placement (on={b.on}, x={b.x}, y={b.y}) "
+                                   f"needs a parameter {dim!r} of the extrusion {owner!r}: add one "
+                                   "or place it with an offset")
             for p, spec in b.params.items():
                 self._check_spec(spec, f"blocks[{i}].params.{p}", fail, shown)
         for g, spec in self.globals.items():
             self._check_spec(spec, f"parameters.{g}", fail, shown)
         _ = self._slots  # resolves every reference (unknown, cycles)
+        for i, b in enumerate(self.blocks):
+            if b.kind == "extrusion":
+                bad = crossing_edges(self._polygon(b))
+                if bad is not None:
+                    what = (f"its edge {bad[0]} has zero length" if bad[0] == bad[1] else
+                            f"its edges {bad[0]} and {bad[1]} touch or cross")
+                    raise fail(self.where, f"blocks[{i}].polygon",
+                               f"block {b.name!r}: the polygon is not simple at the starting "
+                               f"values ({what}); list its vertices in order around it, without "
+                               "crossings")
+
+    def _polygon(self, b: Block, params=None) -> np.ndarray:
+        """An extrusion's polygon ``(n, 2)`` at the values ``params``."""
+        v = self.slot_vector(params)
+        index = self._slots[3]
+        return np.array([[c + sum(k * v[index[f"{b.name}/{n}"]] for n, k in t.items())
+                          for c, t in vert] for vert in b.coordinates])
 
     def _check_spec(self, spec, key, fail, shown) -> None:
         ok = isinstance(spec, (int, float)) and not isinstance(spec, bool)
@@ -349,11 +449,18 @@ class BlockModel:
 
         for n in specs:
             resolve(n, [n])
+        if any(c != 0 for b in self.blocks for v in b.coordinates for c, _ in v):
+            # not in ``index``: no parameter name reaches it, it is never fitted or reported
+            names.append(UNIT_SLOT)
+            values.append(1.0)
+            fixed.append(True)
         return names, np.array(values, float), np.array(fixed, bool), index
 
     @property
     def slot_names(self) -> tuple[str, ...]:
-        """Every independent parameter (free and fixed), in slot order."""
+        """Every independent parameter (free and fixed), in slot order (with
+        :data:`UNIT_SLOT`, fixed at 1, last when an extrusion's polygon has a
+        constant term)."""
         return tuple(self._slots[0])
 
     @property
@@ -419,8 +526,8 @@ class BlockModel:
             return {"value": val, "fixed": True} if isinstance(spec, dict) and spec.get(
                 "fixed") else val
 
-        blocks = tuple(Block(b.name, b.kind, {p: upd(s, f"{b.name}/{p}") for p, s in b.params.items()},
-                             b.parent, b.on, b.x, b.y) for b in self.blocks)
+        blocks = tuple(dc_replace(b, params={p: upd(s, f"{b.name}/{p}") for p, s in b.params.items()})
+                       for b in self.blocks)
         gl = {g: upd(s, g) for g, s in self.globals.items()}
         return BlockModel(blocks, gl, self.where)
 
@@ -434,8 +541,8 @@ class BlockModel:
                 return spec
             return {"value": float(spec["value"] if isinstance(spec, dict) else spec), "fixed": True}
 
-        blocks = tuple(Block(b.name, b.kind, {p: upd(s, f"{b.name}/{p}") for p, s in b.params.items()},
-                             b.parent, b.on, b.x, b.y) for b in self.blocks)
+        blocks = tuple(dc_replace(b, params={p: upd(s, f"{b.name}/{p}") for p, s in b.params.items()})
+                       for b in self.blocks)
         return BlockModel(blocks, {g: upd(s, g) for g, s in self.globals.items()}, self.where)
 
     def to_dict(self) -> dict:
@@ -445,6 +552,8 @@ class BlockModel:
             e = {"name": b.name, "kind": b.kind}
             if b.parent is not None:
                 e.update(parent=b.parent, on=b.on, x=b.x, y=b.y)
+            if b.kind == "extrusion":
+                e.update(axis=b.axis, polygon=[list(v) for v in b.polygon])
             e["params"] = dict(b.params)
             out.append(e)
         d = {"schema": BLOCKS_SCHEMA, "schema_version": 1, "blocks": out}
@@ -475,31 +584,65 @@ class BlockModel:
             if b.parent is not None:
                 p = by[b.parent]
                 o = base(p).copy()
-                w, dp = e(f"{b.name}/width"), e(f"{b.name}/depth")
-                pw, pd = e(f"{p.name}/width"), e(f"{p.name}/depth")
-                o[0] += {"centre": 0 * w, "left": (w - pw) / 2, "right": (pw - w) / 2,
-                         "offset": e(f"{b.name}/offset_x") if b.x == "offset" else 0 * w}[b.x]
-                o[1] += {"centre": 0 * dp, "front": (dp - pd) / 2, "back": (pd - dp) / 2,
-                         "offset": e(f"{b.name}/offset_y") if b.y == "offset" else 0 * dp}[b.y]
-                o[2] += {"top": e(f"{p.name}/height"), "base": 0 * w,
-                         "offset": e(f"{b.name}/offset_z") if b.on == "offset" else 0 * w}[b.on]
+                # only the dimensions a placement uses (an extrusion may lack the others)
+                if b.x in ("left", "right"):
+                    half = (e(f"{p.name}/width") - e(f"{b.name}/width")) / 2
+                    o[0] += half if b.x == "right" else -half
+                elif b.x == "offset":
+                    o[0] += e(f"{b.name}/offset_x")
+                if b.y in ("front", "back"):
+                    half = (e(f"{p.name}/depth") - e(f"{b.name}/depth")) / 2
+                    o[1] += half if b.y == "back" else -half
+                elif b.y == "offset":
+                    o[1] += e(f"{b.name}/offset_y")
+                if b.on == "top":
+                    o[2] += e(f"{p.name}/height")
+                elif b.on == "offset":
+                    o[2] += e(f"{b.name}/offset_z")
             origin[b.name] = o
             return o
 
+        def unit():
+            row = np.zeros(S)
+            row[self._slots[0].index(UNIT_SLOT)] = 1.0
+            return row
+
         names, C, edges = [], [], {}
         for b in self.blocks:
-            dims = np.stack([e(f"{b.name}/{d}") for d in DIMENSIONS])
             o = base(b)
-            first = len(names)
-            spec = _KINDS[b.kind]
             local = {}
+            if b.kind == "extrusion":
+                (ru, rv), ra, length = _EXTRUDE[b.axis]
+                L = e(f"{b.name}/{length}")
+                # the vertical extrusion stands on the base; a horizontal one is centred on it
+                ends = (0 * L, L) if b.axis == "z" else (-L / 2, L / 2)
+                n = len(b.polygon)
+                for cap, end in zip(("bottom", "top"), ends, strict=True):
+                    for j, vert in enumerate(b.coordinates):
+                        row = o.copy()
+                        for r, (c, t) in zip((ru, rv), vert, strict=True):
+                            if c != 0:
+                                row[r] += c * unit()
+                            for pn, k in t.items():
+                                row[r] += k * e(f"{b.name}/{pn}")
+                        row[ra] += end
+                        local[f"{cap}-{j}"] = len(names)
+                        names.append(f"{b.name}/{cap}-{j}")
+                        C.append(row)
+                for j in range(n):
+                    for cap in ("bottom", "top"):
+                        edges[f"{b.name}/{cap}-{j}"] = (local[f"{cap}-{j}"],
+                                                        local[f"{cap}-{(j + 1) % n}"])
+                    edges[f"{b.name}/side-{j}"] = (local[f"bottom-{j}"], local[f"top-{j}"])
+                continue
+            dims = np.stack([e(f"{b.name}/{d}") for d in DIMENSIONS])
+            spec = _KINDS[b.kind]
             for vn, a in spec["vertices"].items():
                 local[vn] = len(names)
                 names.append(f"{b.name}/{vn}")
                 C.append(o + np.asarray(a)[:, None] * dims)
             for en, (v0, v1) in spec["edges"].items():
                 edges[f"{b.name}/{en}"] = (local[v0], local[v1])
-            del first
         return names, np.array(C), edges
 
     @property
@@ -529,12 +672,52 @@ class BlockModel:
         inside another block stays)."""
         names = self._linear[0]
         index = {n: i for i, n in enumerate(names)}
+        V = self.vertices(params)
         faces, owner = [], []
         for b in self.blocks:
-            for t in _TRIANGLES[b.kind]:
-                faces.append([index[f"{b.name}/{v}"] for v in t])
-                owner.append(b.name)
-        return Mesh(self.vertices(params), np.array(faces, np.int64), np.array(owner))
+            tris = (self._extrusion_triangles(b, V, index, params) if b.kind == "extrusion" else
+                    [[index[f"{b.name}/{v}"] for v in t] for t in _TRIANGLES[b.kind]])
+            faces += tris
+            owner += [b.name] * len(tris)
+        return Mesh(V, np.array(faces, np.int64).reshape(-1, 3), np.array(owner))
+
+    def _extrusion_triangles(self, b: Block, V, index, params) -> list[list[int]]:
+        """An extrusion's faces at the given values: the caps by ear
+        clipping (the polygon's shape may change with the values, so the
+        triangulation is made for them), the sides as two triangles each;
+        every triangle turned to face outwards."""
+        P = self._polygon(b, params)
+        try:
+            cap = triangulate(P)
+        except ValueError:
+            raise EstimationError(self.where, f"block {b.name!r}: its polygon crosses itself at "
+                                  "these parameter values (no mesh)") from None
+        n = len(P)
+        bot = [index[f"{b.name}/bottom-{j}"] for j in range(n)]
+        top = [index[f"{b.name}/top-{j}"] for j in range(n)]
+        axis = np.zeros(3)
+        axis[_EXTRUDE[b.axis][1]] = 1.0
+        (ru, rv), _, _ = _EXTRUDE[b.axis]
+        ccw = 1.0 if signed_area(P) >= 0 else -1.0
+        out = []
+
+        def add(tri, outward):
+            a, c, d = V[tri[0]], V[tri[1]], V[tri[2]]
+            if np.dot(np.cross(c - a, d - a), outward) < 0:
+                tri = [tri[0], tri[2], tri[1]]
+            out.append(tri)
+
+        for t in cap:
+            add([bot[k] for k in t], -axis)
+            add([top[k] for k in t], axis)
+        for j in range(n):
+            k = (j + 1) % n
+            du, dv = P[k] - P[j]
+            outward = np.zeros(3)
+            outward[ru], outward[rv] = ccw * dv, -ccw * du
+            add([bot[j], bot[k], top[k]], outward)
+            add([bot[j], top[k], top[j]], outward)
+        return out
 
 
 def load_blocks(path: str | os.PathLike) -> BlockModel:
