@@ -113,22 +113,46 @@ def test_radiance_reinhard_local_is_the_projects_operator_at_the_key_of_the_expo
     assert np.array_equal(img, tonemap(rad, method="reinhard-local", key=0.18 * 2.0))
 
 
-@pytest.mark.parametrize("width", [30, 2 * A.DISPLAY_MAX_PX])
-def test_radiance_reinhard_global_within_a_code_of_the_projects_operator(tmp_path, rng, width):
-    # through the log indices: three roundings of 0.038 code at most (artifacts.
-    # Radiance._reinhard_global), so the two rounded pictures differ by at most one code
-    rad = np.exp(rng.normal(0, 2, (8, width, 3))).astype(np.float32)
+# Reinhard's global curve through the log indices (artifacts.Radiance._reinhard_global):
+# three index roundings of 0.038 code each (channel, luminance, the ratio's offset)
+# on top of the half code of rounding to 8 bits.
+REINHARD_CODE = 0.5 + 3 * 255 * 1.055 / 2.4 * math.log(2) / (2 * A.LOG_STEPS)
+
+
+@pytest.mark.parametrize("width, channels", [(30, 3), (30, 0), (30, 4),
+                                             (2 * A.DISPLAY_MAX_PX, 3)])
+def test_radiance_reinhard_global_within_half_a_code_of_the_projects_operator(
+        tmp_path, rng, width, channels):
+    # 2^+-9 around the mean: the picture spans black to white at every exposure
+    shape = (8, width) + ((channels,) if channels else ())
+    rad = np.exp(rng.normal(0, 3, shape)).astype(np.float32)
     rad[0, 0] = 0.0  # black stays black
+    if channels:
+        rad[0, 1, 1] = 0.0  # one channel zero: that channel stays at code 0
     p = tmp_path / "r.exr"
-    write_hdr_image(p, rad)
-    c = client([p])
-    art = A.load(p)
-    for stops in (-2.0, 0.0, 3.0):
-        img = decode(c.get(f"/api/look/0/image?exposure={stops}&tone=reinhard&format=png"))
-        ref = tonemap(art.display, method="reinhard", key=0.18 * 2.0 ** stops)
+    if channels == 4:
+        art = A.Radiance(p, rad)  # RGBA: alpha is not radiance, only RGB is drawn
+    else:
+        write_hdr_image(p, rad)
+        art = A.load(p)
+    rgb = art.display[..., :3] if art.display.ndim == 3 else art.display
+    for stops in (-6.0, -2.0, 0.0, 3.0, 8.0):
+        if channels == 4:
+            img = art.image({"exposure": stops, "tone": "reinhard"})
+        else:
+            img = decode(client([p]).get(f"/api/look/0/image?exposure={stops}&tone=reinhard"
+                                         "&format=png"))
+        key = 0.18 * 2.0 ** stops
+        # the project's operator before its rounding: its 16-bit output, within
+        # half a 16-bit step of the exact value
+        exact = tonemap(rgb, method="reinhard", key=key, bit_depth=16).astype(float) * 255 / 65535
+        assert np.abs(img - exact).max() <= REINHARD_CODE + 0.5 * 255 / 65535
+        ref = tonemap(rgb, method="reinhard", key=key)
         assert np.abs(img.astype(int) - ref).max() <= 1
     if width <= A.DISPLAY_MAX_PX:  # shown as it is: the black pixel stays black
         assert img[0, 0].tolist() == [0, 0, 0]
+        if channels:
+            assert img[0, 1, 1] == 0
 
 
 # -------------------------------------------------------------------- images
