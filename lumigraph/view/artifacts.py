@@ -17,9 +17,10 @@ through :func:`lumigraph.capture.io.read_pfm`; ``.flo`` through
 :func:`lumigraph.capture.io.read_flo`; light fields through
 :meth:`lumigraph.lightfield.field.LightField.load`; ``response.json`` through
 :meth:`lumigraph.hdr.response.ResponseCurve.load`; point clouds through
-:func:`lumigraph.capture.io.read_ply`; the Façade model (``blocks.json``, and
-``model.ply``/``model.obj`` through the ``blocks.json`` beside them) through
-:func:`lumigraph.stereo.debevec1996.model.load_blocks`.
+:func:`lumigraph.capture.io.read_ply`; meshes (a PLY with faces, such as the
+Façade solve's ``model.ply``) through ``read_ply(faces=True)``, ``.obj`` through
+:func:`lumigraph.stereo.debevec1996.outputs.read_obj` and the Façade model's
+``blocks.json`` through :func:`lumigraph.stereo.debevec1996.model.load_blocks`.
 
 Speed (issue 18): a radiance map is shown from a display copy at most
 :data:`DISPLAY_MAX_PX` wide (area-averaged once, at load), so an exposure move
@@ -793,6 +794,22 @@ def _tiff_is_logluv(p: Path) -> bool:
     return tags.get(262, [None])[0] == TAG_PHOTOMETRIC_LOGLUV
 
 
+def _ply_has_faces(p: Path) -> bool:
+    """True when the PLY's header declares a face element with records (a mesh,
+    the Façade solve's ``model.ply``); read_ply says what is wrong with a bad one."""
+    try:
+        with open(p, "rb") as f:
+            head = f.read(1 << 16)
+    except OSError:
+        return False
+    end = head.find(b"end_header")
+    for line in head[:end if end >= 0 else len(head)].splitlines():
+        parts = line.split()
+        if parts[:2] == [b"element", b"face"] and len(parts) == 3 and parts[2].isdigit():
+            return int(parts[2]) > 0
+    return False
+
+
 def _pfm_channels(p: Path) -> int:
     with open(p, "rb") as f:
         return 3 if f.read(2) == b"PF" else 1
@@ -833,8 +850,7 @@ def kind_of(path) -> str | None:
     if name.endswith(".flo"):
         return "flow"
     if name.endswith(".ply"):
-        return "mesh" if (p.parent / "blocks.json").is_file() and name == "model.ply" \
-            else "pointcloud"
+        return "mesh" if p.is_file() and _ply_has_faces(p) else "pointcloud"
     if name.endswith(".obj"):
         return "mesh"
     return None
@@ -926,15 +942,21 @@ def load(path) -> Artifact:
         pts, cols = read_ply(p)
         return Geometry(p, "pointcloud", pts, cols)
     if kind == "mesh":
-        from lumigraph.stereo.debevec1996.model import load_blocks
+        if p.suffix.lower() == ".ply":
+            from lumigraph.capture.io import read_ply
 
-        blocks = p if p.name.lower() == "blocks.json" else p.parent / "blocks.json"
-        if not blocks.is_file():
-            raise InputError(p, "a mesh is shown from the Façade model's blocks.json beside "
-                                "it, and there is none; open the solve folder")
-        mesh = load_blocks(blocks).mesh()
-        return Geometry(p, "mesh", np.asarray(mesh.vertices, np.float64),
-                        faces=np.asarray(mesh.faces, np.int64))
+            vertices, _, faces = read_ply(p, faces=True)
+        elif p.suffix.lower() == ".obj":
+            from lumigraph.stereo.debevec1996.outputs import read_obj
+
+            vertices, faces = read_obj(p)
+        else:  # blocks.json: the Façade model's own mesh
+            from lumigraph.stereo.debevec1996.model import load_blocks
+
+            mesh = load_blocks(p).mesh()
+            vertices, faces = mesh.vertices, mesh.faces
+        return Geometry(p, "mesh", np.asarray(vertices, np.float64),
+                        faces=np.asarray(faces, np.int64))
     # json
     size = p.stat().st_size
     with open(p, "rb") as f:

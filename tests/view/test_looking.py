@@ -289,21 +289,48 @@ def test_point_cloud_geometry(tmp_path, rng):
     assert c.get("/api/look/0/image").status_code == 422
 
 
-def test_facade_mesh_from_blocks_json_and_model_ply(tmp_path):
+def test_facade_mesh_from_blocks_json_model_ply_and_model_obj(tmp_path):
     from lumigraph.stereo.debevec1996.model import load_blocks
-    from lumigraph.stereo.debevec1996.outputs import mesh_ply_bytes
+    from lumigraph.stereo.debevec1996.outputs import mesh_obj_text, mesh_ply_bytes
 
     blocks = tmp_path / "blocks.json"
     shutil.copy(ROOT / "fixtures" / "facade" / "blocks.json", blocks)
     mesh = load_blocks(blocks).mesh()
-    (tmp_path / "model.ply").write_bytes(mesh_ply_bytes(mesh.vertices, mesh.faces))
-    c = client([blocks, tmp_path / "model.ply"])
-    for i in ("0", "1"):
-        assert c.get(f"/api/look/{i}").get_json()["kind"] == "mesh"
+    alone = tmp_path / "alone"  # no blocks.json beside: the mesh files are read themselves
+    alone.mkdir()
+    for folder in (tmp_path, alone):
+        (folder / "model.ply").write_bytes(mesh_ply_bytes(mesh.vertices, mesh.faces))
+        (folder / "model.obj").write_text(mesh_obj_text(mesh.vertices, mesh.faces))
+    paths = [blocks, tmp_path / "model.ply", tmp_path / "model.obj", alone / "model.ply",
+             alone / "model.obj"]
+    c = client(paths)
+    for i, path in enumerate(paths):
+        d = c.get(f"/api/look/{i}").get_json()
+        assert d["kind"] == "mesh" and d["error"] is None, (path, d["error"])
         g = c.get(f"/api/look/{i}/geometry").get_json()
-        assert g["faces"] == mesh.faces.ravel().tolist()
+        assert g["faces"] == mesh.faces.ravel().tolist()  # order and winding
         got = np.array(g["positions"]).reshape(-1, 3)
-        assert np.all(np.abs(got - mesh.vertices) <= 0.5 * 10.0 ** -g["decimals"] * (1 + 1e-9))
+        # rounded to the decimals it says; the OBJ keeps 9 significant digits
+        tol = 0.5 * 10.0 ** -g["decimals"] * (1 + 1e-9)
+        tol += 5e-9 * np.abs(mesh.vertices) if path.suffix == ".obj" else 0
+        assert np.all(np.abs(got - mesh.vertices) <= tol)
+
+
+def test_a_ply_with_faces_is_a_mesh_whatever_its_name(tmp_path, rng):
+    from lumigraph.stereo.debevec1996.outputs import mesh_ply_bytes
+
+    v = rng.normal(0, 1, (7, 3))
+    f = np.array([[0, 1, 2], [6, 3, 5], [4, 2, 1]])  # no symmetry: order and winding show
+    (tmp_path / "scan.ply").write_bytes(mesh_ply_bytes(v, f))
+    write_ply(tmp_path / "cloud.ply", v)
+    c = client([tmp_path / "scan.ply", tmp_path / "cloud.ply"])
+    assert c.get("/api/look/0").get_json()["kind"] == "mesh"
+    assert c.get("/api/look/0/geometry").get_json()["faces"] == f.ravel().tolist()
+    assert c.get("/api/look/1").get_json()["kind"] == "pointcloud"
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nf 1 2 3\n")
+    d = client([bad]).get("/api/look/0").get_json()
+    assert d["error"].startswith(f"{bad}: line 2:") and d["kind"] == "mesh"
 
 
 # -------------------------------------------------------------- bad input
