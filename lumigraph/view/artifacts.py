@@ -274,6 +274,29 @@ class Artifact:
         raise InputError(self.path, f"a {self.kind} has no 3-D geometry; ask for its image")
 
 
+# Elements per np.take in gather: the chunk's indices, cast to intp (8 bytes
+# each, 2 MB), stay in the cache between the cast and the take.
+GATHER_CHUNK = 1 << 18
+
+
+def gather(table: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``table[index]`` for a uint16 ``index``, by chunks of :data:`GATHER_CHUNK`.
+
+    numpy casts a non-intp index to intp before it gathers; on a whole 3 MP RGB
+    index that is a 72 MB intermediate streamed through memory, by chunks it
+    stays in the cache (docs/decisions/view-looking.md: the gathers of a slider
+    move, interleaved).
+
+    >>> gather(np.array([10, 20, 30], np.uint8), np.array([[2, 0]], np.uint16)).tolist()
+    [[30, 10]]
+    """
+    flat = np.ascontiguousarray(index).reshape(-1)
+    out = np.empty(flat.size, table.dtype)
+    for s in range(0, flat.size, GATHER_CHUNK):
+        np.take(table, flat[s:s + GATHER_CHUNK], out=out[s:s + GATHER_CHUNK])
+    return out.reshape(index.shape)
+
+
 # The display copy of a radiance map is kept as a log2 index: LOG_STEPS codes
 # per stop over LOG_STOPS stops below its brightest value (darker: index 0,
 # black at any exposure the slider reaches). An exposure move is then one
@@ -409,7 +432,7 @@ class Radiance(Artifact):
 
     def image(self, values):
         if values["tone"] == "linear":
-            return _rgb(log_exposure_table(self.top, values["exposure"])[self.index])
+            return _rgb(gather(log_exposure_table(self.top, values["exposure"]), self.index))
         if values["tone"] == "reinhard":
             return self._reinhard_global(0.18 * 2.0 ** values["exposure"])
         return tone_map(self.display, stops=values["exposure"], tone=values["tone"])
@@ -445,13 +468,13 @@ class Radiance(Artifact):
         g = np.round(q + off - _D_LOW + t.bias)
         g[0] = 0  # zero luminance: black (tonemap's ratio 0), d_c alone stays in the black
         g = np.clip(np.nan_to_num(g, nan=0.0), 0, 65535).astype(np.uint16)
-        gl = g[t.q_lum]
+        gl = gather(g, t.q_lum)
         if t.d.ndim == 3:
             cv2.merge([gl] * t.d.shape[2], dst=t.g3)
         else:
             t.g3 = gl
         cv2.add(t.d, t.g3, dst=t.j)  # saturates at 65535: white
-        return _rgb(t.table[t.j])
+        return _rgb(gather(t.table, t.j))
 
     def probe(self, x, y, values):
         h, w = self.full.shape[:2]
