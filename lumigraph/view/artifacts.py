@@ -372,14 +372,14 @@ class _ReinhardIndex:
 
     @classmethod
     def of(cls, display: np.ndarray, index: np.ndarray, top: float) -> _ReinhardIndex:
-        from lumigraph.hdr.reinhard2002 import _lum, tonemap_statistics
+        from lumigraph.hdr.reinhard2002 import _lum, _lum_statistics
 
         t = cls()
         rgb = display[..., :3] if display.ndim == 3 else display[..., None]
         rgb = np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0.0)
         lum = _lum(rgb, "reinhard")  # tonemap's own (float64)
         t.q_lum, t.top_lum = log_index(lum)
-        t.stats = tonemap_statistics([rgb])
+        t.stats = _lum_statistics(lum, local=False)  # tonemap_statistics([rgb]), lum reused
         qc = index[..., :3] if index.ndim == 3 else index
         if qc.ndim == 3 and qc.shape[2] == 1:
             qc = qc[..., 0]
