@@ -987,8 +987,10 @@ def _ply_binary(p: Path, body: bytes, pos: int, name: str, count: int, props) ->
         if len(body) - at < ct.itemsize:
             break
         k = int(np.frombuffer(body, ct, 1, at)[0])
-        fields += [(n + " count", ct), (n, it, (max(k, 0),))]
-        at += ct.itemsize + max(k, 0) * it.itemsize
+        if not 0 <= k * it.itemsize <= len(body) - at - ct.itemsize:
+            break  # a list past the data (or negative): the record walk says truncated
+        fields += [(n + " count", ct), (n, it, (k,))]
+        at += ct.itemsize + k * it.itemsize
     else:
         dtype = np.dtype(fields)
         if count and len(body) - pos >= count * dtype.itemsize:

@@ -96,13 +96,14 @@ def _seeds(reader: str) -> list[tuple[str, bytes]]:
             save("a.ply", lambda p: io.write_ply(p, rng.normal(size=(12, 3)),
                                                  rng.integers(0, 256, (12, 3), dtype=np.uint8)))
             save("b.ply", lambda p: io.write_ply(p, rng.normal(size=(5, 3))))
-            # meshes (read_ply(faces=True)): binary triangles, ascii with a quad
+            # meshes (read_ply(faces=True)): binary triangles (4-byte list lengths),
+            # ascii with a quad
             save("m.ply", lambda p: p.write_bytes(
                 b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
                 b"property float y\nproperty float z\nelement face 2\n"
-                b"property list uchar int vertex_indices\nend_header\n"
+                b"property list uint int vertex_indices\nend_header\n"
                 + rng.normal(size=(4, 3)).astype("<f4").tobytes()
-                + b"".join(b"\x03" + np.array(f, "<i4").tobytes()
+                + b"".join(np.array([3], "<u4").tobytes() + np.array(f, "<i4").tobytes()
                            for f in ([0, 1, 2], [0, 2, 3]))))
             save("q.ply", lambda p: p.write_bytes(
                 b"ply\nformat ascii 1.0\nelement vertex 5\nproperty double x\n"

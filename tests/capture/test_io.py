@@ -320,6 +320,26 @@ def test_ply_mesh_binary_of_mixed_polygons(tmp_path, count_type, index_type):
     assert np.all(normals[:, 2] > 0) and np.all(normals[:, :2] == 0)
 
 
+def test_ply_triangles_with_a_property_around_the_list_read_at_once(tmp_path):
+    # every face of one length: read as one table (ascii) or fixed records (binary)
+    head = ("ply\nformat {fmt} 1.0\nelement vertex 5\nproperty double x\nproperty double y\n"
+            "property double z\nelement face 6\nproperty ushort group\n"
+            "property list uchar int vertex_indices\nproperty float weight\nend_header\n")
+    tris = np.array(MESH_TRIS)
+    a = tmp_path / "a.ply"
+    a.write_bytes(head.format(fmt="ascii").encode() + "".join(
+        " ".join(repr(float(x)) for x in v) + "\n" for v in MESH_V).encode()
+        + "".join(f"{7 * i} 3 {t[0]} {t[1]} {t[2]} {i / 4}\n" for i, t in enumerate(tris)).encode())
+    rec = np.empty(6, [("g", "<u2"), ("n", "u1"), ("i", "<i4", (3,)), ("w", "<f4")])
+    rec["g"], rec["n"], rec["i"], rec["w"] = 7 * np.arange(6), 3, tris, np.arange(6) / 4
+    b = tmp_path / "b.ply"
+    b.write_bytes(head.format(fmt="binary_little_endian").encode() + MESH_V.astype("<f8").tobytes()
+                  + rec.tobytes())
+    for p in (a, b):
+        pts, _, got = io.read_ply(p, faces=True)
+        assert np.array_equal(pts, MESH_V) and np.array_equal(got, tris), p
+
+
 def test_point_cloud_ply_has_no_faces(tmp_path):
     p = tmp_path / "p.ply"
     io.write_ply(p, MESH_V)
@@ -345,6 +365,12 @@ def test_ply_truncated_face_list_and_unknown_format_are_refused(tmp_path):
     p.write_bytes(_binary_mesh()[:-3])
     with pytest.raises(InputError, match="truncated"):
         io.read_ply(p, faces=True)
+    huge = tmp_path / "huge.ply"  # a uint list length far past the data
+    huge.write_bytes(_binary_mesh("uint", "int").replace(
+        b"end_header\n" + MESH_V.astype("<f4").tobytes() + np.array([3], "<u4").tobytes(),
+        b"end_header\n" + MESH_V.astype("<f4").tobytes() + np.array([2**32 - 1], "<u4").tobytes()))
+    with pytest.raises(InputError, match="truncated in record 0 of the face element"):
+        io.read_ply(huge, faces=True)
     q = tmp_path / "be.ply"
     q.write_bytes(_binary_mesh().replace(b"binary_little_endian", b"binary_big_endian"))
     with pytest.raises(InputError, match="only ascii and binary_little_endian"):
