@@ -27,7 +27,8 @@ RAW         read_raw                           rawpy, linear 16-bit, levels appl
 OpenEXR     read_exr / write_exr               float32 or half, ZIP, deterministic
 PFM         read_pfm / write_pfm               NaN in memory <-> inf in the file
 .flo        read_flo / write_flo               Middlebury; NaN <-> 1e10 (unknown)
-PLY         read_ply / write_ply               binary little-endian, float64 xyz, rgb
+PLY         read_ply / write_ply               ascii and binary little-endian (read), faces
+                                               (read_ply(faces=True)); float64 xyz, rgb
 stack       read_stack / write_stack_json      file list or folder with stack.json
 ==========  ================================  ======================================
 
@@ -46,6 +47,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 import struct
 import sys
 import tempfile
@@ -917,52 +919,273 @@ _PLY_TYPES = {"char": "i1", "uchar": "u1", "short": "<i2", "ushort": "<u2", "int
               "uint": "<u4", "float": "<f4", "double": "<f8", "int8": "i1", "uint8": "u1",
               "int16": "<i2", "uint16": "<u2", "int32": "<i4", "uint32": "<u4",
               "float32": "<f4", "float64": "<f8"}
+_PLY_FORMATS = ("ascii", "binary_little_endian")
+# the face element's list of vertex indices, under its two usual names
+_PLY_FACE_LISTS = ("vertex_indices", "vertex_index")
 
 
-def read_ply(path) -> tuple[np.ndarray, np.ndarray | None]:
-    """Read a binary little-endian PLY vertex element: ``(points (N,3) float64,
-    colors (N,3) uint8 or None)``."""
-    p = _existing(path)
-    raw = p.read_bytes()
-    end = raw.find(b"end_header\n", 0, 1 << 16)
-    if not raw.startswith(b"ply\n") or end < 0:
+def _ply_header(p: Path, raw: bytes) -> tuple[str, list, int]:
+    """``(format, elements, body offset)`` of a PLY: each element ``(name, count,
+    properties)``, a property ``(name, dtype)`` or ``(name, (count dtype, item dtype))``
+    for a list."""
+    m = re.search(rb"end_header\r?\n", raw[:1 << 16])
+    if not raw.startswith((b"ply\n", b"ply\r\n")) or m is None:
         raise InputError(p, "not a PLY file (missing 'ply' magic or end_header)")
-    lines = raw[:end].decode("ascii", "replace").splitlines()
-    if "format binary_little_endian 1.0" not in lines:
-        raise InputError(p, "only binary_little_endian PLY is supported")
-    n, fields, element, seen = None, [], None, []
+    lines = raw[:m.start()].decode("ascii", "replace").splitlines()
+    fmt = [ln.split() for ln in lines if ln.split()[:1] == ["format"]]
+    if len(fmt) != 1 or len(fmt[0]) != 3 or fmt[0][1] not in _PLY_FORMATS:
+        raise InputError(p, "only ascii and binary_little_endian PLY are supported")
+    elements: list = []
     for line in lines:
         parts = line.split()
         if parts[:1] == ["element"]:
             if len(parts) != 3 or not (parts[2].isascii() and parts[2].isdigit()):
                 raise InputError(p, f"malformed PLY header line: {line!r}")
-            element = parts[1]
-            if element == "vertex":
-                if any(c > 0 for c in seen):  # their data would come first: not read here
-                    raise InputError(p, "PLY vertex element must come first (before elements "
-                                        "with data)")
-                n = int(parts[2])
-            seen.append(int(parts[2]) if element != "vertex" else 0)
-        elif parts[:1] == ["property"] and element == "vertex":
-            if len(parts) != 3 or parts[1] not in _PLY_TYPES:
-                raise InputError(p, f"unsupported PLY vertex property: {line!r}")
-            fields.append((parts[2], _PLY_TYPES[parts[1]]))
-    names = [f[0] for f in fields]
-    if n is None or not {"x", "y", "z"} <= set(names) or len(set(names)) != len(names):
+            count = int(parts[2])
+            if count > max_pixels():  # one point (or face) per pixel of the largest image
+                noun = "vertices" if parts[1] == "vertex" else f"{parts[1]} records"
+                raise InputError(p, f"PLY header claims {count} {noun}, over the limit of "
+                                    f"{max_pixels()} (set {MAX_PIXELS_ENV} or --max-pixels to "
+                                    "read larger files)")
+            elements.append((parts[1], count, []))
+        elif parts[:1] == ["property"]:
+            if not elements:
+                raise InputError(p, f"PLY property before any element: {line!r}")
+            props = elements[-1][2]
+            if len(parts) == 5 and parts[1] == "list" and parts[2] in _PLY_TYPES \
+                    and parts[3] in _PLY_TYPES and np.dtype(_PLY_TYPES[parts[2]]).kind in "iu":
+                props.append((parts[4], (_PLY_TYPES[parts[2]], _PLY_TYPES[parts[3]])))
+            elif len(parts) == 3 and parts[1] in _PLY_TYPES:
+                props.append((parts[2], _PLY_TYPES[parts[1]]))
+            else:
+                raise InputError(p, f"unsupported PLY property: {line!r}")
+            if [n for n, _ in props].count(props[-1][0]) > 1:
+                raise InputError(p, f"PLY property {props[-1][0]!r} given twice")
+    return fmt[0][1], elements, m.end()
+
+
+def _ply_binary(p: Path, body: bytes, pos: int, name: str, count: int, props) -> tuple:
+    """One element's records from ``body[pos:]`` (binary little-endian): ``(scalars, lists,
+    next pos)``, scalars a structured array, lists ``{name: list of int arrays}``."""
+    scalars = [(n, t) for n, t in props if isinstance(t, str)]
+    if all(isinstance(t, str) for _, t in props):
+        dtype = np.dtype(scalars)
+        need = count * dtype.itemsize
+        if len(body) - pos < need:
+            raise InputError(p, f"PLY is truncated: {len(body) - pos} of {need} bytes of the "
+                                f"{name} element")
+        return np.frombuffer(body, dtype, count, pos), {}, pos + need
+    # Lists: records of one length throughout (a triangle mesh) are read at once, as
+    # fixed records with the first record's lengths; anything else record by record.
+    fields, at = [], pos
+    for n, t in props:
+        if isinstance(t, str):
+            fields.append((n, t))
+            at += np.dtype(t).itemsize
+            continue
+        ct, it = np.dtype(t[0]), np.dtype(t[1])
+        if len(body) - at < ct.itemsize:
+            break
+        k = int(np.frombuffer(body, ct, 1, at)[0])
+        if not 0 <= k * it.itemsize <= len(body) - at - ct.itemsize:
+            break  # a list past the data (or negative): the record walk says truncated
+        fields += [(n + " count", ct), (n, it, (k,))]
+        at += ct.itemsize + k * it.itemsize
+    else:
+        dtype = np.dtype(fields)
+        if count and len(body) - pos >= count * dtype.itemsize:
+            rec = np.frombuffer(body, dtype, count, pos)
+            if all((rec[n + " count"] == rec[n + " count"][0]).all()
+                   for n, t in props if not isinstance(t, str)):
+                lists = {n: rec[n].astype(np.int64) for n, t in props if not isinstance(t, str)}
+                return rec[[n for n, _ in scalars]] if scalars else None, lists, \
+                    pos + count * dtype.itemsize
+    rows: list = []
+    lists = {n: [] for n, t in props if not isinstance(t, str)}
+    for r in range(count):
+        row = []
+        for n, t in props:
+            size = np.dtype(t if isinstance(t, str) else t[0]).itemsize
+            if len(body) - pos < size:
+                raise InputError(p, f"PLY is truncated in record {r} of the {name} element")
+            v = np.frombuffer(body, t if isinstance(t, str) else t[0], 1, pos)[0]
+            pos += size
+            if isinstance(t, str):
+                row.append(v)
+                continue
+            it = np.dtype(t[1])
+            if v < 0 or len(body) - pos < int(v) * it.itemsize:
+                raise InputError(p, f"PLY is truncated in record {r} of the {name} element")
+            lists[n].append(np.frombuffer(body, it, int(v), pos).astype(np.int64))
+            pos += int(v) * it.itemsize
+        rows.append(tuple(row))
+    return (np.array(rows, np.dtype(scalars)) if scalars else None), lists, pos
+
+
+def _ply_ascii(p: Path, tokens: np.ndarray, pos: int, name: str, count: int, props) -> tuple:
+    """As :func:`_ply_binary`, from the body's numbers (``tokens``, float64); the
+    scalars stay float64 (the declared types matter to the binary layout only)."""
+    dtype = np.dtype([(n, np.float64) for n, t in props if isinstance(t, str)])
+    # records of one length (all scalars; a triangle mesh) are read at once, as a
+    # table with the first record's length; anything else record by record
+    lengths, at = [], pos
+    for _, t in props:
+        k = 0
+        if not isinstance(t, str):
+            k = tokens[at] if at < tokens.size else -1.0
+            k = int(k) if np.isfinite(k) and k >= 0 and k == int(k) else -1
+            if k < 0:
+                break
+        lengths.append(k)
+        at += 1 + k if not isinstance(t, str) else 1
+    else:
+        width = at - pos
+        if tokens.size - pos >= count * width:
+            block = tokens[pos:pos + count * width].reshape(count, width)
+            rec, lists, col = np.empty(count, dtype), {}, 0
+            for (n, t), k in zip(props, lengths, strict=True):
+                if isinstance(t, str):
+                    rec[n] = block[:, col]
+                    col += 1
+                    continue
+                if not (block[:, col] == k).all():
+                    break  # lists of several lengths
+                lists[n] = block[:, col + 1:col + 1 + k]
+                col += 1 + k
+            else:
+                for n, v in lists.items():
+                    if not (np.isfinite(v) & (v == np.round(v))).all():
+                        raise InputError(p, f"the {name} element's {n} holds a non-integer")
+                    lists[n] = v.astype(np.int64)
+                return rec, lists, pos + count * width
+    rows: list = []
+    lists = {n: [] for n, t in props if not isinstance(t, str)}
+    for r in range(count):
+        row = []
+        for n, t in props:
+            if pos >= tokens.size:
+                raise InputError(p, f"PLY is truncated in record {r} of the {name} element")
+            v = tokens[pos]
+            pos += 1
+            if isinstance(t, str):
+                row.append(v)
+                continue
+            if not (np.isfinite(v) and v >= 0 and v == int(v) and tokens.size - pos >= v):
+                raise InputError(p, f"record {r} of the {name} element: list length {v:g} is "
+                                    "not a count the file holds")
+            items = tokens[pos:pos + int(v)]
+            if not (np.isfinite(items) & (items == np.round(items))).all():
+                raise InputError(p, f"record {r} of the {name} element: {n} holds a "
+                                    "non-integer")
+            lists[n].append(items.astype(np.int64))
+            pos += int(v)
+        rows.append(tuple(row))
+    return np.array(rows, dtype), lists, pos
+
+
+def _fan(p: Path, polygons, n_vertices: int) -> np.ndarray:
+    """Faces ``(M, 3)`` int64: each polygon ``(v0, v1, ..., vk)`` as the fan
+    ``(v0, vi, vi+1)`` (its winding kept), indices checked against ``n_vertices``."""
+    if isinstance(polygons, np.ndarray):  # all of one length: (F, k)
+        k = polygons.shape[1] if polygons.ndim == 2 else 0
+        polys, lengths = polygons, np.full(len(polygons), k)
+    else:
+        lengths = np.array([len(f) for f in polygons], np.int64)
+        polys = None
+    short = np.flatnonzero(lengths < 3)
+    if short.size:
+        raise InputError(p, f"face {short[0]} has {lengths[short[0]]} vertices; a face needs 3 "
+                            "or more")
+    if polys is not None:
+        k = polys.shape[1] if len(polys) else 3
+        tris = np.stack([np.stack([polys[:, 0], polys[:, i], polys[:, i + 1]], axis=1)
+                         for i in range(1, k - 1)], axis=1).reshape(-1, 3) if len(polys) \
+            else np.zeros((0, 3), np.int64)
+    else:
+        tris = np.array([(f[0], f[i], f[i + 1]) for f in polygons for i in range(1, len(f) - 1)],
+                        np.int64).reshape(-1, 3)
+    bad = np.flatnonzero(((tris < 0) | (tris >= n_vertices)).any(axis=1))
+    if bad.size:
+        v = tris[bad[0]][(tris[bad[0]] < 0) | (tris[bad[0]] >= n_vertices)][0]
+        raise InputError(p, f"a face refers to vertex {v}, and there are {n_vertices} "
+                            f"(indices 0..{n_vertices - 1})")
+    return tris
+
+
+def read_ply(path, *, faces: bool = False):
+    """Read a PLY (``ascii`` or ``binary_little_endian``): the vertex element's
+    ``x, y, z`` and, when present, ``red, green, blue``; with ``faces=True`` also
+    the ``face`` element's ``vertex_indices`` (or ``vertex_index``) lists.
+
+    Every element is read in the header's order (others are skipped). A
+    polygon of ``k > 3`` vertices becomes the fan of triangles ``(v0, vi, vi+1)``,
+    keeping its winding. One reader for point clouds (``write_ply``) and meshes
+    (the Façade solve's ``model.ply``).
+
+    Returns
+    -------
+    points : ndarray, ``(N, 3)`` float64
+    colors : ndarray, ``(N, 3)`` uint8, or None
+    faces : ndarray, ``(M, 3)`` int64 (with ``faces=True`` only; ``(0, 3)``
+        when the file has none): 0-based vertex indices.
+
+    Raises
+    ------
+    InputError
+        Naming the file: not a PLY, another format, a header bomb, truncated
+        data, a face with fewer than 3 vertices or an index out of range.
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> p = os.path.join(tempfile.mkdtemp(), "quad.ply")
+    >>> _ = open(p, "w").write("ply\\nformat ascii 1.0\\nelement vertex 4\\nproperty float x\\n"
+    ...     "property float y\\nproperty float z\\nelement face 1\\n"
+    ...     "property list uchar int vertex_indices\\nend_header\\n"
+    ...     "0 0 0\\n1 0 0\\n1 1 0\\n0 1 0\\n4 0 1 2 3\\n")
+    >>> pts, cols, tris = read_ply(p, faces=True)
+    >>> pts.shape, cols, tris.tolist()
+    ((4, 3), None, [[0, 1, 2], [0, 2, 3]])
+    """
+    p = _existing(path)
+    raw = p.read_bytes()
+    fmt, elements, start = _ply_header(p, raw)
+    if fmt == "ascii":
+        try:
+            data = np.array(raw[start:].split(), dtype=np.float64)
+        except ValueError as e:
+            raise InputError(p, f"ascii PLY body holds a token that is not a number ({e})") \
+                from None
+        read = _ply_ascii
+    else:
+        data, read = raw, _ply_binary
+    pos = 0 if fmt == "ascii" else start
+    vertex = polygons = None
+    for name, count, props in elements:
+        if not props:
+            if count:
+                raise InputError(p, f"PLY element {name!r} has records but no properties")
+            continue
+        rec, lists, pos = read(p, data, pos, name, count, props)
+        if name == "vertex" and vertex is None:
+            vertex = rec
+        elif name == "face" and polygons is None:
+            polygons = next((lists[n] for n in _PLY_FACE_LISTS if n in lists), None)
+        if vertex is not None and (polygons is not None or not faces):
+            break  # what the caller asked for is read
+    names = vertex.dtype.names if vertex is not None else ()
+    if vertex is None or not {"x", "y", "z"} <= set(names):
         raise InputError(p, "PLY has no vertex element with x, y, z properties (each once)")
-    if n > max_pixels():  # one point per pixel of the largest image we read
-        raise InputError(p, f"PLY header claims {n} vertices, over the limit of {max_pixels()} "
-                            f"(set {MAX_PIXELS_ENV} or --max-pixels to read larger files)")
-    dtype = np.dtype(fields)
-    body = raw[end + len(b"end_header\n"):]
-    if len(body) < n * dtype.itemsize:
-        raise InputError(p, f"PLY is truncated: {len(body)} of {n * dtype.itemsize} bytes")
-    rec = np.frombuffer(body[:n * dtype.itemsize], dtype=dtype)
-    pts = np.stack([rec["x"], rec["y"], rec["z"]], axis=1).astype(np.float64)
+    pts = np.stack([vertex["x"], vertex["y"], vertex["z"]], axis=1).astype(np.float64)
     cols = None
-    if {"red", "green", "blue"} <= set(dtype.names):
-        cols = np.stack([rec["red"], rec["green"], rec["blue"]], axis=1).astype(np.uint8)
-    return pts, cols
+    if {"red", "green", "blue"} <= set(names):
+        cols = np.stack([vertex["red"], vertex["green"], vertex["blue"]], axis=1)
+        if cols.dtype != np.uint8:  # ascii numbers, or wider types: to codes, saturated
+            cols = np.clip(np.nan_to_num(cols.astype(np.float64)), 0, 255).astype(np.uint8)
+    if not faces:
+        return pts, cols
+    tris = np.zeros((0, 3), np.int64) if polygons is None else _fan(p, polygons, len(pts))
+    return pts, cols, tris
 
 
 # ----------------------------------------------------------------------- stacks

@@ -17,9 +17,10 @@ through :func:`lumigraph.capture.io.read_pfm`; ``.flo`` through
 :func:`lumigraph.capture.io.read_flo`; light fields through
 :meth:`lumigraph.lightfield.field.LightField.load`; ``response.json`` through
 :meth:`lumigraph.hdr.response.ResponseCurve.load`; point clouds through
-:func:`lumigraph.capture.io.read_ply`; the Façade model (``blocks.json``, and
-``model.ply``/``model.obj`` through the ``blocks.json`` beside them) through
-:func:`lumigraph.stereo.debevec1996.model.load_blocks`.
+:func:`lumigraph.capture.io.read_ply`; meshes (a PLY with faces, such as the
+Façade solve's ``model.ply``) through ``read_ply(faces=True)``, ``.obj`` through
+:func:`lumigraph.stereo.debevec1996.outputs.read_obj` and the Façade model's
+``blocks.json`` through :func:`lumigraph.stereo.debevec1996.model.load_blocks`.
 
 Speed (issue 18): a radiance map is shown from a display copy at most
 :data:`DISPLAY_MAX_PX` wide (area-averaged once, at load), so an exposure move
@@ -273,6 +274,29 @@ class Artifact:
         raise InputError(self.path, f"a {self.kind} has no 3-D geometry; ask for its image")
 
 
+# Elements per np.take in gather: the chunk's indices, cast to intp (8 bytes
+# each, 2 MB), stay in the cache between the cast and the take.
+GATHER_CHUNK = 1 << 18
+
+
+def gather(table: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """``table[index]`` for a uint16 ``index``, by chunks of :data:`GATHER_CHUNK`.
+
+    numpy casts a non-intp index to intp before it gathers; on a whole 3 MP RGB
+    index that is a 72 MB intermediate streamed through memory, by chunks it
+    stays in the cache (docs/decisions/view-looking.md: the gathers of a slider
+    move, interleaved).
+
+    >>> gather(np.array([10, 20, 30], np.uint8), np.array([[2, 0]], np.uint16)).tolist()
+    [[30, 10]]
+    """
+    flat = np.ascontiguousarray(index).reshape(-1)
+    out = np.empty(flat.size, table.dtype)
+    for s in range(0, flat.size, GATHER_CHUNK):
+        np.take(table, flat[s:s + GATHER_CHUNK], out=out[s:s + GATHER_CHUNK])
+    return out.reshape(index.shape)
+
+
 # The display copy of a radiance map is kept as a log2 index: LOG_STEPS codes
 # per stop over LOG_STOPS stops below its brightest value (darker: index 0,
 # black at any exposure the slider reaches). An exposure move is then one
@@ -312,15 +336,69 @@ def log_exposure_table(top: float, stops: float) -> np.ndarray:
     return np.round(255.0 * srgb_encode(lin)).astype(np.uint8)
 
 
-def _code_table(top: float, top_index: int) -> np.ndarray:
-    """sRGB codes of indices ``0..top_index`` at 0 stops (0: black), as
-    :func:`log_exposure_table` but running past ``top`` (to white)."""
+def _code_table(top: float, top_index: int, start: int = 0) -> np.ndarray:
+    """sRGB codes (uint8) of the indices ``start..top_index`` at 0 stops, as
+    :func:`log_exposure_table` but running past ``top`` (to white); an index
+    at or below 0 is black."""
     from lumigraph.hdr.reinhard2002 import srgb_encode
 
-    q = np.arange(top_index + 1, dtype=np.float64)
+    q = np.arange(start, top_index + 1, dtype=np.float64)
     lin = top * np.exp2((q - LOG_STEPS * LOG_STOPS) / LOG_STEPS)
-    lin[0] = 0.0
+    lin[q <= 0] = 0.0
     return np.round(255.0 * srgb_encode(lin)).astype(np.uint8)
+
+
+# Reinhard's global curve by log indices (Radiance._reinhard_global): a channel's
+# index relative to its pixel's luminance index, d = q_c - q_L, kept as uint16
+# d + _D_LOW clipped to [0, _D_LOW + _D_HIGH]. Above: a channel is at most
+# L / 0.0722 (blue's luminance weight, log2 3.79 stops) and the luminance's top at
+# most the channels' top, so d < 3.8 x 1024 < _D_HIGH never clips.
+# Below: d < -_D_LOW means the channel is under 2^-20 of its pixel's luminance,
+# so under 2^-20 of the display luminance (<= 1) after the operator's ratio: code
+# 0, as is the clipped value (a zero or unknown channel, index 0, is set there).
+_D_LOW = 24 * LOG_STEPS
+_D_HIGH = 4 * LOG_STEPS
+# sRGB code 0 below this linear value: 255 x 12.92 x v < 1/2
+_BLACK = 0.5 / (255 * 12.92)
+
+
+class _ReinhardIndex:
+    """What a Reinhard global move needs of a display copy, made once per
+    artifact: the luminance's log index and statistics, the channels' indices
+    relative to it (``d``, uint16), the table's index bias and two scratch
+    buffers (one picture at a time: the artifact's lock)."""
+
+    __slots__ = ("q_lum", "top_lum", "stats", "d", "bias", "table", "g3", "j")
+
+    @classmethod
+    def of(cls, display: np.ndarray, index: np.ndarray, top: float) -> _ReinhardIndex:
+        from lumigraph.hdr.reinhard2002 import _lum, _lum_statistics
+
+        t = cls()
+        rgb = display[..., :3] if display.ndim == 3 else display[..., None]
+        rgb = np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0.0)
+        lum = _lum(rgb, "reinhard")  # tonemap's own (float64)
+        t.q_lum, t.top_lum = log_index(lum)
+        t.stats = _lum_statistics(lum, local=False)  # tonemap_statistics([rgb]), lum reused
+        qc = index[..., :3] if index.ndim == 3 else index
+        if qc.ndim == 3 and qc.shape[2] == 1:
+            qc = qc[..., 0]
+        lum_q = t.q_lum[..., None] if qc.ndim == 3 else t.q_lum
+        d = qc.astype(np.int32) - lum_q + _D_LOW
+        np.clip(d, 0, _D_LOW + _D_HIGH, out=d)
+        d[qc == 0] = 0  # zero, negative or unknown: black whatever the luminance
+        t.d = d.astype(np.uint16)
+        # the code table's index 0 sits so that indices 0.._D_LOW + _D_HIGH are black
+        # (a luminance clipped to index 0 leaves d alone there) and 65535 is white
+        # (the saturated add): white is 12.7 stops (13000 indices) above black,
+        # 36864 are free
+        n = LOG_STEPS * LOG_STOPS
+        last_black = math.ceil(n + LOG_STEPS * math.log2(_BLACK / top)) - 1
+        t.bias = _D_LOW + _D_HIGH - last_black + 16
+        t.table = _code_table(top, 65535 - t.bias, start=-t.bias)
+        t.g3 = np.empty_like(t.d)
+        t.j = np.empty_like(t.d)
+        return t
 
 
 class Radiance(Artifact):
@@ -354,48 +432,49 @@ class Radiance(Artifact):
 
     def image(self, values):
         if values["tone"] == "linear":
-            return _rgb(log_exposure_table(self.top, values["exposure"])[self.index])
+            return _rgb(gather(log_exposure_table(self.top, values["exposure"]), self.index))
         if values["tone"] == "reinhard":
             return self._reinhard_global(0.18 * 2.0 ** values["exposure"])
         return tone_map(self.display, stops=values["exposure"], tone=values["tone"])
 
     def _reinhard_global(self, key: float) -> np.ndarray:
         """Reinhard's global operator (:func:`lumigraph.hdr.reinhard2002.global_operator`,
-        with the display copy's statistics) through the log indices: the operator's
-        ratio ``L_d / L`` depends on the luminance only, so it is evaluated once per
-        luminance index (64513 values, not 3 M pixels) and added, as a log2 offset,
-        to each channel's index; one table gives the sRGB code. Three index roundings
-        (channel, luminance: the ratio's slope in ln L is within (-1, 1), offset) move
-        the code by at most 3 x 0.038 against the project's :func:`tonemap` of the
-        display copy; both round to whole codes, so they differ by at most one."""
+        with the display copy's statistics) through the log indices.
+
+        The operator scales each pixel's RGB by ``L_d / L``, a function of the
+        luminance only, so a channel's picture index is ``q_c + off(q_L)`` (its
+        log index plus the ratio's log2 offset at the luminance's index). Written
+        ``d_c + G(q_L)`` with ``d_c = q_c - q_L`` (per pixel, kept from the first
+        call: :class:`_ReinhardIndex`) and ``G(q) = q + off(q)`` (one 64513-entry
+        table per key), a move is one gather of ``G`` over the luminance indices,
+        one saturating uint16 add (OpenCV) and one gather of the code table: no
+        float work per pixel. Three index roundings (channel, luminance: the
+        ratio's slope in ln L is within (-1, 1), offset) move the code by at most
+        3 x 0.038 against the exact value, so it is within half a code plus 0.114
+        of the project's :func:`tonemap` of the display copy before its rounding
+        (tested against its 16-bit output)."""
+        import cv2
+
         from lumigraph.hdr.reinhard2002 import global_operator
 
         if self._tone is None:
-            from lumigraph.hdr.reinhard2002 import _lum, tonemap_statistics
-
-            rgb = self.display[..., :3] if self.display.ndim == 3 else self.display
-            rgb = np.maximum(np.nan_to_num(rgb, nan=0.0, posinf=0.0), 0.0)
-            lum = _lum(rgb if rgb.ndim == 3 else rgb[..., None], "reinhard")  # tonemap's own
-            q_lum, top_lum = log_index(lum)
-            q_rgb = self.index[..., :3] if self.index.ndim == 3 else self.index
-            q_rgb = q_rgb.astype(np.int32)
-            q_rgb[q_rgb == 0] = -(1 << 30)  # zero stays black whatever the offset
-            stats = tonemap_statistics([rgb if rgb.ndim == 3 else rgb[..., None]])
-            self._tone = (q_lum, top_lum, q_rgb, stats)
-        q_lum, top_lum, q_rgb, stats = self._tone
+            self._tone = _ReinhardIndex.of(self.display, self.index, self.top)
+        t = self._tone
         n = LOG_STEPS * LOG_STOPS
         q = np.arange(n + 1, dtype=np.float64)
-        lum_q = top_lum * np.exp2((q - n) / LOG_STEPS)
-        ratio = global_operator(lum_q, key=key, statistics=stats) / lum_q
-        offset = np.round(LOG_STEPS * np.log2(ratio)).astype(np.int32)
-        offset[0] = -(1 << 30)  # zero luminance: black (tonemap's ratio 0)
-        j = q_rgb + (offset[q_lum][..., None] if q_rgb.ndim == 3 else offset[q_lum])
-        # the table runs from index 0 up to the first index at or above 1 (white)
-        stops_up = max(0, math.ceil(-math.log2(self.top))) + 1
-        top_index = n + LOG_STEPS * stops_up
-        np.clip(j, 0, top_index, out=j)
-        table = _code_table(self.top, top_index)
-        return _rgb(table[j])
+        lum_q = t.top_lum * np.exp2((q - n) / LOG_STEPS)
+        with np.errstate(divide="ignore"):
+            off = LOG_STEPS * np.log2(global_operator(lum_q, key=key, statistics=t.stats) / lum_q)
+        g = np.round(q + off - _D_LOW + t.bias)
+        g[0] = 0  # zero luminance: black (tonemap's ratio 0), d_c alone stays in the black
+        g = np.clip(np.nan_to_num(g, nan=0.0), 0, 65535).astype(np.uint16)
+        gl = gather(g, t.q_lum)
+        if t.d.ndim == 3:
+            cv2.merge([gl] * t.d.shape[2], dst=t.g3)
+        else:
+            t.g3 = gl
+        cv2.add(t.d, t.g3, dst=t.j)  # saturates at 65535: white
+        return _rgb(gather(t.table, t.j))
 
     def probe(self, x, y, values):
         h, w = self.full.shape[:2]
@@ -738,6 +817,22 @@ def _tiff_is_logluv(p: Path) -> bool:
     return tags.get(262, [None])[0] == TAG_PHOTOMETRIC_LOGLUV
 
 
+def _ply_has_faces(p: Path) -> bool:
+    """True when the PLY's header declares a face element with records (a mesh,
+    the Façade solve's ``model.ply``); read_ply says what is wrong with a bad one."""
+    try:
+        with open(p, "rb") as f:
+            head = f.read(1 << 16)
+    except OSError:
+        return False
+    end = head.find(b"end_header")
+    for line in head[:end if end >= 0 else len(head)].splitlines():
+        parts = line.split()
+        if parts[:2] == [b"element", b"face"] and len(parts) == 3 and parts[2].isdigit():
+            return int(parts[2]) > 0
+    return False
+
+
 def _pfm_channels(p: Path) -> int:
     with open(p, "rb") as f:
         return 3 if f.read(2) == b"PF" else 1
@@ -778,8 +873,7 @@ def kind_of(path) -> str | None:
     if name.endswith(".flo"):
         return "flow"
     if name.endswith(".ply"):
-        return "mesh" if (p.parent / "blocks.json").is_file() and name == "model.ply" \
-            else "pointcloud"
+        return "mesh" if p.is_file() and _ply_has_faces(p) else "pointcloud"
     if name.endswith(".obj"):
         return "mesh"
     return None
@@ -871,15 +965,21 @@ def load(path) -> Artifact:
         pts, cols = read_ply(p)
         return Geometry(p, "pointcloud", pts, cols)
     if kind == "mesh":
-        from lumigraph.stereo.debevec1996.model import load_blocks
+        if p.suffix.lower() == ".ply":
+            from lumigraph.capture.io import read_ply
 
-        blocks = p if p.name.lower() == "blocks.json" else p.parent / "blocks.json"
-        if not blocks.is_file():
-            raise InputError(p, "a mesh is shown from the Façade model's blocks.json beside "
-                                "it, and there is none; open the solve folder")
-        mesh = load_blocks(blocks).mesh()
-        return Geometry(p, "mesh", np.asarray(mesh.vertices, np.float64),
-                        faces=np.asarray(mesh.faces, np.int64))
+            vertices, _, faces = read_ply(p, faces=True)
+        elif p.suffix.lower() == ".obj":
+            from lumigraph.stereo.debevec1996.outputs import read_obj
+
+            vertices, faces = read_obj(p)
+        else:  # blocks.json: the Façade model's own mesh
+            from lumigraph.stereo.debevec1996.model import load_blocks
+
+            mesh = load_blocks(p).mesh()
+            vertices, faces = mesh.vertices, mesh.faces
+        return Geometry(p, "mesh", np.asarray(vertices, np.float64),
+                        faces=np.asarray(faces, np.int64))
     # json
     size = p.stat().st_size
     with open(p, "rb") as f:

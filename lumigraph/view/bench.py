@@ -10,8 +10,9 @@ and ``scipy.fft`` at one thread each.
 
 Peers, on the same inputs in the same run: the exposure picture made from the
 full-resolution map (no display copy: what the display copy saves), the
-project's ``hdr.reinhard2002.tonemap`` on the display copy (what the log
-indices save when the Reinhard global curve is chosen; no target), and the
+project's ``hdr.reinhard2002.tonemap`` on the display copy (the peer of an
+exposure move with the Reinhard global curve chosen: the same <= 0.2 s
+target, and the picture the log indices must match), and the
 refocus by the project's Lanczos-3 shift-and-add (``lightfield.refocus``, no
 cached spectrum).
 

@@ -24,10 +24,13 @@ the depth).
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+
+from lumigraph.capture.errors import InputError
 
 MODEL_SCHEMA = "lumigraph.facade.model"
 
@@ -75,6 +78,91 @@ def mesh_obj_text(vertices, faces) -> str:
     lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in np.asarray(vertices, float)]
     lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in np.asarray(faces, int)]
     return "\n".join(lines) + "\n"
+
+
+# OBJ statements read_obj passes over: texture and normal data, groups,
+# materials, smoothing, lines and points, free-form geometry.
+_OBJ_SKIPPED = frozenset({"vt", "vn", "vp", "o", "g", "s", "mg", "usemtl", "mtllib", "l", "p",
+                          "cstype", "deg", "bmat", "step", "curv", "curv2", "surf", "parm",
+                          "trim", "hole", "scrv", "sp", "end", "con", "lod", "bevel",
+                          "c_interp", "d_interp", "usemap", "maplib", "shadow_obj",
+                          "trace_obj", "ctech", "stech"})
+
+
+def read_obj(path) -> tuple[np.ndarray, np.ndarray]:
+    """Read a Wavefront OBJ mesh (what :func:`mesh_obj_text` writes, and others'):
+    ``(vertices (N, 3) float64, faces (M, 3) int64)``, 0-based.
+
+    ``v x y z [w | r g b]`` gives a vertex (its first three numbers); ``f`` a
+    polygon of ``k >= 3`` vertex references (``i``, ``i/t``, ``i//n`` or
+    ``i/t/n``; 1-based, negative counts back from the last vertex so far),
+    split into the fan ``(v0, vi, vi+1)``, keeping its winding. Texture,
+    normal, group and material statements are passed over; comments (``#``) and
+    blank lines too.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the line: an unknown statement, a vertex without
+        three numbers, a face of fewer than three vertices, a reference that is
+        not an integer or names no vertex defined before it; or a file that is
+        not text.
+
+    Examples
+    --------
+    >>> import tempfile, os
+    >>> p = os.path.join(tempfile.mkdtemp(), "quad.obj")
+    >>> _ = open(p, "w").write("v 0 0 0\\nv 1 0 0\\nv 1 1 0\\nv 0 1 0\\nf 1/1 2/2 3/3 -1/4\\n")
+    >>> v, f = read_obj(p)
+    >>> v.shape, f.tolist()
+    ((4, 3), [[0, 1, 2], [0, 2, 3]])
+    """
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise InputError(p, "file not found") from None
+    except OSError as e:
+        raise InputError(p, f"cannot read ({e.strerror or e})") from None
+    except UnicodeDecodeError as e:
+        raise InputError(p, f"not a text OBJ file (byte {e.start} is not UTF-8)") from None
+    verts: list[tuple[float, float, float]] = []
+    tris: list[tuple[int, int, int]] = []
+    for number, line in enumerate(text.splitlines(), start=1):
+        parts = line.split("#", 1)[0].split()
+        if not parts:
+            continue
+        head, args = parts[0], parts[1:]
+        if head == "v":
+            try:
+                xyz = tuple(float(a) for a in args)
+            except ValueError:
+                xyz = ()
+            if len(xyz) not in (3, 4, 6, 7) or not all(math.isfinite(c) for c in xyz):
+                raise InputError(p, f"line {number}: a vertex is 'v x y z' (finite numbers, "
+                                    f"then an optional w or r g b), got {line.strip()!r}")
+            verts.append(xyz[:3])
+        elif head == "f":
+            refs = []
+            for a in args:
+                first = a.split("/", 1)[0]
+                try:
+                    i = int(first)
+                except ValueError:
+                    i = 0
+                k = i - 1 if i > 0 else len(verts) + i  # 1-based; negative: from the end
+                if i == 0 or not 0 <= k < len(verts):
+                    raise InputError(p, f"line {number}: {a!r} names no vertex (there are "
+                                        f"{len(verts)} before this line; indices are 1-based)")
+                refs.append(k)
+            if len(refs) < 3:
+                raise InputError(p, f"line {number}: a face needs 3 or more vertices, got "
+                                    f"{len(refs)}")
+            tris += [(refs[0], refs[j], refs[j + 1]) for j in range(1, len(refs) - 1)]
+        elif head not in _OBJ_SKIPPED:
+            raise InputError(p, f"line {number}: {head!r} is not an OBJ statement (read: v, f; "
+                                "passed over: vt, vn, g, o, usemtl, ...)")
+    return (np.array(verts, np.float64).reshape(-1, 3), np.array(tris, np.int64).reshape(-1, 3))
 
 
 def mesh_ply_bytes(vertices, faces) -> bytes:

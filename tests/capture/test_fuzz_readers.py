@@ -96,6 +96,22 @@ def _seeds(reader: str) -> list[tuple[str, bytes]]:
             save("a.ply", lambda p: io.write_ply(p, rng.normal(size=(12, 3)),
                                                  rng.integers(0, 256, (12, 3), dtype=np.uint8)))
             save("b.ply", lambda p: io.write_ply(p, rng.normal(size=(5, 3))))
+            # meshes (read_ply(faces=True)): binary triangles (4-byte list lengths),
+            # ascii with a quad
+            save("m.ply", lambda p: p.write_bytes(
+                b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\n"
+                b"property float y\nproperty float z\nelement face 2\n"
+                b"property list uint int vertex_indices\nend_header\n"
+                + rng.normal(size=(4, 3)).astype("<f4").tobytes()
+                + b"".join(np.array([3], "<u4").tobytes() + np.array(f, "<i4").tobytes()
+                           for f in ([0, 1, 2], [0, 2, 3]))))
+            save("q.ply", lambda p: p.write_bytes(
+                b"ply\nformat ascii 1.0\nelement vertex 5\nproperty double x\n"
+                b"property double y\nproperty double z\nproperty uchar red\n"
+                b"property uchar green\nproperty uchar blue\nelement face 2\n"
+                b"property list uchar uint vertex_index\nend_header\n"
+                b"0 0 0 1 2 3\n1 0 0 4 5 6\n1 1 0 7 8 9\n0 1 0 1 1 1\n2 2 1 0 0 0\n"
+                b"4 0 1 2 3\n3 1 4 2\n"))
         else:
             raise ValueError(reader)
     return out
@@ -109,7 +125,8 @@ def _read(reader: str):
     table = {"png": [io.read_image], "jpeg": [io.read_image, io.read_exif],
              "tiff": [io.read_image, io.read_exif], "exr": [io.read_exr], "pfm": [io.read_pfm],
              "flo": [io.read_flo], "rgbe": [formats.read_rgbe],
-             "logluv": [formats.read_logluv_tiff], "ply": [io.read_ply]}
+             "logluv": [formats.read_logluv_tiff],
+             "ply": [io.read_ply, lambda p: io.read_ply(p, faces=True)]}
     return table[reader]
 
 

@@ -253,6 +253,134 @@ def test_truncated_ply_is_refused(tmp_path):
         io.read_ply(p)
 
 
+# A mesh no symmetry can hide: five vertices at distinct, unordered positions;
+# faces of mixed winding, a quad and a pentagon (fan-triangulated on reading).
+MESH_V = np.array([[0.5, -1.25, 2.0], [3.0, 0.125, -0.75], [-2.5, 4.0, 1.5],
+                   [1.75, 2.5, -3.0], [-0.25, -3.5, 0.625]])
+MESH_POLYS = [[2, 0, 1], [3, 4, 1, 0], [1, 3, 2, 4, 0]]
+# the fans (v0, vi, vi+1), by hand
+MESH_TRIS = [[2, 0, 1], [3, 4, 1], [3, 1, 0], [1, 3, 2], [1, 2, 4], [1, 4, 0]]
+
+
+def _ascii_mesh(index_name="vertex_indices", extra_elements=True, faces=MESH_POLYS) -> bytes:
+    head = ["ply", "format ascii 1.0", "comment asymmetric"]
+    if extra_elements:  # an element before the vertices, with data: read past
+        head += ["element material 2", "property float shine", "property list uchar int ids"]
+    head += [f"element vertex {len(MESH_V)}", "property double x", "property double y",
+             "property double z", "property uchar red", "property uchar green",
+             "property uchar blue", f"element face {len(faces)}",
+             f"property list uchar int {index_name}"]
+    if extra_elements:
+        head += ["element edge 1", "property int vertex1", "property int vertex2"]
+    body = ["0.5 1 7", "1.5 3 1 2 3"] if extra_elements else []
+    body += [" ".join(repr(float(x)) for x in v) + f" {10 * i} {10 * i + 1} {10 * i + 2}"
+             for i, v in enumerate(MESH_V)]
+    body += [" ".join(map(str, [len(f)] + f)) for f in faces]
+    body += ["0 1"] if extra_elements else []
+    return ("\n".join(head + ["end_header"] + body) + "\n").encode("ascii")
+
+
+def _binary_mesh(count_type="uchar", index_type="int") -> bytes:
+    t = {"uchar": "u1", "ushort": "<u2", "int": "<i4", "uint": "<u4"}
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 5\nproperty float x\n"
+            "property float y\nproperty float z\nelement face 3\n"
+            f"property list {count_type} {index_type} vertex_index\nend_header\n")
+    body = MESH_V.astype("<f4").tobytes() + b"".join(
+        np.array([len(f)], t[count_type]).tobytes() + np.array(f, t[index_type]).tobytes()
+        for f in MESH_POLYS)
+    return head.encode("ascii") + body
+
+
+def test_ply_mesh_ascii_keeps_vertex_order_winding_and_colours(tmp_path):
+    for name, extra in [("vertex_indices", True), ("vertex_index", False)]:
+        p = tmp_path / f"{name}.ply"
+        p.write_bytes(_ascii_mesh(name, extra))
+        pts, cols, tris = io.read_ply(p, faces=True)
+        assert np.array_equal(pts, MESH_V) and tris.tolist() == MESH_TRIS
+        assert cols.tolist() == [[10 * i, 10 * i + 1, 10 * i + 2] for i in range(5)]
+        back_pts, back_cols = io.read_ply(p)  # the point-cloud call: the same vertices
+        assert np.array_equal(back_pts, MESH_V) and np.array_equal(back_cols, cols)
+
+
+@pytest.mark.parametrize("count_type, index_type", [("uchar", "int"), ("ushort", "uint")])
+def test_ply_mesh_binary_of_mixed_polygons(tmp_path, count_type, index_type):
+    p = tmp_path / "m.ply"
+    p.write_bytes(_binary_mesh(count_type, index_type))
+    pts, cols, tris = io.read_ply(p, faces=True)
+    assert np.array_equal(pts, MESH_V.astype(np.float32)) and cols is None
+    assert tris.tolist() == MESH_TRIS
+    # the fan keeps each polygon's winding: every triangle of the planar quad
+    # [0, 1, 2, 3] of a square turns the same way as the square
+    sq = tmp_path / "sq.ply"
+    sq.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                   b"property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                   b"end_header\n0 0 0\n2 0 0\n2 1 0\n0 1 0\n4 0 1 2 3\n")
+    v, _, t = io.read_ply(sq, faces=True)
+    normals = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    assert np.all(normals[:, 2] > 0) and np.all(normals[:, :2] == 0)
+
+
+def test_ply_triangles_with_a_property_around_the_list_read_at_once(tmp_path):
+    # every face of one length: read as one table (ascii) or fixed records (binary)
+    head = ("ply\nformat {fmt} 1.0\nelement vertex 5\nproperty double x\nproperty double y\n"
+            "property double z\nelement face 6\nproperty ushort group\n"
+            "property list uchar int vertex_indices\nproperty float weight\nend_header\n")
+    tris = np.array(MESH_TRIS)
+    a = tmp_path / "a.ply"
+    a.write_bytes(head.format(fmt="ascii").encode() + "".join(
+        " ".join(repr(float(x)) for x in v) + "\n" for v in MESH_V).encode()
+        + "".join(f"{7 * i} 3 {t[0]} {t[1]} {t[2]} {i / 4}\n" for i, t in enumerate(tris)).encode())
+    rec = np.empty(6, [("g", "<u2"), ("n", "u1"), ("i", "<i4", (3,)), ("w", "<f4")])
+    rec["g"], rec["n"], rec["i"], rec["w"] = 7 * np.arange(6), 3, tris, np.arange(6) / 4
+    b = tmp_path / "b.ply"
+    b.write_bytes(head.format(fmt="binary_little_endian").encode() + MESH_V.astype("<f8").tobytes()
+                  + rec.tobytes())
+    for p in (a, b):
+        pts, _, got = io.read_ply(p, faces=True)
+        assert np.array_equal(pts, MESH_V) and np.array_equal(got, tris), p
+
+
+def test_point_cloud_ply_has_no_faces(tmp_path):
+    p = tmp_path / "p.ply"
+    io.write_ply(p, MESH_V)
+    pts, cols, tris = io.read_ply(p, faces=True)
+    assert np.array_equal(pts, MESH_V) and cols is None and tris.shape == (0, 3)
+
+
+@pytest.mark.parametrize("polys, fragment", [
+    ([[0, 1, 5]], "refers to vertex 5, and there are 5"),
+    ([[0, 1, -1]], "refers to vertex -1"),
+    ([[0, 1]], "face 0 has 2 vertices"),
+])
+def test_ply_bad_faces_are_refused_naming_the_file(tmp_path, polys, fragment):
+    p = tmp_path / "bad.ply"
+    p.write_bytes(_ascii_mesh(extra_elements=False, faces=polys))
+    with pytest.raises(InputError, match=fragment) as e:
+        io.read_ply(p, faces=True)
+    assert e.value.where == str(p) or str(p) in str(e.value)
+
+
+def test_ply_truncated_face_list_and_unknown_format_are_refused(tmp_path):
+    p = tmp_path / "t.ply"
+    p.write_bytes(_binary_mesh()[:-3])
+    with pytest.raises(InputError, match="truncated"):
+        io.read_ply(p, faces=True)
+    huge = tmp_path / "huge.ply"  # a uint list length far past the data
+    huge.write_bytes(_binary_mesh("uint", "int").replace(
+        b"end_header\n" + MESH_V.astype("<f4").tobytes() + np.array([3], "<u4").tobytes(),
+        b"end_header\n" + MESH_V.astype("<f4").tobytes() + np.array([2**32 - 1], "<u4").tobytes()))
+    with pytest.raises(InputError, match="truncated in record 0 of the face element"):
+        io.read_ply(huge, faces=True)
+    q = tmp_path / "be.ply"
+    q.write_bytes(_binary_mesh().replace(b"binary_little_endian", b"binary_big_endian"))
+    with pytest.raises(InputError, match="only ascii and binary_little_endian"):
+        io.read_ply(q)
+    a = tmp_path / "word.ply"
+    a.write_bytes(_ascii_mesh(extra_elements=False).replace(b"0.5 ", b"half ", 1))
+    with pytest.raises(InputError, match="not a number"):
+        io.read_ply(a)
+
+
 # ------------------------------------------------------------------------------ RAW
 def test_raw_reader_refuses_non_raw(tmp_path):
     p = tmp_path / "fake.dng"

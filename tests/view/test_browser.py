@@ -231,3 +231,81 @@ def test_the_page_loads_without_a_facade_session(browser):
     finally:
         server.shutdown()
         thread.join(5)
+
+
+# The probe shows numbers as look.js's fmt does: six significant digits, so a
+# shown value is the file's within half a unit of its sixth digit.
+def _six_digits(v: float) -> float:
+    return 0.5 * 10.0 ** (np.floor(np.log10(abs(v))) - 5) if v else 0.0
+
+
+def _probe_text(d, img, xi: int, yi: int, zoom: int) -> str:
+    """Move the mouse to the middle of file pixel (xi, yi) of ``img`` (drawn
+    ``zoom`` CSS px per pixel) and wait until the probe line names that pixel."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    w, h = img.size["width"], img.size["height"]
+    # Selenium 4 offsets are from the element's centre
+    (ActionChains(d).move_to_element_with_offset(img, round((xi + 0.5) * zoom - w / 2),
+                                                 round((yi + 0.5) * zoom - h / 2)).perform())
+    return _wait(d, "const p = document.querySelector('#look .look-probe');"
+                    f"return p && p.textContent.startsWith('({xi}, {yi}):') && p.textContent")
+
+
+def test_the_cursor_probe_shows_the_files_value_under_the_mouse(browser, tmp_path):
+    """Looking mode: a ``.flo`` and a disparity PFM opened in the page; the mouse
+    on a known pixel shows that pixel's vector (or disparity, or "unknown")
+    as the project's reader reads it from the file. The pictures are drawn 8
+    CSS px per pixel (as a zoomed page shows them), so the pointer sits inside
+    its pixel whatever the rounding of the page's layout."""
+    import re
+
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.capture.io import read_flo, read_pfm, write_flo, write_pfm
+    from lumigraph.view.app import create_app, start_server
+
+    rng = np.random.default_rng(18)
+    h, w, zoom = 30, 40, 8  # not square: a swapped x, y shows
+    flow = rng.uniform(-20, 20, (h, w, 2)).astype(np.float32)
+    write_flo(tmp_path / "motion.flo", flow)
+    disp = rng.uniform(1, 60, (h, w)).astype(np.float32)
+    disp[7, 31] = np.nan  # unknown
+    write_pfm(tmp_path / "disp.pfm", disp)
+    flow, disp = read_flo(tmp_path / "motion.flo"), read_pfm(tmp_path / "disp.pfm")
+    server = start_server(create_app(artifacts=[tmp_path / "motion.flo", tmp_path / "disp.pfm"]),
+                          port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    d = browser
+    number = r"(-?[\d.]+(?:e[-+]?\d+)?)"
+    try:
+        d.get(f"http://127.0.0.1:{server.port}/")
+        for k, pixels in ((0, [(31, 7), (3, 22), (39, 0)]), (1, [(12, 25), (31, 7)])):
+            if k:
+                d.find_element(By.CSS_SELECTOR, "#look .look-list li:nth-child(2) button").click()
+            _wait(d, "const i = document.querySelector('#look img.look-image');"
+                     f"return i && i.alt.endsWith('{['motion.flo', 'disp.pfm'][k]}') && "
+                     "i.complete && i.naturalWidth > 0")
+            img = d.find_element(By.CSS_SELECTOR, "#look img.look-image")
+            assert d.execute_script("return [arguments[0].naturalWidth, "
+                                    "arguments[0].naturalHeight]", img) == [w, h]
+            d.execute_script(f"arguments[0].style.width = '{w * zoom}px'", img)
+            for xi, yi in pixels:
+                text = _probe_text(d, img, xi, yi, zoom)
+                if k == 0:
+                    m = re.match(rf"\((\d+), (\d+)\): \({number}, {number}\) px", text)
+                    assert m, text
+                    for shown, true in zip(map(float, m.groups()[2:]), flow[yi, xi],
+                                           strict=True):
+                        assert abs(shown - true) <= _six_digits(true), (text, flow[yi, xi])
+                elif np.isnan(disp[yi, xi]):
+                    assert text.startswith(f"({xi}, {yi}): (unknown) px"), text
+                else:
+                    m = re.match(rf"\((\d+), (\d+)\): \({number}\) px", text)
+                    assert m, text
+                    assert abs(float(m.group(3)) - disp[yi, xi]) <= _six_digits(disp[yi, xi]), \
+                        (text, disp[yi, xi])
+    finally:
+        server.shutdown()
+        thread.join(5)

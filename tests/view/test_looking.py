@@ -113,22 +113,46 @@ def test_radiance_reinhard_local_is_the_projects_operator_at_the_key_of_the_expo
     assert np.array_equal(img, tonemap(rad, method="reinhard-local", key=0.18 * 2.0))
 
 
-@pytest.mark.parametrize("width", [30, 2 * A.DISPLAY_MAX_PX])
-def test_radiance_reinhard_global_within_a_code_of_the_projects_operator(tmp_path, rng, width):
-    # through the log indices: three roundings of 0.038 code at most (artifacts.
-    # Radiance._reinhard_global), so the two rounded pictures differ by at most one code
-    rad = np.exp(rng.normal(0, 2, (8, width, 3))).astype(np.float32)
+# Reinhard's global curve through the log indices (artifacts.Radiance._reinhard_global):
+# three index roundings of 0.038 code each (channel, luminance, the ratio's offset)
+# on top of the half code of rounding to 8 bits.
+REINHARD_CODE = 0.5 + 3 * 255 * 1.055 / 2.4 * math.log(2) / (2 * A.LOG_STEPS)
+
+
+@pytest.mark.parametrize("width, channels", [(30, 3), (30, 0), (30, 4),
+                                             (2 * A.DISPLAY_MAX_PX, 3)])
+def test_radiance_reinhard_global_within_half_a_code_of_the_projects_operator(
+        tmp_path, rng, width, channels):
+    # 2^+-9 around the mean: the picture spans black to white at every exposure
+    shape = (8, width) + ((channels,) if channels else ())
+    rad = np.exp(rng.normal(0, 3, shape)).astype(np.float32)
     rad[0, 0] = 0.0  # black stays black
+    if channels:
+        rad[0, 1, 1] = 0.0  # one channel zero: that channel stays at code 0
     p = tmp_path / "r.exr"
-    write_hdr_image(p, rad)
-    c = client([p])
-    art = A.load(p)
-    for stops in (-2.0, 0.0, 3.0):
-        img = decode(c.get(f"/api/look/0/image?exposure={stops}&tone=reinhard&format=png"))
-        ref = tonemap(art.display, method="reinhard", key=0.18 * 2.0 ** stops)
+    if channels == 4:
+        art = A.Radiance(p, rad)  # RGBA: alpha is not radiance, only RGB is drawn
+    else:
+        write_hdr_image(p, rad)
+        art = A.load(p)
+    rgb = art.display[..., :3] if art.display.ndim == 3 else art.display
+    for stops in (-6.0, -2.0, 0.0, 3.0, 8.0):
+        if channels == 4:
+            img = art.image({"exposure": stops, "tone": "reinhard"})
+        else:
+            img = decode(client([p]).get(f"/api/look/0/image?exposure={stops}&tone=reinhard"
+                                         "&format=png"))
+        key = 0.18 * 2.0 ** stops
+        # the project's operator before its rounding: its 16-bit output, within
+        # half a 16-bit step of the exact value
+        exact = tonemap(rgb, method="reinhard", key=key, bit_depth=16).astype(float) * 255 / 65535
+        assert np.abs(img - exact).max() <= REINHARD_CODE + 0.5 * 255 / 65535
+        ref = tonemap(rgb, method="reinhard", key=key)
         assert np.abs(img.astype(int) - ref).max() <= 1
     if width <= A.DISPLAY_MAX_PX:  # shown as it is: the black pixel stays black
         assert img[0, 0].tolist() == [0, 0, 0]
+        if channels:
+            assert img[0, 1, 1] == 0
 
 
 # -------------------------------------------------------------------- images
@@ -265,21 +289,48 @@ def test_point_cloud_geometry(tmp_path, rng):
     assert c.get("/api/look/0/image").status_code == 422
 
 
-def test_facade_mesh_from_blocks_json_and_model_ply(tmp_path):
+def test_facade_mesh_from_blocks_json_model_ply_and_model_obj(tmp_path):
     from lumigraph.stereo.debevec1996.model import load_blocks
-    from lumigraph.stereo.debevec1996.outputs import mesh_ply_bytes
+    from lumigraph.stereo.debevec1996.outputs import mesh_obj_text, mesh_ply_bytes
 
     blocks = tmp_path / "blocks.json"
     shutil.copy(ROOT / "fixtures" / "facade" / "blocks.json", blocks)
     mesh = load_blocks(blocks).mesh()
-    (tmp_path / "model.ply").write_bytes(mesh_ply_bytes(mesh.vertices, mesh.faces))
-    c = client([blocks, tmp_path / "model.ply"])
-    for i in ("0", "1"):
-        assert c.get(f"/api/look/{i}").get_json()["kind"] == "mesh"
+    alone = tmp_path / "alone"  # no blocks.json beside: the mesh files are read themselves
+    alone.mkdir()
+    for folder in (tmp_path, alone):
+        (folder / "model.ply").write_bytes(mesh_ply_bytes(mesh.vertices, mesh.faces))
+        (folder / "model.obj").write_text(mesh_obj_text(mesh.vertices, mesh.faces))
+    paths = [blocks, tmp_path / "model.ply", tmp_path / "model.obj", alone / "model.ply",
+             alone / "model.obj"]
+    c = client(paths)
+    for i, path in enumerate(paths):
+        d = c.get(f"/api/look/{i}").get_json()
+        assert d["kind"] == "mesh" and d["error"] is None, (path, d["error"])
         g = c.get(f"/api/look/{i}/geometry").get_json()
-        assert g["faces"] == mesh.faces.ravel().tolist()
+        assert g["faces"] == mesh.faces.ravel().tolist()  # order and winding
         got = np.array(g["positions"]).reshape(-1, 3)
-        assert np.all(np.abs(got - mesh.vertices) <= 0.5 * 10.0 ** -g["decimals"] * (1 + 1e-9))
+        # rounded to the decimals it says; the OBJ keeps 9 significant digits
+        tol = 0.5 * 10.0 ** -g["decimals"] * (1 + 1e-9)
+        tol += 5e-9 * np.abs(mesh.vertices) if path.suffix == ".obj" else 0
+        assert np.all(np.abs(got - mesh.vertices) <= tol)
+
+
+def test_a_ply_with_faces_is_a_mesh_whatever_its_name(tmp_path, rng):
+    from lumigraph.stereo.debevec1996.outputs import mesh_ply_bytes
+
+    v = rng.normal(0, 1, (7, 3))
+    f = np.array([[0, 1, 2], [6, 3, 5], [4, 2, 1]])  # no symmetry: order and winding show
+    (tmp_path / "scan.ply").write_bytes(mesh_ply_bytes(v, f))
+    write_ply(tmp_path / "cloud.ply", v)
+    c = client([tmp_path / "scan.ply", tmp_path / "cloud.ply"])
+    assert c.get("/api/look/0").get_json()["kind"] == "mesh"
+    assert c.get("/api/look/0/geometry").get_json()["faces"] == f.ravel().tolist()
+    assert c.get("/api/look/1").get_json()["kind"] == "pointcloud"
+    bad = tmp_path / "bad.obj"
+    bad.write_text("v 0 0 0\nf 1 2 3\n")
+    d = client([bad]).get("/api/look/0").get_json()
+    assert d["error"].startswith(f"{bad}: line 2:") and d["kind"] == "mesh"
 
 
 # -------------------------------------------------------------- bad input
