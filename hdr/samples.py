@@ -237,7 +237,11 @@ def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.
     edges = np.linspace(s.min(), s.max() + 1e-9, nbins + 1)
     b = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, nbins - 1)
     # Rank within a stratum by local range (jittered so ties spread spatially).
-    key = g * (1.0 + 0.25 * rng.random(cand.size)) + 1e-6 * rng.random(cand.size)
+    # One draw per grid pixel, not per candidate: a code that crosses the
+    # clipping margin then changes only its own pixel's candidacy, not every
+    # later candidate's jitter (nor the generator's state after the pick).
+    m = ys.size * xs.size
+    key = g * (1.0 + 0.25 * rng.random(m)[cand]) + 1e-6 * rng.random(m)[cand]
     order = np.lexsort((key, b))
     bs = b[order]
     start = np.searchsorted(bs, np.arange(nbins))
