@@ -162,8 +162,8 @@ def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.
     one resolution, the same scene gets the same pick whether it was stored
     in 8, 12 or 16 bits, so a deeper file's fit differs from the 8-bit one
     only by what its codes add. Exact ranking at 16 bits was no better a
-    pick in expectation (24 scenes per kind: the 16-bit pick fitted to the
-    8-bit data ÷ the 8-bit pick, 0.99–1.03 ± 0.01–0.02).
+    pick in expectation (24 scenes per kind, the 16-bit pick ÷ the 8-bit
+    pick fitted to the same 8-bit data: 0.97–1.03 ± 0.01–0.02).
 
     Parameters
     ----------
@@ -172,7 +172,9 @@ def sample_pixels(images: np.ndarray, *, n: int, bit_depth: int, rng: np.random.
         Pixels wanted (fewer are returned only if fewer qualify).
     bit_depth : int
     rng : numpy.random.Generator
-        Breaks ties within a radiance stratum (deterministic under a seed).
+        Breaks ties within a radiance stratum (deterministic under a seed);
+        one draw per grid pixel, so the draws do not depend on which pixels
+        qualify.
     margin : float
         Codes within ``margin·z_max`` of 0 or ``z_max`` count as clipped
         (judged on the 8-bit reading of deeper codes).
