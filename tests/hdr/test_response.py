@@ -61,6 +61,25 @@ def test_reduced_solve_equals_the_full_sparse_system():
         assert np.allclose(g1, g2, atol=1e-7) and np.allclose(l1, l2, atol=1e-6)
 
 
+def test_the_pick_is_the_same_at_every_bit_depth():
+    # The same scene stored deeper must get the same pixels (and leave the
+    # tie-breaking generator in the same state): deeper codes are read at 8-bit
+    # resolution for the choice. Deep codes are built to round back to the 8-bit
+    # ones: 16-bit z8 * 257 plus less than half a step (128.5) either way;
+    # 12-bit round(z8 * 4095 / 255) plus at most 7 (half a step is 8.03).
+    s, z8 = _bracket(bit_depth=8, seed=3)
+    rng = np.random.default_rng(5)
+    deep = {16: z8.astype(np.int64) * 257 + rng.integers(-128, 129, z8.shape),
+            12: np.rint(z8 * (4095 / 255)).astype(np.int64) + rng.integers(-7, 8, z8.shape)}
+    r8 = np.random.default_rng(1)
+    idx8 = sample_pixels(z8, n=300, bit_depth=8, rng=r8)
+    for bd, z in deep.items():
+        z = np.clip(z, 0, 2 ** bd - 1).astype(np.uint16)
+        rd = np.random.default_rng(1)
+        assert np.array_equal(sample_pixels(z, n=300, bit_depth=bd, rng=rd), idx8), bd
+        assert rd.bit_generator.state == r8.bit_generator.state, bd
+
+
 def test_debevec_error_does_not_grow_with_samples_or_bits():
     # More samples and more bits carry more information, so the error must not
     # grow beyond the sampling scatter of the estimate. That scatter: shot noise
