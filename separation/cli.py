@@ -281,28 +281,31 @@ def _plan(args, resolved, device):
                          f"cannot work by bands: {why}; use --tile-rows off")
     n, h, w, c, itemsize = geo
     # per pixel of a band: the codes, the linear float32 stack, the reordered copy and the
-    # pair temporaries (about 3 float32 per capture), the outputs and masks
-    per = c * (n * (itemsize + 16) + 48)
-    # held whole: the outputs (written after the last band) and the black/white frames
-    held = w * h * (8 * c + 1) + (w * h * c * (itemsize + 12) * 2 if black and white else 0)
+    # pair temporaries (about 3 float32 per capture), the outputs, the writers' copies, masks
+    per = c * (n * (itemsize + 16) + 56)
+    # held whole: the black/white frames (the measured black level is their median); the
+    # outputs are written band by band
+    held = w * h * c * (itemsize + 12) * 2 if black and white else 0
     budget = None if args.memory is None else args.memory
     from lumigraph.capture.tiles import DEFAULT_MEMORY
 
     left = (DEFAULT_MEMORY if budget is None else budget) - held
     if left <= 0:
-        raise InputError("memory", f"{(held / 1e9):.2f} GB of outputs and black/white frames are "
-                                   "held whole; raise it")
+        raise InputError("memory", f"{(held / 1e9):.2f} GB of black/white frames are held "
+                                   "whole; raise it")
     plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per)
     return plan
 
 
 def _separate_rows(args, resolved, plan, response, device, t0) -> int:
-    """``separate`` reading the captures by bands (:func:`separation.tiled.separate_bands`)."""
+    """``separate`` reading the captures by bands and writing its outputs by bands
+    (:func:`separation.tiled.separate_rows`, :class:`separation.result.SeparationWriter`)."""
     from types import SimpleNamespace
 
     from lumigraph.capture.artifact import make_meta
     from lumigraph.capture.tiles import read_stack_rows
-    from lumigraph.separation.tiled import separate_bands
+    from lumigraph.separation.result import SeparationWriter
+    from lumigraph.separation.tiled import separate_rows
 
     inputs, black, white, complement_of, alpha, _ = resolved
     out = Path(args.out)
@@ -318,29 +321,34 @@ def _separate_rows(args, resolved, plan, response, device, t0) -> int:
         _, quant, sat = linear(0, 1)
         extra, flat_files = _flat_frames(black, white, (h, w, c))
         bw = {k: _linear(v, response, v.paths[0])[0][0] for k, v in extra.items()}
+        del extra
         if args.saturation is not None:
             sat = args.saturation
         t1 = time.perf_counter()
-        sep = separate_bands(lambda y0, y1: linear(y0, y1)[0], height=h, rows=plan.rows,
-                             count=len(stack.paths), method=args.method, alpha=alpha, b=args.b,
-                             black=bw.get("black"), white=bw.get("white"),
-                             complement_of=complement_of, estimator=args.estimator,
-                             noise_sigma=args.noise, quant_step=quant, saturation=sat,
-                             tile=args.tile, names=stack.paths)
-        read_whole = [s.path for s in stack.sources if s.whole]
+        # each band's direct, global and mask go to their files as they are computed
+        with SeparationWriter(out, width=w, height=h, channels=c) as files:
+            sep = separate_rows(lambda y0, y1: linear(y0, y1)[0], height=h, rows=plan.rows,
+                                count=len(stack.paths), write=files.write, method=args.method,
+                                alpha=alpha, b=args.b, black=bw.get("black"),
+                                white=bw.get("white"), complement_of=complement_of,
+                                estimator=args.estimator, noise_sigma=args.noise,
+                                quant_step=quant, saturation=sat, tile=args.tile,
+                                names=stack.paths)
+            read_whole = [s.path for s in stack.sources if s.whole]
+            t2 = time.perf_counter()
+            meta = make_meta("lumigraph.separation", inputs=[*stack.paths, *flat_files],
+                             params={"method": args.method, "alpha": alpha, "b_given": args.b,
+                                     "estimator": args.estimator,
+                                     "response": args.response or (response and response.method),
+                                     "video": None, "noise": args.noise, "saturation": sat,
+                                     "tile": args.tile, "images": len(stack.paths),
+                                     "device": device.name},
+                             timings_s={"load": t1 - t0, "separate": t2 - t1},
+                             extra={"tiles": {**plan.as_meta(h), "read_whole": read_whole}})
+            files.finish(meta=meta, method=sep.method, params=sep.params, quality=sep.quality,
+                         warnings=sep.warnings)
     finally:
         stack.close()
-    t2 = time.perf_counter()
-    meta = make_meta("lumigraph.separation", inputs=[*stack.paths, *flat_files],
-                     params={"method": args.method, "alpha": alpha, "b_given": args.b,
-                             "estimator": args.estimator,
-                             "response": args.response or (response and response.method),
-                             "video": None, "noise": args.noise, "saturation": sat,
-                             "tile": args.tile, "images": len(stack.paths),
-                             "device": device.name},
-                     timings_s={"load": t1 - t0, "separate": t2 - t1},
-                     extra={"tiles": {**plan.as_meta(h), "read_whole": read_whole}})
-    sep.save(out, meta=meta)
     for msg in sep.warnings:
         warn(msg)
     q = sep.quality["mask_counts"]

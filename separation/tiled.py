@@ -36,6 +36,7 @@ True
 from __future__ import annotations
 
 import hashlib
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -52,23 +53,51 @@ from lumigraph.separation.separate import (
     evaluate,
 )
 
-__all__ = ["TILED_METHODS", "separate_bands"]
+__all__ = ["TILED_METHODS", "RowsSeparation", "separate_bands", "separate_rows"]
 
 TILED_METHODS = ("checker",)
 
 
-def separate_bands(read, *, height: int, rows: int, count: int, method: str = "checker",
-                   alpha: float | None = None, b: float | None = None, black=None, white=None,
-                   complement_of=None, estimator: str = "pairs", noise_sigma: float = 0.0,
-                   quant_step: float = 0.0, saturation: float | None = None, tile: int = 16,
-                   names=None) -> Separation:
-    """:func:`separation.separate.separate` on captures read in bands of ``rows`` rows.
+@dataclass(frozen=True)
+class RowsSeparation:
+    """What :func:`separate_rows` returns beside the rows it wrote: the
+    :class:`Separation`'s ``method``, ``params``, ``quality`` and ``warnings``
+    (the same as the whole-image run's), and the number of bands."""
+
+    method: str
+    params: dict
+    quality: dict
+    warnings: tuple[str, ...]
+    bands: int
+
+
+def separate_bands(read, *, height: int, rows: int, count: int, **options) -> Separation:
+    """:func:`separate_rows` with the bands assembled into a :class:`Separation`
+    in memory (for a caller that wants the arrays; the command line writes the
+    bands as they come, :class:`separation.result.SeparationWriter`)."""
+    parts: list = []
+    r = separate_rows(read, height=height, rows=rows, count=count,
+                      write=lambda *band: parts.append(band), **options)
+    d, g, m = (np.concatenate(x) for x in zip(*parts, strict=True))
+    return Separation(d, g, m, r.method, r.params, r.quality, r.warnings)
+
+
+def separate_rows(read, *, height: int, rows: int, count: int, write, method: str = "checker",
+                  alpha: float | None = None, b: float | None = None, black=None, white=None,
+                  complement_of=None, estimator: str = "pairs", noise_sigma: float = 0.0,
+                  quant_step: float = 0.0, saturation: float | None = None, tile: int = 16,
+                  names=None) -> RowsSeparation:
+    """:func:`separation.separate.separate` on captures read in bands of ``rows`` rows,
+    each band's outputs handed to ``write`` as soon as they are computed.
 
     Parameters
     ----------
     read : callable
         ``read(y0, y1)`` → ``(count, y1 - y0, W, C)`` float32 linear captures,
-        rows ``y0`` to ``y1`` (called twice per band: once per pass).
+        rows ``y0`` to ``y1`` (called two or three times per band: once per pass).
+    write : callable
+        ``write(direct, global_, mask)`` once per band, top to bottom:
+        ``(n, W, C)`` float32, ``(n, W, C)`` float32, ``(n, W)`` uint8.
     height, rows, count : int
         Image height, band height (any; need not divide ``height``), number of captures.
     black, white : ndarray, ``(H, W, C)``, optional
@@ -79,9 +108,9 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
 
     Returns
     -------
-    Separation
-        Equal, array for array and bit for bit, to :func:`separate` on the
-        whole stack (checked in ``tests/separation/test_tiled.py``).
+    RowsSeparation
+        The rows written and these are equal, bit for bit, to :func:`separate`
+        on the whole stack (checked in ``tests/separation/test_tiled.py``).
 
     Raises
     ------
@@ -176,7 +205,6 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
 
     # pass 2: per pixel, band by band
     fn = METHODS.resolve(method)
-    out_d, out_g, out_m = [], [], []
     counts: dict = {}
     flagged = 0
     ev_params: dict = {}
@@ -188,9 +216,8 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
         for k, v in ev.counts.items():
             counts[k] = counts.get(k, 0) + v
         flagged += ev.residue_flagged
-        out_d.append(ev.direct)
-        out_g.append(ev.global_)
-        out_m.append(ev.mask)
+        write(ev.direct, ev.global_, ev.mask)
+        del ev, a
     params.update(ev_params)
     frac = float(flagged / max(counts["valid"], 1))
     quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
@@ -202,5 +229,4 @@ def separate_bands(read, *, height: int, rows: int, count: int, method: str = "c
         warnings.append(f"high-frequency residue: the pattern survives into the global image in "
                         f"{100 * frac:.1f}% of the trusted pixels (a mirror-like surface, or a "
                         "pattern too coarse for the scene); the split is unreliable there")
-    return Separation(np.concatenate(out_d), np.concatenate(out_g), np.concatenate(out_m),
-                      method, params, quality, tuple(warnings))
+    return RowsSeparation(method, params, quality, tuple(warnings), len(plan))

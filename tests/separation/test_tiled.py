@@ -58,6 +58,88 @@ def test_larger_than_the_pairing_sample_by_bands(estimator):
     _same(whole, tiled)
 
 
+def _synthetic(width, channels):
+    """A checker stack made row by row (no whole image is ever held): the reader
+    of rows ``y0:y1``, any band, the same values; 8 captures."""
+    pat = np.asarray(checker_set((width, 8), square=4, shifts=2).images, np.float32)  # period 8
+
+    def read(y0, y1):
+        y = np.arange(y0, y1, dtype=np.float32)[:, None, None]
+        x = np.arange(width, dtype=np.float32)[None, :, None]
+        c = np.arange(channels, dtype=np.float32)
+        d = 0.4 + 0.3 * np.sin(0.05 * x + 0.07 * y + c)
+        g = 0.2 + 0.1 * np.cos(0.03 * x - 0.04 * y + c)
+        noise = 0.005 * np.sin(12.9898 * x + 78.233 * y + 3.1 * c)  # deterministic per pixel
+        return (d * pat[:, np.arange(y0, y1) % 8][..., None] + 0.5 * g + noise).astype(np.float32)
+
+    return read
+
+
+def test_outputs_by_rows_peak_memory_grows_with_the_band_not_the_image(tmp_path):
+    """Files written band by band: the per-pixel pass holds one band, whatever the height."""
+    import tracemalloc
+
+    from lumigraph.separation.result import Separation, SeparationWriter
+    from lumigraph.separation.tiled import separate_rows
+
+    w, c, n, rows = 200, 3, 8, 5
+    read = _synthetic(w, c)
+    peaks = {}
+    for h in (128, 1024):  # 8x the pixels, the same band; 5 rows divide neither
+        seen = []
+
+        def write(d, g, m, out=None, seen=seen):
+            if not seen:  # the analysis is done: from here on the per-pixel pass
+                tracemalloc.reset_peak()
+                seen.append(tracemalloc.get_traced_memory()[0])
+            out.write(d, g, m)
+
+        tracemalloc.start()
+        try:
+            with SeparationWriter(tmp_path / str(h), width=w, height=h, channels=c) as out:
+                r = separate_rows(read, height=h, rows=rows, count=n, noise_sigma=0.005,
+                                  write=lambda *band, out=out: write(*band, out=out))
+                out.finish(meta={}, method=r.method, params=r.params, quality=r.quality,
+                           warnings=r.warnings)
+            peaks[h] = tracemalloc.get_traced_memory()[1] - seen[0]
+        finally:
+            tracemalloc.stop()
+    # a band's working set as the command's plan counts it (per pixel: the captures as
+    # codes and float32 copies with their temporaries, the outputs and the writers' copies)
+    band = rows * w * c * (n * (4 + 16) + 56)
+    whole_outputs = 1024 * w * (8 * c + 1)  # what assembling the outputs would hold
+    assert band < whole_outputs / 4  # the check below tells the two apart
+    assert peaks[1024] <= peaks[128] + band / 4, peaks
+    assert peaks[1024] <= band, peaks
+    # and the files are the untiled run's
+    whole = separate(read(0, 128), noise_sigma=0.005)
+    got = Separation.load(tmp_path / "128")
+    assert got.direct.tobytes() == whole.direct.tobytes()
+    assert got.mask.tobytes() == whole.mask.tobytes()
+
+
+def test_save_writes_what_the_whole_image_writers_write(tmp_path):
+    """`Separation.save` goes through the banded writer: the EXRs are `write_exr`'s bytes,
+    the mask `write_image`'s pixels; a writer left by an error leaves nothing behind."""
+    from lumigraph.capture import io
+    from lumigraph.separation.result import Separation, SeparationWriter
+
+    for ch in (1, 3):
+        s = separate(_synthetic(40, ch)(0, 24))
+        s.save(tmp_path / str(ch), meta={})
+        io.write_exr(tmp_path / f"d{ch}.exr", s.direct)
+        assert (tmp_path / str(ch) / "direct.exr").read_bytes() == \
+            (tmp_path / f"d{ch}.exr").read_bytes()
+        assert (io.read_image(tmp_path / str(ch) / "mask.png") == s.mask).all()
+        assert Separation.load(tmp_path / str(ch)).global_.tobytes() == s.global_.tobytes()
+    with pytest.raises(RuntimeError), SeparationWriter(tmp_path / "x", width=4, height=4,
+                                                       channels=1) as out:
+        out.write(np.zeros((2, 4, 1), np.float32), np.zeros((2, 4, 1), np.float32),
+                  np.zeros((2, 4), np.uint8))
+        raise RuntimeError("cut short")
+    assert list((tmp_path / "x").iterdir()) == []
+
+
 def test_methods_not_done_by_bands_are_refused():
     ims = np.ones((3, 8, 8, 1), np.float32)
     with pytest.raises(InputError) as e:
