@@ -286,6 +286,17 @@ def _plan(args, resolved, device):
     # held whole: the black/white frames (the measured black level is their median); the
     # outputs are written band by band
     held = w * h * c * (itemsize + 12) * 2 if black and white else 0
+    halo = 0
+    if args.method != "checker" or args.estimator == "maxmin":  # (max/min: pairs or not)
+        from lumigraph.separation.residue import PERCENTILE_BYTES
+        from lumigraph.separation.separate import residue_window
+
+        # no complement pairs: the spatial residue check's box means (float64 prefix and
+        # window sums of the global and mean images) and a halo of half its box; single's
+        # tiles, one tile row beyond the band and its halo (its bilinear tile centres)
+        per += 48 * c
+        held += 2 * PERCENTILE_BYTES  # the exact percentiles' histograms
+        halo = residue_window(args.tile) // 2 + (2 * args.tile if args.method == "single" else 0)
     budget = None if args.memory is None else args.memory
     from lumigraph.capture.tiles import DEFAULT_MEMORY
 
@@ -293,7 +304,7 @@ def _plan(args, resolved, device):
     if left <= 0:
         raise InputError("memory", f"{(held / 1e9):.2f} GB of black/white frames are held "
                                    "whole; raise it")
-    plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per)
+    plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per, halo=halo)
     return plan
 
 
@@ -469,9 +480,12 @@ def build_parser(prog: str = "lumigraph separate"):
              "analysis, then the per-pixel split), so memory is bounded by the band, not the "
              "stack; the result is the same as whole, to the bit. auto: the tallest band within "
              "--memory; off: whole. Default: whole when it fits --memory, else auto (the meta's "
-             "'tiles' says which). --method checker only; read by rows: TIFF and OpenEXR (other "
-             "formats are read whole). Named --tile-rows, not --tile as in 'hdr merge': --tile "
-             "is the single method's tile")
+             "'tiles' says which). Methods checker, sinusoid and single (occluder: whole, its "
+             "lit fraction is measured over the image; so are a video and a GPU --device); "
+             "without complement pairs the residue check reads each band with a halo and takes "
+             "two more passes. Read by rows: TIFF and OpenEXR (other formats are read whole); "
+             "written by rows: direct.exr, global.exr, mask.png. Named --tile-rows, not --tile "
+             "as in 'hdr merge': --tile is the single method's tile")
     p.add_argument(
         "--memory", type=parse_memory, default=None, metavar="SIZE",
         help="memory budget for --tile-rows auto and the default, e.g. 1GB, 512MB, 2GiB "

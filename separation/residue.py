@@ -73,30 +73,157 @@ def pair_residue(images, complement_of, *, b: float, alpha: float, sigma: np.nda
     return float(flagged.sum() / n), flagged
 
 
+REF_FRACTION = 0.02  # of the 99th percentile of the blurred image: the contrast's floor
+REF_PERCENTILE = 99.0
+REF_STRIDE = 4  # the percentile looks at every 4th row and column (cheap at 1 MP)
+# what a Percentile holds at most: the high bits' histogram, two bins' low bits' and
+# one bincount's temporary (int64, 2^16 bins each), whatever the image
+PERCENTILE_BYTES = 4 * 8 * (1 << 16)
+
+
 def spatial_residue(global_, mean_image, *, window: int = 9, rel: float = 0.3,
                     valid: np.ndarray | None = None) -> tuple[float, np.ndarray]:
     """Fraction of pixels where the global image has pattern-scale contrast that
     the pattern-free mean image lacks.
 
-    ``r(x) = |x − box(x)| / box(x)`` over a ``window``-pixel box (about one
-    pattern period); a pixel is flagged when ``r(global) > rel`` and
-    ``r(global) > 3·r(mean)``.
+    ``r(x) = |x − box(x)| / max(|box(x)|, ref)`` over a ``window``-pixel box
+    (about one pattern period; :func:`box_mean`, reflected at the edges) with
+    ``ref`` 2 % of the 99th percentile of ``|box(x)|`` on every 4th row and
+    column (:func:`strided_percentile`); a pixel is flagged when
+    ``r(global) > rel`` and ``r(global) > 3·r(mean)``. Every step is exact by
+    bands of rows (:mod:`separation.tiled` computes the same flags band by band).
     """
-    import cv2
-
-    def contrast(x):
-        x = np.asarray(x, np.float32)
-        sm = cv2.blur(x, (window, window), borderType=cv2.BORDER_REFLECT)
-        sm = sm.reshape(x.shape)
-        ref = 0.02 * float(np.percentile(np.abs(sm[::4, ::4]), 99))  # subsampled: cheap at 1 MP
-        return np.abs(x - sm) / np.maximum(np.abs(sm), 1e-6 + ref)
-
-    rg = contrast(global_)
-    rm = contrast(mean_image)
-    flag = ((rg > rel) & (rg > 3.0 * rm)).any(axis=-1)
+    sg, sm = box_mean(global_, window), box_mean(mean_image, window)
+    ref_g, ref_m = (REF_FRACTION * strided_percentile(x) for x in (sg, sm))
+    flag = residue_flags(global_, sg, ref_g, mean_image, sm, ref_m, rel=rel)
     if valid is not None:
         flag &= valid
         n = max(int(valid.sum()), 1)
     else:
         n = flag.size
     return float(flag.sum() / n), flag
+
+
+def residue_flags(x, sx, ref_x, m, sm, ref_m, *, rel: float = 0.3) -> np.ndarray:
+    """:func:`spatial_residue`'s per-pixel flags ``(H, W)`` from the images
+    ``x`` (global) and ``m`` (mean), their box means and floors."""
+    def contrast(v, s, ref):
+        return np.abs(v - s) / np.maximum(np.abs(s), np.float32(1e-6 + ref))
+
+    rg = contrast(np.asarray(x, np.float32), sx, ref_x)
+    rm = contrast(np.asarray(m, np.float32), sm, ref_m)
+    return ((rg > rel) & (rg > 3.0 * rm)).any(axis=-1)
+
+
+def box_mean(x, window: int, *, top: bool = True, bottom: bool = True) -> np.ndarray:
+    """Mean over a ``window × window`` box, ``(n, W, C)`` float32 rows in, float32 out.
+
+    Reflected at the left and right edges and, where ``top``/``bottom`` say
+    the rows given start/end at the image's edge, there (``fedcba|abcdef``,
+    OpenCV's ``BORDER_REFLECT``); a side that is not the image's edge gives
+    ``window // 2`` fewer rows (those rows are a halo). Each output value is a
+    float64 sum of its row's prefix sums (one row at a time) taken over the
+    window's rows in a fixed order, so a band of rows read with a halo of
+    ``window // 2`` gives the whole image's values to the bit (a running
+    column sum would not: its rounding depends on where the run starts).
+
+    >>> x = np.arange(30, dtype=np.float32).reshape(6, 5, 1)
+    >>> whole = box_mean(x, 3)
+    >>> part = box_mean(x[1:5], 3, top=False, bottom=False)  # rows 2..3, from 1..4
+    >>> bool((part == whole[2:4]).all())
+    True
+    """
+    a = np.asarray(x, np.float32)
+    a = a[..., None] if a.ndim == 2 else a
+    r = window // 2
+    a = np.pad(a, ((r if top else 0, r if bottom else 0), (r, r), (0, 0)), mode="symmetric")
+    c = np.zeros((a.shape[0], a.shape[1] + 1, a.shape[2]), np.float64)
+    np.cumsum(a, axis=1, dtype=np.float64, out=c[:, 1:])
+    rows = c[:, window:] - c[:, :-window]  # each row's own window sums
+    n = rows.shape[0] - 2 * r
+    acc = rows[:n].copy()
+    for k in range(1, window):
+        acc += rows[k:k + n]
+    out = (acc / float(window * window)).astype(np.float32)
+    return out[..., 0] if np.ndim(x) == 2 else out
+
+
+def strided_percentile(x, q: float = REF_PERCENTILE, *, y0: int = 0) -> float:
+    """The ``q``-th percentile (linear between the order statistics at ``q/100·(n−1)``)
+    of ``|x|`` on every :data:`REF_STRIDE`-th row and column, as float64. The
+    order statistics are exact values, so :class:`Percentile` over bands of
+    rows gives the same number."""
+    p = Percentile(q)
+    keys = p.keys(x, y0=y0)
+    p.total = keys.size
+    if keys.size == 0:
+        return 0.0
+    k0, k1 = p.ranks()
+    part = np.partition(keys, sorted({k0, k1}))
+    return p.value(float(part[k0:k0 + 1].view(np.float32)[0]),
+                   float(part[k1:k1 + 1].view(np.float32)[0]))
+
+
+class Percentile:
+    """:func:`strided_percentile` of an image seen in bands of rows, exact:
+    ``|x|`` as float32 bits (for non-negative floats the unsigned integers
+    sort the same), a histogram of the high 16 bits in a first pass
+    (:meth:`add_high`) picks the bins holding the two order statistics, one of
+    the low 16 bits within them (:meth:`add_low`) pins them to the bit. Memory:
+    two 65536-bin histograms, whatever the image."""
+
+    def __init__(self, q: float = REF_PERCENTILE):
+        self.q = q
+        self.total = 0
+        self.high = np.zeros(1 << 16, np.int64)
+        self.low: dict[int, np.ndarray] = {}
+
+    @staticmethod
+    def keys(x, *, y0: int = 0) -> np.ndarray:
+        """The sample's keys: rows of ``x`` whose image row (``y0`` + index) is a
+        multiple of the stride, every stride-th column."""
+        a = np.asarray(x, np.float32)
+        first = (-y0) % REF_STRIDE
+        v = np.abs(a[first::REF_STRIDE, ::REF_STRIDE])
+        return np.ascontiguousarray(v).view(np.uint32).ravel()
+
+    def ranks(self) -> tuple[int, int]:
+        pos = self.q / 100.0 * (self.total - 1)
+        k0 = int(np.floor(pos))
+        return k0, min(k0 + 1, self.total - 1)
+
+    def value(self, lo: float, hi: float) -> float:
+        pos = self.q / 100.0 * (self.total - 1)
+        g = pos - np.floor(pos)
+        return float(lo + (hi - lo) * g)
+
+    def add_high(self, x, *, y0: int) -> None:
+        k = self.keys(x, y0=y0)
+        self.total += k.size
+        self.high += np.bincount(k >> 16, minlength=1 << 16)
+
+    def _bin_of(self, rank: int) -> tuple[int, int]:
+        cum = np.cumsum(self.high)
+        b = int(np.searchsorted(cum, rank, side="right"))
+        return b, rank - (int(cum[b - 1]) if b else 0)
+
+    def bins(self) -> set[int]:
+        """The high-bit bins the second pass looks into."""
+        return {self._bin_of(k)[0] for k in self.ranks()}
+
+    def add_low(self, x, *, y0: int) -> None:
+        k = self.keys(x, y0=y0)
+        hi = k >> 16
+        for b in self.bins():
+            h = np.bincount(k[hi == b] & 0xFFFF, minlength=1 << 16)
+            self.low[b] = self.low.get(b, 0) + h
+
+    def result(self) -> float:
+        if self.total == 0:
+            return 0.0
+        vals = []
+        for rank in self.ranks():
+            b, r = self._bin_of(rank)
+            low = int(np.searchsorted(np.cumsum(self.low[b]), r, side="right"))
+            vals.append(float(np.array([(b << 16) | low], np.uint32).view(np.float32)[0]))
+        return self.value(*vals)

@@ -184,7 +184,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     else:
         from lumigraph.separation.residue import spatial_residue
 
-        frac, _ = spatial_residue(glob, ev.mean_image, window=max(5, tile // 2 * 2 + 1),
+        frac, _ = spatial_residue(glob, ev.mean_image, window=residue_window(tile),
                                   valid=mask == 0)
         quality["residue"] = {"check": "spatial pattern-scale contrast", "fraction": frac}
     quality["residue"]["warn_above"] = RESIDUE_WARN_FRACTION
@@ -247,15 +247,27 @@ def evaluate(a, *, fn, method, alpha, b, comp, estimator, var0, var1, saturation
     low = ((lp - lm) <= 3.0 * sigma_c).all(axis=-1) & ~never
     mask[low] |= nayar2006.MASK_LOW_CONTRAST
     valid = mask == 0
-    counts = {"never_lit": int(never.sum()),
-              "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
-              "low_contrast": int(low.sum()), "valid": int(valid.sum()), "total": int(mask.size)}
+    counts = mask_counts(mask)
     flagged = None
     if comp is not None and any(j >= 0 for j in comp):
         _, flags = _residue_pairs(a, comp, b=b, alpha=alpha, sigma=sigma, valid=valid)
         flagged = int(flags.sum())
     return Evaluation(direct.astype(np.float32), glob.astype(np.float32), mask, mean_image,
                       counts, flagged, params)
+
+
+def mask_counts(mask: np.ndarray) -> dict:
+    """The quality's ``mask_counts`` of a mask ``(H, W)`` (or a band of it:
+    integers, summed over bands)."""
+    return {"never_lit": int(((mask & nayar2006.MASK_NEVER_LIT) > 0).sum()),
+            "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
+            "low_contrast": int(((mask & nayar2006.MASK_LOW_CONTRAST) > 0).sum()),
+            "valid": int((mask == 0).sum()), "total": int(mask.size)}
+
+
+def residue_window(tile: int) -> int:
+    """The box of the spatial residue check: about one pattern period (``tile``), odd, >= 5."""
+    return max(5, tile // 2 * 2 + 1)
 
 
 def black_level_of(b, *, black, white, floor, info):

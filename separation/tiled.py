@@ -43,7 +43,7 @@ import numpy as np
 from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.capture.tiles import bands
 from lumigraph.separation import nayar2006, pairing
-from lumigraph.separation.methods import METHODS, MIN_IMAGES
+from lumigraph.separation.methods import EXACT_IMAGES, METHODS, MIN_IMAGES
 from lumigraph.separation.result import Separation
 from lumigraph.separation.separate import (
     RESIDUE_WARN_FRACTION,
@@ -51,11 +51,13 @@ from lumigraph.separation.separate import (
     check_options,
     checker_pairs,
     evaluate,
+    mask_counts,
+    residue_window,
 )
 
 __all__ = ["TILED_METHODS", "RowsSeparation", "separate_bands", "separate_rows"]
 
-TILED_METHODS = ("checker",)
+TILED_METHODS = ("checker", "sinusoid", "single")
 
 
 @dataclass(frozen=True)
@@ -120,11 +122,14 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
     """
     METHODS.resolve(method)
     if method not in TILED_METHODS:
-        raise InputError("method", f"{method!r} cannot run by bands yet (its whole-image analysis "
-                                   "is not gathered by bands); use tile off, or method checker")
+        raise InputError("method", f"{method!r} cannot run by bands yet (its lit fraction is "
+                                   "measured over the whole image); use tile off")
     if count < MIN_IMAGES[method]:
         raise EstimationError("<images>", f"method {method!r} needs at least "
                                           f"{MIN_IMAGES[method]} images, got {count}")
+    if method in EXACT_IMAGES and count != EXACT_IMAGES[method]:
+        raise EstimationError("<images>", f"method {method!r} takes exactly {EXACT_IMAGES[method]} "
+                                          f"image(s), got {count}")
     if isinstance(rows, bool) or not isinstance(rows, int | np.integer) or rows < 1:
         raise InputError("rows", f"expected a band height of at least 1 row, got {rows!r}")
     names = list(names) if names is not None else [f"image {i}" for i in range(count)]
@@ -171,29 +176,38 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
     sample = np.concatenate(sample_parts, axis=1)
     del sample_parts
     params: dict = {"method": method}
-    pre, _ = pairing.canonical_order(sample, keys=keys)
-    if complement_of is not None and len(complement_of) != count:
-        raise InputError("complement_of", f"expected {count} entries, got {len(complement_of)}")
-    # the sample is what find_pairs draws from the whole images: the same scores
-    comp = checker_pairs(sample, names=names, noise=noise, order=pre,
-                         complement_of=complement_of, estimator=estimator, info=params)
-    if comp is None or not any(j >= 0 for j in comp):
-        raise InputError("method", "checker captures without complement pairs use the spatial "
-                                   "residue check, not done by bands yet; use tile off")
-    order, comp = pairing.canonical_order(sample, comp, keys=keys)
-    names = [names[k] for k in order]
+    order = list(range(count))
+    comp = None
+    if method != "single":  # one image: nothing to put in order (as separate())
+        pre, _ = pairing.canonical_order(sample, keys=keys)
+        if complement_of is not None and len(complement_of) != count:
+            raise InputError("complement_of", f"expected {count} entries, got {len(complement_of)}")
+        if method == "checker":
+            # the sample is what find_pairs draws from the whole images: the same scores
+            comp = checker_pairs(sample, names=names, noise=noise, order=pre,
+                                 complement_of=complement_of, estimator=estimator, info=params)
+        elif method == "sinusoid":
+            # phase_spacing samples the same flat indices of the whole images
+            sp = pairing.phase_spacing(sample[pre], names=[names[k] for k in pre], noise=noise)
+            iu = np.triu_indices(count, 1)
+            if np.isfinite(sp[iu]).all():
+                params["phase_spacing_deg"] = [round(float(v), 1) for v in sp[iu]]
+        order, comp = pairing.canonical_order(sample, comp, keys=keys)
+        names = [names[k] for k in order]
+    del sample
     b = black_level_of(b, black=black, white=white, floor=floor, info=params)
-    alpha = 0.5 if alpha is None else alpha
-    var0 = quant ** 2 + noise_sigma ** 2
+    var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
+    if method == "checker":
+        alpha = 0.5 if alpha is None else alpha
+        comp = list(comp) if comp is not None else [-1] * count
     # the noise line: the pair sums at every k-th flat value, gathered band by band
-    pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(comp) if j >= 0 and j != i})
+    pairs = sorted({(min(i, j), max(i, j)) for i, j in enumerate(comp or []) if j >= 0 and j != i})
     step = nayar2006.noise_step(height * width * chans)
 
     def ordered(y0, y1):
         a = nayar2006.validate_stack(read(y0, y1), need=1, method=method)
         return a[order] if order != list(range(count)) else a
 
-    var1 = 0.0
     if len(pairs) >= 2:
         parts = []
         for band in plan:
@@ -203,30 +217,107 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
         s0, s1 = nayar2006.noise_fit(np.concatenate(parts, axis=1))
         var0, var1 = var0 + s0, s1
 
-    # pass 2: per pixel, band by band
     fn = METHODS.resolve(method)
-    counts: dict = {}
-    flagged = 0
-    ev_params: dict = {}
-    for band in plan:
-        a = ordered(band.y0, band.y1)
-        ev = evaluate(a, fn=fn, method=method, alpha=alpha, b=b, comp=comp, estimator=estimator,
-                      var0=var0, var1=var1, saturation=saturation, tile=tile)
-        ev_params = ev.params
-        for k, v in ev.counts.items():
-            counts[k] = counts.get(k, 0) + v
-        flagged += ev.residue_flagged
-        write(ev.direct, ev.global_, ev.mask)
-        del ev, a
+    kw = {"fn": fn, "method": method, "alpha": alpha, "b": b, "comp": comp,
+          "estimator": estimator, "var0": var0, "var1": var1, "saturation": saturation,
+          "tile": tile}
+    if comp is not None and any(j >= 0 for j in comp):  # evaluate()'s rule
+        counts, flagged, ev_params = _pass_pairs(ordered, plan, write, kw)
+        residue = {"check": "per-pair global disagreement"}
+    else:
+        counts, flagged, ev_params = _pass_spatial(ordered, plan, write, kw, height=height)
+        residue = {"check": "spatial pattern-scale contrast"}
     params.update(ev_params)
     frac = float(flagged / max(counts["valid"], 1))
     quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
                "mask_counts": counts,
-               "residue": {"check": "per-pair global disagreement", "fraction": frac,
-                           "warn_above": RESIDUE_WARN_FRACTION}}
+               "residue": {**residue, "fraction": frac, "warn_above": RESIDUE_WARN_FRACTION}}
     warnings = []
     if frac > RESIDUE_WARN_FRACTION:
         warnings.append(f"high-frequency residue: the pattern survives into the global image in "
                         f"{100 * frac:.1f}% of the trusted pixels (a mirror-like surface, or a "
                         "pattern too coarse for the scene); the split is unreliable there")
     return RowsSeparation(method, params, quality, tuple(warnings), len(plan))
+
+
+def _add(counts: dict, more: dict) -> None:
+    for k, v in more.items():
+        counts[k] = counts.get(k, 0) + v
+
+
+def _pass_pairs(ordered, plan, write, kw):
+    """Pass 2 with complement pairs: per pixel, band by band; the per-pair
+    residue flags are per pixel too (an integer sum)."""
+    counts: dict = {}
+    flagged = 0
+    params: dict = {}
+    for band in plan:
+        ev = evaluate(ordered(band.y0, band.y1), **kw)
+        params = ev.params
+        _add(counts, ev.counts)
+        flagged += ev.residue_flagged
+        write(ev.direct, ev.global_, ev.mask)
+        del ev
+    return counts, flagged, params
+
+
+def _pass_spatial(ordered, plan, write, kw, *, height):
+    """Passes 2-4 without complement pairs (sinusoid, single, checker max/min
+    unpaired): :func:`separation.residue.spatial_residue` by bands. Each band
+    is evaluated with a halo of ``window // 2`` rows (the box mean's reach;
+    ``single`` also on whole tiles, one tile row beyond: its bilinear
+    interpolation between tile centres), so its rows are the whole image's.
+    Pass 2 writes the outputs and histograms the high bits of the
+    percentile's sample, pass 3 its low bits
+    (:class:`separation.residue.Percentile`: the floors to the bit), pass 4
+    counts the flags."""
+    from lumigraph.separation.residue import Percentile, box_mean, residue_flags
+
+    method, tile = kw["method"], kw["tile"]
+    window = residue_window(tile)
+    r = window // 2
+
+    def rows_eval(y0, y1):
+        # the evaluation of exactly rows y0:y1 of the image
+        if method == "single":  # whole tiles from the image's origin, one tile row beyond
+            t0 = max(0, (y0 // tile - 1) * tile)
+            t1 = min(height, (-(-y1 // tile) + 1) * tile)
+        else:  # per pixel
+            t0, t1 = y0, y1
+        ev = evaluate(ordered(t0, t1), **kw)
+        s = slice(y0 - t0, y1 - t0)
+        return ev.direct[s], ev.global_[s], ev.mask[s], ev.mean_image[s], ev.params
+
+    def band_rows(band):
+        r0, r1 = max(0, band.y0 - r), min(height, band.y1 + r)
+        d, g, m, mean, params = rows_eval(r0, r1)
+        core = slice(band.y0 - r0, band.y1 - r0)
+        s0 = r0 if r0 == 0 else r0 + r  # the first row the box means cover
+        box = slice(band.y0 - s0, band.y1 - s0)
+        edges = {"top": r0 == 0, "bottom": r1 == height}
+        sg = box_mean(g, window, **edges)[box]
+        sm = box_mean(mean, window, **edges)[box]
+        return d[core], g[core], m[core], mean[core], sg, sm, params
+
+    pg, pm = Percentile(), Percentile()
+    counts: dict = {}
+    params: dict = {}
+    for band in plan:  # pass 2: the outputs, the percentiles' high bits
+        d, g, m, mean, sg, sm, params = band_rows(band)
+        write(d, g, m)
+        _add(counts, mask_counts(m))
+        pg.add_high(sg, y0=band.y0)
+        pm.add_high(sm, y0=band.y0)
+        del d, g, m, mean, sg, sm
+    for band in plan:  # pass 3: their low bits
+        _, _, _, _, sg, sm, _ = band_rows(band)
+        pg.add_low(sg, y0=band.y0)
+        pm.add_low(sm, y0=band.y0)
+    from lumigraph.separation.residue import REF_FRACTION
+
+    ref_g, ref_m = REF_FRACTION * pg.result(), REF_FRACTION * pm.result()
+    flagged = 0
+    for band in plan:  # pass 4: the flags
+        _, g, m, mean, sg, sm, _ = band_rows(band)
+        flagged += int((residue_flags(g, sg, ref_g, mean, sm, ref_m) & (m == 0)).sum())
+    return counts, flagged, params
