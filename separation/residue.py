@@ -122,10 +122,11 @@ def box_mean(x, window: int, *, top: bool = True, bottom: bool = True) -> np.nda
     the rows given start/end at the image's edge, there (``fedcba|abcdef``,
     OpenCV's ``BORDER_REFLECT``); a side that is not the image's edge gives
     ``window // 2`` fewer rows (those rows are a halo). Each output value is a
-    float64 sum of its row's prefix sums (one row at a time) taken over the
-    window's rows in a fixed order, so a band of rows read with a halo of
-    ``window // 2`` gives the whole image's values to the bit (a running
-    column sum would not: its rounding depends on where the run starts).
+    float64 sum, over the window's rows in a fixed order (a binary tree), of
+    each row's own window sum (from that row's prefix sums), so a band of rows
+    read with a halo of ``window // 2`` gives the whole image's values to the
+    bit (a running column sum would not: its rounding depends on where the
+    run starts).
 
     >>> x = np.arange(30, dtype=np.float32).reshape(6, 5, 1)
     >>> whole = box_mean(x, 3)
@@ -141,9 +142,19 @@ def box_mean(x, window: int, *, top: bool = True, bottom: bool = True) -> np.nda
     np.cumsum(a, axis=1, dtype=np.float64, out=c[:, 1:])
     rows = c[:, window:] - c[:, :-window]  # each row's own window sums
     n = rows.shape[0] - 2 * r
-    acc = rows[:n].copy()
-    for k in range(1, window):
-        acc += rows[k:k + n]
+    # the window's rows summed by binary decomposition (sums of 1, 2, 4, ... rows, each
+    # the sum of two halves): about log2(window) passes, each output row the same fixed
+    # expression of its own rows wherever the band starts
+    acc = None
+    part, size, offset, left = rows, 1, 0, window
+    while left:
+        if left & 1:
+            acc = part[offset:offset + n].copy() if acc is None else acc + part[offset:offset + n]
+            offset += size
+        left >>= 1
+        if left:
+            part = part[:-size] + part[size:]
+            size *= 2
     out = (acc / float(window * window)).astype(np.float32)
     return out[..., 0] if np.ndim(x) == 2 else out
 
