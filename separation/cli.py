@@ -252,8 +252,8 @@ def _plan(args, resolved, device):
     if args.tile_rows == "off":
         return TilePlan(None, 0, "--tile-rows off: the whole image at once")
     why = None
-    if args.method not in TILED_METHODS:
-        why = f"method {args.method!r} is not done by bands (only {', '.join(TILED_METHODS)})"
+    if args.method not in TILED_METHODS:  # (every method is: a future one may not be)
+        why = f"method {args.method!r} is not done by bands"
     elif video is not None:
         why = "a video is decoded whole"
     elif device.uses_torch:
@@ -277,8 +277,9 @@ def _plan(args, resolved, device):
     if why is not None:
         if args.tile_rows is None:
             return TilePlan(None, 0, f"whole: {why}")
-        raise InputError("method" if "method" in why else "images",
-                         f"cannot work by bands: {why}; use --tile-rows off")
+        where = "method" if args.method not in TILED_METHODS else (
+            "device" if device.uses_torch else "images")
+        raise InputError(where, f"cannot work by bands: {why}; use --tile-rows off")
     n, h, w, c, itemsize = geo
     # per pixel of a band: the codes, the linear float32 stack, the reordered copy and the
     # pair temporaries (about 3 float32 per capture), the outputs, the writers' copies, masks
@@ -480,11 +481,10 @@ def build_parser(prog: str = "lumigraph separate"):
              "analysis, then the per-pixel split), so memory is bounded by the band, not the "
              "stack; the result is the same as whole, to the bit. auto: the tallest band within "
              "--memory; off: whole. Default: whole when it fits --memory, else auto (the meta's "
-             "'tiles' says which). Methods checker, sinusoid and single (occluder: whole, its "
-             "lit fraction is measured over the image; so are a video and a GPU --device); "
-             "without complement pairs the residue check reads each band with a halo and takes "
-             "two more passes. Read by rows: TIFF and OpenEXR (other formats are read whole); "
-             "written by rows: direct.exr, global.exr, mask.png. Named --tile-rows, not --tile "
+             "'tiles' says which). Every method; a video and a torch --device run whole. "
+             "Without complement pairs the residue check reads each band with a halo and takes "
+             "two more passes (the occluder's measured lit fraction three). Read by rows: TIFF "
+             "and OpenEXR (other formats are read whole); written by rows: direct.exr, global.exr, mask.png. Named --tile-rows, not --tile "
              "as in 'hdr merge': --tile is the single method's tile")
     p.add_argument(
         "--memory", type=parse_memory, default=None, metavar="SIZE",

@@ -416,18 +416,34 @@ def occluder_lit_fraction(images: np.ndarray, l_plus: np.ndarray, l_minus: np.nd
     >>> occluder_lit_fraction(frames, frames.max(axis=0), frames.min(axis=0), step=1)
     0.75
     """
+    from lumigraph.separation.residue import strided_percentile
+
     a = np.asarray(images)[:, ::step, ::step]
-    lp = np.asarray(l_plus)[::step, ::step]
-    lm = np.asarray(l_minus)[::step, ::step]
-    c = lp - lm
-    top = float(np.percentile(c, 90))
+    lp = np.asarray(l_plus, np.float32)[::step, ::step]
+    lm = np.asarray(l_minus, np.float32)[::step, ::step]
+    # the exact order statistics (bands of rows find the same: separation.tiled)
+    top = strided_percentile(lp - lm, OCCLUDER_PERCENTILE, stride=1, absolute=False)
+    return occluder_alpha(*occluder_lit_counts(a, lp, lm, top=top), frames=len(a))
+
+
+OCCLUDER_PERCENTILE = 90.0  # of L+ - L-: pixels at half of it or more are swept
+
+
+def occluder_lit_counts(a, lp, lm, *, top: float) -> tuple[int, int]:
+    """:func:`occluder_lit_fraction`'s (frame, pixel) samples nearer ``L⁺`` than
+    ``L⁻`` among the swept pixels, and all swept samples: integers (a band's
+    counts add up), from the strided frames ``a`` and extremes ``lp``, ``lm``."""
     if not top > 0:
         raise EstimationError("<images>", "no pixel changes across the frames (no moving shadow): "
                                           "the occluder method needs a shadow swept over the scene")
-    sel = c >= 0.5 * top
+    sel = (lp - lm) >= 0.5 * top
     lit = a[:, sel] > 0.5 * (lp + lm)[sel]
-    n = len(a)
-    return float(np.clip(lit.mean(), 1.0 / n, 1.0 - 1.0 / n))
+    return int(lit.sum()), int(lit.size)
+
+
+def occluder_alpha(lit: int, total: int, *, frames: int) -> float:
+    """α from :func:`occluder_lit_counts`, clipped to ``[1/N, 1 − 1/N]``."""
+    return float(np.clip(lit / max(total, 1), 1.0 / frames, 1.0 - 1.0 / frames))
 
 
 def occluder(images: np.ndarray, *, alpha: float | None = None,

@@ -159,12 +159,14 @@ def box_mean(x, window: int, *, top: bool = True, bottom: bool = True) -> np.nda
     return out[..., 0] if np.ndim(x) == 2 else out
 
 
-def strided_percentile(x, q: float = REF_PERCENTILE, *, y0: int = 0) -> float:
+def strided_percentile(x, q: float = REF_PERCENTILE, *, y0: int = 0, stride: int = REF_STRIDE,
+                       absolute: bool = True) -> float:
     """The ``q``-th percentile (linear between the order statistics at ``q/100·(n−1)``)
-    of ``|x|`` on every :data:`REF_STRIDE`-th row and column, as float64. The
-    order statistics are exact values, so :class:`Percentile` over bands of
-    rows gives the same number."""
-    p = Percentile(q)
+    of ``|x|`` (``absolute``; else ``x``, which must be >= 0) on every
+    ``stride``-th row and column, as float64. The order statistics are exact
+    values, so :class:`Percentile` over bands of rows gives the same number
+    (and numpy's ``percentile`` within a float32 rounding)."""
+    p = Percentile(q, stride=stride, absolute=absolute)
     keys = p.keys(x, y0=y0)
     p.total = keys.size
     if keys.size == 0:
@@ -181,21 +183,24 @@ class Percentile:
     sort the same), a histogram of the high 16 bits in a first pass
     (:meth:`add_high`) picks the bins holding the two order statistics, one of
     the low 16 bits within them (:meth:`add_low`) pins them to the bit. Memory:
-    two 65536-bin histograms, whatever the image."""
+    :data:`PERCENTILE_BYTES` at most, whatever the image."""
 
-    def __init__(self, q: float = REF_PERCENTILE):
+    def __init__(self, q: float = REF_PERCENTILE, *, stride: int = REF_STRIDE,
+                 absolute: bool = True):
         self.q = q
+        self.stride = stride
+        self.absolute = absolute
         self.total = 0
         self.high = np.zeros(1 << 16, np.int64)
         self.low: dict[int, np.ndarray] = {}
 
-    @staticmethod
-    def keys(x, *, y0: int = 0) -> np.ndarray:
+    def keys(self, x, *, y0: int = 0) -> np.ndarray:
         """The sample's keys: rows of ``x`` whose image row (``y0`` + index) is a
         multiple of the stride, every stride-th column."""
         a = np.asarray(x, np.float32)
-        first = (-y0) % REF_STRIDE
-        v = np.abs(a[first::REF_STRIDE, ::REF_STRIDE])
+        first = (-y0) % self.stride
+        v = a[first::self.stride, ::self.stride]
+        v = np.abs(v) if self.absolute else v + np.float32(0)  # (-0.0 + 0 is +0.0)
         return np.ascontiguousarray(v).view(np.uint32).ravel()
 
     def ranks(self) -> tuple[int, int]:

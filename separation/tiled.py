@@ -57,7 +57,7 @@ from lumigraph.separation.separate import (
 
 __all__ = ["TILED_METHODS", "RowsSeparation", "separate_bands", "separate_rows"]
 
-TILED_METHODS = ("checker", "sinusoid", "single")
+TILED_METHODS = ("checker", "sinusoid", "single", "occluder")
 
 
 @dataclass(frozen=True)
@@ -122,8 +122,7 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
     """
     METHODS.resolve(method)
     if method not in TILED_METHODS:
-        raise InputError("method", f"{method!r} cannot run by bands yet (its lit fraction is "
-                                   "measured over the whole image); use tile off")
+        raise InputError("method", f"{method!r} is not done by bands; use tile off")
     if count < MIN_IMAGES[method]:
         raise EstimationError("<images>", f"method {method!r} needs at least "
                                           f"{MIN_IMAGES[method]} images, got {count}")
@@ -217,6 +216,9 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
         s0, s1 = nayar2006.noise_fit(np.concatenate(parts, axis=1))
         var0, var1 = var0 + s0, s1
 
+    alpha_measured = method == "occluder" and alpha is None
+    if alpha_measured:
+        alpha = _occluder_alpha(ordered, plan, count=count)
     fn = METHODS.resolve(method)
     kw = {"fn": fn, "method": method, "alpha": alpha, "b": b, "comp": comp,
           "estimator": estimator, "var0": var0, "var1": var1, "saturation": saturation,
@@ -228,6 +230,8 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
         counts, flagged, ev_params = _pass_spatial(ordered, plan, write, kw, height=height)
         residue = {"check": "spatial pattern-scale contrast"}
     params.update(ev_params)
+    if alpha_measured:  # measured here, by bands, and given to the per-pixel step
+        params["alpha_source"] = "measured"
     frac = float(flagged / max(counts["valid"], 1))
     quality = {"noise_model": {"variance_at_zero": float(var0), "variance_slope": float(var1)},
                "mask_counts": counts,
@@ -243,6 +247,38 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
 def _add(counts: dict, more: dict) -> None:
     for k, v in more.items():
         counts[k] = counts.get(k, 0) + v
+
+
+def _occluder_alpha(ordered, plan, *, count):
+    """:func:`separation.nayar2006.occluder_lit_fraction` by bands: the 90th
+    percentile of ``L⁺ − L⁻`` on every 2nd row and column (exact:
+    :class:`separation.residue.Percentile`, two passes), then the lit counts
+    (integers) in a third."""
+    from lumigraph.separation.residue import Percentile
+
+    step = 2  # occluder_lit_fraction's
+
+    def extremes(band):
+        a = ordered(band.y0, band.y1)
+        lp, lm = nayar2006.extremes(a)
+        return a, lp, lm
+
+    pc = Percentile(nayar2006.OCCLUDER_PERCENTILE, stride=step, absolute=False)
+    for band in plan:
+        _, lp, lm = extremes(band)
+        pc.add_high(lp - lm, y0=band.y0)
+    for band in plan:
+        _, lp, lm = extremes(band)
+        pc.add_low(lp - lm, y0=band.y0)
+    top = pc.result()
+    lit = total = 0
+    for band in plan:
+        a, lp, lm = extremes(band)
+        first = (-band.y0) % step
+        n_lit, n = nayar2006.occluder_lit_counts(a[:, first::step, ::step], lp[first::step, ::step],
+                                                 lm[first::step, ::step], top=top)
+        lit, total = lit + n_lit, total + n
+    return nayar2006.occluder_alpha(lit, total, frames=count)
 
 
 def _pass_pairs(ordered, plan, write, kw):

@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from lumigraph.capture.errors import InputError
 from lumigraph.capture.patterns import checker_set
 from lumigraph.capture.render import render
 from lumigraph.separation.separate import separate
@@ -157,6 +156,7 @@ def test_save_writes_what_the_whole_image_writers_write(tmp_path):
 
 @pytest.mark.parametrize(("method", "tile", "take"), [
     ("sinusoid", 16, None), ("sinusoid", 6, None), ("single", 16, None), ("single", 6, None),
+    ("occluder", 16, None),  # its lit fraction measured by bands (a percentile, counts)
     ("checker", 16, 3)])  # 3 checker boards, no complement among them: max/min, spatial check
 def test_spatial_residue_methods_by_bands_are_the_untiled_run(method, tile, take):
     """Without complement pairs the residue check is spatial (a box of ~tile px, a
@@ -213,14 +213,7 @@ def test_box_mean_and_percentile_by_bands_are_the_whole_image():
     assert abs(p.result() - ref) <= 2 * np.finfo(np.float32).eps * ref
 
 
-def test_methods_not_done_by_bands_are_refused():
-    ims = np.ones((3, 8, 8, 1), np.float32)
-    with pytest.raises(InputError) as e:
-        separate_bands(_reader(ims), height=8, rows=3, count=3, method="occluder")
-    assert e.value.where == "method"
-
-
-@pytest.mark.parametrize("method", ["checker", "sinusoid", "single"])
+@pytest.mark.parametrize("method", ["checker", "sinusoid", "single", "occluder"])
 def test_cli_by_rows_from_tiffs_is_the_untiled_run(run_cli, tmp_path, method):
     """`separate --tile-rows 13` reading 16-bit TIFFs by rows writes the bytes of `--tile-rows off`."""
     import json
@@ -243,12 +236,15 @@ def test_cli_by_rows_from_tiffs_is_the_untiled_run(run_cli, tmp_path, method):
         assert (tmp_path / "13" / f).read_bytes() == (tmp_path / "off" / f).read_bytes()
     tiles = json.loads((tmp_path / "13" / "direct.exr.meta.json").read_text())["tiles"]
     assert tiles["tiled"] and tiles["rows"] == 13 and tiles["read_whole"] == []
-    if method == "checker":
-        occ = [tmp_path / n.replace(".png", ".tif") for n in s.stack["sets"]["occluder"][:3]]
-        for n, f in zip(s.stack["sets"]["occluder"], occ, strict=False):
-            tifffile.imwrite(f, s.images[s.image_names.index(n)])
-        r = run_cli("separate", *occ, "--method", "occluder", "--tile-rows", "8", "--out",
-                    tmp_path / "s")
-        from conftest import assert_clean_error
+    if method == "checker":  # a torch estimator runs whole: refused by bands, before any work
+        from types import SimpleNamespace
 
-        assert_clean_error(r, "method", "--tile-rows off")
+        from lumigraph.capture.errors import InputError
+        from lumigraph.separation.cli import _plan
+
+        args = SimpleNamespace(tile_rows=8, method=method, memory=None, tile=6,
+                               estimator="pairs")
+        with pytest.raises(InputError) as e:
+            _plan(args, (files[:-2], None, None, None, None, None),
+                  SimpleNamespace(uses_torch=True, name="torch-cpu"))
+        assert e.value.where == "device" and "--tile-rows off" in e.value.problem
