@@ -2,7 +2,9 @@
 
 :func:`tile_rows` renders 8 checker captures (shifted boards and their
 complements, square 8 px; a smooth direct and global image, 16-bit RGB TIFFs
-written band by band, so the bench never holds one) at each size, separates
+written band by band, so the bench never holds one) at each size, and 3
+sinusoids at the largest (no complement pairs: the spatial residue check's
+halo and two more passes), separates
 them through the command line (``--tile-rows auto --memory 1GB``: the
 analysis pass, then direct/global/mask written band by band) and reads the
 child's own peak resident memory (``VmHWM``,
@@ -40,16 +42,21 @@ BUDGET = "1GB"
 WHOLE_UP_TO_MP = 4  # the untiled peer runs up to here (8 x 16 MP RGB whole needs ~6 GB)
 
 
-def render_checker(folder, *, height: int, width: int, rows: int = 256) -> list[Path]:
-    """8 checker captures ``c0.tif`` … ``c7.tif`` (16-bit RGB), ``rows`` rows at a time:
-    ``direct · pattern + global / 2`` with smooth direct and global images."""
+def render_checker(folder, *, height: int, width: int, rows: int = 256,
+                   method: str = "checker") -> list[Path]:
+    """Captures ``c0.tif`` … (16-bit RGB), ``rows`` rows at a time:
+    ``direct · pattern + global / 2`` with smooth direct and global images;
+    ``method`` checker: 8 boards (square 8 px, 2 shifts, and complements);
+    sinusoid: 3 phase-shifted sinusoids of period 16 px along the diagonal."""
     from lumigraph.capture.patterns import checker_set
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     period = 2 * SQUARE
     pat = np.asarray(checker_set((width, period), square=SQUARE, shifts=2).images, np.float32)
-    files = [folder / f"c{i}.tif" for i in range(len(pat))]
+    phases = (0.0, 2 * np.pi / 3, 4 * np.pi / 3)
+    count = len(pat) if method == "checker" else len(phases)
+    files = [folder / f"c{i}.tif" for i in range(count)]
     writers = [TiffRowWriter(f, width, height, 3, np.uint16, rows) for f in files]
     try:
         for b in bands(height, rows):
@@ -59,7 +66,11 @@ def render_checker(folder, *, height: int, width: int, rows: int = 256) -> list[
             d = 0.35 + 0.25 * np.sin(6.0 * x / width + 4.0 * y / height + c)
             g = 0.15 + 0.1 * np.cos(5.0 * x / width - 3.0 * y / height + c)
             for k, wr in enumerate(writers):
-                v = d * pat[k, np.arange(b.y0, b.y1) % period][..., None] + 0.5 * g
+                if method == "checker":
+                    p = pat[k, np.arange(b.y0, b.y1) % period][..., None]
+                else:
+                    p = 0.5 + 0.5 * np.cos(2 * np.pi * (x + y) / period + phases[k])
+                v = d * p + 0.5 * g
                 wr.write(np.round(np.clip(v, 0, 1) * 65535).astype(np.uint16))
     finally:
         for wr in writers:
@@ -81,23 +92,28 @@ def tile_rows(quick: bool = False, *, sizes_mp=SIZES_MP, budget: str = BUDGET,
     from lumigraph.separation.result import FILES
 
     sizes = QUICK_MP if quick else tuple(sizes_mp)
+    # checker at every size; sinusoid (no complement pairs: the spatial residue check's
+    # halo and extra passes) at the largest
+    cases = [("checker", mp) for mp in sizes] + [("sinusoid", sizes[-1])]
     rows: list[Row] = []
     peaks, same = [], []
     with tempfile.TemporaryDirectory(dir=workdir) as d:
         d = Path(d)
-        for mp in sizes:
+        for method, mp in cases:
             side = int(math.sqrt(mp * 1e6 * 3 / 4))
             h, w = side, side * 4 // 3
-            files = render_checker(d / f"c{mp}", height=h, width=w)
+            files = render_checker(d / f"c{mp}", height=h, width=w, method=method)
             outs = {}
             for mode, extra in (("tiled", ["--tile-rows", "auto", "--memory", budget]),
                                 ("whole", ["--tile-rows", "off"])):
                 if mode == "whole" and mp > WHOLE_UP_TO_MP:
                     continue
                 out = d / f"{mode}{mp}"
-                rc, peak, dt, err = peak_run(["separate", *files, "--out", out, "-q", *extra])
+                rc, peak, dt, err = peak_run(["separate", *files, "--method", method, "--out", out,
+                                              "-q", *extra])
                 meta = json.loads((out / "direct.exr.meta.json").read_text()) if rc == 0 else {}
-                rows.append(Row(STAGE, f"separate checker, 8 x {mp} MP 16-bit RGB ({w}x{h})",
+                rows.append(Row(STAGE, f"separate {method}, {len(files)} x {mp} MP 16-bit RGB "
+                                       f"({w}x{h})",
                                 f"{mode} ({' '.join(extra)}), peak RSS GB",
                                 None if mode == "tiled" else "untiled separate", "megapixels",
                                 mp, dt, (dt,), peak / 1e9, "ok" if rc == 0 else "failed",
@@ -105,7 +121,7 @@ def tile_rows(quick: bool = False, *, sizes_mp=SIZES_MP, budget: str = BUDGET,
                 if rc == 0:
                     outs[mode] = out
                 if mode == "tiled":
-                    peaks.append((mp, peak))
+                    peaks.append((f"{method} {mp} MP", peak))
             if len(outs) == 2:
                 same.append(all((outs["tiled"] / f).read_bytes() == (outs["whole"] / f).read_bytes()
                                 for f in FILES))
@@ -117,11 +133,11 @@ def tile_rows(quick: bool = False, *, sizes_mp=SIZES_MP, budget: str = BUDGET,
     worst = max((p for _, p in peaks), default=math.nan)
     limit = parse_memory(budget)
     checks = [Check(f"[reported] separate by bands, 8 checker captures of "
-                    f"{', '.join(map(str, sizes))} MP: peak RSS <= the {budget} budget at every "
-                    "size", worst / 1e9, limit / 1e9,
-                    all(p <= limit for _, p in peaks) and len(peaks) == len(sizes),
-                    ", ".join(f"{mp} MP: {p / 1e9:.2f} GB" for mp, p in peaks)),
+                    f"{', '.join(map(str, sizes))} MP and 3 sinusoids of {sizes[-1]} MP: peak RSS "
+                    f"<= the {budget} budget at every size", worst / 1e9, limit / 1e9,
+                    all(p <= limit for _, p in peaks) and len(peaks) == len(cases),
+                    ", ".join(f"{k}: {p / 1e9:.2f} GB" for k, p in peaks)),
               Check("[reported] separate by bands: direct/global/mask byte-identical to the "
                     "untiled run", float(sum(same)), float(len(same)), all(same) and bool(same),
-                    f"{sum(same)}/{len(same)} sizes identical")]
+                    f"{sum(same)}/{len(same)} runs identical")]
     return rows, checks

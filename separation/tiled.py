@@ -1,22 +1,33 @@
-"""`separate` by bands of rows: the same arrays as the untiled run, peak memory bounded by the band.
+"""`separate` by bands of rows: the same files as the untiled run, peak memory bounded by the band.
 
-Two passes over the captures, each reading them one band at a time through
-``read(y0, y1) -> (N, y1 - y0, W, C)`` float32 (linear):
+Every method (checker, sinusoid, single, occluder). The captures are read one
+band at a time through ``read(y0, y1) -> (N, y1 - y0, W, C)`` float32
+(linear), several times; :func:`separate_rows` hands each band's direct,
+global and mask to ``write`` as soon as they are computed
+(:class:`separation.result.SeparationWriter` writes them by rows), so no
+output is held whole either.
 
-1. the whole-image analysis, from order-free statistics gathered band by
+1. The whole-image analysis, from order-free statistics gathered band by
    band: the all-dark check (maxima), the content keys of the canonical order
    (:func:`separation.pairing.fixed_sum`, and a blake2b of the bytes fed in
-   row order for ties), the complement search on the fixed sample of
-   :func:`separation.pairing.find_pairs` (gathered at the same flat indices)
-   and the noise line (:func:`separation.nayar2006.noise_fit` on the same
-   every-k-th values);
-2. :func:`separation.separate.evaluate`, per pixel, band by band, with the
-   analysis fixed; mask counts and residue flags are integer sums.
+   row order for ties), the complement search and the sinusoid phase check on
+   the fixed sample of :func:`separation.pairing.find_pairs` (gathered at the
+   same flat indices), the noise line (:func:`separation.nayar2006.noise_fit`
+   on the same every-k-th values), and the occluder's lit fraction (the 90th
+   percentile of ``L⁺ − L⁻`` from exact order statistics,
+   :class:`separation.residue.Percentile`, then integer counts).
+2. :func:`separation.separate.evaluate`, band by band, with the analysis
+   fixed. With complement pairs it is per pixel and the residue flags are
+   integer sums. Without them (sinusoid, single, occluder, checker max/min
+   unpaired) the residue check is spatial: each band is evaluated with a halo
+   of half the check's box (``single``: on whole tiles from the image's
+   origin, one tile row beyond, for its bilinear tile centres), the box means
+   are band-exact (:func:`separation.residue.box_mean`) and their percentile
+   floors exact order statistics, so two more passes follow the one that
+   writes the outputs.
 
-Only ``checker`` (the default; either estimator, with complement pairs) is
-done by bands. ``sinusoid``'s phase check and residue, ``single``'s tiles
-and the occluder's lit fraction are whole-image statistics not yet gathered by bands: refused with an
-:class:`InputError` naming the option (see ``docs/decisions/tiles.md``).
+Only the black/white frames (the measured black level is a median over the
+frame) are held whole; see ``docs/decisions/tiles.md``.
 
 Examples
 --------
