@@ -39,6 +39,7 @@ examples:
   lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
   lumigraph separate stacks/ --method checker --out sep/ --workers 2   (stacks/*/stack.json)
   lumigraph separate big/*.tif --method checker --b 0.1 --tile-rows auto --memory 1GB --out sep/
+  lumigraph separate big/s*.tif --method sinusoid --tile-rows 512 --out sep/
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
@@ -477,14 +478,16 @@ def build_parser(prog: str = "lumigraph separate"):
     p.add_argument(
         "--tile-rows", type=number(int, lo=MIN_ROWS, allow=("auto", "off")), default=None,
         metavar="ROWS|auto|off",
-        help="read the captures in bands of ROWS full-width rows (two passes: the whole-image "
-             "analysis, then the per-pixel split), so memory is bounded by the band, not the "
-             "stack; the result is the same as whole, to the bit. auto: the tallest band within "
-             "--memory; off: whole. Default: whole when it fits --memory, else auto (the meta's "
-             "'tiles' says which). Every method; a video and a torch --device run whole. "
-             "Without complement pairs the residue check reads each band with a halo and takes "
-             "two more passes (the occluder's measured lit fraction three). Read by rows: TIFF "
-             "and OpenEXR (other formats are read whole); written by rows: direct.exr, global.exr, mask.png. Named --tile-rows, not --tile "
+        help="read the captures in bands of ROWS full-width rows (the whole-image analysis "
+             "first, then the per-pixel split) and write direct.exr, global.exr and mask.png "
+             "band by band, so memory is bounded by the band, not the stack; the files are "
+             "the same as whole, to the byte. auto: the tallest band within --memory; off: "
+             "whole. Default: whole when it fits --memory, else auto (the meta's 'tiles' says "
+             "which). Every method; a video and a torch --device run whole, and the --black/"
+             "--white frames are held whole. Without complement pairs (sinusoid, single, "
+             "occluder) the residue check reads each band with a halo and takes two more "
+             "passes (the occluder's measured lit fraction three). Read by rows: TIFF and "
+             "OpenEXR (other formats are read whole). Named --tile-rows, not --tile "
              "as in 'hdr merge': --tile is the single method's tile")
     p.add_argument(
         "--memory", type=parse_memory, default=None, metavar="SIZE",
