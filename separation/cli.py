@@ -134,6 +134,28 @@ def _flat_frames(black, white, shape):
     return extra, files
 
 
+def _flat_rows(black, white, shape, *, rows):
+    """:func:`_flat_frames` opened for reading by rows (:func:`capture.tiles.read_stack_rows`:
+    the bit depth decided as whole), each checked against the captures' ``shape``."""
+    from lumigraph.capture.tiles import read_stack_rows
+
+    frames, files = {}, []
+    try:
+        for name, p in (("black", black), ("white", white)):
+            if p is not None:
+                st = read_stack_rows([p], rows=rows)
+                frames[name] = st
+                if st.shape != tuple(shape):
+                    raise InputError(p, f"is {st.shape[1]}x{st.shape[0]}, the captures are "
+                                        f"{shape[1]}x{shape[0]}")
+                files.append(str(p))
+    except BaseException:
+        for st in frames.values():
+            st.close()
+        raise
+    return frames, files
+
+
 def _load(args, resolved):
     from lumigraph.capture.io import read_stack
     from lumigraph.separation.video import read_video_stack
@@ -285,12 +307,17 @@ def _plan(args, resolved, device):
     # per pixel of a band: the codes, the linear float32 stack, the reordered copy and the
     # pair temporaries (about 3 float32 per capture), the outputs, the writers' copies, masks
     per = c * (n * (itemsize + 16) + 56)
-    # held whole: the black/white frames (the measured black level is their median); the
-    # outputs are written band by band
-    held = w * h * c * (itemsize + 12) * 2 if black and white else 0
+    # the black/white frames are read by bands too: their codes, float32 and float64 copies
+    # and the ratios (the black level's passes run one at a time, before the captures' split)
+    if black or white:
+        per = max(per, c * 2 * (itemsize + 4 + 8 + 8))
+    from lumigraph.separation.residue import PERCENTILE_BYTES
+
+    # held whatever the band: the exact order statistics' histograms of the black level or
+    # the occluder's lit fraction (the outputs are written band by band)
+    held = 2 * PERCENTILE_BYTES
     halo = 0
     if args.method != "checker" or args.estimator == "maxmin":  # (max/min: pairs or not)
-        from lumigraph.separation.residue import PERCENTILE_BYTES
         from lumigraph.separation.separate import residue_window
 
         # no complement pairs: the spatial residue check's box means (float64 prefix and
@@ -304,8 +331,7 @@ def _plan(args, resolved, device):
 
     left = (DEFAULT_MEMORY if budget is None else budget) - held
     if left <= 0:
-        raise InputError("memory", f"{(held / 1e9):.2f} GB of black/white frames are held "
-                                   "whole; raise it")
+        raise InputError("memory", f"{(held / 1e9):.2f} GB of histograms do not fit; raise it")
     plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per, halo=halo)
     return plan
 
@@ -323,6 +349,7 @@ def _separate_rows(args, resolved, plan, response, device, t0) -> int:
     inputs, black, white, complement_of, alpha, _ = resolved
     out = Path(args.out)
     stack = read_stack_rows(inputs, rows=plan.rows)
+    cleanup = [stack]
     try:
         h, w, c = stack.shape
         where = stack.paths[0]
@@ -332,9 +359,19 @@ def _separate_rows(args, resolved, plan, response, device, t0) -> int:
                            response, where)
 
         _, quant, sat = linear(0, 1)
-        extra, flat_files = _flat_frames(black, white, (h, w, c))
-        bw = {k: _linear(v, response, v.paths[0])[0][0] for k, v in extra.items()}
-        del extra
+        flats, flat_files = _flat_rows(black, white, (h, w, c), rows=plan.rows)
+        for st in flats.values():
+            cleanup.append(st)
+        read_flat = None
+        if len(flats) == 2:  # both: the black level is measured from them, read by bands
+
+            def read_flat(y0, y1):
+                return tuple(_linear(SimpleNamespace(images=flats[k].read(y0, y1),
+                                                     bit_depth=flats[k].bit_depth),
+                                     response, flats[k].paths[0])[0][0]
+                             for k in ("black", "white"))
+
+            read_flat(0, 1)  # a frame that cannot be linearised: refused before any work
         if args.saturation is not None:
             sat = args.saturation
         t1 = time.perf_counter()
@@ -342,12 +379,12 @@ def _separate_rows(args, resolved, plan, response, device, t0) -> int:
         with SeparationWriter(out, width=w, height=h, channels=c) as files:
             sep = separate_rows(lambda y0, y1: linear(y0, y1)[0], height=h, rows=plan.rows,
                                 count=len(stack.paths), write=files.write, method=args.method,
-                                alpha=alpha, b=args.b, black=bw.get("black"),
-                                white=bw.get("white"), complement_of=complement_of,
+                                alpha=alpha, b=args.b, read_flat=read_flat,
+                                complement_of=complement_of,
                                 estimator=args.estimator, noise_sigma=args.noise,
                                 quant_step=quant, saturation=sat, tile=args.tile,
                                 names=stack.paths)
-            read_whole = [s.path for s in stack.sources if s.whole]
+            read_whole = [s.path for st in cleanup for s in st.sources if s.whole]
             t2 = time.perf_counter()
             meta = make_meta("lumigraph.separation", inputs=[*stack.paths, *flat_files],
                              params={"method": args.method, "alpha": alpha, "b_given": args.b,
@@ -361,7 +398,8 @@ def _separate_rows(args, resolved, plan, response, device, t0) -> int:
             files.finish(meta=meta, method=sep.method, params=sep.params, quality=sep.quality,
                          warnings=sep.warnings)
     finally:
-        stack.close()
+        for st in cleanup:
+            st.close()
     for msg in sep.warnings:
         warn(msg)
     q = sep.quality["mask_counts"]
@@ -483,8 +521,8 @@ def build_parser(prog: str = "lumigraph separate"):
              "band by band, so memory is bounded by the band, not the stack; the files are "
              "the same as whole, to the byte. auto: the tallest band within --memory; off: "
              "whole. Default: whole when it fits --memory, else auto (the meta's 'tiles' says "
-             "which). Every method; a video and a torch --device run whole, and the --black/"
-             "--white frames are held whole. Without complement pairs (sinusoid, single, "
+             "which). Every method (and the --black/--white frames); a video and a torch "
+             "--device run whole. Without complement pairs (sinusoid, single, "
              "occluder) the residue check reads each band with a halo and takes two more "
              "passes (the occluder's measured lit fraction three). Read by rows: TIFF and "
              "OpenEXR (other formats are read whole). Named --tile-rows, not --tile "

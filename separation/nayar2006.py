@@ -487,7 +487,9 @@ def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:
 
     Every light path scales with the projector's output, so ``black = b·white``
     pixel by pixel; ``b`` is the median ratio over pixels whose white value is
-    well above ``floor`` (the noise).
+    well above ``floor`` (the noise) and above 5 % of the white frame's 99th
+    percentile. :func:`black_level_rows` on the whole frame (both are float32
+    values; the order statistics are exact, so bands give the same number).
 
     Examples
     --------
@@ -495,9 +497,59 @@ def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:
     >>> round(black_level(0.15 * w, w, floor=0.01), 6)
     0.15
     """
-    bl = np.asarray(black, np.float64)
-    wh = np.asarray(white, np.float64)
-    ok = wh > max(10.0 * floor, 0.05 * float(np.percentile(wh, 99)))
-    if ok.sum() < 16:
-        raise EstimationError("white", "the all-white frame is too dark to measure the black level")
-    return float(np.median(bl[ok] / wh[ok]))
+    bl, wh = np.asarray(black), np.asarray(white)
+    return black_level_rows(lambda y0, y1: (bl[y0:y1], wh[y0:y1]), [(0, len(wh))], floor=floor)
+
+
+def black_level_rows(read, ranges, *, floor: float) -> float:
+    """:func:`black_level` of frames read in bands of rows: ``read(y0, y1)`` →
+    ``(black, white)`` rows, for each ``(y0, y1)`` of ``ranges`` (covering the
+    frames). Six passes: the white frame's 99th percentile (exact order
+    statistics, two), then the median of the float64 ratios over the pixels
+    kept (a radix select on their bits, four); memory: a few 2^16-bin
+    histograms beside a band.
+
+    Raises
+    ------
+    EstimationError
+        Fewer than 16 pixels of the white frame are bright enough.
+    """
+    from lumigraph.separation.residue import RadixSelect, float_keys, key_float
+
+    top = RadixSelect(32)
+    while True:
+        for y0, y1 in ranges:
+            top.add(float_keys(np.asarray(read(y0, y1)[1], np.float32)))
+        if top.refine(lambda n: _ranks(BLACK_PERCENTILE, n)):
+            break
+    lo, hi = (key_float(k, np.float32) for k in top.values())
+    p99 = _lerp(lo, hi, BLACK_PERCENTILE, top.total)
+    thr = max(10.0 * floor, 0.05 * p99)
+    med = RadixSelect(64)
+    while True:
+        for y0, y1 in ranges:
+            bl, wh = read(y0, y1)
+            wh = np.asarray(wh, np.float32).astype(np.float64)
+            ok = wh > thr
+            med.add(float_keys(np.asarray(bl, np.float32).astype(np.float64)[ok] / wh[ok]))
+        if med.total < 16:
+            raise EstimationError("white", "the all-white frame is too dark to measure the black "
+                                           "level")
+        if med.refine(lambda n: ((n - 1) // 2, n // 2)):
+            break
+    a, b = (key_float(k, np.float64) for k in med.values())
+    return float((a + b) / 2.0)
+
+
+BLACK_PERCENTILE = 99.0  # of the white frame: pixels above 5 % of it measure b
+
+
+def _ranks(q: float, n: int) -> tuple[int, int]:
+    pos = q / 100.0 * (n - 1)
+    k0 = int(np.floor(pos))
+    return k0, min(k0 + 1, n - 1)
+
+
+def _lerp(lo: float, hi: float, q: float, n: int) -> float:
+    pos = q / 100.0 * (n - 1)
+    return float(lo + (hi - lo) * (pos - np.floor(pos)))

@@ -243,3 +243,73 @@ class Percentile:
             low = int(np.searchsorted(np.cumsum(self.low[b]), r, side="right"))
             vals.append(float(np.array([(b << 16) | low], np.uint32).view(np.float32)[0]))
         return self.value(*vals)
+
+
+def float_keys(x) -> np.ndarray:
+    """float32/float64 values as unsigned integers of the same width that sort
+    as the values do (negatives flipped, positives offset by the sign bit)."""
+    a = np.ascontiguousarray(x)
+    bits = 8 * a.dtype.itemsize
+    u = a.view(np.uint32 if bits == 32 else np.uint64).ravel()
+    top = u.dtype.type(1 << (bits - 1))
+    return np.where(u >= top, ~u, u | top)
+
+
+def key_float(key: int, dtype) -> float:
+    """The value of a :func:`float_keys` key."""
+    bits = 8 * np.dtype(dtype).itemsize
+    top, mask = 1 << (bits - 1), (1 << bits) - 1
+    u = key ^ top if key >= top else ~key & mask
+    return float(np.array([u], np.uint32 if bits == 32 else np.uint64).view(dtype)[0])
+
+
+class RadixSelect:
+    """Exact order statistics of keys (:func:`float_keys`) seen in passes over
+    bands: each pass (:meth:`add` on every band, then :meth:`refine`) fixes
+    the next 16 bits of each wanted rank, so 32-bit keys take two passes and
+    64-bit four, with one 2^16-bin histogram per distinct prefix; the first
+    pass also counts the keys, from which ``refine`` takes the ranks.
+
+    >>> v = np.random.default_rng(0).normal(size=1001)
+    >>> r = RadixSelect(64)
+    >>> while True:
+    ...     for part in (v[:400], v[400:]):
+    ...         r.add(float_keys(part))
+    ...     if r.refine(lambda n: ((n - 1) // 2,)):
+    ...         break
+    >>> key_float(r.values()[0], np.float64) == float(np.median(v))
+    True
+    """
+
+    def __init__(self, bits: int):
+        self.bits = bits
+        self.known = 0
+        self.total = 0
+        self.targets: list[list[int]] | None = None  # [rank within prefix, prefix]
+        self.hist = {0: np.zeros(1 << 16, np.int64)}
+
+    def add(self, keys: np.ndarray) -> None:
+        k = np.asarray(keys).ravel()
+        if self.known == 0:
+            self.total += k.size
+        shift = self.bits - self.known - 16
+        for p, h in self.hist.items():
+            sel = k if self.known == 0 else k[(k >> (self.bits - self.known)) == p]
+            h += np.bincount(((sel >> shift) & 0xFFFF).astype(np.intp), minlength=1 << 16)
+
+    def refine(self, ranks) -> bool:
+        """After a pass; ``ranks(total)`` the wanted ranks (used once). True when done."""
+        if self.targets is None:
+            self.targets = [[int(r), 0] for r in ranks(self.total)]
+        for t in self.targets:
+            cum = np.cumsum(self.hist[t[1]])
+            d = int(np.searchsorted(cum, t[0], side="right"))
+            t[0] -= int(cum[d - 1]) if d else 0
+            t[1] = (t[1] << 16) | d
+        self.known += 16
+        self.hist = {t[1]: np.zeros(1 << 16, np.int64) for t in self.targets}
+        return self.known == self.bits
+
+    def values(self) -> list[int]:
+        """The keys at the wanted ranks."""
+        return [t[1] for t in self.targets]

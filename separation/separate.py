@@ -270,13 +270,14 @@ def residue_window(tile: int) -> int:
     return max(5, tile // 2 * 2 + 1)
 
 
-def black_level_of(b, *, black, white, floor, info):
+def black_level_of(b, *, black, white, floor, info, measure=None):
     """The projector's black level ``b``: as given, else measured from the
-    all-black and all-white frames (:func:`separation.nayar2006.black_level`),
-    else 0; ``info`` (the meta) gets ``b`` and ``b_source``. The whole-image
-    and the banded runs share it."""
-    if b is None and black is not None and white is not None:
-        b = nayar2006.black_level(black, white, floor=floor)
+    all-black and all-white frames (:func:`separation.nayar2006.black_level`,
+    or ``measure()``: the banded run's, on frames read by rows), else 0;
+    ``info`` (the meta) gets ``b`` and ``b_source``. The whole-image and the
+    banded runs share it."""
+    if b is None and (measure is not None or black is not None and white is not None):
+        b = measure() if measure is not None else nayar2006.black_level(black, white, floor=floor)
         info["b_source"] = "measured from the all-black/all-white frames"
         if not 0.0 <= b < 1.0:
             raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")

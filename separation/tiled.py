@@ -26,8 +26,9 @@ output is held whole either.
    floors exact order statistics, so two more passes follow the one that
    writes the outputs.
 
-Only the black/white frames (the measured black level is a median over the
-frame) are held whole; see ``docs/decisions/tiles.md``.
+The black/white frames, given as ``read_flat``, are read by bands too (the
+black level's percentile and median from exact order statistics,
+:func:`separation.nayar2006.black_level_rows`); see ``docs/decisions/tiles.md``.
 
 Examples
 --------
@@ -99,7 +100,7 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
                   alpha: float | None = None, b: float | None = None, black=None, white=None,
                   complement_of=None, estimator: str = "pairs", noise_sigma: float = 0.0,
                   quant_step: float = 0.0, saturation: float | None = None, tile: int = 16,
-                  names=None) -> RowsSeparation:
+                  names=None, read_flat=None) -> RowsSeparation:
     """:func:`separation.separate.separate` on captures read in bands of ``rows`` rows,
     each band's outputs handed to ``write`` as soon as they are computed.
 
@@ -114,9 +115,11 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
     height, rows, count : int
         Image height, band height (any; need not divide ``height``), number of captures.
     black, white : ndarray, ``(H, W, C)``, optional
-        The all-black/all-white frames, whole: the measured black level is a
-        median over the whole frame (:func:`separation.nayar2006.black_level`),
-        so these two are held whole; the captures are read by bands.
+        The all-black/all-white frames, whole.
+    read_flat : callable, optional
+        Instead of ``black``/``white``: ``read_flat(y0, y1)`` → their rows
+        ``(black, white)`` float32 linear, so they are read by bands too
+        (:func:`separation.nayar2006.black_level_rows`: six passes over them).
     Other parameters are :func:`separate`'s.
 
     Returns
@@ -205,7 +208,11 @@ def separate_rows(read, *, height: int, rows: int, count: int, write, method: st
         order, comp = pairing.canonical_order(sample, comp, keys=keys)
         names = [names[k] for k in order]
     del sample
-    b = black_level_of(b, black=black, white=white, floor=floor, info=params)
+    measure = None
+    if read_flat is not None:
+        ranges = [(band.y0, band.y1) for band in plan]
+        measure = lambda: nayar2006.black_level_rows(read_flat, ranges, floor=floor)  # noqa: E731
+    b = black_level_of(b, black=black, white=white, floor=floor, info=params, measure=measure)
     var0, var1 = quant ** 2 + noise_sigma ** 2, 0.0
     if method == "checker":
         alpha = 0.5 if alpha is None else alpha

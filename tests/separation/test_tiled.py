@@ -40,6 +40,12 @@ def test_projector_scene_by_bands_is_the_untiled_run():
     for rows in (13, 1, h):  # 13 does not divide the height; 1 row; one band
         assert h % 13
         _same(whole, separate_bands(_reader(ims), height=h, rows=rows, count=len(ims), **kw))
+    # the black/white frames read by bands too: the black level's percentile and median
+    # from exact order statistics
+    del kw["black"], kw["white"]
+    _same(whole, separate_bands(_reader(ims), height=h, rows=13, count=len(ims), **kw,
+                                read_flat=lambda y0, y1: (flat["black"][y0:y1],
+                                                          flat["white"][y0:y1])))
 
 
 @pytest.mark.parametrize("estimator", ["pairs", "maxmin"])
@@ -234,8 +240,10 @@ def test_cli_by_rows_from_tiffs_is_the_untiled_run(run_cli, tmp_path, method):
         assert r.returncode == 0, r.stderr
     for f in ("direct.exr", "global.exr", "mask.png"):
         assert (tmp_path / "13" / f).read_bytes() == (tmp_path / "off" / f).read_bytes()
-    tiles = json.loads((tmp_path / "13" / "direct.exr.meta.json").read_text())["tiles"]
+    meta = json.loads((tmp_path / "13" / "direct.exr.meta.json").read_text())
+    tiles = meta["tiles"]
     assert tiles["tiled"] and tiles["rows"] == 13 and tiles["read_whole"] == []
+    assert meta["params"]["b_source"].startswith("measured")  # black/white read by rows
     if method == "checker":  # a torch estimator runs whole: refused by bands, before any work
         from types import SimpleNamespace
 
