@@ -516,6 +516,8 @@ def black_level_rows(read, ranges, *, floor: float) -> float:
     """
     from lumigraph.separation.residue import RadixSelect, float_keys, key_float
 
+    if len(ranges) == 1:  # whole: the same order statistics, by np.partition (faster)
+        return _black_level_whole(*read(*ranges[0]), floor=floor)
     top = RadixSelect(32)
     while True:
         for y0, y1 in ranges:
@@ -542,6 +544,29 @@ def black_level_rows(read, ranges, *, floor: float) -> float:
 
 
 BLACK_PERCENTILE = 99.0  # of the white frame: pixels above 5 % of it measure b
+
+
+def _black_level_whole(black, white, *, floor: float) -> float:
+    # black_level_rows' steps on one band: the k-th smallest sortable key is the same
+    # key whether a radix select or a partition finds it
+    from lumigraph.separation.residue import float_keys, key_float
+
+    def select(keys, ranks, dtype):
+        part = np.partition(keys, sorted(set(ranks)))
+        return [key_float(int(part[r]), dtype) for r in ranks]
+
+    wh32 = np.asarray(white, np.float32)
+    keys = float_keys(wh32)
+    lo, hi = select(keys, _ranks(BLACK_PERCENTILE, keys.size), np.float32)
+    thr = max(10.0 * floor, 0.05 * _lerp(lo, hi, BLACK_PERCENTILE, keys.size))
+    wh = wh32.astype(np.float64)
+    ok = wh > thr
+    if ok.sum() < 16:
+        raise EstimationError("white", "the all-white frame is too dark to measure the black level")
+    ratios = float_keys(np.asarray(black, np.float32).astype(np.float64)[ok] / wh[ok])
+    n = ratios.size
+    a, b = select(ratios, ((n - 1) // 2, n // 2), np.float64)
+    return float((a + b) / 2.0)
 
 
 def _ranks(q: float, n: int) -> tuple[int, int]:

@@ -250,9 +250,13 @@ def float_keys(x) -> np.ndarray:
     as the values do (negatives flipped, positives offset by the sign bit)."""
     a = np.ascontiguousarray(x)
     bits = 8 * a.dtype.itemsize
-    u = a.view(np.uint32 if bits == 32 else np.uint64).ravel()
-    top = u.dtype.type(1 << (bits - 1))
-    return np.where(u >= top, ~u, u | top)
+    signed = a.view(np.int32 if bits == 32 else np.int64).ravel()
+    u = signed.view(np.uint32 if bits == 32 else np.uint64)
+    # the arithmetic shift spreads the sign: all ones for a negative (~u), else 0 (u | top)
+    m = (signed >> (bits - 1)).view(u.dtype)
+    m |= u.dtype.type(1 << (bits - 1))
+    m ^= u
+    return m
 
 
 def key_float(key: int, dtype) -> float:
