@@ -19,8 +19,8 @@ Examples
 >>> import tempfile, pathlib
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> files = render_checker(d, height=20, width=30, rows=8)
->>> len(files), files[0].name
-(8, 'c0.tif')
+>>> len(files), files[0].name, files[-1].name
+(10, 'c0.tif', 'white.tif')
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from lumigraph.capture.tiles import TiffRowWriter, bands
 
 STAGE = "scale"
 SQUARE = 8
+BLACK = 0.1  # the projector's black level in the checker captures and the black frame
 SIZES_MP = (4, 16, 64)
 QUICK_MP = (1, 4)
 BUDGET = "1GB"
@@ -46,7 +47,8 @@ def render_checker(folder, *, height: int, width: int, rows: int = 256,
                    method: str = "checker") -> list[Path]:
     """Captures ``c0.tif`` … (16-bit RGB), ``rows`` rows at a time:
     ``direct · pattern + global / 2`` with smooth direct and global images;
-    ``method`` checker: 8 boards (square 8 px, 2 shifts, and complements);
+    ``method`` checker: 8 boards (square 8 px, 2 shifts, and complements), then
+    ``black.tif`` (the projector's black level 0.1) and ``white.tif``;
     sinusoid: 3 phase-shifted sinusoids of period 16 px along the diagonal."""
     from lumigraph.capture.patterns import checker_set
 
@@ -57,6 +59,8 @@ def render_checker(folder, *, height: int, width: int, rows: int = 256,
     phases = (0.0, 2 * np.pi / 3, 4 * np.pi / 3)
     count = len(pat) if method == "checker" else len(phases)
     files = [folder / f"c{i}.tif" for i in range(count)]
+    if method == "checker":  # and the projector's all-black (b = 0.1) and all-white frames
+        files += [folder / "black.tif", folder / "white.tif"]
     writers = [TiffRowWriter(f, width, height, 3, np.uint16, rows) for f in files]
     try:
         for b in bands(height, rows):
@@ -66,11 +70,13 @@ def render_checker(folder, *, height: int, width: int, rows: int = 256,
             d = 0.35 + 0.25 * np.sin(6.0 * x / width + 4.0 * y / height + c)
             g = 0.15 + 0.1 * np.cos(5.0 * x / width - 3.0 * y / height + c)
             for k, wr in enumerate(writers):
-                if method == "checker":
+                if k >= count:  # black, white: every light path scales with the projector
+                    v = (BLACK if k == count else 1.0) * (d + g)
+                elif method == "checker":  # unlit squares at the black level
                     p = pat[k, np.arange(b.y0, b.y1) % period][..., None]
+                    v = d * (BLACK + (1 - BLACK) * p) + 0.5 * (1 + BLACK) * g
                 else:
-                    p = 0.5 + 0.5 * np.cos(2 * np.pi * (x + y) / period + phases[k])
-                v = d * p + 0.5 * g
+                    v = d * (0.5 + 0.5 * np.cos(2 * np.pi * (x + y) / period + phases[k])) + 0.5 * g
                 wr.write(np.round(np.clip(v, 0, 1) * 65535).astype(np.uint16))
     finally:
         for wr in writers:
@@ -109,11 +115,13 @@ def tile_rows(quick: bool = False, *, sizes_mp=SIZES_MP, budget: str = BUDGET,
                 if mode == "whole" and mp > WHOLE_UP_TO_MP:
                     continue
                 out = d / f"{mode}{mp}"
-                rc, peak, dt, err = peak_run(["separate", *files, "--method", method, "--out", out,
-                                              "-q", *extra])
+                flats = ["--black", files[-2], "--white", files[-1]] if method == "checker" else []
+                caps = files[:-2] if flats else files
+                rc, peak, dt, err = peak_run(["separate", *caps, *flats, "--method", method,
+                                              "--out", out, "-q", *extra])
                 meta = json.loads((out / "direct.exr.meta.json").read_text()) if rc == 0 else {}
-                rows.append(Row(STAGE, f"separate {method}, {len(files)} x {mp} MP 16-bit RGB "
-                                       f"({w}x{h})",
+                rows.append(Row(STAGE, f"separate {method}, {len(caps)} x {mp} MP 16-bit RGB "
+                                       f"({w}x{h}){' + black/white' if flats else ''}",
                                 f"{mode} ({' '.join(extra)}), peak RSS GB",
                                 None if mode == "tiled" else "untiled separate", "megapixels",
                                 mp, dt, (dt,), peak / 1e9, "ok" if rc == 0 else "failed",
