@@ -64,6 +64,16 @@ def _tile_rows(quick: bool):
 ROW_PROVIDERS.append(_tile_rows)
 
 
+def _separate_tile_rows(quick: bool):
+    # separate by bands (outputs written by rows): peak memory against image size
+    from lumigraph.separation.bench_tiles import tile_rows
+
+    return tile_rows(quick)
+
+
+ROW_PROVIDERS.append(_separate_tile_rows)
+
+
 def _inputs(folder: Path, *, quick: bool) -> dict:
     """Render the brackets, their response and the flow sequence into ``folder``."""
     from lumigraph.capture.render import render

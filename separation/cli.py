@@ -39,6 +39,7 @@ examples:
   lumigraph separate patterns --kind checker --size 1024x768 --square 8 --shifts 4 --out pat/
   lumigraph separate stacks/ --method checker --out sep/ --workers 2   (stacks/*/stack.json)
   lumigraph separate big/*.tif --method checker --b 0.1 --tile-rows auto --memory 1GB --out sep/
+  lumigraph separate big/s*.tif --method sinusoid --tile-rows 512 --out sep/
 
 Inputs: linear images (EXR, PFM; 16-bit PNG/TIFF are taken as linear codes),
 or 8-bit captures with --response (from 'lumigraph hdr'). A folder with a
@@ -131,6 +132,28 @@ def _flat_frames(black, white, shape):
             extra[name] = s
             files.append(str(p))
     return extra, files
+
+
+def _flat_rows(black, white, shape, *, rows):
+    """:func:`_flat_frames` opened for reading by rows (:func:`capture.tiles.read_stack_rows`:
+    the bit depth decided as whole), each checked against the captures' ``shape``."""
+    from lumigraph.capture.tiles import read_stack_rows
+
+    frames, files = {}, []
+    try:
+        for name, p in (("black", black), ("white", white)):
+            if p is not None:
+                st = read_stack_rows([p], rows=rows)
+                frames[name] = st
+                if st.shape != tuple(shape):
+                    raise InputError(p, f"is {st.shape[1]}x{st.shape[0]}, the captures are "
+                                        f"{shape[1]}x{shape[0]}")
+                files.append(str(p))
+    except BaseException:
+        for st in frames.values():
+            st.close()
+        raise
+    return frames, files
 
 
 def _load(args, resolved):
@@ -252,8 +275,8 @@ def _plan(args, resolved, device):
     if args.tile_rows == "off":
         return TilePlan(None, 0, "--tile-rows off: the whole image at once")
     why = None
-    if args.method not in TILED_METHODS:
-        why = f"method {args.method!r} is not done by bands (only {', '.join(TILED_METHODS)})"
+    if args.method not in TILED_METHODS:  # (every method is: a future one may not be)
+        why = f"method {args.method!r} is not done by bands"
     elif video is not None:
         why = "a video is decoded whole"
     elif device.uses_torch:
@@ -277,36 +300,56 @@ def _plan(args, resolved, device):
     if why is not None:
         if args.tile_rows is None:
             return TilePlan(None, 0, f"whole: {why}")
-        raise InputError("method" if "method" in why else "images",
-                         f"cannot work by bands: {why}; use --tile-rows off")
+        where = "method" if args.method not in TILED_METHODS else (
+            "device" if device.uses_torch else "images")
+        raise InputError(where, f"cannot work by bands: {why}; use --tile-rows off")
     n, h, w, c, itemsize = geo
     # per pixel of a band: the codes, the linear float32 stack, the reordered copy and the
-    # pair temporaries (about 3 float32 per capture), the outputs and masks
-    per = c * (n * (itemsize + 16) + 48)
-    # held whole: the outputs (written after the last band) and the black/white frames
-    held = w * h * (8 * c + 1) + (w * h * c * (itemsize + 12) * 2 if black and white else 0)
+    # pair temporaries (about 3 float32 per capture), the outputs, the writers' copies, masks
+    per = c * (n * (itemsize + 16) + 56)
+    # the black/white frames are read by bands too: their codes, float32 and float64 copies
+    # and the ratios (the black level's passes run one at a time, before the captures' split)
+    if black or white:
+        per = max(per, c * 2 * (itemsize + 4 + 8 + 8))
+    from lumigraph.separation.residue import PERCENTILE_BYTES
+
+    # held whatever the band: the exact order statistics' histograms of the black level or
+    # the occluder's lit fraction (the outputs are written band by band)
+    held = 2 * PERCENTILE_BYTES
+    halo = 0
+    if args.method != "checker" or args.estimator == "maxmin":  # (max/min: pairs or not)
+        from lumigraph.separation.separate import residue_window
+
+        # no complement pairs: the spatial residue check's box means (float64 prefix and
+        # window sums of the global and mean images) and a halo of half its box; single's
+        # tiles, one tile row beyond the band and its halo (its bilinear tile centres)
+        per += 48 * c
+        held += 2 * PERCENTILE_BYTES  # the exact percentiles' histograms
+        halo = residue_window(args.tile) // 2 + (2 * args.tile if args.method == "single" else 0)
     budget = None if args.memory is None else args.memory
     from lumigraph.capture.tiles import DEFAULT_MEMORY
 
     left = (DEFAULT_MEMORY if budget is None else budget) - held
     if left <= 0:
-        raise InputError("memory", f"{(held / 1e9):.2f} GB of outputs and black/white frames are "
-                                   "held whole; raise it")
-    plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per)
+        raise InputError("memory", f"{(held / 1e9):.2f} GB of histograms do not fit; raise it")
+    plan = plan_rows(args.tile_rows, left, width=w, height=h, bytes_per_pixel=per, halo=halo)
     return plan
 
 
 def _separate_rows(args, resolved, plan, response, device, t0) -> int:
-    """``separate`` reading the captures by bands (:func:`separation.tiled.separate_bands`)."""
+    """``separate`` reading the captures by bands and writing its outputs by bands
+    (:func:`separation.tiled.separate_rows`, :class:`separation.result.SeparationWriter`)."""
     from types import SimpleNamespace
 
     from lumigraph.capture.artifact import make_meta
     from lumigraph.capture.tiles import read_stack_rows
-    from lumigraph.separation.tiled import separate_bands
+    from lumigraph.separation.result import SeparationWriter
+    from lumigraph.separation.tiled import separate_rows
 
     inputs, black, white, complement_of, alpha, _ = resolved
     out = Path(args.out)
     stack = read_stack_rows(inputs, rows=plan.rows)
+    cleanup = [stack]
     try:
         h, w, c = stack.shape
         where = stack.paths[0]
@@ -316,31 +359,47 @@ def _separate_rows(args, resolved, plan, response, device, t0) -> int:
                            response, where)
 
         _, quant, sat = linear(0, 1)
-        extra, flat_files = _flat_frames(black, white, (h, w, c))
-        bw = {k: _linear(v, response, v.paths[0])[0][0] for k, v in extra.items()}
+        flats, flat_files = _flat_rows(black, white, (h, w, c), rows=plan.rows)
+        for st in flats.values():
+            cleanup.append(st)
+        read_flat = None
+        if len(flats) == 2:  # both: the black level is measured from them, read by bands
+
+            def read_flat(y0, y1):
+                return tuple(_linear(SimpleNamespace(images=flats[k].read(y0, y1),
+                                                     bit_depth=flats[k].bit_depth),
+                                     response, flats[k].paths[0])[0][0]
+                             for k in ("black", "white"))
+
+            read_flat(0, 1)  # a frame that cannot be linearised: refused before any work
         if args.saturation is not None:
             sat = args.saturation
         t1 = time.perf_counter()
-        sep = separate_bands(lambda y0, y1: linear(y0, y1)[0], height=h, rows=plan.rows,
-                             count=len(stack.paths), method=args.method, alpha=alpha, b=args.b,
-                             black=bw.get("black"), white=bw.get("white"),
-                             complement_of=complement_of, estimator=args.estimator,
-                             noise_sigma=args.noise, quant_step=quant, saturation=sat,
-                             tile=args.tile, names=stack.paths)
-        read_whole = [s.path for s in stack.sources if s.whole]
+        # each band's direct, global and mask go to their files as they are computed
+        with SeparationWriter(out, width=w, height=h, channels=c) as files:
+            sep = separate_rows(lambda y0, y1: linear(y0, y1)[0], height=h, rows=plan.rows,
+                                count=len(stack.paths), write=files.write, method=args.method,
+                                alpha=alpha, b=args.b, read_flat=read_flat,
+                                complement_of=complement_of,
+                                estimator=args.estimator, noise_sigma=args.noise,
+                                quant_step=quant, saturation=sat, tile=args.tile,
+                                names=stack.paths)
+            read_whole = [s.path for st in cleanup for s in st.sources if s.whole]
+            t2 = time.perf_counter()
+            meta = make_meta("lumigraph.separation", inputs=[*stack.paths, *flat_files],
+                             params={"method": args.method, "alpha": alpha, "b_given": args.b,
+                                     "estimator": args.estimator,
+                                     "response": args.response or (response and response.method),
+                                     "video": None, "noise": args.noise, "saturation": sat,
+                                     "tile": args.tile, "images": len(stack.paths),
+                                     "device": device.name},
+                             timings_s={"load": t1 - t0, "separate": t2 - t1},
+                             extra={"tiles": {**plan.as_meta(h), "read_whole": read_whole}})
+            files.finish(meta=meta, method=sep.method, params=sep.params, quality=sep.quality,
+                         warnings=sep.warnings)
     finally:
-        stack.close()
-    t2 = time.perf_counter()
-    meta = make_meta("lumigraph.separation", inputs=[*stack.paths, *flat_files],
-                     params={"method": args.method, "alpha": alpha, "b_given": args.b,
-                             "estimator": args.estimator,
-                             "response": args.response or (response and response.method),
-                             "video": None, "noise": args.noise, "saturation": sat,
-                             "tile": args.tile, "images": len(stack.paths),
-                             "device": device.name},
-                     timings_s={"load": t1 - t0, "separate": t2 - t1},
-                     extra={"tiles": {**plan.as_meta(h), "read_whole": read_whole}})
-    sep.save(out, meta=meta)
+        for st in cleanup:
+            st.close()
     for msg in sep.warnings:
         warn(msg)
     q = sep.quality["mask_counts"]
@@ -457,13 +516,17 @@ def build_parser(prog: str = "lumigraph separate"):
     p.add_argument(
         "--tile-rows", type=number(int, lo=MIN_ROWS, allow=("auto", "off")), default=None,
         metavar="ROWS|auto|off",
-        help="read the captures in bands of ROWS full-width rows (two passes: the whole-image "
-             "analysis, then the per-pixel split), so memory is bounded by the band, not the "
-             "stack; the result is the same as whole, to the bit. auto: the tallest band within "
-             "--memory; off: whole. Default: whole when it fits --memory, else auto (the meta's "
-             "'tiles' says which). --method checker only; read by rows: TIFF and OpenEXR (other "
-             "formats are read whole). Named --tile-rows, not --tile as in 'hdr merge': --tile "
-             "is the single method's tile")
+        help="read the captures in bands of ROWS full-width rows (the whole-image analysis "
+             "first, then the per-pixel split) and write direct.exr, global.exr and mask.png "
+             "band by band, so memory is bounded by the band, not the stack; the files are "
+             "the same as whole, to the byte. auto: the tallest band within --memory; off: "
+             "whole. Default: whole when it fits --memory, else auto (the meta's 'tiles' says "
+             "which). Every method (and the --black/--white frames); a video and a torch "
+             "--device run whole. Without complement pairs (sinusoid, single, "
+             "occluder) the residue check reads each band with a halo and takes two more "
+             "passes (the occluder's measured lit fraction three). Read by rows: TIFF and "
+             "OpenEXR (other formats are read whole). Named --tile-rows, not --tile "
+             "as in 'hdr merge': --tile is the single method's tile")
     p.add_argument(
         "--memory", type=parse_memory, default=None, metavar="SIZE",
         help="memory budget for --tile-rows auto and the default, e.g. 1GB, 512MB, 2GiB "

@@ -416,18 +416,34 @@ def occluder_lit_fraction(images: np.ndarray, l_plus: np.ndarray, l_minus: np.nd
     >>> occluder_lit_fraction(frames, frames.max(axis=0), frames.min(axis=0), step=1)
     0.75
     """
+    from lumigraph.separation.residue import strided_percentile
+
     a = np.asarray(images)[:, ::step, ::step]
-    lp = np.asarray(l_plus)[::step, ::step]
-    lm = np.asarray(l_minus)[::step, ::step]
-    c = lp - lm
-    top = float(np.percentile(c, 90))
+    lp = np.asarray(l_plus, np.float32)[::step, ::step]
+    lm = np.asarray(l_minus, np.float32)[::step, ::step]
+    # the exact order statistics (bands of rows find the same: separation.tiled)
+    top = strided_percentile(lp - lm, OCCLUDER_PERCENTILE, stride=1, absolute=False)
+    return occluder_alpha(*occluder_lit_counts(a, lp, lm, top=top), frames=len(a))
+
+
+OCCLUDER_PERCENTILE = 90.0  # of L+ - L-: pixels at half of it or more are swept
+
+
+def occluder_lit_counts(a, lp, lm, *, top: float) -> tuple[int, int]:
+    """:func:`occluder_lit_fraction`'s (frame, pixel) samples nearer ``L⁺`` than
+    ``L⁻`` among the swept pixels, and all swept samples: integers (a band's
+    counts add up), from the strided frames ``a`` and extremes ``lp``, ``lm``."""
     if not top > 0:
         raise EstimationError("<images>", "no pixel changes across the frames (no moving shadow): "
                                           "the occluder method needs a shadow swept over the scene")
-    sel = c >= 0.5 * top
+    sel = (lp - lm) >= 0.5 * top
     lit = a[:, sel] > 0.5 * (lp + lm)[sel]
-    n = len(a)
-    return float(np.clip(lit.mean(), 1.0 / n, 1.0 - 1.0 / n))
+    return int(lit.sum()), int(lit.size)
+
+
+def occluder_alpha(lit: int, total: int, *, frames: int) -> float:
+    """α from :func:`occluder_lit_counts`, clipped to ``[1/N, 1 − 1/N]``."""
+    return float(np.clip(lit / max(total, 1), 1.0 / frames, 1.0 - 1.0 / frames))
 
 
 def occluder(images: np.ndarray, *, alpha: float | None = None,
@@ -471,7 +487,9 @@ def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:
 
     Every light path scales with the projector's output, so ``black = b·white``
     pixel by pixel; ``b`` is the median ratio over pixels whose white value is
-    well above ``floor`` (the noise).
+    well above ``floor`` (the noise) and above 5 % of the white frame's 99th
+    percentile. :func:`black_level_rows` on the whole frame (both are float32
+    values; the order statistics are exact, so bands give the same number).
 
     Examples
     --------
@@ -479,9 +497,84 @@ def black_level(black: np.ndarray, white: np.ndarray, *, floor: float) -> float:
     >>> round(black_level(0.15 * w, w, floor=0.01), 6)
     0.15
     """
-    bl = np.asarray(black, np.float64)
-    wh = np.asarray(white, np.float64)
-    ok = wh > max(10.0 * floor, 0.05 * float(np.percentile(wh, 99)))
+    bl, wh = np.asarray(black), np.asarray(white)
+    return black_level_rows(lambda y0, y1: (bl[y0:y1], wh[y0:y1]), [(0, len(wh))], floor=floor)
+
+
+def black_level_rows(read, ranges, *, floor: float) -> float:
+    """:func:`black_level` of frames read in bands of rows: ``read(y0, y1)`` →
+    ``(black, white)`` rows, for each ``(y0, y1)`` of ``ranges`` (covering the
+    frames). Six passes: the white frame's 99th percentile (exact order
+    statistics, two), then the median of the float64 ratios over the pixels
+    kept (a radix select on their bits, four); memory: a few 2^16-bin
+    histograms beside a band.
+
+    Raises
+    ------
+    EstimationError
+        Fewer than 16 pixels of the white frame are bright enough.
+    """
+    from lumigraph.separation.residue import RadixSelect, float_keys, key_float
+
+    if len(ranges) == 1:  # whole: the same order statistics, by np.partition (faster)
+        return _black_level_whole(*read(*ranges[0]), floor=floor)
+    top = RadixSelect(32)
+    while True:
+        for y0, y1 in ranges:
+            top.add(float_keys(np.asarray(read(y0, y1)[1], np.float32)))
+        if top.refine(lambda n: _ranks(BLACK_PERCENTILE, n)):
+            break
+    lo, hi = (key_float(k, np.float32) for k in top.values())
+    p99 = _lerp(lo, hi, BLACK_PERCENTILE, top.total)
+    thr = max(10.0 * floor, 0.05 * p99)
+    med = RadixSelect(64)
+    while True:
+        for y0, y1 in ranges:
+            bl, wh = read(y0, y1)
+            wh = np.asarray(wh, np.float32).astype(np.float64)
+            ok = wh > thr
+            med.add(float_keys(np.asarray(bl, np.float32).astype(np.float64)[ok] / wh[ok]))
+        if med.total < 16:
+            raise EstimationError("white", "the all-white frame is too dark to measure the black "
+                                           "level")
+        if med.refine(lambda n: ((n - 1) // 2, n // 2)):
+            break
+    a, b = (key_float(k, np.float64) for k in med.values())
+    return float((a + b) / 2.0)
+
+
+BLACK_PERCENTILE = 99.0  # of the white frame: pixels above 5 % of it measure b
+
+
+def _black_level_whole(black, white, *, floor: float) -> float:
+    # black_level_rows' steps on one band: the k-th smallest sortable key is the same
+    # key whether a radix select or a partition finds it
+    from lumigraph.separation.residue import float_keys, key_float
+
+    def select(keys, ranks, dtype):
+        part = np.partition(keys, sorted(set(ranks)))
+        return [key_float(int(part[r]), dtype) for r in ranks]
+
+    wh32 = np.asarray(white, np.float32)
+    keys = float_keys(wh32)
+    lo, hi = select(keys, _ranks(BLACK_PERCENTILE, keys.size), np.float32)
+    thr = max(10.0 * floor, 0.05 * _lerp(lo, hi, BLACK_PERCENTILE, keys.size))
+    wh = wh32.astype(np.float64)
+    ok = wh > thr
     if ok.sum() < 16:
         raise EstimationError("white", "the all-white frame is too dark to measure the black level")
-    return float(np.median(bl[ok] / wh[ok]))
+    ratios = float_keys(np.asarray(black, np.float32).astype(np.float64)[ok] / wh[ok])
+    n = ratios.size
+    a, b = select(ratios, ((n - 1) // 2, n // 2), np.float64)
+    return float((a + b) / 2.0)
+
+
+def _ranks(q: float, n: int) -> tuple[int, int]:
+    pos = q / 100.0 * (n - 1)
+    k0 = int(np.floor(pos))
+    return k0, min(k0 + 1, n - 1)
+
+
+def _lerp(lo: float, hi: float, q: float, n: int) -> float:
+    pos = q / 100.0 * (n - 1)
+    return float(lo + (hi - lo) * (pos - np.floor(pos)))

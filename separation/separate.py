@@ -184,7 +184,7 @@ def separate(images: np.ndarray, *, method: str = "checker", alpha: float | None
     else:
         from lumigraph.separation.residue import spatial_residue
 
-        frac, _ = spatial_residue(glob, ev.mean_image, window=max(5, tile // 2 * 2 + 1),
+        frac, _ = spatial_residue(glob, ev.mean_image, window=residue_window(tile),
                                   valid=mask == 0)
         quality["residue"] = {"check": "spatial pattern-scale contrast", "fraction": frac}
     quality["residue"]["warn_above"] = RESIDUE_WARN_FRACTION
@@ -247,9 +247,7 @@ def evaluate(a, *, fn, method, alpha, b, comp, estimator, var0, var1, saturation
     low = ((lp - lm) <= 3.0 * sigma_c).all(axis=-1) & ~never
     mask[low] |= nayar2006.MASK_LOW_CONTRAST
     valid = mask == 0
-    counts = {"never_lit": int(never.sum()),
-              "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
-              "low_contrast": int(low.sum()), "valid": int(valid.sum()), "total": int(mask.size)}
+    counts = mask_counts(mask)
     flagged = None
     if comp is not None and any(j >= 0 for j in comp):
         _, flags = _residue_pairs(a, comp, b=b, alpha=alpha, sigma=sigma, valid=valid)
@@ -258,13 +256,28 @@ def evaluate(a, *, fn, method, alpha, b, comp, estimator, var0, var1, saturation
                       counts, flagged, params)
 
 
-def black_level_of(b, *, black, white, floor, info):
+def mask_counts(mask: np.ndarray) -> dict:
+    """The quality's ``mask_counts`` of a mask ``(H, W)`` (or a band of it:
+    integers, summed over bands)."""
+    return {"never_lit": int(((mask & nayar2006.MASK_NEVER_LIT) > 0).sum()),
+            "saturated": int(((mask & nayar2006.MASK_SATURATED) > 0).sum()),
+            "low_contrast": int(((mask & nayar2006.MASK_LOW_CONTRAST) > 0).sum()),
+            "valid": int((mask == 0).sum()), "total": int(mask.size)}
+
+
+def residue_window(tile: int) -> int:
+    """The box of the spatial residue check: about one pattern period (``tile``), odd, >= 5."""
+    return max(5, tile // 2 * 2 + 1)
+
+
+def black_level_of(b, *, black, white, floor, info, measure=None):
     """The projector's black level ``b``: as given, else measured from the
-    all-black and all-white frames (:func:`separation.nayar2006.black_level`),
-    else 0; ``info`` (the meta) gets ``b`` and ``b_source``. The whole-image
-    and the banded runs share it."""
-    if b is None and black is not None and white is not None:
-        b = nayar2006.black_level(black, white, floor=floor)
+    all-black and all-white frames (:func:`separation.nayar2006.black_level`,
+    or ``measure()``: the banded run's, on frames read by rows), else 0;
+    ``info`` (the meta) gets ``b`` and ``b_source``. The whole-image and the
+    banded runs share it."""
+    if b is None and (measure is not None or black is not None and white is not None):
+        b = measure() if measure is not None else nayar2006.black_level(black, white, floor=floor)
         info["b_source"] = "measured from the all-black/all-white frames"
         if not 0.0 <= b < 1.0:
             raise EstimationError("black", f"measured black level {b:.3f} is not in [0, 1)")
