@@ -96,7 +96,8 @@ class Photograph:
     see each triangle and ``whole`` (M,) which triangles it sees whole (every
     pixel centre their projection covers shows them) and ``cells`` (H, W)
     which bilinear cells (pixels ``[y, y+1] × [x, x+1]``) lie on one
-    continuous surface, filled by :func:`prepare_photographs`.
+    continuous surface, ``face`` (H, W) its z-buffer's triangle ids (-1 off
+    the model), filled by :func:`prepare_photographs`.
     """
 
     image: np.ndarray
@@ -107,6 +108,7 @@ class Photograph:
     face_pixels: np.ndarray | None = field(default=None, repr=False)
     whole: np.ndarray | None = field(default=None, repr=False)
     cells: np.ndarray | None = field(default=None, repr=False)
+    face: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def centre(self) -> np.ndarray:
@@ -175,7 +177,7 @@ def prepare_photographs(mesh, photographs, *, tolerance: float = 0.01) -> tuple[
         out.append(replace(p, depth=r.depth, face_pixels=counts,
                            whole=(counts > 0) & (counts == r.covered),
                            # one continuous surface: as _sample's tap test
-                           cells=_cells(r.depth, 2 * tolerance)))
+                           cells=_cells(r.depth, 2 * tolerance), face=r.face))
     return tuple(out)
 
 
@@ -329,12 +331,20 @@ class ViewMaps:
     good: tuple = ()  # per polygon: which of its triangles are not slivers
     grid: np.ndarray | None = None  # (M, G, 3) points spread over each polygon
     grid_seen: np.ndarray | None = None  # (N, M, G) which photograph sees which point
+    # the polygons' planes and each photograph's per-plane visibility (see _plane_masks)
+    face_plane: np.ndarray | None = None  # (M,) plane of each polygon
+    planes: np.ndarray | None = None  # (P, 4): unit normal n and offset d, n . X = d
+    face_area: np.ndarray | None = None  # (M,)
+    masks: tuple = ()  # per photograph, per plane: (x0, y0, uint8 crop) or None
+    vertices: np.ndarray | None = None  # (V, 3) the mesh's
+    plane_vertices: tuple = ()  # per plane: the indices of its polygons' corners
 
-    def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
-        """The three photographs of each polygon for the view from ``C``
-        (``ids (M, 3)``, -1 = none): those the blend (:func:`_weights`, the
-        same ``power`` and ``neighbours``) gives the most weight over the
-        polygon's grid points, each point's weights summing to 1."""
+    def scores(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+        """``(M, N)``: the weight the blend (:func:`_weights`, the same
+        ``power`` and ``neighbours``) gives each photograph over each
+        polygon's grid points for the view from ``C``, each point's weights
+        summing to 1, then a millionth of the share of the points it sees
+        (ties go to the photograph that sees more of the polygon)."""
         M, G = self.grid.shape[:2]
         ray = _unit((self.grid - C).reshape(-1, 3))
         X = self.grid.reshape(-1, 3)
@@ -343,11 +353,24 @@ class ViewMaps:
         W = _weights(theta, power, neighbours)
         W /= np.maximum(W.sum(0), 1e-300)
         score = W.reshape(len(self.centres), M, G).sum(2).T  # (M, N)
-        # then the photographs that see more of the polygon
         score += 1e-6 * self.grid_seen.mean(2).T
-        order = np.argsort(-score, axis=1, kind="stable")[:, :3]
-        ids = np.where(np.take_along_axis(score, order, 1) > 0, order, -1)
-        return ids
+        return score
+
+    def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+        """The three photographs of each polygon for the view from ``C``
+        (``ids (M, 3)``, -1 = none): those the blend gives the most weight
+        over the polygon's grid points (:meth:`scores`)."""
+        return _top3(self.scores(C, power=power, neighbours=neighbours))
+
+    def choose_planes(self, C, *, power: float = DEFAULT_POWER,
+                      neighbours: int = DEFAULT_NEIGHBOURS):
+        """The three photographs of each plane (``ids (P, 3)``, -1 = none):
+        the polygons' :meth:`scores` weighted by their area, summed over the
+        plane's polygons."""
+        score = self.scores(C, power=power, neighbours=neighbours) * self.face_area[:, None]
+        plane = np.zeros((len(self.planes), score.shape[1]))
+        np.add.at(plane, self.face_plane, score)
+        return _top3(plane)
 
     def lookup(self, C, *, power: float = DEFAULT_POWER):
         """The at most three photographs and weights of each polygon for the
@@ -386,6 +409,11 @@ class ViewMaps:
             ids[m, :len(order)] = js[order]
             wts[m, :len(order)] = wk / wk.sum()
         return ids, wts
+
+
+def _top3(score, k=3):
+    order = np.argsort(-score, axis=1, kind="stable")[:, :k]
+    return np.where(np.take_along_axis(score, order, 1) > 0, order, -1)
 
 
 def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
@@ -438,8 +466,12 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
         pts.append(pm)
         dels.append(d)
         good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
+    fp, planes = _face_planes(v, f)
+    masks = tuple(_plane_masks(v, f, fp, planes, p, tolerance) for p in photos)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
-                    tuple(good), grid, grid_seen)
+                    tuple(good), grid, grid_seen, fp, planes, area, masks, v,
+                    tuple(np.unique(f[fp == P]) for P in range(len(planes))))
 
 
 def _seen_nearest(photo, X, tolerance):
@@ -478,44 +510,305 @@ def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
     return prepare_view_maps(mesh, photos).lookup(C, power=power)
 
 
-def _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels):
-    """Each pixel blended from its polygon's (at most) three photographs
-    ``ids[face]``, with the blend's weights (:func:`_weights`) among them."""
-    n, P = len(X), len(photos)
-    # the pixels grouped by their polygon's three photographs (one radix sort of
-    # small keys): each group's slot is one photograph, worked on as a slice
-    key = ((ids[:, 0] + 1) * (P + 1) + ids[:, 1] + 1) * (P + 1) + ids[:, 2] + 1
-    uniq, inv = np.unique(key, return_inverse=True)
-    pix_group = inv[face]
-    order = np.argsort(pix_group.astype(np.int16 if len(uniq) < 2 ** 15 else np.int64),
-                       kind="stable")
-    starts = np.concatenate([[0], np.cumsum(np.bincount(pix_group, minlength=len(uniq)))])
-    Xs, fs = X[order], face[order]
-    rays = _unit(Xs - C)
-    theta = np.full((3, n), np.inf)
-    samples = np.zeros((3, n, channels), np.float32)
-    for g, kv in enumerate(uniq):
-        a, b = starts[g], starts[g + 1]
-        if a == b:
-            continue
-        trio = (kv // (P + 1) ** 2 - 1, kv // (P + 1) % (P + 1) - 1, kv % (P + 1) - 1)
-        for k, j in enumerate(trio):
-            if j < 0:
-                continue
-            p = photos[j]
-            # a polygon the photograph sees whole needs no per-pixel depth test (the
-            # 1998 paper's polygons are split at visibility edges beforehand), only
-            # a look-up that the bilinear cell does not straddle its outline
-            samples[k, a:b], ok = _sample(p, Xs[a:b], tolerance, whole=p.whole[fs[a:b]])
-            theta[k, a:b] = np.where(ok, _angle_to(rays[a:b], Xs[a:b], p.centre), np.inf)
-    W = _weights(theta, power, neighbours)
-    acc_s = W[0][:, None] * samples[0]
-    acc_s += W[1][:, None] * samples[1]
-    acc_s += W[2][:, None] * samples[2]
-    acc, wsum, cnt = np.empty_like(acc_s), np.empty(n), np.empty(n, np.int64)
-    acc[order], wsum[order], cnt[order] = acc_s, W.sum(0), (W > 0).sum(0)
-    return acc, wsum, cnt
+def _face_planes(v, f):
+    """``(face_plane (M,), planes (P, 4))``: the polygons grouped by their
+    plane (unit normal ``n`` and offset ``d``, ``n · X = d``; equal within
+    1e-9, the offset relative to the model's extent). Coplanar polygons of
+    different blocks (the tower's front flush with the house's) share one."""
+    tri = v[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    d = np.einsum("ij,ij->i", n, tri[:, 0])
+    scale = max(float(np.abs(v).max()) if len(v) else 1.0, 1e-300)
+    fp = np.full(len(f), -1, np.int64)
+    planes: list = []
+    for m in range(len(f)):
+        for k, (nk, dk) in enumerate(planes):
+            if nk @ n[m] > 1 - 1e-9 and abs(dk - d[m]) <= 1e-9 * scale:
+                fp[m] = k
+                break
+        else:
+            fp[m] = len(planes)
+            planes.append((n[m], d[m]))
+    return fp, np.array([np.append(nk, dk) for nk, dk in planes]).reshape(-1, 4)
 
+
+def _plane_masks(v, f, fp, planes, photo, tolerance):
+    """Per plane, where ``photo`` sees it (the 1998 paper's visibility,
+    computed once per model and photograph): ``(x0, y0, crop)``, ``crop``
+    uint8 over the plane's bounding box in the photograph, 255 at the pixels
+    whose surface lies on the plane: the z-buffer shows one of the plane's
+    polygons there or beside it (3x3: a bilinear cell across a crease, as
+    the blend's continuity test) and the depth along the pixel's ray is the
+    plane's within ``tolerance`` relative; else 0. ``None`` where the
+    photograph sees none of it; 128 where the plane is seen so obliquely
+    that its depth changes by more than ``2 · tolerance`` relative to the
+    next pixel (the blend's cells, :func:`_cells`, reject such a cell). A
+    bilinear sample of the crop is 255 only when every tap of non-zero
+    weight sees the plane, as the blend's per-pixel test (:func:`_sample`);
+    at the photograph's own pixel centres (one tap) 128 is seen too."""
+    import cv2
+
+    h, w = photo.depth.shape
+    K = np.asarray(photo.K, np.float64)
+    R, t = np.asarray(photo.R, np.float64), np.asarray(photo.t, np.float64)
+    Kinv = np.linalg.inv(K)
+    face = photo.face
+    if face is None:
+        face = rasterize(v, f, K, R, t, (w, h), bary=False).face
+    pid = np.append(fp, -1)[face]
+    out = []
+    for P in range(len(planes)):
+        vc = v[np.unique(f[fp == P])] @ R.T + t
+        if (vc[:, 2] <= 1e-12).any():  # reaches behind the camera: the whole frame
+            x0, y0, x1, y1 = 0, 0, w - 1, h - 1
+        else:
+            px = vc @ K.T
+            px = px[:, :2] / px[:, 2:]
+            lo, hi = np.floor(px.min(0)) - 1, np.ceil(px.max(0)) + 1
+            if (hi < 0).any() or lo[0] > w - 1 or lo[1] > h - 1:
+                out.append(None)
+                continue
+            x0, y0 = np.clip(lo, 0, [w - 1, h - 1]).astype(int)
+            x1, y1 = np.clip(hi, 0, [w - 1, h - 1]).astype(int)
+        mine = (pid[y0:y1 + 1, x0:x1 + 1] == P).astype(np.uint8)
+        if not mine.any():
+            out.append(None)
+            continue
+        nc = R @ planes[P, :3]
+        dc = planes[P, 3] + nc @ t
+        ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # the plane's depth along each pixel's ray (unit z): d_c / (n_c . r)
+            zp = dc / ((xs * Kinv[0, 0] + ys * Kinv[0, 1] + Kinv[0, 2]) * nc[0]
+                       + (xs * Kinv[1, 0] + ys * Kinv[1, 1] + Kinv[1, 2]) * nc[1]
+                       + (xs * Kinv[2, 0] + ys * Kinv[2, 1] + Kinv[2, 2]) * nc[2])
+            z = photo.depth[y0:y1 + 1, x0:x1 + 1]
+            # the plane seen this obliquely (its depth changing by more than twice the
+            # tolerance from one pixel to the next) is not seen: the blend's cells
+            # (taps within 2 tolerance of each other) reject it alike
+            zx = np.abs(np.diff(zp, axis=1, append=2 * zp[:, -1:] - zp[:, -2:-1]
+                                if zp.shape[1] > 1 else zp[:, -1:]))
+            zy = np.abs(np.diff(zp, axis=0, append=2 * zp[-1:] - zp[-2:-1]
+                                if zp.shape[0] > 1 else zp[-1:]))
+            on = ((cv2.dilate(mine, np.ones((3, 3), np.uint8)) > 0) & np.isfinite(z)
+                  & (np.abs(z - zp) <= tolerance * z))
+            steep = np.maximum(zx, zy) > 2 * tolerance * zp
+        # 255: seen; 128: seen, too obliquely for a sample between pixel centres
+        out.append((int(x0), int(y0), np.where(on, np.where(steep, 128, 255), 0).astype(np.uint8)))
+    return tuple(out)
+
+
+def _homography(K, R, t, photo, plane):
+    """``(3, 3)``: the new view's pixels ``(x, y, 1)`` of the plane ``plane
+    = (n, d)`` to ``photo``'s pixels (the plane-induced homography
+    ``K_j (R_rel + t_rel n_cᵀ / d_c) K⁻¹``, ``n_c · X_c = d_c`` the plane in
+    the new camera's frame)."""
+    nc = R @ plane[:3]
+    dc = plane[3] + nc @ t
+    Rj, tj = np.asarray(photo.R, np.float64), np.asarray(photo.t, np.float64)
+    Rr = Rj @ R.T
+    tr = tj - Rr @ t
+    return np.asarray(photo.K, np.float64) @ (Rr + np.outer(tr, nc) / dc) @ np.linalg.inv(K)
+
+
+def _on_centres(H):
+    """The homography ``H`` maps pixel centres onto pixel centres (the
+    identity up to a whole-pixel shift, within 1e-6 px over a 10⁴ px
+    frame): the new view is the photograph's own."""
+    G = H / H[2, 2]
+    return bool(np.abs(G[:2, :2] - np.eye(2)).max() < 1e-10 and np.abs(G[2, :2]).max() < 1e-10
+                and np.abs(G[:2, 2] - np.rint(G[:2, 2])).max() < 1e-6)
+
+
+# the angles are computed on a grid of this many pixels per step over each plane and
+# interpolated (they vary smoothly over a plane; 1998: per-vertex angles interpolated)
+ANGLE_STEP_PX = 16
+
+
+def _weights3(th, power, neighbours):
+    """:func:`_weights` for at most three photographs, on float32 images
+    ``th (3, H, W)`` (``inf`` = not seen): the same values, without the
+    general partial sort."""
+    seen = np.isfinite(th)
+    with np.errstate(over="ignore", divide="ignore"):
+        w = np.where(seen, (th + np.float32(EPS_RAD)) ** np.float32(-power), np.float32(0))
+    if neighbours and len(th) > neighbours:
+        a, b = th[0], th[1]
+        c = th[2] if len(th) > 2 else np.full_like(a, np.inf)
+        if neighbours == 1:  # the middle one
+            nxt = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+        else:
+            nxt = np.maximum(np.maximum(a, b), c)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            taper = np.where(np.isfinite(nxt), np.clip(1 - th / nxt, 0, None), np.float32(1))
+        tapered = w * np.where(seen, taper, np.float32(0))
+        w = np.where((tapered.sum(0) > 0) | ~seen.any(0), tapered, w)
+    return w
+
+
+def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
+                     background):
+    """The view map's texturing (Debevec, Yu & Borshukov 1998): each plane of
+    the model that the new view's z-buffer ``face (H, W)`` shows is textured
+    from its three photographs ``ids (P, 3)`` by projective texture mapping
+    (one plane-induced homography per photograph: ``cv2.warpPerspective``
+    of the photograph and of its precomputed visibility of the plane), with
+    the blend's weights among the three (:func:`_weights3`) from angles on
+    a grid interpolated over the plane: no per-pixel depth test, world point
+    or angle. Where fewer of the three see a point than the blend would
+    take and other photographs see the plane, :func:`_plane_pixels`.
+    Returns ``(image (H, W, C) float32, known (H, W) bool, count (H, W))``."""
+    import cv2
+
+    h, w = face.shape
+    fp = np.append(maps.face_plane, -1)
+    image = np.full((h, w, channels), background, np.float32)
+    known = np.zeros((h, w), bool)
+    cnt = np.zeros((h, w), np.int8)
+    Kinv = np.linalg.inv(K)
+    R = np.asarray(R, np.float64)
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    need = min(neighbours or 1, 3)
+    # each plane's projected bounding box (its polygons' corners), where it is looked for
+    vc = maps.vertices @ R.T + t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pv = vc @ np.asarray(K, np.float64).T
+        pv = pv[:, :2] / pv[:, 2:]
+    # the planes with a polygon inside the frame (the z-buffer decides which show)
+    for P in np.unique(maps.face_plane[covered > 0]):
+        js = [int(j) for j in ids[P] if j >= 0 and maps.masks[j][P] is not None]
+        if not js:
+            continue
+        corners = maps.plane_vertices[P]
+        if (vc[corners, 2] > 1e-12).all():
+            lo = np.clip(np.floor(pv[corners].min(0)).astype(int) - 1, 0, [w, h])
+            hi = np.clip(np.ceil(pv[corners].max(0)).astype(int) + 2, 0, [w, h])
+        else:
+            lo, hi = np.zeros(2, int), np.array([w, h])
+        band = fp[face[lo[1]:hi[1], lo[0]:hi[0]]] == P
+        rows, cols = np.flatnonzero(band.any(1)), np.flatnonzero(band.any(0))
+        if not len(rows):
+            continue
+        y0, y1 = lo[1] + int(rows[0]), lo[1] + int(rows[-1]) + 1
+        x0, x1 = lo[0] + int(cols[0]), lo[0] + int(cols[-1]) + 1
+        inP = band[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        bh, bw = inP.shape
+        others = [j for j in range(len(photos)) if maps.masks[j][P] is not None]
+        if len(others) > len(js) and bh * bw < SMALL_PLANE_PX and inP.sum() < SMALL_PLANE_PX // 4:
+            # a few pixels (a sliver): the three chosen over the whole plane may miss
+            # the photographs nearest these, and warping costs more than asking all
+            _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
+                       others, photos, power, neighbours, channels)
+            continue
+        # the angles on a grid placed as cv2.resize's linear upsampling samples it
+        gw, gh = max(1, round(bw / ANGLE_STEP_PX)), max(1, round(bh / ANGLE_STEP_PX))
+        gx = np.tile((np.arange(gw) + 0.5) * bw / gw - 0.5 + x0, gh)
+        gy = np.repeat((np.arange(gh) + 0.5) * bh / gh - 0.5 + y0, gw)
+        r = np.stack([gx, gy, np.ones(gx.size)], 1) @ Kinv.T
+        nc = R @ maps.planes[P, :3]
+        X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
+        ray = _unit(X - C)
+        T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
+        th = np.empty((len(js), bh, bw), np.float32)
+        samples = []
+        for k, j in enumerate(js):
+            p = photos[j]
+            H = _homography(K, R, t, p, maps.planes[P]) @ T
+            mx0, my0, crop = maps.masks[j][P]
+            H[:2] -= np.outer([mx0, my0], H[2])  # into the crop
+            vis = cv2.warpPerspective(crop, H, (bw, bh), flags=flags,
+                                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            H[:2] += np.outer([mx0, my0], H[2])
+            # the new view's pixel centres on the photograph's (its own view): one tap
+            vis = vis >= 128 if _on_centres(H) else vis == 255
+            # the plane behind the photograph (its homogeneous w <= 0) is not seen
+            wz = H[2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
+            if (wz <= 0).any():
+                vis &= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
+                        + H[2, 2]) > 0
+            img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
+            s = cv2.warpPerspective(img, H, (bw, bh), flags=flags, borderMode=cv2.BORDER_REPLICATE)
+            samples.append(s.reshape(bh, bw, channels))
+            a = _angle_to(ray, X, p.centre).astype(np.float32).reshape(gh, gw)
+            cv2.resize(a, (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
+            th[k][~vis] = np.inf
+        W = (_weights3(th, power, neighbours) if len(js) <= 3 else
+             _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
+        ws = W.sum(0)
+        seen = ws > 0
+        np.divide(W, ws, out=W, where=seen)
+        out = W[0][..., None] * samples[0]
+        for k in range(1, len(js)):
+            out += W[k][..., None] * samples[k]
+        n = (W > 0).sum(0, dtype=np.int8)
+        ok = inP & seen
+        np.copyto(image[y0:y1, x0:x1], out, where=ok[..., None])
+        known[y0:y1, x0:x1] |= ok
+        np.copyto(cnt[y0:y1, x0:x1], n, where=inP)
+        # where fewer of the three see the point than the blend would take (the plane
+        # partly hidden from them) and other photographs see some of the plane: those
+        # pixels blended from every photograph that sees the plane (as the blend)
+        if len(others) > len(js):
+            yy, xx = np.nonzero(inP & (n < need))
+            if len(yy):
+                _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
+                           photos, power, neighbours, channels)
+    return image, known, cnt
+
+
+# a plane showing fewer pixels than a quarter of this (in a box under this) is textured
+# pixel by pixel from every photograph that sees it (_plane_pixels)
+SMALL_PLANE_PX = 256
+
+
+def _plane_put(image, known, cnt, yy, xx, x0, y0, *args):
+    """:func:`_plane_pixels` of the box pixels ``(yy, xx)`` (offset ``x0,
+    y0``) written into the frame's ``image``, ``known``, ``cnt``."""
+    yy, xx = yy + y0, xx + x0
+    a, ws, c = _plane_pixels(xx, yy, *args)
+    good = ws > 0
+    image[yy[good], xx[good]] = a[good] / ws[good, None]
+    known[yy, xx] = good
+    cnt[yy, xx] = c
+
+
+def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels):
+    """The pixels ``(xs, ys)`` of the plane ``P`` blended from the
+    photographs ``js`` as the blend does (every one that sees the point, the
+    blend's weights from exact angles), visibility from the planes' masks:
+    ``(acc (n, C), wsum (n,), count (n,))``."""
+    import cv2
+
+    n = len(xs)
+    p3 = np.stack([xs, ys, np.ones(n)], 1).astype(np.float64)
+    r = p3 @ np.linalg.inv(K).T
+    nc = R @ maps.planes[P, :3]
+    X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
+    ray = _unit(X - C)
+    th = np.full((len(js), n), np.inf)
+    samples = []
+    for k, j in enumerate(js):
+        p = photos[j]
+        H = _homography(K, R, t, p, maps.planes[P])
+        q = p3 @ H.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv = (q[:, :2] / q[:, 2:]).astype(np.float32)
+        mx0, my0, crop = maps.masks[j][P]
+        vis = cv2.remap(crop, (uv[:, 0] - mx0)[None], (uv[:, 1] - my0)[None], cv2.INTER_LINEAR,
+                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
+        vis = vis >= 128 if _on_centres(H) else vis == 255
+        vis &= q[:, 2] > 0
+        img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
+        s = cv2.remap(img, uv[:, 0][None], uv[:, 1][None], cv2.INTER_LINEAR,
+                      borderMode=cv2.BORDER_REPLICATE)
+        samples.append(s.reshape(n, channels))
+        th[k, vis] = _angle_to(ray[vis], X[vis], p.centre)
+    W = _weights(th, power, neighbours)
+    acc = np.zeros((n, channels))
+    for k, s in enumerate(samples):
+        acc += W[k][:, None] * s
+    return acc, W.sum(0), (W > 0).sum(0)
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -665,42 +958,31 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     r = rasterize(v, f, K, R, t, (w, h), rays=rays, bary=False)
     t1 = time.perf_counter()
     model = r.hit
-    idx = np.flatnonzero(model.ravel())
-    # the world point of each model pixel: its ray scaled to the depth
-    Xc = rays.reshape(-1, 3)[idx] * r.depth.ravel()[idx, None]
-    X = (Xc - t) @ R  # R^T (x_cam - t)
+
+    def points(at):  # the world points of the model pixels ``at``: their rays scaled to the depth
+        Xc = rays.reshape(-1, 3)[at] * r.depth.ravel()[at, None]
+        return (Xc - t) @ R  # R^T (x_cam - t)
+
     if method == "blend":
-        acc, wsum, n = _blend(X, C, photos, tolerance, power, neighbours, channels)
+        idx = np.flatnonzero(model.ravel())
+        acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels)
+        per_pixel = float(n.mean()) if len(n) else 0.0
     else:
         if maps is None:
-            maps = prepare_view_maps((v, f), photos)
-        ids = maps.choose(C, power=power, neighbours=neighbours)
-        face = r.face.ravel()[idx]
-        acc, wsum, n = _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels)
-        # where none of a polygon's three sees the point, every photograph is asked
-        # where fewer of the polygon's three see the point than the blend would
-        # take (a partly hidden polygon) and other photographs see some of the
-        # polygon, every photograph is asked
-        more = np.array([len(js) for js in maps.photos]) > (ids >= 0).sum(1)
-        again = np.flatnonzero((n < min(neighbours or 1, 3)) & more[face])
-        # asked of the photographs that see some of the pixel's polygon (the others
-        # cannot see it): one call per set of such photographs (calls cost more
-        # than these few pixels)
-        sets: dict = {}
-        for m in np.unique(face[again]):
-            sets.setdefault(tuple(maps.photos[m]), []).append(m)
-        for js, ms in sets.items():
-            rows = again[np.isin(face[again], ms)]
-            acc[rows], wsum[rows], n[rows] = _blend(X[rows], C, [photos[j] for j in js],
-                                                    tolerance, power, neighbours, channels)
+            maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
+        ids = maps.choose_planes(C, power=power, neighbours=neighbours)
+        out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos, power,
+                                         neighbours, channels, float(background))
+        per_pixel = float(n.sum(dtype=np.int64) / max(model.sum(), 1))
     t2 = time.perf_counter()
-    seen = wsum > 0
-    out = np.full((h * w, channels), float(background), np.float32)
-    out[idx[seen]] = acc[seen] / wsum[seen, None]
-    known = np.zeros(h * w, bool)
-    known[idx[seen]] = True
-    out = out.reshape(h, w, channels)
-    known = known.reshape(h, w)
+    if method == "blend":
+        seen = wsum > 0
+        out = np.full((h * w, channels), float(background), np.float32)
+        out[idx[seen]] = acc[seen] / wsum[seen, None]
+        known = np.zeros(h * w, bool)
+        known[idx[seen]] = True
+        out = out.reshape(h, w, channels)
+        known = known.reshape(h, w)
     filled = model & ~known
     if fill and filled.any() and known.any():
         out = fill_holes(out, known, model)
@@ -709,7 +991,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     t3 = time.perf_counter()
     info = {"method": method, "tolerance": tolerance, "power": power, "neighbours": neighbours,
             "photographs": len(photos),
-            "photographs_per_pixel": float(n.mean()) if len(n) else 0.0,
+            "photographs_per_pixel": per_pixel,
             "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
             "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
     return VDTMImage(out.astype(np.float32, copy=False), model, filled, info)

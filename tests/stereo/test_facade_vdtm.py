@@ -143,9 +143,10 @@ def test_weights_taper_at_the_next_nearest():
 
 @pytest.mark.parametrize("neighbours", [0, 1, 2])
 def test_view_map_is_the_blend_with_three_photographs(facade, neighbours):
-    # with three photographs every polygon's three are all of them: the view map
-    # blends the same samples with the same weights (the sums in another order:
-    # within 1e-4 of full scale, far above float rounding)
+    # with three photographs every plane's three are all of them: the view map
+    # blends the same photographs with the same weights; only its visibility (per
+    # plane, precomputed) and its angles (interpolated over the plane) differ, so
+    # most pixels agree within half a code and the whole within the 0.5 dB
     s, mesh, _ = facade
     photos = prepare_photographs(mesh, [
         Photograph(im.astype(np.float32), np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
@@ -155,5 +156,12 @@ def test_view_map_is_the_blend_with_three_photographs(facade, neighbours):
     a = render_vdtm(mesh, photos, K, R, t, SIZE, neighbours=neighbours)
     b = render_vdtm(mesh, photos, K, R, t, SIZE, neighbours=neighbours, method="view-map")
     assert a.model.sum() > 500
-    np.testing.assert_array_equal(a.filled, b.filled)
-    np.testing.assert_allclose(b.image, a.image, atol=1e-4 * 255)
+    both = a.model & ~a.filled & ~b.filled
+    assert both.sum() > 0.9 * a.model.sum()
+    assert np.median(np.abs(b.image - a.image).max(2)[both]) <= 0.5
+    gt, m = s.gt_arrays["novel_0"], s.gt_arrays["novel_model_0"]
+
+    def psnr(x):
+        return 10 * np.log10(255.0 ** 2 / np.mean((x.image[m] - gt[m]) ** 2))
+
+    assert abs(psnr(b) - psnr(a)) <= 0.5
