@@ -599,7 +599,7 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
     return tuple(out)
 
 
-def _homography(K, R, t, photo, plane):
+def _homography(K, R, t, photo, plane, Kinv=None):
     """``(3, 3)``: the new view's pixels ``(x, y, 1)`` of the plane ``plane
     = (n, d)`` to ``photo``'s pixels (the plane-induced homography
     ``K_j (R_rel + t_rel n_cᵀ / d_c) K⁻¹``, ``n_c · X_c = d_c`` the plane in
@@ -609,7 +609,8 @@ def _homography(K, R, t, photo, plane):
     Rj, tj = np.asarray(photo.R, np.float64), np.asarray(photo.t, np.float64)
     Rr = Rj @ R.T
     tr = tj - Rr @ t
-    return np.asarray(photo.K, np.float64) @ (Rr + np.outer(tr, nc) / dc) @ np.linalg.inv(K)
+    Kinv = np.linalg.inv(K) if Kinv is None else Kinv
+    return np.asarray(photo.K, np.float64) @ (Rr + np.outer(tr, nc) / dc) @ Kinv
 
 
 def _on_centres(H):
@@ -628,22 +629,30 @@ ANGLE_STEP_PX = 16
 
 def _weights3(th, power, neighbours):
     """:func:`_weights` for at most three photographs, on float32 images
-    ``th (3, H, W)`` (``inf`` = not seen): the same values, without the
-    general partial sort."""
-    seen = np.isfinite(th)
-    with np.errstate(over="ignore", divide="ignore"):
-        w = np.where(seen, (th + np.float32(EPS_RAD)) ** np.float32(-power), np.float32(0))
+    ``th (k, H, W)`` (``inf`` = not seen; k <= 3): the same values, without
+    the general partial sort (the caller silences inf/inf)."""
+    w = th + np.float32(EPS_RAD)
+    if power == 1:
+        np.reciprocal(w, out=w)  # inf -> 0: not seen
+    else:
+        np.power(w, np.float32(-power), out=w)
     if neighbours and len(th) > neighbours:
         a, b = th[0], th[1]
-        c = th[2] if len(th) > 2 else np.full_like(a, np.inf)
+        c = th[2] if len(th) > 2 else np.float32(np.inf)
         if neighbours == 1:  # the middle one
             nxt = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
         else:
             nxt = np.maximum(np.maximum(a, b), c)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            taper = np.where(np.isfinite(nxt), np.clip(1 - th / nxt, 0, None), np.float32(1))
-        tapered = w * np.where(seen, taper, np.float32(0))
-        w = np.where((tapered.sum(0) > 0) | ~seen.any(0), tapered, w)
+        # 1 - θ/θ_next, 0 at the next and beyond; 1 where no next is seen (θ/inf);
+        # NaN (inf/inf, a photograph not seen) to 0
+        q = th / nxt
+        np.subtract(np.float32(1), q, out=q)
+        np.fmax(q, np.float32(0), out=q)
+        q *= w
+        tie = (q.sum(0) == 0) & (w.sum(0) > 0)  # equal angles at the threshold: untapered
+        if tie.any():
+            q[:, tie] = w[:, tie]
+        w = q
     return w
 
 
@@ -672,9 +681,8 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
     need = min(neighbours or 1, 3)
     # each plane's projected bounding box (its polygons' corners), where it is looked for
     vc = maps.vertices @ R.T + t
-    with np.errstate(divide="ignore", invalid="ignore"):
-        pv = vc @ np.asarray(K, np.float64).T
-        pv = pv[:, :2] / pv[:, 2:]
+    pv = vc @ np.asarray(K, np.float64).T
+    pv = pv[:, :2] / pv[:, 2:]
     # the planes with a polygon inside the frame (the z-buffer decides which show)
     for P in np.unique(maps.face_plane[covered > 0]):
         js = [int(j) for j in ids[P] if j >= 0 and maps.masks[j][P] is not None]
@@ -714,7 +722,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         samples = []
         for k, j in enumerate(js):
             p = photos[j]
-            H = _homography(K, R, t, p, maps.planes[P]) @ T
+            H = _homography(K, R, t, p, maps.planes[P], Kinv) @ T
             mx0, my0, crop = maps.masks[j][P]
             H[:2] -= np.outer([mx0, my0], H[2])  # into the crop
             vis = cv2.warpPerspective(crop, H, (bw, bh), flags=flags,
@@ -732,7 +740,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             samples.append(s.reshape(bh, bw, channels))
             a = _angle_to(ray, X, p.centre).astype(np.float32).reshape(gh, gw)
             cv2.resize(a, (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
-            th[k][~vis] = np.inf
+            np.copyto(th[k], np.float32(np.inf), where=~vis)
         W = (_weights3(th, power, neighbours) if len(js) <= 3 else
              _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
         ws = W.sum(0)
@@ -782,7 +790,8 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
 
     n = len(xs)
     p3 = np.stack([xs, ys, np.ones(n)], 1).astype(np.float64)
-    r = p3 @ np.linalg.inv(K).T
+    Kinv = np.linalg.inv(K)
+    r = p3 @ Kinv.T
     nc = R @ maps.planes[P, :3]
     X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
     ray = _unit(X - C)
@@ -790,7 +799,7 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
     samples = []
     for k, j in enumerate(js):
         p = photos[j]
-        H = _homography(K, R, t, p, maps.planes[P])
+        H = _homography(K, R, t, p, maps.planes[P], Kinv)
         q = p3 @ H.T
         with np.errstate(divide="ignore", invalid="ignore"):
             uv = (q[:, :2] / q[:, 2:]).astype(np.float32)
@@ -843,6 +852,72 @@ def _resize(a, size, interp):
 
 
 def _push_pull(image, known, hole):
+    """Push–pull of the holes (:func:`fill_holes`), computed on the aligned
+    tiles of 2^L pixels that hold holes only: a hole's value depends only on
+    its aligned blocks (level l: the 2^l block of the box holding it) up to
+    the coarsest level the whole box's pyramid builds, or up to the first
+    level where the block's weight is full (its coarser levels then have no
+    share). Tiles of 16 pixels first, twice that for the holes they leave
+    open, and so on. Equals :func:`_push_pull_full` up to float rounding."""
+    h, w = known.shape
+    # the level the whole box's pyramid stops at: every block holds a known pixel,
+    # or a side of one block is a pixel
+    k, top = known, 0
+    while min(k.shape) > 1 and not k.all():
+        k = np.pad(k, ((0, k.shape[0] % 2), (0, k.shape[1] % 2)))
+        k = k.reshape(k.shape[0] // 2, 2, k.shape[1] // 2, 2).any((1, 3))
+        top += 1
+    out = np.array(image, copy=True)
+    hy, hx = np.nonzero(hole)
+    levels = min(top, TILE_LEVELS)
+    while len(hy):
+        val, exact = _push_pull_tiles(image, known, hy, hx, levels, levels == top)
+        out[hy[exact], hx[exact]] = val[exact]
+        hy, hx = hy[~exact], hx[~exact]
+        levels = min(top, levels + 1)
+    return out
+
+
+def _push_pull_tiles(image, known, hy, hx, levels, at_top):
+    """The push-pull values at the holes ``(hy, hx)`` from their aligned
+    tiles of ``2^levels`` pixels, and which are exact (``at_top``: the whole
+    box's pyramid stops at this level; else the hole's chain of blocks
+    reaches full weight within the tile)."""
+    h, w = known.shape
+    n = 2 ** levels
+    per_row = -(-w // n)
+    key = (hy // n) * per_row + hx // n
+    tiles, at = np.unique(key, return_inverse=True)
+    ty, tx = tiles // per_row, tiles % per_row
+    ys = ty[:, None] * n + np.arange(n)  # (T, n)
+    xs = tx[:, None] * n + np.arange(n)
+    inside = (ys < h)[:, :, None] & (xs < w)[:, None, :]
+    yc, xc = np.minimum(ys, h - 1)[:, :, None], np.minimum(xs, w - 1)[:, None, :]
+    wg = (known[yc, xc] & inside).astype(np.float32)[..., None]
+    im = np.where(wg > 0, image[yc, xc], 0).astype(np.float32)
+    pyramid = [(im, wg)]
+    for _ in range(levels):
+        T, m = im.shape[0], im.shape[1] // 2
+        s = (im * wg).reshape(T, m, 2, m, 2, -1).sum((2, 4)) * np.float32(0.25)
+        ws = wg.reshape(T, m, 2, m, 2, 1).sum((2, 4)) * np.float32(0.25)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            im = np.where(ws > 0, s / ws, np.float32(0))
+        wg = np.minimum(4 * ws, np.float32(1))
+        pyramid.append((im, wg))
+    up = pyramid[-1][0]
+    exact = (pyramid[-1][1] == 1) | at_top
+    for im, wg in reversed(pyramid[:-1]):
+        up = wg * im + (1 - wg) * up.repeat(2, 1).repeat(2, 2)
+        exact = exact.repeat(2, 1).repeat(2, 2) | (wg == 1)
+    iy, ix = hy - ty[at] * n, hx - tx[at] * n
+    return up[at, iy, ix], exact[at, iy, ix, 0]
+
+
+# the push-pull's first tiles: 2^TILE_LEVELS pixels a side
+TILE_LEVELS = 4
+
+
+def _push_pull_full(image, known, hole):
     import cv2
 
     img = np.where(known[..., None], image, 0.0).astype(np.float32)
@@ -971,8 +1046,9 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         if maps is None:
             maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
         ids = maps.choose_planes(C, power=power, neighbours=neighbours)
-        out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos, power,
-                                         neighbours, channels, float(background))
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
+                                             power, neighbours, channels, float(background))
         per_pixel = float(n.sum(dtype=np.int64) / max(model.sum(), 1))
     t2 = time.perf_counter()
     if method == "blend":

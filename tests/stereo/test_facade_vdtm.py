@@ -165,3 +165,19 @@ def test_view_map_is_the_blend_with_three_photographs(facade, neighbours):
         return 10 * np.log10(255.0 ** 2 / np.mean((x.image[m] - gt[m]) ** 2))
 
     assert abs(psnr(b) - psnr(a)) <= 0.5
+
+
+def test_push_pull_on_tiles_equals_the_whole_pyramid():
+    # the tiles holding holes carry every block a hole's value depends on: the same
+    # values as the pyramid over the whole box (the same float operations)
+    from lumigraph.stereo.debevec1996.vdtm import _push_pull, _push_pull_full
+
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        h, w = rng.integers(1, 70, 2)
+        known = rng.random((h, w)) < rng.random() ** 2
+        hole = ~known & (rng.random((h, w)) < 0.5)
+        if not hole.any() or not known.any():
+            continue
+        img = rng.random((h, w, 3)).astype(np.float32)
+        np.testing.assert_array_equal(_push_pull(img, known, hole), _push_pull_full(img, known, hole))
