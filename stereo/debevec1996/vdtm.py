@@ -613,13 +613,14 @@ def _homography(K, R, t, photo, plane, Kinv=None):
     return np.asarray(photo.K, np.float64) @ (Rr + np.outer(tr, nc) / dc) @ Kinv
 
 
-def _on_centres(H):
-    """The homography ``H`` maps pixel centres onto pixel centres (the
-    identity up to a whole-pixel shift, within 1e-6 px over a 10⁴ px
-    frame): the new view is the photograph's own."""
-    G = H / H[2, 2]
-    return bool(np.abs(G[:2, :2] - np.eye(2)).max() < 1e-10 and np.abs(G[2, :2]).max() < 1e-10
-                and np.abs(G[:2, 2] - np.rint(G[:2, 2])).max() < 1e-6)
+def _same_camera(K, R, t, photo):
+    """The new camera is ``photo``'s (within 1e-12 relative): its pixel
+    centres fall on the photograph's, so a sample has one tap."""
+    def near(a, b):
+        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64).reshape(np.shape(a))
+        return bool(np.abs(a - b).max() <= 1e-12 * max(np.abs(a).max(), 1.0))
+
+    return near(K, photo.K) and near(R, photo.R) and near(t, photo.t)
 
 
 # the angles are computed on a grid of this many pixels per step over each plane and
@@ -679,6 +680,15 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
     R = np.asarray(R, np.float64)
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     need = min(neighbours or 1, 3)
+    # the photographs' cameras stacked (homographies per plane at once), and which
+    # one the new view is (its pixel centres on the photograph's: one tap a sample)
+    Ks = np.stack([np.asarray(p.K, np.float64) for p in photos])
+    Rs = np.stack([np.asarray(p.R, np.float64) for p in photos])
+    ts = np.stack([np.asarray(p.t, np.float64).reshape(3) for p in photos])
+    centres = np.einsum("nji,nj->ni", Rs, -ts)
+    own = [_same_camera(K, R, t, p) for p in photos]
+    Rr = Rs @ R.T  # new camera frame to each photograph's
+    tr = ts - Rr @ t
     # each plane's projected bounding box (its polygons' corners), where it is looked for
     vc = maps.vertices @ R.T + t
     pv = vc @ np.asarray(K, np.float64).T
@@ -707,7 +717,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             # a few pixels (a sliver): the three chosen over the whole plane may miss
             # the photographs nearest these, and warping costs more than asking all
             _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
-                       others, photos, power, neighbours, channels)
+                       others, photos, power, neighbours, channels, own)
             continue
         # the angles on a grid placed as cv2.resize's linear upsampling samples it
         gw, gh = max(1, round(bw / ANGLE_STEP_PX)), max(1, round(bh / ANGLE_STEP_PX))
@@ -716,31 +726,38 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         r = np.stack([gx, gy, np.ones(gx.size)], 1) @ Kinv.T
         nc = R @ maps.planes[P, :3]
         X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
-        ray = _unit(X - C)
         T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
         th = np.empty((len(js), bh, bw), np.float32)
+        # the plane-induced homographies K_j (R_rel + t_rel n_c^T / d_c) K^-1 T, at once
+        dc = maps.planes[P, 3] + nc @ t
+        Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ (Kinv @ T)
+        # the angles at the grid points (_angle_to, for every photograph at once)
+        ray = _unit(X - C)
+        dj = X[None] - centres[js][:, None]
+        dj /= np.linalg.norm(dj, axis=2, keepdims=True)
+        dj -= ray[None]
+        ang = (2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kgi,kgi->kg", dj, dj)) / 2, 1.0))
+               ).astype(np.float32)
         samples = []
         for k, j in enumerate(js):
             p = photos[j]
-            H = _homography(K, R, t, p, maps.planes[P], Kinv) @ T
+            H = Hs[k]
             mx0, my0, crop = maps.masks[j][P]
-            H[:2] -= np.outer([mx0, my0], H[2])  # into the crop
-            vis = cv2.warpPerspective(crop, H, (bw, bh), flags=flags,
+            Hm = H.copy()
+            Hm[:2] -= np.outer([mx0, my0], H[2])  # into the crop
+            vis = cv2.warpPerspective(crop, Hm, (bw, bh), flags=flags,
                                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-            H[:2] += np.outer([mx0, my0], H[2])
-            # the new view's pixel centres on the photograph's (its own view): one tap
-            vis = vis >= 128 if _on_centres(H) else vis == 255
+            vis = vis < 128 if own[j] else vis < 255  # not seen
             # the plane behind the photograph (its homogeneous w <= 0) is not seen
             wz = H[2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
             if (wz <= 0).any():
-                vis &= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
-                        + H[2, 2]) > 0
+                vis |= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
+                        + H[2, 2]) <= 0
             img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
             s = cv2.warpPerspective(img, H, (bw, bh), flags=flags, borderMode=cv2.BORDER_REPLICATE)
             samples.append(s.reshape(bh, bw, channels))
-            a = _angle_to(ray, X, p.centre).astype(np.float32).reshape(gh, gw)
-            cv2.resize(a, (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
-            np.copyto(th[k], np.float32(np.inf), where=~vis)
+            cv2.resize(ang[k].reshape(gh, gw), (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
+            np.copyto(th[k], np.float32(np.inf), where=vis)
         W = (_weights3(th, power, neighbours) if len(js) <= 3 else
              _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
         ws = W.sum(0)
@@ -761,7 +778,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             yy, xx = np.nonzero(inP & (n < need))
             if len(yy):
                 _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
-                           photos, power, neighbours, channels)
+                           photos, power, neighbours, channels, own)
     return image, known, cnt
 
 
@@ -781,7 +798,7 @@ def _plane_put(image, known, cnt, yy, xx, x0, y0, *args):
     cnt[yy, xx] = c
 
 
-def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels):
+def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, own):
     """The pixels ``(xs, ys)`` of the plane ``P`` blended from the
     photographs ``js`` as the blend does (every one that sees the point, the
     blend's weights from exact angles), visibility from the planes' masks:
@@ -806,7 +823,7 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
         mx0, my0, crop = maps.masks[j][P]
         vis = cv2.remap(crop, (uv[:, 0] - mx0)[None], (uv[:, 1] - my0)[None], cv2.INTER_LINEAR,
                         borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
-        vis = vis >= 128 if _on_centres(H) else vis == 255
+        vis = vis >= 128 if own[j] else vis == 255
         vis &= q[:, 2] > 0
         img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
         s = cv2.remap(img, uv[:, 0][None], uv[:, 1][None], cv2.INTER_LINEAR,
