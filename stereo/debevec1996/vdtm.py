@@ -32,17 +32,23 @@ tapered to 0 at the next nearest angle ``θ_(k+1)`` (C. Buehler et al.,
 doi:10.1145/383259.383309), so no seam appears where the nearest change;
 ``neighbours = 0`` blends every photograph that sees ``X``.
 
-``method="view-map"`` (1998). Each polygon (mesh triangle) is textured
-from at most three photographs, chosen once per polygon and view: the
-three the blend gives the most weight over points spread on the polygon
-(:meth:`ViewMaps.choose`; the points' visibility is computed once per model
-by :func:`prepare_view_maps`, with the 1998 paper's per-polygon map of the
-photographs' directions, :meth:`ViewMaps.lookup`). A pixel blends its
-polygon's three with the blend's weights among them, so the view map is the
-blend wherever they hold the pixel's nearest; the visibility test stays per
-pixel (only a bilinear-cell look-up for a polygon the photograph sees
-whole), and a pixel fewer of the three see than the blend would take is
-blended from every photograph when others see part of its polygon.
+``method="view-map"`` (1998). Each plane of the model (its coplanar
+polygons) is textured from at most three photographs, chosen once per
+plane and view: the three the blend gives the most weight over points
+spread on its polygons, weighted by their area (:meth:`ViewMaps.choose_planes`).
+Rendering does what the paper's projective texture mapping does: one
+plane-induced homography per photograph warps the photograph onto the
+plane's pixels (``cv2.warpPerspective``), and visibility is precomputed
+once per model and photographs (:func:`prepare_view_maps`: per plane, the
+photograph's pixels whose surface lies on that plane), so a new view needs
+no per-pixel depth test, world point or angle. The blend's weights among
+the three come from angles computed on a coarse grid over the plane and
+interpolated (the paper interpolates per-vertex weights). Where fewer of
+the three see a pixel than the blend would take (the plane partly hidden
+from them) and other photographs see the plane, and on planes showing a
+few pixels, the pixel is blended from every photograph that sees the plane.
+The per-polygon Delaunay map of the photographs' directions
+(:meth:`ViewMaps.lookup`) is kept for its barycentric weights.
 
 Pixels of the model no photograph sees are *holes*, filled from their
 neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
@@ -60,6 +66,9 @@ A plane seen by two photographs; the new view equals the first: a copy.
 >>> photos = prepare_photographs(quad, [p0, p1])
 >>> out = render_vdtm(quad, photos, K, np.eye(3), np.zeros(3), (16, 12))
 >>> bool(np.abs(out.image - p0.image).max() < 1e-6)
+True
+>>> vm = render_vdtm(quad, photos, K, np.eye(3), np.zeros(3), (16, 12), method="view-map")
+>>> bool(np.abs(vm.image - p0.image).max() < 1e-6)
 True
 """
 
@@ -320,7 +329,9 @@ class ViewMaps:
     """Every polygon's view map (Debevec, Yu & Borshukov 1998), built once
     for a mesh and its photographs by :func:`prepare_view_maps`: the
     photographs that see the polygon, their directions from its centroid
-    projected onto its plane, and their Delaunay triangulation."""
+    projected onto its plane, and their Delaunay triangulation; the
+    polygons' planes and each photograph's visibility of each plane (what
+    rendering a new view reuses, :func:`_plane_masks`)."""
 
     centroids: np.ndarray
     axes: np.ndarray  # (M, 2, 3): the plane's u, w
@@ -420,7 +431,10 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
     """The view map of every polygon (triangle) of ``mesh``: a photograph
     enters a polygon's map when it sees the polygon in at least one pixel
     (its z-buffer's face ids, :func:`prepare_photographs`) or sees one of
-    28 points spread over it (depth ``tolerance`` as :func:`render_vdtm`'s)."""
+    28 points spread over it (depth ``tolerance`` as :func:`render_vdtm`'s);
+    with the polygons grouped by plane and each photograph's visibility of
+    each plane (:func:`_plane_masks`). Built once per model and
+    photographs, for any number of new views."""
     from scipy.spatial import Delaunay
 
     v, f = _mesh(mesh)
@@ -599,20 +613,6 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
     return tuple(out)
 
 
-def _homography(K, R, t, photo, plane, Kinv=None):
-    """``(3, 3)``: the new view's pixels ``(x, y, 1)`` of the plane ``plane
-    = (n, d)`` to ``photo``'s pixels (the plane-induced homography
-    ``K_j (R_rel + t_rel n_cᵀ / d_c) K⁻¹``, ``n_c · X_c = d_c`` the plane in
-    the new camera's frame)."""
-    nc = R @ plane[:3]
-    dc = plane[3] + nc @ t
-    Rj, tj = np.asarray(photo.R, np.float64), np.asarray(photo.t, np.float64)
-    Rr = Rj @ R.T
-    tr = tj - Rr @ t
-    Kinv = np.linalg.inv(K) if Kinv is None else Kinv
-    return np.asarray(photo.K, np.float64) @ (Rr + np.outer(tr, nc) / dc) @ Kinv
-
-
 def _same_camera(K, R, t, photo):
     """The new camera is ``photo``'s (within 1e-12 relative): its pixel
     centres fall on the photograph's, so a sample has one tap."""
@@ -689,6 +689,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
     own = [_same_camera(K, R, t, p) for p in photos]
     Rr = Rs @ R.T  # new camera frame to each photograph's
     tr = ts - Rr @ t
+    cams = (Ks, Rr, tr, centres, own)
     # each plane's projected bounding box (its polygons' corners), where it is looked for
     vc = maps.vertices @ R.T + t
     pv = vc @ np.asarray(K, np.float64).T
@@ -717,7 +718,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             # a few pixels (a sliver): the three chosen over the whole plane may miss
             # the photographs nearest these, and warping costs more than asking all
             _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
-                       others, photos, power, neighbours, channels, own)
+                       others, photos, power, neighbours, channels, cams)
             continue
         # the angles on a grid placed as cv2.resize's linear upsampling samples it
         gw, gh = max(1, round(bw / ANGLE_STEP_PX)), max(1, round(bh / ANGLE_STEP_PX))
@@ -778,7 +779,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             yy, xx = np.nonzero(inP & (n < need))
             if len(yy):
                 _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
-                           photos, power, neighbours, channels, own)
+                           photos, power, neighbours, channels, cams)
     return image, known, cnt
 
 
@@ -798,38 +799,46 @@ def _plane_put(image, known, cnt, yy, xx, x0, y0, *args):
     cnt[yy, xx] = c
 
 
-def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, own):
+def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, cams):
     """The pixels ``(xs, ys)`` of the plane ``P`` blended from the
     photographs ``js`` as the blend does (every one that sees the point, the
     blend's weights from exact angles), visibility from the planes' masks:
-    ``(acc (n, C), wsum (n,), count (n,))``."""
+    ``(acc (n, C), wsum (n,), count (n,))``. ``cams``: the photographs'
+    ``K`` stacked, the rotations and translations from the new camera's
+    frame to theirs, their centres and which is the new view."""
     import cv2
 
+    Ks, Rr, tr, centres, own = cams
     n = len(xs)
     p3 = np.stack([xs, ys, np.ones(n)], 1).astype(np.float64)
     Kinv = np.linalg.inv(K)
     r = p3 @ Kinv.T
     nc = R @ maps.planes[P, :3]
-    X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
+    dc = maps.planes[P, 3] + nc @ t
+    X = ((r * (dc / (r @ nc))[:, None]) - t) @ R
     ray = _unit(X - C)
+    # every photograph's homography, pixel positions and angles at once
+    Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ Kinv
+    q = np.einsum("kij,nj->kni", Hs, p3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (q[..., :2] / q[..., 2:]).astype(np.float32)
+    d = X[None] - centres[js][:, None]
+    d /= np.linalg.norm(d, axis=2, keepdims=True)
+    d -= ray[None]
+    ang = 2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kni,kni->kn", d, d)) / 2, 1.0))
     th = np.full((len(js), n), np.inf)
     samples = []
     for k, j in enumerate(js):
         p = photos[j]
-        H = _homography(K, R, t, p, maps.planes[P], Kinv)
-        q = p3 @ H.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            uv = (q[:, :2] / q[:, 2:]).astype(np.float32)
         mx0, my0, crop = maps.masks[j][P]
-        vis = cv2.remap(crop, (uv[:, 0] - mx0)[None], (uv[:, 1] - my0)[None], cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
-        vis = vis >= 128 if own[j] else vis == 255
-        vis &= q[:, 2] > 0
+        vis = cv2.remap(crop, (uv[k, :, 0] - mx0)[None], (uv[k, :, 1] - my0)[None],
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
+        vis = (vis >= 128 if own[j] else vis == 255) & (q[k, :, 2] > 0)
         img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
-        s = cv2.remap(img, uv[:, 0][None], uv[:, 1][None], cv2.INTER_LINEAR,
+        s = cv2.remap(img, uv[k, :, 0][None], uv[k, :, 1][None], cv2.INTER_LINEAR,
                       borderMode=cv2.BORDER_REPLICATE)
         samples.append(s.reshape(n, channels))
-        th[k, vis] = _angle_to(ray[vis], X[vis], p.centre)
+        th[k, vis] = ang[k, vis]
     W = _weights(th, power, neighbours)
     acc = np.zeros((n, channels))
     for k, s in enumerate(samples):
