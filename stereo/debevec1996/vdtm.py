@@ -975,6 +975,64 @@ def _push_pull_full(image, known, hole):
     return out
 
 
+_SOLIDS: dict = {}
+
+
+def _outward_solids(v, f) -> bool:
+    """The mesh is a union of closed solids, each consistently oriented
+    with its normals outward: every directed edge once and its reverse once,
+    and every connected part of positive volume (the last few meshes'
+    answers kept)."""
+    key = (v.tobytes(), f.tobytes())
+    if key in _SOLIDS:
+        return _SOLIDS[key]
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(v)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    fwd, rev = e[:, 0] * n + e[:, 1], e[:, 1] * n + e[:, 0]
+    ok = bool(len(f)) and len(np.unique(fwd)) == len(fwd) and np.array_equal(np.sort(fwd),
+                                                                             np.sort(rev))
+    if ok:
+        _, label = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])),
+                                                   shape=(n, n)), directed=False)
+        tri = v[f]
+        vol = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
+        ok = bool((np.bincount(label[f[:, 0]], weights=vol) > 0).all())
+    if len(_SOLIDS) >= 4:
+        _SOLIDS.pop(next(iter(_SOLIDS)))
+    _SOLIDS[key] = ok
+    return ok
+
+
+def _zbuffer(v, f, K, R, t, size, rays):
+    """The new view's z-buffer (:func:`rasterize`, no barycentrics). When the
+    mesh is a union of closed outward-facing solids (:func:`_outward_solids`)
+    and the camera is outside all of them (the winding number of the
+    surface around the centre, the sum of the triangles' solid angles over
+    4π, is 0), the triangles facing away are left out: a ray reaching one
+    has entered its solid through a nearer face of it, so none of them
+    shows (the same depth; at an edge a tie may keep the front face's id
+    where the back face's was kept)."""
+    C = -R.T @ t
+    if len(f) and _outward_solids(v, f):
+        a, b, c = v[f[:, 0]] - C, v[f[:, 1]] - C, v[f[:, 2]] - C
+        la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+        num = np.einsum("ij,ij->i", a, np.cross(b, c))  # < 0: the face looks at C
+        den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc
+               + np.einsum("ij,ij->i", a, c) * lb + np.einsum("ij,ij->i", b, c) * la)
+        winding = np.arctan2(num, den).sum() / (2 * np.pi)  # van Oosterom & Strackee 1983
+        if abs(winding) < 0.5:
+            keep = np.flatnonzero(num < 0)
+            r = rasterize(v, f[keep], K, R, t, size, rays=rays, bary=False)
+            covered = np.zeros(len(f), np.int64)
+            covered[keep] = r.covered
+            face = np.where(r.face >= 0, keep[np.maximum(r.face, 0)], -1).astype(np.int32)
+            return replace(r, face=face, covered=covered)
+    return rasterize(v, f, K, R, t, size, rays=rays, bary=False)
+
+
 _RAYS: dict = {}
 
 
@@ -1056,7 +1114,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     C = -R.T @ t
     t0 = time.perf_counter()
     rays = _rays(K, (w, h))
-    r = rasterize(v, f, K, R, t, (w, h), rays=rays, bary=False)
+    r = _zbuffer(v, f, K, R, t, (w, h), rays)
     t1 = time.perf_counter()
     model = r.hit
 

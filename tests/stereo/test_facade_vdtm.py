@@ -181,3 +181,26 @@ def test_push_pull_on_tiles_equals_the_whole_pyramid():
             continue
         img = rng.random((h, w, 3)).astype(np.float32)
         np.testing.assert_array_equal(_push_pull(img, known, hole), _push_pull_full(img, known, hole))
+
+
+def test_zbuffer_leaves_out_faces_turned_away_with_the_same_result(facade):
+    # the building is a union of closed outward-facing blocks: from outside, the
+    # faces turned away never show; from inside a block, or for an open mesh, every
+    # face is drawn
+    from lumigraph.stereo.debevec1996.vdtm import _outward_solids, _zbuffer
+
+    s, mesh, photos = facade
+    v, f = (np.asarray(a) for a in mesh)
+    assert _outward_solids(v, f) and not _outward_solids(v, f[1:])
+    for p in photos[:3]:
+        a = rasterize(v, f, p.K, p.R, p.t, SIZE, bary=False)
+        b = _zbuffer(v, f, p.K, np.asarray(p.R), np.asarray(p.t), SIZE, None)
+        np.testing.assert_array_equal(a.depth, b.depth)
+        np.testing.assert_array_equal(a.face, b.face)
+    inside = v[f[:12].ravel()].mean(0)  # the house's centre (its box: the first 12 faces)
+    K = photos[0].K
+    R = np.eye(3)
+    a = rasterize(v, f, K, R, -R @ inside, SIZE, bary=False)
+    b = _zbuffer(v, f, K, R, -R @ inside, SIZE, None)
+    assert a.hit.any()
+    np.testing.assert_array_equal(a.face, b.face)
