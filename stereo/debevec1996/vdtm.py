@@ -819,13 +819,13 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
     ray = _unit(X - C)
     # every photograph's homography, pixel positions and angles at once
     Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ Kinv
-    q = np.einsum("kij,nj->kni", Hs, p3)
+    q = p3 @ Hs.transpose(0, 2, 1)  # (k, n, 3)
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = (q[..., :2] / q[..., 2:]).astype(np.float32)
     d = X[None] - centres[js][:, None]
-    d /= np.linalg.norm(d, axis=2, keepdims=True)
+    d /= np.sqrt((d * d).sum(2))[..., None]
     d -= ray[None]
-    ang = 2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kni,kni->kn", d, d)) / 2, 1.0))
+    ang = 2 * np.arcsin(np.minimum(np.sqrt((d * d).sum(2)) / 2, 1.0))
     th = np.full((len(js), n), np.inf)
     samples = []
     for k, j in enumerate(js):
