@@ -739,9 +739,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         dj -= ray[None]
         ang = (2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kgi,kgi->kg", dj, dj)) / 2, 1.0))
                ).astype(np.float32)
-        samples = []
         for k, j in enumerate(js):
-            p = photos[j]
             H = Hs[k]
             mx0, my0, crop = maps.masks[j][P]
             Hm = H.copy()
@@ -754,9 +752,6 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             if (wz <= 0).any():
                 vis |= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
                         + H[2, 2]) <= 0
-            img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
-            s = cv2.warpPerspective(img, H, (bw, bh), flags=flags, borderMode=cv2.BORDER_REPLICATE)
-            samples.append(s.reshape(bh, bw, channels))
             cv2.resize(ang[k].reshape(gh, gw), (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
             np.copyto(th[k], np.float32(np.inf), where=vis)
         W = (_weights3(th, power, neighbours) if len(js) <= 3 else
@@ -764,9 +759,22 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         ws = W.sum(0)
         seen = ws > 0
         np.divide(W, ws, out=W, where=seen)
-        out = W[0][..., None] * samples[0]
-        for k in range(1, len(js)):
-            out += W[k][..., None] * samples[k]
+        # the photographs warped where they have weight only (with the blend's taper,
+        # the third nearest has none wherever the two nearer ones see the point)
+        out = np.zeros((bh, bw, channels), np.float32)
+        for k, j in enumerate(js):
+            Wk = W[k] * inP
+            rows = np.flatnonzero(Wk.any(1))
+            if not len(rows):
+                continue
+            cols = np.flatnonzero(Wk[rows[0]:rows[-1] + 1].any(0))
+            (ya, yb), (xa, xb) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
+            H = Hs[k] @ np.array([[1.0, 0, xa], [0, 1, ya], [0, 0, 1]])
+            img = photos[j].image
+            img = img if img.dtype == np.float32 else np.asarray(img, np.float32)
+            smp = cv2.warpPerspective(img, H, (int(xb - xa), int(yb - ya)), flags=flags,
+                                      borderMode=cv2.BORDER_REPLICATE)
+            out[ya:yb, xa:xb] += Wk[ya:yb, xa:xb, None] * smp.reshape(yb - ya, xb - xa, channels)
         n = (W > 0).sum(0, dtype=np.int8)
         ok = inP & seen
         np.copyto(image[y0:y1, x0:x1], out, where=ok[..., None])
