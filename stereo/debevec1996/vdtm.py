@@ -589,27 +589,29 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
         if not mine.any():
             out.append(None)
             continue
+        near = cv2.dilate(mine, np.ones((3, 3), np.uint8)) > 0
+        rows, cols = np.flatnonzero(near.any(1)), np.flatnonzero(near.any(0))
+        near = near[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        y0, x0 = int(y0) + int(rows[0]), int(x0) + int(cols[0])
+        h_, w_ = near.shape
+        # the plane's inverse depth along each pixel's (unit z) ray is affine in the
+        # pixel: u = n_c . K^-1 (x, y, 1) / d_c = A x + B y + c
         nc = R @ planes[P, :3]
         dc = planes[P, 3] + nc @ t
-        ys, xs = np.mgrid[y0:y1 + 1, x0:x1 + 1]
+        A, B, c = (nc @ Kinv) / dc
+        u = (A * np.arange(x0, x0 + w_))[None, :] + (B * np.arange(y0, y0 + h_) + c)[:, None]
+        z = photo.depth[y0:y0 + h_, x0:x0 + w_]
         with np.errstate(divide="ignore", invalid="ignore"):
-            # the plane's depth along each pixel's ray (unit z): d_c / (n_c . r)
-            zp = dc / ((xs * Kinv[0, 0] + ys * Kinv[0, 1] + Kinv[0, 2]) * nc[0]
-                       + (xs * Kinv[1, 0] + ys * Kinv[1, 1] + Kinv[1, 2]) * nc[1]
-                       + (xs * Kinv[2, 0] + ys * Kinv[2, 1] + Kinv[2, 2]) * nc[2])
-            z = photo.depth[y0:y1 + 1, x0:x1 + 1]
+            zp = 1 / u
+            on = near & np.isfinite(z) & (np.abs(z - zp) <= tolerance * z)
             # the plane seen this obliquely (its depth changing by more than twice the
-            # tolerance from one pixel to the next) is not seen: the blend's cells
-            # (taps within 2 tolerance of each other) reject it alike
-            zx = np.abs(np.diff(zp, axis=1, append=2 * zp[:, -1:] - zp[:, -2:-1]
-                                if zp.shape[1] > 1 else zp[:, -1:]))
-            zy = np.abs(np.diff(zp, axis=0, append=2 * zp[-1:] - zp[-2:-1]
-                                if zp.shape[0] > 1 else zp[-1:]))
-            on = ((cv2.dilate(mine, np.ones((3, 3), np.uint8)) > 0) & np.isfinite(z)
-                  & (np.abs(z - zp) <= tolerance * z))
-            steep = np.maximum(zx, zy) > 2 * tolerance * zp
+            # tolerance to the next pixel: |1/(u + A) - 1/u| = |A / (u + A)| / u) is not
+            # seen between pixel centres: the blend's cells (taps within 2 tolerance of
+            # each other) reject it alike
+            steep = ((np.abs(A) > 2 * tolerance * np.abs(u + A))
+                     | (np.abs(B) > 2 * tolerance * np.abs(u + B)))
         # 255: seen; 128: seen, too obliquely for a sample between pixel centres
-        out.append((int(x0), int(y0), np.where(on, np.where(steep, 128, 255), 0).astype(np.uint8)))
+        out.append((x0, y0, np.where(on, np.where(steep, 128, 255), 0).astype(np.uint8)))
     return tuple(out)
 
 
