@@ -97,13 +97,16 @@ def _interleaved(fns, repeats=5):
     """``(outputs, best seconds)`` of each of ``fns``, called in turn
     ``repeats`` times (interleaved, so a load change hits all alike); the
     seconds are CPU time of this process (``time.process_time``: on a
-    shared machine steadier than the wall clock; one thread, so the same)."""
+    shared machine steadier than the wall clock; one thread, so the same),
+    the output that of the fastest call (its stage timings beside it)."""
     best, out = [math.inf] * len(fns), [None] * len(fns)
     for _ in range(repeats):
         for i, fn in enumerate(fns):
             t0 = time.process_time()
-            out[i] = fn()
-            best[i] = min(best[i], time.process_time() - t0)
+            o = fn()
+            dt = time.process_time() - t0
+            if dt < best[i]:
+                best[i], out[i] = dt, o
     return out, best
 
 
