@@ -864,6 +864,11 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
     float32 out, else float64."""
     out = np.array(image, np.float32 if np.asarray(image).dtype == np.float32 else np.float64,
                    copy=True)
+    return _fill_inplace(out, known, region)
+
+
+def _fill_inplace(out, known, region):
+    """:func:`fill_holes` into ``out`` itself (float32 or float64)."""
     hole = region & ~known
     if not hole.any() or not known.any():
         return out
@@ -872,7 +877,7 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
     box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
     if not known[box].any():
         box = np.s_[:, :]
-    out[box] = _push_pull(out[box], known[box], hole[box])
+    _push_pull(out[box], known[box], hole[box], inplace=True)  # out[box] is a view of out
     return out
 
 
@@ -887,8 +892,9 @@ def _resize(a, size, interp):
     return out[0] if len(out) == 1 else np.concatenate(out, 2)
 
 
-def _push_pull(image, known, hole):
-    """Push–pull of the holes (:func:`fill_holes`), computed on the aligned
+def _push_pull(image, known, hole, *, inplace=False):
+    """Push–pull of the holes (:func:`fill_holes`; into ``image`` itself
+    with ``inplace``), computed on the aligned
     tiles of 2^L pixels that hold holes only: a hole's value depends only on
     its aligned blocks (level l: the 2^l block of the box holding it) up to
     the coarsest level the whole box's pyramid builds, or up to the first
@@ -903,7 +909,7 @@ def _push_pull(image, known, hole):
         k = np.pad(k, ((0, k.shape[0] % 2), (0, k.shape[1] % 2)))
         k = k.reshape(k.shape[0] // 2, 2, k.shape[1] // 2, 2).any((1, 3))
         top += 1
-    out = np.array(image, copy=True)
+    out = image if inplace else np.array(image, copy=True)
     hy, hx = np.nonzero(hole)
     levels = min(top, TILE_LEVELS)
     while len(hy):
@@ -1155,7 +1161,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         known = known.reshape(h, w)
     filled = model & ~known
     if fill and filled.any() and known.any():
-        out = fill_holes(out, known, model)
+        out = _fill_inplace(out, known, model)  # out is this call's own
     elif not fill:
         filled = np.zeros_like(model)
     t3 = time.perf_counter()
