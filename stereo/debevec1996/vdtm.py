@@ -699,7 +699,8 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
     # the planes with a polygon inside the frame (the z-buffer decides which show)
     for P in np.unique(maps.face_plane[covered > 0]):
         js = [int(j) for j in ids[P] if j >= 0 and maps.masks[j][P] is not None]
-        if not js:
+        others = [j for j in range(len(photos)) if maps.masks[j][P] is not None]
+        if not others:
             continue
         corners = maps.plane_vertices[P]
         if (vc[corners, 2] > 1e-12).all():
@@ -715,10 +716,11 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         x0, x1 = lo[0] + int(cols[0]), lo[0] + int(cols[-1]) + 1
         inP = band[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
         bh, bw = inP.shape
-        others = [j for j in range(len(photos)) if maps.masks[j][P] is not None]
-        if len(others) > len(js) and bh * bw < SMALL_PLANE_PX and inP.sum() < SMALL_PLANE_PX // 4:
-            # a few pixels (a sliver): the three chosen over the whole plane may miss
-            # the photographs nearest these, and warping costs more than asking all
+        if not js or (len(others) > len(js) and bh * bw < SMALL_PLANE_PX
+                      and inP.sum() < SMALL_PLANE_PX // 4):
+            # none of the three sees the plane, or a few pixels (a sliver): the three
+            # chosen over the whole plane may miss the photographs nearest these, and
+            # warping costs more than asking all
             _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
                        others, photos, power, neighbours, channels, cams)
             continue
@@ -772,10 +774,7 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             cols = np.flatnonzero(Wk[rows[0]:rows[-1] + 1].any(0))
             (ya, yb), (xa, xb) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
             H = Hs[k] @ np.array([[1.0, 0, xa], [0, 1, ya], [0, 0, 1]])
-            img = photos[j].image
-            img = img if img.dtype == np.float32 else np.asarray(img, np.float32)
-            smp = cv2.warpPerspective(img, H, (int(xb - xa), int(yb - ya)), flags=flags,
-                                      borderMode=cv2.BORDER_REPLICATE)
+            smp = _warp(photos[j].image, H, (int(xb - xa), int(yb - ya)))
             out[ya:yb, xa:xb] += Wk[ya:yb, xa:xb, None] * smp.reshape(yb - ya, xb - xa, channels)
         n = (W > 0).sum(0, dtype=np.int8)
         ok = inP & seen
@@ -791,6 +790,27 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
                 _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
                            photos, power, neighbours, channels, cams)
     return image, known, cnt
+
+
+def _warp(image, H, size, maps=None):
+    """``image`` (H, W[, C]) as float32 warped by the inverse map ``H``
+    (new-view pixel to photograph pixel, ``cv2.warpPerspective``) onto
+    ``size``, or sampled at ``maps = (mx, my)`` (``cv2.remap``); bilinear,
+    border replicated (as :func:`_sample`), at most four channels a call."""
+    import cv2
+
+    img = image if image.dtype == np.float32 else np.asarray(image, np.float32)
+
+    def one(a):
+        if maps is not None:
+            return cv2.remap(a, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return cv2.warpPerspective(a, H, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_REPLICATE)
+
+    if img.ndim == 2 or img.shape[2] <= 4:
+        return one(img)
+    parts = [one(np.ascontiguousarray(img[..., c:c + 4])) for c in range(0, img.shape[2], 4)]
+    return np.concatenate([q[..., None] if q.ndim == 2 else q for q in parts], -1)
 
 
 # a plane showing fewer pixels than a quarter of this (in a box under this) is textured
@@ -844,9 +864,7 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
         vis = cv2.remap(crop, (uv[k, :, 0] - mx0)[None], (uv[k, :, 1] - my0)[None],
                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
         vis = (vis >= 128 if own[j] else vis == 255) & (q[k, :, 2] > 0)
-        img = p.image if p.image.dtype == np.float32 else np.asarray(p.image, np.float32)
-        s = cv2.remap(img, uv[k, :, 0][None], uv[k, :, 1][None], cv2.INTER_LINEAR,
-                      borderMode=cv2.BORDER_REPLICATE)
+        s = _warp(p.image, None, None, maps=(uv[k, :, 0][None], uv[k, :, 1][None]))
         samples.append(s.reshape(n, channels))
         th[k, vis] = ang[k, vis]
     W = _weights(th, power, neighbours)

@@ -204,3 +204,22 @@ def test_zbuffer_leaves_out_faces_turned_away_with_the_same_result(facade):
     b = _zbuffer(v, f, K, R, -R @ inside, SIZE, None)
     assert a.hit.any()
     np.testing.assert_array_equal(a.face, b.face)
+
+
+def test_view_map_any_number_of_channels(facade):
+    # the warps take at most four channels a call: five channels are the three
+    # and two more, blended alike; one channel (a 2-D image) is the first
+    s, mesh, photos = facade
+    cam = s.gt["novel_cameras"]["view_0"]
+    K, R, t = (np.array(cam[x]) for x in ("K", "R", "t"))
+    five = prepare_photographs(mesh, [
+        Photograph(np.concatenate([p.image, p.image[..., :2] * 0.5], 2), p.K, p.R, p.t)
+        for p in photos])
+    grey = prepare_photographs(mesh, [Photograph(p.image[..., 0], p.K, p.R, p.t) for p in photos])
+    a = render_vdtm(mesh, photos, K, R, t, SIZE, method="view-map")
+    b = render_vdtm(mesh, five, K, R, t, SIZE, method="view-map")
+    c = render_vdtm(mesh, grey, K, R, t, SIZE, method="view-map")
+    assert b.image.shape[2] == 5 and c.image.shape[2] == 1
+    np.testing.assert_allclose(b.image[..., :3], a.image, rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(b.image[..., 3:], 0.5 * a.image[..., :2], rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(c.image[..., 0], a.image[..., 0], rtol=1e-5, atol=1e-3)
