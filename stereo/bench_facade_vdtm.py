@@ -19,13 +19,15 @@ REPORTED seeds 1–3 (quick: seed 1) and holds at the WORST reported view
   centre is nearest the new one; what it does not see filled as VDTM fills
   holes). Targets (the issue's sentence read strictly): blend ≥ 2 dB above
   the uniform average AND ≥ 2 dB above the nearest photograph; view map
-  within ±0.5 dB of the blend at ≥ 3× its speed. The speed is the whole
-  library call against the whole call (the shared z-buffer of the new view
-  and hole filling included), one thread, calls interleaved, the minimum
-  of three each, with the photographs' depth maps and the view maps
-  prepared once beforehand (both papers precompute visibility; the 1998
-  view maps are built once per model); the texturing stage's ratio is in
-  the row.
+  within ±0.5 dB of the blend at ≥ 3× its speed. The speed is what a new
+  view costs: the whole library call against the whole call (the shared
+  z-buffer of the new view and hole filling included), one thread, calls
+  interleaved, the minimum of five each in CPU time, with the photographs'
+  depth maps and the view maps prepared once beforehand (both papers
+  precompute visibility; the 1998 view maps, and here each photograph's
+  visibility of each plane, are built once per model and photographs);
+  the precompute, and the ratio with it spread over a model's views, are
+  in the check's note; the texturing stage's ratio is in the row.
 - Model-based stereo (Lambertian building, 640x480, quick 320x240; the
   glossy variant's highlights break SSD matching between two views): key
   ``photo_03``, offset ``photo_04``; marks with 0.5 px endpoint noise. The
@@ -84,21 +86,27 @@ def _photos(s):
     photos = prepare_photographs(mesh, [
         Photograph(im.astype(np.float32), np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
         for im, c in zip(s.images, s.gt["cameras"].values(), strict=True)])
-    # the view maps' precompute (once per model and photographs), timed apart
-    t0 = time.perf_counter()
+    # the view maps' precompute (once per model and photographs: the polygons' maps,
+    # the planes and each photograph's visibility of each plane), timed apart
+    t0 = time.process_time()
     maps = prepare_view_maps(mesh, photos)
-    return mesh, photos, maps, time.perf_counter() - t0
+    return mesh, photos, maps, time.process_time() - t0
 
 
-def _interleaved(fns, repeats=3):
+def _interleaved(fns, repeats=5):
     """``(outputs, best seconds)`` of each of ``fns``, called in turn
-    ``repeats`` times (interleaved, so a load change hits all alike)."""
+    ``repeats`` times (interleaved, so a load change hits all alike); the
+    seconds are CPU time of this process (``time.process_time``: on a
+    shared machine steadier than the wall clock; one thread, so the same),
+    the output that of the fastest call (its stage timings beside it)."""
     best, out = [math.inf] * len(fns), [None] * len(fns)
     for _ in range(repeats):
         for i, fn in enumerate(fns):
-            t0 = time.perf_counter()
-            out[i] = fn()
-            best[i] = min(best[i], time.perf_counter() - t0)
+            t0 = time.process_time()
+            o = fn()
+            dt = time.process_time() - t0
+            if dt < best[i]:
+                best[i], out[i] = dt, o
     return out, best
 
 
@@ -167,15 +175,16 @@ def vdtm(quick: bool):
         Check(f"view map within 0.5 dB of the blend (worst |PSNR view map - blend| of {n} "
               "reported views)", worstv, 0.5, worstv <= 0.5, f"median {medv:+.2f} dB"),
         Check(f"view map at >= 3x the blend's speed (whole call, worst of {n} reported views; "
-              "interleaved, min of 3 calls, one thread)", worsts, 3.0, worsts >= 3.0,
-              f"median {meds:.2f}x; timed: render_vdtm(method='blend') against "
-              "render_vdtm(method='view-map', maps=...), each with its own z-buffer of the "
-              "new view, texturing and hole filling; not timed: the photographs' depth maps "
-              "(both) and the view maps (built once per model: median "
-              f"{1e3 * float(np.median(prep)):.0f} ms; spread over the views, ratio median "
-              f"{float(np.median(amortised)):.2f}x, worst {float(np.min(amortised)):.2f}x); "
-              f"texturing stage alone median {float(np.median(speed)):.2f}x, "
-              f"worst {float(np.min(speed)):.2f}x"),
+              "interleaved, min of 5 calls, CPU time, one thread)", worsts, 3.0, worsts >= 3.0,
+              f"median {meds:.2f}x; timed: what a new view costs, render_vdtm(method='blend') "
+              "against render_vdtm(method='view-map', maps=...), each with its own z-buffer of "
+              "the new view, texturing and hole filling; not timed: the photographs' depth maps "
+              "(both) and the view maps' precompute (once per model and photographs: the "
+              "planes' visibility in every photograph; median "
+              f"{1e3 * float(np.median(prep)):.0f} ms; spread over the {n_views} views of a "
+              f"model, ratio median {float(np.median(amortised)):.2f}x, worst "
+              f"{float(np.min(amortised)):.2f}x); texturing stage alone median "
+              f"{float(np.median(speed)):.2f}x, worst {float(np.min(speed)):.2f}x"),
     ]
     return rows, checks
 

@@ -27,8 +27,10 @@ Renders the model from --view, each pixel textured from the photographs that see
 point (visibility by each photograph's depth of the model, --tolerance), weighted by
 (angle between the new and the photograph's viewing rays)^-power over the --neighbours
 nearest, tapered to 0 at the next (--method blend; Debevec, Taylor & Malik 1996; the taper of
-Buehler et al. 2001), or the same weights among at most three photographs per polygon, the
-three the blend weights most over it (--method view-map; Debevec, Yu & Borshukov 1998).
+Buehler et al. 2001), or the same weights among at most three photographs per plane of the
+model, the three the blend weights most over it, projected onto the plane by homographies with
+each photograph's visibility of each plane computed once (--method view-map; Debevec, Yu &
+Borshukov 1998).
 Model pixels no photograph sees are filled from their neighbours; pixels off the model are 0.
 --photos names a folder with stack.json; each photograph's pose comes from --cameras DIR
 (<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
@@ -77,7 +79,7 @@ def add_verbs(fs) -> None:
                    help="camera.json with cam_from_world: the new viewpoint")
     v.add_argument("--method", choices=("blend", "view-map"), default="blend",
                    help="blend: every photograph, per-pixel angle weights (default); view-map: "
-                        "at most three per polygon (faster)")
+                        "at most three per plane, projective texture mapping (faster)")
     v.add_argument("--tolerance", type=number(float, lo=0, lo_open=True, hi=1), default=0.01,
                    help="visibility: relative depth difference still on the same surface "
                         "(default 0.01)")

@@ -32,17 +32,23 @@ tapered to 0 at the next nearest angle ``θ_(k+1)`` (C. Buehler et al.,
 doi:10.1145/383259.383309), so no seam appears where the nearest change;
 ``neighbours = 0`` blends every photograph that sees ``X``.
 
-``method="view-map"`` (1998). Each polygon (mesh triangle) is textured
-from at most three photographs, chosen once per polygon and view: the
-three the blend gives the most weight over points spread on the polygon
-(:meth:`ViewMaps.choose`; the points' visibility is computed once per model
-by :func:`prepare_view_maps`, with the 1998 paper's per-polygon map of the
-photographs' directions, :meth:`ViewMaps.lookup`). A pixel blends its
-polygon's three with the blend's weights among them, so the view map is the
-blend wherever they hold the pixel's nearest; the visibility test stays per
-pixel (only a bilinear-cell look-up for a polygon the photograph sees
-whole), and a pixel fewer of the three see than the blend would take is
-blended from every photograph when others see part of its polygon.
+``method="view-map"`` (1998). Each plane of the model (its coplanar
+polygons) is textured from at most three photographs, chosen once per
+plane and view: the three the blend gives the most weight over points
+spread on its polygons, weighted by their area (:meth:`ViewMaps.choose_planes`).
+Rendering does what the paper's projective texture mapping does: one
+plane-induced homography per photograph warps the photograph onto the
+plane's pixels (``cv2.warpPerspective``), and visibility is precomputed
+once per model and photographs (:func:`prepare_view_maps`: per plane, the
+photograph's pixels whose surface lies on that plane), so a new view needs
+no per-pixel depth test, world point or angle. The blend's weights among
+the three come from angles computed on a coarse grid over the plane and
+interpolated (the paper interpolates per-vertex weights). Where fewer of
+the three see a pixel than the blend would take (the plane partly hidden
+from them) and other photographs see the plane, and on planes showing a
+few pixels, the pixel is blended from every photograph that sees the plane.
+The per-polygon Delaunay map of the photographs' directions
+(:meth:`ViewMaps.lookup`) is kept for its barycentric weights.
 
 Pixels of the model no photograph sees are *holes*, filled from their
 neighbours (push–pull: a pyramid of weighted means, Gortler et al. 1996).
@@ -60,6 +66,9 @@ A plane seen by two photographs; the new view equals the first: a copy.
 >>> photos = prepare_photographs(quad, [p0, p1])
 >>> out = render_vdtm(quad, photos, K, np.eye(3), np.zeros(3), (16, 12))
 >>> bool(np.abs(out.image - p0.image).max() < 1e-6)
+True
+>>> vm = render_vdtm(quad, photos, K, np.eye(3), np.zeros(3), (16, 12), method="view-map")
+>>> bool(np.abs(vm.image - p0.image).max() < 1e-6)
 True
 """
 
@@ -96,7 +105,8 @@ class Photograph:
     see each triangle and ``whole`` (M,) which triangles it sees whole (every
     pixel centre their projection covers shows them) and ``cells`` (H, W)
     which bilinear cells (pixels ``[y, y+1] × [x, x+1]``) lie on one
-    continuous surface, filled by :func:`prepare_photographs`.
+    continuous surface, ``face`` (H, W) its z-buffer's triangle ids (-1 off
+    the model), filled by :func:`prepare_photographs`.
     """
 
     image: np.ndarray
@@ -107,6 +117,7 @@ class Photograph:
     face_pixels: np.ndarray | None = field(default=None, repr=False)
     whole: np.ndarray | None = field(default=None, repr=False)
     cells: np.ndarray | None = field(default=None, repr=False)
+    face: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def centre(self) -> np.ndarray:
@@ -175,7 +186,7 @@ def prepare_photographs(mesh, photographs, *, tolerance: float = 0.01) -> tuple[
         out.append(replace(p, depth=r.depth, face_pixels=counts,
                            whole=(counts > 0) & (counts == r.covered),
                            # one continuous surface: as _sample's tap test
-                           cells=_cells(r.depth, 2 * tolerance)))
+                           cells=_cells(r.depth, 2 * tolerance), face=r.face))
     return tuple(out)
 
 
@@ -318,7 +329,9 @@ class ViewMaps:
     """Every polygon's view map (Debevec, Yu & Borshukov 1998), built once
     for a mesh and its photographs by :func:`prepare_view_maps`: the
     photographs that see the polygon, their directions from its centroid
-    projected onto its plane, and their Delaunay triangulation."""
+    projected onto its plane, and their Delaunay triangulation; the
+    polygons' planes and each photograph's visibility of each plane (what
+    rendering a new view reuses, :func:`_plane_masks`)."""
 
     centroids: np.ndarray
     axes: np.ndarray  # (M, 2, 3): the plane's u, w
@@ -329,12 +342,20 @@ class ViewMaps:
     good: tuple = ()  # per polygon: which of its triangles are not slivers
     grid: np.ndarray | None = None  # (M, G, 3) points spread over each polygon
     grid_seen: np.ndarray | None = None  # (N, M, G) which photograph sees which point
+    # the polygons' planes and each photograph's per-plane visibility (see _plane_masks)
+    face_plane: np.ndarray | None = None  # (M,) plane of each polygon
+    planes: np.ndarray | None = None  # (P, 4): unit normal n and offset d, n . X = d
+    face_area: np.ndarray | None = None  # (M,)
+    masks: tuple = ()  # per photograph, per plane: (x0, y0, uint8 crop) or None
+    vertices: np.ndarray | None = None  # (V, 3) the mesh's
+    plane_vertices: tuple = ()  # per plane: the indices of its polygons' corners
 
-    def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
-        """The three photographs of each polygon for the view from ``C``
-        (``ids (M, 3)``, -1 = none): those the blend (:func:`_weights`, the
-        same ``power`` and ``neighbours``) gives the most weight over the
-        polygon's grid points, each point's weights summing to 1."""
+    def scores(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+        """``(M, N)``: the weight the blend (:func:`_weights`, the same
+        ``power`` and ``neighbours``) gives each photograph over each
+        polygon's grid points for the view from ``C``, each point's weights
+        summing to 1, then a millionth of the share of the points it sees
+        (ties go to the photograph that sees more of the polygon)."""
         M, G = self.grid.shape[:2]
         ray = _unit((self.grid - C).reshape(-1, 3))
         X = self.grid.reshape(-1, 3)
@@ -343,11 +364,24 @@ class ViewMaps:
         W = _weights(theta, power, neighbours)
         W /= np.maximum(W.sum(0), 1e-300)
         score = W.reshape(len(self.centres), M, G).sum(2).T  # (M, N)
-        # then the photographs that see more of the polygon
         score += 1e-6 * self.grid_seen.mean(2).T
-        order = np.argsort(-score, axis=1, kind="stable")[:, :3]
-        ids = np.where(np.take_along_axis(score, order, 1) > 0, order, -1)
-        return ids
+        return score
+
+    def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+        """The three photographs of each polygon for the view from ``C``
+        (``ids (M, 3)``, -1 = none): those the blend gives the most weight
+        over the polygon's grid points (:meth:`scores`)."""
+        return _top3(self.scores(C, power=power, neighbours=neighbours))
+
+    def choose_planes(self, C, *, power: float = DEFAULT_POWER,
+                      neighbours: int = DEFAULT_NEIGHBOURS):
+        """The three photographs of each plane (``ids (P, 3)``, -1 = none):
+        the polygons' :meth:`scores` weighted by their area, summed over the
+        plane's polygons."""
+        score = self.scores(C, power=power, neighbours=neighbours) * self.face_area[:, None]
+        plane = np.zeros((len(self.planes), score.shape[1]))
+        np.add.at(plane, self.face_plane, score)
+        return _top3(plane)
 
     def lookup(self, C, *, power: float = DEFAULT_POWER):
         """The at most three photographs and weights of each polygon for the
@@ -388,11 +422,19 @@ class ViewMaps:
         return ids, wts
 
 
+def _top3(score, k=3):
+    order = np.argsort(-score, axis=1, kind="stable")[:, :k]
+    return np.where(np.take_along_axis(score, order, 1) > 0, order, -1)
+
+
 def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
     """The view map of every polygon (triangle) of ``mesh``: a photograph
     enters a polygon's map when it sees the polygon in at least one pixel
     (its z-buffer's face ids, :func:`prepare_photographs`) or sees one of
-    28 points spread over it (depth ``tolerance`` as :func:`render_vdtm`'s)."""
+    28 points spread over it (depth ``tolerance`` as :func:`render_vdtm`'s);
+    with the polygons grouped by plane and each photograph's visibility of
+    each plane (:func:`_plane_masks`). Built once per model and
+    photographs, for any number of new views."""
     from scipy.spatial import Delaunay
 
     v, f = _mesh(mesh)
@@ -438,8 +480,12 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
         pts.append(pm)
         dels.append(d)
         good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
+    fp, planes = _face_planes(v, f)
+    masks = tuple(_plane_masks(v, f, fp, planes, p, tolerance) for p in photos)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
-                    tuple(good), grid, grid_seen)
+                    tuple(good), grid, grid_seen, fp, planes, area, masks, v,
+                    tuple(np.unique(f[fp == P]) for P in range(len(planes))))
 
 
 def _seen_nearest(photo, X, tolerance):
@@ -478,44 +524,354 @@ def view_maps(mesh, photos, C, *, power=DEFAULT_POWER):
     return prepare_view_maps(mesh, photos).lookup(C, power=power)
 
 
-def _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels):
-    """Each pixel blended from its polygon's (at most) three photographs
-    ``ids[face]``, with the blend's weights (:func:`_weights`) among them."""
-    n, P = len(X), len(photos)
-    # the pixels grouped by their polygon's three photographs (one radix sort of
-    # small keys): each group's slot is one photograph, worked on as a slice
-    key = ((ids[:, 0] + 1) * (P + 1) + ids[:, 1] + 1) * (P + 1) + ids[:, 2] + 1
-    uniq, inv = np.unique(key, return_inverse=True)
-    pix_group = inv[face]
-    order = np.argsort(pix_group.astype(np.int16 if len(uniq) < 2 ** 15 else np.int64),
-                       kind="stable")
-    starts = np.concatenate([[0], np.cumsum(np.bincount(pix_group, minlength=len(uniq)))])
-    Xs, fs = X[order], face[order]
-    rays = _unit(Xs - C)
-    theta = np.full((3, n), np.inf)
-    samples = np.zeros((3, n, channels), np.float32)
-    for g, kv in enumerate(uniq):
-        a, b = starts[g], starts[g + 1]
-        if a == b:
-            continue
-        trio = (kv // (P + 1) ** 2 - 1, kv // (P + 1) % (P + 1) - 1, kv % (P + 1) - 1)
-        for k, j in enumerate(trio):
-            if j < 0:
-                continue
-            p = photos[j]
-            # a polygon the photograph sees whole needs no per-pixel depth test (the
-            # 1998 paper's polygons are split at visibility edges beforehand), only
-            # a look-up that the bilinear cell does not straddle its outline
-            samples[k, a:b], ok = _sample(p, Xs[a:b], tolerance, whole=p.whole[fs[a:b]])
-            theta[k, a:b] = np.where(ok, _angle_to(rays[a:b], Xs[a:b], p.centre), np.inf)
-    W = _weights(theta, power, neighbours)
-    acc_s = W[0][:, None] * samples[0]
-    acc_s += W[1][:, None] * samples[1]
-    acc_s += W[2][:, None] * samples[2]
-    acc, wsum, cnt = np.empty_like(acc_s), np.empty(n), np.empty(n, np.int64)
-    acc[order], wsum[order], cnt[order] = acc_s, W.sum(0), (W > 0).sum(0)
-    return acc, wsum, cnt
+def _face_planes(v, f):
+    """``(face_plane (M,), planes (P, 4))``: the polygons grouped by their
+    plane (unit normal ``n`` and offset ``d``, ``n · X = d``; equal within
+    1e-9, the offset relative to the model's extent). Coplanar polygons of
+    different blocks (the tower's front flush with the house's) share one."""
+    tri = v[f]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    d = np.einsum("ij,ij->i", n, tri[:, 0])
+    scale = max(float(np.abs(v).max()) if len(v) else 1.0, 1e-300)
+    fp = np.full(len(f), -1, np.int64)
+    planes: list = []
+    for m in range(len(f)):
+        for k, (nk, dk) in enumerate(planes):
+            if nk @ n[m] > 1 - 1e-9 and abs(dk - d[m]) <= 1e-9 * scale:
+                fp[m] = k
+                break
+        else:
+            fp[m] = len(planes)
+            planes.append((n[m], d[m]))
+    return fp, np.array([np.append(nk, dk) for nk, dk in planes]).reshape(-1, 4)
 
+
+def _plane_masks(v, f, fp, planes, photo, tolerance):
+    """Per plane, where ``photo`` sees it (the 1998 paper's visibility,
+    computed once per model and photograph): ``(x0, y0, crop)``, ``crop``
+    uint8 over the plane's bounding box in the photograph, 255 at the pixels
+    whose surface lies on the plane: the z-buffer shows one of the plane's
+    polygons there or beside it (3x3: a bilinear cell across a crease, as
+    the blend's continuity test) and the depth along the pixel's ray is the
+    plane's within ``tolerance`` relative; else 0. ``None`` where the
+    photograph sees none of it; 128 where the plane is seen so obliquely
+    that its depth changes by more than ``2 · tolerance`` relative to the
+    next pixel (the blend's cells, :func:`_cells`, reject such a cell). A
+    bilinear sample of the crop is 255 only when every tap of non-zero
+    weight sees the plane, as the blend's per-pixel test (:func:`_sample`);
+    at the photograph's own pixel centres (one tap) 128 is seen too."""
+    import cv2
+
+    h, w = photo.depth.shape
+    K = np.asarray(photo.K, np.float64)
+    R, t = np.asarray(photo.R, np.float64), np.asarray(photo.t, np.float64)
+    Kinv = np.linalg.inv(K)
+    face = photo.face
+    if face is None:
+        face = rasterize(v, f, K, R, t, (w, h), bary=False).face
+    pid = np.append(fp, -1)[face]
+    out = []
+    for P in range(len(planes)):
+        vc = v[np.unique(f[fp == P])] @ R.T + t
+        if (vc[:, 2] <= 1e-12).any():  # reaches behind the camera: the whole frame
+            x0, y0, x1, y1 = 0, 0, w - 1, h - 1
+        else:
+            px = vc @ K.T
+            px = px[:, :2] / px[:, 2:]
+            lo, hi = np.floor(px.min(0)) - 1, np.ceil(px.max(0)) + 1
+            if (hi < 0).any() or lo[0] > w - 1 or lo[1] > h - 1:
+                out.append(None)
+                continue
+            x0, y0 = np.clip(lo, 0, [w - 1, h - 1]).astype(int)
+            x1, y1 = np.clip(hi, 0, [w - 1, h - 1]).astype(int)
+        mine = (pid[y0:y1 + 1, x0:x1 + 1] == P).astype(np.uint8)
+        if not mine.any():
+            out.append(None)
+            continue
+        near = cv2.dilate(mine, np.ones((3, 3), np.uint8)) > 0
+        rows, cols = np.flatnonzero(near.any(1)), np.flatnonzero(near.any(0))
+        near = near[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        y0, x0 = int(y0) + int(rows[0]), int(x0) + int(cols[0])
+        h_, w_ = near.shape
+        # the plane's inverse depth along each pixel's (unit z) ray is affine in the
+        # pixel: u = n_c . K^-1 (x, y, 1) / d_c = A x + B y + c
+        nc = R @ planes[P, :3]
+        dc = planes[P, 3] + nc @ t
+        A, B, c = (nc @ Kinv) / dc
+        u = (A * np.arange(x0, x0 + w_))[None, :] + (B * np.arange(y0, y0 + h_) + c)[:, None]
+        z = photo.depth[y0:y0 + h_, x0:x0 + w_]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            zp = 1 / u
+            on = near & np.isfinite(z) & (np.abs(z - zp) <= tolerance * z)
+            # the plane seen this obliquely (its depth changing by more than twice the
+            # tolerance to the next pixel: |1/(u + A) - 1/u| = |A / (u + A)| / u) is not
+            # seen between pixel centres: the blend's cells (taps within 2 tolerance of
+            # each other) reject it alike
+            steep = ((np.abs(A) > 2 * tolerance * np.abs(u + A))
+                     | (np.abs(B) > 2 * tolerance * np.abs(u + B)))
+        # 255: seen; 128: seen, too obliquely for a sample between pixel centres
+        out.append((x0, y0, np.where(on, np.where(steep, 128, 255), 0).astype(np.uint8)))
+    return tuple(out)
+
+
+def _same_camera(K, R, t, photo):
+    """The new camera is ``photo``'s (within 1e-12 relative): its pixel
+    centres fall on the photograph's, so a sample has one tap."""
+    def near(a, b):
+        a, b = np.asarray(a, np.float64), np.asarray(b, np.float64).reshape(np.shape(a))
+        return bool(np.abs(a - b).max() <= 1e-12 * max(np.abs(a).max(), 1.0))
+
+    return near(K, photo.K) and near(R, photo.R) and near(t, photo.t)
+
+
+# the angles are computed on a grid of this many pixels per step over each plane and
+# interpolated (they vary smoothly over a plane; 1998: per-vertex angles interpolated)
+ANGLE_STEP_PX = 16
+
+
+def _weights3(th, power, neighbours):
+    """:func:`_weights` for at most three photographs, on float32 images
+    ``th (k, H, W)`` (``inf`` = not seen; k <= 3): the same values, without
+    the general partial sort (the caller silences inf/inf)."""
+    w = th + np.float32(EPS_RAD)
+    if power == 1:
+        np.reciprocal(w, out=w)  # inf -> 0: not seen
+    else:
+        np.power(w, np.float32(-power), out=w)
+    if neighbours and len(th) > neighbours:
+        a, b = th[0], th[1]
+        c = th[2] if len(th) > 2 else np.float32(np.inf)
+        if neighbours == 1:  # the middle one
+            nxt = np.maximum(np.minimum(a, b), np.minimum(np.maximum(a, b), c))
+        else:
+            nxt = np.maximum(np.maximum(a, b), c)
+        # 1 - θ/θ_next, 0 at the next and beyond; 1 where no next is seen (θ/inf);
+        # NaN (inf/inf, a photograph not seen) to 0
+        q = th / nxt
+        np.subtract(np.float32(1), q, out=q)
+        np.fmax(q, np.float32(0), out=q)
+        q *= w
+        tie = (q.sum(0) == 0) & (w.sum(0) > 0)  # equal angles at the threshold: untapered
+        if tie.any():
+            q[:, tie] = w[:, tie]
+        w = q
+    return w
+
+
+def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
+                     background):
+    """The view map's texturing (Debevec, Yu & Borshukov 1998): each plane of
+    the model that the new view's z-buffer ``face (H, W)`` shows is textured
+    from its three photographs ``ids (P, 3)`` by projective texture mapping
+    (one plane-induced homography per photograph: ``cv2.warpPerspective``
+    of the photograph and of its precomputed visibility of the plane), with
+    the blend's weights among the three (:func:`_weights3`) from angles on
+    a grid interpolated over the plane: no per-pixel depth test, world point
+    or angle. Where fewer of the three see a point than the blend would
+    take and other photographs see the plane, :func:`_plane_pixels`.
+    Returns ``(image (H, W, C) float32, known (H, W) bool, count (H, W))``."""
+    import cv2
+
+    h, w = face.shape
+    fp = np.append(maps.face_plane, -1)
+    image = np.full((h, w, channels), background, np.float32)
+    known = np.zeros((h, w), bool)
+    cnt = np.zeros((h, w), np.int8)
+    Kinv = np.linalg.inv(K)
+    R = np.asarray(R, np.float64)
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    need = min(neighbours or 1, 3)
+    # the photographs' cameras stacked (homographies per plane at once), and which
+    # one the new view is (its pixel centres on the photograph's: one tap a sample)
+    Ks = np.stack([np.asarray(p.K, np.float64) for p in photos])
+    Rs = np.stack([np.asarray(p.R, np.float64) for p in photos])
+    ts = np.stack([np.asarray(p.t, np.float64).reshape(3) for p in photos])
+    centres = np.einsum("nji,nj->ni", Rs, -ts)
+    own = [_same_camera(K, R, t, p) for p in photos]
+    Rr = Rs @ R.T  # new camera frame to each photograph's
+    tr = ts - Rr @ t
+    cams = (Ks, Rr, tr, centres, own)
+    # each plane's projected bounding box (its polygons' corners), where it is looked for
+    vc = maps.vertices @ R.T + t
+    pv = vc @ np.asarray(K, np.float64).T
+    pv = pv[:, :2] / pv[:, 2:]
+    # the planes with a polygon inside the frame (the z-buffer decides which show)
+    for P in np.unique(maps.face_plane[covered > 0]):
+        js = [int(j) for j in ids[P] if j >= 0 and maps.masks[j][P] is not None]
+        others = [j for j in range(len(photos)) if maps.masks[j][P] is not None]
+        if not others:
+            continue
+        corners = maps.plane_vertices[P]
+        if (vc[corners, 2] > 1e-12).all():
+            lo = np.clip(np.floor(pv[corners].min(0)).astype(int) - 1, 0, [w, h])
+            hi = np.clip(np.ceil(pv[corners].max(0)).astype(int) + 2, 0, [w, h])
+        else:
+            lo, hi = np.zeros(2, int), np.array([w, h])
+        band = fp[face[lo[1]:hi[1], lo[0]:hi[0]]] == P
+        rows, cols = np.flatnonzero(band.any(1)), np.flatnonzero(band.any(0))
+        if not len(rows):
+            continue
+        y0, y1 = lo[1] + int(rows[0]), lo[1] + int(rows[-1]) + 1
+        x0, x1 = lo[0] + int(cols[0]), lo[0] + int(cols[-1]) + 1
+        inP = band[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        bh, bw = inP.shape
+        if not js or (len(others) > len(js) and bh * bw < SMALL_PLANE_PX
+                      and inP.sum() < SMALL_PLANE_PX // 4):
+            # none of the three sees the plane, or a few pixels (a sliver): the three
+            # chosen over the whole plane may miss the photographs nearest these, and
+            # warping costs more than asking all
+            _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
+                       others, photos, power, neighbours, channels, cams)
+            continue
+        # the angles on a grid placed as cv2.resize's linear upsampling samples it
+        gw, gh = max(1, round(bw / ANGLE_STEP_PX)), max(1, round(bh / ANGLE_STEP_PX))
+        gx = np.tile((np.arange(gw) + 0.5) * bw / gw - 0.5 + x0, gh)
+        gy = np.repeat((np.arange(gh) + 0.5) * bh / gh - 0.5 + y0, gw)
+        r = np.stack([gx, gy, np.ones(gx.size)], 1) @ Kinv.T
+        nc = R @ maps.planes[P, :3]
+        X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
+        T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
+        th = np.empty((len(js), bh, bw), np.float32)
+        # the plane-induced homographies K_j (R_rel + t_rel n_c^T / d_c) K^-1 T, at once
+        dc = maps.planes[P, 3] + nc @ t
+        Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ (Kinv @ T)
+        # the angles at the grid points (_angle_to, for every photograph at once)
+        ray = _unit(X - C)
+        dj = X[None] - centres[js][:, None]
+        dj /= np.linalg.norm(dj, axis=2, keepdims=True)
+        dj -= ray[None]
+        ang = (2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kgi,kgi->kg", dj, dj)) / 2, 1.0))
+               ).astype(np.float32)
+        for k, j in enumerate(js):
+            H = Hs[k]
+            mx0, my0, crop = maps.masks[j][P]
+            Hm = H.copy()
+            Hm[:2] -= np.outer([mx0, my0], H[2])  # into the crop
+            vis = cv2.warpPerspective(crop, Hm, (bw, bh), flags=flags,
+                                      borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            vis = vis < 128 if own[j] else vis < 255  # not seen
+            # the plane behind the photograph (its homogeneous w <= 0) is not seen
+            wz = H[2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
+            if (wz <= 0).any():
+                vis |= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
+                        + H[2, 2]) <= 0
+            cv2.resize(ang[k].reshape(gh, gw), (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
+            np.copyto(th[k], np.float32(np.inf), where=vis)
+        W = (_weights3(th, power, neighbours) if len(js) <= 3 else
+             _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
+        ws = W.sum(0)
+        seen = ws > 0
+        np.divide(W, ws, out=W, where=seen)
+        # the photographs warped where they have weight only (with the blend's taper,
+        # the third nearest has none wherever the two nearer ones see the point)
+        out = np.zeros((bh, bw, channels), np.float32)
+        for k, j in enumerate(js):
+            Wk = W[k] * inP
+            rows = np.flatnonzero(Wk.any(1))
+            if not len(rows):
+                continue
+            cols = np.flatnonzero(Wk[rows[0]:rows[-1] + 1].any(0))
+            (ya, yb), (xa, xb) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
+            H = Hs[k] @ np.array([[1.0, 0, xa], [0, 1, ya], [0, 0, 1]])
+            smp = _warp(photos[j].image, H, (int(xb - xa), int(yb - ya)))
+            out[ya:yb, xa:xb] += Wk[ya:yb, xa:xb, None] * smp.reshape(yb - ya, xb - xa, channels)
+        n = (W > 0).sum(0, dtype=np.int8)
+        ok = inP & seen
+        np.copyto(image[y0:y1, x0:x1], out, where=ok[..., None])
+        known[y0:y1, x0:x1] |= ok
+        np.copyto(cnt[y0:y1, x0:x1], n, where=inP)
+        # where fewer of the three see the point than the blend would take (the plane
+        # partly hidden from them) and other photographs see some of the plane: those
+        # pixels blended from every photograph that sees the plane (as the blend)
+        if len(others) > len(js):
+            yy, xx = np.nonzero(inP & (n < need))
+            if len(yy):
+                _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
+                           photos, power, neighbours, channels, cams)
+    return image, known, cnt
+
+
+def _warp(image, H, size, maps=None):
+    """``image`` (H, W[, C]) as float32 warped by the inverse map ``H``
+    (new-view pixel to photograph pixel, ``cv2.warpPerspective``) onto
+    ``size``, or sampled at ``maps = (mx, my)`` (``cv2.remap``); bilinear,
+    border replicated (as :func:`_sample`), at most four channels a call."""
+    import cv2
+
+    img = image if image.dtype == np.float32 else np.asarray(image, np.float32)
+
+    def one(a):
+        if maps is not None:
+            return cv2.remap(a, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return cv2.warpPerspective(a, H, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_REPLICATE)
+
+    if img.ndim == 2 or img.shape[2] <= 4:
+        return one(img)
+    parts = [one(np.ascontiguousarray(img[..., c:c + 4])) for c in range(0, img.shape[2], 4)]
+    return np.concatenate([q[..., None] if q.ndim == 2 else q for q in parts], -1)
+
+
+# a plane showing fewer pixels than a quarter of this (in a box under this) is textured
+# pixel by pixel from every photograph that sees it (_plane_pixels)
+SMALL_PLANE_PX = 256
+
+
+def _plane_put(image, known, cnt, yy, xx, x0, y0, *args):
+    """:func:`_plane_pixels` of the box pixels ``(yy, xx)`` (offset ``x0,
+    y0``) written into the frame's ``image``, ``known``, ``cnt``."""
+    yy, xx = yy + y0, xx + x0
+    a, ws, c = _plane_pixels(xx, yy, *args)
+    good = ws > 0
+    image[yy[good], xx[good]] = a[good] / ws[good, None]
+    known[yy, xx] = good
+    cnt[yy, xx] = c
+
+
+def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, cams):
+    """The pixels ``(xs, ys)`` of the plane ``P`` blended from the
+    photographs ``js`` as the blend does (every one that sees the point, the
+    blend's weights from exact angles), visibility from the planes' masks:
+    ``(acc (n, C), wsum (n,), count (n,))``. ``cams``: the photographs'
+    ``K`` stacked, the rotations and translations from the new camera's
+    frame to theirs, their centres and which is the new view."""
+    import cv2
+
+    Ks, Rr, tr, centres, own = cams
+    n = len(xs)
+    p3 = np.stack([xs, ys, np.ones(n)], 1).astype(np.float64)
+    Kinv = np.linalg.inv(K)
+    r = p3 @ Kinv.T
+    nc = R @ maps.planes[P, :3]
+    dc = maps.planes[P, 3] + nc @ t
+    X = ((r * (dc / (r @ nc))[:, None]) - t) @ R
+    ray = _unit(X - C)
+    # every photograph's homography, pixel positions and angles at once
+    Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ Kinv
+    q = p3 @ Hs.transpose(0, 2, 1)  # (k, n, 3)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = (q[..., :2] / q[..., 2:]).astype(np.float32)
+    d = X[None] - centres[js][:, None]
+    d /= np.sqrt((d * d).sum(2))[..., None]
+    d -= ray[None]
+    ang = 2 * np.arcsin(np.minimum(np.sqrt((d * d).sum(2)) / 2, 1.0))
+    th = np.full((len(js), n), np.inf)
+    samples = []
+    for k, j in enumerate(js):
+        p = photos[j]
+        mx0, my0, crop = maps.masks[j][P]
+        vis = cv2.remap(crop, (uv[k, :, 0] - mx0)[None], (uv[k, :, 1] - my0)[None],
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
+        vis = (vis >= 128 if own[j] else vis == 255) & (q[k, :, 2] > 0)
+        s = _warp(p.image, None, None, maps=(uv[k, :, 0][None], uv[k, :, 1][None]))
+        samples.append(s.reshape(n, channels))
+        th[k, vis] = ang[k, vis]
+    W = _weights(th, power, neighbours)
+    acc = np.zeros((n, channels))
+    for k, s in enumerate(samples):
+        acc += W[k][:, None] * s
+    return acc, W.sum(0), (W > 0).sum(0)
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -526,6 +882,11 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
     float32 out, else float64."""
     out = np.array(image, np.float32 if np.asarray(image).dtype == np.float32 else np.float64,
                    copy=True)
+    return _fill_inplace(out, known, region)
+
+
+def _fill_inplace(out, known, region):
+    """:func:`fill_holes` into ``out`` itself (float32 or float64)."""
     hole = region & ~known
     if not hole.any() or not known.any():
         return out
@@ -534,7 +895,7 @@ def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.n
     box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
     if not known[box].any():
         box = np.s_[:, :]
-    out[box] = _push_pull(out[box], known[box], hole[box])
+    _push_pull(out[box], known[box], hole[box], inplace=True)  # out[box] is a view of out
     return out
 
 
@@ -549,7 +910,74 @@ def _resize(a, size, interp):
     return out[0] if len(out) == 1 else np.concatenate(out, 2)
 
 
-def _push_pull(image, known, hole):
+def _push_pull(image, known, hole, *, inplace=False):
+    """Push–pull of the holes (:func:`fill_holes`; into ``image`` itself
+    with ``inplace``), computed on the aligned
+    tiles of 2^L pixels that hold holes only: a hole's value depends only on
+    its aligned blocks (level l: the 2^l block of the box holding it) up to
+    the coarsest level the whole box's pyramid builds, or up to the first
+    level where the block's weight is full (its coarser levels then have no
+    share). Tiles of 16 pixels first, twice that for the holes they leave
+    open, and so on. Equals :func:`_push_pull_full` up to float rounding."""
+    h, w = known.shape
+    # the level the whole box's pyramid stops at: every block holds a known pixel,
+    # or a side of one block is a pixel
+    k, top = known, 0
+    while min(k.shape) > 1 and not k.all():
+        k = np.pad(k, ((0, k.shape[0] % 2), (0, k.shape[1] % 2)))
+        k = k.reshape(k.shape[0] // 2, 2, k.shape[1] // 2, 2).any((1, 3))
+        top += 1
+    out = image if inplace else np.array(image, copy=True)
+    hy, hx = np.nonzero(hole)
+    levels = min(top, TILE_LEVELS)
+    while len(hy):
+        val, exact = _push_pull_tiles(image, known, hy, hx, levels, levels == top)
+        out[hy[exact], hx[exact]] = val[exact]
+        hy, hx = hy[~exact], hx[~exact]
+        levels = min(top, levels + 1)
+    return out
+
+
+def _push_pull_tiles(image, known, hy, hx, levels, at_top):
+    """The push-pull values at the holes ``(hy, hx)`` from their aligned
+    tiles of ``2^levels`` pixels, and which are exact (``at_top``: the whole
+    box's pyramid stops at this level; else the hole's chain of blocks
+    reaches full weight within the tile)."""
+    h, w = known.shape
+    n = 2 ** levels
+    per_row = -(-w // n)
+    key = (hy // n) * per_row + hx // n
+    tiles, at = np.unique(key, return_inverse=True)
+    ty, tx = tiles // per_row, tiles % per_row
+    ys = ty[:, None] * n + np.arange(n)  # (T, n)
+    xs = tx[:, None] * n + np.arange(n)
+    inside = (ys < h)[:, :, None] & (xs < w)[:, None, :]
+    yc, xc = np.minimum(ys, h - 1)[:, :, None], np.minimum(xs, w - 1)[:, None, :]
+    wg = (known[yc, xc] & inside).astype(np.float32)[..., None]
+    im = np.where(wg > 0, image[yc, xc], 0).astype(np.float32)
+    pyramid = [(im, wg)]
+    for _ in range(levels):
+        T, m = im.shape[0], im.shape[1] // 2
+        s = (im * wg).reshape(T, m, 2, m, 2, -1).sum((2, 4)) * np.float32(0.25)
+        ws = wg.reshape(T, m, 2, m, 2, 1).sum((2, 4)) * np.float32(0.25)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            im = np.where(ws > 0, s / ws, np.float32(0))
+        wg = np.minimum(4 * ws, np.float32(1))
+        pyramid.append((im, wg))
+    up = pyramid[-1][0]
+    exact = (pyramid[-1][1] == 1) | at_top
+    for im, wg in reversed(pyramid[:-1]):
+        up = wg * im + (1 - wg) * up.repeat(2, 1).repeat(2, 2)
+        exact = exact.repeat(2, 1).repeat(2, 2) | (wg == 1)
+    iy, ix = hy - ty[at] * n, hx - tx[at] * n
+    return up[at, iy, ix], exact[at, iy, ix, 0]
+
+
+# the push-pull's first tiles: 2^TILE_LEVELS pixels a side
+TILE_LEVELS = 4
+
+
+def _push_pull_full(image, known, hole):
     import cv2
 
     img = np.where(known[..., None], image, 0.0).astype(np.float32)
@@ -579,6 +1007,64 @@ def _push_pull(image, known, hole):
     out = np.array(image, copy=True)
     out[hole] = up[hole]
     return out
+
+
+_SOLIDS: dict = {}
+
+
+def _outward_solids(v, f) -> bool:
+    """The mesh is a union of closed solids, each consistently oriented
+    with its normals outward: every directed edge once and its reverse once,
+    and every connected part of positive volume (the last few meshes'
+    answers kept)."""
+    key = (v.tobytes(), f.tobytes())
+    if key in _SOLIDS:
+        return _SOLIDS[key]
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = len(v)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    fwd, rev = e[:, 0] * n + e[:, 1], e[:, 1] * n + e[:, 0]
+    ok = bool(len(f)) and len(np.unique(fwd)) == len(fwd) and np.array_equal(np.sort(fwd),
+                                                                             np.sort(rev))
+    if ok:
+        _, label = connected_components(coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])),
+                                                   shape=(n, n)), directed=False)
+        tri = v[f]
+        vol = np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))
+        ok = bool((np.bincount(label[f[:, 0]], weights=vol) > 0).all())
+    if len(_SOLIDS) >= 4:
+        _SOLIDS.pop(next(iter(_SOLIDS)))
+    _SOLIDS[key] = ok
+    return ok
+
+
+def _zbuffer(v, f, K, R, t, size, rays):
+    """The new view's z-buffer (:func:`rasterize`, no barycentrics). When the
+    mesh is a union of closed outward-facing solids (:func:`_outward_solids`)
+    and the camera is outside all of them (the winding number of the
+    surface around the centre, the sum of the triangles' solid angles over
+    4π, is 0), the triangles facing away are left out: a ray reaching one
+    has entered its solid through a nearer face of it, so none of them
+    shows (the same depth; at an edge a tie may keep the front face's id
+    where the back face's was kept)."""
+    C = -R.T @ t
+    if len(f) and _outward_solids(v, f):
+        a, b, c = v[f[:, 0]] - C, v[f[:, 1]] - C, v[f[:, 2]] - C
+        la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+        num = np.einsum("ij,ij->i", a, np.cross(b, c))  # < 0: the face looks at C
+        den = (la * lb * lc + np.einsum("ij,ij->i", a, b) * lc
+               + np.einsum("ij,ij->i", a, c) * lb + np.einsum("ij,ij->i", b, c) * la)
+        winding = np.arctan2(num, den).sum() / (2 * np.pi)  # van Oosterom & Strackee 1983
+        if abs(winding) < 0.5:
+            keep = np.flatnonzero(num < 0)
+            r = rasterize(v, f[keep], K, R, t, size, rays=rays, bary=False)
+            covered = np.zeros(len(f), np.int64)
+            covered[keep] = r.covered
+            face = np.where(r.face >= 0, keep[np.maximum(r.face, 0)], -1).astype(np.int32)
+            return replace(r, face=face, covered=covered)
+    return rasterize(v, f, K, R, t, size, rays=rays, bary=False)
 
 
 _RAYS: dict = {}
@@ -662,54 +1148,44 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     C = -R.T @ t
     t0 = time.perf_counter()
     rays = _rays(K, (w, h))
-    r = rasterize(v, f, K, R, t, (w, h), rays=rays, bary=False)
+    r = _zbuffer(v, f, K, R, t, (w, h), rays)
     t1 = time.perf_counter()
     model = r.hit
-    idx = np.flatnonzero(model.ravel())
-    # the world point of each model pixel: its ray scaled to the depth
-    Xc = rays.reshape(-1, 3)[idx] * r.depth.ravel()[idx, None]
-    X = (Xc - t) @ R  # R^T (x_cam - t)
+
+    def points(at):  # the world points of the model pixels ``at``: their rays scaled to the depth
+        Xc = rays.reshape(-1, 3)[at] * r.depth.ravel()[at, None]
+        return (Xc - t) @ R  # R^T (x_cam - t)
+
     if method == "blend":
-        acc, wsum, n = _blend(X, C, photos, tolerance, power, neighbours, channels)
+        idx = np.flatnonzero(model.ravel())
+        acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels)
+        per_pixel = float(n.mean()) if len(n) else 0.0
     else:
         if maps is None:
-            maps = prepare_view_maps((v, f), photos)
-        ids = maps.choose(C, power=power, neighbours=neighbours)
-        face = r.face.ravel()[idx]
-        acc, wsum, n = _view_map(X, C, face, ids, photos, tolerance, power, neighbours, channels)
-        # where none of a polygon's three sees the point, every photograph is asked
-        # where fewer of the polygon's three see the point than the blend would
-        # take (a partly hidden polygon) and other photographs see some of the
-        # polygon, every photograph is asked
-        more = np.array([len(js) for js in maps.photos]) > (ids >= 0).sum(1)
-        again = np.flatnonzero((n < min(neighbours or 1, 3)) & more[face])
-        # asked of the photographs that see some of the pixel's polygon (the others
-        # cannot see it): one call per set of such photographs (calls cost more
-        # than these few pixels)
-        sets: dict = {}
-        for m in np.unique(face[again]):
-            sets.setdefault(tuple(maps.photos[m]), []).append(m)
-        for js, ms in sets.items():
-            rows = again[np.isin(face[again], ms)]
-            acc[rows], wsum[rows], n[rows] = _blend(X[rows], C, [photos[j] for j in js],
-                                                    tolerance, power, neighbours, channels)
+            maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
+        ids = maps.choose_planes(C, power=power, neighbours=neighbours)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
+                                             power, neighbours, channels, float(background))
+        per_pixel = float(n.sum(dtype=np.int64) / max(model.sum(), 1))
     t2 = time.perf_counter()
-    seen = wsum > 0
-    out = np.full((h * w, channels), float(background), np.float32)
-    out[idx[seen]] = acc[seen] / wsum[seen, None]
-    known = np.zeros(h * w, bool)
-    known[idx[seen]] = True
-    out = out.reshape(h, w, channels)
-    known = known.reshape(h, w)
+    if method == "blend":
+        seen = wsum > 0
+        out = np.full((h * w, channels), float(background), np.float32)
+        out[idx[seen]] = acc[seen] / wsum[seen, None]
+        known = np.zeros(h * w, bool)
+        known[idx[seen]] = True
+        out = out.reshape(h, w, channels)
+        known = known.reshape(h, w)
     filled = model & ~known
     if fill and filled.any() and known.any():
-        out = fill_holes(out, known, model)
+        out = _fill_inplace(out, known, model)  # out is this call's own
     elif not fill:
         filled = np.zeros_like(model)
     t3 = time.perf_counter()
     info = {"method": method, "tolerance": tolerance, "power": power, "neighbours": neighbours,
             "photographs": len(photos),
-            "photographs_per_pixel": float(n.mean()) if len(n) else 0.0,
+            "photographs_per_pixel": per_pixel,
             "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
             "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
     return VDTMImage(out.astype(np.float32, copy=False), model, filled, info)

@@ -143,9 +143,10 @@ def test_weights_taper_at_the_next_nearest():
 
 @pytest.mark.parametrize("neighbours", [0, 1, 2])
 def test_view_map_is_the_blend_with_three_photographs(facade, neighbours):
-    # with three photographs every polygon's three are all of them: the view map
-    # blends the same samples with the same weights (the sums in another order:
-    # within 1e-4 of full scale, far above float rounding)
+    # with three photographs every plane's three are all of them: the view map
+    # blends the same photographs with the same weights; only its visibility (per
+    # plane, precomputed) and its angles (interpolated over the plane) differ, so
+    # most pixels agree within half a code and the whole within the 0.5 dB
     s, mesh, _ = facade
     photos = prepare_photographs(mesh, [
         Photograph(im.astype(np.float32), np.array(c["K"]), np.array(c["R"]), np.array(c["t"]))
@@ -155,5 +156,70 @@ def test_view_map_is_the_blend_with_three_photographs(facade, neighbours):
     a = render_vdtm(mesh, photos, K, R, t, SIZE, neighbours=neighbours)
     b = render_vdtm(mesh, photos, K, R, t, SIZE, neighbours=neighbours, method="view-map")
     assert a.model.sum() > 500
-    np.testing.assert_array_equal(a.filled, b.filled)
-    np.testing.assert_allclose(b.image, a.image, atol=1e-4 * 255)
+    both = a.model & ~a.filled & ~b.filled
+    assert both.sum() > 0.9 * a.model.sum()
+    assert np.median(np.abs(b.image - a.image).max(2)[both]) <= 0.5
+    gt, m = s.gt_arrays["novel_0"], s.gt_arrays["novel_model_0"]
+
+    def psnr(x):
+        return 10 * np.log10(255.0 ** 2 / np.mean((x.image[m] - gt[m]) ** 2))
+
+    assert abs(psnr(b) - psnr(a)) <= 0.5
+
+
+def test_push_pull_on_tiles_equals_the_whole_pyramid():
+    # the tiles holding holes carry every block a hole's value depends on: the same
+    # values as the pyramid over the whole box (the same float operations)
+    from lumigraph.stereo.debevec1996.vdtm import _push_pull, _push_pull_full
+
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        h, w = rng.integers(1, 70, 2)
+        known = rng.random((h, w)) < rng.random() ** 2
+        hole = ~known & (rng.random((h, w)) < 0.5)
+        if not hole.any() or not known.any():
+            continue
+        img = rng.random((h, w, 3)).astype(np.float32)
+        np.testing.assert_array_equal(_push_pull(img, known, hole), _push_pull_full(img, known, hole))
+
+
+def test_zbuffer_leaves_out_faces_turned_away_with_the_same_result(facade):
+    # the building is a union of closed outward-facing blocks: from outside, the
+    # faces turned away never show; from inside a block, or for an open mesh, every
+    # face is drawn
+    from lumigraph.stereo.debevec1996.vdtm import _outward_solids, _zbuffer
+
+    s, mesh, photos = facade
+    v, f = (np.asarray(a) for a in mesh)
+    assert _outward_solids(v, f) and not _outward_solids(v, f[1:])
+    for p in photos[:3]:
+        a = rasterize(v, f, p.K, p.R, p.t, SIZE, bary=False)
+        b = _zbuffer(v, f, p.K, np.asarray(p.R), np.asarray(p.t), SIZE, None)
+        np.testing.assert_array_equal(a.depth, b.depth)
+        np.testing.assert_array_equal(a.face, b.face)
+    inside = v[f[:12].ravel()].mean(0)  # the house's centre (its box: the first 12 faces)
+    K = photos[0].K
+    R = np.eye(3)
+    a = rasterize(v, f, K, R, -R @ inside, SIZE, bary=False)
+    b = _zbuffer(v, f, K, R, -R @ inside, SIZE, None)
+    assert a.hit.any()
+    np.testing.assert_array_equal(a.face, b.face)
+
+
+def test_view_map_any_number_of_channels(facade):
+    # the warps take at most four channels a call: five channels are the three
+    # and two more, blended alike; one channel (a 2-D image) is the first
+    s, mesh, photos = facade
+    cam = s.gt["novel_cameras"]["view_0"]
+    K, R, t = (np.array(cam[x]) for x in ("K", "R", "t"))
+    five = prepare_photographs(mesh, [
+        Photograph(np.concatenate([p.image, p.image[..., :2] * 0.5], 2), p.K, p.R, p.t)
+        for p in photos])
+    grey = prepare_photographs(mesh, [Photograph(p.image[..., 0], p.K, p.R, p.t) for p in photos])
+    a = render_vdtm(mesh, photos, K, R, t, SIZE, method="view-map")
+    b = render_vdtm(mesh, five, K, R, t, SIZE, method="view-map")
+    c = render_vdtm(mesh, grey, K, R, t, SIZE, method="view-map")
+    assert b.image.shape[2] == 5 and c.image.shape[2] == 1
+    np.testing.assert_allclose(b.image[..., :3], a.image, rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(b.image[..., 3:], 0.5 * a.image[..., :2], rtol=1e-5, atol=1e-3)
+    np.testing.assert_allclose(c.image[..., 0], a.image[..., 0], rtol=1e-5, atol=1e-3)
