@@ -5,12 +5,17 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     SNAP=0 ... (hand drags not snapped)
     SNAPSTEP=0 ... (snapping onto the strongest gradient, not the step)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
+    ROUNDS=0 ... (no second round: Propose again, accept, Solve again; default 1)
+    RESNAP=1 / RESNAP=all ... (re-snap to the solved model before each further
+        round: the marks the solve cannot explain / every mark; default off)
+    SNAPPX=1.5 ... (snap radius in px, default marking.SNAP_DISTANCE_PX)
 
 Per seed: four hand marks per photograph (the longest two vertical and two
 horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
 of noise), Propose, each proposal accepted when within 1.5 px of its true
 edge line, the blocks a refusal names marked by hand (the four longest
-unmarked edges), Solve; the RMS relative parameter error against the fully
+unmarked edges), Solve; then (ROUNDS) Propose again, accept as before, Solve
+again; the RMS relative parameter error against the fully
 marked (σ = 0.5 px) solve of the same scene.
 """
 
@@ -35,7 +40,9 @@ from lumigraph.view.marking import FacadeSession  # noqa: E402
 def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
     import lumigraph.view.marking as marking
 
-    marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1") == "1"
+    if os.environ.get("SNAPPX"):
+        marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
+    marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
     for seed in seeds:
         t0 = time.time()
         s = render("facade", size=size, seed=seed, photos=6, novel=0, supersample=2,
@@ -87,6 +94,20 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         if r.status_code != 200:
             print(f"seed {seed}: no solve: {r.get_json()['error']}")
             continue
+        for _ in range(int(os.environ.get("ROUNDS", "1"))):
+            if os.environ.get("RESNAP", "0") != "0":
+                rs = ses.resnap(every=os.environ["RESNAP"] == "all")
+                if os.environ.get("VERBOSE"):
+                    print("  resnap:", {k: len(v) for k, v in rs.items()})
+            # the user's next round: look at the solve, Propose again (from
+            # the marks so far), accept what lies on its edge, Solve again
+            props2 = c.post("/api/facade/propose").get_json().get("proposals", [])
+            for q in props2:
+                ok = distance(q["segment"], truth[q["photo"]][q["edge"]]) <= 3 * EDGE_NOISE_PX
+                accepted += ok
+                c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
+            props = props + props2
+            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
         gt = json.loads((folder / "gt.json").read_text())["parameters"]
         free = list(ses.model.parameter_names)
 
