@@ -583,10 +583,10 @@ class FacadeSession:
             deleted = [k for k, m in self.marks.items() if (m["photo"], m["edge"]) in out]
             for k in deleted:
                 del self.marks[k]
-            rms = {(p, e): r for p, e, r in sol.mark_rms_px}
+            kept = {(p, e) for p, e, _ in sol.mark_rms_px}
             ids = [k for k, m in self.marks.items()
                    if m["edge"] is not None and m["photo"] in sol.poses
-                   and (m["photo"], m["edge"]) in rms]
+                   and (m["photo"], m["edge"]) in kept]
             ms = [Mark(self.marks[k]["photo"], self.marks[k]["edge"],
                        np.asarray(self.marks[k]["segment"], float)) for k in ids]
             sd = edge_offset_std(sol, ms)
@@ -596,13 +596,14 @@ class FacadeSession:
             for k, m, s in zip(ids, ms, sd, strict=True):
                 w = 3.0 * float(np.sqrt(np.max(s) ** 2 + sol.sigma_px ** 2))
                 band[k] = w
-                if not np.all(np.isfinite(s)) or (
-                        not every and rms[(m.photo, m.edge)] <= w * np.sqrt(2.0 / 3.0)):
-                    # within what the solve explains: ends scattered by w/3 give a
-                    # mark's RMS distance (eq. 5.3) of √(2/3) of it
+                if not np.all(np.isfinite(s)):
                     continue
                 a, b = (np.asarray(v, float) for v in lines[m.photo][m.edge])
                 d = (b - a) / max(np.hypot(*(b - a)), 1e-9)
+                nrm = np.array([-d[1], d[0]])
+                off = max(abs((m.segment[:2] - a) @ nrm), abs((m.segment[2:] - a) @ nrm))
+                if not every and off <= w:
+                    continue        # both ends within the band: what the solve explains
                 # the mark's stretch carried onto the reprojected edge: the search's centre
                 seg = np.r_[a + ((m.segment[:2] - a) @ d) * d, a + ((m.segment[2:] - a) @ d) * d]
                 new = refine_on_edge(self.grey(m.photo), seg, half_width=w)
