@@ -16,6 +16,7 @@ segment [x0, y0, x1, y1] px, proposed}``):
 ``POST /api/facade/propose``                automatic marking -> ``{"proposals": […]}``
 ``POST /api/facade/resnap``                 ``{every?}`` after a solve: marks onto the image step
                                            within their edge's band -> ``{moved, flagged, deleted}``
+                                           (``every: false``: only marks beyond their band)
 ``POST /api/facade/proposals/<id>/accept``  (``all`` accepts every pending one)
 ``POST /api/facade/proposals/<id>/reject``
 
@@ -159,7 +160,7 @@ def create_app(*, artifacts=(), facade=None):
     @app.post("/api/facade/resnap")
     def resnap():
         d = request.get_json(silent=True) or {}
-        every = d.get("every", False) if isinstance(d, dict) else False
+        every = d.get("every", True) if isinstance(d, dict) else True
         if not isinstance(every, bool):
             raise InputError("every", f"expected true or false, got {every!r}")
         return jsonify(session().resnap(every=every))

@@ -549,13 +549,14 @@ class FacadeSession:
             return self.solution
 
     # ------------------------------------------------------------- re-snap
-    def resnap(self, *, every: bool = False) -> dict:
+    def resnap(self, *, every: bool = True) -> dict:
         """The user's second look, done for every mark at once: after a
-        Solve, each mark whose distance from its reprojected edge is more
-        than the solve can explain is moved onto the intensity step that
-        lies within the edge's uncertainty band, or flagged; the solver's
-        outliers are deleted. Saved. Returns ``{moved: [ids], flagged:
-        [ids], deleted: [ids], band_px: {id: px}}``.
+        Solve, each mark (``every``; else only a mark with an end farther
+        from its reprojected edge than the solve explains) is moved onto
+        the intensity step that lies within the edge's uncertainty band, or
+        flagged when the band shows none; the solver's outliers are
+        deleted. Saved. Returns ``{moved: [ids], flagged: [ids], deleted:
+        [ids], band_px: {id: px}}``.
 
         The band of a mark is ``3 sqrt(σ_e² + σ²)``: σ_e the first-order
         standard deviation of where the solve puts the edge at the mark's
@@ -574,6 +575,9 @@ class FacadeSession:
         from lumigraph.stereo.debevec1996.edges import Mark
         from lumigraph.stereo.debevec1996.solve import project_model_edges
 
+        if np.any(self.camera.dist):
+            raise InputError(self.camera_path, "re-snapping needs undistorted photographs "
+                                               "('lumigraph calib undistort' them first)")
         with self._lock:
             sol = getattr(self, "_sol", None)
             if sol is None:

@@ -6,8 +6,8 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     SNAPSTEP=1 ... (snapping onto the step, marking.refine_on_edge; default: the library's SNAP_ON_STEP)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
     ROUNDS=0 ... (no second round: Propose again, accept, Solve again; default 1)
-    RESNAP=1 / RESNAP=all ... (re-snap to the solved model before each further
-        round: the marks the solve cannot explain / every mark; default off)
+    RESNAP=all / RESNAP=1 / RESNAP=0 ... (re-snap to the solved model before each
+        further round: every mark (default) / the marks beyond their band / none)
     SNAPPX=1.5 ... (snap radius in px, default marking.SNAP_DISTANCE_PX)
     DRAW=1 ... (another draw of the hand drags' noise: generator seed 7 + DRAW)
     FAIRER=0 ... (skip the all-edges-dragged reference)
@@ -16,8 +16,8 @@ Per seed: four hand marks per photograph (the longest two vertical and two
 horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
 of noise), Propose, each proposal accepted when within 1.5 px of its true
 edge line, the blocks a refusal names marked by hand (the four longest
-unmarked edges), Solve; then (ROUNDS) Propose again, accept as before, Solve
-again; the RMS relative parameter error against the fully
+unmarked edges), Solve; then (ROUNDS) Re-snap to the model, Propose again,
+accept as before, Solve again; the RMS relative parameter error against the fully
 marked (σ = 0.5 px) solve of the same scene.
 """
 
@@ -97,7 +97,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             print(f"seed {seed}: no solve: {r.get_json()['error']}")
             continue
         for _ in range(int(os.environ.get("ROUNDS", "1"))):
-            if os.environ.get("RESNAP", "0") != "0":
+            if os.environ.get("RESNAP", "all") != "0":
                 rs = ses.resnap(every=os.environ["RESNAP"] == "all")
                 if os.environ.get("VERBOSE"):
                     print("  resnap:", {k: len(v) for k, v in rs.items()})
