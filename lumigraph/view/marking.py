@@ -30,7 +30,10 @@ and each mark's RMS distance to its edge (px). ``propose`` runs
 moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
 dropped when it lies on none: a texture line), and keeps the proposals
 pending until each is accepted (then it is a mark,
-``"proposed": true`` in the file) or rejected.
+``"proposed": true`` in the file) or rejected. ``resnap``, after a solve,
+moves each mark onto the image step within its reprojected edge's
+uncertainty band (the solve's covariance and residual scale), deleting the
+solve's outliers: the user's "look, correct, solve again".
 
 Examples
 --------

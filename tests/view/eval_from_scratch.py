@@ -98,7 +98,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             continue
         for _ in range(int(os.environ.get("ROUNDS", "1"))):
             if os.environ.get("RESNAP", "all") != "0":
-                rs = ses.resnap(every=os.environ["RESNAP"] == "all")
+                rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
                 if os.environ.get("VERBOSE"):
                     print("  resnap:", {k: len(v) for k, v in rs.items()})
             # the user's next round: look at the solve, Propose again (from
