@@ -14,6 +14,9 @@ segment [x0, y0, x1, y1] px, proposed}``):
 ``DELETE /api/facade/marks/<id>``           remove a mark
 ``POST /api/facade/solve``                  ``{noise_px?}`` -> parameters, projected edges, residuals
 ``POST /api/facade/propose``                automatic marking -> ``{"proposals": […]}``
+``POST /api/facade/resnap``                 ``{every?}`` after a solve: marks onto the image step
+                                           within their edge's band -> ``{moved, flagged, deleted}``
+                                           (``every: false``: only marks beyond their band)
 ``POST /api/facade/proposals/<id>/accept``  (``all`` accepts every pending one)
 ``POST /api/facade/proposals/<id>/reject``
 
@@ -153,6 +156,14 @@ def create_app(*, artifacts=(), facade=None):
         if not isinstance(noise, int | float) or isinstance(noise, bool):
             raise InputError("noise_px", f"expected a positive number of pixels, got {noise!r}")
         return jsonify(session().solve(noise_px=float(noise)))
+
+    @app.post("/api/facade/resnap")
+    def resnap():
+        d = request.get_json(silent=True) or {}
+        every = d.get("every", True) if isinstance(d, dict) else True
+        if not isinstance(every, bool):
+            raise InputError("every", f"expected true or false, got {every!r}")
+        return jsonify(session().resnap(every=every))
 
     @app.post("/api/facade/propose")
     def propose():

@@ -30,7 +30,10 @@ and each mark's RMS distance to its edge (px). ``propose`` runs
 moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
 dropped when it lies on none: a texture line), and keeps the proposals
 pending until each is accepted (then it is a mark,
-``"proposed": true`` in the file) or rejected.
+``"proposed": true`` in the file) or rejected. ``resnap``, after a solve,
+moves each mark onto the image step within its reprojected edge's
+uncertainty band (the solve's covariance and residual scale), deleting the
+solve's outliers: the user's "look, correct, solve again".
 
 Examples
 --------
@@ -464,7 +467,8 @@ class FacadeSession:
         edge = self._edge(edge)
         snapped = False
         if snap:
-            s = snap_segment(seg, self.detected(photo), grey=self.grey(photo))
+            s = snap_segment(seg, self.detected(photo), grey=self.grey(photo),
+                             max_distance_px=SNAP_DISTANCE_PX)
             if s is not None:
                 w, h = self.sizes[photo]
                 s[[0, 2]] = np.clip(s[[0, 2]], -0.5, w - 0.5)
@@ -546,6 +550,77 @@ class FacadeSession:
             self._sol = sol
             self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
             return self.solution
+
+    # ------------------------------------------------------------- re-snap
+    def resnap(self, *, every: bool = True) -> dict:
+        """The user's second look, done for every mark at once: after a
+        Solve, each mark (``every``; else only a mark with an end farther
+        from its reprojected edge than the solve explains) is moved onto
+        the intensity step that lies within the edge's uncertainty band, or
+        flagged when the band shows none; the solver's outliers are
+        deleted. Saved. Returns ``{moved: [ids], flagged: [ids], deleted:
+        [ids], band_px: {id: px}}``.
+
+        The band of a mark is ``3 sqrt(σ_e² + σ²)``: σ_e the first-order
+        standard deviation of where the solve puts the edge at the mark's
+        ends (:func:`~lumigraph.stereo.debevec1996.automark.edge_offset_std`,
+        from the solve's covariance), σ the solve's estimated endpoint noise
+        (its residual scale); a correct mark lies within it of the
+        reprojected edge (3σ). A mark farther off sits on another image line
+        (snapping took a stronger step nearby: a pilaster's relief, a brick
+        course, the next face's shading). Within the band around the
+        reprojected edge, :func:`refine_on_edge` looks for a step (one sign
+        along the edge, a step not a line); the mark moves onto it when one
+        is found, else it is flagged for the user. Not circular: a mark only
+        ever moves to where the *image* shows a step; the model line only
+        bounds the search, and a band with no step moves nothing."""
+        from lumigraph.stereo.debevec1996.automark import edge_offset_std
+        from lumigraph.stereo.debevec1996.edges import Mark
+        from lumigraph.stereo.debevec1996.solve import project_model_edges
+
+        if np.any(self.camera.dist):
+            raise InputError(self.camera_path, "re-snapping needs undistorted photographs "
+                                               "('lumigraph calib undistort' them first)")
+        with self._lock:
+            sol = getattr(self, "_sol", None)
+            if sol is None:
+                raise EstimationError(self.edges_path, "no solve yet: Solve first, then "
+                                                       "re-snap to the solved model")
+            out = {(p, e) for p, e, _ in sol.outliers}
+            deleted = [k for k, m in self.marks.items() if (m["photo"], m["edge"]) in out]
+            for k in deleted:
+                del self.marks[k]
+            kept = {(p, e) for p, e, _ in sol.mark_rms_px}
+            ids = [k for k, m in self.marks.items()
+                   if m["edge"] is not None and m["photo"] in sol.poses
+                   and (m["photo"], m["edge"]) in kept]
+            ms = [Mark(self.marks[k]["photo"], self.marks[k]["edge"],
+                       np.asarray(self.marks[k]["segment"], float)) for k in ids]
+            sd = edge_offset_std(sol, ms)
+            moved, flagged, band = [], [], {}
+            lines = {p: project_model_edges(sol.model, sol.K[p], *sol.poses[p])
+                     for p in sol.poses}
+            for k, m, s in zip(ids, ms, sd, strict=True):
+                w = 3.0 * float(np.sqrt(np.max(s) ** 2 + sol.sigma_px ** 2))
+                band[k] = w
+                if not np.all(np.isfinite(s)):
+                    continue
+                a, b = (np.asarray(v, float) for v in lines[m.photo][m.edge])
+                d = (b - a) / max(np.hypot(*(b - a)), 1e-9)
+                nrm = np.array([-d[1], d[0]])
+                off = max(abs((m.segment[:2] - a) @ nrm), abs((m.segment[2:] - a) @ nrm))
+                if not every and off <= w:
+                    continue        # both ends within the band: what the solve explains
+                # the mark's stretch carried onto the reprojected edge: the search's centre
+                seg = np.r_[a + ((m.segment[:2] - a) @ d) * d, a + ((m.segment[2:] - a) @ d) * d]
+                new = refine_on_edge(self.grey(m.photo), seg, half_width=w)
+                if new is None:
+                    flagged.append(k)
+                    continue
+                self.marks[k]["segment"] = [float(v) for v in new]
+                moved.append(k)
+            self.save()
+            return {"moved": moved, "flagged": flagged, "deleted": deleted, "band_px": band}
 
     # ------------------------------------------------------------- propose
     def propose(self, *, noise_px: float = 1.0, refine: bool = True) -> list[dict]:

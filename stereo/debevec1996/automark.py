@@ -549,3 +549,61 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
     return AutomarkResult(merged, len(proposals), sol, warnings)
+
+
+def edge_offset_std(sol, marks) -> np.ndarray:
+    """First-order standard deviation (px) of where the solved model puts
+    each of ``marks``' model edges, measured across the edge at the mark's
+    two ends: ``(len(marks), 2)`` (NaN for a mark whose photograph the solve
+    left out).
+
+    The Jacobian of the signed endpoint distances of eq. 5.3 (the solver's
+    own, :class:`~lumigraph.stereo.debevec1996.solve._Problem`) taken at
+    the solution, with the rotations re-based on the solved ones, carries
+    the solve's covariance of the parameters and poses
+    (``sol.covariance``, over ``sol.unknowns``) to the projected line:
+    var = J C Jᵀ per end. The covariance's rotation block is of the
+    solver's rotation-vector increment from its start, taken here as an
+    increment at the solution (equal to first order when the start's
+    correction is small, which the linear initialisation makes it). This
+    is the width within which the true edge lies given the marks, the band
+    :func:`lumigraph.view.marking.FacadeSession.resnap` searches.
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+    ...                             photographs=list(cams))
+    >>> noisy = [type(k)(k.photo, k.edge, k.segment + 0.5 * np.cos(np.arange(4) + i))
+    ...          for i, k in enumerate(marks.marks)]           # ±0.5 px, deterministic
+    >>> sol = solve_facade(m, type(marks)(tuple(noisy), marks.photographs),
+    ...                    {p: c["K"] for p, c in cams.items()})
+    >>> sd = edge_offset_std(sol, noisy)                        # (marks, 2) px
+    >>> sd.shape == (len(noisy), 2) and bool(0 < sd.min() and sd.max() < 0.5)
+    True
+    """
+    from lumigraph.stereo.debevec1996.solve import _Problem
+
+    photos = list(dict.fromkeys(u.split(":")[0] for u in sol.unknowns if ":" in u))
+    free_focal = bool(sol.unknowns) and sol.unknowns[-1] == "focal_scale"
+    marks = list(marks)
+    out = np.full((len(marks), 2), np.nan)
+    keep = [i for i, m in enumerate(marks) if m.photo in photos]
+    if not keep:
+        return out
+    R = np.array([sol.poses[p][0] for p in photos])
+    t = np.array([sol.poses[p][1] for p in photos])
+    K0 = {p: sol.K[p] / np.array([[sol.focal_scale] * 2 + [1.0], [1.0, sol.focal_scale, 1.0],
+                                  [1.0, 1.0, 1.0]]) for p in photos}
+    prob = _Problem(sol.model, [marks[i] for i in keep], photos, K0, R, free_focal=free_focal)
+    x = prob.pack(sol.model.values, np.zeros((len(photos), 3)), t, sol.focal_scale)
+    _, cols, vals = prob.distances(x, jac=True)
+    C = np.asarray(sol.covariance)
+    for k in range(2):
+        # row i of J has nonzeros only in cols[k][i]: var_i = v_i C[c_i, c_i] v_i
+        Cs = C[cols[k][:, :, None], cols[k][:, None, :]]
+        out[keep, k] = np.sqrt(np.clip(np.einsum("ni,nij,nj->n", vals[k], Cs, vals[k]), 0, None))
+    return out

@@ -3,14 +3,22 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
 
     OPENBLAS_NUM_THREADS=1 python tests/view/eval_from_scratch.py 320x240 2,3,4,5,6
     SNAP=0 ... (hand drags not snapped)
-    SNAPSTEP=0 ... (snapping onto the strongest gradient, not the step)
+    SNAPSTEP=1 ... (snapping onto the step, marking.refine_on_edge; default: the library's SNAP_ON_STEP)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
+    ROUNDS=0 ... (no second round: Propose again, accept, Solve again; default 1)
+    RESNAP=all / RESNAP=1 / RESNAP=0 ... (re-snap to the solved model before each
+        further round: every mark (default) / the marks beyond their band / none)
+    SNAPPX=1.5 ... (snap radius in px, default marking.SNAP_DISTANCE_PX)
+    DRAW=1 ... (another draw of the hand drags' noise: generator seed 7 + DRAW)
+    FAIRER=0 ... (skip the all-edges-dragged reference)
+    TRIES=3 ... (rounds of four hand marks on the blocks a refusal names)
 
 Per seed: four hand marks per photograph (the longest two vertical and two
 horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
 of noise), Propose, each proposal accepted when within 1.5 px of its true
 edge line, the blocks a refusal names marked by hand (the four longest
-unmarked edges), Solve; the RMS relative parameter error against the fully
+unmarked edges), Solve; then (ROUNDS) Re-snap to the model, Propose again,
+accept as before, Solve again; the RMS relative parameter error against the fully
 marked (σ = 0.5 px) solve of the same scene.
 """
 
@@ -35,7 +43,9 @@ from lumigraph.view.marking import FacadeSession  # noqa: E402
 def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
     import lumigraph.view.marking as marking
 
-    marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1") == "1"
+    if os.environ.get("SNAPPX"):
+        marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
+    marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
     for seed in seeds:
         t0 = time.time()
         s = render("facade", size=size, seed=seed, photos=6, novel=0, supersample=2,
@@ -47,7 +57,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         full = json.loads((folder / "edges.json").read_text())["photographs"]
         ses = FacadeSession.open(folder, edges=edges)
         c = create_app(artifacts=[], facade=ses).test_client()
-        rng = np.random.default_rng(7)
+        rng = np.random.default_rng(7 + int(os.environ.get("DRAW", "0")))
 
         def drag(p, m, c=c, rng=rng):
             seg = np.asarray(m["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
@@ -67,12 +77,14 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             accepted += ok
             c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
         extra = 0
-        for _ in range(3):
+        tries = int(os.environ.get("TRIES", "3"))
+        for attempt in range(tries + 1):
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
             if r.status_code == 200:
                 break
             err = r.get_json()["error"]
-            if "do not constrain" not in err:
+            # (the last try's marks are solved too: before, they were added unsolved)
+            if "do not constrain" not in err or attempt == tries:
                 break
             blocks = {n.split("/")[0] for n in err.split("constrain ")[1].split(":")[0].split(", ")}
             have = {(m["photo"], m["edge"]) for m in ses.marks.values()}
@@ -87,6 +99,20 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         if r.status_code != 200:
             print(f"seed {seed}: no solve: {r.get_json()['error']}")
             continue
+        for _ in range(int(os.environ.get("ROUNDS", "1"))):
+            if os.environ.get("RESNAP", "all") != "0":
+                rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
+                if os.environ.get("VERBOSE"):
+                    print("  resnap:", {k: len(v) for k, v in rs.items()})
+            # the user's next round: look at the solve, Propose again (from
+            # the marks so far), accept what lies on its edge, Solve again
+            props2 = c.post("/api/facade/propose").get_json().get("proposals", [])
+            for q in props2:
+                ok = distance(q["segment"], truth[q["photo"]][q["edge"]]) <= 3 * EDGE_NOISE_PX
+                accepted += ok
+                c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
+            props = props + props2
+            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
         gt = json.loads((folder / "gt.json").read_text())["parameters"]
         free = list(ses.model.parameter_names)
 
@@ -101,22 +127,23 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         # a fairer reference, made on the photographs: every edge of the
         # scene's marks dragged (σ = 0.5 px) and snapped, as the hand marks
         # above; its solve's error is what marking the images can reach
-        ses2 = FacadeSession.open(folder, edges=out / f"edges_all_{size[0]}_{seed}.json")
-        (out / f"edges_all_{size[0]}_{seed}.json").unlink(missing_ok=True)
-        ses2.marks.clear()
-        rng2 = np.random.default_rng(7)
-        for p in ses2.photos:
-            for m in full[p]:
-                seg = np.asarray(m["segment"]) + rng2.normal(0, EDGE_NOISE_PX, 4)
-                w, h = ses2.sizes[p]
-                seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
-                ses2.add(p, seg.tolist(), edge=m["edge"], snap=snap)
-        try:
-            allsnap = rel({n: v["value"] for n, v in
-                           ses2.solve(noise_px=EDGE_NOISE_PX)["parameters"].items()})
-        except Exception as e:  # noqa: BLE001 - a figure, not a test
-            print(f"  all-snapped reference: no solve ({e})")
-            allsnap = float("nan")
+        allsnap = float("nan")
+        if os.environ.get("FAIRER", "1") == "1":
+            ses2 = FacadeSession.open(folder, edges=out / f"edges_all_{size[0]}_{seed}.json")
+            (out / f"edges_all_{size[0]}_{seed}.json").unlink(missing_ok=True)
+            ses2.marks.clear()
+            rng2 = np.random.default_rng(7)
+            for p in ses2.photos:
+                for m in full[p]:
+                    seg = np.asarray(m["segment"]) + rng2.normal(0, EDGE_NOISE_PX, 4)
+                    w, h = ses2.sizes[p]
+                    seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
+                    ses2.add(p, seg.tolist(), edge=m["edge"], snap=snap)
+            try:
+                allsnap = rel({n: v["value"] for n, v in
+                               ses2.solve(noise_px=EDGE_NOISE_PX)["parameters"].items()})
+            except Exception as e:  # noqa: BLE001 - a figure, not a test
+                print(f"  all-snapped reference: no solve ({e})")
         off = sum(distance(m["segment"], truth[m["photo"]][m["edge"]]) > 3 * EDGE_NOISE_PX
                   for m in ses.marks.values())
         if os.environ.get("VERBOSE"):

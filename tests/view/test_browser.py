@@ -9,8 +9,9 @@ port, in a thread) over a rendered Façade scene (320x240, six photographs,
 first has three of its four hand marks. The test draws the fourth by a mouse
 drag on the canvas, assigns it by clicking its edge in the list, presses
 Propose, accepts or rejects each proposal of that photograph (as a user's eye
-would: accepted when it lies on its true edge), presses Solve, and checks
-the saved ``edges.json`` and a screenshot: the reprojected edge's colour
+would: accepted when it lies on its true edge), presses Solve, then
+Re-snap to model and Solve again, and checks the saved ``edges.json`` and a
+screenshot: the reprojected edge's colour
 (red) drawn along the true line of the edge it drew.
 """
 
@@ -142,6 +143,13 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
                      f".some(p => p.id === {q['id']})")
         d.find_element(By.ID, "solve").click()
         _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.solution !== null", 60)
+        # the second look: Re-snap to the solved model, Solve again
+        d.find_element(By.ID, "resnap").click()
+        _wait(d, "return window.lumiMark.busy === 0 && "
+                 "document.getElementById('status').textContent.startsWith('re-snapped')", 60)
+        d.find_element(By.ID, "solve").click()
+        _wait(d, "return window.lumiMark.busy === 0 && "
+                 "document.getElementById('status').textContent.startsWith('solved')", 60)
         sol = d.execute_script("return window.lumiMark.state.solution")
         assert d.find_element(By.ID, "solve-rms").text.startswith("RMS")
         assert d.execute_script("return document.getElementById('error').hidden")

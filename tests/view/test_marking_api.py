@@ -274,11 +274,14 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     photograph dragged by hand (σ = 0.5 px) and snapped, Propose, each
     proposal accepted when it lies on its edge (the user's eye; here the
     scene's true edge line, 1.5 px: three times the marks' noise), the
-    blocks the solver names as unconstrained marked by hand, Solve.
+    blocks the solver names as unconstrained marked by hand, Solve; then
+    Re-snap to the model, Propose again, accept, Solve again (the second
+    round).
 
-    Seed 2 is the scene the snapping gates were set on (tuned): this checks
-    the flow end to end against issue 17's bound. On other seeds the bound
-    is not met (median 1.8x, worst 4.9x: docs/decisions/view-marking.md,
+    Seed 2 is a scene the snapping gates and the flow were set on (tuned):
+    this checks the flow end to end against issue 17's bound. On the
+    reported seeds 3-6 it is not met on every run (median 0.99x, worst 5.0x
+    over three draws each: docs/decisions/view-marking.md,
     tests/view/eval_from_scratch.py)."""
     from lumigraph.stereo.debevec1996.edges import load_edges
     from lumigraph.stereo.debevec1996.solve import solve_facade
@@ -305,9 +308,9 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
         line = truth[q["photo"]][q["edge"]]
         verdict = "accept" if distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
         assert c.post(f"/api/facade/proposals/{q['id']}/{verdict}").status_code == 200
-    for _ in range(3):
+    for attempt in range(4):     # three rounds of hand marks, each solved
         r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
-        if r.status_code == 200:
+        if r.status_code == 200 or attempt == 3:
             break
         err = r.get_json()["error"]
         assert r.status_code == 422 and "do not constrain" in err, err
@@ -320,6 +323,17 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
                       key=lambda t: -t[0])
         for _, p, m in todo[:4]:
             drag(p, m)
+    assert r.status_code == 200, r.get_json()
+    # the user's second round: Re-snap to the solved model, Propose again (from
+    # every mark so far), accept what lies on its edge, Solve again
+    assert c.post("/api/facade/resnap").status_code == 200
+    r = c.post("/api/facade/propose")
+    assert r.status_code == 200, r.get_json()
+    for q in r.get_json()["proposals"]:
+        line = truth[q["photo"]][q["edge"]]
+        verdict = "accept" if distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
+        assert c.post(f"/api/facade/proposals/{q['id']}/{verdict}").status_code == 200
+    r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
     assert r.status_code == 200, r.get_json()
     sol = r.get_json()
     gt = json.loads((folder / "gt.json").read_text())["parameters"]
@@ -353,3 +367,69 @@ def test_a_segment_refines_onto_the_step_not_onto_a_texture_line():
     line = np.full((60, 80), 100.0)
     line[:, 37] = 0.0
     assert refine_on_edge(line, np.array([37.0, 5.0, 37.0, 55.0])) is None
+
+
+def test_edge_band_from_the_covariance_matches_the_solved_edges_error(scene, tmp_path):
+    """``edge_offset_std``: the solve's covariance carried to each reprojected
+    edge (at a mark's ends). On the scene's own marks (σ = 0.5 px) the solved
+    edges' true errors, divided by it, have an RMS within issue 17's bound
+    for a reported σ (0.67x to 1.5x)."""
+    from lumigraph.stereo.debevec1996.automark import edge_offset_std
+    from lumigraph.stereo.debevec1996.solve import project_model_edges
+
+    folder, _ = scene
+    work = tmp_path / "scene"
+    shutil.copytree(folder, work)
+    s = _session(work, work / "edges.json")
+    s.solve(noise_px=EDGE_NOISE_PX)
+    sol, truth = s._sol, truth_lines(work)
+    marks = s.edge_marks().marks
+    sd = edge_offset_std(sol, marks)
+    z = []
+    for m, (s0, s1) in zip(marks, sd, strict=True):
+        a, b = project_model_edges(sol.model, sol.K[m.photo], *sol.poses[m.photo])[m.edge]
+        ta, tb = (np.asarray(v) for v in truth[m.photo][m.edge])
+        d = (tb - ta) / np.hypot(*(tb - ta))
+        n = np.array([-d[1], d[0]])
+        for end, sk in ((m.segment[:2], s0), (m.segment[2:], s1)):
+            # the solved line's offset from the true one, across it, at the mark's end
+            foot = a + ((end - a) @ (b - a)) / ((b - a) @ (b - a)) * (b - a)
+            z.append(((foot - ta) @ n) / sk)
+    ratio = float(np.sqrt(np.mean(np.square(z))))
+    assert 0.67 <= ratio <= 1.5, ratio
+
+
+def test_resnap_moves_an_off_mark_onto_its_step_within_the_band(scene, tmp_path):
+    """Re-snap after a Solve (``every``: each mark, not only those the solve
+    cannot explain): a mark moved 2 px off its edge (four times the marks'
+    noise; not the robust loss's outlier: the pose absorbs part of it) goes
+    back onto the image step within the reprojected edge's band, to within
+    half a pixel of the true line (the photographs are rendered one sample
+    per pixel); a mark is only ever moved onto a step, and the file stays
+    valid."""
+    folder, _ = scene
+    work = tmp_path / "scene"
+    shutil.copytree(folder, work)
+    c, s = _client(work, work / "edges.json")
+    assert c.post("/api/facade/resnap").status_code == 422      # no solve yet
+    truth = truth_lines(work)
+    # the longest mark of photo_00 shifted 2 px across its true line
+    k, m = max(((k, m) for k, m in s.marks.items() if m["photo"] == "photo_00.png"),
+               key=lambda km: np.hypot(km[1]["segment"][2] - km[1]["segment"][0],
+                                       km[1]["segment"][3] - km[1]["segment"][1]))
+    a, b = (np.asarray(v) for v in truth["photo_00.png"][m["edge"]])
+    d = (b - a) / np.hypot(*(b - a))
+    seg = np.asarray(m["segment"]) + 2.0 * np.tile([-d[1], d[0]], 2)
+    assert c.post(f"/api/facade/marks/{k}", json={"segment": seg.tolist()}).status_code == 200
+    before = {j: list(v["segment"]) for j, v in s.marks.items()}
+    assert c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX}).status_code == 200
+    r = c.post("/api/facade/resnap", json={"every": True})
+    assert r.status_code == 200, r.get_json()
+    got = r.get_json()
+    assert k in got["moved"], got
+    assert distance(s.marks[k]["segment"], truth["photo_00.png"][m["edge"]]) <= 0.5
+    untouched = [j for j in before if j not in got["moved"] and j not in got["deleted"]]
+    assert all(s.marks[j]["segment"] == before[j] for j in untouched)
+    assert c.post("/api/facade/resnap", json={"every": 1}).status_code == 400
+    saved, _ = _valid(work / "edges.json", work)
+    assert len(saved.marks) == len(s.marks)

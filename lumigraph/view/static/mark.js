@@ -374,6 +374,17 @@
     }
     await refresh();
   });
+  $("resnap").addEventListener("click", async () => {
+    status("re-snapping to the solved model…");
+    try {
+      const r = await api("POST", "/api/facade/resnap", {});
+      status(`re-snapped: ${r.moved.length} moved, ${r.flagged.length} flagged (check them), ` +
+             `${r.deleted.length} outliers deleted; Solve again`);
+    } catch (e) {
+      status("not re-snapped");
+    }
+    await refresh();
+  });
   $("accept-all").addEventListener("click", async () => {
     const r = await api("POST", "/api/facade/proposals/all/accept");
     status(`${r.accepted.length} proposals accepted; saved`);
