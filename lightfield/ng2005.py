@@ -77,6 +77,9 @@ INTERPOLATIONS = {"lanczos3": 1.0 / 6.0, "sinc": 0.0}
 # other at 9x9x512², 16 the fastest; docs/decisions/fourier-refocus.md).
 ROWS = 16
 
+# Spatial columns per block of the stored spectrum (FourierLightField.cols).
+COLS = 32
+
 
 def _kb(t: np.ndarray, width: int, beta: float) -> np.ndarray:
     from scipy.special import i0
@@ -116,14 +119,20 @@ class FourierLightField:
 
     Attributes
     ----------
-    spectrum : ndarray, (Nu, Nv, Hp, Wp//2 + 1, C) complex64
+    spectrum : ndarray, (Hp, Nu, Nv * Wr * C) complex64, Wr = Wp//2 + 1
         FFT over (y, x) (real along x) and over the zero-padded angular axes;
         the angular axes in centred order (index m is frequency (m - N//2)/N
-        cycles per view step), about the grid centre ``(U - 1)/2``.
+        cycles per view step), about the grid centre ``(U - 1)/2``. Stored in
+        column blocks: for each row and u-bin, the columns ``cols[b]:cols[b+1]``
+        are one ``(Nv, cols[b+1] - cols[b], C)`` block, so that the few
+        v-bins a slice reads for a block are one contiguous piece
+        (:meth:`block`; :meth:`angular` gives the plain (Hp, Nu, Nv, Wr, C)).
     grid : (U, V); size : (W, H) of the views; pad : (py, px) spatial padding.
     shape_p : (Hp, Wp) padded spatial size.
     kernel_width : int; beta : float (Kaiser-Bessel parameters).
     max_slope : float; channels : the light field's channels held, in order.
+    shape : (Hp, Nu, Nv, Wr, C), the spectrum's logical shape.
+    cols : column-block bounds, ``0 = cols[0] < ... < cols[-1] = Wr``.
     """
 
     spectrum: np.ndarray
@@ -135,6 +144,8 @@ class FourierLightField:
     beta: float
     max_slope: float
     channels: tuple[int, ...] = (0,)
+    shape: tuple[int, ...] = ()
+    cols: tuple[int, ...] = ()
     # Scratch buffers of refocus(), reused from slice to slice (not thread-safe:
     # one spectrum, one thread at a time).
     workspace: dict = field(default_factory=dict, repr=False, compare=False)
@@ -142,6 +153,23 @@ class FourierLightField:
     @property
     def nbytes(self) -> int:
         return int(self.spectrum.nbytes)
+
+    def block(self, b: int) -> np.ndarray:
+        """Column block ``b``: a view ``(Hp, Nu, Nv, cols[b+1] - cols[b], C)``."""
+        hp, nu, nv, _, c = self.shape
+        x0, x1 = self.cols[b], self.cols[b + 1]
+        return self.spectrum[:, :, nv * c * x0:nv * c * x1].reshape(hp, nu, nv, x1 - x0, c)
+
+    def angular(self) -> np.ndarray:
+        """The spectrum as one (Hp, Nu, Nv, Wr, C) array (a copy)."""
+        return np.concatenate([self.block(b) for b in range(len(self.cols) - 1)], axis=3)
+
+
+def _column_blocks(wr: int) -> tuple[int, ...]:
+    """Bounds of the column blocks: about :data:`COLS` columns each, as even as
+    the width allows (no padding: the spectrum keeps its size)."""
+    nb = max(1, round(wr / COLS))
+    return tuple(int(round(b * wr / nb)) for b in range(nb + 1))
 
 
 def _geometry(lf: LightField, max_slope: float, oversample: float, kernel_width: int):
@@ -212,14 +240,17 @@ def _prepare(lf, max_slope, oversample, kernel_width, channels, buffer) -> Fouri
                      * _kb_hat(pv / nv, kernel_width, beta)[None, :])).astype(np.float32)
     wr = wp // 2 + 1
     row = wr * nc
-    # Layout (Hp, Nu, Nv, Wr, C): a spatial row's whole angular spectrum is
-    # contiguous, so a slice contracts u with one BLAS product per row.
-    if buffer is not None and buffer.dtype == np.complex64 and buffer.size >= hp * nu * nv * row:
-        spec = buffer.reshape(-1)[:hp * nu * nv * row].reshape(hp, nu * nv, row)
+    cols = _column_blocks(wr)
+    # Layout: per row y and u-bin, column blocks of (Nv, columns, C): a
+    # slice reads k v-bins of a column block as one contiguous piece.
+    size = hp * nu * nv * row
+    if buffer is not None and buffer.dtype == np.complex64 and buffer.size >= size:
+        spec = buffer.reshape(-1)[:size].reshape(hp, nu * nv * row)
     else:
-        spec = _prefaulted((hp, nu * nv, row), np.complex64)
-    # The per-view FFTs go into the first U V angular slots of every row;
+        spec = _prefaulted((hp, nu * nv * row), np.complex64)
+    # The per-view FFTs go into the first U V (row-long) slots of every row;
     # the angular transform below then runs in place, row block by row block.
+    views = spec.reshape(hp, nu * nv, row)
     mode = "symmetric" if pad < min(h, w) else "edge"
     sel = list(chans)
     for i in range(u):
@@ -227,7 +258,7 @@ def _prepare(lf, max_slope, oversample, kernel_width, channels, buffer) -> Fouri
             view = lf.data[i, j][..., sel] if nc != c else lf.data[i, j]
             padded = np.pad(view * weight[i, j], ((pad, hp - h - pad), (pad, wp - w - pad), (0, 0)),
                             mode=mode)
-            spec[:, i * v + j] = sfft.rfft2(padded, axes=(0, 1), workers=WORKERS).reshape(hp, row)
+            views[:, i * v + j] = sfft.rfft2(padded, axes=(0, 1), workers=WORKERS).reshape(hp, row)
     # The angular transform of the zero-padded grid has only U x V non-zero
     # inputs: two small DFT matrices (BLAS) instead of an FFT over mostly
     # zeros. Frequencies stored centred (bin m is frequency m - n//2): the
@@ -235,16 +266,21 @@ def _prepare(lf, max_slope, oversample, kernel_width, channels, buffer) -> Fouri
     # frequency, never wrap around.
     fu = np.exp(-2j * np.pi * np.outer(np.arange(nu) - nu // 2, pu) / nu).astype(np.complex64)
     fv = np.exp(-2j * np.pi * np.outer(np.arange(nv) - nv // 2, pv) / nv).astype(np.complex64)
-    # Rows y0:y1 are copied out before they are overwritten, and no other
-    # row is touched: in place, with a few MB of temporaries.
+    # Rows y0:y1 are read into `half` before they are overwritten, and no
+    # other row is touched: in place, with a few MB of temporaries. The v
+    # transform writes each column block straight into its place.
     rb = max(1, (1 << 19) // (u * v * row))
     for y0 in range(0, hp, rb):
         y1 = min(hp, y0 + rb)
-        blk = spec[y0:y1, :u * v].reshape(y1 - y0, u, v * row)
+        blk = views[y0:y1, :u * v].reshape(y1 - y0, u, v * row)
         half = np.matmul(fu, blk).reshape((y1 - y0) * nu, v, row)
-        spec[y0:y1] = np.matmul(fv, half).reshape(y1 - y0, nu * nv, row)
-    return FourierLightField(spec.reshape(hp, nu, nv, wr, nc), (u, v), (w, h), (pad, pad),
-                             (hp, wp), kernel_width, float(beta), float(abs(max_slope)), chans)
+        out = spec[y0:y1].reshape((y1 - y0) * nu, nv * row)
+        for x0, x1 in zip(cols[:-1], cols[1:], strict=True):
+            np.matmul(fv, half[..., x0 * nc:x1 * nc],
+                      out=out[:, nv * nc * x0:nv * nc * x1].reshape(-1, nv, (x1 - x0) * nc))
+    return FourierLightField(spec.reshape(hp, nu, nv * row), (u, v), (w, h), (pad, pad),
+                             (hp, wp), kernel_width, float(beta), float(abs(max_slope)), chans,
+                             (hp, nu, nv, wr, nc), cols)
 
 
 def _prefaulted(shape: tuple[int, ...], dtype) -> np.ndarray:
@@ -353,76 +389,110 @@ def refocus(spec: FourierLightField, slope: float, *,
 
 
 def _plan(spec: FourierLightField, slope: float, interpolation: str):
-    """The slice's taps for ``slope`` (independent of the channels held)."""
-    hp, nu, nv = spec.spectrum.shape[:3]
+    """The slice's taps for ``slope`` (independent of the channels held).
+
+    u: per alias term, the first row, the row runs of one tap start and the
+    weights ``(rows, 1, k)``. v: per alias term and column block, the block,
+    the term's columns in it ``[xa, xb)``, the first stored v-bin and the
+    weights ``(m, xb - xa)`` over the ``m`` stored bins from there (cyclic):
+    ``m = k`` where the block's columns share one tap start, a bin more per
+    change of start (zero weights where a column has no tap)."""
+    hp, nu, nv = spec.shape[:3]
     u, v = spec.grid
     k = spec.kernel_width
     # Rows in centred order, so that each alias term's rows are one range.
     ky = (np.arange(hp) - hp // 2) / hp
     kx = np.fft.rfftfreq(spec.shape_p[1])
-    return ([(lo, _runs(iu[:, 0]), wu.astype(np.float32)[:, None, :])
-             for lo, _, iu, wu in _axis_terms(ky, slope, nu, u, k, spec.beta, interpolation)],
-            [(lo, _runs(iv[:, 0]), wv.astype(np.float32))
-             for lo, _, iv, wv in _axis_terms(kx, slope, nv, v, k, spec.beta, interpolation)])
+    terms_u = [(lo, _runs(iu[:, 0]), wu.astype(np.float32)[:, None, :])
+               for lo, _, iu, wu in _axis_terms(ky, slope, nu, u, k, spec.beta, interpolation)]
+    terms_v = []
+    for lo, hi, iv, wv in _axis_terms(kx, slope, nv, v, k, spec.beta, interpolation):
+        for b, (x0, x1) in enumerate(zip(spec.cols[:-1], spec.cols[1:], strict=True)):
+            xa, xb = max(x0, lo), min(x1, hi)
+            if xa >= xb:
+                continue
+            idx, w = iv[xa - lo:xb - lo], wv[xa - lo:xb - lo]
+            # tap starts relative to the first column's, unwrapped (they move
+            # by at most a few bins across a block)
+            d = (idx[:, 0] - idx[0, 0] + nv // 2) % nv - nv // 2
+            start, m = int(idx[0, 0] + d.min()) % nv, int(d.max() - d.min()) + k
+            if m >= nv:
+                start, m = 0, nv
+            wb = np.zeros((nv, xb - xa))
+            # (stored bins of one column's k taps are distinct: k < Nv)
+            np.add.at(wb, ((idx - start) % nv, np.arange(xb - xa)[:, None]), w)
+            terms_v.append((b, xa - x0, xb - x0, start, wb[:m].astype(np.float32)))
+    return terms_u, terms_v
 
 
 def _refocus(spec: FourierLightField, plan) -> np.ndarray:
     import scipy.fft as sfft
 
-    hp, nu, nv, wr, c = spec.spectrum.shape
+    hp, nu, nv, wr, c = spec.shape
     c2 = 2 * c
     hp_, wp = spec.shape_p
     u, v = spec.grid
     k = spec.kernel_width
     terms_u, terms_v = plan
-    s5 = spec.spectrum.view(np.float32).reshape(hp, nu, nv, wr * c2)
+    blocks = [spec.block(b).view(np.float32).reshape(hp, nu, nv, -1)
+              for b in range(len(spec.cols) - 1)]
     work = spec.workspace
     out = _scratch(work, "out", (hp, wr * c2))
     out[...] = 0.0
     # one flat scratch each for every block's products (fresh arrays per
     # block would page-fault their pages anew each time)
-    blk = _scratch(work, "blk", (ROWS * k * wr * c2,))
-    ein = _scratch(work, "ein", (ROWS * wr * c2,))
+    nbmax = max(x1 - x0 for x0, x1 in zip(spec.cols[:-1], spec.cols[1:], strict=True)) * c2
+    tmp = _scratch(work, "blk", (ROWS * nv * nbmax,))
+    ein = _scratch(work, "ein", (ROWS * nbmax,))
     # The slice reads k x k angular bins per spatial frequency, k/Nu * k/Nv of
-    # the spectrum: per block (a run of rows with one u-tap start) x (a run of
-    # columns with one v-tap start), one batched BLAS product contracts the
-    # u-taps for the block's k v-bins only, then the v-taps are a small einsum.
-    # (Contracting u over all Nv bins first read Nv/k times more memory: the
-    # slice is memory-bound.) Weights are real: they act on (re, im) floats.
+    # the spectrum: per block (a run of rows with one u-tap start) x (a
+    # column block), one batched BLAS product contracts the u-taps for the
+    # block's m (~k) v-bins only, one contiguous piece per row and u-bin
+    # (the stored layout), then the v-taps are a small einsum. (Contracting u
+    # over all Nv bins first read Nv/k times more memory: the slice is
+    # memory-bound.) Weights are real: they act on (re, im) floats.
     vblocks = []
-    for lo_v, runs_v, wv in terms_v:
-        wvx = np.repeat(wv.T, c2, axis=1)                          # (k, cols * 2C)
-        for x0, x1, j0 in runs_v:
-            # v-taps wrapping around the (anti-)periodic angular axis
-            # (the wrap's sign is in the weights): two contiguous pieces
-            m1 = min(k, nv - j0)
-            vblocks.append((slice((lo_v + x0) * c2, (lo_v + x1) * c2), wvx[:, x0 * c2:x1 * c2],
-                            [(0, m1, j0)] + ([(m1, k, 0)] if m1 < k else [])))
+    for b, xa, xb, j0, wv in terms_v:
+        m = wv.shape[0]
+        m1 = min(m, nv - j0)
+        full = xa == 0 and xb == spec.cols[b + 1] - spec.cols[b]
+        vblocks.append((blocks[b], slice(xa * c2, xb * c2), full,
+                        slice((spec.cols[b] + xa) * c2, (spec.cols[b] + xb) * c2),
+                        np.repeat(wv, c2, axis=1),
+                        [(0, m1, j0)] + ([(m1, m, 0)] if m1 < m else [])))
     for lo_u, runs_u, wrow in terms_u:                             # wrow: (rows, 1, k)
         for y0, y1, i0 in runs_u:
             n1 = min(k, nu - i0)
             for c0, c1, r0 in _stored_slices(lo_u + y0, lo_u + y1, hp // 2, hp):
-                # a few rows at a time, all column runs: the rows' pages stay
-                # cached (and mapped) while every column run reads its part
+                # a few rows at a time, all column blocks: the rows' pages
+                # stay cached (and mapped) while every block reads its part
                 for q0 in range(r0, r0 + c1 - c0, ROWS):
                     q1 = min(q0 + ROWS, r0 + c1 - c0)
-                    wt = wrow[c0 - lo_u + q0 - r0:c0 - lo_u + q1 - r0, :, None, :]
+                    nq = q1 - q0
+                    wt = wrow[c0 - lo_u + q0 - r0:c0 - lo_u + q1 - r0]       # (nq, 1, k)
                     pieces = [(wt[..., :n1], i0, i0 + n1)]
                     if n1 < k:
                         pieces.append((wt[..., n1:], 0, k - n1))
-                    for cols, wc, jpieces in vblocks:
+                    for sb, cols, full, ocols, wc, jpieces in vblocks:
                         nb = cols.stop - cols.start
-                        t = blk[:(q1 - q0) * k * nb].reshape(q1 - q0, k, 1, nb)
-                        for m, (wp_, a0, a1) in enumerate(pieces):
+                        m = wc.shape[0]
+                        t = tmp[:nq * m * nb].reshape(nq, m, nb)
+                        for n, (wp_, a0, a1) in enumerate(pieces):
                             for b0, b1, jj in jpieces:
-                                taps = s5[q0:q1, a0:a1, jj:jj + b1 - b0, cols].transpose(0, 2, 1, 3)
-                                if m == 0:
-                                    np.matmul(wp_, taps, out=t[:, b0:b1])
+                                src = sb[q0:q1, a0:a1, jj:jj + b1 - b0]
+                                if full:      # (nq, ka, (b1 - b0) nb): contiguous rows
+                                    dst, wq = t[:, b0:b1].reshape(nq, 1, -1), wp_
+                                    src = src.reshape(nq, a1 - a0, -1)
+                                else:         # part of the block: per v-bin
+                                    dst, wq = t[:, b0:b1, None], wp_[:, :, None]
+                                    src = src[..., cols].transpose(0, 2, 1, 3)
+                                if n == 0:
+                                    np.matmul(wq, src, out=dst)
                                 else:
-                                    t[:, b0:b1] += np.matmul(wp_, taps)
-                        o, e = out[q0:q1, cols], ein[:(q1 - q0) * nb].reshape(q1 - q0, nb)
-                        np.einsum("ybx,bx->yx", t[:, :, 0], wc, out=e)
-                        o += e
+                                    dst += np.matmul(wq, src)
+                        e = ein[:nq * nb].reshape(nq, nb)
+                        np.einsum("ybx,bx->yx", t, wc, out=e)
+                        out[q0:q1, ocols] += e
     spec2 = out.view(np.complex64).reshape(hp, wr, c)
     img = sfft.irfft2(spec2, s=(hp_, wp), axes=(0, 1), workers=WORKERS)
     w, h = spec.size

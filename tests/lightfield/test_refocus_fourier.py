@@ -119,7 +119,7 @@ def _dense_slice(spec, slope, interpolation):
     x spatial response x wrap sign) scattered into dense (rows, Nu) and
     (columns, Nv) matrices. No runs, blocks or scratch buffers: the oracle
     for the blocked float32 slice."""
-    hp, nu, nv, wr, _ = spec.spectrum.shape
+    hp, nu, nv, wr, _ = spec.shape
     u, v = spec.grid
     k = spec.kernel_width
     ky = (np.arange(hp) - hp // 2) / hp
@@ -133,7 +133,7 @@ def _dense_slice(spec, slope, interpolation):
 
     wu = np.roll(dense(ky, nu, u), -(hp // 2), axis=0)   # centred row r is stored at r - hp//2
     wv = dense(kx, nv, v)
-    e = np.einsum("ya,xb,yabxc->yxc", wu, wv, spec.spectrum.astype(np.complex128))
+    e = np.einsum("ya,xb,yabxc->yxc", wu, wv, spec.angular().astype(np.complex128))
     img = sfft.irfft2(e, s=spec.shape_p, axes=(0, 1))
     (w, h), (py, px) = spec.size, spec.pad
     return img[py:py + h, px:px + w] / (u * v)
