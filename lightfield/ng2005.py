@@ -388,40 +388,102 @@ def refocus(spec: FourierLightField, slope: float, *,
     return _refocus(spec, _plan(spec, slope, interpolation))
 
 
+def _arc(need: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of the boolean ``(rows, n)``: the shortest cyclic range of bins
+    ``start, start + 1, ... start + m - 1`` (mod n) that holds every needed bin."""
+    n = need.shape[1]
+    # rows repeat (runs of one tap start): solve each distinct row once
+    keys, inv = np.unique(need.astype(np.int64) @ (1 << np.arange(n, dtype=np.int64)),
+                          return_inverse=True)
+    uniq = (keys[:, None] >> np.arange(n)) & 1 > 0
+    d = (np.arange(n)[None, :] - np.arange(n)[:, None]) % n          # (start, bin)
+    length = np.where(uniq[:, None, :], d[None], -1).max(axis=2) + 1  # (rows, start)
+    start = length.argmin(axis=1)
+    return start[inv.ravel()], length[np.arange(keys.size), start][inv.ravel()]
+
+
+def _dense(freq, slope, n, views, width, beta, interpolation):
+    """Per alias term of one axis: the tap weights scattered into a dense
+    ``(len(freq), n)`` matrix over the stored bins, and which bins they use."""
+    out = []
+    for lo, hi, idx, w in _axis_terms(freq, slope, n, views, width, beta, interpolation):
+        m = np.zeros((freq.size, n))
+        rows = np.arange(lo, hi)[:, None]
+        np.add.at(m, (rows, idx), w)
+        need = np.zeros((freq.size, n), bool)
+        need[rows, idx] = True
+        out.append((m, need))
+    return out
+
+
+def _windows(terms):
+    """The stored bins each row reads, from its alias terms ``(weights, need)``
+    (:func:`_dense`): the union of the terms' taps as one cyclic range where
+    that is no longer than the terms' ranges apart, else each term's own.
+    Returns per slot ``(start, m, weights (rows, max m))``: slot 0 holds the
+    union (or term 0), slot t term t where not merged; ``m = 0``: nothing."""
+    rows, n = terms[0][0].shape
+    start, m = _arc(np.logical_or.reduce([nd for _, nd in terms]))
+    own = [_arc(nd) for _, nd in terms]
+    merged = m <= sum(mt for _, mt in own)
+    total = sum(w for w, _ in terms)
+    slots = []
+    for t, ((w, _), (st, mt)) in enumerate(zip(terms, own, strict=True)):
+        s_ = np.where(merged, start if t == 0 else 0, st)
+        m_ = np.where(merged, m if t == 0 else 0, mt)
+        if not m_.any():
+            continue
+        mx = int(m_.max())
+        pos = (s_[:, None] + np.arange(mx)) % n
+        wt = np.take_along_axis(w, pos, axis=1)
+        if t == 0:
+            wt = np.where(merged[:, None], np.take_along_axis(total, pos, axis=1), wt)
+        slots.append((s_, m_, np.where(np.arange(mx) < m_[:, None], wt, 0.0)))
+    return slots
+
+
 def _plan(spec: FourierLightField, slope: float, interpolation: str):
     """The slice's taps for ``slope`` (independent of the channels held).
 
-    u: per alias term, the first row, the row runs of one tap start and the
-    weights ``(rows, 1, k)``. v: per alias term and column block, the block,
-    the term's columns in it ``[xa, xb)``, the first stored v-bin and the
-    weights ``(m, xb - xa)`` over the ``m`` stored bins from there (cyclic):
-    ``m = k`` where the block's columns share one tap start, a bin more per
-    change of start (zero weights where a column has no tap)."""
+    u: per slot, the runs of stored rows ``(r0, r1, start, m)`` that read the
+    same ``m`` stored u-bins from ``start`` (cyclic), and the weights
+    ``(Hp, 1, max m)``. v: per column block and slot, the block, its columns
+    ``[xa, xb)`` read, the first stored v-bin and the weights ``(m, xb - xa)``.
+    A row's (or block's) alias terms share one read where their taps'
+    union is no longer than the terms apart (:func:`_windows`)."""
     hp, nu, nv = spec.shape[:3]
     u, v = spec.grid
     k = spec.kernel_width
-    # Rows in centred order, so that each alias term's rows are one range.
+    # Rows in centred order, then rolled to storage order (centred row r is
+    # stored at r - hp//2).
     ky = (np.arange(hp) - hp // 2) / hp
     kx = np.fft.rfftfreq(spec.shape_p[1])
-    terms_u = [(lo, _runs(iu[:, 0]), wu.astype(np.float32)[:, None, :])
-               for lo, _, iu, wu in _axis_terms(ky, slope, nu, u, k, spec.beta, interpolation)]
+    tu = [(np.roll(w, -(hp // 2), axis=0), np.roll(nd, -(hp // 2), axis=0))
+          for w, nd in _dense(ky, slope, nu, u, k, spec.beta, interpolation)]
+    terms_u = []
+    for st, m, wt in _windows(tu):
+        key = st * (nu + 1) + m
+        runs = [(r0, r1, int(st[r0]), int(m[r0])) for r0, r1, _ in _runs(key) if m[r0] > 0]
+        # the mean's 1/(U V) rides on the u weights (no pass over the image)
+        terms_u.append((runs, (wt / (u * v)).astype(np.float32)[:, None, :]))
+    # v: the same per column block, over all its columns
+    tv = _dense(kx, slope, nv, v, k, spec.beta, interpolation)
     terms_v = []
-    for lo, hi, iv, wv in _axis_terms(kx, slope, nv, v, k, spec.beta, interpolation):
-        for b, (x0, x1) in enumerate(zip(spec.cols[:-1], spec.cols[1:], strict=True)):
-            xa, xb = max(x0, lo), min(x1, hi)
-            if xa >= xb:
-                continue
-            idx, w = iv[xa - lo:xb - lo], wv[xa - lo:xb - lo]
-            # tap starts relative to the first column's, unwrapped (they move
-            # by at most a few bins across a block)
-            d = (idx[:, 0] - idx[0, 0] + nv // 2) % nv - nv // 2
-            start, m = int(idx[0, 0] + d.min()) % nv, int(d.max() - d.min()) + k
-            if m >= nv:
-                start, m = 0, nv
-            wb = np.zeros((nv, xb - xa))
-            # (stored bins of one column's k taps are distinct: k < Nv)
-            np.add.at(wb, ((idx - start) % nv, np.arange(xb - xa)[:, None]), w)
-            terms_v.append((b, xa - x0, xb - x0, start, wb[:m].astype(np.float32)))
+    for b, (x0, x1) in enumerate(zip(spec.cols[:-1], spec.cols[1:], strict=True)):
+        parts = []            # per term in the block: its columns, bins, weights
+        for w, nd in tv:
+            has = np.flatnonzero(nd[x0:x1].any(axis=1))
+            if has.size:
+                xa, xb = int(has[0]), int(has[-1]) + 1
+                st, m = _arc(nd[x0:x1].any(axis=0)[None, :])
+                parts.append((xa, xb, int(st[0]), int(m[0]), w[x0:x1].T))
+        st, m = _arc(np.logical_or.reduce([nd[x0:x1].any(axis=0) for _, nd in tv])[None, :])
+        st, m = int(st[0]), int(m[0])
+        if len(parts) > 1 and m * (x1 - x0) <= sum(mt * (xb - xa) for xa, xb, _, mt, _ in parts):
+            parts = [(0, x1 - x0, st, m, sum(w for *_, w in parts))]
+        for xa, xb, st, m, w in parts:
+            pos = (st + np.arange(m)) % nv
+            terms_v.append((b, xa, xb, st, w[pos, xa:xb].astype(np.float32)))
     return terms_u, terms_v
 
 
@@ -430,9 +492,7 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
 
     hp, nu, nv, wr, c = spec.shape
     c2 = 2 * c
-    hp_, wp = spec.shape_p
-    u, v = spec.grid
-    k = spec.kernel_width
+    wp = spec.shape_p[1]
     terms_u, terms_v = plan
     blocks = [spec.block(b).view(np.float32).reshape(hp, nu, nv, -1)
               for b in range(len(spec.cols) - 1)]
@@ -445,59 +505,68 @@ def _refocus(spec: FourierLightField, plan) -> np.ndarray:
     tmp = _scratch(work, "blk", (ROWS * nv * nbmax,))
     ein = _scratch(work, "ein", (ROWS * nbmax,))
     # The slice reads k x k angular bins per spatial frequency, k/Nu * k/Nv of
-    # the spectrum: per block (a run of rows with one u-tap start) x (a
+    # the spectrum: per block (a run of rows reading the same u-bins) x (a
     # column block), one batched BLAS product contracts the u-taps for the
     # block's m (~k) v-bins only, one contiguous piece per row and u-bin
     # (the stored layout), then the v-taps are a small einsum. (Contracting u
     # over all Nv bins first read Nv/k times more memory: the slice is
     # memory-bound.) Weights are real: they act on (re, im) floats.
-    vblocks = []
+    vblocks, done = [], set()
     for b, xa, xb, j0, wv in terms_v:
         m = wv.shape[0]
         m1 = min(m, nv - j0)
         full = xa == 0 and xb == spec.cols[b + 1] - spec.cols[b]
-        vblocks.append((blocks[b], slice(xa * c2, xb * c2), full,
+        # the first slot's first read of a whole block writes its columns
+        # (the rest add to them)
+        first = full and b not in done
+        done.add(b)
+        vblocks.append((blocks[b], slice(xa * c2, xb * c2), full, first,
                         slice((spec.cols[b] + xa) * c2, (spec.cols[b] + xb) * c2),
                         np.repeat(wv, c2, axis=1),
                         [(0, m1, j0)] + ([(m1, m, 0)] if m1 < m else [])))
-    for lo_u, runs_u, wrow in terms_u:                             # wrow: (rows, 1, k)
-        for y0, y1, i0 in runs_u:
-            n1 = min(k, nu - i0)
-            for c0, c1, r0 in _stored_slices(lo_u + y0, lo_u + y1, hp // 2, hp):
-                # a few rows at a time, all column blocks: the rows' pages
-                # stay cached (and mapped) while every block reads its part
-                for q0 in range(r0, r0 + c1 - c0, ROWS):
-                    q1 = min(q0 + ROWS, r0 + c1 - c0)
-                    nq = q1 - q0
-                    wt = wrow[c0 - lo_u + q0 - r0:c0 - lo_u + q1 - r0]       # (nq, 1, k)
-                    pieces = [(wt[..., :n1], i0, i0 + n1)]
-                    if n1 < k:
-                        pieces.append((wt[..., n1:], 0, k - n1))
-                    for sb, cols, full, ocols, wc, jpieces in vblocks:
-                        nb = cols.stop - cols.start
-                        m = wc.shape[0]
-                        t = tmp[:nq * m * nb].reshape(nq, m, nb)
-                        for n, (wp_, a0, a1) in enumerate(pieces):
-                            for b0, b1, jj in jpieces:
-                                src = sb[q0:q1, a0:a1, jj:jj + b1 - b0]
-                                if full:      # (nq, ka, (b1 - b0) nb): contiguous rows
-                                    dst, wq = t[:, b0:b1].reshape(nq, 1, -1), wp_
-                                    src = src.reshape(nq, a1 - a0, -1)
-                                else:         # part of the block: per v-bin
-                                    dst, wq = t[:, b0:b1, None], wp_[:, :, None]
-                                    src = src[..., cols].transpose(0, 2, 1, 3)
-                                if n == 0:
-                                    np.matmul(wq, src, out=dst)
-                                else:
-                                    dst += np.matmul(wq, src)
+    for slot, (runs, wrow) in enumerate(terms_u):                  # wrow: (Hp, 1, max m)
+        for r0, r1, i0, mu in runs:
+            n1 = min(mu, nu - i0)
+            # a few rows at a time, all column blocks: the rows' pages stay
+            # cached (and mapped) while every block reads its part
+            for q0 in range(r0, r1, ROWS):
+                q1 = min(q0 + ROWS, r1)
+                nq = q1 - q0
+                wt = wrow[q0:q1]                                   # (nq, 1, max m)
+                pieces = [(wt[..., :n1], i0, i0 + n1)]
+                if n1 < mu:
+                    pieces.append((wt[..., n1:mu], 0, mu - n1))
+                for sb, cols, full, first, ocols, wc, jpieces in vblocks:
+                    nb = cols.stop - cols.start
+                    m = wc.shape[0]
+                    t = tmp[:nq * m * nb].reshape(nq, m, nb)
+                    for n, (wp_, a0, a1) in enumerate(pieces):
+                        for b0, b1, jj in jpieces:
+                            src = sb[q0:q1, a0:a1, jj:jj + b1 - b0]
+                            if full:      # (nq, ka, (b1 - b0) nb): contiguous rows
+                                dst, wq = t[:, b0:b1].reshape(nq, 1, -1), wp_
+                                src = src.reshape(nq, a1 - a0, -1)
+                            else:         # part of the block: per v-bin
+                                dst, wq = t[:, b0:b1, None], wp_[:, :, None]
+                                src = src[..., cols].transpose(0, 2, 1, 3)
+                            if n == 0:
+                                np.matmul(wq, src, out=dst)
+                            else:
+                                dst += np.matmul(wq, src)
+                    if first and slot == 0:
+                        np.einsum("ybx,bx->yx", t, wc, out=out[q0:q1, ocols])
+                    else:
                         e = ein[:nq * nb].reshape(nq, nb)
                         np.einsum("ybx,bx->yx", t, wc, out=e)
                         out[q0:q1, ocols] += e
+    # Inverse FFT: along y in place in the scratch, then the real transform
+    # along x of the image's rows only.
     spec2 = out.view(np.complex64).reshape(hp, wr, c)
-    img = sfft.irfft2(spec2, s=(hp_, wp), axes=(0, 1), workers=WORKERS)
+    cy = sfft.ifft(spec2, axis=0, overwrite_x=True, workers=WORKERS)
     w, h = spec.size
     py, px = spec.pad
-    return np.ascontiguousarray(img[py:py + h, px:px + w] / (u * v), dtype=np.float32)
+    img = sfft.irfft(cy[py:py + h], n=wp, axis=1, workers=WORKERS)
+    return np.ascontiguousarray(img[:, px:px + w], dtype=np.float32)
 
 
 def _scratch(work: dict, name: str, shape: tuple[int, ...]) -> np.ndarray:
