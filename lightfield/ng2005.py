@@ -468,19 +468,20 @@ def _plan(spec: FourierLightField, slope: float, interpolation: str):
         terms_u.append((runs, (wt / (u * v)).astype(np.float32)[:, None, :]))
     # v: the same per column block, over all its columns
     tv = _dense(kx, slope, nv, v, k, spec.beta, interpolation)
+    bounds = np.asarray(spec.cols)
+    # per term: which bins each block needs, and their arc
+    need = [np.logical_or.reduceat(nd, bounds[:-1], axis=0) for _, nd in tv]   # (B, Nv)
+    arcs = [_arc(nd) for nd in need]
+    ust, um = _arc(np.logical_or.reduce(need))
     terms_v = []
     for b, (x0, x1) in enumerate(zip(spec.cols[:-1], spec.cols[1:], strict=True)):
         parts = []            # per term in the block: its columns, bins, weights
-        for w, nd in tv:
-            has = np.flatnonzero(nd[x0:x1].any(axis=1))
-            if has.size:
-                xa, xb = int(has[0]), int(has[-1]) + 1
-                st, m = _arc(nd[x0:x1].any(axis=0)[None, :])
-                parts.append((xa, xb, int(st[0]), int(m[0]), w[x0:x1].T))
-        st, m = _arc(np.logical_or.reduce([nd[x0:x1].any(axis=0) for _, nd in tv])[None, :])
-        st, m = int(st[0]), int(m[0])
-        if len(parts) > 1 and m * (x1 - x0) <= sum(mt * (xb - xa) for xa, xb, _, mt, _ in parts):
-            parts = [(0, x1 - x0, st, m, sum(w for *_, w in parts))]
+        for (w, nd), (st, m) in zip(tv, arcs, strict=True):
+            if m[b]:
+                has = np.flatnonzero(nd[x0:x1].any(axis=1))
+                parts.append((int(has[0]), int(has[-1]) + 1, int(st[b]), int(m[b]), w[x0:x1].T))
+        if len(parts) > 1 and um[b] * (x1 - x0) <= sum(mt * (xb - xa) for xa, xb, _, mt, _ in parts):
+            parts = [(0, x1 - x0, int(ust[b]), int(um[b]), sum(w for *_, w in parts))]
         for xa, xb, st, m, w in parts:
             pos = (st + np.arange(m)) % nv
             terms_v.append((b, xa, xb, st, w[pos, xa:xb].astype(np.float32)))
