@@ -75,10 +75,10 @@ INTERPOLATIONS = {"lanczos3": 1.0 / 6.0, "sinc": 0.0}
 # Spatial rows per block of the slice: the blocks' reads of those rows stay
 # in cache and mapped across the column runs (8-64 within the noise of each
 # other at 9x9x512², 16 the fastest; docs/decisions/fourier-refocus.md).
-ROWS = 16
+ROWS = 32
 
 # Spatial columns per block of the stored spectrum (FourierLightField.cols).
-COLS = 32
+COLS = 64
 
 
 def _kb(t: np.ndarray, width: int, beta: float) -> np.ndarray:
