@@ -37,9 +37,11 @@ sign. The spatial axes are mirror-padded by the largest shift so the FFT's
 wrap-around never reaches the image (the border rule of shift-and-add).
 
 **Memory.** complex64, real FFT along x, ``ceil(oU) ceil(oV) Hp (Wp/2 + 1) C``
-x 8 bytes: the per-view FFTs are written into the first ``U V`` rows of the
-spectrum's own buffer and the angular transform runs in place, column block by
-column block, so no second full-size array exists. :func:`refocus_stack`
+x 8 bytes: the per-view FFTs are written into the first ``U V`` slots of each
+row of the spectrum's own buffer and the angular transform runs in place, row
+block by row block, writing each column block of the stored layout
+(:class:`FourierLightField`) straight into its place, so no second full-size
+array exists. :func:`refocus_stack`
 prepares colour channels one at a time when the whole spectrum would exceed the
 light field's own size.
 
@@ -72,12 +74,14 @@ WORKERS = -1
 # |f| <= 1/2 - r, 0 from 1/2 + r, linear between (r = 1/6: Lanczos-3's sinc(x/3)).
 INTERPOLATIONS = {"lanczos3": 1.0 / 6.0, "sinc": 0.0}
 
-# Spatial rows per block of the slice: the blocks' reads of those rows stay
-# in cache and mapped across the column runs (8-64 within the noise of each
-# other at 9x9x512², 16 the fastest; docs/decisions/fourier-refocus.md).
+# Spatial rows per block of the slice: fewer Python-level steps per slice,
+# the block's products stay in cache (16-64 rows x 32-64 columns within the
+# noise of each other at 9x9x512²; docs/decisions/fourier-refocus.md).
 ROWS = 32
 
-# Spatial columns per block of the stored spectrum (FourierLightField.cols).
+# Spatial columns per block of the stored spectrum (FourierLightField.cols):
+# a slice reads each block's few v-bins as one piece per row and u-bin
+# (64 columns x 5-8 bins x 3 channels: 8-12 KB).
 COLS = 64
 
 
@@ -358,12 +362,17 @@ def refocus(spec: FourierLightField, slope: float, *,
     The slice reads the spectrum at angular bins ``(s (ky + p) Nu, s (kx + q) Nv)``
     for the spatial filter's aliases ``p, q`` (module docstring). The
     Kaiser-Bessel taps along u depend on ``ky`` only and those along v on
-    ``kx`` only, so the slice is separable. The taps' start is constant over
-    runs of rows (u) and of columns (v); per block of (up to :data:`ROWS`
-    rows of) one row run x one column run, one batched BLAS product contracts
-    the k u-taps for the block's k v-bins only, then an einsum the k v-taps,
-    on the (re, im) float pairs (the weights are real). The slice thus reads
-    ``k^2 / (Nu Nv)`` of the spectrum (it is memory-bound).
+    ``kx`` only, so the slice is separable. Each row reads a cyclic range of
+    u-bins (its k taps, or one range holding its alias terms' taps too
+    where that is no longer than reading them apart), constant over runs of
+    rows; each stored column block (:data:`COLS` columns) likewise a range of
+    v-bins for all its columns (a bin more where the taps' start changes
+    inside the block). Per (up to :data:`ROWS` rows of) one row run x one
+    column block, one batched BLAS product contracts the u-taps over the
+    block's v-bins, one contiguous piece per row and u-bin, then an einsum the
+    v-taps, on the (re, im) float pairs (the weights are real). The slice
+    thus reads about ``k^2 / (Nu Nv)`` of the spectrum (x 1.8 for the alias
+    terms); it is memory-bound.
 
     Parameters
     ----------
