@@ -477,23 +477,26 @@ def _plan(spec: FourierLightField, slope: float, interpolation: str):
         terms_u.append((runs, (wt / (u * v)).astype(np.float32)[:, None, :]))
     # v: the same per column block, over all its columns
     tv = _dense(kx, slope, nv, v, k, spec.beta, interpolation)
-    bounds = np.asarray(spec.cols)
-    # per term: which bins each block needs, and their arc
-    need = [np.logical_or.reduceat(nd, bounds[:-1], axis=0) for _, nd in tv]   # (B, Nv)
-    arcs = [_arc(nd) for nd in need]
-    ust, um = _arc(np.logical_or.reduce(need))
+    starts = np.asarray(spec.cols[:-1])
+    col = np.arange(spec.cols[-1])
+    # per term: the bins each block needs, their arc, its first and last column
+    need = [np.logical_or.reduceat(nd, starts, axis=0) for _, nd in tv]       # (B, Nv)
+    arcs = [[a.tolist() for a in _arc(nd)] for nd in need]
+    ust, um = (a.tolist() for a in _arc(np.logical_or.reduce(need)))
+    spans = [(np.minimum.reduceat(np.where(nd.any(axis=1), col, col.size), starts).tolist(),
+              np.maximum.reduceat(np.where(nd.any(axis=1), col, -1), starts).tolist())
+             for _, nd in tv]
+    total = sum(w for w, _ in tv)
     terms_v = []
     for b, (x0, x1) in enumerate(zip(spec.cols[:-1], spec.cols[1:], strict=True)):
-        parts = []            # per term in the block: its columns, bins, weights
-        for (w, nd), (st, m) in zip(tv, arcs, strict=True):
-            if m[b]:
-                has = np.flatnonzero(nd[x0:x1].any(axis=1))
-                parts.append((int(has[0]), int(has[-1]) + 1, int(st[b]), int(m[b]), w[x0:x1].T))
+        parts = [(first[b] - x0, last[b] + 1 - x0, st[b], m[b], w)
+                 for (w, _), (st, m), (first, last) in zip(tv, arcs, spans, strict=True) if m[b]]
         if len(parts) > 1 and um[b] * (x1 - x0) <= sum(mt * (xb - xa) for xa, xb, _, mt, _ in parts):
-            parts = [(0, x1 - x0, int(ust[b]), int(um[b]), sum(w for *_, w in parts))]
+            parts = [(0, x1 - x0, ust[b], um[b], total)]
         for xa, xb, st, m, w in parts:
             pos = (st + np.arange(m)) % nv
-            terms_v.append((b, xa, xb, st, w[pos, xa:xb].astype(np.float32)))
+            terms_v.append((b, xa, xb, st,
+                            np.ascontiguousarray(w[x0 + xa:x0 + xb, pos].T, dtype=np.float32)))
     return terms_u, terms_v
 
 
