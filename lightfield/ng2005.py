@@ -37,9 +37,11 @@ sign. The spatial axes are mirror-padded by the largest shift so the FFT's
 wrap-around never reaches the image (the border rule of shift-and-add).
 
 **Memory.** complex64, real FFT along x, ``ceil(oU) ceil(oV) Hp (Wp/2 + 1) C``
-x 8 bytes: the per-view FFTs are written into the first ``U V`` rows of the
-spectrum's own buffer and the angular transform runs in place, column block by
-column block, so no second full-size array exists. :func:`refocus_stack`
+x 8 bytes: the per-view FFTs are written into the first ``U V`` slots of each
+row of the spectrum's own buffer and the angular transform runs in place, row
+block by row block, writing each column block of the stored layout
+(:class:`FourierLightField`) straight into its place, so no second full-size
+array exists. :func:`refocus_stack`
 prepares colour channels one at a time when the whole spectrum would exceed the
 light field's own size.
 
@@ -72,10 +74,15 @@ WORKERS = -1
 # |f| <= 1/2 - r, 0 from 1/2 + r, linear between (r = 1/6: Lanczos-3's sinc(x/3)).
 INTERPOLATIONS = {"lanczos3": 1.0 / 6.0, "sinc": 0.0}
 
-# Spatial rows per block of the slice: the blocks' reads of those rows stay
-# in cache and mapped across the column runs (8-64 within the noise of each
-# other at 9x9x512², 16 the fastest; docs/decisions/fourier-refocus.md).
-ROWS = 16
+# Spatial rows per block of the slice: fewer Python-level steps per slice,
+# the block's products stay in cache (16-64 rows x 32-64 columns within the
+# noise of each other at 9x9x512²; docs/decisions/fourier-refocus.md).
+ROWS = 32
+
+# Spatial columns per block of the stored spectrum (FourierLightField.cols):
+# a slice reads each block's few v-bins as one piece per row and u-bin
+# (64 columns x 5-8 bins x 3 channels: 8-12 KB).
+COLS = 64
 
 
 def _kb(t: np.ndarray, width: int, beta: float) -> np.ndarray:
@@ -116,14 +123,20 @@ class FourierLightField:
 
     Attributes
     ----------
-    spectrum : ndarray, (Nu, Nv, Hp, Wp//2 + 1, C) complex64
+    spectrum : ndarray, (Hp, Nu, Nv * Wr * C) complex64, Wr = Wp//2 + 1
         FFT over (y, x) (real along x) and over the zero-padded angular axes;
         the angular axes in centred order (index m is frequency (m - N//2)/N
-        cycles per view step), about the grid centre ``(U - 1)/2``.
+        cycles per view step), about the grid centre ``(U - 1)/2``. Stored in
+        column blocks: for each row and u-bin, the columns ``cols[b]:cols[b+1]``
+        are one ``(Nv, cols[b+1] - cols[b], C)`` block, so that the few
+        v-bins a slice reads for a block are one contiguous piece
+        (:meth:`block`; :meth:`angular` gives the plain (Hp, Nu, Nv, Wr, C)).
     grid : (U, V); size : (W, H) of the views; pad : (py, px) spatial padding.
     shape_p : (Hp, Wp) padded spatial size.
     kernel_width : int; beta : float (Kaiser-Bessel parameters).
     max_slope : float; channels : the light field's channels held, in order.
+    shape : (Hp, Nu, Nv, Wr, C), the spectrum's logical shape.
+    cols : column-block bounds, ``0 = cols[0] < ... < cols[-1] = Wr``.
     """
 
     spectrum: np.ndarray
@@ -135,6 +148,8 @@ class FourierLightField:
     beta: float
     max_slope: float
     channels: tuple[int, ...] = (0,)
+    shape: tuple[int, ...] = ()
+    cols: tuple[int, ...] = ()
     # Scratch buffers of refocus(), reused from slice to slice (not thread-safe:
     # one spectrum, one thread at a time).
     workspace: dict = field(default_factory=dict, repr=False, compare=False)
@@ -142,6 +157,23 @@ class FourierLightField:
     @property
     def nbytes(self) -> int:
         return int(self.spectrum.nbytes)
+
+    def block(self, b: int) -> np.ndarray:
+        """Column block ``b``: a view ``(Hp, Nu, Nv, cols[b+1] - cols[b], C)``."""
+        hp, nu, nv, _, c = self.shape
+        x0, x1 = self.cols[b], self.cols[b + 1]
+        return self.spectrum[:, :, nv * c * x0:nv * c * x1].reshape(hp, nu, nv, x1 - x0, c)
+
+    def angular(self) -> np.ndarray:
+        """The spectrum as one (Hp, Nu, Nv, Wr, C) array (a copy)."""
+        return np.concatenate([self.block(b) for b in range(len(self.cols) - 1)], axis=3)
+
+
+def _column_blocks(wr: int) -> tuple[int, ...]:
+    """Bounds of the column blocks: about :data:`COLS` columns each, as even as
+    the width allows (no padding: the spectrum keeps its size)."""
+    nb = max(1, round(wr / COLS))
+    return tuple(int(round(b * wr / nb)) for b in range(nb + 1))
 
 
 def _geometry(lf: LightField, max_slope: float, oversample: float, kernel_width: int):
@@ -212,14 +244,17 @@ def _prepare(lf, max_slope, oversample, kernel_width, channels, buffer) -> Fouri
                      * _kb_hat(pv / nv, kernel_width, beta)[None, :])).astype(np.float32)
     wr = wp // 2 + 1
     row = wr * nc
-    # Layout (Hp, Nu, Nv, Wr, C): a spatial row's whole angular spectrum is
-    # contiguous, so a slice contracts u with one BLAS product per row.
-    if buffer is not None and buffer.dtype == np.complex64 and buffer.size >= hp * nu * nv * row:
-        spec = buffer.reshape(-1)[:hp * nu * nv * row].reshape(hp, nu * nv, row)
+    cols = _column_blocks(wr)
+    # Layout: per row y and u-bin, column blocks of (Nv, columns, C): a
+    # slice reads k v-bins of a column block as one contiguous piece.
+    size = hp * nu * nv * row
+    if buffer is not None and buffer.dtype == np.complex64 and buffer.size >= size:
+        spec = buffer.reshape(-1)[:size].reshape(hp, nu * nv * row)
     else:
-        spec = _prefaulted((hp, nu * nv, row), np.complex64)
-    # The per-view FFTs go into the first U V angular slots of every row;
+        spec = _prefaulted((hp, nu * nv * row), np.complex64)
+    # The per-view FFTs go into the first U V (row-long) slots of every row;
     # the angular transform below then runs in place, row block by row block.
+    views = spec.reshape(hp, nu * nv, row)
     mode = "symmetric" if pad < min(h, w) else "edge"
     sel = list(chans)
     for i in range(u):
@@ -227,7 +262,7 @@ def _prepare(lf, max_slope, oversample, kernel_width, channels, buffer) -> Fouri
             view = lf.data[i, j][..., sel] if nc != c else lf.data[i, j]
             padded = np.pad(view * weight[i, j], ((pad, hp - h - pad), (pad, wp - w - pad), (0, 0)),
                             mode=mode)
-            spec[:, i * v + j] = sfft.rfft2(padded, axes=(0, 1), workers=WORKERS).reshape(hp, row)
+            views[:, i * v + j] = sfft.rfft2(padded, axes=(0, 1), workers=WORKERS).reshape(hp, row)
     # The angular transform of the zero-padded grid has only U x V non-zero
     # inputs: two small DFT matrices (BLAS) instead of an FFT over mostly
     # zeros. Frequencies stored centred (bin m is frequency m - n//2): the
@@ -235,16 +270,21 @@ def _prepare(lf, max_slope, oversample, kernel_width, channels, buffer) -> Fouri
     # frequency, never wrap around.
     fu = np.exp(-2j * np.pi * np.outer(np.arange(nu) - nu // 2, pu) / nu).astype(np.complex64)
     fv = np.exp(-2j * np.pi * np.outer(np.arange(nv) - nv // 2, pv) / nv).astype(np.complex64)
-    # Rows y0:y1 are copied out before they are overwritten, and no other
-    # row is touched: in place, with a few MB of temporaries.
+    # Rows y0:y1 are read into `half` before they are overwritten, and no
+    # other row is touched: in place, with a few MB of temporaries. The v
+    # transform writes each column block straight into its place.
     rb = max(1, (1 << 19) // (u * v * row))
     for y0 in range(0, hp, rb):
         y1 = min(hp, y0 + rb)
-        blk = spec[y0:y1, :u * v].reshape(y1 - y0, u, v * row)
+        blk = views[y0:y1, :u * v].reshape(y1 - y0, u, v * row)
         half = np.matmul(fu, blk).reshape((y1 - y0) * nu, v, row)
-        spec[y0:y1] = np.matmul(fv, half).reshape(y1 - y0, nu * nv, row)
-    return FourierLightField(spec.reshape(hp, nu, nv, wr, nc), (u, v), (w, h), (pad, pad),
-                             (hp, wp), kernel_width, float(beta), float(abs(max_slope)), chans)
+        out = spec[y0:y1].reshape((y1 - y0) * nu, nv * row)
+        for x0, x1 in zip(cols[:-1], cols[1:], strict=True):
+            np.matmul(fv, half[..., x0 * nc:x1 * nc],
+                      out=out[:, nv * nc * x0:nv * nc * x1].reshape(-1, nv, (x1 - x0) * nc))
+    return FourierLightField(spec.reshape(hp, nu, nv * row), (u, v), (w, h), (pad, pad),
+                             (hp, wp), kernel_width, float(beta), float(abs(max_slope)), chans,
+                             (hp, nu, nv, wr, nc), cols)
 
 
 def _prefaulted(shape: tuple[int, ...], dtype) -> np.ndarray:
@@ -322,12 +362,17 @@ def refocus(spec: FourierLightField, slope: float, *,
     The slice reads the spectrum at angular bins ``(s (ky + p) Nu, s (kx + q) Nv)``
     for the spatial filter's aliases ``p, q`` (module docstring). The
     Kaiser-Bessel taps along u depend on ``ky`` only and those along v on
-    ``kx`` only, so the slice is separable. The taps' start is constant over
-    runs of rows (u) and of columns (v); per block of (up to :data:`ROWS`
-    rows of) one row run x one column run, one batched BLAS product contracts
-    the k u-taps for the block's k v-bins only, then an einsum the k v-taps,
-    on the (re, im) float pairs (the weights are real). The slice thus reads
-    ``k^2 / (Nu Nv)`` of the spectrum (it is memory-bound).
+    ``kx`` only, so the slice is separable. Each row reads a cyclic range of
+    u-bins (its k taps, or one range holding its alias terms' taps too
+    where that is no longer than reading them apart), constant over runs of
+    rows; each stored column block (:data:`COLS` columns) likewise a range of
+    v-bins for all its columns (a bin more where the taps' start changes
+    inside the block). Per (up to :data:`ROWS` rows of) one row run x one
+    column block, one batched BLAS product contracts the u-taps over the
+    block's v-bins, one contiguous piece per row and u-bin, then an einsum the
+    v-taps, on the (re, im) float pairs (the weights are real). The slice
+    thus reads about ``k^2 / (Nu Nv)`` of the spectrum (x 1.8 for the alias
+    terms); it is memory-bound.
 
     Parameters
     ----------
@@ -352,82 +397,193 @@ def refocus(spec: FourierLightField, slope: float, *,
     return _refocus(spec, _plan(spec, slope, interpolation))
 
 
+def _arc(need: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of the boolean ``(rows, n)``: the shortest cyclic range of bins
+    ``start, start + 1, ... start + m - 1`` (mod n) that holds every needed bin."""
+    n = need.shape[1]
+    # rows repeat (runs of one tap start): solve each distinct row once (as
+    # bit masks where they fit in 62 bits: faster than unique rows)
+    if n <= 62:
+        keys, inv = np.unique(need.astype(np.int64) @ (1 << np.arange(n, dtype=np.int64)),
+                              return_inverse=True)
+        uniq = (keys[:, None] >> np.arange(n)) & 1 > 0
+    else:
+        uniq, inv = np.unique(need, axis=0, return_inverse=True)
+    d = (np.arange(n)[None, :] - np.arange(n)[:, None]) % n          # (start, bin)
+    length = np.where(uniq[:, None, :], d[None], -1).max(axis=2) + 1  # (rows, start)
+    start = length.argmin(axis=1)
+    return start[inv.ravel()], length[np.arange(len(uniq)), start][inv.ravel()]
+
+
+def _dense(freq, slope, n, views, width, beta, interpolation):
+    """Per alias term of one axis: the tap weights scattered into a dense
+    ``(len(freq), n)`` matrix over the stored bins, and which bins they use."""
+    out = []
+    for lo, hi, idx, w in _axis_terms(freq, slope, n, views, width, beta, interpolation):
+        m = np.zeros((freq.size, n))
+        rows = np.arange(lo, hi)[:, None]
+        np.add.at(m, (rows, idx), w)
+        need = np.zeros((freq.size, n), bool)
+        need[rows, idx] = True
+        out.append((m, need))
+    return out
+
+
+def _windows(terms):
+    """The stored bins each row reads, from its alias terms ``(weights, need)``
+    (:func:`_dense`): the union of the terms' taps as one cyclic range where
+    that is no longer than the terms' ranges apart, else each term's own.
+    Returns per slot ``(start, m, weights (rows, max m))``: slot 0 holds the
+    union (or term 0), slot t term t where not merged; ``m = 0``: nothing."""
+    rows, n = terms[0][0].shape
+    start, m = _arc(np.logical_or.reduce([nd for _, nd in terms]))
+    own = [_arc(nd) for _, nd in terms]
+    merged = m <= sum(mt for _, mt in own)
+    total = sum(w for w, _ in terms)
+    slots = []
+    for t, ((w, _), (st, mt)) in enumerate(zip(terms, own, strict=True)):
+        s_ = np.where(merged, start if t == 0 else 0, st)
+        m_ = np.where(merged, m if t == 0 else 0, mt)
+        if not m_.any():
+            continue
+        mx = int(m_.max())
+        pos = (s_[:, None] + np.arange(mx)) % n
+        wt = np.take_along_axis(w, pos, axis=1)
+        if t == 0:
+            wt = np.where(merged[:, None], np.take_along_axis(total, pos, axis=1), wt)
+        slots.append((s_, m_, np.where(np.arange(mx) < m_[:, None], wt, 0.0)))
+    return slots
+
+
 def _plan(spec: FourierLightField, slope: float, interpolation: str):
-    """The slice's taps for ``slope`` (independent of the channels held)."""
-    hp, nu, nv = spec.spectrum.shape[:3]
+    """The slice's taps for ``slope`` (independent of the channels held).
+
+    u: per slot, the runs of stored rows ``(r0, r1, start, m)`` that read the
+    same ``m`` stored u-bins from ``start`` (cyclic), and the weights
+    ``(Hp, 1, max m)``. v: per column block and slot, the block, its columns
+    ``[xa, xb)`` read, the first stored v-bin and the weights ``(m, xb - xa)``.
+    A row's (or block's) alias terms share one read where their taps'
+    union is no longer than the terms apart (:func:`_windows`)."""
+    hp, nu, nv = spec.shape[:3]
     u, v = spec.grid
     k = spec.kernel_width
-    # Rows in centred order, so that each alias term's rows are one range.
+    # Rows in centred order, then rolled to storage order (centred row r is
+    # stored at r - hp//2).
     ky = (np.arange(hp) - hp // 2) / hp
     kx = np.fft.rfftfreq(spec.shape_p[1])
-    return ([(lo, _runs(iu[:, 0]), wu.astype(np.float32)[:, None, :])
-             for lo, _, iu, wu in _axis_terms(ky, slope, nu, u, k, spec.beta, interpolation)],
-            [(lo, _runs(iv[:, 0]), wv.astype(np.float32))
-             for lo, _, iv, wv in _axis_terms(kx, slope, nv, v, k, spec.beta, interpolation)])
+    tu = [(np.roll(w, -(hp // 2), axis=0), np.roll(nd, -(hp // 2), axis=0))
+          for w, nd in _dense(ky, slope, nu, u, k, spec.beta, interpolation)]
+    terms_u = []
+    for st, m, wt in _windows(tu):
+        key = st * (nu + 1) + m
+        runs = [(r0, r1, int(st[r0]), int(m[r0])) for r0, r1, _ in _runs(key) if m[r0] > 0]
+        # the mean's 1/(U V) rides on the u weights (no pass over the image)
+        terms_u.append((runs, (wt / (u * v)).astype(np.float32)[:, None, :]))
+    # v: the same per column block, over all its columns
+    tv = _dense(kx, slope, nv, v, k, spec.beta, interpolation)
+    starts = np.asarray(spec.cols[:-1])
+    col = np.arange(spec.cols[-1])
+    # per term: the bins each block needs, their arc, its first and last column
+    need = [np.logical_or.reduceat(nd, starts, axis=0) for _, nd in tv]       # (B, Nv)
+    arcs = [[a.tolist() for a in _arc(nd)] for nd in need]
+    ust, um = (a.tolist() for a in _arc(np.logical_or.reduce(need)))
+    spans = [(np.minimum.reduceat(np.where(nd.any(axis=1), col, col.size), starts).tolist(),
+              np.maximum.reduceat(np.where(nd.any(axis=1), col, -1), starts).tolist())
+             for _, nd in tv]
+    total = sum(w for w, _ in tv)
+    terms_v = []
+    for b, (x0, x1) in enumerate(zip(spec.cols[:-1], spec.cols[1:], strict=True)):
+        parts = [(first[b] - x0, last[b] + 1 - x0, st[b], m[b], w)
+                 for (w, _), (st, m), (first, last) in zip(tv, arcs, spans, strict=True) if m[b]]
+        if len(parts) > 1 and um[b] * (x1 - x0) <= sum(mt * (xb - xa) for xa, xb, _, mt, _ in parts):
+            parts = [(0, x1 - x0, ust[b], um[b], total)]
+        for xa, xb, st, m, w in parts:
+            pos = (st + np.arange(m)) % nv
+            terms_v.append((b, xa, xb, st,
+                            np.ascontiguousarray(w[x0 + xa:x0 + xb, pos].T, dtype=np.float32)))
+    return terms_u, terms_v
 
 
 def _refocus(spec: FourierLightField, plan) -> np.ndarray:
     import scipy.fft as sfft
 
-    hp, nu, nv, wr, c = spec.spectrum.shape
+    hp, nu, nv, wr, c = spec.shape
     c2 = 2 * c
-    hp_, wp = spec.shape_p
-    u, v = spec.grid
-    k = spec.kernel_width
+    wp = spec.shape_p[1]
     terms_u, terms_v = plan
-    s5 = spec.spectrum.view(np.float32).reshape(hp, nu, nv, wr * c2)
+    blocks = [spec.block(b).view(np.float32).reshape(hp, nu, nv, -1)
+              for b in range(len(spec.cols) - 1)]
     work = spec.workspace
     out = _scratch(work, "out", (hp, wr * c2))
     out[...] = 0.0
     # one flat scratch each for every block's products (fresh arrays per
     # block would page-fault their pages anew each time)
-    blk = _scratch(work, "blk", (ROWS * k * wr * c2,))
-    ein = _scratch(work, "ein", (ROWS * wr * c2,))
+    nbmax = max(x1 - x0 for x0, x1 in zip(spec.cols[:-1], spec.cols[1:], strict=True)) * c2
+    tmp = _scratch(work, "blk", (ROWS * nv * nbmax,))
+    ein = _scratch(work, "ein", (ROWS * nbmax,))
     # The slice reads k x k angular bins per spatial frequency, k/Nu * k/Nv of
-    # the spectrum: per block (a run of rows with one u-tap start) x (a run of
-    # columns with one v-tap start), one batched BLAS product contracts the
-    # u-taps for the block's k v-bins only, then the v-taps are a small einsum.
-    # (Contracting u over all Nv bins first read Nv/k times more memory: the
-    # slice is memory-bound.) Weights are real: they act on (re, im) floats.
-    vblocks = []
-    for lo_v, runs_v, wv in terms_v:
-        wvx = np.repeat(wv.T, c2, axis=1)                          # (k, cols * 2C)
-        for x0, x1, j0 in runs_v:
-            # v-taps wrapping around the (anti-)periodic angular axis
-            # (the wrap's sign is in the weights): two contiguous pieces
-            m1 = min(k, nv - j0)
-            vblocks.append((slice((lo_v + x0) * c2, (lo_v + x1) * c2), wvx[:, x0 * c2:x1 * c2],
-                            [(0, m1, j0)] + ([(m1, k, 0)] if m1 < k else [])))
-    for lo_u, runs_u, wrow in terms_u:                             # wrow: (rows, 1, k)
-        for y0, y1, i0 in runs_u:
-            n1 = min(k, nu - i0)
-            for c0, c1, r0 in _stored_slices(lo_u + y0, lo_u + y1, hp // 2, hp):
-                # a few rows at a time, all column runs: the rows' pages stay
-                # cached (and mapped) while every column run reads its part
-                for q0 in range(r0, r0 + c1 - c0, ROWS):
-                    q1 = min(q0 + ROWS, r0 + c1 - c0)
-                    wt = wrow[c0 - lo_u + q0 - r0:c0 - lo_u + q1 - r0, :, None, :]
-                    pieces = [(wt[..., :n1], i0, i0 + n1)]
-                    if n1 < k:
-                        pieces.append((wt[..., n1:], 0, k - n1))
-                    for cols, wc, jpieces in vblocks:
-                        nb = cols.stop - cols.start
-                        t = blk[:(q1 - q0) * k * nb].reshape(q1 - q0, k, 1, nb)
-                        for m, (wp_, a0, a1) in enumerate(pieces):
-                            for b0, b1, jj in jpieces:
-                                taps = s5[q0:q1, a0:a1, jj:jj + b1 - b0, cols].transpose(0, 2, 1, 3)
-                                if m == 0:
-                                    np.matmul(wp_, taps, out=t[:, b0:b1])
-                                else:
-                                    t[:, b0:b1] += np.matmul(wp_, taps)
-                        o, e = out[q0:q1, cols], ein[:(q1 - q0) * nb].reshape(q1 - q0, nb)
-                        np.einsum("ybx,bx->yx", t[:, :, 0], wc, out=e)
-                        o += e
+    # the spectrum: per block (a run of rows reading the same u-bins) x (a
+    # column block), one batched BLAS product contracts the u-taps for the
+    # block's m (~k) v-bins only, one contiguous piece per row and u-bin
+    # (the stored layout), then the v-taps are a small einsum. (Contracting u
+    # over all Nv bins first read Nv/k times more memory: the slice is
+    # memory-bound.) Weights are real: they act on (re, im) floats.
+    vblocks, done = [], set()
+    for b, xa, xb, j0, wv in terms_v:
+        m = wv.shape[0]
+        m1 = min(m, nv - j0)
+        full = xa == 0 and xb == spec.cols[b + 1] - spec.cols[b]
+        # the first slot's first read of a whole block writes its columns
+        # (the rest add to them)
+        first = full and b not in done
+        done.add(b)
+        vblocks.append((blocks[b], slice(xa * c2, xb * c2), full, first,
+                        slice((spec.cols[b] + xa) * c2, (spec.cols[b] + xb) * c2),
+                        np.repeat(wv, c2, axis=1),
+                        [(0, m1, j0)] + ([(m1, m, 0)] if m1 < m else [])))
+    for slot, (runs, wrow) in enumerate(terms_u):                  # wrow: (Hp, 1, max m)
+        for r0, r1, i0, mu in runs:
+            n1 = min(mu, nu - i0)
+            # a few rows at a time, all column blocks: the rows' pages stay
+            # cached (and mapped) while every block reads its part
+            for q0 in range(r0, r1, ROWS):
+                q1 = min(q0 + ROWS, r1)
+                nq = q1 - q0
+                wt = wrow[q0:q1]                                   # (nq, 1, max m)
+                pieces = [(wt[..., :n1], i0, i0 + n1)]
+                if n1 < mu:
+                    pieces.append((wt[..., n1:mu], 0, mu - n1))
+                for sb, cols, full, first, ocols, wc, jpieces in vblocks:
+                    nb = cols.stop - cols.start
+                    m = wc.shape[0]
+                    t = tmp[:nq * m * nb].reshape(nq, m, nb)
+                    for n, (wp_, a0, a1) in enumerate(pieces):
+                        for b0, b1, jj in jpieces:
+                            src = sb[q0:q1, a0:a1, jj:jj + b1 - b0]
+                            if full:      # (nq, ka, (b1 - b0) nb): contiguous rows
+                                dst, wq = t[:, b0:b1].reshape(nq, 1, -1), wp_
+                                src = src.reshape(nq, a1 - a0, -1)
+                            else:         # part of the block: per v-bin
+                                dst, wq = t[:, b0:b1, None], wp_[:, :, None]
+                                src = src[..., cols].transpose(0, 2, 1, 3)
+                            if n == 0:
+                                np.matmul(wq, src, out=dst)
+                            else:
+                                dst += np.matmul(wq, src)
+                    if first and slot == 0:
+                        np.einsum("ybx,bx->yx", t, wc, out=out[q0:q1, ocols])
+                    else:
+                        e = ein[:nq * nb].reshape(nq, nb)
+                        np.einsum("ybx,bx->yx", t, wc, out=e)
+                        out[q0:q1, ocols] += e
+    # Inverse FFT: along y in place in the scratch, then the real transform
+    # along x of the image's rows only.
     spec2 = out.view(np.complex64).reshape(hp, wr, c)
-    img = sfft.irfft2(spec2, s=(hp_, wp), axes=(0, 1), workers=WORKERS)
+    cy = sfft.ifft(spec2, axis=0, overwrite_x=True, workers=WORKERS)
     w, h = spec.size
     py, px = spec.pad
-    return np.ascontiguousarray(img[py:py + h, px:px + w] / (u * v), dtype=np.float32)
+    img = sfft.irfft(cy[py:py + h], n=wp, axis=1, workers=WORKERS)
+    return np.ascontiguousarray(img[:, px:px + w], dtype=np.float32)
 
 
 def _scratch(work: dict, name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -438,16 +594,6 @@ def _scratch(work: dict, name: str, shape: tuple[int, ...]) -> np.ndarray:
     if a is None or a.shape != shape:
         a = work[name] = np.empty(shape, np.float32)
     return a
-
-
-def _stored_slices(c0: int, c1: int, shift: int, n: int):
-    """Centred rows ``c0:c1`` (centred row r is stored row (r - shift) mod n) as
-    ``(centred start, centred stop, stored start)`` pieces contiguous in storage."""
-    s0 = (c0 - shift) % n
-    if s0 + (c1 - c0) <= n:
-        return [(c0, c1, s0)]
-    cut = c0 + (n - s0)
-    return [(c0, cut, s0), (cut, c1, 0)]
 
 
 def refocus_lightfield(lf: LightField, slope: float, **options) -> np.ndarray:

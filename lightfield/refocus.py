@@ -204,13 +204,14 @@ def choose_method(lf: LightField, n_slopes: int) -> str:
     shift-and-add passes. Cost model, in shift-and-add refocuses (measured by
     ``lumigraph bench lightfield``, single-threaded, 9x9 views of 512x512x3,
     with the band-limited slice of docs/decisions/fourier-refocus.md): one
-    4-D FFT ~ 3 (0.83 s against 0.273 s), one slice ~ 0.13 (0.036 s); so
+    4-D FFT ~ 3 (0.83 s against 0.273 s), one slice ~ 0.1 (the column-blocked
+    slice: 0.8x the 0.13 of the one before it, measured side by side); so
     Fourier wins from 4 depths on.
 
     >>> choose_method(None, 3), choose_method(None, 4)
     ('shift-add', 'fourier')
     """
-    fft_cost, slice_cost = 3.0, 0.13
+    fft_cost, slice_cost = 3.0, 0.1
     return "fourier" if fft_cost + slice_cost * n_slopes < n_slopes else "shift-add"
 
 

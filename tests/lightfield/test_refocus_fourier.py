@@ -119,7 +119,7 @@ def _dense_slice(spec, slope, interpolation):
     x spatial response x wrap sign) scattered into dense (rows, Nu) and
     (columns, Nv) matrices. No runs, blocks or scratch buffers: the oracle
     for the blocked float32 slice."""
-    hp, nu, nv, wr, _ = spec.spectrum.shape
+    hp, nu, nv, wr, _ = spec.shape
     u, v = spec.grid
     k = spec.kernel_width
     ky = (np.arange(hp) - hp // 2) / hp
@@ -133,28 +133,37 @@ def _dense_slice(spec, slope, interpolation):
 
     wu = np.roll(dense(ky, nu, u), -(hp // 2), axis=0)   # centred row r is stored at r - hp//2
     wv = dense(kx, nv, v)
-    e = np.einsum("ya,xb,yabxc->yxc", wu, wv, spec.spectrum.astype(np.complex128))
+    e = np.einsum("ya,xb,yabxc->yxc", wu, wv, spec.angular().astype(np.complex128))
     img = sfft.irfft2(e, s=spec.shape_p, axes=(0, 1))
     (w, h), (py, px) = spec.size, spec.pad
     return img[py:py + h, px:px + w] / (u * v)
 
 
-@pytest.mark.parametrize("params", [dict(grid="5x5", size=(40, 32), seed=24),
-                                    dict(grid="6x6", size=(36, 30), seed=25, texel_px=0.7)],
-                         ids=["5x5", "6x6"])
-def test_blocked_slice_equals_its_dense_definition_to_float_rounding(params):
+@pytest.mark.parametrize("params,width", [(dict(grid="5x5", size=(40, 32), seed=24), 5),
+                                          (dict(grid="6x6", size=(36, 30), seed=25, texel_px=0.7), 5),
+                                          (dict(grid="5x5", size=(40, 32), seed=24), 3)],
+                         ids=["5x5", "6x6", "5x5-width3"])
+def test_blocked_slice_equals_its_dense_definition_to_float_rounding(params, width, monkeypatch):
     """The slice reads only the k x k angular taps of each spatial frequency,
     block by block; it must equal the dense sum to float32 rounding, on a
     rendered light field, for slopes whose taps wrap around the angular axes
-    (odd grid: periodic; even: anti-periodic) and both filters."""
+    (odd grid: periodic; even: anti-periodic) and both filters. Stored in one
+    column block (the default at these sizes) and in blocks of 4 columns, so
+    that blocks whose columns change tap start, alias terms covering part of a
+    block, and (width 3: the alias taps apart from the main ones) rows whose
+    terms are read apart all occur."""
     s = render("lightfield-array", thin_lens=False, **params)
     lf = LightField(s.gt_arrays["views"].astype(np.float32))
-    spec = ng2005.prepare(lf, max_slope=2.0)
-    for slope in (0.0, 0.35, -0.7, 1.3, 2.0):
-        for interp in ("lanczos3", "sinc"):
-            ref = _dense_slice(spec, slope, interp)
-            got = ng2005.refocus(spec, slope, interpolation=interp)
-            # float32 accumulation: eps 1.2e-7 over at most 4 aliases x 5 x 5
-            # taps (100 terms) plus the inverse FFT's rounding: 1.2e-5 of
-            # full scale bounds it.
-            assert np.abs(got - ref).max() <= 1.2e-5 * np.abs(ref).max(), (slope, interp)
+    default = ng2005.COLS
+    for cols in (default, 4):
+        monkeypatch.setattr(ng2005, "COLS", cols)
+        spec = ng2005.prepare(lf, max_slope=2.0, kernel_width=width)
+        assert len(spec.cols) - 1 == (1 if cols == default else 7)
+        for slope in (0.0, 0.35, -0.7, 1.3, 2.0):
+            for interp in ("lanczos3", "sinc"):
+                ref = _dense_slice(spec, slope, interp)
+                got = ng2005.refocus(spec, slope, interpolation=interp)
+                # float32 accumulation: eps 1.2e-7 over at most 4 aliases x 5 x 5
+                # taps (100 terms) plus the inverse FFT's rounding: 1.2e-5 of
+                # full scale bounds it.
+                assert np.abs(got - ref).max() <= 1.2e-5 * np.abs(ref).max(), (cols, slope, interp)
