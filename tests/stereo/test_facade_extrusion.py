@@ -12,9 +12,11 @@ import json
 
 import numpy as np
 import pytest
+from facade_checks import assert_jacobian_matches_differences
 
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.scenes.facade_edges import project_edges, ring_cameras
+from lumigraph.stereo.bench_facade import MODELS
 from lumigraph.stereo.debevec1996.edges import EdgeMarks
 from lumigraph.stereo.debevec1996.model import BlockModel
 from lumigraph.stereo.debevec1996.polygon import signed_area
@@ -23,21 +25,7 @@ from lumigraph.stereo.debevec1996.solve import _Problem, solve_facade
 # an L-shaped hall (a footprint with a notch: non-convex, a constant vertex
 # coordinate), a gable profile extruded along its depth on top, and a box
 # tower flush against the hall's right side
-MODEL = {"blocks": [
-    {"name": "hall", "kind": "extrusion", "axis": "z",
-     "polygon": [["-0.5*width", "-0.5*depth"], ["0.5*width", "-0.5*depth"],
-                 ["0.5*width", "wing - 0.5*depth"], [1.0, "wing - 0.5*depth"],
-                 [1.0, "0.5*depth"], ["-0.5*width", "0.5*depth"]],
-     "params": {"width": {"value": 10.0, "fixed": True}, "depth": 8.0, "wing": 3.0,
-                "height": 5.0}},
-    {"name": "roof", "kind": "extrusion", "parent": "hall", "axis": "y", "x": "offset",
-     "y": "offset",
-     "polygon": [["-0.5*span", 0], ["0.5*span", 0], ["0.5*span", "eave"], [0, "eave + pitch"],
-                 ["-0.5*span", "eave"]],
-     "params": {"span": 5.0, "depth": 5.0, "eave": 0.8, "pitch": 1.6, "offset_x": -2.0,
-                "offset_y": 1.5}},
-    {"name": "tower", "kind": "box", "parent": "hall", "on": "base", "x": "right", "y": "front",
-     "params": {"width": 2.0, "depth": {"same_as": "hall/wing"}, "height": 7.0}}]}
+MODEL = MODELS["hall"]
 
 
 @pytest.fixture(scope="module")
@@ -129,13 +117,7 @@ def test_jacobian_covers_the_extrusion_parameters(model, cams):
     x = prob.pack(th, rng.normal(0, 0.05, (len(cams), 3)),
                   np.array([c["t"] for c in cams.values()]), 1.05)
     A = prob.weights(True)
-    J = prob.jacobian(x, A, dense=True)
-    Jn = np.zeros_like(J)
-    for i in range(len(x)):
-        e = np.zeros_like(x)
-        e[i] = 1e-6 * max(1.0, abs(x[i]))
-        Jn[:, i] = (prob.residuals(x + e, A) - prob.residuals(x - e, A)) / (2 * e[i])
-    assert np.abs(J - Jn).max() < 1e-5 * np.abs(J).max()
+    J = assert_jacobian_matches_differences(prob, x, A)
     for i, nm in enumerate(names[: prob.P]):      # every parameter moves some mark
         assert np.abs(J[:, i]).max() > 0, nm
 

@@ -292,6 +292,16 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     c, s = _client(folder, tmp_path / "edges.json")
     rng = np.random.default_rng(7)
 
+    def review():
+        """Propose, then accept what lies on its edge (within 3 sigma of the
+        marks' noise) and reject the rest, as a user looking at the photo."""
+        r = c.post("/api/facade/propose")
+        assert r.status_code == 200, r.get_json()
+        for q in r.get_json()["proposals"]:
+            line = truth[q["photo"]][q["edge"]]
+            verdict = "accept" if distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
+            assert c.post(f"/api/facade/proposals/{q['id']}/{verdict}").status_code == 200
+
     def drag(photo, mark):
         seg = np.asarray(mark["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
         r = c.post("/api/facade/marks", json={"photo": photo, "segment": seg.tolist()})
@@ -302,12 +312,7 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     for p in s.photos:
         for m in four_hand_marks(s.model, full[p]):
             drag(p, m)
-    r = c.post("/api/facade/propose")
-    assert r.status_code == 200, r.get_json()
-    for q in r.get_json()["proposals"]:
-        line = truth[q["photo"]][q["edge"]]
-        verdict = "accept" if distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
-        assert c.post(f"/api/facade/proposals/{q['id']}/{verdict}").status_code == 200
+    review()
     for attempt in range(4):     # three rounds of hand marks, each solved
         r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
         if r.status_code == 200 or attempt == 3:
@@ -327,12 +332,7 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     # the user's second round: Re-snap to the solved model, Propose again (from
     # every mark so far), accept what lies on its edge, Solve again
     assert c.post("/api/facade/resnap").status_code == 200
-    r = c.post("/api/facade/propose")
-    assert r.status_code == 200, r.get_json()
-    for q in r.get_json()["proposals"]:
-        line = truth[q["photo"]][q["edge"]]
-        verdict = "accept" if distance(q["segment"], line) <= 3 * EDGE_NOISE_PX else "reject"
-        assert c.post(f"/api/facade/proposals/{q['id']}/{verdict}").status_code == 200
+    review()
     r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
     assert r.status_code == 200, r.get_json()
     sol = r.get_json()
