@@ -130,6 +130,7 @@ def _batch(monkeypatch, argv):
     from lumigraph.hdr import cli
 
     monkeypatch.setattr(cli, "batch_requested", lambda args: True)
+    monkeypatch.delenv("DASK_SCHEDULER_ADDRESS", raising=False)  # in this process, always
     args = cli.build_parser().parse_args(["video", *map(str, argv)])
     return args.func(args)
 
