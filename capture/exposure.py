@@ -154,6 +154,32 @@ def _low_zero_bits(images, container: int) -> int:
     return (ored & -ored).bit_length() - 1
 
 
+def code_summary(codes: np.ndarray) -> np.ndarray:
+    """What :func:`decide_bit_depth` looks at in one image, in a few values:
+    its largest code and each bit set anywhere in its codes (the OR of every
+    code, bit by bit), as a 1-D array of the image's dtype. Every decision
+    :func:`decide_bit_depth` takes on the summaries is the one it takes on
+    the images (each bit of the OR is at most the largest code's top bit), so
+    a stack of any length is decided holding one image at a time. Float
+    images give one zero of their dtype (float data has no bit depth).
+
+    Examples
+    --------
+    >>> code_summary(np.array([[0, 17], [4095, 64]], np.uint16)).tolist()
+    [4095, 1, 2, 4, 8, 16, 32, 64, 128, 256, 512, 1024, 2048]
+    >>> z = np.array([1, 4095], np.uint16) << 4  # 12-bit codes, left-aligned
+    >>> decide_bit_depth([code_summary(z)], ["a.png"]) == decide_bit_depth([z], ["a.png"])
+    True
+    """
+    z = np.asarray(codes)
+    if z.dtype.kind not in "ui" or not z.size:
+        return np.zeros(1, z.dtype)
+    top = int(z.max())
+    ored = int(np.bitwise_or.reduce(z.ravel()))
+    return np.array([top] + [1 << k for k in range(8 * z.dtype.itemsize) if ored >> k & 1],
+                    z.dtype)
+
+
 def decide_bit_depth(images: Sequence[np.ndarray], paths: Sequence[str | os.PathLike], *,
                      given: int | None = None, declared: int | None = None,
                      declared_where: str | os.PathLike = "bit_depth",

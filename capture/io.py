@@ -1366,6 +1366,37 @@ def _stack_times(files: Sequence[Path], info: dict, sj: Path | None, *,
     return t
 
 
+def _read_stack_image(f: Path) -> tuple[np.ndarray, tuple[int, str] | None, bool]:
+    """One file of a stack as :func:`read_stack` reads it: ``(H, W, C)`` codes
+    or floats, the bits its header declares (and which header) or None, and
+    whether it is linear (RAW developed, float)."""
+    ext = f.suffix.lower()
+    linear = False
+    if ext in RAW_EXTS:
+        raw = read_raw(f)
+        img, bd, linear = raw.codes, (raw.bit_depth, "RAW black/white levels"), True
+    else:
+        img = read_image(f)
+        if img.dtype.kind == "f":
+            bd, linear = None, True
+        else:
+            sb = png_significant_bits(f) if ext == ".png" else None
+            bd = None if sb is None else (sb, "PNG sBIT")
+    if img.ndim == 2:
+        img = img[..., None]
+    return img, bd, linear
+
+
+def _check_like(f: Path, img: np.ndarray, first: Path, like) -> None:
+    """A stack needs one size and type: ``img`` (of ``f``) against the first
+    file's (an array, or its ``(shape, dtype)``)."""
+    shape, dtype = (like.shape, like.dtype) if isinstance(like, np.ndarray) else like
+    if img.shape != shape or img.dtype != dtype:
+        raise InputError(f, f"is {img.shape[1]}x{img.shape[0]}x{img.shape[2]} {img.dtype}, "
+                            f"but {first.name} is {shape[1]}x{shape[0]}x"
+                            f"{shape[2]} {dtype}; a stack needs one size and type")
+
+
 def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | None = None,
                need_times: bool = False, bit_depth: int | None = None) -> Stack:
     """Read an image stack from a list of files or a folder holding ``stack.json``.
@@ -1394,23 +1425,10 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
     files, info, sj = _stack_files(inputs)
     imgs, bit_depths, linear = [], [], False
     for f in files:
-        ext = f.suffix.lower()
-        if ext in RAW_EXTS:
-            raw = read_raw(f)
-            img, bd, linear = raw.codes, (raw.bit_depth, "RAW black/white levels"), True
-        else:
-            img = read_image(f)
-            if img.dtype.kind == "f":
-                bd, linear = None, True
-            else:
-                sb = png_significant_bits(f) if ext == ".png" else None
-                bd = None if sb is None else (sb, "PNG sBIT")
-        if img.ndim == 2:
-            img = img[..., None]
-        if imgs and (img.shape != imgs[0].shape or img.dtype != imgs[0].dtype):
-            raise InputError(f, f"is {img.shape[1]}x{img.shape[0]}x{img.shape[2]} {img.dtype}, "
-                                f"but {files[0].name} is {imgs[0].shape[1]}x{imgs[0].shape[0]}x"
-                                f"{imgs[0].shape[2]} {imgs[0].dtype}; a stack needs one size and type")
+        img, bd, lin = _read_stack_image(f)
+        linear = linear or lin
+        if imgs:
+            _check_like(f, img, files[0], imgs[0])
         imgs.append(img)
         bit_depths.append(bd)
     # given, stack.json's (a claim checked against the codes), sBIT/RAW, or detected
@@ -1423,6 +1441,93 @@ def read_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | 
                  bool(info.get("linear", linear)), info, times_given=times is not None,
                  bit_depth_source=depth.source,
                  orientations=tuple(image_orientation(f) for f in files))
+
+
+@dataclass(frozen=True)
+class StackHeader:
+    """What :func:`read_stack` learns about a stack, without its images
+    (:func:`scan_stack`): a stack of any length in constant memory.
+
+    Attributes
+    ----------
+    paths, bit_depth, bit_depth_source, exposure_times_s, linear, info, times_given
+        As :class:`Stack`.
+    shape : tuple of int
+        ``(H, W, C)`` of every image.
+    dtype : numpy.dtype
+        Of every image's codes (or floats).
+    shift : int
+        The codes are left-aligned: :func:`read_stack` shifts them right by
+        this many bits (:class:`capture.exposure.BitDepth`).
+    """
+
+    paths: tuple[str, ...]
+    shape: tuple[int, int, int]
+    dtype: np.dtype
+    bit_depth: int | None
+    bit_depth_source: str | None
+    exposure_times_s: tuple[float, ...] | None = None
+    linear: bool = False
+    info: dict = field(default_factory=dict)
+    times_given: bool = False
+    shift: int = 0
+
+    effective_exposure_times_s = Stack.effective_exposure_times_s
+
+
+def scan_stack(inputs: Sequence[str | os.PathLike], *, times: Sequence[float] | None = None,
+               need_times: bool = False, bit_depth: int | None = None) -> StackHeader:
+    """:func:`read_stack` without keeping the images: the same checks (each
+    file readable, one size and type, times), the same bit depth, from one
+    decoded image at a time. :func:`capture.exposure.decide_bit_depth` looks
+    at each image's largest code and the OR of its codes only, so it is fed
+    those (:func:`capture.exposure.code_summary`) and decides as it would on
+    the whole stack.
+
+    Parameters
+    ----------
+    inputs, times, need_times, bit_depth
+        As :func:`read_stack`.
+
+    Returns
+    -------
+    StackHeader
+
+    Raises
+    ------
+    InputError
+        As :func:`read_stack`, the same messages.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> for i, top in enumerate((100, 4095)):
+    ...     write_image(d / f"f{i}.png", np.full((2, 3), top, np.uint16))
+    >>> h = scan_stack([d / "f0.png", d / "f1.png"], times=[0.01, 0.04])
+    >>> h.shape, h.bit_depth, h.bit_depth == read_stack([d / "f0.png", d / "f1.png"]).bit_depth
+    ((2, 3, 1), 12, True)
+    """
+    from lumigraph.capture.exposure import code_summary
+
+    files, info, sj = _stack_files(inputs)
+    summaries, bit_depths, linear, like = [], [], False, None
+    for f in files:
+        img, bd, lin = _read_stack_image(f)  # decoded, summarised, dropped
+        linear = linear or lin
+        if like is None:
+            like = (img.shape, img.dtype)
+        else:
+            _check_like(f, img, files[0], like)
+        summaries.append(code_summary(img))
+        bit_depths.append(bd)
+        del img
+    depth = decide_bit_depth(summaries, files, given=bit_depth, declared=info.get("bit_depth"),
+                             declared_where=sj, significant=bit_depths)
+    t = _stack_times(files, info, sj, times=times, need_times=need_times)
+    return StackHeader(tuple(str(f) for f in files), like[0], np.dtype(like[1]), depth.bits,
+                       depth.source, t, bool(info.get("linear", linear)), info,
+                       times_given=times is not None, shift=depth.shift)
 
 
 def write_stack_json(folder, images: Sequence[str], **info) -> Path:

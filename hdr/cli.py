@@ -658,8 +658,9 @@ def _video_batch(args, stack) -> int:
     """``hdr video`` on a Dask cluster (``--workers``/``--scheduler``): each
     output frame one item, whose inputs are its neighbour frames; then, in
     this process, ``video.meta.json`` from the frames' sidecars and, with
-    ``--tonemap``, the temporal tone mapping over every frame (it needs them
-    all)."""
+    ``--tonemap``, the temporal tone mapping, streaming over the written
+    frames. ``stack`` is the frames' :class:`capture.io.StackHeader`: this
+    process holds one frame at a time, whatever the video's length."""
     import json
 
     import numpy as np
@@ -667,7 +668,12 @@ def _video_batch(args, stack) -> int:
     from lumigraph.capture.artifact import make_meta, meta_path, write_artifact, write_json
     from lumigraph.capture.batch import Item, report, run_batch
     from lumigraph.capture.io import read_exr, write_image
-    from lumigraph.hdr.kang2003 import frames_used, tonemap_video
+    from lumigraph.hdr.kang2003 import (
+        frame_log_stats,
+        frames_used,
+        tonemap_frame,
+        video_exposure,
+    )
 
     out = Path(args.out)
     n = len(stack.paths)
@@ -695,14 +701,19 @@ def _video_batch(args, stack) -> int:
     params = {k: v for k, v in params.items() if k not in ("frame", "exposure_s")}
     tm = None
     if args.tonemap:
-        tm = tonemap_video(np.stack([read_exr(out / f"frame_{i:03d}.exr") for i in range(n)]),
-                           key=args.key, temporal=args.temporal)
+        # tonemap_video one frame in memory at a time, to the bit: only each
+        # frame's log-average and log-max cross frames, so one pass over the
+        # written frames gathers them, a second maps and writes each frame
+        tm = video_exposure([frame_log_stats(read_exr(out / f"frame_{i:03d}.exr"))
+                             for i in range(n)], key=args.key, temporal=args.temporal)
         for i, src in enumerate(stack.paths):
-            write_artifact(out / f"frame_{i:03d}.png", lambda p, i=i: write_image(p, tm.images[i]),
+            png = tonemap_frame(read_exr(out / f"frame_{i:03d}.exr"), tm, i)
+            write_artifact(out / f"frame_{i:03d}.png", lambda p, png=png: write_image(p, png),
                            meta=make_meta("lumigraph.tonemapped", inputs=[src], params=tm.params,
                                           quality={"log_average": float(tm.log_average[i]),
                                                    "log_average_used":
                                                        float(tm.log_average_used[i])}))
+            del png
     shares = {k: float(np.mean([f["sources"][k] for f in frames])) for k in frames[0]["sources"]}
     warnings = [w for o in result.outcomes for w in o.warnings]
     summary = make_meta("lumigraph.hdr_video", inputs=[*stack.paths, args.response],
@@ -724,7 +735,7 @@ def _video(args) -> int:
     from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.commandline import progress
     from lumigraph.capture.device import resolve_device
-    from lumigraph.capture.io import read_stack, write_exr, write_image
+    from lumigraph.capture.io import read_stack, scan_stack, write_exr, write_image
     from lumigraph.hdr.kang2003 import (
         check_temporal,
         check_video_options,
@@ -741,22 +752,32 @@ def _video(args) -> int:
     check_video_options(window=args.window, consistency_sigma=args.consistency_sigma)
     dev = resolve_device(args.device)
     curve = ResponseCurve.load(args.response)
-    stack = read_stack(args.frames, times=_times(args), need_times=True,
-                       bit_depth=args.bit_depth)
+    batch = batch_requested(args)
+    if batch:
+        # the items read their own frames: here only what every item is given
+        # (times, bit depth) and the checks, one decoded frame at a time -- a
+        # video can be thousands of frames
+        stack = scan_stack(args.frames, times=_times(args), need_times=True,
+                           bit_depth=args.bit_depth)
+        dtype, channels = stack.dtype, stack.shape[-1]
+    else:
+        stack = read_stack(args.frames, times=_times(args), need_times=True,
+                           bit_depth=args.bit_depth)
+        dtype, channels = stack.images.dtype, stack.images.shape[-1]
     # hdr_video checks its frames (at least 2 of them); an error about them
     # names the input they came from
     args.arg_flags = {**TIMES_FLAG,
                       "frames": stack.paths[0] if len(stack.paths) == 1 else str(args.frames[0])}
-    if stack.images.dtype.kind == "f":
+    if dtype.kind == "f":
         raise InputError(stack.paths[0], "float frames are already linear; HDR video needs "
                                          "code values (integer PNG/TIFF)")
-    _check_curve(curve, stack, args.response, "frames")
+    _check_curve(curve, stack, args.response, "frames", channels=channels)
     planned = [f"frame_{i:03d}.exr" for i in range(len(stack.paths))]
     if args.tonemap:
         planned += [f"frame_{i:03d}.png" for i in range(len(stack.paths))]
     check_planned([out / n for n in (*planned, *(n + ".meta.json" for n in planned),
                                      "video.meta.json")])
-    if batch_requested(args):
+    if batch:
         return _video_batch(args, stack)
     t0 = time.perf_counter()
     v = hdr_video(stack.images, stack.effective_exposure_times_s, curve, window=args.window,

@@ -844,6 +844,181 @@ def check_temporal(temporal: int) -> int:
     return temporal
 
 
+@dataclass(frozen=True)
+class VideoExposure:
+    """What :func:`tonemap_video` carries from frame to frame: per frame
+    ``ln L̄_w`` (Reinhard eq. 1) and ``ln L_max``, and their centred moving
+    averages over ``temporal`` frames (:func:`video_exposure`). Everything
+    else is per frame, so a video of any length is tone-mapped one frame in
+    memory at a time (:func:`tonemap_frame`).
+
+    Attributes
+    ----------
+    log_avg, log_max : ndarray, ``(N,)`` float64
+        Each frame's own ``ln L̄_w`` and ``ln L_max`` (:func:`frame_log_stats`).
+    smoothed_log_avg, smoothed_log_max : ndarray, ``(N,)`` float64
+        Their centred means over ``temporal`` frames, shrinking at the ends.
+    key : float
+    temporal : int
+    bit_depth : {8, 16}
+    delta : float
+        Reinhard's ``δ`` (eq. 1), the floor of the luminance's log.
+    """
+
+    log_avg: np.ndarray
+    log_max: np.ndarray
+    smoothed_log_avg: np.ndarray
+    smoothed_log_max: np.ndarray
+    key: float
+    temporal: int
+    bit_depth: int = 8
+    delta: float = 1e-6
+
+    @property
+    def log_average(self) -> np.ndarray:
+        """Each frame's own ``L̄_w``."""
+        return np.exp(self.log_avg)
+
+    @property
+    def log_average_used(self) -> np.ndarray:
+        """The smoothed ``L̄_w`` each frame is scaled by."""
+        return np.exp(self.smoothed_log_avg)
+
+    @property
+    def flicker(self) -> float:
+        """:attr:`TonemappedVideo.flicker`."""
+        n = len(self.smoothed_log_avg)
+        return float(np.mean(np.abs(np.diff(self.smoothed_log_avg)))) if n > 1 else 0.0
+
+    @property
+    def params(self) -> dict:
+        return {"key": self.key, "temporal": int(self.temporal), "bit_depth": self.bit_depth}
+
+
+def frame_log_stats(radiance: np.ndarray, *, delta: float = 1e-6) -> tuple[float, float]:
+    """One frame's ``ln L̄_w`` (Reinhard et al. 2002 eq. 1: the mean of
+    ``ln(δ + L_w)``) and ``ln max(L_max, δ)``, luminance ``L_w`` of the
+    radiance clipped at 0 (:data:`hdr.reinhard2002.LUMA`).
+
+    Parameters
+    ----------
+    radiance : ndarray, ``(H, W, 3)`` float, linear, finite
+    delta : float
+
+    Returns
+    -------
+    (float, float)
+
+    Examples
+    --------
+    >>> a, m = frame_log_stats(np.full((2, 2, 3), 0.5, np.float32))
+    >>> round(math.exp(a), 4), round(math.exp(m), 4)
+    (0.5, 0.5)
+    """
+    v, lum = _frame_luminance(radiance)
+    return float(np.mean(np.log(delta + lum))), float(np.log(max(float(lum.max()), delta)))
+
+
+def _frame_luminance(radiance) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's radiance as float64 clipped at 0, and its luminance: the
+    arithmetic :func:`tonemap_video` always did, one frame at a time (a
+    frame's rows are the same float64 operations whether or not the other
+    frames are stacked beside it)."""
+    from lumigraph.hdr.reinhard2002 import LUMA
+
+    v = np.asarray(radiance, dtype=np.float64)
+    if v.ndim != 3 or v.shape[-1] != 3:
+        raise ValueError(f"radiance: expected (H, W, 3), got {np.shape(radiance)}")
+    if not np.isfinite(v).all():
+        raise ValueError("radiance: expected finite values, got NaN/inf")
+    v = np.maximum(v, 0.0)
+    return v, v @ LUMA
+
+
+def video_exposure(log_stats, *, key: float = 0.18, temporal: int = 5, bit_depth: int = 8,
+                   delta: float = 1e-6) -> VideoExposure:
+    """The temporal part of :func:`tonemap_video`: from each frame's
+    :func:`frame_log_stats` (in frame order), the centred moving average of
+    ``ln L̄_w`` and ``ln L_max`` over ``temporal`` frames.
+
+    Parameters
+    ----------
+    log_stats : sequence of (float, float), one per frame
+    key, temporal, bit_depth, delta
+        As :func:`tonemap_video`.
+
+    Returns
+    -------
+    VideoExposure
+
+    Raises
+    ------
+    InputError
+        ``temporal`` not odd >= 1, ``bit_depth`` not 8 or 16, ``key`` out of range.
+
+    Examples
+    --------
+    >>> e = video_exposure([(0.0, 1.0), (1.0, 2.0), (2.0, 3.0)], temporal=3)
+    >>> e.smoothed_log_avg.tolist(), e.flicker
+    ([0.5, 1.0, 1.5], 0.5)
+    """
+    from lumigraph.hdr.reinhard2002 import check_key
+
+    check_temporal(temporal)
+    if bit_depth not in (8, 16):
+        raise InputError("bit_depth", f"expected 8 or 16, got {bit_depth}")
+    key = check_key(key)
+    stats = [(float(a), float(m)) for a, m in log_stats]
+    n = len(stats)
+    log_avg = np.array([a for a, _ in stats], np.float64)
+    log_max = np.array([m for _, m in stats], np.float64)
+    half = temporal // 2
+    # Centred moving average of ln L̄_w (and ln L_max), shrinking at the ends.
+    sm_avg = np.array([log_avg[max(0, i - half):i + half + 1].mean() for i in range(n)])
+    sm_max = np.array([log_max[max(0, i - half):i + half + 1].mean() for i in range(n)])
+    return VideoExposure(log_avg, log_max, sm_avg, sm_max, key, int(temporal), bit_depth, delta)
+
+
+def tonemap_frame(radiance: np.ndarray, exposure: VideoExposure, index: int) -> np.ndarray:
+    """Frame ``index`` of :func:`tonemap_video`, alone: Reinhard's global
+    operator (eq. 2-4) scaled by the smoothed log-average of ``exposure``
+    (:func:`video_exposure`), sRGB-encoded.
+
+    Parameters
+    ----------
+    radiance : ndarray, ``(H, W, 3)`` float, linear, finite
+        The frame ``exposure`` was computed with at ``index``.
+    exposure : VideoExposure
+    index : int
+
+    Returns
+    -------
+    ndarray, ``(H, W, 3)`` uint8 or uint16 (``exposure.bit_depth``)
+
+    Examples
+    --------
+    >>> v = np.exp(np.random.default_rng(1).normal(0, 1, (4, 6, 6, 3))).astype(np.float32)
+    >>> e = video_exposure([frame_log_stats(f) for f in v], temporal=3)
+    >>> bool((tonemap_frame(v[2], e, 2) == tonemap_video(v, temporal=3).images[2]).all())
+    True
+    """
+    from lumigraph.hdr.reinhard2002 import global_operator, srgb_encode
+
+    v, lum = _frame_luminance(radiance)
+    e, i = exposure, int(index)
+    top = 2 ** e.bit_depth - 1
+    # global_operator scales by the frame's own L̄_w; a key rescaled by
+    # L̄_w / L̄_smoothed makes it scale by the smoothed one instead.
+    k_i = e.key * math.exp(e.log_avg[i] - e.smoothed_log_avg[i])
+    white = e.key * math.exp(e.smoothed_log_max[i] - e.smoothed_log_avg[i])
+    ld = global_operator(lum, key=k_i, white=white, delta=e.delta)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(lum > 0, ld / lum, 0.0)
+    out = np.empty(v.shape, np.uint8 if e.bit_depth == 8 else np.uint16)
+    out[...] = np.round(srgb_encode(v * ratio[..., None]) * top)
+    return out
+
+
 def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5,
                   bit_depth: int = 8, delta: float = 1e-6) -> TonemappedVideo:
     """Temporally coherent Reinhard global tone mapping of a radiance video.
@@ -853,6 +1028,11 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     ``L̄_w`` (eq. 1) and the white point are the geometric mean over a centred
     window of ``temporal`` frames, so a frame whose clipped areas differ from
     its neighbours' does not change the exposure of the whole picture.
+
+    Only ``L̄_w`` and ``L_max`` cross frames: :func:`frame_log_stats`,
+    :func:`video_exposure` and :func:`tonemap_frame` are this function one
+    frame in memory at a time, to the bit (``hdr video`` on a cluster uses
+    them on videos of any length).
 
     Parameters
     ----------
@@ -877,9 +1057,7 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     >>> bool(b.flicker < a.flicker), a.images.shape
     (True, (6, 8, 8, 3))
     """
-    from lumigraph.hdr.reinhard2002 import LUMA, check_key, global_operator, srgb_encode
-
-    v = np.asarray(radiances, dtype=np.float64)
+    v = np.asarray(radiances)
     if v.ndim != 4 or v.shape[-1] != 3:
         raise ValueError(f"radiances: expected (N, H, W, 3), got {np.shape(radiances)}")
     if not np.isfinite(v).all():
@@ -887,27 +1065,9 @@ def tonemap_video(radiances: np.ndarray, *, key: float = 0.18, temporal: int = 5
     check_temporal(temporal)
     if bit_depth not in (8, 16):
         raise InputError("bit_depth", f"expected 8 or 16, got {bit_depth}")
-    key = check_key(key)
-    n = v.shape[0]
-    v = np.maximum(v, 0.0)
-    lum = v @ LUMA
-    log_avg = np.array([np.mean(np.log(delta + lum[i])) for i in range(n)])
-    log_max = np.array([np.log(max(float(lum[i].max()), delta)) for i in range(n)])
-    half = temporal // 2
-    # Centred moving average of ln L̄_w (and ln L_max), shrinking at the ends.
-    sm_avg = np.array([log_avg[max(0, i - half):i + half + 1].mean() for i in range(n)])
-    sm_max = np.array([log_max[max(0, i - half):i + half + 1].mean() for i in range(n)])
-    top = 2 ** bit_depth - 1
+    e = video_exposure([frame_log_stats(f, delta=delta) for f in v], key=key, temporal=temporal,
+                       bit_depth=bit_depth, delta=delta)
     images = np.empty(v.shape, np.uint8 if bit_depth == 8 else np.uint16)
-    for i in range(n):
-        # global_operator scales by the frame's own L̄_w; a key rescaled by
-        # L̄_w / L̄_smoothed makes it scale by the smoothed one instead.
-        k_i = key * math.exp(log_avg[i] - sm_avg[i])
-        white = key * math.exp(sm_max[i] - sm_avg[i])
-        ld = global_operator(lum[i], key=k_i, white=white, delta=delta)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(lum[i] > 0, ld / lum[i], 0.0)
-        images[i] = np.round(srgb_encode(v[i] * ratio[..., None]) * top)
-    flicker = float(np.mean(np.abs(np.diff(sm_avg)))) if n > 1 else 0.0
-    return TonemappedVideo(images, np.exp(log_avg), np.exp(sm_avg), flicker,
-                           {"key": key, "temporal": int(temporal), "bit_depth": bit_depth})
+    for i in range(v.shape[0]):
+        images[i] = tonemap_frame(v[i], e, i)
+    return TonemappedVideo(images, e.log_average, e.log_average_used, e.flicker, e.params)
