@@ -75,6 +75,7 @@ Examples
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -685,12 +686,39 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     mark_rms = [(m.photo, m.edge, float(v)) for m, v in zip(prob.marks, d, strict=True)]
     if not r.success:
         warnings.append(f"the solver stopped before converging ({r.message})")
+    warnings += _weak_unknowns(params, std, pose_std)
     return FacadeSolution(
         model=fitted, params=params, std=std, poses=poses, pose_std=pose_std,
         focal_scale=float(s), focal_scale_std=float(sd[-1]) if prob.free_focal else 0.0,
         K=Ks, outliers=outliers, dropped=dropped, mark_rms_px=mark_rms, sigma_px=sigma,
         rms_px=float(np.sqrt(np.mean(h**2))), covariance=cov, unknowns=tuple(prob.column_names()),
         warnings=warnings, seconds=time.perf_counter() - t0, nfev=nfev)
+
+
+# A size whose 3σ interval reaches zero is not determined (not even its
+# sign); a rotation σ above 1° (3σ: 3°, about 50 px at f = 1000 px) is not
+# a usable camera for texture mapping or stereo. Both are said, never hidden
+# in the σ columns alone.
+WEAK_REL_STD = 1 / 3
+WEAK_ROTATION_RAD = math.radians(1.0)
+
+
+def _weak_unknowns(params: dict, std: dict, pose_std: dict) -> list[str]:
+    """Warnings naming the parameters and poses the marks determine poorly
+    (first-order σ): parameters with σ > |value| / 3, photographs whose
+    rotation σ exceeds 1°."""
+    out = []
+    weak = [f"{n} ({std[n] / abs(v):.0%})" for n, v in params.items()
+            if std.get(n, 0) > WEAK_REL_STD * abs(v) > 0]
+    if weak:
+        out.append("poorly determined parameters (σ over a third of the value): "
+                   + ", ".join(weak) + "; mark more edges of their blocks")
+    rot = [f"{p} ({math.degrees(float(np.max(d['rotation_rad']))):.1f}°)"
+           for p, d in pose_std.items() if np.max(d["rotation_rad"]) > WEAK_ROTATION_RAD]
+    if rot:
+        out.append("poorly determined camera rotations (σ over 1°): " + ", ".join(rot)
+                   + "; mark edges in more directions on these photographs")
+    return out
 
 
 def project_model_edges(model: BlockModel, K, R, t, *, params=None) -> dict:

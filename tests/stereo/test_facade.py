@@ -191,3 +191,26 @@ def test_cli_unknown_edge_name_is_exit_2_naming_file_and_entry(tmp_path, model):
     assert rc == 2 and len(lines) == 1, err
     assert "edges.json" in lines[0] and "photo_01.png[2]" in lines[0]
     assert "'tower/top-middle'" in lines[0]
+
+
+def test_poorly_determined_rotations_and_parameters_are_said():
+    """A solve whose first-order σ says a camera's rotation is unknown to more
+    than 1° (or a size to more than a third of itself) warns, naming them;
+    exact marks give no such warning."""
+    from lumigraph.stereo.debevec1996.solve import FIXTURE, WEAK_ROTATION_RAD, solve_facade
+
+    m = BlockModel.from_dict(FIXTURE)
+    cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+                                photographs=list(cams))
+    K = {p: c["K"] for p, c in cams.items()}
+    exact = solve_facade(m, marks, K, robust=False)
+    assert not [w for w in exact.warnings if "poorly determined" in w]
+    rng = np.random.default_rng(1)
+    noisy = type(marks)(tuple(type(k)(k.photo, k.edge, k.segment + rng.normal(0, 20.0, 4))
+                              for k in marks.marks), marks.photographs)
+    sol = solve_facade(m, noisy, K, noise_px=20.0, robust=False)
+    weak = [p for p, d in sol.pose_std.items() if np.max(d["rotation_rad"]) > WEAK_ROTATION_RAD]
+    assert weak
+    said = [w for w in sol.warnings if w.startswith("poorly determined camera rotations")]
+    assert len(said) == 1 and all(p in said[0] for p in weak)
