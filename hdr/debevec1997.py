@@ -22,7 +22,12 @@ What this adds to the paper:
   whose size follows the sample count, not the frames';
 - λ chosen automatically at the corner of the L-curve (:func:`_l_curve`,
   which also says why held-out prediction and GCV are not used); every
-  candidate is recorded;
+  candidate is recorded; above 8 bits the corner is taken on the codes read
+  at 8-bit resolution (:func:`_binned8`) and λ scaled by the ratio of the
+  noise per observation (:func:`_noise_ratio`), so a deeper file of the same
+  scene is smoothed the same and 8-bit data stored as ``z · 257`` give the
+  8-bit curve (the noise model and the bias correction quantise to the
+  data's :func:`code_step`);
 - the smoothness term is scaled by the knot spacing and the data term by the
   number of observations, so one λ means the same for every bit depth and
   sample count (λ weighs ``∫ ω(u)² g''(u)² du`` against the mean squared
@@ -763,6 +768,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     chosen, fit_rms, monotone_fix, linked_px = [], [], [], []
     robust_rms, noise_ab, bias_max, rel_noise, noise_top = [], [], [], [], []
     noise_src = ""
+    lam8, ratio = [], []  # above 8 bits: the 8-bit-resolution corner and the noise ratio
     all_codes = np.arange(2 ** bd)
     for ch in range(c):
         zc = zs[..., ch].T.astype(np.int64)  # (N, P)
@@ -812,7 +818,9 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
             # The 8-bit λ carried over in proportion to the noise per observation:
             # λ weighs roughness against the mean squared residual, whose noise
             # part here lacks the 8-bit rounding the λ was chosen with.
-            lam_ch *= _noise_ratio(gk, lne, zc, wc, lnt, nz, n_knots, bd, step)
+            lam8.append(lam_ch)
+            ratio.append(_noise_ratio(gk, lne, zc, wc, lnt, nz, n_knots, bd, step))
+            lam_ch *= ratio[-1]
             gk, lne, _, _ = red.fit(lam_ch)
         resid = (_g_at(gk, zc, n_knots, bd) - lne[:, None] - lnt[None]) * (wc > 0)
         fit_rms.append(float(np.sqrt((resid ** 2).sum() / max((wc > 0).sum(), 1))))
@@ -878,6 +886,11 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
            ("L-curve corner: largest curvature of (ln data misfit, ln roughness) over λ; "
             "under heavy noise the largest λ within the discrepancy bound"),
            "candidates": scores, "knots": n_knots}
+    if lam8:
+        sel["rule"] += ("; above 8 bits: the corner of the codes read at 8-bit resolution, "
+                        "times the noise variance per observation at the data's rounding over "
+                        "that at 8-bit rounding")
+        sel["lambda_8bit"], sel["noise_ratio"] = lam8, ratio
     fit = {"samples": int(idx.size), "code_step": step, "residual_rms_ln": fit_rms,
            "residual_robust_rms_ln": robust_rms, "linked_pixels": linked_px,
            "monotone_max_change_ln": monotone_fix,

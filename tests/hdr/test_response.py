@@ -103,6 +103,21 @@ def test_debevec_fit_of_8_bit_data_stored_at_16_bits_is_the_8_bit_fit():
     assert dg.max() < 1e-8, dg.max()
 
 
+def test_debevec_deep_fit_is_smoothed_as_the_8_bit_fit_of_the_same_scene():
+    # The same render at 8 and 16 bits (one analog noise draw, only the rounding
+    # differs) read at 8-bit resolution is the 8-bit data except where double
+    # rounding differs (within 1/257 of a half step), so the corner is the 8-bit
+    # one; λ then falls by the noise ratio, which lies in (0, 1] by construction.
+    # (Before, the corner itself moved a grid step down with the finer codes.)
+    lam = {}
+    for bd in (8, 16):
+        s, z = _bracket(bit_depth=bd, seed=3)
+        lam[bd] = response_debevec1997(z, s.stack["exposure_times_s"], bit_depth=bd).selection
+    assert lam[16]["lambda_8bit"] == lam[8]["chosen"]
+    assert all(0 < q <= 1 for q in lam[16]["noise_ratio"])
+    assert np.allclose(lam[16]["chosen"], np.multiply(lam[16]["lambda_8bit"], lam[16]["noise_ratio"]))
+
+
 def test_debevec_error_does_not_grow_with_samples_or_bits():
     # More samples and more bits carry more information, so the error must not
     # grow beyond the sampling scatter of the estimate. That scatter: shot noise
