@@ -22,7 +22,12 @@ What this adds to the paper:
   whose size follows the sample count, not the frames';
 - λ chosen automatically at the corner of the L-curve (:func:`_l_curve`,
   which also says why held-out prediction and GCV are not used); every
-  candidate is recorded;
+  candidate is recorded; above 8 bits the corner is taken on the codes read
+  at 8-bit resolution (:func:`_binned8`) and λ scaled by the ratio of the
+  noise per observation (:func:`_noise_ratio`), so a deeper file of the same
+  scene is smoothed the same and 8-bit data stored as ``z · 257`` give the
+  8-bit curve (the noise model and the bias correction quantise to the
+  data's :func:`code_step`);
 - the smoothness term is scaled by the knot spacing and the data term by the
   number of observations, so one λ means the same for every bit depth and
   sample count (λ weighs ``∫ ω(u)² g''(u)² du`` against the mean squared
@@ -219,7 +224,7 @@ def _weight_table(bit_depth, clip_margin):
     # its log pulls the toe (docs/decisions/hdr-debevec-noise.md, "deep codes").
     edge = max(clip_margin * zmax, zmax / 255)
     keep = (zf >= edge) & (zf <= zmax - edge)
-    out = np.where(keep, np.sqrt(hat_weight(zf, bit_depth)), 0.0)
+    out = np.where(keep, np.sqrt(_hat_u(zf, bit_depth)), 0.0)
     out.setflags(write=False)
     return out
 
@@ -354,8 +359,57 @@ def _g_at(gk, codes, n_knots, bit_depth):
 
 def _smooth_weights(n_knots, bit_depth):
     k = np.arange(1, n_knots - 1)
-    wk = hat_weight(k * (2 ** bit_depth - 1) / (n_knots - 1), bit_depth)
+    wk = _hat_u(k * (2 ** bit_depth - 1) / (n_knots - 1), bit_depth)
     return np.maximum(wk, 0.05)  # keep the ends smooth too, where data are scarce
+
+
+def _hat_u(z, bit_depth):
+    """The 8-bit hat ω (:func:`hdr.samples.hat_weight` at 8 bits, peak at codes
+    127 and 128) on the normalised axis ``u = z / z_max``: the same weight for
+    the same share of the range at every depth. The hat of the declared depth
+    peaks at ``floor(z_max / 2)``, 0.4 % of its height away from this one at 16
+    bits, enough to give the same information stored deeper (``z · 257``) a
+    different curve. Identical to ``hat_weight(z, 8)`` at 8 bits (the scale is 1.0).
+
+    >>> bool(np.array_equal(_hat_u(np.arange(256.0), 8), hat_weight(np.arange(256.0), 8)))
+    True
+    """
+    zmax = 2 ** bit_depth - 1
+    z = np.asarray(z, dtype=np.float64)
+    return np.clip(np.minimum(z, zmax - z) * (255 / zmax) / 127.0, 0.0, 1.0)
+
+
+def _noise_ratio(gk, lne, z, w, lnt, noise, n_knots, bit_depth, step):
+    """Mean weighted noise variance of ``ln X`` per observation with the data's
+    own rounding (``step`` codes) over the same with 8-bit rounding
+    (``z_max/255`` codes): ``Σ w² (a X + b + q) / X²`` each; ≤ 1, and 1 for
+    8-bit data stored deeper."""
+    a, b = noise
+    ii, jj = np.nonzero(w > 0)
+    x = np.exp(lne[ii] + lnt[jj])
+    k0, _ = knot_basis(z[ii, jj], n_knots, bit_depth)
+    ex = np.exp(gk)
+    zmax = 2 ** bit_depth - 1
+    dxdz = (ex[k0 + 1] - ex[k0]) * ((n_knots - 1) / zmax)
+    w2 = w[ii, jj] ** 2 / x ** 2
+    v = np.maximum(a * x + b, 0.0)
+    num = np.sum(w2 * (v + (dxdz * step) ** 2 / 12))
+    den = np.sum(w2 * (v + (dxdz * (zmax / 255)) ** 2 / 12))
+    return float(min(num / den, 1.0)) if den > 0 else 1.0
+
+
+def _binned8(zc, lnt, clip_margin, n_knots, bit_depth):
+    """:class:`_Reduced` of the same observations read at 8-bit resolution
+    (``round(z · 255 / z_max)``), on at most 256 knots: the problem λ is
+    chosen on at every depth."""
+    z8 = np.rint(zc * (255 / (2 ** bit_depth - 1))).astype(np.int64)
+    try:
+        return _Reduced(z8, lnt, data_weight(z8, 8, clip_margin), min(n_knots, 256), 8)
+    except np.linalg.LinAlgError:
+        from lumigraph.capture.errors import EstimationError
+
+        raise EstimationError("images", "too few pixels are well exposed in two exposures at "
+                                        "8-bit resolution to choose λ; give smoothness") from None
 
 
 def _l_curve(red: _Reduced, grid):
@@ -438,11 +492,11 @@ def _discrepancy(red: _Reduced, cand, lam_corner, lnt, w):
     return float(lam)
 
 
-def _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth, edges=None):
+def _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth, edges=None, code_step=1):
     """Per bin of ``ln X`` (log-spaced quantiles of the observations unless
     ``edges`` given): robust residual variance (median of the squared
     residuals over the χ²₁ median 0.455), median quantisation variance
-    ``(dX/dz)²/12``, median ``X`` and count. The fit's own error at a code
+    ``(code_step · dX/dz)²/12``, median ``X`` and count. The fit's own error at a code
     (largest at the ends before the bias correction) is common to every
     observation of that code and is removed first, keeping the scatter."""
     ii, jj = np.nonzero(w > 0)
@@ -457,7 +511,7 @@ def _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth, edges=None):
     step = (2 ** bit_depth - 1) / (n_knots - 1)  # codes per knot cell
     k0, _ = knot_basis(zz, n_knots, bit_depth)
     ex = np.exp(gk)
-    quant = ((ex[k0 + 1] - ex[k0]) / step) ** 2 / 12.0
+    quant = ((ex[k0 + 1] - ex[k0]) * (code_step / step)) ** 2 / 12.0
     if edges is None:
         nb = int(min(12, max(4, ii.size // 50)))
         edges = np.quantile(lx, np.linspace(0, 1, nb + 1))
@@ -490,7 +544,8 @@ def _fit_ab(var, quant, xm):
     return float(coef[0]), float(coef[1])
 
 
-def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth, *, wfun=None, rng=None, rounds=4):
+def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth, *, wfun=None, rng=None, rounds=4,
+                   code_step=1):
     """Sensor noise of the bracket, from a fit's own residuals.
 
     Model (in the fit's relative exposure units ``X = exp g``): an
@@ -504,7 +559,10 @@ def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth, *, wfun=None, rng=Non
     the bracket the fit describes is rendered at the current ``a, b``, the
     same statistic taken on it, and each bin's ratio of statistic to true
     variance divides the observed one before ``a, b`` are refitted
-    (``rounds`` times; indirect inference).
+    (``rounds`` times; indirect inference). ``code_step``: the spacing of the
+    codes the data can take (:func:`code_step`; 257 for 8-bit data stored as
+    ``z · 257``), which sets the quantisation both in the statistic and in the
+    render.
 
     Returns ``(a, b)``.
 
@@ -520,26 +578,24 @@ def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth, *, wfun=None, rng=Non
     """
     if np.count_nonzero(w > 0) < 20:
         return 0.0, 0.0
-    obs, edges = _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth)
+    obs, edges = _noise_bins(gk, lne, z, w, lnt, n_knots, bit_depth, code_step=code_step)
     a, b = _fit_ab(obs[0], obs[1], obs[2])
     if wfun is None or rng is None or rounds <= 0 or z.shape[1] < 2:
         return a, b
-    zmax = 2 ** bit_depth - 1
     gm = _monotone(gk, np.ones_like(gk))
-    gc = _g_at(gm, np.arange(zmax + 1), n_knots, bit_depth)
-    cut = np.exp(0.5 * (gc[1:] + gc[:-1]))
+    codes, gc, cut = _code_ladder(gm, n_knots, bit_depth, code_step)
     x = np.exp(lne[:, None] + lnt[None])
     for _ in range(rounds):
-        zs = np.searchsorted(cut, x + np.sqrt(np.maximum(a * x + b, 0.0))
-                             * rng.standard_normal(x.shape)).astype(np.int64)
+        zs = codes[np.searchsorted(cut, x + np.sqrt(np.maximum(a * x + b, 0.0))
+                                   * rng.standard_normal(x.shape))]
         ws = wfun(zs)
         w2 = ws ** 2
         keep = np.count_nonzero(ws > 0, axis=1) >= 2
         if np.count_nonzero(keep) < 10:
             break
-        lne_s = (np.sum(w2 * (gc[zs] - lnt[None]), axis=1) / np.maximum(w2.sum(axis=1), 1e-300))
+        lne_s = (np.sum(w2 * (gc[zs // code_step] - lnt[None]), axis=1) / np.maximum(w2.sum(axis=1), 1e-300))
         sim, _ = _noise_bins(gk, lne_s[keep], zs[keep], ws[keep], lnt, n_knots, bit_depth,
-                             edges)
+                             edges, code_step)
         true = a * sim[2] + b + sim[1]
         ratio = sim[0] / np.maximum(true, 1e-300)
         ok = np.isfinite(ratio) & (ratio > 0.05)
@@ -557,7 +613,28 @@ def estimate_noise(gk, lne, z, w, lnt, n_knots, bit_depth, *, wfun=None, rng=Non
     return a, b
 
 
-def _debias(gk, lne, zc, wfun, lnt, noise, lam, n_knots, bit_depth, rng, draws):
+def code_step(z: np.ndarray) -> int:
+    """The spacing of the codes the data can take: the greatest common divisor
+    of the codes seen (1 for any real 12- or 16-bit capture; 257 for 8-bit data
+    stored as ``z · 257``, 16 for 12-bit data shifted left by 4). The noise
+    model and the bias correction quantise to it, so the same information
+    stored at a finer declared depth is modelled as what it is.
+
+    >>> code_step(np.array([0, 257, 514, 65535])), code_step(np.array([3, 5])), code_step(np.zeros(3, int))
+    (257, 1, 1)
+    """
+    return max(int(np.gcd.reduce(np.asarray(z, dtype=np.int64).ravel())), 1)
+
+
+def _code_ladder(gm, n_knots, bit_depth, step):
+    """``(codes, g at them, X where the code steps up)`` for the codes
+    ``0, step, 2·step, … ≤ z_max`` of a monotone knot curve ``gm``."""
+    codes = np.arange(0, 2 ** bit_depth, step, dtype=np.int64)
+    gc = _g_at(gm, codes, n_knots, bit_depth)
+    return codes, gc, np.exp(0.5 * (gc[1:] + gc[:-1]))
+
+
+def _debias(gk, lne, zc, wfun, lnt, noise, lam, n_knots, bit_depth, rng, draws, step=1):
     """Parametric-bootstrap bias of the fit at ``lam``: render the bracket
     the fit describes (exposures ``E_i Δt_j`` of the used pixels, the noise
     ``a X + b`` before the response, the response ``exp g`` quantised and
@@ -572,10 +649,8 @@ def _debias(gk, lne, zc, wfun, lnt, noise, lam, n_knots, bit_depth, rng, draws):
     it); subtracting it is the first-order bias-corrected estimator.
     """
     a, b = noise
-    zmax = 2 ** bit_depth - 1
     gm = _monotone(gk, np.ones_like(gk))
-    gc = _g_at(gm, np.arange(zmax + 1), n_knots, bit_depth)
-    edges = np.exp(0.5 * (gc[1:] + gc[:-1]))  # X where the code steps up
+    codes, _, edges = _code_ladder(gm, n_knots, bit_depth, step)  # X where the code steps up
     x = np.exp(lne[:, None] + lnt[None])
     sd = np.sqrt(np.maximum(a * x + b, 0.0))
     # The draws stacked as more pixels: one system whose solution is the refit of
@@ -583,13 +658,13 @@ def _debias(gk, lne, zc, wfun, lnt, noise, lam, n_knots, bit_depth, rng, draws):
     # at a fraction of the cost).
     xn = np.tile(x, (draws, 1)) + np.tile(sd, (draws, 1)) * rng.standard_normal(
         (draws * x.shape[0], x.shape[1]))
-    zs = np.searchsorted(edges, xn).astype(np.int64)
+    zs = codes[np.searchsorted(edges, xn)]
     red = _Reduced(zs, lnt, wfun(zs), n_knots, bit_depth)
     # The reference is the same render without noise, fitted the same way: what
     # the refit does to the fit's own wiggles (smoothing them) is then not
     # counted as bias, else the correction adds the fit's noise back (bench,
     # tuned kinds: room 0.0035 -> 0.0027, studio 0.0024 -> 0.0015).
-    z0 = np.searchsorted(edges, x).astype(np.int64)
+    z0 = codes[np.searchsorted(edges, x)]
     ref = _Reduced(z0, lnt, wfun(z0), n_knots, bit_depth).fit(lam)[0]
     return red.fit(lam)[0] - ref
 
@@ -677,6 +752,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         warnings.append(f"only {idx.size} usable pixels for {n_knots} unknowns per channel: "
                         "the curve leans on the smoothness term")
     zs = z[:, idx // w_, idx % w_][order]  # (P, N, C)
+    step = code_step(zs)
     lam_given = smoothness != "auto"
     if lam_given:
         lam = float(smoothness)
@@ -692,6 +768,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
     chosen, fit_rms, monotone_fix, linked_px = [], [], [], []
     robust_rms, noise_ab, bias_max, rel_noise, noise_top = [], [], [], [], []
     noise_src = ""
+    lam8, ratio = [], []  # above 8 bits: the 8-bit-resolution corner and the noise ratio
     all_codes = np.arange(2 ** bd)
     for ch in range(c):
         zc = zs[..., ch].T.astype(np.int64)  # (N, P)
@@ -701,8 +778,16 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         except np.linalg.LinAlgError:
             raise EstimationError("images", f"channel {ch}: too few pixels are well exposed in "
                                             "two exposures") from None
+        # λ is chosen on the problem read at 8-bit resolution at every depth
+        # (the codes rounded to steps of z_max/255, the same knots on the same
+        # u = z/z_max axis, where one λ means the same smoothing): the L-curve's
+        # corner moves with the quantisation noise, so a deeper file of the same
+        # scene got a smaller λ and a rougher curve (studio, same pixels: 6e-7 at
+        # 8 bits, 2-3e-7 deeper). With λ fixed the deeper codes only refine the
+        # data term (docs/decisions/hdr-debevec-noise.md, "seventh pass").
+        sel = red if bd <= 8 else _binned8(zc, lnt, clip_margin, n_knots, bd)
         if len(grid) > 1:
-            lam_ch, cand = _l_curve(red, grid)
+            lam_ch, cand = _l_curve(sel, grid)
             if lam_ch == grid[-1] or lam_ch == grid[0]:
                 warnings.append(f"channel {ch}: λ = {lam_ch:g} is at the end of the searched "
                                 "range: the data are very noisy or too few; the curve is mostly "
@@ -712,7 +797,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
             lam_ch = grid[0]
             cand = [{"lambda": lam_ch}]
         if len(grid) > 1:
-            lam_ch = _discrepancy(red, cand, lam_ch, lnt, wc)
+            lam_ch = _discrepancy(sel, cand, lam_ch, lnt, sel.w)
         scores[str(ch)] = cand
         try:
             gk, lne, _, _ = red.fit(lam_ch)
@@ -721,17 +806,25 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
         except np.linalg.LinAlgError:
             raise EstimationError("images", f"channel {ch}: the response system is singular "
                                             "(too few distinct codes; use a larger λ)") from None
-        resid = (_g_at(gk, zc, n_knots, bd) - lne[:, None] - lnt[None]) * (wc > 0)
-        fit_rms.append(float(np.sqrt((resid ** 2).sum() / max((wc > 0).sum(), 1))))
-        robust_rms.append(float(1.4826 * np.median(np.abs(resid[wc > 0]))))
         if noise is None:
-            nz = estimate_noise(gk, lne, zc, wc, lnt, n_knots, bd, rng=rng,
+            nz = estimate_noise(gk, lne, zc, wc, lnt, n_knots, bd, rng=rng, code_step=step,
                                 wfun=lambda zz: data_weight(zz, bd, clip_margin))
             noise_src = "estimated from the bracket (robust residual variance a X + b)"
         else:
             xs = math.exp(float(gk[-1]))  # the top code: the full well, in the fit's units
             nz = (xs / noise[0], (xs * noise[1] / noise[0]) ** 2)
             noise_src = "given (full_well_e, read_noise_e)"
+        if bd > 8 and len(grid) > 1:
+            # The 8-bit λ carried over in proportion to the noise per observation:
+            # λ weighs roughness against the mean squared residual, whose noise
+            # part here lacks the 8-bit rounding the λ was chosen with.
+            lam8.append(lam_ch)
+            ratio.append(_noise_ratio(gk, lne, zc, wc, lnt, nz, n_knots, bd, step))
+            lam_ch *= ratio[-1]
+            gk, lne, _, _ = red.fit(lam_ch)
+        resid = (_g_at(gk, zc, n_knots, bd) - lne[:, None] - lnt[None]) * (wc > 0)
+        fit_rms.append(float(np.sqrt((resid ** 2).sum() / max((wc > 0).sum(), 1))))
+        robust_rms.append(float(1.4826 * np.median(np.abs(resid[wc > 0]))))
         noise_ab.append(nz)
         # the same model with X relative to the top code's exposure (X_sat = 1), the unit
         # of a curve normalised at the top code (Mitsunaga-Nayar's bias correction uses it)
@@ -742,7 +835,7 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
                 g_obs, g_cur = gk, gk
                 for _ in range(BIAS_ROUNDS):
                     bias = _debias(g_cur, lne, zc, lambda zz: data_weight(zz, bd, clip_margin),
-                                   lnt, nz, lam_ch, n_knots, bd, rng, bias_draws)
+                                   lnt, nz, lam_ch, n_knots, bd, rng, bias_draws, step)
                     g_cur = g_obs - bias
                 bias_max.append(float(np.max(np.abs(bias))))
                 gk = g_cur
@@ -793,7 +886,12 @@ def response_debevec1997(images: np.ndarray, exposure_times_s, *, bit_depth: int
            ("L-curve corner: largest curvature of (ln data misfit, ln roughness) over λ; "
             "under heavy noise the largest λ within the discrepancy bound"),
            "candidates": scores, "knots": n_knots}
-    fit = {"samples": int(idx.size), "residual_rms_ln": fit_rms,
+    if lam8:
+        sel["rule"] += ("; above 8 bits: the corner of the codes read at 8-bit resolution, "
+                        "times the noise variance per observation at the data's rounding over "
+                        "that at 8-bit rounding")
+        sel["lambda_8bit"], sel["noise_ratio"] = lam8, ratio
+    fit = {"samples": int(idx.size), "code_step": step, "residual_rms_ln": fit_rms,
            "residual_robust_rms_ln": robust_rms, "linked_pixels": linked_px,
            "monotone_max_change_ln": monotone_fix,
            "noise": {"model": "Var X = a X + b (X = exp g, relative exposure) + quantisation",

@@ -80,6 +80,44 @@ def test_the_pick_is_the_same_at_every_bit_depth():
         assert rd.bit_generator.state == r8.bit_generator.state, bd
 
 
+def test_debevec_fit_of_8_bit_data_stored_at_16_bits_is_the_8_bit_fit():
+    # z * 257 holds exactly the 8-bit information (65535 = 257 * 255): the same
+    # pixels, weights, λ, noise model (quantised to steps of 257 codes) and bias
+    # correction, so the same curve at u = z / z_max. The two fits do the same
+    # arithmetic on knot positions and weights that differ by float rounding
+    # (relative 2.2e-16, a few operations each); the K x K solves amplify that by
+    # their condition number (< 1e6 for these λ and 128 knots) on |g| < 10:
+    # 10 * 1e6 * 1e-15 = 1e-8 ln.
+    # The noise is given: the estimate takes per-bin medians, and a rounding-level
+    # difference can pick the other of two near-equal middle values (seen on one
+    # channel here: a 4e-4 relative change of the shot-noise estimate).
+    s, z8 = _bracket(bit_depth=8, seed=3)
+    t = s.stack["exposure_times_s"]
+    kw = dict(noise=(20000.0, 5.0))
+    r8 = response_debevec1997(z8, t, bit_depth=8, rng=np.random.default_rng(2), **kw)
+    r16 = response_debevec1997(z8.astype(np.uint16) * 257, t, bit_depth=16,
+                               rng=np.random.default_rng(2), **kw)
+    assert r16.selection["chosen"] == r8.selection["chosen"]
+    assert r16.fit["code_step"] == 257 and r8.fit["code_step"] == 1
+    dg = np.abs(r16.g[:, np.arange(256) * 257] - r8.g)[:, 1:255]
+    assert dg.max() < 1e-8, dg.max()
+
+
+def test_debevec_deep_fit_is_smoothed_as_the_8_bit_fit_of_the_same_scene():
+    # The same render at 8 and 16 bits (one analog noise draw, only the rounding
+    # differs) read at 8-bit resolution is the 8-bit data except where double
+    # rounding differs (within 1/257 of a half step), so the corner is the 8-bit
+    # one; λ then falls by the noise ratio, which lies in (0, 1] by construction.
+    # (Before, the corner itself moved a grid step down with the finer codes.)
+    lam = {}
+    for bd in (8, 16):
+        s, z = _bracket(bit_depth=bd, seed=3)
+        lam[bd] = response_debevec1997(z, s.stack["exposure_times_s"], bit_depth=bd).selection
+    assert lam[16]["lambda_8bit"] == lam[8]["chosen"]
+    assert all(0 < q <= 1 for q in lam[16]["noise_ratio"])
+    assert np.allclose(lam[16]["chosen"], np.multiply(lam[16]["lambda_8bit"], lam[16]["noise_ratio"]))
+
+
 def test_debevec_error_does_not_grow_with_samples_or_bits():
     # More samples and more bits carry more information, so the error must not
     # grow beyond the sampling scatter of the estimate. That scatter: shot noise
