@@ -659,25 +659,30 @@ def _weights3(th, power, neighbours):
     return w
 
 
-def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
+def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
                      background):
     """The view map's texturing (Debevec, Yu & Borshukov 1998): each plane of
-    the model that the new view's z-buffer ``face (H, W)`` shows is textured
-    from its three photographs ``ids (P, 3)`` by projective texture mapping
-    (one plane-induced homography per photograph: ``cv2.warpPerspective``
-    of the photograph and of its precomputed visibility of the plane), with
-    the blend's weights among the three (:func:`_weights3`) from angles on
-    a grid interpolated over the plane: no per-pixel depth test, world point
-    or angle. Where fewer of the three see a point than the blend would
-    take and other photographs see the plane, :func:`_plane_pixels`.
-    Returns ``(image (H, W, C) float32, known (H, W) bool, count (H, W))``."""
+    the model that the new view's z-buffer shows (``plane (H, W)``: the
+    plane of the polygon seen at each pixel, -1 off the model; ``covered
+    (M,)`` its polygons' pixels) is textured from its three photographs
+    ``ids (P, 3)`` by projective texture mapping (one plane-induced
+    homography per photograph: ``cv2.warpPerspective`` of the photograph and
+    of its precomputed visibility of the plane), with the blend's weights
+    among the three (:func:`_weights3`) from angles on a grid interpolated
+    over the plane: no per-pixel depth test, world point or angle. Where
+    fewer of the three see a point than the blend would take and other
+    photographs see the plane, :func:`_plane_pixels`. Returns ``(image (H,
+    W, C) float32, known (H, W) bool, count)``, ``count`` the number of
+    photographs blended summed over the model's pixels."""
     import cv2
 
-    h, w = face.shape
-    fp = np.append(maps.face_plane, -1)
-    image = np.full((h, w, channels), background, np.float32)
+    h, w = plane.shape
+    # zeros: each plane's weighted samples are added into its box in place (the
+    # weights are 0 off the plane's pixels), no per-plane image and copy
+    image = np.zeros((h, w, channels), np.float32)
     known = np.zeros((h, w), bool)
-    cnt = np.zeros((h, w), np.int8)
+    count = 0
+    K = np.asarray(K, np.float64)
     Kinv = np.linalg.inv(K)
     R = np.asarray(R, np.float64)
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
@@ -691,29 +696,36 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
     own = [_same_camera(K, R, t, p) for p in photos]
     Rr = Rs @ R.T  # new camera frame to each photograph's
     tr = ts - Rr @ t
-    cams = (Ks, Rr, tr, centres, own)
+    cams = (Ks, Rr, tr, centres, own, Kinv)
     # each plane's projected bounding box (its polygons' corners), where it is looked for
     vc = maps.vertices @ R.T + t
-    pv = vc @ np.asarray(K, np.float64).T
-    pv = pv[:, :2] / pv[:, 2:]
-    # the planes with a polygon inside the frame (the z-buffer decides which show)
-    for P in np.unique(maps.face_plane[covered > 0]):
-        js = [int(j) for j in ids[P] if j >= 0 and maps.masks[j][P] is not None]
-        others = [j for j in range(len(photos)) if maps.masks[j][P] is not None]
+    pv = vc @ K.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pv = pv[:, :2] / pv[:, 2:]
+    # the planes in the new camera's frame: n_c . x = d_c
+    ncs = maps.planes[:, :3] @ R.T
+    dcs = maps.planes[:, 3] + ncs @ t
+    for P in np.unique(maps.face_plane[covered > 0]).tolist():
+        masks = [m[P] for m in maps.masks]
+        others = [j for j, m in enumerate(masks) if m is not None]
         if not others:
             continue
+        js = [j for j in ids[P].tolist() if j >= 0 and masks[j] is not None]
         corners = maps.plane_vertices[P]
         if (vc[corners, 2] > 1e-12).all():
-            lo = np.clip(np.floor(pv[corners].min(0)).astype(int) - 1, 0, [w, h])
-            hi = np.clip(np.ceil(pv[corners].max(0)).astype(int) + 2, 0, [w, h])
+            c = pv[corners]
+            lx, ly = max(int(np.floor(c[:, 0].min())) - 1, 0), max(int(np.floor(c[:, 1].min())) - 1, 0)
+            hx, hy = min(int(np.ceil(c[:, 0].max())) + 2, w), min(int(np.ceil(c[:, 1].max())) + 2, h)
+            if hx <= lx or hy <= ly:
+                continue
         else:
-            lo, hi = np.zeros(2, int), np.array([w, h])
-        band = fp[face[lo[1]:hi[1], lo[0]:hi[0]]] == P
+            lx, ly, hx, hy = 0, 0, w, h
+        band = plane[ly:hy, lx:hx] == P
         rows, cols = np.flatnonzero(band.any(1)), np.flatnonzero(band.any(0))
         if not len(rows):
             continue
-        y0, y1 = lo[1] + int(rows[0]), lo[1] + int(rows[-1]) + 1
-        x0, x1 = lo[0] + int(cols[0]), lo[0] + int(cols[-1]) + 1
+        y0, y1 = ly + int(rows[0]), ly + int(rows[-1]) + 1
+        x0, x1 = lx + int(cols[0]), lx + int(cols[-1]) + 1
         inP = band[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
         bh, bw = inP.shape
         if not js or (len(others) > len(js) and bh * bw < SMALL_PLANE_PX
@@ -721,21 +733,27 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             # none of the three sees the plane, or a few pixels (a sliver): the three
             # chosen over the whole plane may miss the photographs nearest these, and
             # warping costs more than asking all
-            _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
-                       others, photos, power, neighbours, channels, cams)
+            count += _plane_put(image, known, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
+                                others, photos, power, neighbours, channels, cams)
             continue
+        nc, dc = ncs[P], dcs[P]
         # the angles on a grid placed as cv2.resize's linear upsampling samples it
         gw, gh = max(1, round(bw / ANGLE_STEP_PX)), max(1, round(bh / ANGLE_STEP_PX))
-        gx = np.tile((np.arange(gw) + 0.5) * bw / gw - 0.5 + x0, gh)
-        gy = np.repeat((np.arange(gh) + 0.5) * bh / gh - 0.5 + y0, gw)
-        r = np.stack([gx, gy, np.ones(gx.size)], 1) @ Kinv.T
-        nc = R @ maps.planes[P, :3]
-        X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
-        T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
-        th = np.empty((len(js), bh, bw), np.float32)
+        gx = (np.arange(gw) + 0.5) * (bw / gw) + (x0 - 0.5)
+        gy = (np.arange(gh) + 0.5) * (bh / gh) + (y0 - 0.5)
+        r = (Kinv[:, 0] * gx[:, None])[None] + (Kinv[:, 1] * gy[:, None] + Kinv[:, 2])[:, None]
+        r = r.reshape(-1, 3)
+        X = ((r * (dc / (r @ nc))[:, None]) - t) @ R
         # the plane-induced homographies K_j (R_rel + t_rel n_c^T / d_c) K^-1 T, at once
-        dc = maps.planes[P, 3] + nc @ t
+        T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
         Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ (Kinv @ T)
+        # the same into each mask's crop
+        Hm = Hs.copy()
+        off = np.array([masks[j][:2] for j in js], np.float64)
+        Hm[:, :2] -= off[:, :, None] * Hs[:, 2][:, None, :]
+        # the plane behind a photograph (its homogeneous w <= 0) is not seen there
+        wz = Hs[:, 2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
+        behind = (wz <= 0).any(1).tolist()
         # the angles at the grid points (_angle_to, for every photograph at once)
         ray = _unit(X - C)
         dj = X[None] - centres[js][:, None]
@@ -743,17 +761,13 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         dj -= ray[None]
         ang = (2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kgi,kgi->kg", dj, dj)) / 2, 1.0))
                ).astype(np.float32)
+        th = np.empty((len(js), bh, bw), np.float32)
         for k, j in enumerate(js):
-            H = Hs[k]
-            mx0, my0, crop = maps.masks[j][P]
-            Hm = H.copy()
-            Hm[:2] -= np.outer([mx0, my0], H[2])  # into the crop
-            vis = cv2.warpPerspective(crop, Hm, (bw, bh), flags=flags,
+            vis = cv2.warpPerspective(masks[j][2], Hm[k], (bw, bh), flags=flags,
                                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             vis = vis < 128 if own[j] else vis < 255  # not seen
-            # the plane behind the photograph (its homogeneous w <= 0) is not seen
-            wz = H[2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
-            if (wz <= 0).any():
+            if behind[k]:
+                H = Hs[k]
                 vis |= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
                         + H[2, 2]) <= 0
             cv2.resize(ang[k].reshape(gh, gw), (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
@@ -763,33 +777,38 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         ws = W.sum(0)
         seen = ws > 0
         np.divide(W, ws, out=W, where=seen)
+        W *= inP  # (the box's pixels of other planes: no weight)
         # the photographs warped where they have weight only (with the blend's taper,
-        # the third nearest has none wherever the two nearer ones see the point)
-        out = np.zeros((bh, bw, channels), np.float32)
+        # the third nearest has none wherever the two nearer ones see the point),
+        # their weighted samples added into the frame
         for k, j in enumerate(js):
-            Wk = W[k] * inP
+            Wk = W[k]
             rows = np.flatnonzero(Wk.any(1))
             if not len(rows):
                 continue
-            cols = np.flatnonzero(Wk[rows[0]:rows[-1] + 1].any(0))
-            (ya, yb), (xa, xb) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
+            ya, yb = int(rows[0]), int(rows[-1]) + 1
+            cols = np.flatnonzero(Wk[ya:yb].any(0))
+            xa, xb = int(cols[0]), int(cols[-1]) + 1
             H = Hs[k] @ np.array([[1.0, 0, xa], [0, 1, ya], [0, 0, 1]])
-            smp = _warp(photos[j].image, H, (int(xb - xa), int(yb - ya)))
-            out[ya:yb, xa:xb] += Wk[ya:yb, xa:xb, None] * smp.reshape(yb - ya, xb - xa, channels)
+            smp = _warp(photos[j].image, H, (xb - xa, yb - ya))
+            smp = smp.reshape(yb - ya, xb - xa, channels)
+            smp *= Wk[ya:yb, xa:xb, None]
+            image[y0 + ya:y0 + yb, x0 + xa:x0 + xb] += smp
         n = (W > 0).sum(0, dtype=np.int8)
-        ok = inP & seen
-        np.copyto(image[y0:y1, x0:x1], out, where=ok[..., None])
-        known[y0:y1, x0:x1] |= ok
-        np.copyto(cnt[y0:y1, x0:x1], n, where=inP)
+        count += int(n.sum(dtype=np.int64))
+        known[y0:y1, x0:x1] |= inP & seen
         # where fewer of the three see the point than the blend would take (the plane
         # partly hidden from them) and other photographs see some of the plane: those
         # pixels blended from every photograph that sees the plane (as the blend)
         if len(others) > len(js):
             yy, xx = np.nonzero(inP & (n < need))
             if len(yy):
-                _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
-                           photos, power, neighbours, channels, cams)
-    return image, known, cnt
+                count -= int(n[yy, xx].sum(dtype=np.int64))
+                count += _plane_put(image, known, yy, xx, x0, y0, K, R, t, C, maps, P, others,
+                                    photos, power, neighbours, channels, cams)
+    if background != 0:
+        image[~known] = background
+    return image, known, count
 
 
 def _warp(image, H, size, maps=None):
@@ -818,15 +837,16 @@ def _warp(image, H, size, maps=None):
 SMALL_PLANE_PX = 256
 
 
-def _plane_put(image, known, cnt, yy, xx, x0, y0, *args):
+def _plane_put(image, known, yy, xx, x0, y0, *args):
     """:func:`_plane_pixels` of the box pixels ``(yy, xx)`` (offset ``x0,
-    y0``) written into the frame's ``image``, ``known``, ``cnt``."""
+    y0``) written into the frame's ``image`` and ``known``; returns the
+    number of photographs blended summed over the pixels."""
     yy, xx = yy + y0, xx + x0
     a, ws, c = _plane_pixels(xx, yy, *args)
     good = ws > 0
-    image[yy[good], xx[good]] = a[good] / ws[good, None]
+    image[yy, xx] = np.where(good[:, None], a / np.where(good, ws, 1.0)[:, None], 0.0)
     known[yy, xx] = good
-    cnt[yy, xx] = c
+    return int(c.sum())
 
 
 def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, cams):
@@ -835,13 +855,12 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
     blend's weights from exact angles), visibility from the planes' masks:
     ``(acc (n, C), wsum (n,), count (n,))``. ``cams``: the photographs'
     ``K`` stacked, the rotations and translations from the new camera's
-    frame to theirs, their centres and which is the new view."""
+    frame to theirs, their centres, which is the new view, and ``K⁻¹``."""
     import cv2
 
-    Ks, Rr, tr, centres, own = cams
+    Ks, Rr, tr, centres, own, Kinv = cams
     n = len(xs)
     p3 = np.stack([xs, ys, np.ones(n)], 1).astype(np.float64)
-    Kinv = np.linalg.inv(K)
     r = p3 @ Kinv.T
     nc = R @ maps.planes[P, :3]
     dc = maps.planes[P, 3] + nc @ t
@@ -1040,8 +1059,9 @@ def _outward_solids(v, f) -> bool:
     return ok
 
 
-def _zbuffer(v, f, K, R, t, size, rays):
-    """The new view's z-buffer (:func:`rasterize`, no barycentrics). When the
+def _zbuffer(v, f, K, R, t, size, rays, labels=None):
+    """The new view's z-buffer (:func:`rasterize`, no barycentrics; ``face``
+    holds ``labels[m]`` for triangle ``m`` when given). When the
     mesh is a union of closed outward-facing solids (:func:`_outward_solids`)
     and the camera is outside all of them (the winding number of the
     surface around the centre, the sum of the triangles' solid angles over
@@ -1059,12 +1079,14 @@ def _zbuffer(v, f, K, R, t, size, rays):
         winding = np.arctan2(num, den).sum() / (2 * np.pi)  # van Oosterom & Strackee 1983
         if abs(winding) < 0.5:
             keep = np.flatnonzero(num < 0)
-            r = rasterize(v, f[keep], K, R, t, size, rays=rays, bary=False)
+            # the kept triangles' own ids (or labels) written by the rasteriser: no
+            # pass over the frame to map them back
+            r = rasterize(v, f[keep], K, R, t, size, rays=rays, bary=False,
+                          labels=keep if labels is None else np.asarray(labels)[keep])
             covered = np.zeros(len(f), np.int64)
             covered[keep] = r.covered
-            face = np.where(r.face >= 0, keep[np.maximum(r.face, 0)], -1).astype(np.int32)
-            return replace(r, face=face, covered=covered)
-    return rasterize(v, f, K, R, t, size, rays=rays, bary=False)
+            return replace(r, covered=covered)
+    return rasterize(v, f, K, R, t, size, rays=rays, bary=False, labels=labels)
 
 
 _RAYS: dict = {}
@@ -1148,7 +1170,11 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     C = -R.T @ t
     t0 = time.perf_counter()
     rays = _rays(K, (w, h))
-    r = _zbuffer(v, f, K, R, t, (w, h), rays)
+    if method == "view-map" and maps is None:
+        maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
+    # the view map asks for each pixel's plane rather than its polygon
+    r = _zbuffer(v, f, K, R, t, (w, h), rays,
+                 labels=maps.face_plane if method == "view-map" else None)
     t1 = time.perf_counter()
     model = r.hit
 
@@ -1161,13 +1187,11 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels)
         per_pixel = float(n.mean()) if len(n) else 0.0
     else:
-        if maps is None:
-            maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
         ids = maps.choose_planes(C, power=power, neighbours=neighbours)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
                                              power, neighbours, channels, float(background))
-        per_pixel = float(n.sum(dtype=np.int64) / max(model.sum(), 1))
+        per_pixel = float(n / max(model.sum(), 1))
     t2 = time.perf_counter()
     if method == "blend":
         seen = wsum > 0
