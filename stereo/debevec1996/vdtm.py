@@ -350,21 +350,26 @@ class ViewMaps:
     vertices: np.ndarray | None = None  # (V, 3) the mesh's
     plane_vertices: tuple = ()  # per plane: the indices of its polygons' corners
 
-    def scores(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+    def scores(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS,
+               faces=None):
         """``(M, N)``: the weight the blend (:func:`_weights`, the same
         ``power`` and ``neighbours``) gives each photograph over each
         polygon's grid points for the view from ``C``, each point's weights
         summing to 1, then a millionth of the share of the points it sees
-        (ties go to the photograph that sees more of the polygon)."""
-        M, G = self.grid.shape[:2]
-        ray = _unit((self.grid - C).reshape(-1, 3))
-        X = self.grid.reshape(-1, 3)
-        theta = np.stack([np.where(self.grid_seen[i].ravel(), _angle_to(ray, X, c), np.inf)
+        (ties go to the photograph that sees more of the polygon). With
+        ``faces`` (indices), those polygons' rows only (``(len(faces), N)``)."""
+        grid, grid_seen = self.grid, self.grid_seen
+        if faces is not None:
+            grid, grid_seen = grid[faces], grid_seen[:, faces]
+        M, G = grid.shape[:2]
+        ray = _unit((grid - C).reshape(-1, 3))
+        X = grid.reshape(-1, 3)
+        theta = np.stack([np.where(grid_seen[i].ravel(), _angle_to(ray, X, c), np.inf)
                           for i, c in enumerate(self.centres)])
         W = _weights(theta, power, neighbours)
         W /= np.maximum(W.sum(0), 1e-300)
         score = W.reshape(len(self.centres), M, G).sum(2).T  # (M, N)
-        score += 1e-6 * self.grid_seen.mean(2).T
+        score += 1e-6 * grid_seen.mean(2).T
         return score
 
     def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
@@ -374,13 +379,17 @@ class ViewMaps:
         return _top3(self.scores(C, power=power, neighbours=neighbours))
 
     def choose_planes(self, C, *, power: float = DEFAULT_POWER,
-                      neighbours: int = DEFAULT_NEIGHBOURS):
+                      neighbours: int = DEFAULT_NEIGHBOURS, planes=None):
         """The three photographs of each plane (``ids (P, 3)``, -1 = none):
         the polygons' :meth:`scores` weighted by their area, summed over the
-        plane's polygons."""
-        score = self.scores(C, power=power, neighbours=neighbours) * self.face_area[:, None]
+        plane's polygons. With ``planes`` (indices), for those only (the
+        others' rows -1: a view asks for the planes it shows)."""
+        faces = None if planes is None else np.flatnonzero(np.isin(self.face_plane, planes))
+        score = self.scores(C, power=power, neighbours=neighbours, faces=faces)
+        fp = self.face_plane if faces is None else self.face_plane[faces]
+        score *= self.face_area[:, None] if faces is None else self.face_area[faces, None]
         plane = np.zeros((len(self.planes), score.shape[1]))
-        np.add.at(plane, self.face_plane, score)
+        np.add.at(plane, fp, score)
         return _top3(plane)
 
     def lookup(self, C, *, power: float = DEFAULT_POWER):
@@ -1198,7 +1207,8 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels)
         per_pixel = float(n.mean()) if len(n) else 0.0
     else:
-        ids = maps.choose_planes(C, power=power, neighbours=neighbours)
+        ids = maps.choose_planes(C, power=power, neighbours=neighbours,
+                                 planes=np.unique(maps.face_plane[r.covered > 0]))
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
                                              power, neighbours, channels, float(background))
