@@ -219,8 +219,7 @@ def rasterize(vertices, faces, K, R, t, size, *, dist=None, rays=None, bary: boo
             inside, abc, ssum = inside[front], abc[front], ssum[front]
         covered[m] = len(inside)
         z = 1.0 / ssum
-        row, col = np.divmod(inside, bw)
-        flat = (row + y0) * w + (col + x0)
+        flat = inside + (y0 * w + x0) + (inside // bw) * (w - bw)  # box index -> frame index
         win = z < dflat[flat]
         if not win.all():  # (the gathers only where a nearer surface is already there)
             if not win.any():

@@ -784,9 +784,10 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
         W = (_weights3(th, power, neighbours) if len(js) <= 3 else
              _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
         ws = W.sum(0)
-        seen = ws > 0
-        np.divide(W, ws, out=W, where=seen)
-        W *= inP  # (the box's pixels of other planes: no weight)
+        ok = inP & (ws > 0)
+        # normalised on the plane's seen pixels, 0 elsewhere in the box (w / inf; no
+        # weight is infinite): one plain division
+        W /= np.where(ok, ws, np.float32(np.inf))
         # the photographs warped where they have weight only (with the blend's taper,
         # the third nearest has none wherever the two nearer ones see the point),
         # their weighted samples added into the frame
@@ -803,13 +804,14 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
             smp = smp.reshape(yb - ya, xb - xa, channels)
             smp *= Wk[ya:yb, xa:xb, None]
             image[y0 + ya:y0 + yb, x0 + xa:x0 + xb] += smp
-        n = (W > 0).sum(0, dtype=np.int8)
-        count += int(n.sum(dtype=np.int64))
-        known[y0:y1, x0:x1] |= inP & seen
+        has = W > 0
+        count += int(np.count_nonzero(has))
+        known[y0:y1, x0:x1] |= ok
         # where fewer of the three see the point than the blend would take (the plane
         # partly hidden from them) and other photographs see some of the plane: those
         # pixels blended from every photograph that sees the plane (as the blend)
         if len(others) > len(js):
+            n = has.sum(0, dtype=np.int8)
             yy, xx = np.nonzero(inP & (n < need))
             if len(yy):
                 count -= int(n[yy, xx].sum(dtype=np.int64))
