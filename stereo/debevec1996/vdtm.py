@@ -642,7 +642,8 @@ ANGLE_STEP_PX = 16
 def _weights3(th, power, neighbours):
     """:func:`_weights` for at most three photographs, on float32 images
     ``th (k, H, W)`` (``inf`` = not seen; k <= 3): the same values, without
-    the general partial sort (the caller silences inf/inf)."""
+    the general partial sort (the caller silences inf/inf); and their sum
+    over the photographs ``(H, W)``."""
     w = th + np.float32(EPS_RAD)
     if power == 1:
         np.reciprocal(w, out=w)  # inf -> 0: not seen
@@ -661,11 +662,16 @@ def _weights3(th, power, neighbours):
         np.subtract(np.float32(1), q, out=q)
         np.fmax(q, np.float32(0), out=q)
         q *= w
-        tie = (q.sum(0) == 0) & (w.sum(0) > 0)  # equal angles at the threshold: untapered
+        qs = q.sum(0)
+        # equal angles at the threshold (every tapered weight 0 where one is seen): untapered
+        tie = qs == 0
         if tie.any():
-            q[:, tie] = w[:, tie]
-        w = q
-    return w
+            tie &= w.sum(0) > 0
+            if tie.any():
+                q[:, tie] = w[:, tie]
+                qs = q.sum(0)
+        return q, qs
+    return w, w.sum(0)
 
 
 def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
@@ -781,9 +787,11 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
                         + H[2, 2]) <= 0
             cv2.resize(ang[k].reshape(gh, gw), (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
             np.copyto(th[k], np.float32(np.inf), where=vis)
-        W = (_weights3(th, power, neighbours) if len(js) <= 3 else
-             _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
-        ws = W.sum(0)
+        if len(js) <= 3:
+            W, ws = _weights3(th, power, neighbours)
+        else:
+            W = _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32)
+            ws = W.sum(0)
         ok = inP & (ws > 0)
         # normalised on the plane's seen pixels, 0 elsewhere in the box (w / inf; no
         # weight is infinite): one plain division
