@@ -488,13 +488,17 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
         ids.append(js)
         pts.append(pm)
         dels.append(d)
-        good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
+    # every polygon's triangles tested at once (the same values, one call)
+    tris = [pm[d.simplices] if d is not None else np.zeros((0, 3, 2))
+            for pm, d in zip(pts, dels, strict=True)]
+    ok = _not_sliver(np.concatenate(tris)) if tris else np.zeros(0, bool)
+    good = np.split(ok, np.cumsum([len(x) for x in tris])[:-1]) if tris else []
     fp, planes = _face_planes(v, f)
-    masks = tuple(_plane_masks(v, f, fp, planes, p, tolerance) for p in photos)
+    corners = tuple(np.unique(f[fp == P]) for P in range(len(planes)))
+    masks = tuple(_plane_masks(v, f, fp, planes, p, tolerance, corners) for p in photos)
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
-                    tuple(good), grid, grid_seen, fp, planes, area, masks, v,
-                    tuple(np.unique(f[fp == P]) for P in range(len(planes))))
+                    tuple(good), grid, grid_seen, fp, planes, area, masks, v, corners)
 
 
 def _seen_nearest(photo, X, tolerance):
@@ -556,7 +560,7 @@ def _face_planes(v, f):
     return fp, np.array([np.append(nk, dk) for nk, dk in planes]).reshape(-1, 4)
 
 
-def _plane_masks(v, f, fp, planes, photo, tolerance):
+def _plane_masks(v, f, fp, planes, photo, tolerance, corners=None):
     """Per plane, where ``photo`` sees it (the 1998 paper's visibility,
     computed once per model and photograph): ``(x0, y0, crop)``, ``crop``
     uint8 over the plane's bounding box in the photograph, 255 at the pixels
@@ -569,7 +573,9 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
     next pixel (the blend's cells, :func:`_cells`, reject such a cell). A
     bilinear sample of the crop is 255 only when every tap of non-zero
     weight sees the plane, as the blend's per-pixel test (:func:`_sample`);
-    at the photograph's own pixel centres (one tap) 128 is seen too."""
+    at the photograph's own pixel centres (one tap) 128 is seen too.
+    ``corners``: per plane, the indices of its polygons' corners (found
+    here when not given)."""
     import cv2
 
     h, w = photo.depth.shape
@@ -579,10 +585,24 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
     face = photo.face
     if face is None:
         face = rasterize(v, f, K, R, t, (w, h), bary=False).face
-    pid = np.append(fp, -1)[face]
+    if corners is None:
+        corners = tuple(np.unique(f[fp == P]) for P in range(len(planes)))
+    # each pixel's plane (-1 off the model; int16 when it holds them: half the bytes
+    # of the gather's output), and the planes the photograph shows at all (the others
+    # have no pixel in any box)
+    lut = np.append(fp, -1).astype(np.int16 if len(planes) < 2 ** 15 else np.int64)
+    pid = np.take(lut, face)
+    counts = photo.face_pixels
+    if counts is None or photo.face is None:
+        counts = np.bincount(face[face >= 0], minlength=len(f))
+    shown = np.zeros(len(planes), bool)
+    shown[fp[counts > 0]] = True
     out = []
     for P in range(len(planes)):
-        vc = v[np.unique(f[fp == P])] @ R.T + t
+        if not shown[P]:
+            out.append(None)
+            continue
+        vc = v[corners[P]] @ R.T + t
         if (vc[:, 2] <= 1e-12).any():  # reaches behind the camera: the whole frame
             x0, y0, x1, y1 = 0, 0, w - 1, h - 1
         else:
@@ -592,8 +612,8 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
             if (hi < 0).any() or lo[0] > w - 1 or lo[1] > h - 1:
                 out.append(None)
                 continue
-            x0, y0 = np.clip(lo, 0, [w - 1, h - 1]).astype(int)
-            x1, y1 = np.clip(hi, 0, [w - 1, h - 1]).astype(int)
+            x0, y0 = min(max(int(lo[0]), 0), w - 1), min(max(int(lo[1]), 0), h - 1)
+            x1, y1 = min(max(int(hi[0]), 0), w - 1), min(max(int(hi[1]), 0), h - 1)
         mine = (pid[y0:y1 + 1, x0:x1 + 1] == P).astype(np.uint8)
         if not mine.any():
             out.append(None)
