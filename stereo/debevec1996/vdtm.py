@@ -350,21 +350,26 @@ class ViewMaps:
     vertices: np.ndarray | None = None  # (V, 3) the mesh's
     plane_vertices: tuple = ()  # per plane: the indices of its polygons' corners
 
-    def scores(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
+    def scores(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS,
+               faces=None):
         """``(M, N)``: the weight the blend (:func:`_weights`, the same
         ``power`` and ``neighbours``) gives each photograph over each
         polygon's grid points for the view from ``C``, each point's weights
         summing to 1, then a millionth of the share of the points it sees
-        (ties go to the photograph that sees more of the polygon)."""
-        M, G = self.grid.shape[:2]
-        ray = _unit((self.grid - C).reshape(-1, 3))
-        X = self.grid.reshape(-1, 3)
-        theta = np.stack([np.where(self.grid_seen[i].ravel(), _angle_to(ray, X, c), np.inf)
+        (ties go to the photograph that sees more of the polygon). With
+        ``faces`` (indices), those polygons' rows only (``(len(faces), N)``)."""
+        grid, grid_seen = self.grid, self.grid_seen
+        if faces is not None:
+            grid, grid_seen = grid[faces], grid_seen[:, faces]
+        M, G = grid.shape[:2]
+        ray = _unit((grid - C).reshape(-1, 3))
+        X = grid.reshape(-1, 3)
+        theta = np.stack([np.where(grid_seen[i].ravel(), _angle_to(ray, X, c), np.inf)
                           for i, c in enumerate(self.centres)])
         W = _weights(theta, power, neighbours)
         W /= np.maximum(W.sum(0), 1e-300)
         score = W.reshape(len(self.centres), M, G).sum(2).T  # (M, N)
-        score += 1e-6 * self.grid_seen.mean(2).T
+        score += 1e-6 * grid_seen.mean(2).T
         return score
 
     def choose(self, C, *, power: float = DEFAULT_POWER, neighbours: int = DEFAULT_NEIGHBOURS):
@@ -374,13 +379,17 @@ class ViewMaps:
         return _top3(self.scores(C, power=power, neighbours=neighbours))
 
     def choose_planes(self, C, *, power: float = DEFAULT_POWER,
-                      neighbours: int = DEFAULT_NEIGHBOURS):
+                      neighbours: int = DEFAULT_NEIGHBOURS, planes=None):
         """The three photographs of each plane (``ids (P, 3)``, -1 = none):
         the polygons' :meth:`scores` weighted by their area, summed over the
-        plane's polygons."""
-        score = self.scores(C, power=power, neighbours=neighbours) * self.face_area[:, None]
+        plane's polygons. With ``planes`` (indices), for those only (the
+        others' rows -1: a view asks for the planes it shows)."""
+        faces = None if planes is None else np.flatnonzero(np.isin(self.face_plane, planes))
+        score = self.scores(C, power=power, neighbours=neighbours, faces=faces)
+        fp = self.face_plane if faces is None else self.face_plane[faces]
+        score *= self.face_area[:, None] if faces is None else self.face_area[faces, None]
         plane = np.zeros((len(self.planes), score.shape[1]))
-        np.add.at(plane, self.face_plane, score)
+        np.add.at(plane, fp, score)
         return _top3(plane)
 
     def lookup(self, C, *, power: float = DEFAULT_POWER):
@@ -479,13 +488,17 @@ def prepare_view_maps(mesh, photos, *, tolerance: float = 0.01) -> ViewMaps:
         ids.append(js)
         pts.append(pm)
         dels.append(d)
-        good.append(_not_sliver(pm[d.simplices]) if d is not None else np.zeros(0, bool))
+    # every polygon's triangles tested at once (the same values, one call)
+    tris = [pm[d.simplices] if d is not None else np.zeros((0, 3, 2))
+            for pm, d in zip(pts, dels, strict=True)]
+    ok = _not_sliver(np.concatenate(tris)) if tris else np.zeros(0, bool)
+    good = np.split(ok, np.cumsum([len(x) for x in tris])[:-1]) if tris else []
     fp, planes = _face_planes(v, f)
-    masks = tuple(_plane_masks(v, f, fp, planes, p, tolerance) for p in photos)
+    corners = tuple(np.unique(f[fp == P]) for P in range(len(planes)))
+    masks = tuple(_plane_masks(v, f, fp, planes, p, tolerance, corners) for p in photos)
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     return ViewMaps(cen, np.stack([u, w], 1), tuple(ids), tuple(pts), tuple(dels), centres,
-                    tuple(good), grid, grid_seen, fp, planes, area, masks, v,
-                    tuple(np.unique(f[fp == P]) for P in range(len(planes))))
+                    tuple(good), grid, grid_seen, fp, planes, area, masks, v, corners)
 
 
 def _seen_nearest(photo, X, tolerance):
@@ -547,7 +560,7 @@ def _face_planes(v, f):
     return fp, np.array([np.append(nk, dk) for nk, dk in planes]).reshape(-1, 4)
 
 
-def _plane_masks(v, f, fp, planes, photo, tolerance):
+def _plane_masks(v, f, fp, planes, photo, tolerance, corners=None):
     """Per plane, where ``photo`` sees it (the 1998 paper's visibility,
     computed once per model and photograph): ``(x0, y0, crop)``, ``crop``
     uint8 over the plane's bounding box in the photograph, 255 at the pixels
@@ -560,7 +573,9 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
     next pixel (the blend's cells, :func:`_cells`, reject such a cell). A
     bilinear sample of the crop is 255 only when every tap of non-zero
     weight sees the plane, as the blend's per-pixel test (:func:`_sample`);
-    at the photograph's own pixel centres (one tap) 128 is seen too."""
+    at the photograph's own pixel centres (one tap) 128 is seen too.
+    ``corners``: per plane, the indices of its polygons' corners (found
+    here when not given)."""
     import cv2
 
     h, w = photo.depth.shape
@@ -570,10 +585,24 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
     face = photo.face
     if face is None:
         face = rasterize(v, f, K, R, t, (w, h), bary=False).face
-    pid = np.append(fp, -1)[face]
+    if corners is None:
+        corners = tuple(np.unique(f[fp == P]) for P in range(len(planes)))
+    # each pixel's plane (-1 off the model; int16 when it holds them: half the bytes
+    # of the gather's output), and the planes the photograph shows at all (the others
+    # have no pixel in any box)
+    lut = np.append(fp, -1).astype(np.int16 if len(planes) < 2 ** 15 else np.int64)
+    pid = np.take(lut, face)
+    counts = photo.face_pixels
+    if counts is None or photo.face is None:
+        counts = np.bincount(face[face >= 0], minlength=len(f))
+    shown = np.zeros(len(planes), bool)
+    shown[fp[counts > 0]] = True
     out = []
     for P in range(len(planes)):
-        vc = v[np.unique(f[fp == P])] @ R.T + t
+        if not shown[P]:
+            out.append(None)
+            continue
+        vc = v[corners[P]] @ R.T + t
         if (vc[:, 2] <= 1e-12).any():  # reaches behind the camera: the whole frame
             x0, y0, x1, y1 = 0, 0, w - 1, h - 1
         else:
@@ -583,8 +612,8 @@ def _plane_masks(v, f, fp, planes, photo, tolerance):
             if (hi < 0).any() or lo[0] > w - 1 or lo[1] > h - 1:
                 out.append(None)
                 continue
-            x0, y0 = np.clip(lo, 0, [w - 1, h - 1]).astype(int)
-            x1, y1 = np.clip(hi, 0, [w - 1, h - 1]).astype(int)
+            x0, y0 = min(max(int(lo[0]), 0), w - 1), min(max(int(lo[1]), 0), h - 1)
+            x1, y1 = min(max(int(hi[0]), 0), w - 1), min(max(int(hi[1]), 0), h - 1)
         mine = (pid[y0:y1 + 1, x0:x1 + 1] == P).astype(np.uint8)
         if not mine.any():
             out.append(None)
@@ -633,7 +662,8 @@ ANGLE_STEP_PX = 16
 def _weights3(th, power, neighbours):
     """:func:`_weights` for at most three photographs, on float32 images
     ``th (k, H, W)`` (``inf`` = not seen; k <= 3): the same values, without
-    the general partial sort (the caller silences inf/inf)."""
+    the general partial sort (the caller silences inf/inf); and their sum
+    over the photographs ``(H, W)``."""
     w = th + np.float32(EPS_RAD)
     if power == 1:
         np.reciprocal(w, out=w)  # inf -> 0: not seen
@@ -652,32 +682,42 @@ def _weights3(th, power, neighbours):
         np.subtract(np.float32(1), q, out=q)
         np.fmax(q, np.float32(0), out=q)
         q *= w
-        tie = (q.sum(0) == 0) & (w.sum(0) > 0)  # equal angles at the threshold: untapered
+        qs = q.sum(0)
+        # equal angles at the threshold (every tapered weight 0 where one is seen): untapered
+        tie = qs == 0
         if tie.any():
-            q[:, tie] = w[:, tie]
-        w = q
-    return w
+            tie &= w.sum(0) > 0
+            if tie.any():
+                q[:, tie] = w[:, tie]
+                qs = q.sum(0)
+        return q, qs
+    return w, w.sum(0)
 
 
-def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
+def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neighbours, channels,
                      background):
     """The view map's texturing (Debevec, Yu & Borshukov 1998): each plane of
-    the model that the new view's z-buffer ``face (H, W)`` shows is textured
-    from its three photographs ``ids (P, 3)`` by projective texture mapping
-    (one plane-induced homography per photograph: ``cv2.warpPerspective``
-    of the photograph and of its precomputed visibility of the plane), with
-    the blend's weights among the three (:func:`_weights3`) from angles on
-    a grid interpolated over the plane: no per-pixel depth test, world point
-    or angle. Where fewer of the three see a point than the blend would
-    take and other photographs see the plane, :func:`_plane_pixels`.
-    Returns ``(image (H, W, C) float32, known (H, W) bool, count (H, W))``."""
+    the model that the new view's z-buffer shows (``plane (H, W)``: the
+    plane of the polygon seen at each pixel, -1 off the model; ``covered
+    (M,)`` its polygons' pixels) is textured from its three photographs
+    ``ids (P, 3)`` by projective texture mapping (one plane-induced
+    homography per photograph: ``cv2.warpPerspective`` of the photograph and
+    of its precomputed visibility of the plane), with the blend's weights
+    among the three (:func:`_weights3`) from angles on a grid interpolated
+    over the plane: no per-pixel depth test, world point or angle. Where
+    fewer of the three see a point than the blend would take and other
+    photographs see the plane, :func:`_plane_pixels`. Returns ``(image (H,
+    W, C) float32, known (H, W) bool, count)``, ``count`` the number of
+    photographs blended summed over the model's pixels."""
     import cv2
 
-    h, w = face.shape
-    fp = np.append(maps.face_plane, -1)
-    image = np.full((h, w, channels), background, np.float32)
+    h, w = plane.shape
+    # zeros: each plane's weighted samples are added into its box in place (the
+    # weights are 0 off the plane's pixels), no per-plane image and copy
+    image = np.zeros((h, w, channels), np.float32)
     known = np.zeros((h, w), bool)
-    cnt = np.zeros((h, w), np.int8)
+    count = 0
+    K = np.asarray(K, np.float64)
     Kinv = np.linalg.inv(K)
     R = np.asarray(R, np.float64)
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
@@ -691,29 +731,36 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
     own = [_same_camera(K, R, t, p) for p in photos]
     Rr = Rs @ R.T  # new camera frame to each photograph's
     tr = ts - Rr @ t
-    cams = (Ks, Rr, tr, centres, own)
+    cams = (Ks, Rr, tr, centres, own, Kinv)
     # each plane's projected bounding box (its polygons' corners), where it is looked for
     vc = maps.vertices @ R.T + t
-    pv = vc @ np.asarray(K, np.float64).T
-    pv = pv[:, :2] / pv[:, 2:]
-    # the planes with a polygon inside the frame (the z-buffer decides which show)
-    for P in np.unique(maps.face_plane[covered > 0]):
-        js = [int(j) for j in ids[P] if j >= 0 and maps.masks[j][P] is not None]
-        others = [j for j in range(len(photos)) if maps.masks[j][P] is not None]
+    pv = vc @ K.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pv = pv[:, :2] / pv[:, 2:]
+    # the planes in the new camera's frame: n_c . x = d_c
+    ncs = maps.planes[:, :3] @ R.T
+    dcs = maps.planes[:, 3] + ncs @ t
+    for P in np.unique(maps.face_plane[covered > 0]).tolist():
+        masks = [m[P] for m in maps.masks]
+        others = [j for j, m in enumerate(masks) if m is not None]
         if not others:
             continue
+        js = [j for j in ids[P].tolist() if j >= 0 and masks[j] is not None]
         corners = maps.plane_vertices[P]
         if (vc[corners, 2] > 1e-12).all():
-            lo = np.clip(np.floor(pv[corners].min(0)).astype(int) - 1, 0, [w, h])
-            hi = np.clip(np.ceil(pv[corners].max(0)).astype(int) + 2, 0, [w, h])
+            c = pv[corners]
+            lx, ly = max(int(np.floor(c[:, 0].min())) - 1, 0), max(int(np.floor(c[:, 1].min())) - 1, 0)
+            hx, hy = min(int(np.ceil(c[:, 0].max())) + 2, w), min(int(np.ceil(c[:, 1].max())) + 2, h)
+            if hx <= lx or hy <= ly:
+                continue
         else:
-            lo, hi = np.zeros(2, int), np.array([w, h])
-        band = fp[face[lo[1]:hi[1], lo[0]:hi[0]]] == P
+            lx, ly, hx, hy = 0, 0, w, h
+        band = plane[ly:hy, lx:hx] == P
         rows, cols = np.flatnonzero(band.any(1)), np.flatnonzero(band.any(0))
         if not len(rows):
             continue
-        y0, y1 = lo[1] + int(rows[0]), lo[1] + int(rows[-1]) + 1
-        x0, x1 = lo[0] + int(cols[0]), lo[0] + int(cols[-1]) + 1
+        y0, y1 = ly + int(rows[0]), ly + int(rows[-1]) + 1
+        x0, x1 = lx + int(cols[0]), lx + int(cols[-1]) + 1
         inP = band[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
         bh, bw = inP.shape
         if not js or (len(others) > len(js) and bh * bw < SMALL_PLANE_PX
@@ -721,21 +768,27 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
             # none of the three sees the plane, or a few pixels (a sliver): the three
             # chosen over the whole plane may miss the photographs nearest these, and
             # warping costs more than asking all
-            _plane_put(image, known, cnt, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
-                       others, photos, power, neighbours, channels, cams)
+            count += _plane_put(image, known, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
+                                others, photos, power, neighbours, channels, cams)
             continue
+        nc, dc = ncs[P], dcs[P]
         # the angles on a grid placed as cv2.resize's linear upsampling samples it
         gw, gh = max(1, round(bw / ANGLE_STEP_PX)), max(1, round(bh / ANGLE_STEP_PX))
-        gx = np.tile((np.arange(gw) + 0.5) * bw / gw - 0.5 + x0, gh)
-        gy = np.repeat((np.arange(gh) + 0.5) * bh / gh - 0.5 + y0, gw)
-        r = np.stack([gx, gy, np.ones(gx.size)], 1) @ Kinv.T
-        nc = R @ maps.planes[P, :3]
-        X = ((r * ((maps.planes[P, 3] + nc @ t) / (r @ nc))[:, None]) - t) @ R
-        T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
-        th = np.empty((len(js), bh, bw), np.float32)
+        gx = (np.arange(gw) + 0.5) * (bw / gw) + (x0 - 0.5)
+        gy = (np.arange(gh) + 0.5) * (bh / gh) + (y0 - 0.5)
+        r = (Kinv[:, 0] * gx[:, None])[None] + (Kinv[:, 1] * gy[:, None] + Kinv[:, 2])[:, None]
+        r = r.reshape(-1, 3)
+        X = ((r * (dc / (r @ nc))[:, None]) - t) @ R
         # the plane-induced homographies K_j (R_rel + t_rel n_c^T / d_c) K^-1 T, at once
-        dc = maps.planes[P, 3] + nc @ t
+        T = np.array([[1.0, 0, x0], [0, 1, y0], [0, 0, 1]])
         Hs = Ks[js] @ (Rr[js] + tr[js][:, :, None] * (nc / dc)[None, None, :]) @ (Kinv @ T)
+        # the same into each mask's crop
+        Hm = Hs.copy()
+        off = np.array([masks[j][:2] for j in js], np.float64)
+        Hm[:, :2] -= off[:, :, None] * Hs[:, 2][:, None, :]
+        # the plane behind a photograph (its homogeneous w <= 0) is not seen there
+        wz = Hs[:, 2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
+        behind = (wz <= 0).any(1).tolist()
         # the angles at the grid points (_angle_to, for every photograph at once)
         ray = _unit(X - C)
         dj = X[None] - centres[js][:, None]
@@ -743,53 +796,58 @@ def _view_map_planes(face, covered, K, R, t, C, ids, maps, photos, power, neighb
         dj -= ray[None]
         ang = (2 * np.arcsin(np.minimum(np.sqrt(np.einsum("kgi,kgi->kg", dj, dj)) / 2, 1.0))
                ).astype(np.float32)
+        th = np.empty((len(js), bh, bw), np.float32)
         for k, j in enumerate(js):
-            H = Hs[k]
-            mx0, my0, crop = maps.masks[j][P]
-            Hm = H.copy()
-            Hm[:2] -= np.outer([mx0, my0], H[2])  # into the crop
-            vis = cv2.warpPerspective(crop, Hm, (bw, bh), flags=flags,
+            vis = cv2.warpPerspective(masks[j][2], Hm[k], (bw, bh), flags=flags,
                                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
             vis = vis < 128 if own[j] else vis < 255  # not seen
-            # the plane behind the photograph (its homogeneous w <= 0) is not seen
-            wz = H[2] @ np.array([[0, bw - 1, 0, bw - 1], [0, 0, bh - 1, bh - 1], [1.0, 1, 1, 1]])
-            if (wz <= 0).any():
+            if behind[k]:
+                H = Hs[k]
                 vis |= (H[2, 0] * np.arange(bw)[None] + H[2, 1] * np.arange(bh)[:, None]
                         + H[2, 2]) <= 0
             cv2.resize(ang[k].reshape(gh, gw), (bw, bh), dst=th[k], interpolation=cv2.INTER_LINEAR)
             np.copyto(th[k], np.float32(np.inf), where=vis)
-        W = (_weights3(th, power, neighbours) if len(js) <= 3 else
-             _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32))
-        ws = W.sum(0)
-        seen = ws > 0
-        np.divide(W, ws, out=W, where=seen)
+        if len(js) <= 3:
+            W, ws = _weights3(th, power, neighbours)
+        else:
+            W = _weights(th.reshape(len(js), -1), power, neighbours).reshape(th.shape).astype(np.float32)
+            ws = W.sum(0)
+        ok = inP & (ws > 0)
+        # normalised on the plane's seen pixels, 0 elsewhere in the box (w / inf; no
+        # weight is infinite): one plain division
+        W /= np.where(ok, ws, np.float32(np.inf))
         # the photographs warped where they have weight only (with the blend's taper,
-        # the third nearest has none wherever the two nearer ones see the point)
-        out = np.zeros((bh, bw, channels), np.float32)
+        # the third nearest has none wherever the two nearer ones see the point),
+        # their weighted samples added into the frame
         for k, j in enumerate(js):
-            Wk = W[k] * inP
+            Wk = W[k]
             rows = np.flatnonzero(Wk.any(1))
             if not len(rows):
                 continue
-            cols = np.flatnonzero(Wk[rows[0]:rows[-1] + 1].any(0))
-            (ya, yb), (xa, xb) = (rows[0], rows[-1] + 1), (cols[0], cols[-1] + 1)
+            ya, yb = int(rows[0]), int(rows[-1]) + 1
+            cols = np.flatnonzero(Wk[ya:yb].any(0))
+            xa, xb = int(cols[0]), int(cols[-1]) + 1
             H = Hs[k] @ np.array([[1.0, 0, xa], [0, 1, ya], [0, 0, 1]])
-            smp = _warp(photos[j].image, H, (int(xb - xa), int(yb - ya)))
-            out[ya:yb, xa:xb] += Wk[ya:yb, xa:xb, None] * smp.reshape(yb - ya, xb - xa, channels)
-        n = (W > 0).sum(0, dtype=np.int8)
-        ok = inP & seen
-        np.copyto(image[y0:y1, x0:x1], out, where=ok[..., None])
+            smp = _warp(photos[j].image, H, (xb - xa, yb - ya))
+            smp = smp.reshape(yb - ya, xb - xa, channels)
+            smp *= Wk[ya:yb, xa:xb, None]
+            image[y0 + ya:y0 + yb, x0 + xa:x0 + xb] += smp
+        has = W > 0
+        count += int(np.count_nonzero(has))
         known[y0:y1, x0:x1] |= ok
-        np.copyto(cnt[y0:y1, x0:x1], n, where=inP)
         # where fewer of the three see the point than the blend would take (the plane
         # partly hidden from them) and other photographs see some of the plane: those
         # pixels blended from every photograph that sees the plane (as the blend)
         if len(others) > len(js):
+            n = has.sum(0, dtype=np.int8)
             yy, xx = np.nonzero(inP & (n < need))
             if len(yy):
-                _plane_put(image, known, cnt, yy, xx, x0, y0, K, R, t, C, maps, P, others,
-                           photos, power, neighbours, channels, cams)
-    return image, known, cnt
+                count -= int(n[yy, xx].sum(dtype=np.int64))
+                count += _plane_put(image, known, yy, xx, x0, y0, K, R, t, C, maps, P, others,
+                                    photos, power, neighbours, channels, cams)
+    if background != 0:
+        image[~known] = background
+    return image, known, count
 
 
 def _warp(image, H, size, maps=None):
@@ -818,15 +876,16 @@ def _warp(image, H, size, maps=None):
 SMALL_PLANE_PX = 256
 
 
-def _plane_put(image, known, cnt, yy, xx, x0, y0, *args):
+def _plane_put(image, known, yy, xx, x0, y0, *args):
     """:func:`_plane_pixels` of the box pixels ``(yy, xx)`` (offset ``x0,
-    y0``) written into the frame's ``image``, ``known``, ``cnt``."""
+    y0``) written into the frame's ``image`` and ``known``; returns the
+    number of photographs blended summed over the pixels."""
     yy, xx = yy + y0, xx + x0
     a, ws, c = _plane_pixels(xx, yy, *args)
     good = ws > 0
-    image[yy[good], xx[good]] = a[good] / ws[good, None]
+    image[yy, xx] = np.where(good[:, None], a / np.where(good, ws, 1.0)[:, None], 0.0)
     known[yy, xx] = good
-    cnt[yy, xx] = c
+    return int(c.sum())
 
 
 def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, cams):
@@ -835,13 +894,12 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
     blend's weights from exact angles), visibility from the planes' masks:
     ``(acc (n, C), wsum (n,), count (n,))``. ``cams``: the photographs'
     ``K`` stacked, the rotations and translations from the new camera's
-    frame to theirs, their centres and which is the new view."""
+    frame to theirs, their centres, which is the new view, and ``K⁻¹``."""
     import cv2
 
-    Ks, Rr, tr, centres, own = cams
+    Ks, Rr, tr, centres, own, Kinv = cams
     n = len(xs)
     p3 = np.stack([xs, ys, np.ones(n)], 1).astype(np.float64)
-    Kinv = np.linalg.inv(K)
     r = p3 @ Kinv.T
     nc = R @ maps.planes[P, :3]
     dc = maps.planes[P, 3] + nc @ t
@@ -924,8 +982,7 @@ def _push_pull(image, known, hole, *, inplace=False):
     # or a side of one block is a pixel
     k, top = known, 0
     while min(k.shape) > 1 and not k.all():
-        k = np.pad(k, ((0, k.shape[0] % 2), (0, k.shape[1] % 2)))
-        k = k.reshape(k.shape[0] // 2, 2, k.shape[1] // 2, 2).any((1, 3))
+        k = _half_any(k)
         top += 1
     out = image if inplace else np.array(image, copy=True)
     hy, hx = np.nonzero(hole)
@@ -936,6 +993,18 @@ def _push_pull(image, known, hole, *, inplace=False):
         hy, hx = hy[~exact], hx[~exact]
         levels = min(top, levels + 1)
     return out
+
+
+def _half_any(k):
+    """``k (H, W)`` bool, its 2x2 blocks (zero-padded to even sides) any-ed:
+    four strided views or-ed (a reduction over the small axes of a reshape
+    costs several times more)."""
+    h, w = k.shape
+    a = k[0::2, 0::2].copy()
+    a[:h // 2] |= k[1::2, 0::2]
+    a[:, :w // 2] |= k[0::2, 1::2]
+    a[:h // 2, :w // 2] |= k[1::2, 1::2]
+    return a
 
 
 def _push_pull_tiles(image, known, hy, hx, levels, at_top):
@@ -1040,8 +1109,9 @@ def _outward_solids(v, f) -> bool:
     return ok
 
 
-def _zbuffer(v, f, K, R, t, size, rays):
-    """The new view's z-buffer (:func:`rasterize`, no barycentrics). When the
+def _zbuffer(v, f, K, R, t, size, rays, labels=None):
+    """The new view's z-buffer (:func:`rasterize`, no barycentrics; ``face``
+    holds ``labels[m]`` for triangle ``m`` when given). When the
     mesh is a union of closed outward-facing solids (:func:`_outward_solids`)
     and the camera is outside all of them (the winding number of the
     surface around the centre, the sum of the triangles' solid angles over
@@ -1059,12 +1129,14 @@ def _zbuffer(v, f, K, R, t, size, rays):
         winding = np.arctan2(num, den).sum() / (2 * np.pi)  # van Oosterom & Strackee 1983
         if abs(winding) < 0.5:
             keep = np.flatnonzero(num < 0)
-            r = rasterize(v, f[keep], K, R, t, size, rays=rays, bary=False)
+            # the kept triangles' own ids (or labels) written by the rasteriser: no
+            # pass over the frame to map them back
+            r = rasterize(v, f[keep], K, R, t, size, rays=rays, bary=False,
+                          labels=keep if labels is None else np.asarray(labels)[keep])
             covered = np.zeros(len(f), np.int64)
             covered[keep] = r.covered
-            face = np.where(r.face >= 0, keep[np.maximum(r.face, 0)], -1).astype(np.int32)
-            return replace(r, face=face, covered=covered)
-    return rasterize(v, f, K, R, t, size, rays=rays, bary=False)
+            return replace(r, covered=covered)
+    return rasterize(v, f, K, R, t, size, rays=rays, bary=False, labels=labels)
 
 
 _RAYS: dict = {}
@@ -1148,7 +1220,11 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     C = -R.T @ t
     t0 = time.perf_counter()
     rays = _rays(K, (w, h))
-    r = _zbuffer(v, f, K, R, t, (w, h), rays)
+    if method == "view-map" and maps is None:
+        maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
+    # the view map asks for each pixel's plane rather than its polygon
+    r = _zbuffer(v, f, K, R, t, (w, h), rays,
+                 labels=maps.face_plane if method == "view-map" else None)
     t1 = time.perf_counter()
     model = r.hit
 
@@ -1161,13 +1237,12 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels)
         per_pixel = float(n.mean()) if len(n) else 0.0
     else:
-        if maps is None:
-            maps = prepare_view_maps((v, f), photos, tolerance=tolerance)
-        ids = maps.choose_planes(C, power=power, neighbours=neighbours)
+        ids = maps.choose_planes(C, power=power, neighbours=neighbours,
+                                 planes=np.unique(maps.face_plane[r.covered > 0]))
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
                                              power, neighbours, channels, float(background))
-        per_pixel = float(n.sum(dtype=np.int64) / max(model.sum(), 1))
+        per_pixel = float(n / max(model.sum(), 1))
     t2 = time.perf_counter()
     if method == "blend":
         seen = wsum > 0

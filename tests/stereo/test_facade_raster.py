@@ -117,3 +117,17 @@ def test_bad_mesh_is_input_error():
         rasterize(np.zeros((3, 2)), [[0, 1, 2]], K, np.eye(3), np.zeros(3), SIZE)
     with pytest.raises(InputError, match="outside"):
         rasterize(np.zeros((3, 3)), [[0, 1, 3]], K, np.eye(3), np.zeros(3), SIZE)
+
+
+def test_labels_replace_the_triangle_ids():
+    # labels[m] where triangle m is seen, -1 elsewhere; depth, barycentrics and
+    # per-triangle coverage as without them
+    V, F = _box((-1, -1, 0), (1, 1, 2))
+    R, t = _look_at(np.array([3.0, -4.0, 3.5]), np.array([0.0, 0.0, 1.0]))
+    labels = np.arange(len(F)) // 2 + 100  # two triangles a side: one label a side
+    a = rasterize(V, F, K, R, t, SIZE)
+    b = rasterize(V, F, K, R, t, SIZE, labels=labels)
+    np.testing.assert_array_equal(b.face, np.where(a.hit, labels[np.maximum(a.face, 0)], -1))
+    np.testing.assert_array_equal(a.depth, b.depth)
+    np.testing.assert_array_equal(a.bary, b.bary)
+    np.testing.assert_array_equal(a.covered, b.covered)

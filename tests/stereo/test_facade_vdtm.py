@@ -204,6 +204,39 @@ def test_zbuffer_leaves_out_faces_turned_away_with_the_same_result(facade):
     b = _zbuffer(v, f, K, R, -R @ inside, SIZE, None)
     assert a.hit.any()
     np.testing.assert_array_equal(a.face, b.face)
+    # with labels (the view map's planes): each pixel's triangle's label
+    labels = np.arange(len(f)) % 5 + 10
+    for R_, t_ in ((np.asarray(photos[1].R), np.asarray(photos[1].t)), (R, -R @ inside)):
+        a = _zbuffer(v, f, K, R_, t_, SIZE, None)
+        b = _zbuffer(v, f, K, R_, t_, SIZE, None, labels=labels)
+        np.testing.assert_array_equal(b.face, np.where(a.hit, labels[np.maximum(a.face, 0)], -1))
+        np.testing.assert_array_equal(a.covered, b.covered)
+
+
+def test_view_map_planes_chosen_for_the_view_and_background(facade):
+    # choosing the three for a subset of the planes gives those planes' rows of the
+    # whole choice; off the model and at unfilled holes the view map leaves the
+    # background, elsewhere the same values whatever the background
+    s, mesh, photos = facade
+    from lumigraph.stereo.debevec1996.vdtm import prepare_view_maps
+
+    maps = prepare_view_maps(mesh, photos)
+    cam = s.gt["novel_cameras"]["view_0"]
+    K, R, t = (np.array(cam[x]) for x in ("K", "R", "t"))
+    C = -R.T @ t
+    every = maps.choose_planes(C)
+    some = np.arange(0, len(maps.planes), 2)
+    part = maps.choose_planes(C, planes=some)
+    np.testing.assert_array_equal(part[some], every[some])
+    assert (np.delete(part, some, 0) == -1).all()
+    a = render_vdtm(mesh, photos, K, R, t, SIZE, method="view-map", maps=maps, fill=False)
+    b = render_vdtm(mesh, photos, K, R, t, SIZE, method="view-map", maps=maps, fill=False,
+                    background=7.0)
+    holes = render_vdtm(mesh, photos, K, R, t, SIZE, method="view-map", maps=maps).filled
+    seen = a.model & ~holes  # (fill=False reports no holes)
+    assert seen.sum() > 500 and holes.any()
+    np.testing.assert_array_equal(a.image[seen], b.image[seen])
+    assert (b.image[~seen] == 7.0).all() and (a.image[~seen] == 0.0).all()
 
 
 def test_view_map_any_number_of_channels(facade):
