@@ -8,7 +8,10 @@ Cases
 - ``8-bit``, ``12-bit``, ``16-bit`` also run our Robertson et al. 2003
   (converged; beside OpenCV CalibrateRobertson and pfstools' Robertson at 8 bits);
 - ``8-bit, times ±10 %``: the stack carries nominal times off by up to 10 %
-  (Mitsunaga–Nayar refines them; Debevec gets the exact times as the yardstick);
+  (Mitsunaga–Nayar refines them, also with the shortest and longest exposures
+  known exactly; Debevec gets the exact times as the yardstick; MN's error is
+  also given up to the common power rough times leave free, beside the
+  information bound of the draw);
 - ``merge``: radiance from each method's own curve;
 - ``merge 12 MP``: 9 exposures tiled up to 4000×3000 (quick: 1 MP), wall
   time and tracemalloc peak of the merge alone;
@@ -124,6 +127,18 @@ def _ours_mn(d, order):
     from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
 
     r = response_mitsunaga1999(d["z"], d["times"], bit_depth=d["bit_depth"], order=order)
+    return r.g, np.array(r.exposure_times_s)
+
+
+def _ours_mn_two_references(d, order):
+    """Mitsunaga–Nayar with the rough times and the shortest and longest
+    exposures known exactly (``--reference-time`` twice): the power fixed."""
+    from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
+
+    lo, hi = int(np.argmin(d["exact"])), int(np.argmax(d["exact"]))
+    r = response_mitsunaga1999(d["z"], d["times"], bit_depth=d["bit_depth"], order=order,
+                               reference_times={lo: float(d["exact"][lo]),
+                                                hi: float(d["exact"][hi])})
     return r.g, np.array(r.exposure_times_s)
 
 
@@ -439,6 +454,43 @@ def paired_ratio(deep: dict, base: dict) -> PairedRatio:
                              / np.median([base[k] for k in seeds])))
 
 
+def ln_response_rms_up_to_power(g, g_true, bit_depth: int) -> float:
+    """:func:`ln_response_rms` after the best common power: ``g`` against
+    ``γ·g_true`` with one ``γ`` for all channels (least squares over the same
+    codes, each channel's offset removed), in ``g_true``'s units.
+
+    With rough times a response is fixed only up to that power (Mitsunaga &
+    Nayar 1999, §4; the ratios take the same power): this is the part of the
+    error the bracket's codes decide.
+
+    Examples
+    --------
+    >>> g = np.log(np.arange(1, 257, dtype=float))[None].repeat(3, 0)
+    >>> round(ln_response_rms_up_to_power(0.9 * g + 1.0, g, 8), 12)
+    0.0
+    """
+    zmax = 2 ** bit_depth - 1
+    m = slice(int(math.ceil(0.05 * zmax)), int(0.95 * zmax) + 1)
+    a = np.asarray(g, np.float64)[:, m]
+    b = np.asarray(g_true, np.float64)[:, m]
+    a = a - a.mean(axis=1, keepdims=True)
+    b = b - b.mean(axis=1, keepdims=True)
+    gam = float(np.sum(a * b) / np.sum(b * b))
+    return float(np.sqrt(np.mean((a / gam - b) ** 2)))
+
+
+def _power_bound_error(d) -> float:
+    """The ln-response RMS of an estimator that knows the data-determined
+    curve exactly and sets the free power from the stack's rough times (least
+    squares in log, as :func:`hdr.bench_mn.oracle_ratio_error`): on average no
+    estimator with these times does better."""
+    x = np.log(np.sort(d["exact"]))
+    y = np.log(np.sort(d["times"]))
+    x, y = x - x.mean(), y - y.mean()
+    gam = float(np.dot(x, y) / np.dot(x, x))
+    return ln_response_rms(gam * np.asarray(d["g_true"], np.float64), d["g_true"], d["bit_depth"])
+
+
 def ln_response_rms_range(g, g_true, bit_depth, lo: float, hi: float) -> float:
     """:func:`ln_response_rms` over the codes ``lo..hi`` given as fractions of
     the code range (``10/255`` … ``0.95``), each channel's offset removed."""
@@ -693,7 +745,9 @@ def _error(d, out):
         tr = np.exp(np.diff(np.log(np.sort(d["exact"]))))
         rr = np.exp(np.diff(np.log(np.sort(times))))
         return {"error": ln_response_rms(g, d["g_true"], d["bit_depth"]),
-                "ratio_error_max": float(np.max(np.abs(rr / tr - 1)))}
+                "ratio_error_max": float(np.max(np.abs(rr / tr - 1))),
+                "error_up_to_power": ln_response_rms_up_to_power(g, d["g_true"], d["bit_depth"]),
+                "bound_error": _power_bound_error(d)}
     if out.ndim == 3:  # a radiance map
         well = ((d["z"] > 0.05 * 255) & (d["z"] < 0.95 * 255)).any(axis=0)
         return radiance_rel_rms(out, d["radiance"], well)
@@ -889,9 +943,27 @@ def _checks(res: Results, ctx) -> list[Check]:
         out.append(Check("MN refined ratios within 1 % of the truth", rerr, 0.01, rerr <= 0.01,
                          "times given off by up to ±10 %"))
         if de:
-            r = mn_auto.error / de.error
-            out.append(Check("MN response error / Debevec with exact times <= 1.5", r, 1.5,
-                             r <= 1.5, f"MN {mn_auto.error:.4g}, Debevec {de.error:.4g}"))
+            # With times off by ±10 % the data fix the curve only up to a common power
+            # (issue 13 restates the ratio target for this reason): the raw error is the
+            # power the rough times set, near the information bound whatever the method.
+            # The 1.5x is checked where the data decide it: up to that power, and with two
+            # exposures known exactly (which fix the power).
+            up = mn_auto.extra.get("error_up_to_power", math.nan)
+            bound = mn_auto.extra.get("bound_error", math.nan)
+            r = up / de.error
+            out.append(Check("MN response error up to the common power the rough times leave "
+                             "free / Debevec with exact times <= 1.5", r, 1.5, r <= 1.5,
+                             f"MN {up:.4g} (raw {mn_auto.error:.4g}, the information bound "
+                             f"for this time draw {bound:.4g}), Debevec {de.error:.4g}"))
+            try:
+                m2 = res.get("8-bit, times ±10 %", "mitsunaga-nayar (ours, 2 reference times)",
+                             "auto")
+                r2 = m2.error / de.error
+                out.append(Check("MN response error with the shortest and longest exposures "
+                                 "known exactly / Debevec with exact times <= 1.5", r2, 1.5,
+                                 r2 <= 1.5, f"MN {m2.error:.4g}, Debevec {de.error:.4g}"))
+            except KeyError:
+                pass
         if pm:
             out.append(Check("MN response error <= pfstools MN", mn_auto.error / pm.error, 1.0,
                              mn_auto.error <= pm.error, f"pfstools {pm.error:.4g}"))
@@ -984,6 +1056,8 @@ def stage(*, quick: bool = False) -> Stage:
         Method("debevec (ours)", _ours_debevec, "samples", samples, cases=resp_cases),
         Method("mitsunaga-nayar (ours)", _ours_mn, "order", orders,
                cases=("8-bit, times ±10 %",) if quick else ("8-bit", "8-bit, times ±10 %")),
+        Method("mitsunaga-nayar (ours, 2 reference times)", _ours_mn_two_references, "order",
+               ("auto",), cases=("8-bit, times ±10 %",)),
         Method("debevec (ours, exact times)", _ours_debevec_exact, "samples", (600,),
                cases=("8-bit, times ±10 %",)),
         Method("CalibrateDebevec (OpenCV)", _cv_debevec, "samples", cv_samples, peer="opencv",
