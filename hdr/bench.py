@@ -688,6 +688,14 @@ def _real_ours(d, _k):
     return merge(d["z"], d["times"], curve).radiance
 
 
+def _real_ours_robertson(d, _k):
+    from lumigraph.hdr.merge import merge
+    from lumigraph.hdr.robertson2003 import response_robertson2003
+
+    curve = response_robertson2003(d["z"], d["times"], bit_depth=8)
+    return merge(d["z"], d["times"], curve).radiance
+
+
 def _real_cv(d, _k):
     return _fam_merge_cv(d)
 
@@ -843,11 +851,14 @@ def _real_checks(res: Results) -> list[Check]:
                        ("canon 5D Mk II", "Canon 5D Mk II ColorChecker neutral row: channels' "
                                           "disagreement of patch ratios, ln RMS")):
         o, c = _row(res, case, "merge (ours)"), _row(res, case, "MergeDebevec (OpenCV)")
+        rb = _row(res, case, "merge (ours, Robertson curve)")
         if o and c:
             r = o.error / c.error
             out.append(Check(f"[reported] {what}, ours / OpenCV (informational)", r, 1.0,
                              r <= 1.0, f"ours {o.error:.4g} ({o.time_s:.3g} s), OpenCV "
-                                       f"{c.error:.4g} ({c.time_s:.3g} s)"))
+                                       f"{c.error:.4g} ({c.time_s:.3g} s)"
+                                       + (f"; ours with our Robertson curve {rb.error:.4g}"
+                                          if rb else "")))
     o = _row(res, "iphone", "merge (ours)")
     if o:
         out.append(Check("[reported] iPhone XR night (downscaled): median |Δ ln| ours vs OpenCV's "
@@ -1103,6 +1114,8 @@ def stage(*, quick: bool = False) -> Stage:
                prepare=_once(_fam_merge_cv)[0], peer="opencv", cases=fam8),
         # real sets: timed (curve + merge), error against the set's own reference
         Method("merge (ours)", _real_ours, cases=reals),
+        Method("merge (ours, Robertson curve)", _real_ours_robertson,
+               cases=tuple(c for c in reals if c != "iphone")),
         Method("MergeDebevec (OpenCV)", _real_cv, peer="opencv", cases=reals),
     )
     return Stage("hdr", tuple(cases), methods, _error, "ln-response RMS / radiance rel. RMS",

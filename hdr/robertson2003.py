@@ -81,6 +81,17 @@ pixel; OpenCV's CalibrateRobertson run to convergence (1000 iterations,
 threshold 1e-7) gives 0.037, while its default (30 iterations, threshold
 0.01) stops early at 0.014: early stopping regularises. We report the
 converged estimate the method defines, and its convergence;
+- each channel fitted over the codes that follow the exposure
+  (:func:`hdr.mitsunaga1999.responsive_range`: a film base, a black level or a
+  shoulder below/above them; ``fit["responsive_codes"]``), and pixels that are
+  not scene points (a code that does not move over two stops) dropped from the
+  sample (``fit["static_pixels_dropped"]``): Memorial's film base otherwise
+  reverses green's low codes;
+- the refinements kept only where the data bear them: when the refined
+  estimate is not increasing (beyond ``MONOTONE_TOL_LN``), the bias
+  correction, leave-one-out and noise weights are dropped in turn, each
+  variant recorded in ``fit["variants"]`` and the fallback warned (a phone's
+  per-frame processing, a channel that does not follow one response);
 - a monotonic result (weighted isotonic regression, reported in ``fit``);
 - convergence recorded: iterations, the final change and the objective at
   the first and last iteration (``fit["convergence"]``).
@@ -105,6 +116,7 @@ import math
 
 import numpy as np
 
+from lumigraph.hdr.mitsunaga1999 import responsive_range, static_pixels
 from lumigraph.hdr.response import ResponseCurve, normalise_g
 from lumigraph.hdr.samples import check_samples, check_stack, sample_pixels
 
@@ -393,6 +405,70 @@ def _debias(fc, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng, draws, noise, wta
     return g - bias, float(np.max(np.abs(bias)))
 
 
+MONOTONE_TOL_LN = 0.05
+"""Largest departure from an increasing curve (ln units, isotonic regression)
+a kept estimate may have; beyond it the next simpler variant is tried, and a
+warning says when none is within it."""
+
+
+def _variants(noise_w: bool, loo: bool, debias: bool):
+    """The variants to try, the requested one first, then each refinement
+    dropped in turn (bias correction, leave-one-out, noise weights), down to
+    the papers' plain alternation; no repeats.
+
+    Examples
+    --------
+    >>> _variants(True, True, True)
+    [(True, True, True), (True, True, False), (True, False, False), (False, False, False)]
+    >>> _variants(False, False, False)
+    [(False, False, False)]
+    """
+    out = [(noise_w, loo, debias), (noise_w, loo, False), (noise_w, False, False),
+           (False, False, False)]
+    seen: list[tuple[bool, bool, bool]] = []
+    for v in out:
+        if v not in seen:
+            seen.append(v)
+    return seen
+
+
+def _variant_name(v: dict) -> str:
+    parts = [k.replace("_", " ") for k in ("noise_weight", "leave_one_out", "bias_correction")
+             if v[k]]
+    return "with " + ", ".join(parts) if parts else "plain (the papers' certainty weight)"
+
+
+def _estimate(fc0, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng, bias_draws, nz, wtab, loo,
+              debias, smooth):
+    """One variant of a channel's estimate from the certainty-weighted fit
+    ``fc0``: refit with ``wtab``/``loo`` when either is set, the bias
+    correction, the smoothing; and how far it is from increasing."""
+    from scipy.optimize import isotonic_regression
+
+    n_codes = 2 ** bd
+    fc = fc0
+    if wtab is not None or loo:
+        fc = _fit_channel(y, tt, bd, n_bins, lo, hi, max_iter, tol, wtab, loo) or fc0
+    centres, known, cnt, kc = fc["centres"], fc["known"], fc["cnt"], fc["kc"]
+    g_ch, bmax, lam = fc["g"], None, None
+    if debias:
+        g_ch, bmax = _debias(fc, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng, bias_draws,
+                             nz, wtab, loo)
+    if smooth:
+        # The bias correction adds its refit's variance (draws x the pixels).
+        var = fc["var_bin"] * (1.0 + (1.0 / bias_draws if debias else 0.0))
+        at = np.where(known, centres, (np.arange(n_bins) + 0.5) * n_codes / n_bins)
+        inside = (at >= lo) & (at <= hi)
+        all_codes = np.arange(n_codes, dtype=np.float64)
+        sm, lam = smooth_gcv(np.interp(at, all_codes, g_ch), np.where(inside, var, np.inf), at)
+        g_ch = _splice(g_ch, at[inside], sm[inside])
+    wts = np.interp(np.arange(n_codes, dtype=np.float64), centres[kc], cnt[kc]) + 1.0
+    g_mono = np.asarray(isotonic_regression(g_ch, weights=wts, increasing=True).x)
+    return {"fc": fc, "g": g_ch, "g_mono": g_mono, "bias_max": bmax, "lam": lam,
+            "monotone_change": float(np.max(np.abs(g_mono - g_ch)))}
+
+
+
 def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
               samples: int = 5000, bins: int | None = None, max_iter: int = 2000,
               tol: float = 1e-6, clip_margin: float = 0.03, bias_draws: int = 4,
@@ -448,8 +524,6 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
     EstimationError
         A channel with too few visited codes to define a curve.
     """
-    from scipy.optimize import isotonic_regression
-
     from lumigraph.capture.errors import EstimationError, InputError
 
     z, t, bd = check_stack(images, exposure_times_s, bit_depth=bit_depth)
@@ -473,16 +547,38 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
     order = np.argsort(t)
     t = t[order]
     zmax = n_codes - 1
+    # Pixels that are not scene points (a code that does not move over two stops: a
+    # matte, a registration border, a dead pixel; Memorial's pure-blue border) break
+    # the model y = f(t x) in a way no weight repairs. When the sample holds any, it is
+    # drawn again at three times the size without them and thinned evenly along
+    # radiance (as Mitsunaga-Nayar's, :func:`hdr.mitsunaga1999.static_pixels`).
+    n_static = 0
+    flat = z.reshape(p, h * w_, c)
+    if static_pixels(flat[:, idx][order] / zmax, t, clip_margin).any():
+        idx = sample_pixels(z, n=3 * samples, bit_depth=bd, rng=rng)
+        drop = static_pixels(flat[:, idx][order] / zmax, t, clip_margin)
+        n_static = int(np.count_nonzero(drop))
+        idx = idx[~drop]
+        if idx.size > samples:
+            idx = idx[np.round(np.linspace(0, idx.size - 1, samples)).astype(np.int64)]
     zs = z[:, idx // w_, idx % w_][order].astype(np.int64)  # (P, N, C)
     lo, hi = clip_margin * zmax, (1 - clip_margin) * zmax
-    all_codes = np.arange(n_codes, dtype=np.float64)
+    # Codes that do not follow the exposure (a film base, a black level, a shoulder)
+    # carry no response information, and their per-code means mix every radiance that
+    # sits there: each channel's fitted range stops at them
+    # (:func:`hdr.mitsunaga1999.responsive_range`; the whole range when every code
+    # responds).
+    floor, ceil = responsive_range(zs / zmax, t, zmax)
+    los = np.maximum(lo, floor * zmax)
+    his = np.minimum(hi, ceil * zmax)
     tt = t[:, None]
     g_out = np.empty((c, n_codes))
     warnings: list[str] = []
     conv, mono, visited = [], [], []
-    noise_ab, bias_max, lams = [], [], []
+    noise_ab, bias_max, lams, variants_log = [], [], [], []
     for ch in range(c):
         y = zs[..., ch]  # (P, N)
+        lo, hi = float(los[ch]), float(his[ch])
         fc = _fit_channel(y, tt, bd, n_bins, lo, hi, max_iter, tol)
         if fc is None:
             raise EstimationError("images", f"channel {ch}: too few code levels are well exposed; "
@@ -494,35 +590,49 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
         # (no noise measured, e.g. a noise-free render: the certainty weight)
         wtab = (noise_weight(fc["g"], nz, lo, hi)
                 if weight == "noise" and (nz[0] > 0 or nz[1] > 0) else None)
-        if wtab is not None or leave_one_out:
-            fc = _fit_channel(y, tt, bd, n_bins, lo, hi, max_iter, tol, wtab, leave_one_out) or fc
+        # The refinements (noise weights, leave-one-out, bias correction) correct small
+        # biases of a bracket that follows one response; on one that does not (a phone's
+        # per-frame processing, a channel with little signal) they can amplify the misfit
+        # into a broken curve. A response is increasing: the first variant, in the order
+        # below, whose estimate is monotone within MONOTONE_TOL_LN is kept, and every
+        # variant tried is recorded with the reason the earlier ones were passed over.
+        tried, chosen = [], None
+        for v_w, v_loo, v_deb in _variants(wtab is not None, leave_one_out, bias_draws > 0):
+            est = _estimate(fc, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng, bias_draws,
+                            nz, wtab if v_w else None, v_loo, v_deb, smooth)
+            est["variant"] = {"noise_weight": v_w, "leave_one_out": v_loo,
+                              "bias_correction": v_deb}
+            tried.append(est)
+            if est["monotone_change"] <= MONOTONE_TOL_LN:
+                chosen = est
+                break
+        if chosen is None:
+            chosen = min(tried, key=lambda e: e["monotone_change"])
+        if chosen is not tried[0]:
+            warnings.append(
+                f"channel {ch}: the full estimate was not monotonic (max change "
+                f"{tried[0]['monotone_change']:.3g} in ln units); kept the variant "
+                f"{_variant_name(chosen['variant'])} (max change "
+                f"{chosen['monotone_change']:.3g}): the bracket does not follow one response "
+                "closely in this channel")
+        variants_log.append([{**e["variant"], "monotone_max_change_ln": e["monotone_change"],
+                              "kept": e is chosen} for e in tried])
+        fc = chosen["fc"]
+        if chosen["bias_max"] is not None:
+            bias_max.append(chosen["bias_max"])
+        if chosen["lam"] is not None:
+            lams.append(chosen["lam"])
         it, change, obj0, obj = fc["it"], fc["change"], fc["obj0"], fc["obj"]
-        centres, known, cnt, kc = fc["centres"], fc["known"], fc["cnt"], fc["kc"]
-        g_ch = fc["g"]
-        if bias_draws > 0:
-            g_ch, bmax = _debias(fc, y, tt, bd, n_bins, lo, hi, max_iter, tol, rng, bias_draws,
-                                 nz, wtab, leave_one_out)
-            bias_max.append(bmax)
-        if smooth:
-            # The bias correction adds its refit's variance (draws x the pixels).
-            var = fc["var_bin"] * (1.0 + (1.0 / bias_draws if bias_draws > 0 else 0.0))
-            at = np.where(known, centres, (np.arange(n_bins) + 0.5) * n_codes / n_bins)
-            inside = (at >= lo) & (at <= hi)
-            sm, lam = smooth_gcv(np.interp(at, all_codes, g_ch), np.where(inside, var, np.inf),
-                                 at)
-            g_ch = _splice(g_ch, at[inside], sm[inside])
-            lams.append(lam)
+        known = fc["known"]
         converged = change < tol
         if not converged:
             warnings.append(f"channel {ch}: not converged after {max_iter} iterations (last change "
                             f"{change:.2g} in ln units); raise max_iter")
         conv.append({"iterations": it, "final_change_ln": change, "converged": bool(converged),
                      "objective_first": obj0, "objective_last": obj})
-        wts = np.interp(all_codes, centres[kc], cnt[kc]) + 1.0
-        g_mono = np.asarray(isotonic_regression(g_ch, weights=wts, increasing=True).x)
-        change_mono = float(np.max(np.abs(g_mono - g_ch)))
+        g_mono, change_mono = chosen["g_mono"], chosen["monotone_change"]
         mono.append(change_mono)
-        if change_mono > 0.05:
+        if change_mono > MONOTONE_TOL_LN:
             warnings.append(f"channel {ch}: the fit was not monotonic (max change "
                             f"{change_mono:.3f} in ln units when made so); noisy data or too "
                             "few samples")
@@ -536,10 +646,13 @@ def response_robertson2003(images: np.ndarray, exposure_times_s, *, bit_depth: i
            "clip_margin": clip_margin, "leave_one_out": bool(leave_one_out),
            "smoothing": {"penalty": "integral of (d2 g / d(ln z)2)^2", "rule": "GCV",
                          "lambda": lams} if smooth else None}
-    fit = {"samples": int(idx.size), "bins_visited": visited, "convergence": conv,
+    fit = {"samples": int(idx.size), "static_pixels_dropped": n_static,
+           "responsive_codes": [[float(a), float(b)] for a, b in zip(los, his, strict=True)],
+           "bins_visited": visited, "convergence": conv,
            "noise": {"model": "Var X = a X + b (X = exp g) + quantisation", "a_b": noise_ab,
                      "source": "estimated from the bracket"},
            "bias_correction": {"draws": int(bias_draws), "max_abs_ln": bias_max},
-           "monotone_max_change_ln": mono, "tol_ln": tol, "max_iter": int(max_iter)}
+           "monotone_max_change_ln": mono, "variants": variants_log, "tol_ln": tol,
+           "max_iter": int(max_iter)}
     times = tuple(float(x) for x in np.asarray(exposure_times_s, dtype=np.float64))
     return ResponseCurve("robertson", bd, normalise_g(g_out), times, sel, tuple(warnings), fit)

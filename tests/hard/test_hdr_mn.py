@@ -134,3 +134,20 @@ def test_walls_toe_gets_the_order_its_data_support():
     deb = ln_response_rms_range(response_debevec1997(z, t, bit_depth=8).g, gt, 8, 10 / 255, 0.95)
     assert np.all(np.diff(r.g, axis=1) > 0)
     assert mn <= 1.5 * deb, (mn, deb, r.selection["chosen"])
+
+
+@pytest.mark.skipif(not (MEMORIAL / "shutter_times.txt").exists(), reason="no Memorial data")
+def test_robertson_on_memorial_keeps_the_full_estimate_on_every_channel():
+    # Memorial's film base (codes below ~20 that do not follow the exposure) used to pull
+    # the per-code means of green into a reversal (14 ln units when made monotone). With
+    # the fitted range stopped at the codes that respond, every channel's refined estimate
+    # is increasing on its own: no fallback, no warning.
+    from lumigraph.capture.io import read_stack
+    from lumigraph.hdr.robertson2003 import response_robertson2003
+
+    t = [float(Fraction(x)) for x in (MEMORIAL / "shutter_times.txt").read_text().split()]
+    stack = read_stack(sorted(MEMORIAL.glob("memorial0*.png")), times=t)
+    r = response_robertson2003(stack.images, t)
+    assert not r.warnings, r.warnings
+    assert all(len(ch) == 1 and ch[0]["kept"] for ch in r.fit["variants"])
+    assert all(lo > 0.03 * 255 for lo, _ in r.fit["responsive_codes"])  # the film base

@@ -169,3 +169,28 @@ def test_not_worse_than_opencv_default_on_walls():
     cv = ln_response_rms_range(np.log(np.maximum(crv[:, 0, ::-1].T.astype(np.float64), 1e-12)),
                                s.gt_arrays["g"], 8, 10 / 255, 0.95)
     assert 0 < ours <= cv, (ours, cv)
+
+
+def test_a_channel_that_breaks_the_refinements_falls_back_and_says_so():
+    # Per-frame gains on blue (a phone's per-frame white balance): that channel no longer
+    # follows one response, and the refined estimate (noise weights, leave-one-out, bias
+    # correction) amplifies the misfit. The simpler variants are tried in turn, each
+    # recorded; red and green are untouched and keep the full estimate.
+    s = render("bracket", size=(96, 72), seed=3)
+    z = np.stack(s.images)
+    t = np.array(s.stack["exposure_times_s"])
+    clean = response_robertson2003(z, t, bit_depth=8)
+    assert [len(ch) for ch in clean.fit["variants"]] == [1, 1, 1]
+    assert all(ch[0]["kept"] and ch[0]["leave_one_out"] and ch[0]["bias_correction"]
+               for ch in clean.fit["variants"])
+    gains = np.array([1.0, 1.5, 1.0, 1.5, 1.0, 1.5, 1.0])[: z.shape[0]]
+    bad = z.copy()
+    bad[..., 2] = np.clip(np.round(z[..., 2] * gains[:, None, None]), 0, 255).astype(z.dtype)
+    r = response_robertson2003(bad, t, bit_depth=8)
+    assert all(len(ch) == 1 and ch[0]["kept"] for ch in r.fit["variants"][:2])
+    blue = r.fit["variants"][2]
+    assert len(blue) > 1 and not blue[0]["kept"] and sum(v["kept"] for v in blue) == 1
+    kept = next(v for v in blue if v["kept"])
+    assert kept["monotone_max_change_ln"] <= blue[0]["monotone_max_change_ln"]
+    assert any(w.startswith("channel 2: the full estimate was not monotonic") for w in r.warnings)
+    assert not any(w.startswith(("channel 0", "channel 1")) for w in r.warnings)
