@@ -191,6 +191,69 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
     return out
 
 
+# a free parameter is "weakly constrained" when its relative σ is more than
+# this many times the median relative σ of the free parameters: the marks
+# hold it clearly less well than the rest (chosen on the tuned seeds 2, 7, 8,
+# docs/decisions/view-marking.md, "Told where the model is weak")
+WEAK_FACTOR = 2.0
+OCC = False
+WEAK_SUGGESTIONS = 8     # unmarked edges suggested per weak parameter
+
+
+def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
+               suggestions: int | None = None) -> list[dict]:
+    """Where the solved model is weak, and which marks would hold it.
+
+    ``sol`` a :class:`~lumigraph.stereo.debevec1996.solve.FacadeSolution`,
+    ``marked`` the set of ``(photo, edge)`` already marked, ``sizes``
+    photo -> (width, height) px. Each free parameter's relative first-order
+    σ (its σ over its value, or for an offset near zero over a tenth of the
+    model's median size); the parameters whose relative σ is over
+    ``factor`` times the median of them all are weak. For each, the
+    unmarked model edges visible in the solved model (in front, in frame,
+    not hidden by its faces), ranked by the σ the parameter would have with
+    a mark on the edge's visible stretch added
+    (:func:`~lumigraph.stereo.debevec1996.automark.std_with_mark`: what
+    the mark adds to the marks already there, poses and shared parameters
+    included). Returns ``[{parameter, value, std, rel_std, median_rel_std,
+    suggest: [{photo, edge, std_after}]}]``, weakest first.
+
+    >>> weak_spots(type("S", (), {"model": type("M", (), {"parameter_names": ()})()})(),
+    ...            set(), {})
+    []
+    """
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.automark import _scale, std_with_mark
+    from lumigraph.stereo.debevec1996.edges import Mark
+
+    factor = WEAK_FACTOR if factor is None else factor
+    suggestions = WEAK_SUGGESTIONS if suggestions is None else suggestions
+    names = list(sol.model.parameter_names)
+    if len(names) < 2:
+        return []
+    scale = _scale(sol.model, names)
+    rel = {n: sol.std[n] / scale[n] for n in names if scale[n] > 0 and np.isfinite(sol.std[n])}
+    if not rel:
+        return []
+    med = float(np.median(list(rel.values())))
+    weak = sorted((n for n, r in rel.items() if r > factor * med), key=lambda n: -rel[n])
+    out = []
+    vis = {}
+    for p, (R, t) in sol.poses.items():
+        cam = {"K": sol.K[p], "R": R, "t": t, "image_size": sizes[p]}
+        vis[p] = [(m["edge"], np.asarray(m["segment"], float))
+                  for m in project_edges(sol.model, {p: cam}, occlusion=OCC)[p] if (p, m["edge"]) not in marked]
+    cands = [Mark(p, e, seg) for p in vis for e, seg in vis[p]]
+    for n in weak:
+        after = std_with_mark(sol, cands, n) if cands else np.zeros(0)
+        order = [i for i in np.argsort(after) if np.isfinite(after[i]) and after[i] < sol.std[n]]
+        out.append({"parameter": n, "value": float(sol.params[n]), "std": float(sol.std[n]),
+                    "rel_std": float(rel[n]), "median_rel_std": med,
+                    "suggest": [{"photo": cands[i].photo, "edge": cands[i].edge,
+                                 "std_after": float(after[i])} for i in order[:suggestions]]})
+    return out
+
+
 class FacadeSession:
     """One photogrammetric-modelling session (module docstring).
 
@@ -465,7 +528,7 @@ class FacadeSession:
         photo = self._photo(photo)
         seg = self._segment(segment, "segment", photo)
         edge = self._edge(edge)
-        snapped = False
+        dragged, snapped = seg.copy(), False
         if snap:
             s = snap_segment(seg, self.detected(photo), grey=self.grey(photo),
                              max_distance_px=SNAP_DISTANCE_PX)
@@ -480,7 +543,11 @@ class FacadeSession:
                 self._drop_same(photo, edge)
             m = self._store(photo, edge, seg, False)
             self.save()
-            return dict(m, snapped=snapped)
+            # how far snapping moved the drag (px, the farther end): the page
+            # shows it, so a user sees a snap that left the line they traced
+            # and can keep the drag as drawn (``dragged``, with ``move``)
+            jump = float(max(np.hypot(*(seg[:2] - dragged[:2])), np.hypot(*(seg[2:] - dragged[2:]))))
+            return dict(m, snapped=snapped, jump_px=jump, dragged=[float(v) for v in dragged])
 
     def _drop_same(self, photo, edge, keep=None) -> None:
         # one mark per model edge and photograph: a new one replaces the old
@@ -549,6 +616,9 @@ class FacadeSession:
                                where=str(self.edges_path))
             self._sol = sol
             self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
+            # the page's "weakly constrained" list: what to mark next
+            self.solution["weak"] = weak_spots(
+                sol, {(m["photo"], m["edge"]) for m in self.marks.values()}, self.sizes)
             return self.solution
 
     # ------------------------------------------------------------- re-snap

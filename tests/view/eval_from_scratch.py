@@ -39,12 +39,25 @@ from lumigraph.stereo.debevec1996.solve import solve_facade  # noqa: E402
 from lumigraph.view.app import create_app  # noqa: E402
 from lumigraph.view.marking import FacadeSession  # noqa: E402
 
+# a snap that moves a drag farther than this (px) is redone unsnapped by the
+# simulated user; REDO=0 never. 3 sigma of the drag's offset from the true
+# line: the scene's marks (0.5 px) plus the drag's own 0.5 px, in quadrature
+REDO = float(os.environ.get("REDO", "0"))
+
+
+# the simulated user marks at most this many of the suggested edges a
+# photograph shows, per weakly constrained parameter
+WEAK_USER = int(os.environ.get("WEAK_USER", "4"))
+
 
 def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
     import lumigraph.view.marking as marking
 
     if os.environ.get("SNAPPX"):
         marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
+    for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS"):
+        if os.environ.get(k):
+            setattr(marking, k, type(getattr(marking, k))(os.environ[k]))
     marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
     for seed in seeds:
         t0 = time.time()
@@ -58,11 +71,20 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         ses = FacadeSession.open(folder, edges=edges)
         c = create_app(artifacts=[], facade=ses).test_client()
         rng = np.random.default_rng(7 + int(os.environ.get("DRAW", "0")))
+        redone = []
 
-        def drag(p, m, c=c, rng=rng):
+        def drag(p, m, c=c, rng=rng, redone=redone, truth=truth):
             seg = np.asarray(m["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
             r = c.post("/api/facade/marks", json={"photo": p, "segment": seg.tolist(), "snap": snap})
-            c.post(f"/api/facade/marks/{r.get_json()['id']}", json={"edge": m["edge"]})
+            got = r.get_json()
+            c.post(f"/api/facade/marks/{got['id']}", json={"edge": m["edge"]})
+            if REDO and got["jump_px"] > REDO:
+                # the page shows the snap leaving the line the user traced:
+                # they keep their drag as drawn (snapping off for it)
+                c.post(f"/api/facade/marks/{got['id']}", json={"segment": got["dragged"]})
+                redone.append((p, m["edge"], got["jump_px"],
+                               distance(got["segment"], truth[p][m["edge"]]),
+                               distance(got["dragged"], truth[p][m["edge"]])))
 
         for p in ses.photos:
             for m in four_hand_marks(ses.model, full[p]):
@@ -99,6 +121,41 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         if r.status_code != 200:
             print(f"seed {seed}: no solve: {r.get_json()['error']}")
             continue
+        if os.environ.get("PROBE"):
+            gt0 = json.loads((folder / "gt.json").read_text())["parameters"]
+            for n, v in r.get_json()["parameters"].items():
+                if n in gt0:
+                    print(f"  probe {n}: rel std {v['std'] / abs(v['value']):.4f} rel err "
+                          f"{(v['value'] - gt0[n]) / gt0[n]:+.4f}")
+        weak_added = []
+        if os.environ.get("WEAK", "1") == "1":
+            # the page lists the weakly constrained parameters and the
+            # unmarked edges that would hold them: the user marks those the
+            # photograph shows (an edge of the scene's marks), by hand
+            byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
+            if os.environ.get("VERBOSE"):
+                for w in r.get_json().get("weak", []):
+                    print(f"  weak {w['parameter']} σ {w['std']:.4f} ({w['rel_std']:.4f}, median "
+                          f"{w['median_rel_std']:.4f}):", [(q["photo"], q["edge"], round(q["std_after"], 4),
+                                                          q["edge"] in byedge[q["photo"]])
+                                                         for q in w["suggest"]])
+            for w in r.get_json().get("weak", []):
+                n_added = 0
+                for q in w["suggest"]:
+                    m = byedge[q["photo"]].get(q["edge"])
+                    have = {(k["photo"], k["edge"]) for k in ses.marks.values()}
+                    if m is not None and (q["photo"], q["edge"]) not in have and n_added < WEAK_USER:
+                        drag(q["photo"], m)
+                        n_added += 1
+                        weak_added.append((w["parameter"], q["photo"], q["edge"]))
+            if weak_added:
+                r2 = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+                if r2.status_code == 200:
+                    r = r2
+            extra += len(weak_added)
+            if os.environ.get("VERBOSE"):
+                print("  weak:", [(w["parameter"], round(w["rel_std"] / w["median_rel_std"], 2))
+                                  for w in r.get_json().get("weak", [])], "added", weak_added)
         for _ in range(int(os.environ.get("ROUNDS", "1"))):
             if os.environ.get("RESNAP", "all") != "0":
                 rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
@@ -146,7 +203,15 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 print(f"  all-snapped reference: no solve ({e})")
         off = sum(distance(m["segment"], truth[m["photo"]][m["edge"]]) > 3 * EDGE_NOISE_PX
                   for m in ses.marks.values())
+        if os.environ.get("BLOCK"):
+            for m in sorted(ses.marks.values(), key=lambda m: (m["edge"], m["photo"])):
+                if m["edge"].startswith(os.environ["BLOCK"] + "/"):
+                    print(f"  {m['edge']} {m['photo']} {'P' if m['proposed'] else 'H'} "
+                          f"{distance(m['segment'], truth[m['photo']][m['edge']]):.2f} px")
         if os.environ.get("VERBOSE"):
+            for p, e, j, ds, dd in redone:
+                print(f"  redone unsnapped: {p} {e} (snap jumped {j:.2f} px; snapped "
+                      f"{ds:.2f} px off the true line, the drag {dd:.2f})")
             for m in ses.marks.values():
                 e = distance(m["segment"], truth[m["photo"]][m["edge"]])
                 if e > 3 * EDGE_NOISE_PX:
