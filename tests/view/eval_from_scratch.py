@@ -128,10 +128,12 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                     print(f"  probe {n}: rel std {v['std'] / abs(v['value']):.4f} rel err "
                           f"{(v['value'] - gt0[n]) / gt0[n]:+.4f}")
         weak_added = []
-        if os.environ.get("WEAK", "1") == "1":
-            # the page lists the weakly constrained parameters and the
-            # unmarked edges that would hold them: the user marks those the
-            # photograph shows (an edge of the scene's marks), by hand
+
+        def mark_weak(r, c=c, drag=drag, weak_added=weak_added, full=full, ses=ses):
+            """The page lists the weakly constrained parameters and the
+            unmarked edges that would hold them: the user marks (by hand) up
+            to WEAK_USER of those the photograph shows (an edge of the
+            scene's marks) per parameter, and Solves again."""
             byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
             if os.environ.get("VERBOSE"):
                 for w in r.get_json().get("weak", []):
@@ -139,6 +141,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                           f"{w['median_rel_std']:.4f}):", [(q["photo"], q["edge"], round(q["std_after"], 4),
                                                           q["edge"] in byedge[q["photo"]])
                                                          for q in w["suggest"]])
+            n0 = len(weak_added)
             for w in r.get_json().get("weak", []):
                 n_added = 0
                 for q in w["suggest"]:
@@ -148,14 +151,15 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                         drag(q["photo"], m)
                         n_added += 1
                         weak_added.append((w["parameter"], q["photo"], q["edge"]))
-            if weak_added:
+            if len(weak_added) > n0:
                 r2 = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
                 if r2.status_code == 200:
-                    r = r2
-            extra += len(weak_added)
-            if os.environ.get("VERBOSE"):
-                print("  weak:", [(w["parameter"], round(w["rel_std"] / w["median_rel_std"], 2))
-                                  for w in r.get_json().get("weak", [])], "added", weak_added)
+                    return r2
+            return r
+
+        weak = os.environ.get("WEAK", "2")
+        if weak != "0":
+            r = mark_weak(r)
         for _ in range(int(os.environ.get("ROUNDS", "1"))):
             if os.environ.get("RESNAP", "all") != "0":
                 rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
@@ -170,6 +174,11 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
             props = props + props2
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+        if weak == "2" and r.status_code == 200:    # the weak list again, after the last solve
+            r = mark_weak(r)
+        extra += len(weak_added)
+        if os.environ.get("VERBOSE"):
+            print("  weak marks added:", weak_added)
         gt = json.loads((folder / "gt.json").read_text())["parameters"]
         free = list(ses.model.parameter_names)
 
