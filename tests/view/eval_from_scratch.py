@@ -5,7 +5,13 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     SNAP=0 ... (hand drags not snapped)
     SNAPSTEP=1 ... (snapping onto the step, marking.refine_on_edge; default: the library's SNAP_ON_STEP)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
-    ROUNDS=0 ... (no second round: Propose again, accept, Solve again; default 1)
+    ROUNDS=1 ... (further rounds: Re-snap, Propose again, accept, Solve again; default 2)
+    WEAK=0 / WEAK=1 / WEAK=2 ... (the user marks the edges the solve's weak list suggests:
+        never / after the first solve / after every solve, the default)
+    WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
+    WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
+    REDO=2.12 ... (the user redoes unsnapped a drag the snap moved farther than this, px; default 0: never)
+    BLOCK=wing / PROBE=1 / VERBOSE=1 ... (diagnostics)
     RESNAP=all / RESNAP=1 / RESNAP=0 ... (re-snap to the solved model before each
         further round: every mark (default) / the marks beyond their band / none)
     SNAPPX=1.5 ... (snap radius in px, default marking.SNAP_DISTANCE_PX)
@@ -17,9 +23,11 @@ Per seed: four hand marks per photograph (the longest two vertical and two
 horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
 of noise), Propose, each proposal accepted when within 1.5 px of its true
 edge line, the blocks a refusal names marked by hand (the four longest
-unmarked edges), Solve; then (ROUNDS) Re-snap to the model, Propose again,
-accept as before, Solve again; the RMS relative parameter error against the fully
-marked (σ = 0.5 px) solve of the same scene.
+unmarked edges), Solve; the edges the solve's weak list suggests that the
+photograph shows marked by hand (up to four per weak parameter), Solve; then
+(ROUNDS, two) Re-snap to the model, Propose again, accept as before, Solve
+again, the weak list's edges again; the RMS relative parameter error against
+the fully marked (σ = 0.5 px) solve of the same scene.
 """
 
 import json
@@ -160,7 +168,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         weak = os.environ.get("WEAK", "2")
         if weak != "0":
             r = mark_weak(r)
-        for _ in range(int(os.environ.get("ROUNDS", "1"))):
+        for _ in range(int(os.environ.get("ROUNDS", "2"))):
             if os.environ.get("RESNAP", "all") != "0":
                 rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
                 if os.environ.get("VERBOSE"):
@@ -174,8 +182,8 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
             props = props + props2
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
-        if weak == "2" and r.status_code == 200:    # the weak list again, after the last solve
-            r = mark_weak(r)
+            if weak == "2" and r.status_code == 200:    # the weak list again, after each solve
+                r = mark_weak(r)
         extra += len(weak_added)
         if os.environ.get("VERBOSE"):
             print("  weak marks added:", weak_added)

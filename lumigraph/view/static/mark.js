@@ -232,7 +232,7 @@
         a.type = "button";
         a.className = "suggest";
         a.title = `with this edge marked: ${w.parameter} ± ${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`;
-        a.textContent = `${q.photo} ${q.edge}`;
+        a.textContent = `${q.photo} ${q.edge}` + (q.hidden_in_solve ? " (hidden in the solve?)" : "");
         a.addEventListener("click", async () => {
           const i = S.state.photos.findIndex((p) => p.name === q.photo);
           if (i >= 0) await choosePhoto(i);
