@@ -219,9 +219,32 @@ def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
     included); ``suggestions`` of them. Returns ``[{parameter, value, std, rel_std, median_rel_std,
     suggest: [{photo, edge, std_after, hidden_in_solve}]}]``, weakest first.
 
-    >>> weak_spots(type("S", (), {"model": type("M", (), {"parameter_names": ()})()})(),
-    ...            set(), {})
-    []
+    The test scene's tower with its right side marked in one photograph
+    only (its left side in all): its width is weak, and the edges to mark
+    are on its right side.
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> seen, first = project_edges(m, cams), True
+    >>> for p in seen:
+    ...     right = [e for e in seen[p] if e["edge"] in ("tower/front-right", "tower/back-right",
+    ...                                                  "tower/top-right", "tower/bottom-right")]
+    ...     keep, first = (right[:1] if first and right else []), first and not right
+    ...     seen[p] = [e for e in seen[p] if e not in right or e in keep]
+    >>> marks = [k for k in EdgeMarks.from_dict({"photographs": seen}, model=m,
+    ...                                         photographs=list(cams)).marks]
+    >>> marks = [type(k)(k.photo, k.edge, k.segment + 0.5 * np.cos(np.arange(4) + i))
+    ...          for i, k in enumerate(marks)]                  # ±0.5 px, deterministic
+    >>> sol = solve_facade(m, EdgeMarks(tuple(marks), tuple(cams)),
+    ...                    {p: c["K"] for p, c in cams.items()})
+    >>> weak = weak_spots(sol, {(k.photo, k.edge) for k in marks},
+    ...                   {p: c["image_size"] for p, c in cams.items()})
+    >>> [w["parameter"] for w in weak], [q["edge"] for q in weak[0]["suggest"][:3]]
+    (['tower/width'], ['tower/back-right', 'tower/back-right', 'tower/front-right'])
     """
     from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.automark import _scale, std_with_mark
