@@ -23,9 +23,14 @@ to sub-pixel precision and the dragged ends are moved onto its line (the edge
 objective of eq. 5.3 measures the distance to the projected model line, so
 the stretch a mark covers along the line matters little; its line matters).
 
-``solve`` runs :func:`~lumigraph.stereo.debevec1996.solve.solve_facade` on
-the assigned marks and returns, per photograph, every model edge reprojected
-and each mark's RMS distance to its edge (px). ``propose`` runs
+``add`` answers how far the snap moved the drag (``jump_px``) and the drag
+as drawn (``dragged``), so the page can show a snap that left the traced line
+and undo it. ``solve`` runs
+:func:`~lumigraph.stereo.debevec1996.solve.solve_facade` on the assigned
+marks and returns, per photograph, every model edge reprojected, each mark's
+RMS distance to its edge (px), and the weakly constrained parameters with
+the unmarked edges that would hold each best (:func:`weak_spots`: the
+user is told where the model is weak and what to mark there). ``propose`` runs
 :func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
 moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
 dropped when it lies on none: a texture line), and keeps the proposals
