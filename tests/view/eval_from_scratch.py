@@ -11,6 +11,7 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
     WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
     REDO=2.12 ... (the user redoes unsnapped a drag the snap moved farther than this, px; default 0: never)
+    REFLAG=1 ... (after each re-snap the user redraws, snapping off, every hand mark it flagged)
     BLOCK=wing / PROBE=1 / VERBOSE=1 ... (diagnostics)
     RESNAP=all / RESNAP=1 / RESNAP=0 ... (re-snap to the solved model before each
         further round: every mark (default) / the marks beyond their band / none)
@@ -173,6 +174,19 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
                 if os.environ.get("VERBOSE"):
                     print("  resnap:", {k: len(v) for k, v in rs.items()})
+                if os.environ.get("REFLAG", "0") == "1":
+                    # the page lists the flagged marks ("check them"): the user
+                    # redraws each hand mark among them, carefully, snapping off
+                    byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
+                    for k in rs["flagged"]:
+                        mk = ses.marks.get(k)
+                        if mk is None or mk["proposed"]:
+                            continue
+                        seg = (np.asarray(byedge[mk["photo"]][mk["edge"]]["segment"])
+                               + rng.normal(0, EDGE_NOISE_PX, 4))
+                        w, h = ses.sizes[mk["photo"]]
+                        seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
+                        c.post(f"/api/facade/marks/{k}", json={"segment": seg.tolist()})
             # the user's next round: look at the solve, Propose again (from
             # the marks so far), accept what lies on its edge, Solve again
             props2 = c.post("/api/facade/propose").get_json().get("proposals", [])
