@@ -9,10 +9,15 @@ segment [x0, y0, x1, y1] px, proposed}``):
 ``GET  /api/facade/state``                  photos, model edge names, marks, proposals, last solve
 ``GET  /api/facade/photo/<i>``              photograph ``i`` as PNG
 ``GET  /api/facade/detected/<i>``           line segments detected in it ``{"segments": [[4]…]}``
-``POST /api/facade/marks``                  ``{photo, segment, edge?, snap?}`` -> the new mark
+``POST /api/facade/marks``                  ``{photo, segment, edge?, snap?}`` -> the new mark,
+                                           with ``snapped``, ``jump_px`` (how far the snap moved
+                                           the drag) and ``dragged`` (the segment as drawn)
 ``POST /api/facade/marks/<id>``             ``{edge}`` (assign; null unassigns) or ``{segment}``
 ``DELETE /api/facade/marks/<id>``           remove a mark
-``POST /api/facade/solve``                  ``{noise_px?}`` -> parameters, projected edges, residuals
+``POST /api/facade/solve``                  ``{noise_px?}`` -> parameters, projected edges, residuals,
+                                           ``weak`` (weakly constrained parameters and the
+                                           unmarked edges that would hold them:
+                                           :func:`~lumigraph.view.marking.weak_spots`)
 ``POST /api/facade/propose``                automatic marking -> ``{"proposals": […]}``
 ``POST /api/facade/resnap``                 ``{every?}`` after a solve: marks onto the image step
                                            within their edge's band -> ``{moved, flagged, deleted}``

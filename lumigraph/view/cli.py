@@ -37,12 +37,17 @@ marking mode (Façade, 'lumigraph stereo facade solve --help' for the files):
                    (a folder with stack.json, blocks.json and camera.json)
   In the page: wheel to zoom, drag with the middle button (or Shift+drag) to pan,
   drag to draw a segment (it snaps to a detected line when one is near, unless
-  "snap" is unticked), click
+  "snap" is unticked; the status line says how far it moved, and "Keep as
+  drawn" undoes a snap that left the line you traced), click
   an edge in the list (or its reprojection) to assign the selected segment,
   Delete to remove it. "Solve" fits the model and overlays the reprojected
-  edges and each mark's residual (px); "Propose" runs automatic marking (mark
-  about four edges per photograph first), each proposal then accepted or
-  rejected. Every change is saved at once to --edges (atomically: the file is
+  edges and each mark's residual (px), and lists the weakly constrained
+  parameters with the edges to mark for them (click one to go to it);
+  "Propose" runs automatic marking (mark about four edges per photograph
+  first), each proposal then accepted or rejected; "Re-snap to model", after
+  a Solve, moves each mark onto the image step near its reprojected edge.
+  A good order: four marks per photograph, Propose, accept, Solve, mark what
+  the weak list names, then twice Re-snap, Propose, Solve. Every change is saved at once to --edges (atomically: the file is
   always complete); an existing --edges file is read first.
 
 A port in use: with --port, exit 2; without it, another free port is taken.

@@ -23,9 +23,14 @@ to sub-pixel precision and the dragged ends are moved onto its line (the edge
 objective of eq. 5.3 measures the distance to the projected model line, so
 the stretch a mark covers along the line matters little; its line matters).
 
-``solve`` runs :func:`~lumigraph.stereo.debevec1996.solve.solve_facade` on
-the assigned marks and returns, per photograph, every model edge reprojected
-and each mark's RMS distance to its edge (px). ``propose`` runs
+``add`` answers how far the snap moved the drag (``jump_px``) and the drag
+as drawn (``dragged``), so the page can show a snap that left the traced line
+and undo it. ``solve`` runs
+:func:`~lumigraph.stereo.debevec1996.solve.solve_facade` on the assigned
+marks and returns, per photograph, every model edge reprojected, each mark's
+RMS distance to its edge (px), and the weakly constrained parameters with
+the unmarked edges that would hold each best (:func:`weak_spots`: the
+user is told where the model is weak and what to mark there). ``propose`` runs
 :func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
 moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
 dropped when it lies on none: a texture line), and keeps the proposals
@@ -188,6 +193,100 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
     # them: a short detection a few degrees off would swing a long drag's ends
     if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > max_distance_px:
         return None
+    return out
+
+
+# a free parameter is "weakly constrained" when its relative σ is more than
+# this many times the median relative σ of the free parameters: the marks
+# hold it clearly less well than the rest (chosen on the tuned seeds 2, 7, 8,
+# docs/decisions/view-marking.md, "Told where the model is weak")
+WEAK_FACTOR = 2.0
+WEAK_SUGGESTIONS = 8     # unmarked edges suggested per weak parameter
+
+
+def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
+               suggestions: int | None = None) -> list[dict]:
+    """Where the solved model is weak, and which marks would hold it.
+
+    ``sol`` a :class:`~lumigraph.stereo.debevec1996.solve.FacadeSolution`,
+    ``marked`` the set of ``(photo, edge)`` already marked, ``sizes``
+    photo -> (width, height) px; ``factor`` and ``suggestions`` default to
+    :data:`WEAK_FACTOR` and :data:`WEAK_SUGGESTIONS`. Each free parameter's relative first-order
+    σ (its σ over its value, or for an offset near zero over a tenth of the
+    model's median size); the parameters whose relative σ is over
+    ``factor`` times the median of them all are weak. For each, the
+    unmarked model edges in front of each camera and in frame (hidden by
+    the solved model's faces or not: ``hidden_in_solve`` says which, since
+    a weak model's occlusion is not to be trusted), ranked by the σ the
+    parameter would have with a mark on the edge's stretch in frame added
+    (:func:`~lumigraph.stereo.debevec1996.automark.std_with_mark`: what
+    the mark adds to the marks already there, poses and shared parameters
+    included); ``suggestions`` of them. Returns ``[{parameter, value, std, rel_std, median_rel_std,
+    suggest: [{photo, edge, std_after, hidden_in_solve}]}]``, weakest first.
+
+    The test scene's tower with its right side marked in one photograph
+    only (its left side in all): its width is weak, and the edges to mark
+    are on its right side.
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> seen, first = project_edges(m, cams), True
+    >>> for p in seen:
+    ...     right = [e for e in seen[p] if e["edge"] in ("tower/front-right", "tower/back-right",
+    ...                                                  "tower/top-right", "tower/bottom-right")]
+    ...     keep, first = (right[:1] if first and right else []), first and not right
+    ...     seen[p] = [e for e in seen[p] if e not in right or e in keep]
+    >>> marks = [k for k in EdgeMarks.from_dict({"photographs": seen}, model=m,
+    ...                                         photographs=list(cams)).marks]
+    >>> marks = [type(k)(k.photo, k.edge, k.segment + 0.5 * np.cos(np.arange(4) + i))
+    ...          for i, k in enumerate(marks)]                  # ±0.5 px, deterministic
+    >>> sol = solve_facade(m, EdgeMarks(tuple(marks), tuple(cams)),
+    ...                    {p: c["K"] for p, c in cams.items()})
+    >>> weak = weak_spots(sol, {(k.photo, k.edge) for k in marks},
+    ...                   {p: c["image_size"] for p, c in cams.items()})
+    >>> [w["parameter"] for w in weak], [q["edge"] for q in weak[0]["suggest"][:3]]
+    (['tower/width'], ['tower/back-right', 'tower/back-right', 'tower/front-right'])
+    """
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.automark import _scale, std_with_mark
+    from lumigraph.stereo.debevec1996.edges import Mark
+
+    factor = WEAK_FACTOR if factor is None else factor
+    suggestions = WEAK_SUGGESTIONS if suggestions is None else suggestions
+    names = list(sol.model.parameter_names)
+    if len(names) < 2:
+        return []
+    scale = _scale(sol.model, names)
+    rel = {n: sol.std[n] / scale[n] for n in names if scale[n] > 0 and np.isfinite(sol.std[n])}
+    if not rel:
+        return []
+    med = float(np.median(list(rel.values())))
+    weak = sorted((n for n, r in rel.items() if r > factor * med), key=lambda n: -rel[n])
+    out = []
+    # candidates: in front and in frame, hidden or not by the solved model's
+    # faces -- where the model is weak its occlusion is too (seed 3's over-wide
+    # wing hides its own right side in the house); the solved model's verdict
+    # is passed on ("hidden_in_solve") for the user's eye
+    cands, shown = [], set()
+    for p, (R, t) in sol.poses.items():
+        cam = {p: {"K": sol.K[p], "R": R, "t": t, "image_size": sizes[p]}}
+        shown |= {(p, m["edge"]) for m in project_edges(sol.model, cam)[p]}
+        cands += [Mark(p, m["edge"], np.asarray(m["segment"], float))
+                  for m in project_edges(sol.model, cam, occlusion=False)[p]
+                  if (p, m["edge"]) not in marked]
+    for n in weak:
+        after = std_with_mark(sol, cands, n) if cands else np.zeros(0)
+        order = [i for i in np.argsort(after) if np.isfinite(after[i]) and after[i] < sol.std[n]]
+        out.append({"parameter": n, "value": float(sol.params[n]), "std": float(sol.std[n]),
+                    "rel_std": float(rel[n]), "median_rel_std": med,
+                    "suggest": [{"photo": cands[i].photo, "edge": cands[i].edge,
+                                 "std_after": float(after[i]),
+                                 "hidden_in_solve": (cands[i].photo, cands[i].edge) not in shown}
+                                for i in order[:suggestions]]})
     return out
 
 
@@ -465,7 +564,7 @@ class FacadeSession:
         photo = self._photo(photo)
         seg = self._segment(segment, "segment", photo)
         edge = self._edge(edge)
-        snapped = False
+        dragged, snapped = seg.copy(), False
         if snap:
             s = snap_segment(seg, self.detected(photo), grey=self.grey(photo),
                              max_distance_px=SNAP_DISTANCE_PX)
@@ -480,7 +579,11 @@ class FacadeSession:
                 self._drop_same(photo, edge)
             m = self._store(photo, edge, seg, False)
             self.save()
-            return dict(m, snapped=snapped)
+            # how far snapping moved the drag (px, the farther end): the page
+            # shows it, so a user sees a snap that left the line they traced
+            # and can keep the drag as drawn (``dragged``, with ``move``)
+            jump = float(max(np.hypot(*(seg[:2] - dragged[:2])), np.hypot(*(seg[2:] - dragged[2:]))))
+            return dict(m, snapped=snapped, jump_px=jump, dragged=[float(v) for v in dragged])
 
     def _drop_same(self, photo, edge, keep=None) -> None:
         # one mark per model edge and photograph: a new one replaces the old
@@ -549,6 +652,9 @@ class FacadeSession:
                                where=str(self.edges_path))
             self._sol = sol
             self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
+            # the page's "weakly constrained" list: what to mark next
+            self.solution["weak"] = weak_spots(
+                sol, {(m["photo"], m["edge"]) for m in self.marks.values()}, self.sizes)
             return self.solution
 
     # ------------------------------------------------------------- re-snap

@@ -585,15 +585,32 @@ def edge_offset_std(sol, marks) -> np.ndarray:
     >>> sd.shape == (len(noisy), 2) and bool(0 < sd.min() and sd.max() < 0.5)
     True
     """
+    marks = list(marks)
+    out = np.full((len(marks), 2), np.nan)
+    keep, cols, vals = _edge_rows(sol, marks)
+    if not keep:
+        return out
+    C = np.asarray(sol.covariance)
+    for k in range(2):
+        # row i of J has nonzeros only in cols[k][i]: var_i = v_i C[c_i, c_i] v_i
+        Cs = C[cols[k][:, :, None], cols[k][:, None, :]]
+        out[keep, k] = np.sqrt(np.clip(np.einsum("ni,nij,nj->n", vals[k], Cs, vals[k]), 0, None))
+    return out
+
+
+def _edge_rows(sol, marks):
+    """The solver's Jacobian rows of ``marks``' signed end distances at the
+    solution (rotations re-based on the solved ones): ``(keep, cols, vals)``,
+    ``keep`` the indices of the marks on photographs the solve kept, and
+    per end ``k`` the columns ``cols[k]`` ``(len(keep), c)`` (of
+    ``sol.unknowns``) and values ``vals[k]`` of each row."""
     from lumigraph.stereo.debevec1996.solve import _Problem
 
     photos = list(dict.fromkeys(u.split(":")[0] for u in sol.unknowns if ":" in u))
     free_focal = bool(sol.unknowns) and sol.unknowns[-1] == "focal_scale"
-    marks = list(marks)
-    out = np.full((len(marks), 2), np.nan)
     keep = [i for i, m in enumerate(marks) if m.photo in photos]
     if not keep:
-        return out
+        return keep, None, None
     R = np.array([sol.poses[p][0] for p in photos])
     t = np.array([sol.poses[p][1] for p in photos])
     K0 = {p: sol.K[p] / np.array([[sol.focal_scale] * 2 + [1.0], [1.0, sol.focal_scale, 1.0],
@@ -601,9 +618,55 @@ def edge_offset_std(sol, marks) -> np.ndarray:
     prob = _Problem(sol.model, [marks[i] for i in keep], photos, K0, R, free_focal=free_focal)
     x = prob.pack(sol.model.values, np.zeros((len(photos), 3)), t, sol.focal_scale)
     _, cols, vals = prob.distances(x, jac=True)
+    return keep, cols, vals
+
+
+def std_with_mark(sol, marks, name: str, *, noise_px: float | None = None) -> np.ndarray:
+    """The first-order σ that parameter ``name`` would have if each one of
+    ``marks`` (candidate marks: say, the visible stretch of an unmarked
+    edge) were added to the solve alone: ``(len(marks),)``, NaN for a mark
+    on a photograph the solve left out.
+
+    The rank-two update of the solve's covariance ``C`` (over
+    ``sol.unknowns``) by a mark whose two end distances (eq. 5.3) have
+    Jacobian rows ``J`` ``(2, n)`` and independent noise ``noise_px``
+    (default the solve's estimated endpoint noise): ``C' = C - C Jᵀ (σ² I
+    + J C Jᵀ)⁻¹ J C`` (the Gaussian posterior, i.e. the Kalman update). So
+    a mark counts by what it adds to the marks already there, not by how
+    far the edge moves with the parameter alone (an edge the other marks
+    already pin, through the poses or a shared parameter, adds little).
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks, Mark
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+    ...                             photographs=list(cams))
+    >>> sol = solve_facade(m, marks, {p: c["K"] for p, c in cams.items()}, noise_px=0.5)
+    >>> sd = std_with_mark(sol, marks.marks[:3], "tower/height")   # marks already in: less σ
+    >>> bool(np.all(sd <= sol.std["tower/height"]))
+    True
+    """
+    marks = list(marks)
+    out = np.full(len(marks), np.nan)
+    keep, cols, vals = _edge_rows(sol, marks)
+    if not keep:
+        return out
     C = np.asarray(sol.covariance)
-    for k in range(2):
-        # row i of J has nonzeros only in cols[k][i]: var_i = v_i C[c_i, c_i] v_i
-        Cs = C[cols[k][:, :, None], cols[k][:, None, :]]
-        out[keep, k] = np.sqrt(np.clip(np.einsum("ni,nij,nj->n", vals[k], Cs, vals[k]), 0, None))
+    slot = sol.model.slot_of(name)
+    free = [n for n, f in zip(sol.model.slot_names, ~sol.model.fixed, strict=True) if f]
+    k = free.index(sol.model.slot_names[slot])
+    var = float(noise_px if noise_px is not None else sol.sigma_px) ** 2
+    for j, i in enumerate(keep):
+        c = np.union1d(cols[0][j], cols[1][j])
+        J = np.zeros((2, len(c)))
+        for e in range(2):
+            J[e, np.searchsorted(c, cols[e][j])] = vals[e][j]
+        Cc = C[np.ix_(c, c)]
+        Ck = C[k, c]                                    # cov(parameter, the row's unknowns)
+        S = var * np.eye(2) + J @ Cc @ J.T
+        g = J @ Ck
+        out[i] = np.sqrt(max(C[k, k] - g @ np.linalg.solve(S, g), 0.0))
     return out

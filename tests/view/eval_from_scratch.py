@@ -5,7 +5,14 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     SNAP=0 ... (hand drags not snapped)
     SNAPSTEP=1 ... (snapping onto the step, marking.refine_on_edge; default: the library's SNAP_ON_STEP)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
-    ROUNDS=0 ... (no second round: Propose again, accept, Solve again; default 1)
+    ROUNDS=1 ... (further rounds: Re-snap, Propose again, accept, Solve again; default 2)
+    WEAK=0 / WEAK=1 / WEAK=2 ... (the user marks the edges the solve's weak list suggests:
+        never / after the first solve / after every solve, the default)
+    WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
+    WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
+    REDO=2.12 ... (the user redoes unsnapped a drag the snap moved farther than this, px; default 0: never)
+    REFLAG=1 ... (after each re-snap the user redraws, snapping off, every hand mark it flagged)
+    BLOCK=wing / PROBE=1 / VERBOSE=1 ... (diagnostics)
     RESNAP=all / RESNAP=1 / RESNAP=0 ... (re-snap to the solved model before each
         further round: every mark (default) / the marks beyond their band / none)
     SNAPPX=1.5 ... (snap radius in px, default marking.SNAP_DISTANCE_PX)
@@ -17,9 +24,11 @@ Per seed: four hand marks per photograph (the longest two vertical and two
 horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
 of noise), Propose, each proposal accepted when within 1.5 px of its true
 edge line, the blocks a refusal names marked by hand (the four longest
-unmarked edges), Solve; then (ROUNDS) Re-snap to the model, Propose again,
-accept as before, Solve again; the RMS relative parameter error against the fully
-marked (σ = 0.5 px) solve of the same scene.
+unmarked edges), Solve; the edges the solve's weak list suggests that the
+photograph shows marked by hand (up to four per weak parameter), Solve; then
+(ROUNDS, two) Re-snap to the model, Propose again, accept as before, Solve
+again, the weak list's edges again; the RMS relative parameter error against
+the fully marked (σ = 0.5 px) solve of the same scene.
 """
 
 import json
@@ -39,12 +48,25 @@ from lumigraph.stereo.debevec1996.solve import solve_facade  # noqa: E402
 from lumigraph.view.app import create_app  # noqa: E402
 from lumigraph.view.marking import FacadeSession  # noqa: E402
 
+# a snap that moves a drag farther than this (px) is redone unsnapped by the
+# simulated user; REDO=0 never. 3 sigma of the drag's offset from the true
+# line: the scene's marks (0.5 px) plus the drag's own 0.5 px, in quadrature
+REDO = float(os.environ.get("REDO", "0"))
+
+
+# the simulated user marks at most this many of the suggested edges a
+# photograph shows, per weakly constrained parameter
+WEAK_USER = int(os.environ.get("WEAK_USER", "4"))
+
 
 def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
     import lumigraph.view.marking as marking
 
     if os.environ.get("SNAPPX"):
         marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
+    for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS"):
+        if os.environ.get(k):
+            setattr(marking, k, type(getattr(marking, k))(os.environ[k]))
     marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
     for seed in seeds:
         t0 = time.time()
@@ -58,11 +80,20 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         ses = FacadeSession.open(folder, edges=edges)
         c = create_app(artifacts=[], facade=ses).test_client()
         rng = np.random.default_rng(7 + int(os.environ.get("DRAW", "0")))
+        redone = []
 
-        def drag(p, m, c=c, rng=rng):
+        def drag(p, m, c=c, rng=rng, redone=redone, truth=truth):
             seg = np.asarray(m["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
             r = c.post("/api/facade/marks", json={"photo": p, "segment": seg.tolist(), "snap": snap})
-            c.post(f"/api/facade/marks/{r.get_json()['id']}", json={"edge": m["edge"]})
+            got = r.get_json()
+            c.post(f"/api/facade/marks/{got['id']}", json={"edge": m["edge"]})
+            if REDO and got["jump_px"] > REDO:
+                # the page shows the snap leaving the line the user traced:
+                # they keep their drag as drawn (snapping off for it)
+                c.post(f"/api/facade/marks/{got['id']}", json={"segment": got["dragged"]})
+                redone.append((p, m["edge"], got["jump_px"],
+                               distance(got["segment"], truth[p][m["edge"]]),
+                               distance(got["dragged"], truth[p][m["edge"]])))
 
         for p in ses.photos:
             for m in four_hand_marks(ses.model, full[p]):
@@ -99,11 +130,63 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         if r.status_code != 200:
             print(f"seed {seed}: no solve: {r.get_json()['error']}")
             continue
-        for _ in range(int(os.environ.get("ROUNDS", "1"))):
+        if os.environ.get("PROBE"):
+            gt0 = json.loads((folder / "gt.json").read_text())["parameters"]
+            for n, v in r.get_json()["parameters"].items():
+                if n in gt0:
+                    print(f"  probe {n}: rel std {v['std'] / abs(v['value']):.4f} rel err "
+                          f"{(v['value'] - gt0[n]) / gt0[n]:+.4f}")
+        weak_added = []
+
+        def mark_weak(r, c=c, drag=drag, weak_added=weak_added, full=full, ses=ses):
+            """The page lists the weakly constrained parameters and the
+            unmarked edges that would hold them: the user marks (by hand) up
+            to WEAK_USER of those the photograph shows (an edge of the
+            scene's marks) per parameter, and Solves again."""
+            byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
+            if os.environ.get("VERBOSE"):
+                for w in r.get_json().get("weak", []):
+                    print(f"  weak {w['parameter']} σ {w['std']:.4f} ({w['rel_std']:.4f}, median "
+                          f"{w['median_rel_std']:.4f}):", [(q["photo"], q["edge"], round(q["std_after"], 4),
+                                                          q["edge"] in byedge[q["photo"]])
+                                                         for q in w["suggest"]])
+            n0 = len(weak_added)
+            for w in r.get_json().get("weak", []):
+                n_added = 0
+                for q in w["suggest"]:
+                    m = byedge[q["photo"]].get(q["edge"])
+                    have = {(k["photo"], k["edge"]) for k in ses.marks.values()}
+                    if m is not None and (q["photo"], q["edge"]) not in have and n_added < WEAK_USER:
+                        drag(q["photo"], m)
+                        n_added += 1
+                        weak_added.append((w["parameter"], q["photo"], q["edge"]))
+            if len(weak_added) > n0:
+                r2 = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+                if r2.status_code == 200:
+                    return r2
+            return r
+
+        weak = os.environ.get("WEAK", "2")
+        if weak != "0":
+            r = mark_weak(r)
+        for _ in range(int(os.environ.get("ROUNDS", "2"))):
             if os.environ.get("RESNAP", "all") != "0":
                 rs = ses.resnap(every=os.environ.get("RESNAP", "all") == "all")
                 if os.environ.get("VERBOSE"):
                     print("  resnap:", {k: len(v) for k, v in rs.items()})
+                if os.environ.get("REFLAG", "0") == "1":
+                    # the page lists the flagged marks ("check them"): the user
+                    # redraws each hand mark among them, carefully, snapping off
+                    byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
+                    for k in rs["flagged"]:
+                        mk = ses.marks.get(k)
+                        if mk is None or mk["proposed"]:
+                            continue
+                        seg = (np.asarray(byedge[mk["photo"]][mk["edge"]]["segment"])
+                               + rng.normal(0, EDGE_NOISE_PX, 4))
+                        w, h = ses.sizes[mk["photo"]]
+                        seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
+                        c.post(f"/api/facade/marks/{k}", json={"segment": seg.tolist()})
             # the user's next round: look at the solve, Propose again (from
             # the marks so far), accept what lies on its edge, Solve again
             props2 = c.post("/api/facade/propose").get_json().get("proposals", [])
@@ -113,6 +196,11 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
             props = props + props2
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+            if weak == "2" and r.status_code == 200:    # the weak list again, after each solve
+                r = mark_weak(r)
+        extra += len(weak_added)
+        if os.environ.get("VERBOSE"):
+            print("  weak marks added:", weak_added)
         gt = json.loads((folder / "gt.json").read_text())["parameters"]
         free = list(ses.model.parameter_names)
 
@@ -146,7 +234,15 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 print(f"  all-snapped reference: no solve ({e})")
         off = sum(distance(m["segment"], truth[m["photo"]][m["edge"]]) > 3 * EDGE_NOISE_PX
                   for m in ses.marks.values())
+        if os.environ.get("BLOCK"):
+            for m in sorted(ses.marks.values(), key=lambda m: (m["edge"], m["photo"])):
+                if m["edge"].startswith(os.environ["BLOCK"] + "/"):
+                    print(f"  {m['edge']} {m['photo']} {'P' if m['proposed'] else 'H'} "
+                          f"{distance(m['segment'], truth[m['photo']][m['edge']]):.2f} px")
         if os.environ.get("VERBOSE"):
+            for p, e, j, ds, dd in redone:
+                print(f"  redone unsnapped: {p} {e} (snap jumped {j:.2f} px; snapped "
+                      f"{ds:.2f} px off the true line, the drag {dd:.2f})")
             for m in ses.marks.values():
                 e = distance(m["segment"], truth[m["photo"]][m["edge"]])
                 if e > 3 * EDGE_NOISE_PX:

@@ -12,7 +12,10 @@ Propose, accepts or rejects each proposal of that photograph (as a user's eye
 would: accepted when it lies on its true edge), presses Solve, then
 Re-snap to model and Solve again, and checks the saved ``edges.json`` and a
 screenshot: the reprojected edge's colour
-(red) drawn along the true line of the edge it drew.
+(red) drawn along the true line of the edge it drew. A second scene, the
+wing's right side marked once: Solve lists wing/width as weakly constrained,
+a click on a suggested edge opens its photograph with the edge highlighted,
+and marking it there lowers the width's σ.
 """
 
 from __future__ import annotations
@@ -80,7 +83,6 @@ def _idle(d):
 
 
 def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
-    from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
 
     from lumigraph.capture.render import render
@@ -109,17 +111,13 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
         d.get(f"http://127.0.0.1:{server.port}/")
         _idle(d)
         canvas = d.find_element(By.ID, "photo-canvas")
-        w, h = canvas.size["width"], canvas.size["height"]
         # drag along the edge, as a hand would: the marked segment plus 0.5 px noise
         seg = np.asarray(drawn["segment"]) + np.random.default_rng(3).normal(0, EDGE_NOISE_PX, 4)
-        a = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])", *seg[:2])
-        b = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])", *seg[2:])
-        (ActionChains(d).move_to_element_with_offset(canvas, round(a[0] - w / 2), round(a[1] - h / 2))
-         .click_and_hold().move_by_offset(round((b[0] - a[0]) / 2), round((b[1] - a[1]) / 2))
-         .move_by_offset(round(b[0] - a[0]) - round((b[0] - a[0]) / 2),
-                         round(b[1] - a[1]) - round((b[1] - a[1]) / 2))
-         .release().perform())
+        _drag(d, canvas, seg)
         _wait(d, "return window.lumiMark.selected !== null && window.lumiMark.busy === 0")
+        # the snap says how far it moved the drag, and offers the way back
+        assert "moved" in d.find_element(By.ID, "status").text
+        assert d.find_element(By.ID, "unsnap").is_enabled()
         d.find_element(By.CSS_SELECTOR, f'#edge-list li[data-edge="{drawn["edge"]}"]').click()
         _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.marks.some("
                  f"m => m.photo === '{first}' && m.edge === '{drawn['edge']}')")
@@ -180,6 +178,83 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
         server.shutdown()
         thread.join(5)
     print(f"browser test: {time.monotonic() - t0:.1f} s")
+
+
+def _drag(d, canvas, seg):
+    """A mouse drag on the canvas from image point seg[:2] to seg[2:]."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    w, h = canvas.size["width"], canvas.size["height"]
+    a = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])", *seg[:2])
+    b = d.execute_script("return window.lumiMark.toScreen(arguments[0], arguments[1])", *seg[2:])
+    (ActionChains(d).move_to_element_with_offset(canvas, round(a[0] - w / 2), round(a[1] - h / 2))
+     .click_and_hold().move_by_offset(round((b[0] - a[0]) / 2), round((b[1] - a[1]) / 2))
+     .move_by_offset(round(b[0] - a[0]) - round((b[0] - a[0]) / 2),
+                     round(b[1] - a[1]) - round((b[1] - a[1]) / 2))
+     .release().perform())
+
+
+def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
+    """The scene's marks with the wing's right side kept in one mark only:
+    Solve lists wing/width as weakly constrained with its suggested edges;
+    clicking the first one the photographs show opens its photograph with
+    the edge highlighted; dragging it, clicking the edge and Solving again
+    lowers wing/width's σ."""
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.capture.render import render
+    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.marking import FacadeSession
+
+    s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
+               edge_noise=EDGE_NOISE_PX)
+    folder = s.save(tmp_path / "scene")
+    body = json.loads((folder / "edges.json").read_text())
+    full = {p: list(v) for p, v in body["photographs"].items()}
+    kept = False
+    for p, ms in body["photographs"].items():
+        right = [m for m in ms if m["edge"].startswith("wing/") and m["edge"].endswith("-right")]
+        if not kept and right:
+            kept, right = True, right[1:]
+        body["photographs"][p] = [m for m in ms if m not in right]
+    edges = tmp_path / "edges.json"
+    edges.write_text(json.dumps(body))
+    session = FacadeSession.open(folder, edges=edges)
+    server = start_server(create_app(artifacts=[], facade=session), port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    d = browser
+    try:
+        d.get(f"http://127.0.0.1:{server.port}/")
+        _idle(d)
+        d.find_element(By.ID, "solve").click()
+        _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.solution !== null", 60)
+        before = d.execute_script("return window.lumiMark.state.solution")
+        w = before["weak"][0]
+        assert w["parameter"] == "wing/width"
+        items = d.find_elements(By.CSS_SELECTOR, '#weak li[data-parameter="wing/width"] button.suggest')
+        assert len(items) == len(w["suggest"])
+        k, q, m = next((k, q, m) for k, q in enumerate(w["suggest"]) for m in full[q["photo"]]
+                       if m["edge"] == q["edge"])
+        items[k].click()
+        _wait(d, "return window.lumiMark.busy === 0")
+        names = [p["name"] for p in d.execute_script("return window.lumiMark.state.photos")]
+        assert names[d.execute_script("return window.lumiMark.photo")] == q["photo"]
+        assert d.find_element(By.CSS_SELECTOR, "#edge-list li.current").text == q["edge"]
+        seg = np.asarray(m["segment"]) + np.random.default_rng(5).normal(0, EDGE_NOISE_PX, 4)
+        _drag(d, d.find_element(By.ID, "photo-canvas"), seg)
+        _wait(d, "return window.lumiMark.selected !== null && window.lumiMark.busy === 0")
+        d.find_element(By.CSS_SELECTOR, "#edge-list li.current").click()
+        _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.marks.some("
+                 f"m => m.photo === '{q['photo']}' && m.edge === '{q['edge']}')")
+        d.find_element(By.ID, "solve").click()
+        _wait(d, "return window.lumiMark.busy === 0 && "
+                 "document.getElementById('status').textContent.startsWith('solved')", 60)
+        after = d.execute_script("return window.lumiMark.state.solution")
+        assert after["parameters"]["wing/width"]["std"] < w["std"]
+    finally:
+        server.shutdown()
+        thread.join(5)
 
 
 def _four_hand_marks_sorted(folder, marks):

@@ -208,7 +208,44 @@
     const warn = sol.warnings.map((w) => `<li>${w.replace(/</g, "&lt;")}</li>`).join("");
     const out = sol.outliers.map((o) => `<li>mis-marked? ${o.photo} ${o.edge} (${o.rms_px.toFixed(1)} px)</li>`).join("");
     d.innerHTML = `<p id="solve-rms">RMS ${sol.rms_px.toFixed(3)} px, σ ${sol.sigma_px.toFixed(3)} px</p>` +
-      `<ul>${warn}${out}</ul><table>${rows}</table>`;
+      `<ul>${warn}${out}</ul><div id="weak"></div><table>${rows}</table>`;
+    renderWeak(sol.weak || []);
+  }
+  // the parameters the marks hold clearly less well than the rest, each with
+  // the unmarked edges that would hold it best (the server's weak_spots):
+  // a click opens the photograph with that edge highlighted, to mark it there
+  function renderWeak(weak) {
+    const box = $("weak");
+    if (!weak.length) return;
+    const pct = (v) => `${(100 * v).toFixed(1)} %`;
+    const h = document.createElement("p");
+    h.className = "weak-head";
+    h.textContent = "Weakly constrained (mark the edges below where the photograph shows them, then Solve):";
+    box.appendChild(h);
+    const ul = document.createElement("ul");
+    for (const w of weak) {
+      const li = document.createElement("li");
+      li.dataset.parameter = w.parameter;
+      li.textContent = `${w.parameter} ± ${pct(w.rel_std)} (median parameter ± ${pct(w.median_rel_std)}): `;
+      for (const q of w.suggest) {
+        const a = document.createElement("button");
+        a.type = "button";
+        a.className = "suggest";
+        a.title = `with this edge marked: ${w.parameter} ± ${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`;
+        a.textContent = `${q.photo} ${q.edge}` + (q.hidden_in_solve ? " (hidden in the solve?)" : "");
+        a.addEventListener("click", async () => {
+          const i = S.state.photos.findIndex((p) => p.name === q.photo);
+          if (i >= 0) await choosePhoto(i);
+          S.currentEdge = q.edge;
+          status(`${q.edge} highlighted on ${q.photo}: drag it if you see it, then click the edge`);
+          renderSide();
+          draw();
+        });
+        li.appendChild(a);
+      }
+      ul.appendChild(li);
+    }
+    box.appendChild(ul);
   }
 
   // ------------------------------------------------------------ actions
@@ -287,7 +324,12 @@
         const m = await api("POST", "/api/facade/marks", { photo: photoName(), segment: seg,
                                                            snap: $("snap").checked });
         S.selected = m.id;
-        status(m.snapped ? "segment snapped to a detected line; click its model edge" :
+        // a snap that moved the drag farther than a careful hand errs is
+        // shown as such, with the way back ("keep as drawn")
+        S.lastDrag = m.snapped ? { id: m.id, dragged: m.dragged } : null;
+        $("unsnap").disabled = !m.snapped;
+        status(m.snapped ? `segment snapped to a detected line (moved ${m.jump_px.toFixed(1)} px; ` +
+                           "not the line you traced? keep as drawn); click its model edge" :
                $("snap").checked ? "segment drawn (no detected line near); click its model edge" :
                                    "segment drawn; click its model edge");
       } finally {
@@ -383,6 +425,15 @@
     } catch (e) {
       status("not re-snapped");
     }
+    await refresh();
+  });
+  $("unsnap").addEventListener("click", async () => {
+    const d = S.lastDrag;
+    if (!d) return;
+    await api("POST", `/api/facade/marks/${d.id}`, { segment: d.dragged });
+    S.lastDrag = null;
+    $("unsnap").disabled = true;
+    status("segment kept as drawn (not snapped); saved");
     await refresh();
   });
   $("accept-all").addEventListener("click", async () => {
