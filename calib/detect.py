@@ -417,7 +417,8 @@ def _homographies_4(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return np.concatenate([h, np.ones((K, 1))], axis=1).reshape(K, 3, 3)
 
 
-def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: BoardSpec):
+def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: BoardSpec, *,
+                    want_masks: bool = False):
     """``gray`` (H, W) uint8 with the markers next to the refined corners
     ``pts`` (N, 2) px (board ids ``ids``) taken out: ``(float32 image, set of
     modelled squares (i, j))``, or None when no marker could be modelled.
@@ -572,7 +573,9 @@ def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: B
         dark[y0:y1, x0:x1] += np.float32(amp[n_ + 1]) * c
     out = gray.astype(np.float32)
     out[Y0:Y1, X0:X1] -= cv2.GaussianBlur(dark, (0, 0), sigma)
-    return out, done
+    if not want_masks:
+        return out, done
+    return out, done, qi, sigma
 
 
 def _empty(size) -> Detection:
@@ -593,17 +596,17 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
     out as before."""
     import cv2
 
-    removed = _remove_markers(gray, ids, pts, board)
+    removed = _remove_markers(gray, ids, pts, board, want_masks=True)
     if removed is None:
         return pts
-    clean, done = removed
+    clean, done, quads, sigma = removed
     by_id = _marker_blocks(board)[2]
+    unmodelled = []
     if mcorners is not None and mids is not None and len(mcorners):
-        left = [c for c, k in zip(mcorners, np.asarray(mids).ravel(), strict=True)
-                if by_id.get(int(k)) not in done]
-        if left:
-            clean = _paint_out_markers(clean, left, board.square / board.marker)
-    new = cv2.cornerSubPix(clean, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
+        unmodelled = [c for c, k in zip(mcorners, np.asarray(mids).ravel(), strict=True)
+                      if by_id.get(int(k)) not in done]
+    painted = _paint_out_markers(clean, unmodelled, board.square / board.marker) if unmodelled else clean
+    new = cv2.cornerSubPix(painted, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
                            _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
     nc = board.cols - 1
     ii, jj = ids % nc + 1, ids // nc + 1  # the corner is the top-left of square (ii, jj)
@@ -615,7 +618,43 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
     ok &= np.linalg.norm(new - pts, axis=1) < MAX_MARKER_MOVE_PX
     out = pts.copy()
     out[ok] = new[ok]
+    if FIT_MODEL:
+        # the model is an X-junction of two edges only: the pixels near a marker (a few
+        # codes of a modelled one's edges left by the subtraction, all of an unmodelled
+        # one's, not painted here) are left out, so every corner can be fitted
+        near = np.zeros(gray.shape, np.uint8)
+        polys = list(quads) + [np.asarray(c, np.float64).reshape(4, 2) for c in unmodelled]
+        for q in np.round(np.asarray(polys) * 16).astype(np.int32):
+            cv2.fillConvexPoly(near, q, 1, lineType=cv2.LINE_8, shift=4)
+        dist = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3)
+        out = _model_fit(clean, out, win, valid=dist > FIT_MARKER_CLEARANCE * sigma + 0.5)
     return out
+
+
+# the last step: the blurred X-junction model fitted to each corner's pixels
+# (calib/rohr1992.py, docs/decisions/charuco-marker-removal.md "model fit");
+# False keeps cornerSubPix's corners
+FIT_MODEL = True
+# checkerboards too: off, since there cornerSubPix shows no lean (its sets meet every
+# target) and the fit would cost ~3x the checkerboard's whole detection (1280 px, 234
+# corners: 20 of 27 ms a view; the bench's speed check would fail)
+FIT_CHECKER = False
+# the model's window: cornerSubPix's half-window, at most this (px)
+FIT_RADIUS_MAX = 4
+
+
+# ChArUco: pixels nearer a marker than this many of the image's blur sigmas (plus half
+# a pixel) stay out of the fit
+FIT_MARKER_CLEARANCE = 2.0
+
+
+def _model_fit(image, pts, win, valid=None):
+    """``pts`` (N, 2) refined by the X-junction model (:func:`rohr1992.fit_corners`),
+    each corner keeping its start where the fit fails."""
+    from lumigraph.calib.rohr1992 import fit_corners
+
+    f = fit_corners(image, pts, radius=int(min(win, FIT_RADIUS_MAX)), valid=valid)
+    return f.points
 
 
 def detect(image: np.ndarray, board: BoardSpec) -> Detection:
@@ -672,6 +711,8 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
     win = subpix_window(pts, board.pattern_size)
     pts = cv2.cornerSubPix(gray, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                            _SUBPIX_CRITERIA).reshape(-1, 2)
+    if FIT_MODEL and FIT_CHECKER:
+        pts = _model_fit(gray, pts.astype(np.float64), win)
     pts = _orient(gray, pts.astype(np.float64), board)
     if _pattern_continues(gray, pts, board):
         return _empty((w, h))

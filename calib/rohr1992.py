@@ -1,0 +1,285 @@
+"""Corner refinement by fitting a blurred X-junction model to the pixels.
+
+Follows K. Rohr, "Recognizing corners by fitting parametric models",
+IJCV 9(3):213-230, 1992 (doi:10.1007/BF00133702): a corner's grey values are
+modelled as an ideal junction of straight edges convolved with a Gaussian, and
+its position is found by least squares on the pixels of a small window
+(Rohr's eq. 3-5 for the wedge, here the checkerboard's X-junction: two
+straight lines through the corner, at free angles since a tilted board's squares
+are not right-angled in the image).
+
+Model of a pixel centred at ``x`` (OpenCV's convention: pixel centres at
+integers, ``x = (col, row)``)::
+
+    I(x) = a + b * F(h, k, rho)
+    h = n1 . (x - c) / s,  k = n2 . (x - c) / s,  n_i = (cos alpha_i, sin alpha_i),
+    rho = n1 . n2,  F = 4 Phi2(h, k; rho) - 2 Phi(h) - 2 Phi(k) + 1
+
+``F`` is the product of the two edges' signs, sign(n1.(x-c)) sign(n2.(x-c)),
+convolved with an isotropic Gaussian of standard deviation ``s``
+(``Phi2`` the bivariate normal distribution, since ``n1.z`` and ``n2.z`` of a
+Gaussian ``z`` are normal with correlation ``rho``). ``s`` stands for the
+optics' blur and the pixel's box together: the box's projection onto any
+direction has variance 1/12 px^2, so ``s^2 = sigma^2 + 1/12`` matches both
+second moments along every edge; ``s`` is fitted per corner, and what the
+Gaussian misses of the box's shape is even about the corner and moves it
+nowhere. ``a, b`` (level, contrast) are free per corner.
+
+``Phi2`` is evaluated by Drezner & Wesolowsky's integral (J. Statist. Comput.
+Simul. 35, 1990, eq. 3) with Gauss-Legendre nodes; its derivatives are
+closed-form (``dPhi2/dh = phi(h) Phi((k - rho h)/sqrt(1 - rho^2))``,
+``dPhi2/drho`` the bivariate density), so each Levenberg-Marquardt step needs
+one model evaluation, for all corners of an image at once (arrays of
+corners x window pixels, 7x7 normal equations solved batched).
+
+The model is point-symmetric about ``c`` like the blurred, box-sampled image
+of a real X-junction, and it is evaluated at the pixel centres (no
+interpolation of the image), so the fit has neither of ``cornerSubPix``'s
+biases (bilinear resampling of a sub-pixel-sharp edge, the window's lean
+toward where more gradient falls inside it).
+
+Units: pixels; ``alpha`` radians; images in any grey unit (the fit's
+residual is reported in it).
+
+Examples
+--------
+>>> import numpy as np
+>>> y, x = np.mgrid[0:15, 0:15].astype(float)
+>>> img = np.sign((x - 7.3) * (y - 6.8)) * -100 + 128  # an ideal X-junction at (7.3, 6.8)
+>>> import cv2
+>>> img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
+>>> f = fit_corners(img, np.array([[7.0, 7.0]]), radius=4)
+>>> bool(f.ok[0]), np.abs(f.points[0] - (7.3, 6.8)).max() < 0.1
+(True, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+# Gauss-Legendre nodes for Phi2's integral over [0, asin rho]; the integrand is
+# smooth for |rho| < 0.95 (lines at least 18 deg apart), where 12 nodes reach
+# 1e-7 (test_rohr1992.py checks against scipy)
+_NODES = 12
+# a fit that ends with the lines closer than this (|cos| of their angle) is no X-junction
+MAX_ABS_RHO = 0.95
+# moved farther than this from its start: the fit found something else (fall back)
+MAX_MOVE_PX = 0.5
+
+
+@dataclass(frozen=True)
+class CornerFit:
+    """Fitted X-junctions.
+
+    Attributes
+    ----------
+    points : ndarray, (N, 2) float64
+        Fitted centres ``(x, y)`` px; the start point where ``ok`` is False.
+    ok : ndarray, (N,) bool
+        The fit converged, kept its lines apart (``|rho| < MAX_ABS_RHO``),
+        moved less than ``max_move`` px and its blur stayed in range.
+    blur : ndarray, (N,) float64
+        Fitted ``s`` (blur and pixel box together), px.
+    contrast : ndarray, (N,) float64
+        ``|b|``, half the step between the squares, grey units.
+    rms : ndarray, (N,) float64
+        Residual RMS over the window, grey units.
+    iterations : int
+        Levenberg-Marquardt steps taken.
+    """
+
+    points: np.ndarray
+    ok: np.ndarray
+    blur: np.ndarray
+    contrast: np.ndarray
+    rms: np.ndarray
+    iterations: int
+
+
+@lru_cache(maxsize=1)
+def _gauss_legendre():
+    t, w = np.polynomial.legendre.leggauss(_NODES)
+    return 0.5 * (t + 1.0), 0.5 * w  # on [0, 1]
+
+
+def _phi2(h, k, rho):
+    """Bivariate standard normal ``P(X < h, Y < k)`` with correlation ``rho``,
+    by Drezner & Wesolowsky's integral
+    ``Phi(h) Phi(k) + 1/(2 pi) int_0^asin(rho) exp(-(h^2 + k^2 - 2 h k sin t) / (2 cos^2 t)) dt``.
+    ``h, k`` (N, P), ``rho`` (N, 1): one correlation per corner, so the
+    nodes' sines and cosines are per corner; the integrand in float32 (its
+    1e-7 relative rounding is far below the model's other errors).
+
+    >>> z = np.zeros((1, 1))
+    >>> round(float(_phi2(z, z, z + 0.5)[0, 0]), 6)  # 1/4 + asin(.5)/(2 pi)
+    0.333333
+    """
+    from scipy.special import ndtr
+
+    t, w = _gauss_legendre()
+    A = np.arcsin(rho)  # (N, 1)
+    th = A * t  # (N, Q)
+    cs2 = np.cos(th) ** 2
+    u = (-0.5 / cs2).astype(np.float32)[:, None, :]  # (N, 1, Q)
+    v = (np.sin(th) / cs2).astype(np.float32)[:, None, :]
+    hh = (h * h + k * k).astype(np.float32)[..., None]
+    hk = (h * k).astype(np.float32)[..., None]
+    integ = np.exp(hh * u + hk * v) @ w.astype(np.float32)
+    return ndtr(h) * ndtr(k) + A * integ / (2.0 * np.pi)
+
+
+def _model(p, dx, dy):
+    """Model values and Jacobian. ``p`` (N, 7) = (a, b, cx, cy, alpha1,
+    alpha2, s); ``dx, dy`` (N, P) pixel centres minus the window's origin
+    (the corner's start). Returns ``(I (N, P), J (N, P, 7))``."""
+    from scipy.special import erf, ndtr
+
+    a, b, cx, cy, a1, a2, s = (p[:, i:i + 1] for i in range(7))
+    c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
+    ux, uy = dx - cx, dy - cy
+    h = (c1 * ux + s1 * uy) / s
+    k = (c2 * ux + s2 * uy) / s
+    rho = np.clip(c1 * c2 + s1 * s2, -0.999, 0.999)  # (N, 1)
+    r = np.sqrt(1.0 - rho * rho)
+    phi_h = np.exp(-0.5 * h * h) / np.sqrt(2 * np.pi)
+    phi_k = np.exp(-0.5 * k * k) / np.sqrt(2 * np.pi)
+    F = 4.0 * _phi2(h, k, rho) - 2.0 * ndtr(h) - 2.0 * ndtr(k) + 1.0
+    q = 1.0 / (np.sqrt(2.0) * r)
+    Fh = 2.0 * phi_h * erf((k - rho * h) * q)
+    Fk = 2.0 * phi_k * erf((h - rho * k) * q)
+    Fr = 4.0 / (2.0 * np.pi * r) * np.exp(-(h * h - 2.0 * rho * h * k + k * k) / (2.0 * r * r))
+    drho = s1 * c2 - c1 * s2  # d rho / d alpha2 = sin(a1 - a2) = -d rho / d alpha1
+    bs = b / s
+    J = np.empty(h.shape + (7,))
+    J[..., 0] = 1.0
+    J[..., 1] = F
+    J[..., 2] = -bs * (Fh * c1 + Fk * c2)
+    J[..., 3] = -bs * (Fh * s1 + Fk * s2)
+    J[..., 4] = bs * Fh * (-s1 * ux + c1 * uy) - b * Fr * drho
+    J[..., 5] = bs * Fk * (-s2 * ux + c2 * uy) + b * Fr * drho
+    J[..., 6] = -bs * (Fh * h + Fk * k)
+    return a + b * F, J
+
+
+def _start(img, pts, ox, oy, vals, mask):
+    """Starting parameters: level and contrast from the window, the lines
+    orthogonal at the orientation of the second harmonic of a ring of samples
+    round the corner (an X-junction is a period-pi pattern on any circle
+    about it: its phase is the lines' mean direction), s = 1 px."""
+    import cv2
+
+    n = len(pts)
+    phi = np.linspace(0, 2 * np.pi, 32, endpoint=False)
+    rr = 2.0
+    rx = (pts[:, 0:1] + rr * np.cos(phi)).astype(np.float32)
+    ry = (pts[:, 1:2] + rr * np.sin(phi)).astype(np.float32)
+    ring = cv2.remap(img, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
+    z = (ring - ring.mean(axis=1, keepdims=True)) @ np.exp(2j * phi)
+    # the ring is high where cos(2 (phi - beta)) is: the bright sectors' bisector is beta, the
+    # lines lie 45 deg either side of it; F = sign(n1.u) sign(n2.u) with normals at beta, beta+90
+    # makes F = +1 on the sectors about beta +- 45 deg... choose normals so that b > 0 there
+    beta = 0.5 * np.angle(z)
+    p = np.zeros((n, 7))
+    lo = np.where(mask, vals, np.inf).min(axis=1)
+    hi = np.where(mask, vals, -np.inf).max(axis=1)
+    p[:, 0] = 0.5 * (lo + hi)
+    # with normals n1 = beta + 45, n2 = beta - 45 deg the bisector direction beta has
+    # n1.u > 0 and n2.u > 0: F = +1 there, the bright side: b > 0
+    p[:, 1] = 0.5 * (hi - lo)
+    p[:, 2] = pts[:, 0] - ox
+    p[:, 3] = pts[:, 1] - oy
+    p[:, 4] = beta + np.pi / 4
+    p[:, 5] = beta - np.pi / 4
+    p[:, 6] = 1.0
+    return p
+
+
+def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, iterations: int = 12,
+                max_move: float = MAX_MOVE_PX, valid: np.ndarray | None = None) -> CornerFit:
+    """Refine X-junction corners by the blurred-junction model (module docstring).
+
+    Parameters
+    ----------
+    image : ndarray, (H, W)
+        Grey image (uint8 or float); pixel centres at integer ``(x, y)``.
+    points : ndarray, (N, 2)
+        Start positions ``(x, y)`` px, within ~0.5 px (e.g. ``cornerSubPix``'s).
+    radius : int
+        The window: pixels within ``radius + 0.5`` px of the rounded start
+        (keep it inside the corner's squares, e.g. ``cornerSubPix``'s half-window).
+    iterations : int
+        Levenberg-Marquardt steps (all corners step together).
+    max_move : float
+        A fit that ends farther than this from its start fails (px).
+    valid : ndarray, (H, W) bool, optional
+        Pixels the model may use (False: something else is there, e.g. a marker).
+
+    Returns
+    -------
+    CornerFit
+        ``points`` are the start points where ``ok`` is False.
+    """
+    pts = np.asarray(points, np.float64).reshape(-1, 2)
+    img = np.asarray(image)
+    img = img.astype(np.float32) if img.dtype != np.float32 else img
+    n = len(pts)
+    h, w = img.shape
+    R = int(radius)
+    oy_, ox_ = np.mgrid[-R:R + 1, -R:R + 1]
+    disc = (ox_ ** 2 + oy_ ** 2) <= (R + 0.5) ** 2
+    offx, offy = ox_[disc].astype(np.float64), oy_[disc].astype(np.float64)
+    base = np.round(pts).astype(np.int64)
+    X = base[:, 0:1] + offx.astype(np.int64)
+    Y = base[:, 1:2] + offy.astype(np.int64)
+    mask = (X >= 0) & (X < w) & (Y >= 0) & (Y < h)
+    if valid is not None:
+        mask &= np.asarray(valid, bool)[np.clip(Y, 0, h - 1), np.clip(X, 0, w - 1)]
+    vals = img[np.clip(Y, 0, h - 1), np.clip(X, 0, w - 1)].astype(np.float64)
+    wgt = mask.astype(np.float64)
+    dx = np.broadcast_to(offx, X.shape)
+    dy = np.broadcast_to(offy, X.shape)
+    ox, oy = base[:, 0].astype(np.float64), base[:, 1].astype(np.float64)
+    if n == 0:
+        z = np.zeros(0)
+        return CornerFit(pts.copy(), np.zeros(0, bool), z, z, z, 0)
+    p = _start(img, pts, ox, oy, vals, mask)
+    lam = np.full(n, 1e-3)
+    model, J = _model(p, dx, dy)
+    res = (vals - model) * wgt
+    cost = (res * res).sum(axis=1)
+    active = np.arange(n)  # the corners still moving: converged ones drop out
+    eye = np.eye(7)
+    steps = 0
+    while steps < iterations and active.size:
+        steps += 1
+        a_ = active
+        Jw = J[a_] * wgt[a_, :, None]
+        JT = Jw.transpose(0, 2, 1)
+        A = JT @ J[a_]
+        g = (JT @ res[a_, :, None])[..., 0]
+        d = np.diagonal(A, axis1=1, axis2=2)
+        Ad = A + (lam[a_, None] * (d + 1e-9))[:, :, None] * eye
+        step = np.linalg.solve(Ad, g[..., None])[..., 0]
+        pn = p[a_] + step
+        pn[:, 6] = np.abs(pn[:, 6])
+        mn, Jn = _model(pn, dx[a_], dy[a_])
+        rn = (vals[a_] - mn) * wgt[a_]
+        cn = (rn * rn).sum(axis=1)
+        better = cn < cost[a_]
+        up = a_[better]
+        p[up], res[up], cost[up], J[up] = pn[better], rn[better], cn[better], Jn[better]
+        lam[a_] = np.where(better, lam[a_] * 0.3, lam[a_] * 10.0)
+        # done: a taken step below 1e-4 px (far under the noise's effect), or no descent left
+        done = (better & (np.abs(step[:, 2:4]).max(axis=1) < 1e-4)) | (lam[a_] > 1e4)
+        active = a_[~done]
+    c = np.column_stack([p[:, 2] + ox, p[:, 3] + oy])
+    rho = np.cos(p[:, 4] - p[:, 5])
+    npx = np.maximum(wgt.sum(axis=1), 1)
+    rms = np.sqrt(cost / npx)
+    ok = (np.all(np.isfinite(c), axis=1) & (np.abs(rho) < MAX_ABS_RHO)
+          & (np.linalg.norm(c - pts, axis=1) < max_move) & (p[:, 6] > 0.05) & (p[:, 6] < R))
+    out = np.where(ok[:, None], c, pts)
+    return CornerFit(out, ok, np.abs(p[:, 6]), np.abs(p[:, 1]), rms, steps)
