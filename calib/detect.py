@@ -605,9 +605,12 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
     if mcorners is not None and mids is not None and len(mcorners):
         unmodelled = [c for c, k in zip(mcorners, np.asarray(mids).ravel(), strict=True)
                       if by_id.get(int(k)) not in done]
-    painted = _paint_out_markers(clean, unmodelled, board.square / board.marker) if unmodelled else clean
-    new = cv2.cornerSubPix(painted, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
-                           _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+    if FIT_MODEL and _SKIP_CSP:
+        new = pts
+    else:
+        painted = _paint_out_markers(clean, unmodelled, board.square / board.marker) if unmodelled else clean
+        new = cv2.cornerSubPix(painted, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
+                               _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
     nc = board.cols - 1
     ii, jj = ids % nc + 1, ids // nc + 1  # the corner is the top-left of square (ii, jj)
     # its window holds squares (ii-1..ii, jj-1..jj); the white ones ((i + j) odd) carry markers
@@ -622,12 +625,20 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
         # the model is an X-junction of two edges only: the pixels near a marker (a few
         # codes of a modelled one's edges left by the subtraction, all of an unmodelled
         # one's, not painted here) are left out, so every corner can be fitted
-        near = np.zeros(gray.shape, np.uint8)
+        clear = FIT_MARKER_CLEARANCE * sigma + 0.5
+        # only the corners' windows need the mask: a region holding them and every
+        # marker pixel within the clearance of them (the distance transform costs
+        # ~4 ms on a whole 960x720 image)
+        reach = int(min(win, FIT_RADIUS_MAX)) + int(np.ceil(clear)) + 2
+        x0, y0 = np.maximum(np.floor(out.min(axis=0)).astype(int) - reach, 0)
+        x1, y1 = np.minimum(np.ceil(out.max(axis=0)).astype(int) + reach + 1, gray.shape[::-1])
+        near = np.zeros((y1 - y0, x1 - x0), np.uint8)
         polys = list(quads) + [np.asarray(c, np.float64).reshape(4, 2) for c in unmodelled]
-        for q in np.round(np.asarray(polys) * 16).astype(np.int32):
+        for q in np.round((np.asarray(polys) - (x0, y0)) * 16).astype(np.int32):
             cv2.fillConvexPoly(near, q, 1, lineType=cv2.LINE_8, shift=4)
-        dist = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3)
-        out = _model_fit(clean, out, win, valid=dist > FIT_MARKER_CLEARANCE * sigma + 0.5)
+        valid = np.zeros(gray.shape, bool)
+        valid[y0:y1, x0:x1] = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3) > clear
+        out = _model_fit(clean, out, win, valid=valid)
     return out
 
 
@@ -639,6 +650,7 @@ FIT_MODEL = True
 # target) and the fit would cost ~3x the checkerboard's whole detection (1280 px, 234
 # corners: 20 of 27 ms a view; the bench's speed check would fail)
 FIT_CHECKER = False
+_SKIP_CSP = False
 # the model's window: cornerSubPix's half-window, at most this (px)
 FIT_RADIUS_MAX = 4
 
