@@ -660,6 +660,62 @@ FIT_RADIUS_MAX = 4
 FIT_MARKER_CLEARANCE = 2.0
 
 
+_FIT_PATH = "direct"
+_FIT_FIRST_BLUR = 1.2
+
+
+def _marker_quads(ids: np.ndarray, pts: np.ndarray, board: BoardSpec, mcorners) -> np.ndarray:
+    """``(K, 4, 2)`` image corners of the markers next to the found corners:
+    those whose square's four inner corners were found, mapped through that
+    square's homography (so a marker the ArUco detector missed is there too),
+    and the detected ones (``mcorners``), for the squares on the board's edge."""
+    obj, _, _, _ = _marker_layout(board)
+    own, _, _ = _marker_blocks(board)
+    found = np.zeros(board.n_corners + 1, bool)
+    found[ids] = True
+    pos = np.zeros((board.n_corners, 2))
+    pos[ids] = pts
+    four = np.all(own >= 0, axis=1) & np.all(found[own], axis=1)
+    quads = []
+    if four.any():
+        H = _homographies_4(board.object_points[:, :2][own[four]], pos[own[four]])
+        q = obj[four]
+        qh = np.einsum("kij,kpj->kpi", H, np.concatenate([q, np.ones(q.shape[:2] + (1,))], axis=2))
+        quads.append(qh[..., :2] / qh[..., 2:])
+    if mcorners is not None and len(mcorners):
+        quads.append(np.asarray(mcorners, np.float64).reshape(-1, 4, 2))
+    return np.concatenate(quads) if quads else np.zeros((0, 4, 2))
+
+
+def _marker_mask(shape, quads, pts, win, clear):
+    import cv2
+
+    reach = int(min(win, FIT_RADIUS_MAX)) + int(np.ceil(clear)) + 2
+    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - reach, 0)
+    x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + reach + 1, shape[::-1])
+    near = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    for q in np.round((np.asarray(quads) - (x0, y0)) * 16).astype(np.int32):
+        cv2.fillConvexPoly(near, q, 1, lineType=cv2.LINE_8, shift=4)
+    valid = np.zeros(shape, bool)
+    valid[y0:y1, x0:x1] = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3) > clear
+    return valid
+
+
+def _fit_charuco(gray, ids, pts, mcorners, board, win):
+    from lumigraph.calib.rohr1992 import fit_corners
+
+    quads = _marker_quads(ids, pts, board, mcorners)
+    radius = int(min(win, FIT_RADIUS_MAX))
+    blur = _FIT_FIRST_BLUR
+    f = fit_corners(gray, pts, radius=radius, valid=_marker_mask(gray.shape, quads, pts, win,
+                                                                  FIT_MARKER_CLEARANCE * blur + 0.5))
+    s = np.median(f.blur[f.ok]) if f.ok.any() else np.sqrt(blur ** 2 + 1 / 12)
+    blur = float(np.sqrt(max(s * s - 1 / 12, 0.04)))
+    f = fit_corners(gray, pts, radius=radius, valid=_marker_mask(gray.shape, quads, pts, win,
+                                                                  FIT_MARKER_CLEARANCE * blur + 0.5))
+    return f.points
+
+
 def _model_fit(image, pts, win, valid=None):
     """``pts`` (N, 2) refined by the X-junction model (:func:`rohr1992.fit_corners`),
     each corner keeping its start where the fit fails."""
@@ -705,7 +761,9 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
         win = int(np.clip(np.floor(0.4 * np.median(dist.min(axis=1))), 2, 10))
         pts = cv2.cornerSubPix(painted, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                                _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
-        if REMOVE_MARKERS:
+        if FIT_MODEL and _FIT_PATH == "direct":
+            pts = _fit_charuco(gray, ids, pts, mcorners, board, win)
+        elif REMOVE_MARKERS:
             pts = _refine_without_markers(gray, ids, pts, mcorners, mids, board, win)
         return Detection(ids, pts, board.object_points[ids], (w, h))
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
