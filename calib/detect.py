@@ -17,11 +17,13 @@ at ``((i+1) s, (j+1) s, 0)``.
 
 Detection uses OpenCV (``findChessboardCorners`` then ``cornerSubPix`` for
 checkerboards, ``aruco.CharucoDetector`` for ChArUco). ChArUco corners are
-refined twice with the checkerboard's ``cornerSubPix``: first with the markers
-painted white, then with each marker rendered through the homography of its
-square's refined corners, blurred by the image's blur (fitted on the markers)
-and subtracted, so no blurred marker edge is left in a corner's window
-(docs/decisions/charuco-marker-removal.md). For large images the
+refined with the checkerboard's ``cornerSubPix`` with the markers painted
+white, then by fitting a blurred X-junction model to each corner's pixels
+(:mod:`lumigraph.calib.rohr1992`), the pixels near any marker left out, so no
+blurred marker edge pulls a corner and no interpolation leans it
+(docs/decisions/charuco-marker-removal.md; ``FIT_MODEL = False`` gives the
+earlier second ``cornerSubPix`` on the image with each marker rendered and
+subtracted). For large images the
 checkerboard search runs on a 2× reduced copy and only the sub-pixel refinement
 on the full image; checkerboards whose 180° rotation differs in colour (COLS +
 ROWS odd) are put in the board's own orientation (square (0, 0) black), so the
@@ -157,12 +159,16 @@ class Detection:
         The same corners in the board frame.
     image_size : (int, int)
         ``(w, h)`` of the image they were found in.
+    fallbacks : int
+        Corners whose X-junction model fit failed (ChArUco: ``FIT_MODEL``), which
+        keep ``cornerSubPix``'s position.
     """
 
     ids: np.ndarray
     image_points: np.ndarray
     object_points: np.ndarray
     image_size: tuple[int, int]
+    fallbacks: int = 0
 
     def __post_init__(self):
         n = len(self.ids)
@@ -417,8 +423,7 @@ def _homographies_4(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     return np.concatenate([h, np.ones((K, 1))], axis=1).reshape(K, 3, 3)
 
 
-def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: BoardSpec, *,
-                    want_masks: bool = False):
+def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: BoardSpec):
     """``gray`` (H, W) uint8 with the markers next to the refined corners
     ``pts`` (N, 2) px (board ids ``ids``) taken out: ``(float32 image, set of
     modelled squares (i, j))``, or None when no marker could be modelled.
@@ -573,9 +578,7 @@ def _remove_markers(gray: np.ndarray, ids: np.ndarray, pts: np.ndarray, board: B
         dark[y0:y1, x0:x1] += np.float32(amp[n_ + 1]) * c
     out = gray.astype(np.float32)
     out[Y0:Y1, X0:X1] -= cv2.GaussianBlur(dark, (0, 0), sigma)
-    if not want_masks:
-        return out, done
-    return out, done, qi, sigma
+    return out, done
 
 
 def _empty(size) -> Detection:
@@ -596,21 +599,18 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
     out as before."""
     import cv2
 
-    removed = _remove_markers(gray, ids, pts, board, want_masks=True)
+    removed = _remove_markers(gray, ids, pts, board)
     if removed is None:
         return pts
-    clean, done, quads, sigma = removed
+    clean, done = removed
     by_id = _marker_blocks(board)[2]
-    unmodelled = []
     if mcorners is not None and mids is not None and len(mcorners):
-        unmodelled = [c for c, k in zip(mcorners, np.asarray(mids).ravel(), strict=True)
-                      if by_id.get(int(k)) not in done]
-    if FIT_MODEL and _SKIP_CSP:
-        new = pts
-    else:
-        painted = _paint_out_markers(clean, unmodelled, board.square / board.marker) if unmodelled else clean
-        new = cv2.cornerSubPix(painted, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
-                               _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+        left = [c for c, k in zip(mcorners, np.asarray(mids).ravel(), strict=True)
+                if by_id.get(int(k)) not in done]
+        if left:
+            clean = _paint_out_markers(clean, left, board.square / board.marker)
+    new = cv2.cornerSubPix(clean, pts.astype(np.float32).reshape(-1, 1, 2), (win, win), (-1, -1),
+                           _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
     nc = board.cols - 1
     ii, jj = ids % nc + 1, ids // nc + 1  # the corner is the top-left of square (ii, jj)
     # its window holds squares (ii-1..ii, jj-1..jj); the white ones ((i + j) odd) carry markers
@@ -621,57 +621,35 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
     ok &= np.linalg.norm(new - pts, axis=1) < MAX_MARKER_MOVE_PX
     out = pts.copy()
     out[ok] = new[ok]
-    if FIT_MODEL:
-        # the model is an X-junction of two edges only: the pixels near a marker (a few
-        # codes of a modelled one's edges left by the subtraction, all of an unmodelled
-        # one's, not painted here) are left out, so every corner can be fitted
-        clear = FIT_MARKER_CLEARANCE * sigma + 0.5
-        # only the corners' windows need the mask: a region holding them and every
-        # marker pixel within the clearance of them (the distance transform costs
-        # ~4 ms on a whole 960x720 image)
-        reach = int(min(win, FIT_RADIUS_MAX)) + int(np.ceil(clear)) + 2
-        x0, y0 = np.maximum(np.floor(out.min(axis=0)).astype(int) - reach, 0)
-        x1, y1 = np.minimum(np.ceil(out.max(axis=0)).astype(int) + reach + 1, gray.shape[::-1])
-        near = np.zeros((y1 - y0, x1 - x0), np.uint8)
-        polys = list(quads) + [np.asarray(c, np.float64).reshape(4, 2) for c in unmodelled]
-        for q in np.round((np.asarray(polys) - (x0, y0)) * 16).astype(np.int32):
-            cv2.fillConvexPoly(near, q, 1, lineType=cv2.LINE_8, shift=4)
-        valid = np.zeros(gray.shape, bool)
-        valid[y0:y1, x0:x1] = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3) > clear
-        out = _model_fit(clean, out, win, valid=valid)
     return out
 
 
-# the last step: the blurred X-junction model fitted to each corner's pixels
-# (calib/rohr1992.py, docs/decisions/charuco-marker-removal.md "model fit");
-# False keeps cornerSubPix's corners
+# The last step of ChArUco detection (docs/decisions/charuco-marker-removal.md, "The
+# model fit"): the blurred X-junction model (calib/rohr1992.py) fitted to each corner's
+# pixels, the pixels near a marker left out. The model describes the image itself, so
+# nothing is subtracted: fitted on the image with the markers removed it gave the same
+# corners. False: cornerSubPix on the image with the markers subtracted (REMOVE_MARKERS).
 FIT_MODEL = True
-# checkerboards too: off, since there cornerSubPix shows no lean (its sets meet every
-# target) and the fit would cost ~3x the checkerboard's whole detection (1280 px, 234
-# corners: 20 of 27 ms a view; the bench's speed check would fail)
-FIT_CHECKER = False
-_SKIP_CSP = False
-# the model's window: cornerSubPix's half-window, at most this (px)
+# The model's window: cornerSubPix's half-window (40 % of the corner spacing), at most
+# this, px (the junction's edges are straight over it even on a strongly tilted board).
 FIT_RADIUS_MAX = 4
-
-
-# ChArUco: pixels nearer a marker than this many of the image's blur sigmas (plus half
-# a pixel) stay out of the fit
+# Pixels nearer a marker than this many of the image's blur sigmas, plus half a pixel
+# (the pixel's own half-width), stay out of the fit: the marker's blurred edge there is
+# below Phi(-2) = 2.3 % of its contrast.
 FIT_MARKER_CLEARANCE = 2.0
-
-
-_FIT_PATH = "direct"
+# The blur assumed for the first fit's mask (generous: that pass only measures the blur).
 _FIT_FIRST_BLUR = 1.2
 
 
 def _marker_quads(ids: np.ndarray, pts: np.ndarray, board: BoardSpec, mcorners) -> np.ndarray:
-    """``(K, 4, 2)`` image corners of the markers next to the found corners:
-    those whose square's four inner corners were found, mapped through that
-    square's homography (so a marker the ArUco detector missed is there too),
-    and the detected ones (``mcorners``), for the squares on the board's edge."""
+    """``(K, 4, 2)`` image corners of the markers next to the found corners
+    ``pts`` (board ids ``ids``): each marker whose square's four inner corners
+    were found, through that square's homography (so a marker the ArUco
+    detector missed is there too), and every detected one (``mcorners``;
+    the squares on the board's edge have no four corners)."""
     obj, _, _, _ = _marker_layout(board)
     own, _, _ = _marker_blocks(board)
-    found = np.zeros(board.n_corners + 1, bool)
+    found = np.zeros(board.n_corners + 1, bool)  # the last entry: the -1 pads, never found
     found[ids] = True
     pos = np.zeros((board.n_corners, 2))
     pos[ids] = pts
@@ -687,14 +665,18 @@ def _marker_quads(ids: np.ndarray, pts: np.ndarray, board: BoardSpec, mcorners) 
     return np.concatenate(quads) if quads else np.zeros((0, 4, 2))
 
 
-def _marker_mask(shape, quads, pts, win, clear):
+def _away_from_markers(shape, quads, pts, radius, clear) -> np.ndarray:
+    """``(H, W)`` bool: True where a pixel lies farther than ``clear`` px from
+    every marker ``quads``. Computed only on the region that holds the windows
+    (``radius``) of the corners ``pts`` and every marker pixel within ``clear``
+    of them: a distance transform of a whole 960x720 image costs ~4 ms."""
     import cv2
 
-    reach = int(min(win, FIT_RADIUS_MAX)) + int(np.ceil(clear)) + 2
+    reach = radius + int(np.ceil(clear)) + 2
     x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - reach, 0)
     x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + reach + 1, shape[::-1])
     near = np.zeros((y1 - y0, x1 - x0), np.uint8)
-    for q in np.round((np.asarray(quads) - (x0, y0)) * 16).astype(np.int32):
+    for q in np.round((quads - (x0, y0)) * 16).astype(np.int32):
         cv2.fillConvexPoly(near, q, 1, lineType=cv2.LINE_8, shift=4)
     valid = np.zeros(shape, bool)
     valid[y0:y1, x0:x1] = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3) > clear
@@ -702,27 +684,24 @@ def _marker_mask(shape, quads, pts, win, clear):
 
 
 def _fit_charuco(gray, ids, pts, mcorners, board, win):
+    """``(corners, fallbacks)``: the corners ``pts`` (refined on the painted
+    image) fitted by the X-junction model on ``gray`` with the pixels within
+    ``FIT_MARKER_CLEARANCE`` blurs of a marker left out. The blur is the
+    corners' own: a first fit with a generous mask (``_FIT_FIRST_BLUR``)
+    measures it (median fitted ``s``, less the pixel box's 1/12 px^2), the
+    second uses it. A corner whose fit fails keeps ``pts``."""
     from lumigraph.calib.rohr1992 import fit_corners
 
     quads = _marker_quads(ids, pts, board, mcorners)
     radius = int(min(win, FIT_RADIUS_MAX))
     blur = _FIT_FIRST_BLUR
-    f = fit_corners(gray, pts, radius=radius, valid=_marker_mask(gray.shape, quads, pts, win,
-                                                                  FIT_MARKER_CLEARANCE * blur + 0.5))
-    s = np.median(f.blur[f.ok]) if f.ok.any() else np.sqrt(blur ** 2 + 1 / 12)
-    blur = float(np.sqrt(max(s * s - 1 / 12, 0.04)))
-    f = fit_corners(gray, pts, radius=radius, valid=_marker_mask(gray.shape, quads, pts, win,
-                                                                  FIT_MARKER_CLEARANCE * blur + 0.5))
-    return f.points
-
-
-def _model_fit(image, pts, win, valid=None):
-    """``pts`` (N, 2) refined by the X-junction model (:func:`rohr1992.fit_corners`),
-    each corner keeping its start where the fit fails."""
-    from lumigraph.calib.rohr1992 import fit_corners
-
-    f = fit_corners(image, pts, radius=int(min(win, FIT_RADIUS_MAX)), valid=valid)
-    return f.points
+    for first in (True, False):
+        valid = _away_from_markers(gray.shape, quads, pts, radius, FIT_MARKER_CLEARANCE * blur + 0.5)
+        f = fit_corners(gray, pts, radius=radius, valid=valid)
+        if first and f.ok.any():
+            s = float(np.median(f.blur[f.ok]))
+            blur = float(np.sqrt(max(s * s - 1 / 12, 0.04)))
+    return f.points, int((~f.ok).sum())
 
 
 def detect(image: np.ndarray, board: BoardSpec) -> Detection:
@@ -761,11 +740,12 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
         win = int(np.clip(np.floor(0.4 * np.median(dist.min(axis=1))), 2, 10))
         pts = cv2.cornerSubPix(painted, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                                _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
-        if FIT_MODEL and _FIT_PATH == "direct":
-            pts = _fit_charuco(gray, ids, pts, mcorners, board, win)
+        fallbacks = 0
+        if FIT_MODEL:
+            pts, fallbacks = _fit_charuco(gray, ids, pts, mcorners, board, win)
         elif REMOVE_MARKERS:
             pts = _refine_without_markers(gray, ids, pts, mcorners, mids, board, win)
-        return Detection(ids, pts, board.object_points[ids], (w, h))
+        return Detection(ids, pts, board.object_points[ids], (w, h), fallbacks)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
     found, pts = False, None
     if max(w, h) > 1000:  # search on a 2x-reduced copy; refine on the full image
@@ -781,8 +761,6 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
     win = subpix_window(pts, board.pattern_size)
     pts = cv2.cornerSubPix(gray, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                            _SUBPIX_CRITERIA).reshape(-1, 2)
-    if FIT_MODEL and FIT_CHECKER:
-        pts = _model_fit(gray, pts.astype(np.float64), win)
     pts = _orient(gray, pts.astype(np.float64), board)
     if _pattern_continues(gray, pts, board):
         return _empty((w, h))

@@ -45,11 +45,12 @@ Examples
 --------
 >>> import numpy as np
 >>> y, x = np.mgrid[0:15, 0:15].astype(float)
->>> img = np.sign((x - 7.3) * (y - 6.8)) * -100 + 128  # an ideal X-junction at (7.3, 6.8)
+>>> box = lambda t: np.clip(2 * t, -1, 1)  # a step's mean over the pixel's box
+>>> img = 128 - 100 * box(x - 7.3) * box(y - 6.8)  # an X-junction at (7.3, 6.8)
 >>> import cv2
 >>> img = cv2.GaussianBlur(img.astype(np.float32), (0, 0), 1.0)
 >>> f = fit_corners(img, np.array([[7.0, 7.0]]), radius=4)
->>> bool(f.ok[0]), np.abs(f.points[0] - (7.3, 6.8)).max() < 0.1
+>>> bool(f.ok[0]), bool(np.abs(f.points[0] - (7.3, 6.8)).max() < 0.01)
 (True, True)
 """
 
@@ -68,6 +69,13 @@ _NODES = 12
 MAX_ABS_RHO = 0.95
 # moved farther than this from its start: the fit found something else (fall back)
 MAX_MOVE_PX = 0.5
+# the fit has 7 parameters: a window with fewer than twice as many usable pixels is not fitted
+MIN_PIXELS = 14
+# a fit whose residual RMS exceeds this many times the median corner's fails: the RMS of
+# P >= MIN_PIXELS residuals of iid noise varies by at most 1/sqrt(2 * 7) = 19 % (relative
+# sd), so 4x the typical corner's is not noise but something the model lacks (an
+# occlusion, an unmasked marker, no X-junction)
+RESIDUAL_GATE = 4.0
 
 
 @dataclass(frozen=True)
@@ -79,8 +87,10 @@ class CornerFit:
     points : ndarray, (N, 2) float64
         Fitted centres ``(x, y)`` px; the start point where ``ok`` is False.
     ok : ndarray, (N,) bool
-        The fit converged, kept its lines apart (``|rho| < MAX_ABS_RHO``),
-        moved less than ``max_move`` px and its blur stayed in range.
+        The window had ``MIN_PIXELS`` usable pixels, the fit converged within
+        ``iterations``, kept its lines apart (``|rho| < MAX_ABS_RHO``), moved
+        less than ``max_move`` px, its blur stayed in (0.05, radius) px and its
+        residual within ``RESIDUAL_GATE`` times the median corner's.
     blur : ndarray, (N,) float64
         Fitted ``s`` (blur and pixel box together), px.
     contrast : ndarray, (N,) float64
@@ -178,9 +188,8 @@ def _start(img, pts, ox, oy, vals, mask):
     ry = (pts[:, 1:2] + rr * np.sin(phi)).astype(np.float32)
     ring = cv2.remap(img, rx, ry, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float64)
     z = (ring - ring.mean(axis=1, keepdims=True)) @ np.exp(2j * phi)
-    # the ring is high where cos(2 (phi - beta)) is: the bright sectors' bisector is beta, the
-    # lines lie 45 deg either side of it; F = sign(n1.u) sign(n2.u) with normals at beta, beta+90
-    # makes F = +1 on the sectors about beta +- 45 deg... choose normals so that b > 0 there
+    # the ring follows cos(2 (phi - beta)): beta bisects the bright sectors, the lines lie
+    # 45 deg either side of it
     beta = 0.5 * np.angle(z)
     p = np.zeros((n, 7))
     lo = np.where(mask, vals, np.inf).min(axis=1)
@@ -245,12 +254,15 @@ def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, itera
     if n == 0:
         z = np.zeros(0)
         return CornerFit(pts.copy(), np.zeros(0, bool), z, z, z, 0)
-    p = _start(img, pts, ox, oy, vals, mask)
+    npx = wgt.sum(axis=1)
+    enough = npx >= MIN_PIXELS
+    # windows without enough pixels are not fitted (their start values only need to be finite)
+    p = _start(img, pts, ox, oy, np.where(enough[:, None], vals, 0.0), mask | ~enough[:, None])
     lam = np.full(n, 1e-3)
     model, J = _model(p, dx, dy)
     res = (vals - model) * wgt
     cost = (res * res).sum(axis=1)
-    active = np.arange(n)  # the corners still moving: converged ones drop out
+    active = np.flatnonzero(enough)  # the corners still moving: converged ones drop out
     eye = np.eye(7)
     steps = 0
     while steps < iterations and active.size:
@@ -277,9 +289,12 @@ def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, itera
         active = a_[~done]
     c = np.column_stack([p[:, 2] + ox, p[:, 3] + oy])
     rho = np.cos(p[:, 4] - p[:, 5])
-    npx = np.maximum(wgt.sum(axis=1), 1)
-    rms = np.sqrt(cost / npx)
-    ok = (np.all(np.isfinite(c), axis=1) & (np.abs(rho) < MAX_ABS_RHO)
+    rms = np.sqrt(cost / np.maximum(npx, 1))
+    converged = enough.copy()
+    converged[active] = False
+    ok = (converged & np.all(np.isfinite(c), axis=1) & (np.abs(rho) < MAX_ABS_RHO)
           & (np.linalg.norm(c - pts, axis=1) < max_move) & (p[:, 6] > 0.05) & (p[:, 6] < R))
+    if ok.any():
+        ok &= rms <= RESIDUAL_GATE * np.median(rms[ok])
     out = np.where(ok[:, None], c, pts)
     return CornerFit(out, ok, np.abs(p[:, 6]), np.abs(p[:, 1]), rms, steps)
