@@ -637,8 +637,12 @@ FIT_RADIUS_MAX = 4
 # (the pixel's own half-width), stay out of the fit: the marker's blurred edge there is
 # below Phi(-2) = 2.3 % of its contrast.
 FIT_MARKER_CLEARANCE = 2.0
-# The blur assumed for the first fit's mask (generous: that pass only measures the blur).
+# The blur assumed for the first fit's mask (generous: that pass only measures the blur),
+# on at most this many corners, with at most this many steps (a blur to ~0.05 px, where
+# the clearance moves by 0.1 px).
 _FIT_FIRST_BLUR = 1.2
+_FIT_BLUR_CORNERS = 12
+_FIT_BLUR_ITERATIONS = 6
 
 
 def _marker_quads(ids: np.ndarray, pts: np.ndarray, board: BoardSpec, mcorners) -> np.ndarray:
@@ -687,20 +691,23 @@ def _fit_charuco(gray, ids, pts, mcorners, board, win):
     """``(corners, fallbacks)``: the corners ``pts`` (refined on the painted
     image) fitted by the X-junction model on ``gray`` with the pixels within
     ``FIT_MARKER_CLEARANCE`` blurs of a marker left out. The blur is the
-    corners' own: a first fit with a generous mask (``_FIT_FIRST_BLUR``)
-    measures it (median fitted ``s``, less the pixel box's 1/12 px^2), the
-    second uses it. A corner whose fit fails keeps ``pts``."""
+    corners' own: a first fit of a dozen corners with a generous mask
+    (``_FIT_FIRST_BLUR``) measures it (median fitted ``s``, less the pixel
+    box's 1/12 px^2), the fit of all corners uses it. A corner whose fit fails
+    keeps ``pts``."""
     from lumigraph.calib.rohr1992 import fit_corners
 
     quads = _marker_quads(ids, pts, board, mcorners)
     radius = int(min(win, FIT_RADIUS_MAX))
-    blur = _FIT_FIRST_BLUR
-    for first in (True, False):
-        valid = _away_from_markers(gray.shape, quads, pts, radius, FIT_MARKER_CLEARANCE * blur + 0.5)
-        f = fit_corners(gray, pts, radius=radius, valid=valid)
-        if first and f.ok.any():
-            s = float(np.median(f.blur[f.ok]))
-            blur = float(np.sqrt(max(s * s - 1 / 12, 0.04)))
+    # the blur is one number per image: a dozen corners spread over the board measure it
+    few = pts[np.unique(np.linspace(0, len(pts) - 1, min(len(pts), _FIT_BLUR_CORNERS)).astype(int))]
+    f = fit_corners(gray, few, radius=radius, iterations=_FIT_BLUR_ITERATIONS,
+                    valid=_away_from_markers(gray.shape, quads, few, radius,
+                                             FIT_MARKER_CLEARANCE * _FIT_FIRST_BLUR + 0.5))
+    s = float(np.median(f.blur[f.ok])) if f.ok.any() else np.sqrt(_FIT_FIRST_BLUR ** 2 + 1 / 12)
+    blur = float(np.sqrt(max(s * s - 1 / 12, 0.04)))
+    f = fit_corners(gray, pts, radius=radius, blur=s,
+                    valid=_away_from_markers(gray.shape, quads, pts, radius, FIT_MARKER_CLEARANCE * blur + 0.5))
     return f.points, int((~f.ok).sum())
 
 

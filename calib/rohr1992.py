@@ -61,14 +61,17 @@ from functools import lru_cache
 
 import numpy as np
 
-# Gauss-Legendre nodes for Phi2's integral over [0, asin rho]; the integrand is
-# smooth for |rho| < 0.95 (lines at least 18 deg apart), where 12 nodes reach
-# 1e-7 (test_rohr1992.py checks against scipy)
-_NODES = 12
+# Gauss-Legendre nodes for Phi2's integral over [0, asin rho]: the integrand is smooth
+# for |rho| <= MAX_ABS_RHO, where 6 nodes reach 2e-6 (8: 2e-7; test_rohr1992.py checks
+# 1e-5 against scipy), i.e. 1e-3 codes of a 100-code contrast
+_NODES = 6
 # a fit that ends with the lines closer than this (|cos| of their angle) is no X-junction
 MAX_ABS_RHO = 0.95
 # moved farther than this from its start: the fit found something else (fall back)
 MAX_MOVE_PX = 0.5
+# converged: a centre step below this (px), a tenth of the fitted corners' own scatter
+# (>= 0.01 px on the rendered boards, docs/decisions/charuco-marker-removal.md)
+STEP_TOL_PX = 1e-3
 # the fit has 7 parameters: a window with fewer than twice as many usable pixels is not fitted
 MIN_PIXELS = 14
 # a fit whose residual RMS exceeds this many times the median corner's fails: the RMS of
@@ -115,13 +118,27 @@ def _gauss_legendre():
     return 0.5 * (t + 1.0), 0.5 * w  # on [0, 1]
 
 
+def _phi2_integral(hh, hk, rho):
+    """Drezner & Wesolowsky's integral term of ``Phi2(h, k; rho)``:
+    ``1/(2 pi) int_0^asin(rho) exp(-(h^2 + k^2 - 2 h k sin t) / (2 cos^2 t)) dt``
+    from ``hh = h^2 + k^2`` and ``hk = h k`` (N, P), ``rho`` (N, 1): one
+    correlation per corner, so the nodes' sines and cosines are per corner;
+    the integrand in float32 (its 6e-8 relative rounding is far below the
+    model's other errors)."""
+    t, w = _gauss_legendre()
+    A = np.arcsin(rho)  # (N, 1)
+    th = A * t  # (N, Q)
+    cs2 = np.cos(th) ** 2
+    u = (-0.5 / cs2).astype(np.float32)[:, None, :]  # (N, 1, Q)
+    v = (np.sin(th) / cs2).astype(np.float32)[:, None, :]
+    integ = np.exp(hh.astype(np.float32)[..., None] * u + hk.astype(np.float32)[..., None] * v) @ w.astype(np.float32)
+    return A * integ / (2.0 * np.pi)
+
+
 def _phi2(h, k, rho):
-    """Bivariate standard normal ``P(X < h, Y < k)`` with correlation ``rho``,
-    by Drezner & Wesolowsky's integral
-    ``Phi(h) Phi(k) + 1/(2 pi) int_0^asin(rho) exp(-(h^2 + k^2 - 2 h k sin t) / (2 cos^2 t)) dt``.
-    ``h, k`` (N, P), ``rho`` (N, 1): one correlation per corner, so the
-    nodes' sines and cosines are per corner; the integrand in float32 (its
-    1e-7 relative rounding is far below the model's other errors).
+    """Bivariate standard normal ``P(X < h, Y < k)`` with correlation ``rho``
+    (``h, k`` (N, P), ``rho`` (N, 1)): ``Phi(h) Phi(k)`` plus
+    :func:`_phi2_integral`.
 
     >>> z = np.zeros((1, 1))
     >>> round(float(_phi2(z, z, z + 0.5)[0, 0]), 6)  # 1/4 + asin(.5)/(2 pi)
@@ -129,23 +146,18 @@ def _phi2(h, k, rho):
     """
     from scipy.special import ndtr
 
-    t, w = _gauss_legendre()
-    A = np.arcsin(rho)  # (N, 1)
-    th = A * t  # (N, Q)
-    cs2 = np.cos(th) ** 2
-    u = (-0.5 / cs2).astype(np.float32)[:, None, :]  # (N, 1, Q)
-    v = (np.sin(th) / cs2).astype(np.float32)[:, None, :]
-    hh = (h * h + k * k).astype(np.float32)[..., None]
-    hk = (h * k).astype(np.float32)[..., None]
-    integ = np.exp(hh * u + hk * v) @ w.astype(np.float32)
-    return ndtr(h) * ndtr(k) + A * integ / (2.0 * np.pi)
+    return ndtr(h) * ndtr(k) + _phi2_integral(h * h + k * k, h * k, rho)
+
+
+_SQRT1_2 = np.sqrt(0.5)
+_INV_SQRT_2PI = 1.0 / np.sqrt(2.0 * np.pi)
 
 
 def _model(p, dx, dy):
     """Model values and Jacobian. ``p`` (N, 7) = (a, b, cx, cy, alpha1,
     alpha2, s); ``dx, dy`` (N, P) pixel centres minus the window's origin
-    (the corner's start). Returns ``(I (N, P), J (N, P, 7))``."""
-    from scipy.special import erf, ndtr
+    (the corner's start). Returns ``(I (N, P), J (N, 7, P))``."""
+    from scipy.special import erf
 
     a, b, cx, cy, a1, a2, s = (p[:, i:i + 1] for i in range(7))
     c1, s1, c2, s2 = np.cos(a1), np.sin(a1), np.cos(a2), np.sin(a2)
@@ -154,31 +166,34 @@ def _model(p, dx, dy):
     k = (c2 * ux + s2 * uy) / s
     rho = np.clip(c1 * c2 + s1 * s2, -0.999, 0.999)  # (N, 1)
     r = np.sqrt(1.0 - rho * rho)
-    phi_h = np.exp(-0.5 * h * h) / np.sqrt(2 * np.pi)
-    phi_k = np.exp(-0.5 * k * k) / np.sqrt(2 * np.pi)
-    F = 4.0 * _phi2(h, k, rho) - 2.0 * ndtr(h) - 2.0 * ndtr(k) + 1.0
-    q = 1.0 / (np.sqrt(2.0) * r)
-    Fh = 2.0 * phi_h * erf((k - rho * h) * q)
-    Fk = 2.0 * phi_k * erf((h - rho * k) * q)
-    Fr = 4.0 / (2.0 * np.pi * r) * np.exp(-(h * h - 2.0 * rho * h * k + k * k) / (2.0 * r * r))
+    q = _SQRT1_2 / r
+    h2, k2, hk = h * h, k * k, h * k
+    # the four error functions in one call: Phi(h), Phi(k) and the conditional ones
+    E = erf(np.stack([h * _SQRT1_2, k * _SQRT1_2, (k - rho * h) * q, (h - rho * k) * q]))
+    Ph, Pk = 0.5 * (1.0 + E[0]), 0.5 * (1.0 + E[1])
+    F = 4.0 * (Ph * Pk + _phi2_integral(h2 + k2, hk, rho)) - 2.0 * (Ph + Pk) + 1.0
+    Fh = (2.0 * _INV_SQRT_2PI) * np.exp(-0.5 * h2) * E[2]
+    Fk = (2.0 * _INV_SQRT_2PI) * np.exp(-0.5 * k2) * E[3]
+    Fr = (2.0 / np.pi) / r * np.exp((2.0 * rho * hk - h2 - k2) / (2.0 * r * r))
     drho = s1 * c2 - c1 * s2  # d rho / d alpha2 = sin(a1 - a2) = -d rho / d alpha1
     bs = b / s
-    J = np.empty(h.shape + (7,))
-    J[..., 0] = 1.0
-    J[..., 1] = F
-    J[..., 2] = -bs * (Fh * c1 + Fk * c2)
-    J[..., 3] = -bs * (Fh * s1 + Fk * s2)
-    J[..., 4] = bs * Fh * (-s1 * ux + c1 * uy) - b * Fr * drho
-    J[..., 5] = bs * Fk * (-s2 * ux + c2 * uy) + b * Fr * drho
-    J[..., 6] = -bs * (Fh * h + Fk * k)
+    bFr = b * drho * Fr
+    J = np.empty((h.shape[0], 7, h.shape[1]))
+    J[:, 0] = 1.0
+    J[:, 1] = F
+    J[:, 2] = -bs * (Fh * c1 + Fk * c2)
+    J[:, 3] = -bs * (Fh * s1 + Fk * s2)
+    J[:, 4] = bs * Fh * (c1 * uy - s1 * ux) - bFr
+    J[:, 5] = bs * Fk * (c2 * uy - s2 * ux) + bFr
+    J[:, 6] = -bs * (Fh * h + Fk * k)
     return a + b * F, J
 
 
-def _start(img, pts, ox, oy, vals, mask):
+def _start(img, pts, ox, oy, vals, mask, blur):
     """Starting parameters: level and contrast from the window, the lines
     orthogonal at the orientation of the second harmonic of a ring of samples
     round the corner (an X-junction is a period-pi pattern on any circle
-    about it: its phase is the lines' mean direction), s = 1 px."""
+    about it: its phase is the lines' mean direction), s = ``blur``."""
     import cv2
 
     n = len(pts)
@@ -202,12 +217,13 @@ def _start(img, pts, ox, oy, vals, mask):
     p[:, 3] = pts[:, 1] - oy
     p[:, 4] = beta + np.pi / 4
     p[:, 5] = beta - np.pi / 4
-    p[:, 6] = 1.0
+    p[:, 6] = blur
     return p
 
 
 def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, iterations: int = 12,
-                max_move: float = MAX_MOVE_PX, valid: np.ndarray | None = None) -> CornerFit:
+                max_move: float = MAX_MOVE_PX, valid: np.ndarray | None = None,
+                blur: float = 1.0) -> CornerFit:
     """Refine X-junction corners by the blurred-junction model (module docstring).
 
     Parameters
@@ -225,6 +241,8 @@ def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, itera
         A fit that ends farther than this from its start fails (px).
     valid : ndarray, (H, W) bool, optional
         Pixels the model may use (False: something else is there, e.g. a marker).
+    blur : float
+        Start value of ``s`` (the optics' blur and the pixel box together), px.
 
     Returns
     -------
@@ -257,7 +275,7 @@ def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, itera
     npx = wgt.sum(axis=1)
     enough = npx >= MIN_PIXELS
     # windows without enough pixels are not fitted (their start values only need to be finite)
-    p = _start(img, pts, ox, oy, np.where(enough[:, None], vals, 0.0), mask | ~enough[:, None])
+    p = _start(img, pts, ox, oy, np.where(enough[:, None], vals, 0.0), mask | ~enough[:, None], float(blur))
     lam = np.full(n, 1e-3)
     model, J = _model(p, dx, dy)
     res = (vals - model) * wgt
@@ -268,10 +286,10 @@ def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, itera
     while steps < iterations and active.size:
         steps += 1
         a_ = active
-        Jw = J[a_] * wgt[a_, :, None]
-        JT = Jw.transpose(0, 2, 1)
-        A = JT @ J[a_]
-        g = (JT @ res[a_, :, None])[..., 0]
+        Ja = J[a_]
+        Jw = Ja * wgt[a_, None, :]
+        A = Jw @ Ja.transpose(0, 2, 1)
+        g = (Jw @ res[a_, :, None])[..., 0]
         d = np.diagonal(A, axis1=1, axis2=2)
         Ad = A + (lam[a_, None] * (d + 1e-9))[:, :, None] * eye
         step = np.linalg.solve(Ad, g[..., None])[..., 0]
@@ -284,8 +302,9 @@ def fit_corners(image: np.ndarray, points: np.ndarray, *, radius: int = 3, itera
         up = a_[better]
         p[up], res[up], cost[up], J[up] = pn[better], rn[better], cn[better], Jn[better]
         lam[a_] = np.where(better, lam[a_] * 0.3, lam[a_] * 10.0)
-        # done: a taken step below 1e-4 px (far under the noise's effect), or no descent left
-        done = (better & (np.abs(step[:, 2:4]).max(axis=1) < 1e-4)) | (lam[a_] > 1e4)
+        # done: a taken step below STEP_TOL_PX (Gauss-Newton's last step overstates the
+        # distance to the minimum, which it nears quadratically), or no descent left
+        done = (better & (np.abs(step[:, 2:4]).max(axis=1) < STEP_TOL_PX)) | (lam[a_] > 1e4)
         active = a_[~done]
     c = np.column_stack([p[:, 2] + ox, p[:, 3] + oy])
     rho = np.cos(p[:, 4] - p[:, 5])
