@@ -3,10 +3,11 @@
 Follows K. Rohr, "Recognizing corners by fitting parametric models",
 IJCV 9(3):213-230, 1992 (doi:10.1007/BF00133702): a corner's grey values are
 modelled as an ideal junction of straight edges convolved with a Gaussian, and
-its position is found by least squares on the pixels of a small window
-(Rohr's eq. 3-5 for the wedge, here the checkerboard's X-junction: two
-straight lines through the corner, at free angles since a tilted board's squares
-are not right-angled in the image).
+its position is found by least squares on the pixels of a small window (Rohr
+fits wedges and vertices; here the checkerboard's X-junction: two straight
+lines through the corner, at free angles since a tilted board's squares are
+not right-angled in the image). The model's equation is below (the
+equation numbers of the paper are not quoted: the model here is its own).
 
 Model of a pixel centred at ``x`` (OpenCV's convention: pixel centres at
 integers, ``x = (col, row)``)::
@@ -21,12 +22,16 @@ convolved with an isotropic Gaussian of standard deviation ``s``
 Gaussian ``z`` are normal with correlation ``rho``). ``s`` stands for the
 optics' blur and the pixel's box together: the box's projection onto any
 direction has variance 1/12 px^2, so ``s^2 = sigma^2 + 1/12`` matches both
-second moments along every edge; ``s`` is fitted per corner, and what the
-Gaussian misses of the box's shape is even about the corner and moves it
-nowhere. ``a, b`` (level, contrast) are free per corner.
+second moments along every edge; ``s`` is fitted per corner. What the
+Gaussian misses of the box's shape is even about each edge; it moves a corner
+only through the sampling's sub-pixel phase (noise-free, axis-aligned: up to
+0.02 px at a 0.6 px blur, 0.008 px at 1.0, no mean over phases;
+docs/decisions/charuco-marker-removal.md). ``a, b`` (level, contrast) are
+free per corner.
 
 ``Phi2`` is evaluated by Drezner & Wesolowsky's integral (J. Statist. Comput.
-Simul. 35, 1990, eq. 3) with Gauss-Legendre nodes; its derivatives are
+Simul. 35:101-107, 1990; written out in :func:`_phi2_integral`) with
+Gauss-Legendre nodes; its derivatives are
 closed-form (``dPhi2/dh = phi(h) Phi((k - rho h)/sqrt(1 - rho^2))``,
 ``dPhi2/drho`` the bivariate density), so each Levenberg-Marquardt step needs
 one model evaluation, for all corners of an image at once (arrays of
