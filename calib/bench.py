@@ -67,10 +67,12 @@ def _synthetic(size, views, board_opts, **opts):
 
 # The board family (issue 14): checker and ChArUco boards, several image sizes,
 # blurs and lenses, detected as captured (no injected noise). The ChArUco
-# marker painting (calib/detect.py PAINT_GROW) and the marker removal
-# (REMOVE_MARKERS, docs/decisions/charuco-marker-removal.md) were chosen on the
-# sets marked "tuned"; the targets are reported on the others (seeds 30-34 at
-# 320 and 30-32 at 640 blur 0.9 were added as held-out sets after the choice).
+# marker painting (calib/detect.py PAINT_GROW), the marker removal
+# (REMOVE_MARKERS) and the X-junction model fit that replaced its last step
+# (FIT_MODEL, calib/rohr1992.py; docs/decisions/charuco-marker-removal.md) were
+# chosen on the sets marked "tuned"; the targets are reported on the others
+# (seeds 30-34 at 320 and 30-32 at 640 blur 0.9 were added as held-out sets
+# after the removal's choice).
 FAMILY = (
     # name, board, size, blur, distortion, seed, role
     ("charuco 640 blur0.6", "charuco", (640, 480), 0.6, "normal", 3, "tuned"),

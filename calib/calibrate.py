@@ -439,7 +439,7 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
     Camera
         With ``extra``: ``rms_px``, ``std``, ``views`` (name, used, RMS,
         ``cam_from_world``), ``candidates``, ``model_selection``, ``warnings``,
-        ``poorly_determined``, ``skipped``, ``n_points``.
+        ``poorly_determined``, ``skipped``, ``n_points``, ``corner_fit_fallbacks``.
 
     Raises
     ------
@@ -531,7 +531,9 @@ def calibrate(detections: Sequence[Detection], *, model: str = "auto",
     extra = {"rms_px": fit.rms_px, "std": fit.std, "views": views + rejected,
              "candidates": rows, "model_selection": selection, "warnings": warnings,
              "poorly_determined": poor, "skipped": list(skipped), "n_points": fit.n_points,
-             "n_params": fit.n_params}
+             "n_params": fit.n_params,
+             # corners whose X-junction fit failed and kept cornerSubPix's position (detect.py)
+             "corner_fit_fallbacks": int(sum(getattr(d, "fallbacks", 0) for d in detections))}
     return Camera(fit.K, fit.dist, size, fit.model, extra)
 
 

@@ -17,11 +17,13 @@ at ``((i+1) s, (j+1) s, 0)``.
 
 Detection uses OpenCV (``findChessboardCorners`` then ``cornerSubPix`` for
 checkerboards, ``aruco.CharucoDetector`` for ChArUco). ChArUco corners are
-refined twice with the checkerboard's ``cornerSubPix``: first with the markers
-painted white, then with each marker rendered through the homography of its
-square's refined corners, blurred by the image's blur (fitted on the markers)
-and subtracted, so no blurred marker edge is left in a corner's window
-(docs/decisions/charuco-marker-removal.md). For large images the
+refined with the checkerboard's ``cornerSubPix`` with the markers painted
+white, then by fitting a blurred X-junction model to each corner's pixels
+(:mod:`lumigraph.calib.rohr1992`), the pixels near any marker left out, so no
+blurred marker edge pulls a corner and no interpolation leans it
+(docs/decisions/charuco-marker-removal.md; ``FIT_MODEL = False`` gives the
+earlier second ``cornerSubPix`` on the image with each marker rendered and
+subtracted). For large images the
 checkerboard search runs on a 2× reduced copy and only the sub-pixel refinement
 on the full image; checkerboards whose 180° rotation differs in colour (COLS +
 ROWS odd) are put in the board's own orientation (square (0, 0) black), so the
@@ -157,12 +159,16 @@ class Detection:
         The same corners in the board frame.
     image_size : (int, int)
         ``(w, h)`` of the image they were found in.
+    fallbacks : int
+        Corners whose X-junction model fit failed (ChArUco: ``FIT_MODEL``), which
+        keep ``cornerSubPix``'s position.
     """
 
     ids: np.ndarray
     image_points: np.ndarray
     object_points: np.ndarray
     image_size: tuple[int, int]
+    fallbacks: int = 0
 
     def __post_init__(self):
         n = len(self.ids)
@@ -618,6 +624,93 @@ def _refine_without_markers(gray, ids, pts, mcorners, mids, board, win):
     return out
 
 
+# The last step of ChArUco detection (docs/decisions/charuco-marker-removal.md, "The
+# model fit"): the blurred X-junction model (calib/rohr1992.py) fitted to each corner's
+# pixels, the pixels near a marker left out. The model describes the image itself, so
+# nothing is subtracted: fitted on the image with the markers removed it gave the same
+# corners. False: cornerSubPix on the image with the markers subtracted (REMOVE_MARKERS).
+FIT_MODEL = True
+# The model's window: cornerSubPix's half-window (40 % of the corner spacing), at most
+# this, px (the junction's edges are straight over it even on a strongly tilted board).
+FIT_RADIUS_MAX = 4
+# Pixels nearer a marker than this many of the image's blur sigmas, plus half a pixel
+# (the pixel's own half-width), stay out of the fit: the marker's blurred edge there is
+# below Phi(-2) = 2.3 % of its contrast.
+FIT_MARKER_CLEARANCE = 2.0
+# The blur assumed for the first fit's mask (generous: that pass only measures the blur),
+# on at most this many corners, with at most this many steps (a blur to ~0.05 px, where
+# the clearance moves by 0.1 px).
+_FIT_FIRST_BLUR = 1.2
+_FIT_BLUR_CORNERS = 12
+_FIT_BLUR_ITERATIONS = 6
+
+
+def _marker_quads(ids: np.ndarray, pts: np.ndarray, board: BoardSpec, mcorners) -> np.ndarray:
+    """``(K, 4, 2)`` image corners of the markers next to the found corners
+    ``pts`` (board ids ``ids``): each marker whose square's four inner corners
+    were found, through that square's homography (so a marker the ArUco
+    detector missed is there too), and every detected one (``mcorners``;
+    the squares on the board's edge have no four corners)."""
+    obj, _, _, _ = _marker_layout(board)
+    own, _, _ = _marker_blocks(board)
+    found = np.zeros(board.n_corners + 1, bool)  # the last entry: the -1 pads, never found
+    found[ids] = True
+    pos = np.zeros((board.n_corners, 2))
+    pos[ids] = pts
+    four = np.all(own >= 0, axis=1) & np.all(found[own], axis=1)
+    quads = []
+    if four.any():
+        H = _homographies_4(board.object_points[:, :2][own[four]], pos[own[four]])
+        q = obj[four]
+        qh = np.einsum("kij,kpj->kpi", H, np.concatenate([q, np.ones(q.shape[:2] + (1,))], axis=2))
+        quads.append(qh[..., :2] / qh[..., 2:])
+    if mcorners is not None and len(mcorners):
+        quads.append(np.asarray(mcorners, np.float64).reshape(-1, 4, 2))
+    return np.concatenate(quads) if quads else np.zeros((0, 4, 2))
+
+
+def _away_from_markers(shape, quads, pts, radius, clear) -> np.ndarray:
+    """``(H, W)`` bool: True where a pixel lies farther than ``clear`` px from
+    every marker ``quads``. Computed only on the region that holds the windows
+    (``radius``) of the corners ``pts`` and every marker pixel within ``clear``
+    of them: a distance transform of a whole 960x720 image costs ~4 ms."""
+    import cv2
+
+    reach = radius + int(np.ceil(clear)) + 2
+    x0, y0 = np.maximum(np.floor(pts.min(axis=0)).astype(int) - reach, 0)
+    x1, y1 = np.minimum(np.ceil(pts.max(axis=0)).astype(int) + reach + 1, shape[::-1])
+    near = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    for q in np.round((quads - (x0, y0)) * 16).astype(np.int32):
+        cv2.fillConvexPoly(near, q, 1, lineType=cv2.LINE_8, shift=4)
+    valid = np.zeros(shape, bool)
+    valid[y0:y1, x0:x1] = cv2.distanceTransform(1 - near, cv2.DIST_L2, 3) > clear
+    return valid
+
+
+def _fit_charuco(gray, ids, pts, mcorners, board, win):
+    """``(corners, fallbacks)``: the corners ``pts`` (refined on the painted
+    image) fitted by the X-junction model on ``gray`` with the pixels within
+    ``FIT_MARKER_CLEARANCE`` blurs of a marker left out. The blur is the
+    corners' own: a first fit of a dozen corners with a generous mask
+    (``_FIT_FIRST_BLUR``) measures it (median fitted ``s``, less the pixel
+    box's 1/12 px^2), the fit of all corners uses it. A corner whose fit fails
+    keeps ``pts``."""
+    from lumigraph.calib.rohr1992 import fit_corners
+
+    quads = _marker_quads(ids, pts, board, mcorners)
+    radius = int(min(win, FIT_RADIUS_MAX))
+    # the blur is one number per image: a dozen corners spread over the board measure it
+    few = pts[np.unique(np.linspace(0, len(pts) - 1, min(len(pts), _FIT_BLUR_CORNERS)).astype(int))]
+    f = fit_corners(gray, few, radius=radius, iterations=_FIT_BLUR_ITERATIONS,
+                    valid=_away_from_markers(gray.shape, quads, few, radius,
+                                             FIT_MARKER_CLEARANCE * _FIT_FIRST_BLUR + 0.5))
+    s = float(np.median(f.blur[f.ok])) if f.ok.any() else np.sqrt(_FIT_FIRST_BLUR ** 2 + 1 / 12)
+    blur = float(np.sqrt(max(s * s - 1 / 12, 0.04)))
+    f = fit_corners(gray, pts, radius=radius, blur=s,
+                    valid=_away_from_markers(gray.shape, quads, pts, radius, FIT_MARKER_CLEARANCE * blur + 0.5))
+    return f.points, int((~f.ok).sum())
+
+
 def detect(image: np.ndarray, board: BoardSpec) -> Detection:
     """Find the board's inner corners in one image.
 
@@ -654,9 +747,12 @@ def detect(image: np.ndarray, board: BoardSpec) -> Detection:
         win = int(np.clip(np.floor(0.4 * np.median(dist.min(axis=1))), 2, 10))
         pts = cv2.cornerSubPix(painted, pts.reshape(-1, 1, 2), (win, win), (-1, -1),
                                _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
-        if REMOVE_MARKERS:
+        fallbacks = 0
+        if FIT_MODEL:
+            pts, fallbacks = _fit_charuco(gray, ids, pts, mcorners, board, win)
+        elif REMOVE_MARKERS:
             pts = _refine_without_markers(gray, ids, pts, mcorners, mids, board, win)
-        return Detection(ids, pts, board.object_points[ids], (w, h))
+        return Detection(ids, pts, board.object_points[ids], (w, h), fallbacks)
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
     found, pts = False, None
     if max(w, h) > 1000:  # search on a 2x-reduced copy; refine on the full image

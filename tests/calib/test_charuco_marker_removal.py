@@ -5,7 +5,9 @@ blurred fringe stayed in the corner's window at a different distance on the
 near and the far side of a tilted board, and the refined corners leaned
 towards the near (larger) squares by ~0.005 px, enough to move the focal
 length by 3-4 of its sigma (docs/decisions/charuco-marker-removal.md). The
-markers are now rendered and subtracted before the last refinement."""
+markers are now left out of the last refinement (the X-junction model fit,
+calib/rohr1992.py), or, with ``FIT_MODEL = False``, rendered and subtracted
+before a second ``cornerSubPix``."""
 
 import numpy as np
 import pytest
@@ -19,12 +21,14 @@ def scene():
     return render("boards", size=(320, 240), seed=21, views=10, board="charuco", blur=0.6)
 
 
-def _lean(s, remove: bool):
+def _lean(s, remove: bool, fit: bool = False):
     """Each corner's error along its view's depth gradient (+ = towards the
-    far side), in px, for every detected corner of every view."""
+    far side), in px, for every detected corner of every view; ``fit``: the
+    X-junction model fit as the last step (the default), else ``cornerSubPix``
+    on the painted (``remove`` False) or marker-subtracted image."""
     board = D.BoardSpec.parse(s.stack["board"])
-    old = D.REMOVE_MARKERS
-    D.REMOVE_MARKERS = remove
+    old = D.REMOVE_MARKERS, D.FIT_MODEL
+    D.REMOVE_MARKERS, D.FIT_MODEL = remove, fit
     try:
         out = []
         for k, im in enumerate(s.images):
@@ -37,7 +41,7 @@ def _lean(s, remove: bool):
             out.append((d.image_points - gt) @ (grad / np.linalg.norm(grad)))
         return np.concatenate(out)
     finally:
-        D.REMOVE_MARKERS = old
+        D.REMOVE_MARKERS, D.FIT_MODEL = old
 
 
 def test_corners_do_not_lean_towards_the_near_side(scene):
@@ -45,6 +49,12 @@ def test_corners_do_not_lean_towards_the_near_side(scene):
     # the render's read noise (1 code) scatters each corner independently: the mean of
     # N components has the standard error sd/sqrt(N); an unbiased refinement stays
     # within 3 of them
+    se = new.std() / np.sqrt(new.size)
+    assert abs(new.mean()) <= 3 * se, (new.mean(), se)
+
+
+def test_model_fit_corners_do_not_lean(scene):
+    new = _lean(scene, True, fit=True)
     se = new.std() / np.sqrt(new.size)
     assert abs(new.mean()) <= 3 * se, (new.mean(), se)
 
@@ -92,3 +102,28 @@ def test_marker_removal_takes_the_markers_out():
     # marker's (~100 codes); one modelled to within its blur leaves a small part of
     # it (the precision is judged by the lean above and the bench's family)
     assert np.sqrt(np.mean(a ** 2)) < 0.1 * np.sqrt(np.mean(b ** 2)), (a.std(), b.std())
+
+
+def test_model_fit_sharper_than_cornersubpix(scene):
+    """The same views: the X-junction fit's corner errors are smaller than
+    cornerSubPix's on the marker-subtracted image (its interpolation error at
+    a 0.6 px blur), and the fall-backs are counted and reach calibrate."""
+    from lumigraph.calib.calibrate import calibrate
+
+    board = D.BoardSpec.parse(scene.stack["board"])
+    rms = {}
+    for fit in (False, True):
+        old = D.FIT_MODEL
+        D.FIT_MODEL = fit
+        try:
+            dets = [D.detect(im, board) for im in scene.images]
+        finally:
+            D.FIT_MODEL = old
+        e = np.concatenate([d.image_points - scene.gt_arrays["corners"][k][d.ids] for k, d in enumerate(dets)])
+        rms[fit] = np.sqrt((e ** 2).sum(axis=1).mean())
+        if fit:
+            n = sum(len(d) for d in dets)
+            falls = sum(d.fallbacks for d in dets)
+            assert 0 <= falls < n
+            assert calibrate(dets, model="k1k2p1p2").extra["corner_fit_fallbacks"] == falls
+    assert rms[True] < rms[False], rms
