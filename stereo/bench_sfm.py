@@ -103,7 +103,12 @@ def _checks(res) -> list[Check]:
                          f"median {e['rotation_median_deg']:.2f} deg; pairwise relative max "
                          f"{e['relative_rotation_max_deg']:.2f} deg; residual noise "
                          f"{e['residual_sigma_px']:.2f} px (MAD), the robust loss's scale "
-                         f"{e['loss_scale_px']:.2f} px"))
+                         f"{e['loss_scale_px']:.2f} px"
+                         + ("" if r.value else
+                            "; K estimated (our own check: the set is calibrated, the issue's "
+                            "row is fixed intrinsics=True): the principal point is held at the "
+                            "image centre, 18 px from the given one (~0.68 deg at f = 1520 px), "
+                            "which a ring of views does not determine (docs/decisions/sfm.md)")))
     return out
 
 
