@@ -70,6 +70,16 @@ UNASSIGNED_KEY = "unassigned"
 SNAP_ON_STEP = False
 
 
+# True: snapping refines the detected line over the stretch the user dragged
+# and keeps the drag as drawn when the image does not show the line there;
+# False, the default: refined over the detection's own extent and carried out
+# to the dragged ends, as before. Tried in the fifth pass on the tuned seeds,
+# not adopted (docs/decisions/view-marking.md, "Fresh seeds")
+SNAP_OVER_DRAG = False
+# True: refine_on_edge weights each profile's peak by its contrast squared
+# (the inverse variance of a step's position) in its line fit; False, the
+# default: equal weights. Tried in the fifth pass, not adopted (same section)
+WEIGHTED_STEPS = False
 EDGE_SUPPORT = 0.5       # a segment whose profiles mostly show no step there lies on texture, not on an edge
 EDGE_HALF_WIDTH_PX = 2.5  # searched either side of the segment; less than the snap radius, more than a drag's error
 
@@ -122,7 +132,7 @@ def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
     sign = 1.0 if np.sum(np.max(np.where(inside, g, 0), 1)) >= \
         np.sum(np.max(np.where(inside, -g, 0), 1)) else -1.0
     sg = np.where(inside, sign * g, -np.inf)
-    pts = []
+    pts, wts = [], []
     for k in range(len(ts)):
         i = int(np.argmax(sg[k]))
         peak = sg[k, i]
@@ -136,10 +146,15 @@ def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
         if step < 0.5 * peak:
             continue
         pts.append(a + ts[k] * d + off * n)
+        wts.append(peak ** 2)
     if len(pts) < max(6, min_support * samples):
         return None
     from lumigraph.stereo.debevec1996.automark import fit_line
-    c, dd = fit_line(np.array(pts))
+    # each peak weighted by its inverse variance: a step's position is known
+    # to (noise or texture clutter) / contrast, so a stretch where the edge
+    # barely shows (a silhouette against a face of the same brick, below the
+    # part against the sky) must not tilt the line the clear stretch gives
+    c, dd = fit_line(np.array(pts), weights=np.array(wts) if WEIGHTED_STEPS else None)
     out = np.r_[c + ((a - c) @ dd) * dd, c + ((b - c) @ dd) * dd]
     if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > half_width:
         return None
@@ -176,14 +191,24 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
     score = np.where(ok, np.abs(ha) + np.abs(hb), np.inf)
     best = detected[int(np.argmin(score))]
     if grey is not None:
-        if SNAP_ON_STEP:
-            refined = refine_on_edge(grey, best)
-            if refined is None:                         # no step there: texture, not an edge
-                return None
-        else:
-            from lumigraph.stereo.debevec1996.automark import refine_segment
+        from lumigraph.stereo.debevec1996.automark import refine_segment
 
-            refined = refine_segment(grey, best)
+        refine = refine_on_edge if SNAP_ON_STEP else refine_segment
+        if SNAP_OVER_DRAG:
+            # refined over the stretch the user dragged (carried onto the
+            # detection's line), not over the detection alone: a detection
+            # may cover a fifth of a long edge (the part against the sky),
+            # and its line carried out to the far end is an extrapolation
+            # (0.7 degrees off is 2 px at the far end of a 160 px edge)
+            p0, q0 = best[:2], best[2:]
+            d0 = (q0 - p0) / max(np.hypot(*(q0 - p0)), 1e-9)
+            refined = refine(grey, np.r_[p0 + ((a - p0) @ d0) * d0, p0 + ((b - p0) @ d0) * d0])
+            if refined is None:
+                return None     # the image does not show the line along the drag: no snap
+        else:
+            refined = refine(grey, best)
+            if refined is None and SNAP_ON_STEP:        # no step there: texture, not an edge
+                return None
         if refined is not None:
             best = refined
     p, q = best[:2], best[2:]

@@ -111,27 +111,33 @@ def detect_segments(grey: np.ndarray, *, min_length_px: float = 12.0) -> np.ndar
     return np.zeros((0, 4)) if found is None else found.reshape(-1, 4).astype(float)
 
 
-def fit_line(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def fit_line(pts: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The line through the points ``pts`` (N, 2) px by total least squares,
     refitted once without the points beyond 3 robust sigmas (1.4826 x the
     median absolute distance, at least 0.05 px): ``(centre (2,), unit
-    direction (2,))``.
+    direction (2,))``. With ``weights`` (N,) the fit is weighted (each
+    point's inverse variance); the trim stays unweighted.
 
     >>> c, d = fit_line(np.array([[0., 0.], [1., 1.], [2., 2.], [3., 3.], [4., 4.], [5., 5.]]))
     >>> bool(np.allclose(abs(d), np.sqrt(0.5)))
     True
     """
     pts = np.asarray(pts, float)
+    w = np.ones(len(pts)) if weights is None else np.asarray(weights, float)
+
+    def tls(pts, w):
+        c = (w[:, None] * pts).sum(0) / w.sum()
+        _, _, Vt = np.linalg.svd(np.sqrt(w)[:, None] * (pts - c))
+        return c, Vt
+
     for _ in range(2):
-        c = pts.mean(0)
-        _, _, Vt = np.linalg.svd(pts - c)
+        c, Vt = tls(pts, w)
         r = (pts - c) @ Vt[1]
         keep = np.abs(r) <= max(3 * 1.4826 * np.median(np.abs(r)), 0.05)
         if keep.all() or keep.sum() < 6:
             break
-        pts = pts[keep]
-    c = pts.mean(0)
-    _, _, Vt = np.linalg.svd(pts - c)
+        pts, w = pts[keep], w[keep]
+    c, Vt = tls(pts, w)
     return c, Vt[0]
 
 

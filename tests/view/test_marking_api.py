@@ -437,6 +437,26 @@ def test_a_segment_refines_onto_the_step_not_onto_a_texture_line():
     assert refine_on_edge(line, np.array([37.0, 5.0, 37.0, 55.0])) is None
 
 
+def test_snapping_over_the_drag_refuses_a_line_the_image_shows_on_a_fifth_of_it(monkeypatch):
+    """``SNAP_OVER_DRAG`` (an option, off by default): the detected line is
+    refined over the stretch dragged, not over the detection, so a detection
+    covering the top fifth of a long edge (the part against the sky) is not
+    carried out over the rest; there the drag is kept as drawn. Where the
+    step runs the whole drag, the snap lands on it. Noise-free image: the
+    step's position is known to the ½ px grid the profiles are sampled on."""
+    import lumigraph.view.marking as marking
+
+    monkeypatch.setattr(marking, "SNAP_OVER_DRAG", True)
+    g = np.full((150, 80), 60.0)
+    g[:28, 40:] = 200.0                     # a step at x = 39.5 in the top 28 rows only
+    det = np.array([[39.55, 2.0, 39.65, 24.0]])  # the detector's short, tilted piece of it
+    drag = np.array([39.0, 2.0, 39.0, 140.0])
+    assert marking.snap_segment(drag, det, grey=g) is None
+    g[:, 40:] = 200.0                       # the step all along
+    got = marking.snap_segment(drag, det, grey=g)
+    assert got is not None and abs(got[0] - 39.5) <= 0.5 and abs(got[2] - 39.5) <= 0.5, got
+
+
 def test_edge_band_from_the_covariance_matches_the_solved_edges_error(scene, tmp_path):
     """``edge_offset_std``: the solve's covariance carried to each reprojected
     edge (at a mark's ends). On the scene's own marks (σ = 0.5 px) the solved
