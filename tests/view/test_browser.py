@@ -20,6 +20,7 @@ and marking it there lowers the width's σ.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import sys
@@ -35,6 +36,22 @@ from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, truth_lines
 
 CHROMIUM = "/usr/bin/chromium"
 DRIVER = "/usr/bin/chromedriver"
+
+
+@contextlib.contextmanager
+def _served(app):
+    """The real server (``start_server``) on a free 127.0.0.1 port, in a thread,
+    shut down when the block ends however it ends."""
+    from lumigraph.view.app import start_server
+
+    server = start_server(app, port=None)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield server
+    finally:
+        server.shutdown()
+        thread.join(5)
 
 
 def _need_browser():
@@ -87,7 +104,7 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
 
     from lumigraph.capture.render import render
     from lumigraph.stereo.debevec1996.edges import load_edges
-    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.app import create_app
     from lumigraph.view.marking import FacadeSession
 
     t0 = time.monotonic()
@@ -103,11 +120,8 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
     edges.write_text(json.dumps(body))
 
     session = FacadeSession.open(folder, edges=edges)
-    server = start_server(create_app(artifacts=[], facade=session), port=None)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
     d = browser
-    try:
+    with _served(create_app(artifacts=[], facade=session)) as server:
         d.get(f"http://127.0.0.1:{server.port}/")
         _idle(d)
         canvas = d.find_element(By.ID, "photo-canvas")
@@ -174,9 +188,6 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
             win = red[max(0, round(y) - r): round(y) + r + 1, max(0, round(x) - r): round(x) + r + 1]
             hits += bool(win.any())
         assert hits >= 0.8 * len(ts), f"red reprojection found at {hits} of {len(ts)} points"
-    finally:
-        server.shutdown()
-        thread.join(5)
     print(f"browser test: {time.monotonic() - t0:.1f} s")
 
 
@@ -203,7 +214,7 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
     from selenium.webdriver.common.by import By
 
     from lumigraph.capture.render import render
-    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.app import create_app
     from lumigraph.view.marking import FacadeSession
 
     s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
@@ -220,11 +231,8 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
     edges = tmp_path / "edges.json"
     edges.write_text(json.dumps(body))
     session = FacadeSession.open(folder, edges=edges)
-    server = start_server(create_app(artifacts=[], facade=session), port=None)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
     d = browser
-    try:
+    with _served(create_app(artifacts=[], facade=session)) as server:
         d.get(f"http://127.0.0.1:{server.port}/")
         _idle(d)
         d.find_element(By.ID, "solve").click()
@@ -252,9 +260,6 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
                  "document.getElementById('status').textContent.startsWith('solved')", 60)
         after = d.execute_script("return window.lumiMark.state.solution")
         assert after["parameters"]["wing/width"]["std"] < w["std"]
-    finally:
-        server.shutdown()
-        thread.join(5)
 
 
 def _four_hand_marks_sorted(folder, marks):
@@ -275,14 +280,11 @@ def test_an_unreadable_artifact_shows_its_one_line_error_and_the_server_keeps_se
 
     from selenium.webdriver.common.by import By
 
-    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.app import create_app
 
     bad = tmp_path / "broken.exr"
     bad.write_bytes(b"not an exr at all")
-    server = start_server(create_app(artifacts=[bad]), port=None)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
+    with _served(create_app(artifacts=[bad])) as server:
         browser.get(f"http://127.0.0.1:{server.port}/")
         _wait(browser, "return window.lumiMark && window.lumiMark.ready")
         shown = _wait(browser, "const e = document.querySelector('#look .look-error');"
@@ -292,28 +294,19 @@ def test_an_unreadable_artifact_shows_its_one_line_error_and_the_server_keeps_se
         assert browser.find_element(By.ID, "look").get_attribute("hidden") is None
         with urllib.request.urlopen(f"http://127.0.0.1:{server.port}/api/mode", timeout=10) as r:
             assert r.status == 200
-    finally:
-        server.shutdown()
-        thread.join(5)
 
 
 def test_the_page_loads_without_a_facade_session(browser):
     """Looking mode only: the page starts, the marking tab stays hidden."""
     from selenium.webdriver.common.by import By
 
-    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.app import create_app
 
-    server = start_server(create_app(artifacts=[]), port=None)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    try:
+    with _served(create_app(artifacts=[])) as server:
         browser.get(f"http://127.0.0.1:{server.port}/")
         _wait(browser, "return window.lumiMark && window.lumiMark.ready")
         assert not browser.find_element(By.ID, "mode-mark").is_displayed()
         assert browser.find_element(By.ID, "look").get_attribute("hidden") is None
-    finally:
-        server.shutdown()
-        thread.join(5)
 
 
 # The probe shows numbers as look.js's fmt does: six significant digits, so a
@@ -346,7 +339,7 @@ def test_the_cursor_probe_shows_the_files_value_under_the_mouse(browser, tmp_pat
     from selenium.webdriver.common.by import By
 
     from lumigraph.capture.io import read_flo, read_pfm, write_flo, write_pfm
-    from lumigraph.view.app import create_app, start_server
+    from lumigraph.view.app import create_app
 
     rng = np.random.default_rng(18)
     h, w, zoom = 30, 40, 8  # not square: a swapped x, y shows
@@ -356,13 +349,9 @@ def test_the_cursor_probe_shows_the_files_value_under_the_mouse(browser, tmp_pat
     disp[7, 31] = np.nan  # unknown
     write_pfm(tmp_path / "disp.pfm", disp)
     flow, disp = read_flo(tmp_path / "motion.flo"), read_pfm(tmp_path / "disp.pfm")
-    server = start_server(create_app(artifacts=[tmp_path / "motion.flo", tmp_path / "disp.pfm"]),
-                          port=None)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
     d = browser
     number = r"(-?[\d.]+(?:e[-+]?\d+)?)"
-    try:
+    with _served(create_app(artifacts=[tmp_path / "motion.flo", tmp_path / "disp.pfm"])) as server:
         d.get(f"http://127.0.0.1:{server.port}/")
         for k, pixels in ((0, [(31, 7), (3, 22), (39, 0)]), (1, [(12, 25), (31, 7)])):
             if k:
@@ -389,6 +378,3 @@ def test_the_cursor_probe_shows_the_files_value_under_the_mouse(browser, tmp_pat
                     assert m, text
                     assert abs(float(m.group(3)) - disp[yi, xi]) <= _six_digits(disp[yi, xi]), \
                         (text, disp[yi, xi])
-    finally:
-        server.shutdown()
-        thread.join(5)
