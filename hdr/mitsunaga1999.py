@@ -64,6 +64,10 @@ order at 3 and skips the ratio update):
   0 and 1 (docs/decisions/hdr-mitsunaga-stable.md);
 - the final curve is bias-corrected by a parametric bootstrap (:func:`_debias`,
   as Debevec's): the noise and the floor at code 0 bias the dark codes;
+- the final exposure ratios from linear sums through the corrected curve
+  over every pixel (:func:`refine_exposures`): an ln-domain fit reads each
+  dark code low by ``Var x / 2X²``, a per-cent bias on a read-noise-limited
+  bracket whatever the weights (docs/decisions/hdr-mitsunaga-stable.md);
 - a channel whose own exposure ratios differ from the common ones beyond its
   sampling noise and far beyond the other channels' is named in ``warnings``;
 - exposures known exactly (``reference_times``) fix the scale, and with two
@@ -716,11 +720,175 @@ def _debias(a, m_range, lo, hi, order, mz, valid, ln_e, noise, bit_depth, rng, d
     return out[0] - out[1]
 
 
+RATIO_PIXELS = 1 << 18  # pixels (at most) the final ratio estimate reads, evenly spaced
+# The darker value of a pair at least this many noise sd above the responsive floor:
+# where the ln-domain curve fit's own bias, Var x / 2X², is under 1 % (σ/X ≤ 1/√0.02).
+# Below it the fitted curve itself is least reliable (night: ln f off by −0.25 at codes
+# 16–20 with the true times), and a linear sum reads it there.
+RATIO_FLOOR_LN_BIAS = 0.01
+RATIO_FLOOR_MARGIN = 1.0 / math.sqrt(2.0 * RATIO_FLOOR_LN_BIAS)
+# The brighter value at least this many noise sd below the responsive ceiling: clear of the
+# clip (at 4σ the clipped tail moves the mean by under 1e-5 of it); near the top the curve
+# is well determined, and a wider margin starves pairs with few mid-range pixels.
+RATIO_MARGIN = 4.0
+RATIO_ITERS = 6  # selection-ratio fixed-point iterations
+RATIO_OUTLIER = 6.0  # robust z-score beyond which a pixel's ratio is dropped (motion, flare)
+
+
+def ratio_of_sums(xa: np.ndarray, xb: np.ndarray, *, var_a: np.ndarray | None = None,
+                  var_b: np.ndarray | None = None) -> tuple[float, float, int]:
+    """The exposure ratio ``R = e_b/e_a`` from one scene's exposures ``xa, xb``
+    (``(N,)``, linear, ``xb ≈ R·xa``) as ``Σ xb / Σ xa``, after dropping pixels whose
+    residual ``xb − R·xa`` is beyond :data:`RATIO_OUTLIER` robust sd.
+
+    In linear units zero-mean sensor noise stays zero-mean, so the estimate is
+    unbiased (an ln-domain average is not: ``E[ln x] ≈ ln X − Var x / 2X²``,
+    a per-cent bias where read noise is a third of the signal). Returns ``ln R``,
+    its sandwich variance ``Σ r² / (R Σ xa)²`` and the pixels kept. ``var_a,
+    var_b`` (the noise model's variance of each value) normalise the
+    residuals for the outlier test; without them ``x`` stands in (shot noise).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> x = rng.uniform(0.05, 0.2, 5000)
+    >>> xa, xb = x + rng.normal(0, 0.02, x.size), 4 * x + rng.normal(0, 0.02, x.size)
+    >>> v = np.full(x.size, 0.02 ** 2)
+    >>> ln_r, var, n = ratio_of_sums(xa, xb, var_a=v, var_b=v)
+    >>> bool(abs(ln_r - np.log(4)) < 4 * np.sqrt(var)), n
+    (True, 5000)
+    >>> xb[:10] = 50.0  # ten pixels that moved
+    >>> ratio_of_sums(xa, xb, var_a=v, var_b=v)[2]
+    4990
+    """
+    xa = np.asarray(xa, dtype=np.float64)
+    xb = np.asarray(xb, dtype=np.float64)
+    va = np.maximum(xa, 1e-12) if var_a is None else var_a
+    vb = np.maximum(xb, 1e-12) if var_b is None else var_b
+    keep = np.ones(xa.size, dtype=bool)
+    for _ in range(2):
+        if keep.sum() < 2 or np.sum(xa[keep]) <= 0:
+            return math.nan, math.inf, 0
+        r = float(np.sum(xb[keep]) / np.sum(xa[keep]))
+        s = (xb - r * xa) / np.sqrt(vb + r * r * va)
+        med = float(np.median(s[keep]))
+        mad = 1.4826 * float(np.median(np.abs(s[keep] - med)))
+        new = np.abs(s - med) <= RATIO_OUTLIER * max(mad, 1e-12)
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    if keep.sum() < 2 or np.sum(xa[keep]) <= 0 or np.sum(xb[keep]) <= 0:
+        return math.nan, math.inf, 0
+    r = float(np.sum(xb[keep]) / np.sum(xa[keep]))
+    res = xb[keep] - r * xa[keep]
+    var = float(np.sum(res ** 2) / (r * np.sum(xa[keep])) ** 2)
+    return math.log(r), var, int(keep.sum())
+
+
+def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_max: int,
+                     *, min_pixels: int = 50) -> tuple[np.ndarray, dict]:
+    """The final adjacent exposure ratios from every pixel (up to
+    :data:`RATIO_PIXELS`) through the fitted curves, unbiased by noise.
+
+    ``z``: ``(P, H, W, C)`` codes, exposures ascending; ``lfs``: each channel's
+    ``ln f`` table (the fit's gauge); ``ln_e``: ``(P,)`` the fit's ln exposures;
+    ``lo, hi``: ``(C,)`` the responsive code range (normalised); ``noise``: per
+    channel ``(a, b)`` with ``Var X = a X + b`` in the curve's units, or None.
+
+    The fit's ratios come from an ln-domain least squares on 600 sampled
+    pixels, and each ln value of a dark code is low by ``Var X / 2X²``
+    (night brackets: −1.7 … +1.5 % ratio errors with exact times). Here each
+    adjacent pair's ratio is :func:`ratio_of_sums` per channel, inverse-variance
+    averaged over channels, on the pixels whose darker exposure is
+    :data:`RATIO_FLOOR_MARGIN` noise sd above the responsive floor and whose
+    brighter one :data:`RATIO_MARGIN` below the ceiling. Each condition is
+    tested on a third exposure where there is one (the next brighter for the
+    floor, the next darker for the ceiling), else on the pair's other one,
+    scaled by the ratios: a value selected on its own noise is biased by the
+    selection. A pair with fewer than
+    ``min_pixels`` keeps the fit's ratio. Returns the ln exposures (same gauge
+    and mean as ``ln_e``) and a record per pair.
+    """
+    p, h, w, c = z.shape
+    n = h * w
+    flat = z.reshape(p, n, c)
+    if n > RATIO_PIXELS:
+        flat = flat[:, np.round(np.linspace(0, n - 1, RATIO_PIXELS)).astype(np.int64)]
+    d_fit = np.diff(ln_e)
+    d_new = d_fit.copy()
+    record = []
+    for q in range(p - 1):
+        ests, vars_, kept = [], [], []
+        r0 = math.exp(d_fit[q])
+        for ch in range(c):
+            lf = lfs[ch]
+            x_tab = np.exp(lf)
+            a, b = (noise[ch] if noise is not None else (0.0, 0.0))
+            sd = np.sqrt(np.maximum(a * x_tab + b, 0.0))
+            k_lo = int(math.ceil(lo[ch] * code_max - 1e-9))
+            k_hi = int(math.floor(hi[ch] * code_max + 1e-9))
+            if k_hi <= k_lo:
+                continue
+            codes = np.arange(code_max + 1)
+            inside = (codes >= k_lo) & (codes <= k_hi)
+            floor_ok = inside & (x_tab - RATIO_FLOOR_MARGIN * sd >= x_tab[k_lo])
+            ceil_ok = inside & (x_tab + RATIO_MARGIN * sd <= x_tab[k_hi])
+            if not floor_ok.any() or not ceil_ok.any():
+                continue
+            x_floor = x_tab[np.flatnonzero(floor_ok)[0]]
+            x_ceil = x_tab[np.flatnonzero(ceil_ok)[-1]]
+            xa, xb = x_tab[flat[q, :, ch]], x_tab[flat[q + 1, :, ch]]
+            # Where a third exposure exists the conditions are tested on it (the next
+            # brighter for the floor, the next darker for the ceiling): its noise is
+            # independent of both values summed. A clipped third value errs on the
+            # safe side (a saturated code is at most the truth).
+            up = x_tab[flat[q + 2, :, ch]] if q + 2 < p else None
+            down = x_tab[flat[q - 1, :, ch]] if q >= 1 else None
+            r_up = math.exp(d_fit[q + 1]) if up is not None else 1.0
+            r_down = math.exp(d_fit[q - 1]) if down is not None else 1.0
+            # The selection uses the ratio; iterated to a fixed point, and a channel
+            # whose estimate moves its own selection (a toe the curve cannot read:
+            # film base, where code 15 and 25 lie ten stops apart) is not used.
+            r, ln_r, converged = r0, math.nan, False
+            for _ in range(RATIO_ITERS):
+                low_ok = (up >= r_up * r * x_floor) if up is not None else (xb >= r * x_floor)
+                high_ok = ((down * r_down * r <= x_ceil) if down is not None
+                           else (xa * r <= x_ceil))
+                sel = low_ok & high_ok
+                if sel.sum() < min_pixels:
+                    break
+                va = vb = None
+                if noise is not None and (a > 0 or b > 0):
+                    va, vb = a * xa[sel] + b, a * xb[sel] + b
+                ln_r, var, k = ratio_of_sums(xa[sel], xb[sel], var_a=va, var_b=vb)
+                if not np.isfinite(ln_r):
+                    break
+                if abs(ln_r - math.log(r)) < 1e-4:
+                    converged = True
+                    break
+                r = math.exp(ln_r)
+            if converged and k >= min_pixels and var > 0:
+                ests.append(ln_r)
+                vars_.append(var)
+                kept.append(k)
+        if ests:
+            wts = 1.0 / np.array(vars_)
+            d_new[q] = float(np.sum(wts * np.array(ests)) / np.sum(wts))
+            record.append({"pixels": kept, "ln_ratio_per_channel": ests,
+                           "sd_ln": float(1.0 / math.sqrt(np.sum(wts))),
+                           "fit_ln_ratio": float(d_fit[q])})
+        else:
+            record.append({"pixels": [], "kept_fit": True, "fit_ln_ratio": float(d_fit[q])})
+    out = np.concatenate([[0.0], np.cumsum(d_new)])
+    return out - out.mean() + ln_e.mean(), {"pairs": record}
+
+
 def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
                     order: int | str = "auto", samples: int = 600, clip_margin: float = 0.03,
                     rng: np.random.Generator | None = None,
                     reference_times: dict[int, float] | None = None,
-                    bias_draws: int = BIAS_DRAWS, noise_weighted: bool = True) -> ResponseCurve:
+                    bias_draws: int = BIAS_DRAWS, noise_weighted: bool = True,
+                    refine_ratios: bool = True) -> ResponseCurve:
     """Recover the inverse response as a polynomial and refine the exposure ratios.
 
     Parameters
@@ -749,6 +917,11 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
         Renders of the fitted bracket for the bias correction (:func:`_debias`),
         with the noise estimated from the bracket
         (:func:`hdr.debevec1997.estimate_noise`); 0 turns it off.
+    noise_weighted : bool
+        Held-out scores divided by their predicted noise (the order selection).
+    refine_ratios : bool
+        The final ratios from linear sums over every pixel
+        (:func:`refine_exposures`); False keeps the joint fit's.
 
     Returns
     -------
@@ -908,23 +1081,8 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     except np.linalg.LinAlgError:
         raise EstimationError("images", "too few pixels seen unclipped in two exposures for "
                                         "Mitsunaga-Nayar") from None
-    gam, ln_e = align_power(le, ln_nom, reference=ref)
-    if not ref and abs(gam - 1.0) > 0.1:
-        warnings.append(f"the data's exposure ratios are the given ones to the power {1 / gam:.3f}; "
-                        "check the rough times")
-    disagree = _channel_disagreement(chans_sel, fold_le, ln_nom, le, n_use, ranges, zmax)
-    typical = float(np.median([x for _, x in disagree])) if disagree else 0.0
-    for ch, (stat, rms) in enumerate(disagree):
-        # beyond its sampling noise (3 sigma), and an outlier among the channels (three times
-        # the median channel's distance: film dyes and colour filters differ in shape, and an
-        # order that suits all of them leaves each a small bias of its own)
-        if c > 1 and stat > DISAGREE_LIMIT and rms > 3.0 * typical:
-            warnings.append(f"channel {ch}: its own exposure ratios differ from the common ones by "
-                            f"{rms:.3f} ln RMS, {math.sqrt(stat):.1f}x its sampling noise and over "
-                            "3x the median channel's: "
-                            "a clipped, misregistered or non-linear channel; check its curve")
     monotone = [is_monotone(a, m_range, zmax) for a, m_range in zip(coeffs, ranges, strict=True)]
-    bias_max = []
+    bias_max, lfs = [], []
     for ch in range(c):
         if not monotone[ch]:  # the constraints make this unreachable; say so if not
             warnings.append(f"channel {ch}: the joint fit is not monotone over codes "
@@ -943,8 +1101,29 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
                     bias_max.append(None)
             except np.linalg.LinAlgError:
                 bias_max.append(None)
+        lfs.append(lf)
+    le_fit = le
+    ratio_record = None
+    if refine_ratios:
+        le, ratio_record = refine_exposures(z, lfs, le, lo, hi, noise_top, zmax)
+    gam, ln_e = align_power(le, ln_nom, reference=ref)
+    if not ref and abs(gam - 1.0) > 0.1:
+        warnings.append(f"the data's exposure ratios are the given ones to the power {1 / gam:.3f}; "
+                        "check the rough times")
+    disagree = _channel_disagreement(chans_sel, fold_le, ln_nom, le_fit, n_use, ranges, zmax)
+    typical = float(np.median([x for _, x in disagree])) if disagree else 0.0
+    for ch, (stat, rms) in enumerate(disagree):
+        # beyond its sampling noise (3 sigma), and an outlier among the channels (three times
+        # the median channel's distance: film dyes and colour filters differ in shape, and an
+        # order that suits all of them leaves each a small bias of its own)
+        if c > 1 and stat > DISAGREE_LIMIT and rms > 3.0 * typical:
+            warnings.append(f"channel {ch}: its own exposure ratios differ from the common ones by "
+                            f"{rms:.3f} ln RMS, {math.sqrt(stat):.1f}x its sampling noise and over "
+                            "3x the median channel's: "
+                            "a clipped, misregistered or non-linear channel; check its curve")
+    for ch in range(c):
         # Exposures rescaled as e -> e^γ pair with the curve f -> f^γ (eq. 6.6 is unchanged).
-        g[ch] = gam * lf
+        g[ch] = gam * lfs[ch]
     sel_scores = {str(ch): [{"order": n, "held_out_code_mse": float(mse[i, ch]),
                              "rejected": reasons.get((n, ch))}
                             for i, n in enumerate(orders)] for ch in range(c)}
@@ -967,6 +1146,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
            "refined_ratios_ascending": ratios.tolist(),
            "given_ratios_ascending": np.exp(np.diff(ln_nom)).tolist(),
            "samples": int(idx.size), "static_pixels_dropped": n_static,
+           "ratio_refinement": ratio_record,
            "bias_correction": {"draws": int(bias_draws), "noise_a_b_top": noise_top,
                                "max_abs_ln": bias_max},
            "responsive_codes": [[round(float(a) * zmax), round(float(b) * zmax)]
