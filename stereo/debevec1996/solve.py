@@ -101,6 +101,26 @@ FIXTURE = {"blocks": [
                 "offset_x": 6.5}}]}
 
 
+class Unconstrained(EstimationError):
+    """The solver's refusal when no combination of the marks constrains some
+    unknowns (the rank test of the column-scaled Jacobian at the start):
+    an :class:`EstimationError` (exit 2 on the command line) that also
+    carries the unknowns' names, ``unknowns`` (parameter names as the
+    model's slots, ``"<photo>:position"`` / ``"<photo>:rotation"`` for a
+    pose, ``"focal_scale"``), so a caller can say what would constrain each
+    (:func:`lumigraph.view.marking.unconstrained_spots`).
+
+    >>> str(Unconstrained("edges.json", ("tower/height",))).split(":")[:2]
+    ['edges.json', ' the marks do not constrain tower/height']
+    """
+
+    def __init__(self, where, unknowns):
+        self.unknowns = tuple(unknowns)
+        super().__init__(where, "the marks do not constrain " + ", ".join(self.unknowns)
+                         + ": mark more edges of those blocks / photographs, share or fix "
+                           "those parameters")
+
+
 @dataclass(frozen=True)
 class FacadeSolution:
     """The fitted model and cameras.
@@ -417,7 +437,14 @@ def _linear_translations(prob: _Problem, R, th_start, cams_only=None):
     return th, t
 
 
-def _rank_deficient(J, names, *, rcond=1e-9):
+# the rank test: a singular value of the column-scaled Jacobian below this
+# times the largest is a null direction, and an unknown with more than
+# NULL_WEIGHT of it in a null direction is unconstrained
+RANK_RCOND = 1e-9
+NULL_WEIGHT = 0.1
+
+
+def _rank_deficient(J, names, *, rcond=RANK_RCOND):
     """The unknowns no combination of marks constrains: names with weight in
     the null space of the column-scaled Jacobian."""
     J = np.asarray(J)
@@ -436,7 +463,7 @@ def _rank_deficient(J, names, *, rcond=1e-9):
     _, s, Vt = np.linalg.svd(Js, full_matrices=False)
     null = Vt[s < rcond * s[0]] if s.size else Vt[:0]
     for v in null:
-        for i in np.flatnonzero(np.abs(v) > 0.1):
+        for i in np.flatnonzero(np.abs(v) > NULL_WEIGHT):
             bad.add(names[keep[i]])
     return sorted(bad, key=names.index)
 
@@ -564,7 +591,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                               "(a block of zero size?): check the starting values in blocks.json")
     # a rough solve (hold_unconstrained) also holds what the marks barely
     # constrain: with four noisy marks a weak direction wanders far
-    bad = _rank_deficient(J0, names, rcond=1e-3 if hold_unconstrained else 1e-9)
+    bad = _rank_deficient(J0, names, rcond=1e-3 if hold_unconstrained else RANK_RCOND)
     if bad and hold_unconstrained:
         # hold the model's unconstrained parameters first; only a photograph
         # still unconstrained with them held is left out
@@ -583,9 +610,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         return replace(sol, warnings=warnings + sol.warnings, dropped=dropped + lost + sol.dropped,
                        held=tuple(held) + sol.held)
     if bad:
-        raise EstimationError(where, "the marks do not constrain " + ", ".join(dict.fromkeys(bad))
-                              + ": mark more edges of those blocks / photographs, share or fix "
-                                "those parameters")
+        raise Unconstrained(where, tuple(dict.fromkeys(bad)))
     dense = prob.ncol <= DENSE_MAX_COLUMNS
     kw = dict(method="trf", x_scale="jac", ftol=1e-14, xtol=1e-14, gtol=1e-14,
               max_nfev=max_iterations, tr_solver="exact" if dense else "lsmr")
