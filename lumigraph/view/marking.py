@@ -30,7 +30,11 @@ and undo it. ``solve`` runs
 marks and returns, per photograph, every model edge reprojected, each mark's
 RMS distance to its edge (px), and the weakly constrained parameters with
 the unmarked edges that would hold each best (:func:`weak_spots`: the
-user is told where the model is weak and what to mark there). ``propose`` runs
+user is told where the model is weak and what to mark there); when the
+solver refuses because the marks do not constrain some unknowns, the refusal
+carries, per unknown, the unmarked edges that would constrain it
+(:func:`unconstrained_spots`), so the user is told what to mark, not only
+what is free. ``propose`` runs
 :func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
 moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
 dropped when it lies on none: a texture line), and keeps the proposals
@@ -878,7 +882,9 @@ class FacadeSession:
         along the edge, a step not a line); the mark moves onto it when one
         is found, else it is flagged for the user. Not circular: a mark only
         ever moves to where the *image* shows a step; the model line only
-        bounds the search, and a band with no step moves nothing."""
+        bounds the search, and a band with no step moves nothing. A mark
+        whose band is wider than its photograph (the solve does not know
+        where the edge is: a parameter it barely holds) is left as it is."""
         from lumigraph.stereo.debevec1996.automark import edge_offset_std
         from lumigraph.stereo.debevec1996.edges import Mark
         from lumigraph.stereo.debevec1996.solve import project_model_edges
@@ -908,7 +914,9 @@ class FacadeSession:
             for k, m, s in zip(ids, ms, sd, strict=True):
                 w = 3.0 * float(np.sqrt(np.max(s) ** 2 + sol.sigma_px ** 2))
                 band[k] = w
-                if not np.all(np.isfinite(s)):
+                if not np.all(np.isfinite(s)) or w > max(self.sizes[m.photo]):
+                    # the solve does not know where this edge is (a band wider
+                    # than the photograph): nothing to search, the mark stays
                     continue
                 a, b = (np.asarray(v, float) for v in lines[m.photo][m.edge])
                 d = (b - a) / max(np.hypot(*(b - a)), 1e-9)

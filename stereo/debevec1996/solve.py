@@ -54,7 +54,8 @@ independent with variance ``σ²`` (estimated from the residual distances,
 the origin, axis-aligned); the scale comes from the fixed parameter(s): at
 least one length must be fixed. Unconstrained unknowns (no mark constrains a
 parameter, a photograph with too few marks) are found by a rank test of the
-column-scaled Jacobian at the start and named in an :class:`EstimationError`.
+column-scaled Jacobian at the start and named in an :class:`EstimationError`
+(:class:`Unconstrained`, which also carries the names).
 A photograph with fewer than three marks (six constraints on its six pose
 unknowns) is left out with a warning.
 
@@ -625,12 +626,19 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                           # iterative trust-region solver (an SVD per step costs more)
                           **{**kw, "ftol": 1e-8, "xtol": 1e-8, "gtol": 1e-8, "tr_solver": "lsmr"})
         nfev += r.nfev
+        ran_off = bool(np.any(size & (prob.split(r.x)[0] <= 0)))
         h = prob.distances(r.x)
         d = np.sqrt((h[:, 0] ** 2 + h[:, 0] * h[:, 1] + h[:, 1] ** 2) / 3.0)
         spread = 1.4826 * np.median(np.abs(h))
         limit = 5.0 * max(noise_px, spread)
         out = d > limit
-        if out.any():
+        if ran_off:
+            # the robust pass ran off along a direction the marks barely hold
+            # (a size went non-positive: no model there; the soft loss lets it
+            # drift): its distances test nothing, so no mark is left out, and
+            # the plain solve starts from the linear initialisation instead
+            pass
+        elif out.any():
             outliers = [(m.photo, m.edge, float(di)) for m, di, o in zip(kept, d, out, strict=True)
                         if o]
             for o in outliers:
@@ -650,7 +658,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
             return replace(sol, outliers=outliers, warnings=warnings + sol.warnings,
                            dropped=dropped + sol.dropped, nfev=nfev + sol.nfev,
                            seconds=time.perf_counter() - t0)
-        x0 = r.x
+        if not ran_off:
+            x0 = r.x
     return _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where)
 
 
