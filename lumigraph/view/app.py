@@ -17,7 +17,11 @@ segment [x0, y0, x1, y1] px, proposed}``):
 ``POST /api/facade/solve``                  ``{noise_px?}`` -> parameters, projected edges, residuals,
                                            ``weak`` (weakly constrained parameters and the
                                            unmarked edges that would hold them:
-                                           :func:`~lumigraph.view.marking.weak_spots`)
+                                           :func:`~lumigraph.view.marking.weak_spots`);
+                                           refused (422) when the marks do not constrain some
+                                           unknowns, with ``unconstrained``: per unknown, the
+                                           unmarked edges that would constrain it
+                                           (:func:`~lumigraph.view.marking.unconstrained_spots`)
 ``POST /api/facade/propose``                automatic marking -> ``{"proposals": […]}``
 ``POST /api/facade/resnap``                 ``{every?}`` after a solve: marks onto the image step
                                            within their edge's band -> ``{moved, flagged, deleted}``
@@ -84,7 +88,11 @@ def create_app(*, artifacts=(), facade=None):
 
     @app.errorhandler(EstimationError)
     def _fit(e):
-        return err(e.where, e.problem, 422)
+        body, status = err(e.where, e.problem, 422)
+        if getattr(e, "unconstrained", None) is not None:
+            # a Solve refused for unconstrained unknowns: what would constrain each
+            body = jsonify({"error": body.get_json()["error"], "unconstrained": e.unconstrained})
+        return body, status
 
     @app.errorhandler(LookupError)
     def _missing(e):

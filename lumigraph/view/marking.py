@@ -30,7 +30,11 @@ and undo it. ``solve`` runs
 marks and returns, per photograph, every model edge reprojected, each mark's
 RMS distance to its edge (px), and the weakly constrained parameters with
 the unmarked edges that would hold each best (:func:`weak_spots`: the
-user is told where the model is weak and what to mark there). ``propose`` runs
+user is told where the model is weak and what to mark there); when the
+solver refuses because the marks do not constrain some unknowns, the refusal
+carries, per unknown, the unmarked edges that would constrain it
+(:func:`unconstrained_spots`), so the user is told what to mark, not only
+what is free. ``propose`` runs
 :func:`~lumigraph.stereo.debevec1996.automark.automark` from the marks so far
 moves each proposal onto the intensity step it lies on (:func:`refine_on_edge`;
 dropped when it lies on none: a texture line), and keeps the proposals
@@ -315,6 +319,156 @@ def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
     return out
 
 
+def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_px: float = 1.0,
+                        marked=None, suggestions: int | None = None,
+                        where: str = "edges.json") -> list[dict]:
+    """The unmarked edges that would constrain what a solve refuses.
+
+    When no combination of the marks constrains some unknowns,
+    :func:`~lumigraph.stereo.debevec1996.solve.solve_facade` refuses
+    (:class:`~lumigraph.stereo.debevec1996.solve.Unconstrained`, naming
+    them: ``unknowns``). This says, for each, which unmarked (photograph,
+    edge) pairs would constrain it, ranked, as :func:`weak_spots` does for
+    the weakly constrained ones.
+
+    ``model`` a :class:`~lumigraph.stereo.debevec1996.model.BlockModel`,
+    ``marks`` the :class:`~lumigraph.stereo.debevec1996.edges.EdgeMarks`
+    the solve refused, ``K`` photo -> (3, 3) intrinsics (px), ``sizes``
+    photo -> (width, height) px, ``marked`` the ``(photo, edge)`` pairs
+    not to suggest (default: those of ``marks``), ``suggestions`` how many
+    per unknown (default :data:`WEAK_SUGGESTIONS`).
+
+    The poses to project candidate edges with come from the solve that
+    holds what the marks leave free (``hold_unconstrained``: the held
+    parameters at their starting values). At that solution the solver's
+    Jacobian of the signed end distances (eq. 5.3, both ends of every mark,
+    over the free parameters and every pose: the refused unknowns' columns
+    included) is column-scaled (by each column's norm over the marks and
+    the candidates) and its null space taken with the solver's own rank
+    test (singular values below ``RANK_RCOND`` times the largest). A
+    candidate (the in-frame stretch of an unmarked model edge, hidden by
+    the model's faces or not, ``hidden_in_solve`` says which) adds its two
+    rows; the null space left is the old one's part its rows do not see.
+    The candidate *constrains* an unknown when that unknown's weight in the
+    null space left is at most ``NULL_WEIGHT`` (the solver would no longer
+    name it); those are ranked by the unknown's first-order σ with the mark
+    added (``std_after``: the stacked Jacobian's pseudo-inverse, end
+    distances independent with standard deviation ``noise_px``; model
+    units, or for a pose the largest of its three columns'), best first.
+    After them come the candidates that only shrink the unknown's null
+    weight (``constrains`` false, ``std_after`` None: one of several marks
+    it needs), least weight left first. Returns ``[{parameter,
+    suggest: [{photo, edge, constrains, std_after, hidden_in_solve}]}]`` in
+    the order of ``unknowns`` (an unknown of a photograph the held solve
+    left out gets no suggestion); no suggestion at all when even the held
+    solve fails.
+
+    The test scene with every edge marked but the tower's top: its height
+    is free (its vertical edges slide along their own lines), and the edges
+    that fix it are the tower's top and the spire's (not the tower's
+    verticals, the longest).
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> seen = {p: [e for e in v if not e["edge"].startswith("tower/top")]
+    ...         for p, v in project_edges(m, cams).items()}
+    >>> marks = EdgeMarks.from_dict({"photographs": seen}, model=m, photographs=list(cams))
+    >>> K = {p: c["K"] for p, c in cams.items()}
+    >>> spots = unconstrained_spots(m, marks, K, {p: c["image_size"] for p, c in cams.items()},
+    ...                             ["tower/height"])
+    >>> first = spots[0]["suggest"][0]
+    >>> first["edge"].startswith("tower/top"), first["constrains"], first["std_after"] > 0
+    (True, True, True)
+    """
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import Mark
+    from lumigraph.stereo.debevec1996.solve import NULL_WEIGHT, RANK_RCOND, _Problem, solve_facade
+
+    suggestions = WEAK_SUGGESTIONS if suggestions is None else suggestions
+    unknowns = list(unknowns)
+    marked = {(m.photo, m.edge) for m in marks.marks} if marked is None else set(marked)
+    none = [{"parameter": u, "suggest": []} for u in unknowns]
+    try:
+        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained=True,
+                            where=where)
+    except EstimationError:
+        return none
+    photos = list(held.poses)
+    # the model's own free / fixed split (the held ones free again) at the held solution
+    at = model.with_values(held.params)
+    kept = {(p, e) for p, e, _ in held.mark_rms_px}
+    have = [m for m in marks.marks if (m.photo, m.edge) in kept]
+    cands, shown = [], set()
+    for p in photos:
+        R, t = held.poses[p]
+        cam = {p: {"K": held.K[p], "R": R, "t": t, "image_size": sizes[p]}}
+        shown |= {(p, e["edge"]) for e in project_edges(at, cam)[p]}
+        cands += [Mark(p, e["edge"], np.asarray(e["segment"], float))
+                  for e in project_edges(at, cam, occlusion=False)[p] if (p, e["edge"]) not in marked]
+    if not have or not cands:
+        return none
+    prob = _Problem(at, have + cands, photos, {p: held.K[p] for p in photos},
+                    np.array([held.poses[p][0] for p in photos]), free_focal=False)
+    x = prob.pack(at.values, np.zeros((len(photos), 3)),
+                  np.array([held.poses[p][1] for p in photos]))
+    _, cols, vals = prob.distances(x, jac=True)
+    J = np.zeros((prob.n, 2, prob.ncol))
+    for e in range(2):
+        J[np.arange(prob.n)[:, None], e, cols[e]] = vals[e]
+    names = prob.column_names()
+    ok = np.all(np.isfinite(J.reshape(prob.n, -1)), 1)
+    J[~ok] = 0.0
+    norms = np.linalg.norm(J.reshape(-1, prob.ncol), axis=0)
+    J = J / np.where(norms > 0, norms, 1.0)
+    E = J[:len(have)].reshape(-1, prob.ncol)
+    _, s, Vt = np.linalg.svd(E, full_matrices=True)
+    tau = RANK_RCOND * s[0]
+    N = Vt[int((s > tau).sum()):]                       # the null space, (k, ncol)
+    var = float(noise_px) ** 2
+    where_cols = {u: [i for i, n in enumerate(names) if n == u] for u in unknowns}
+
+    def weight(basis, c):                               # an unknown's weight in a null space
+        return max((float(np.linalg.norm(basis[:, i])) for i in c), default=0.0)
+
+    before = {u: weight(N, c) for u, c in where_cols.items()}
+    ranked = {u: ([], []) for u in unknowns}
+    for j, mk in enumerate(cands):
+        i = len(have) + j
+        if not ok[i]:
+            continue
+        _, sm, Vm = np.linalg.svd(J[i] @ N.T, full_matrices=True)
+        left = Vm[int((sm > tau).sum()):] @ N            # what this mark's rows do not see
+        std = None
+        for u in unknowns:
+            c = where_cols[u]
+            if not c:
+                continue
+            w_after = weight(left, c)
+            if w_after <= NULL_WEIGHT:
+                if std is None:
+                    _, s2, V2 = np.linalg.svd(np.vstack([E, J[i]]), full_matrices=False)
+                    keep = s2 > RANK_RCOND * s2[0]
+                    std = np.sqrt(var * ((V2[keep] / s2[keep, None]) ** 2).sum(0)) / np.where(
+                        norms > 0, norms, 1.0)
+                ranked[u][0].append((float(max(std[c])), mk))
+            elif w_after < before[u] - 1e-6:
+                ranked[u][1].append((w_after, mk))
+    out = []
+    for u in unknowns:
+        full, part = ranked[u]
+        rows = ([(mk, True, sd) for sd, mk in sorted(full, key=lambda t: t[0])]
+                + [(mk, False, None) for _, mk in sorted(part, key=lambda t: t[0])])
+        out.append({"parameter": u,
+                    "suggest": [{"photo": mk.photo, "edge": mk.edge, "constrains": c,
+                                 "std_after": sd, "hidden_in_solve": (mk.photo, mk.edge) not in shown}
+                                for mk, c, sd in rows[:suggestions]]})
+    return out
+
+
 class FacadeSession:
     """One photogrammetric-modelling session (module docstring).
 
@@ -340,6 +494,7 @@ class FacadeSession:
         self.marks: dict[int, dict] = {}
         self.proposals: dict[int, dict] = {}
         self.solution: dict | None = None
+        self.refusal: dict | None = None     # the last Solve's refusal, with what to mark
         self.proposal_warnings: list[str] = []
         self._next = 1
         self._lock = threading.RLock()
@@ -530,7 +685,8 @@ class FacadeSession:
     # ------------------------------------------------------------- the state
     def state(self) -> dict:
         """Everything the page shows: photographs (name, size), the model's
-        edge names, the marks, the pending proposals, the last solve."""
+        edge names, the marks, the pending proposals, the last solve (and
+        the last Solve's refusal, with what to mark)."""
         with self._lock:
             return {"photos": [{"index": i, "name": p, "width": self.sizes[p][0],
                                 "height": self.sizes[p][1]} for i, p in enumerate(self.photos)],
@@ -538,6 +694,7 @@ class FacadeSession:
                     "marks": list(self.marks.values()),
                     "proposals": list(self.proposals.values()),
                     "solution": self.solution,
+                    "refusal": self.refusal,
                     "edges_path": str(self.edges_path)}
 
     def edge_marks(self):
@@ -664,17 +821,38 @@ class FacadeSession:
         ``{parameters: {name: {value, std}}, rms_px, sigma_px, warnings,
         outliers: [{photo, edge, rms_px}], dropped, projected: {photo:
         {edge: [x0, y0, x1, y1]}}, residuals: {photo: {edge: rms px}},
-        residual_by_id: {mark id: rms px}}``; kept as the session's
-        solution (the proposals' starting point)."""
-        from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
+        residual_by_id: {mark id: rms px}, weak: [...] (:func:`weak_spots`)}``;
+        kept as the session's solution (the proposals' starting point).
+        A refusal because the marks do not constrain some unknowns raises
+        :class:`~lumigraph.stereo.debevec1996.solve.Unconstrained` with
+        ``unconstrained`` set to :func:`unconstrained_spots`' answer (the
+        unmarked edges that would constrain each), also kept as the
+        session's ``refusal`` ``{error, unconstrained}`` until the next
+        Solve."""
+        from lumigraph.stereo.debevec1996.solve import (
+            Unconstrained,
+            project_model_edges,
+            solve_facade,
+        )
 
         with self._lock:
             marks = self.edge_marks()
             if not marks.marks:
                 raise EstimationError(self.edges_path, "no marks tied to model edges yet: draw "
                                                        "segments and assign each to an edge")
-            sol = solve_facade(self.model, self._undistorted(marks), self._K(), noise_px=noise_px,
-                               where=str(self.edges_path))
+            try:
+                sol = solve_facade(self.model, self._undistorted(marks), self._K(),
+                                   noise_px=noise_px, where=str(self.edges_path))
+            except Unconstrained as e:
+                # the page lists, per refused unknown, the unmarked edges
+                # that would constrain it (what to mark next, not just names)
+                e.unconstrained = unconstrained_spots(
+                    self.model, self._undistorted(marks), self._K(), self.sizes, e.unknowns,
+                    noise_px=noise_px, where=str(self.edges_path),
+                    marked={(m["photo"], m["edge"]) for m in self.marks.values()})
+                self.refusal = {"error": str(e), "unconstrained": e.unconstrained}
+                raise
+            self.refusal = None
             self._sol = sol
             self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
             # the page's "weakly constrained" list: what to mark next
@@ -704,7 +882,9 @@ class FacadeSession:
         along the edge, a step not a line); the mark moves onto it when one
         is found, else it is flagged for the user. Not circular: a mark only
         ever moves to where the *image* shows a step; the model line only
-        bounds the search, and a band with no step moves nothing."""
+        bounds the search, and a band with no step moves nothing. A mark
+        whose band is wider than its photograph (the solve does not know
+        where the edge is: a parameter it barely holds) is left as it is."""
         from lumigraph.stereo.debevec1996.automark import edge_offset_std
         from lumigraph.stereo.debevec1996.edges import Mark
         from lumigraph.stereo.debevec1996.solve import project_model_edges
@@ -734,7 +914,9 @@ class FacadeSession:
             for k, m, s in zip(ids, ms, sd, strict=True):
                 w = 3.0 * float(np.sqrt(np.max(s) ** 2 + sol.sigma_px ** 2))
                 band[k] = w
-                if not np.all(np.isfinite(s)):
+                if not np.all(np.isfinite(s)) or w > max(self.sizes[m.photo]):
+                    # the solve does not know where this edge is (a band wider
+                    # than the photograph): nothing to search, the mark stays
                     continue
                 a, b = (np.asarray(v, float) for v in lines[m.photo][m.edge])
                 d = (b - a) / max(np.hypot(*(b - a)), 1e-9)

@@ -54,7 +54,8 @@ independent with variance ``σ²`` (estimated from the residual distances,
 the origin, axis-aligned); the scale comes from the fixed parameter(s): at
 least one length must be fixed. Unconstrained unknowns (no mark constrains a
 parameter, a photograph with too few marks) are found by a rank test of the
-column-scaled Jacobian at the start and named in an :class:`EstimationError`.
+column-scaled Jacobian at the start and named in an :class:`EstimationError`
+(:class:`Unconstrained`, which also carries the names).
 A photograph with fewer than three marks (six constraints on its six pose
 unknowns) is left out with a warning.
 
@@ -99,6 +100,26 @@ FIXTURE = {"blocks": [
     {"name": "tower", "kind": "box", "parent": "house", "on": "base", "x": "offset", "y": "front",
      "params": {"width": 3.0, "depth": {"same_as": "tower/width"}, "height": 9.0,
                 "offset_x": 6.5}}]}
+
+
+class Unconstrained(EstimationError):
+    """The solver's refusal when no combination of the marks constrains some
+    unknowns (the rank test of the column-scaled Jacobian at the start):
+    an :class:`EstimationError` (exit 2 on the command line) that also
+    carries the unknowns' names, ``unknowns`` (parameter names as the
+    model's slots, ``"<photo>:position"`` / ``"<photo>:rotation"`` for a
+    pose, ``"focal_scale"``), so a caller can say what would constrain each
+    (:func:`lumigraph.view.marking.unconstrained_spots`).
+
+    >>> str(Unconstrained("edges.json", ("tower/height",))).split(":")[:2]
+    ['edges.json', ' the marks do not constrain tower/height']
+    """
+
+    def __init__(self, where, unknowns):
+        self.unknowns = tuple(unknowns)
+        super().__init__(where, "the marks do not constrain " + ", ".join(self.unknowns)
+                         + ": mark more edges of those blocks / photographs, share or fix "
+                           "those parameters")
 
 
 @dataclass(frozen=True)
@@ -417,7 +438,14 @@ def _linear_translations(prob: _Problem, R, th_start, cams_only=None):
     return th, t
 
 
-def _rank_deficient(J, names, *, rcond=1e-9):
+# the rank test: a singular value of the column-scaled Jacobian below this
+# times the largest is a null direction, and an unknown with more than
+# NULL_WEIGHT of it in a null direction is unconstrained
+RANK_RCOND = 1e-9
+NULL_WEIGHT = 0.1
+
+
+def _rank_deficient(J, names, *, rcond=RANK_RCOND):
     """The unknowns no combination of marks constrains: names with weight in
     the null space of the column-scaled Jacobian."""
     J = np.asarray(J)
@@ -436,7 +464,7 @@ def _rank_deficient(J, names, *, rcond=1e-9):
     _, s, Vt = np.linalg.svd(Js, full_matrices=False)
     null = Vt[s < rcond * s[0]] if s.size else Vt[:0]
     for v in null:
-        for i in np.flatnonzero(np.abs(v) > 0.1):
+        for i in np.flatnonzero(np.abs(v) > NULL_WEIGHT):
             bad.add(names[keep[i]])
     return sorted(bad, key=names.index)
 
@@ -564,7 +592,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                               "(a block of zero size?): check the starting values in blocks.json")
     # a rough solve (hold_unconstrained) also holds what the marks barely
     # constrain: with four noisy marks a weak direction wanders far
-    bad = _rank_deficient(J0, names, rcond=1e-3 if hold_unconstrained else 1e-9)
+    bad = _rank_deficient(J0, names, rcond=1e-3 if hold_unconstrained else RANK_RCOND)
     if bad and hold_unconstrained:
         # hold the model's unconstrained parameters first; only a photograph
         # still unconstrained with them held is left out
@@ -583,9 +611,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         return replace(sol, warnings=warnings + sol.warnings, dropped=dropped + lost + sol.dropped,
                        held=tuple(held) + sol.held)
     if bad:
-        raise EstimationError(where, "the marks do not constrain " + ", ".join(dict.fromkeys(bad))
-                              + ": mark more edges of those blocks / photographs, share or fix "
-                                "those parameters")
+        raise Unconstrained(where, tuple(dict.fromkeys(bad)))
     dense = prob.ncol <= DENSE_MAX_COLUMNS
     kw = dict(method="trf", x_scale="jac", ftol=1e-14, xtol=1e-14, gtol=1e-14,
               max_nfev=max_iterations, tr_solver="exact" if dense else "lsmr")
@@ -600,12 +626,19 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                           # iterative trust-region solver (an SVD per step costs more)
                           **{**kw, "ftol": 1e-8, "xtol": 1e-8, "gtol": 1e-8, "tr_solver": "lsmr"})
         nfev += r.nfev
+        ran_off = bool(np.any(size & (prob.split(r.x)[0] <= 0)))
         h = prob.distances(r.x)
         d = np.sqrt((h[:, 0] ** 2 + h[:, 0] * h[:, 1] + h[:, 1] ** 2) / 3.0)
         spread = 1.4826 * np.median(np.abs(h))
         limit = 5.0 * max(noise_px, spread)
         out = d > limit
-        if out.any():
+        if ran_off:
+            # the robust pass ran off along a direction the marks barely hold
+            # (a size went non-positive: no model there; the soft loss lets it
+            # drift): its distances test nothing, so no mark is left out, and
+            # the plain solve starts from the linear initialisation instead
+            pass
+        elif out.any():
             outliers = [(m.photo, m.edge, float(di)) for m, di, o in zip(kept, d, out, strict=True)
                         if o]
             for o in outliers:
@@ -625,7 +658,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
             return replace(sol, outliers=outliers, warnings=warnings + sol.warnings,
                            dropped=dropped + sol.dropped, nfev=nfev + sol.nfev,
                            seconds=time.perf_counter() - t0)
-        x0 = r.x
+        if not ran_off:
+            x0 = r.x
     return _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where)
 
 

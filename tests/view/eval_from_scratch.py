@@ -23,13 +23,18 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     REF_DRAWS=20 ... (fresh noise draws for the fully marked solve's expected error)
     ATTRIB=tower/width ... (each mark's share of that parameter's error)
     PARAMS=1 ... (the parameters with the largest errors, in the fully marked solve's σ)
-    TRIES=3 ... (rounds of four hand marks on the blocks a refusal names)
+    TRIES=3 ... (rounds of four hand marks after a refusal)
+    REFUSAL=list / REFUSAL=blocks ... (after a refusal the user marks from the
+        refusal's list of edges that would constrain each unknown, the
+        default; or, before the sixth pass, the four longest unmarked edges
+        of the blocks it names)
 
 Per seed: four hand marks per photograph (the longest two vertical and two
 horizontal edges of the scene's σ = 0.5 px marks, dragged with another 0.5 px
 of noise), Propose, each proposal accepted when within 1.5 px of its true
-edge line, the blocks a refusal names marked by hand (the four longest
-unmarked edges), Solve; the edges the solve's weak list suggests that the
+edge line, Solve; on a refusal (the marks do not constrain some
+unknowns) up to four of the edges its list says would constrain them
+marked by hand (at most three rounds), Solve; the edges the solve's weak list suggests that the
 photograph shows marked by hand (up to four per weak parameter), Solve; then
 (ROUNDS, two) Re-snap to the model, Propose again, accept as before, Solve
 again, the weak list's edges again; the RMS relative parameter error against
@@ -45,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, truth_lines  # noqa: E402
+from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, refusal_marks, truth_lines  # noqa: E402
 
 from lumigraph.capture.render import render  # noqa: E402
 from lumigraph.stereo.debevec1996.edges import load_edges  # noqa: E402
@@ -150,14 +155,25 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             # (the last try's marks are solved too: before, they were added unsolved)
             if "do not constrain" not in err or attempt == tries:
                 break
-            blocks = {n.split("/")[0] for n in err.split("constrain ")[1].split(":")[0].split(", ")}
             have = {(m["photo"], m["edge"]) for m in ses.marks.values()}
-            todo = sorted(((np.hypot(m["segment"][2] - m["segment"][0],
-                                     m["segment"][3] - m["segment"][1]), p, m)
-                           for p in ses.photos for m in full[p]
-                           if m["edge"].split("/")[0] in blocks and (p, m["edge"]) not in have),
-                          key=lambda t: -t[0])
-            for _, p, m in todo[:4]:
+            if os.environ.get("REFUSAL", "list") == "list":
+                todo = refusal_marks(r.get_json().get("unconstrained", []), full, have)
+            else:
+                # (before the sixth pass) the four longest unmarked edges of the named blocks
+                blocks = {n.split("/")[0] for n in err.split("constrain ")[1].split(":")[0].split(", ")}
+                todo = [(p, m) for _, p, m in sorted(
+                    ((np.hypot(m["segment"][2] - m["segment"][0], m["segment"][3] - m["segment"][1]),
+                      p, m) for p in ses.photos for m in full[p]
+                     if m["edge"].split("/")[0] in blocks and (p, m["edge"]) not in have),
+                    key=lambda t: -t[0])][:4]
+            if os.environ.get("VERBOSE"):
+                print("  refused:", err.split(": ", 1)[1][:160])
+                for u in r.get_json().get("unconstrained", []):
+                    print(f"    {u['parameter']}:", [(q["photo"], q["edge"], q["constrains"],
+                                                     q["edge"] in {m["edge"] for m in full[q["photo"]]})
+                                                    for q in u["suggest"]])
+                print("    marked:", [(p, m["edge"]) for p, m in todo])
+            for p, m in todo:
                 drag(p, m)
                 extra += 1
         if r.status_code != 200:

@@ -31,3 +31,26 @@ def distance(seg, line) -> float:
     n = np.array([-d[1], d[0]])
     s = np.asarray(seg, float)
     return float(max(abs((s[:2] - a) @ n), abs((s[2:] - a) @ n)))
+
+
+def refusal_marks(unconstrained, full, have, *, most=4):
+    """The simulated user's answer to a refusal: the page lists, per
+    unconstrained unknown, the unmarked edges that would constrain it
+    (``unconstrained`` of the Solve's 422 answer); the user marks by hand
+    up to ``most`` of them (as many hand marks a round as before the
+    list), taking each unknown's list in turn, best first, and skipping an
+    edge the photograph does not show (not among the scene's marks
+    ``full``) or already marked (``have``). Returns ``[(photo, mark)]``."""
+    byedge = {p: {m["edge"]: m for m in ms} for p, ms in full.items()}
+    queues = [[q for q in u["suggest"] if q["edge"] in byedge.get(q["photo"], {})]
+              for u in unconstrained]
+    out, taken = [], set(have)
+    while len(out) < most and any(queues):
+        for qs in queues:
+            while qs and (qs[0]["photo"], qs[0]["edge"]) in taken:
+                qs.pop(0)
+            if qs and len(out) < most:
+                q = qs.pop(0)
+                taken.add((q["photo"], q["edge"]))
+                out.append((q["photo"], byedge[q["photo"]][q["edge"]]))
+    return out

@@ -15,7 +15,9 @@ screenshot: the reprojected edge's colour
 (red) drawn along the true line of the edge it drew. A second scene, the
 wing's right side marked once: Solve lists wing/width as weakly constrained,
 a click on a suggested edge opens its photograph with the edge highlighted,
-and marking it there lowers the width's σ.
+and marking it there lowers the width's σ. A third, the tower's top and the
+spire unmarked: Solve is refused, and the panel lists the edges that would
+constrain the tower's and the spire's heights, leading to them.
 """
 
 from __future__ import annotations
@@ -260,6 +262,49 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
                  "document.getElementById('status').textContent.startsWith('solved')", 60)
         after = d.execute_script("return window.lumiMark.state.solution")
         assert after["parameters"]["wing/width"]["std"] < w["std"]
+
+
+def test_a_refusal_lists_the_edges_that_would_constrain_and_leads_to_them(browser, tmp_path):
+    """The scene's marks without the tower's top and the spire: Solve is
+    refused (tower/height, spire/height free); the Solve panel shows the
+    refusal and, per unknown, the edges that would constrain it; clicking
+    the first tower/height suggestion the photographs show opens its
+    photograph with the edge highlighted."""
+    from selenium.webdriver.common.by import By
+
+    from lumigraph.capture.render import render
+    from lumigraph.view.app import create_app
+    from lumigraph.view.marking import FacadeSession
+
+    s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
+               edge_noise=EDGE_NOISE_PX)
+    folder = s.save(tmp_path / "scene")
+    body = json.loads((folder / "edges.json").read_text())
+    full = {p: list(v) for p, v in body["photographs"].items()}
+    for p, ms in body["photographs"].items():
+        body["photographs"][p] = [m for m in ms if not m["edge"].startswith(("tower/top", "spire/"))]
+    edges = tmp_path / "edges.json"
+    edges.write_text(json.dumps(body))
+    session = FacadeSession.open(folder, edges=edges)
+    d = browser
+    with _served(create_app(artifacts=[], facade=session)) as server:
+        d.get(f"http://127.0.0.1:{server.port}/")
+        _idle(d)
+        d.find_element(By.ID, "solve").click()
+        _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.refusal !== null", 60)
+        ref = d.execute_script("return window.lumiMark.state.refusal")
+        assert "do not constrain" in d.find_element(By.CSS_SELECTOR, "#unconstrained .refused").text
+        u = next(u for u in ref["unconstrained"] if u["parameter"] == "tower/height")
+        items = d.find_elements(By.CSS_SELECTOR,
+                                '#unconstrained li[data-parameter="tower/height"] button.suggest')
+        assert len(items) == len(u["suggest"]) > 0
+        k, q = next((k, q) for k, q in enumerate(u["suggest"])
+                    if any(m["edge"] == q["edge"] for m in full[q["photo"]]))
+        items[k].click()
+        _wait(d, "return window.lumiMark.busy === 0")
+        names = [p["name"] for p in d.execute_script("return window.lumiMark.state.photos")]
+        assert names[d.execute_script("return window.lumiMark.photo")] == q["photo"]
+        assert d.find_element(By.CSS_SELECTOR, "#edge-list li.current").text == q["edge"]
 
 
 def _four_hand_marks_sorted(folder, marks):

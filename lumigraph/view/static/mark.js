@@ -200,16 +200,71 @@
   }
   function renderSolution() {
     const sol = S.state.solution;
+    const ref = S.state.refusal;
     const d = $("solution");
-    if (!sol) { d.textContent = "not solved yet"; return; }
+    if (!sol && !ref) { d.textContent = "not solved yet"; return; }
+    d.innerHTML = "";
+    if (ref) renderRefusal(d, ref);
+    if (!sol) return;
     const rows = Object.entries(sol.parameters)
       .map(([n, v]) => `<tr><td>${n}</td><td>${v.value.toFixed(4)}</td><td>± ${v.std.toExponential(1)}</td></tr>`)
       .join("");
     const warn = sol.warnings.map((w) => `<li>${w.replace(/</g, "&lt;")}</li>`).join("");
     const out = sol.outliers.map((o) => `<li>mis-marked? ${o.photo} ${o.edge} (${o.rms_px.toFixed(1)} px)</li>`).join("");
-    d.innerHTML = `<p id="solve-rms">RMS ${sol.rms_px.toFixed(3)} px, σ ${sol.sigma_px.toFixed(3)} px</p>` +
-      `<ul>${warn}${out}</ul><div id="weak"></div><table>${rows}</table>`;
+    d.insertAdjacentHTML("beforeend",
+      (ref ? `<p class="hint">the last solve that succeeded:</p>` : "") +
+      `<p id="solve-rms">RMS ${sol.rms_px.toFixed(3)} px, σ ${sol.sigma_px.toFixed(3)} px</p>` +
+      `<ul>${warn}${out}</ul><div id="weak"></div><table>${rows}</table>`);
     renderWeak(sol.weak || []);
+  }
+  // a click on a suggested edge opens its photograph with the edge highlighted
+  function suggestButton(q, title) {
+    const a = document.createElement("button");
+    a.type = "button";
+    a.className = "suggest";
+    a.title = title;
+    a.textContent = `${q.photo} ${q.edge}` + (q.hidden_in_solve ? " (hidden in the solve?)" : "");
+    a.addEventListener("click", async () => {
+      const i = S.state.photos.findIndex((p) => p.name === q.photo);
+      if (i >= 0) await choosePhoto(i);
+      S.currentEdge = q.edge;
+      status(`${q.edge} highlighted on ${q.photo}: drag it if you see it, then click the edge`);
+      renderSide();
+      draw();
+    });
+    return a;
+  }
+  // the last Solve refused (the marks do not constrain some unknowns): its
+  // line, and per unknown the unmarked edges that would constrain it (the
+  // server's unconstrained_spots), in the weak list's look
+  function renderRefusal(d, ref) {
+    const box = document.createElement("div");
+    box.id = "unconstrained";
+    const e = document.createElement("p");
+    e.className = "refused";
+    e.textContent = `Not solved: ${ref.error}`;
+    box.appendChild(e);
+    const items = (ref.unconstrained || []).filter((u) => u.suggest.length);
+    if (items.length) {
+      const h = document.createElement("p");
+      h.className = "weak-head";
+      h.textContent = "Unconstrained (mark the edges below where the photograph shows them, then Solve):";
+      box.appendChild(h);
+      const ul = document.createElement("ul");
+      for (const u of items) {
+        const li = document.createElement("li");
+        li.dataset.parameter = u.parameter;
+        li.textContent = `${u.parameter}: `;
+        for (const q of u.suggest) {
+          li.appendChild(suggestButton(q, q.constrains
+            ? `with this edge marked: ${u.parameter} ± ${q.std_after.toPrecision(2)} (at the solve's noise)`
+            : `one of the edges ${u.parameter} needs (this one alone does not fix it)`));
+        }
+        ul.appendChild(li);
+      }
+      box.appendChild(ul);
+    }
+    d.appendChild(box);
   }
   // the parameters the marks hold clearly less well than the rest, each with
   // the unmarked edges that would hold it best (the server's weak_spots):
@@ -228,20 +283,8 @@
       li.dataset.parameter = w.parameter;
       li.textContent = `${w.parameter} ± ${pct(w.rel_std)} (median parameter ± ${pct(w.median_rel_std)}): `;
       for (const q of w.suggest) {
-        const a = document.createElement("button");
-        a.type = "button";
-        a.className = "suggest";
-        a.title = `with this edge marked: ${w.parameter} ± ${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`;
-        a.textContent = `${q.photo} ${q.edge}` + (q.hidden_in_solve ? " (hidden in the solve?)" : "");
-        a.addEventListener("click", async () => {
-          const i = S.state.photos.findIndex((p) => p.name === q.photo);
-          if (i >= 0) await choosePhoto(i);
-          S.currentEdge = q.edge;
-          status(`${q.edge} highlighted on ${q.photo}: drag it if you see it, then click the edge`);
-          renderSide();
-          draw();
-        });
-        li.appendChild(a);
+        li.appendChild(suggestButton(q, `with this edge marked: ${w.parameter} ± ` +
+          `${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`));
       }
       ul.appendChild(li);
     }
@@ -405,6 +448,9 @@
       status("not solved");
     }
     await refresh();
+    if (S.state.refusal && S.state.refusal.unconstrained.some((u) => u.suggest.length)) {
+      status("not solved: the Solve panel lists the edges that would constrain what it refused");
+    }
   });
   $("propose").addEventListener("click", async () => {
     status("proposing (detecting lines, matching the model)…");
