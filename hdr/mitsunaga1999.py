@@ -731,6 +731,7 @@ RATIO_FLOOR_MARGIN = 1.0 / math.sqrt(2.0 * RATIO_FLOOR_LN_BIAS)
 # clip (at 4σ the clipped tail moves the mean by under 1e-5 of it); near the top the curve
 # is well determined, and a wider margin starves pairs with few mid-range pixels.
 RATIO_MARGIN = 4.0
+RATIO_PRIOR_SD = 0.05  # ln sd given the fit's adjacent ratios in the final graph
 RATIO_ITERS = 6  # selection-ratio fixed-point iterations
 RATIO_OUTLIER = 6.0  # robust z-score beyond which a pixel's ratio is dropped (motion, flare)
 
@@ -814,73 +815,93 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
     flat = z.reshape(p, n, c)
     if n > RATIO_PIXELS:
         flat = flat[:, np.round(np.linspace(0, n - 1, RATIO_PIXELS)).astype(np.int64)]
-    d_fit = np.diff(ln_e)
-    d_new = d_fit.copy()
-    record = []
+    codes = np.arange(code_max + 1)
+    tables = []
+    for ch in range(c):
+        x_tab = np.exp(lfs[ch])
+        a, b = (noise[ch] if noise is not None else (0.0, 0.0))
+        sd = np.sqrt(np.maximum(a * x_tab + b, 0.0))
+        k_lo = int(math.ceil(lo[ch] * code_max - 1e-9))
+        k_hi = int(math.floor(hi[ch] * code_max + 1e-9))
+        inside = (codes >= k_lo) & (codes <= k_hi)
+        floor_ok = inside & (x_tab - RATIO_FLOOR_MARGIN * sd >= x_tab[min(k_lo, code_max)])
+        ceil_ok = inside & (x_tab + RATIO_MARGIN * sd <= x_tab[max(k_hi, 0)])
+        if k_hi <= k_lo or not floor_ok.any() or not ceil_ok.any():
+            tables.append(None)
+            continue
+        tables.append((x_tab, a, b, x_tab[np.flatnonzero(floor_ok)[0]],
+                       x_tab[np.flatnonzero(ceil_ok)[-1]]))
+    rows, rhs, wts, record = [], [], [], []
+    for qa in range(p - 1):
+        for qb in range(qa + 1, min(qa + MAX_PAIR_GAP, p - 1) + 1):
+            ests, vars_, kept = [], [], []
+            d0 = float(ln_e[qb] - ln_e[qa])
+            # Each condition is tested on a third exposure where there is one, whose
+            # noise is independent of both values summed: the floor (the darker value's
+            # truth above it) on the next brighter than the darker one, the ceiling on
+            # the next darker than the brighter one; at the bracket's ends, on the pair's
+            # other value. A clipped third value errs on the safe side.
+            q_fl = qa + 1 if qa + 1 < qb else (qb + 1 if qb + 1 < p else qb)
+            q_ce = qb - 1 if qb - 1 > qa else (qa - 1 if qa >= 1 else qa)
+            for ch, tab in enumerate(tables):
+                if tab is None:
+                    continue
+                x_tab, a, b, x_floor, x_ceil = tab
+                xa, xb = x_tab[flat[qa, :, ch]], x_tab[flat[qb, :, ch]]
+                x_fl, x_ce = x_tab[flat[q_fl, :, ch]], x_tab[flat[q_ce, :, ch]]
+                # the selection uses the ratios: iterated to a fixed point, and a channel
+                # whose estimate moves its own selection away (a toe the curve cannot
+                # read: film base, codes 15 and 25 ten stops apart) is not used
+                ln_r, converged, var, k = d0, False, math.inf, 0
+                for _ in range(RATIO_ITERS):
+                    # ln of each selecting exposure over the pair's darker/brighter one
+                    s_fl = ln_r if q_fl == qb else float(ln_e[q_fl] - ln_e[qa])
+                    s_ce = ln_r if q_ce == qa else float(ln_e[qb] - ln_e[q_ce])
+                    sel = (x_fl >= math.exp(s_fl) * x_floor) & (x_ce * math.exp(s_ce) <= x_ceil)
+                    if sel.sum() < min_pixels:
+                        break
+                    va = vb = None
+                    if a > 0 or b > 0:
+                        va, vb = a * xa[sel] + b, a * xb[sel] + b
+                    new, var, k = ratio_of_sums(xa[sel], xb[sel], var_a=va, var_b=vb)
+                    if not np.isfinite(new):
+                        break
+                    if abs(new - ln_r) < 1e-4:
+                        ln_r, converged = new, True
+                        break
+                    ln_r = new
+                if converged and k >= min_pixels and 0 < var < math.inf:
+                    ests.append(ln_r)
+                    vars_.append(var)
+                    kept.append(k)
+                    row = np.zeros(p)
+                    row[qb], row[qa] = 1.0, -1.0
+                    rows.append(row)
+                    rhs.append(ln_r)
+                    wts.append(1.0 / var)
+            if qb == qa + 1 or ests:
+                record.append({"exposures": [qa, qb], "pixels": kept,
+                               "ln_ratio_per_channel": ests, "fit_ln_ratio": d0})
+    # The exposure graph by weighted least squares (the fit's own gauge: the mean ln
+    # exposure kept). The fit's adjacent ratios enter with an sd of 0.05 in ln, so a
+    # pair no channel could read keeps the fit's ratio and the graph stays connected;
+    # against a measured pair's sd (0.0001-0.003) their weight is under 0.4 %.
     for q in range(p - 1):
-        ests, vars_, kept = [], [], []
-        r0 = math.exp(d_fit[q])
-        for ch in range(c):
-            lf = lfs[ch]
-            x_tab = np.exp(lf)
-            a, b = (noise[ch] if noise is not None else (0.0, 0.0))
-            sd = np.sqrt(np.maximum(a * x_tab + b, 0.0))
-            k_lo = int(math.ceil(lo[ch] * code_max - 1e-9))
-            k_hi = int(math.floor(hi[ch] * code_max + 1e-9))
-            if k_hi <= k_lo:
-                continue
-            codes = np.arange(code_max + 1)
-            inside = (codes >= k_lo) & (codes <= k_hi)
-            floor_ok = inside & (x_tab - RATIO_FLOOR_MARGIN * sd >= x_tab[k_lo])
-            ceil_ok = inside & (x_tab + RATIO_MARGIN * sd <= x_tab[k_hi])
-            if not floor_ok.any() or not ceil_ok.any():
-                continue
-            x_floor = x_tab[np.flatnonzero(floor_ok)[0]]
-            x_ceil = x_tab[np.flatnonzero(ceil_ok)[-1]]
-            xa, xb = x_tab[flat[q, :, ch]], x_tab[flat[q + 1, :, ch]]
-            # Where a third exposure exists the conditions are tested on it (the next
-            # brighter for the floor, the next darker for the ceiling): its noise is
-            # independent of both values summed. A clipped third value errs on the
-            # safe side (a saturated code is at most the truth).
-            up = x_tab[flat[q + 2, :, ch]] if q + 2 < p else None
-            down = x_tab[flat[q - 1, :, ch]] if q >= 1 else None
-            r_up = math.exp(d_fit[q + 1]) if up is not None else 1.0
-            r_down = math.exp(d_fit[q - 1]) if down is not None else 1.0
-            # The selection uses the ratio; iterated to a fixed point, and a channel
-            # whose estimate moves its own selection (a toe the curve cannot read:
-            # film base, where code 15 and 25 lie ten stops apart) is not used.
-            r, ln_r, converged = r0, math.nan, False
-            for _ in range(RATIO_ITERS):
-                low_ok = (up >= r_up * r * x_floor) if up is not None else (xb >= r * x_floor)
-                high_ok = ((down * r_down * r <= x_ceil) if down is not None
-                           else (xa * r <= x_ceil))
-                sel = low_ok & high_ok
-                if sel.sum() < min_pixels:
-                    break
-                va = vb = None
-                if noise is not None and (a > 0 or b > 0):
-                    va, vb = a * xa[sel] + b, a * xb[sel] + b
-                ln_r, var, k = ratio_of_sums(xa[sel], xb[sel], var_a=va, var_b=vb)
-                if not np.isfinite(ln_r):
-                    break
-                if abs(ln_r - math.log(r)) < 1e-4:
-                    converged = True
-                    break
-                r = math.exp(ln_r)
-            if converged and k >= min_pixels and var > 0:
-                ests.append(ln_r)
-                vars_.append(var)
-                kept.append(k)
-        if ests:
-            wts = 1.0 / np.array(vars_)
-            d_new[q] = float(np.sum(wts * np.array(ests)) / np.sum(wts))
-            record.append({"pixels": kept, "ln_ratio_per_channel": ests,
-                           "sd_ln": float(1.0 / math.sqrt(np.sum(wts))),
-                           "fit_ln_ratio": float(d_fit[q])})
-        else:
-            record.append({"pixels": [], "kept_fit": True, "fit_ln_ratio": float(d_fit[q])})
-    out = np.concatenate([[0.0], np.cumsum(d_new)])
-    return out - out.mean() + ln_e.mean(), {"pairs": record}
+        row = np.zeros(p)
+        row[q + 1], row[q] = 1.0, -1.0
+        rows.append(row)
+        rhs.append(float(ln_e[q + 1] - ln_e[q]))
+        wts.append(1.0 / RATIO_PRIOR_SD ** 2)
+    a_m = np.array(rows) * np.sqrt(np.array(wts))[:, None]
+    b_v = np.array(rhs) * np.sqrt(np.array(wts))
+    gauge = np.full((1, p), 1.0 / p) * math.sqrt(max(wts))
+    sol = np.linalg.lstsq(np.vstack([a_m, gauge]),
+                          np.concatenate([b_v, [float(ln_e.mean()) * math.sqrt(max(wts))]]),
+                          rcond=None)[0]
+    cov = np.linalg.pinv(a_m.T @ a_m + gauge.T @ gauge)
+    diff_sd = [float(math.sqrt(max(cov[q, q] + cov[q + 1, q + 1] - 2 * cov[q, q + 1], 0.0)))
+               for q in range(p - 1)]
+    return sol, {"pairs": record, "sd_ln_adjacent": diff_sd}
 
 
 def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,

@@ -126,5 +126,5 @@ def test_refine_exposures_with_the_true_curve_recovers_the_ratios():
     le, rec = mn.refine_exposures(z, [lf], ln_e + [0.0, 0.03, -0.02, 0.0], np.array([0.01]),
                                   np.array([0.99]), [(a, b)], zmax)
     err = np.diff(le) - np.diff(ln_e)
-    sds = np.array([r["sd_ln"] for r in rec["pairs"]])
+    sds = np.array(rec["sd_ln_adjacent"])
     assert np.all(np.abs(err) < 4 * sds), (err, sds)
