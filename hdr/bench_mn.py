@@ -32,6 +32,8 @@ STAGE = "hdr"
 ORDER_SEEDS = (0, 1, 2, 3, 4)
 TIME_ERROR_SD = 0.10  # ln sd of the rough times (about 10 %, a nominal shutter's spread)
 DRAWS = 20
+HELD_OUT_SEED = 3
+HELD_OUT_KINDS = ("walls", "outdoor", "night")  # the reported kinds
 RATIO_KIND = "walls"  # 9 exposures one stop apart: the most ratios to refine (quick: the only one)
 
 
@@ -126,6 +128,13 @@ def mn_rows(*, quick: bool = False, size=None) -> tuple[list[Row], list[Check]]:
         r_rows, r_checks = _ratio_rows(kind, quick, size)
         rows += r_rows
         checks += r_checks
+    # The final-ratio estimator (refine_exposures) was changed after night failed, with
+    # night and outdoor looked at: family seed 3, used by no other row, holds it out.
+    if not quick:
+        for kind in HELD_OUT_KINDS:
+            r_rows, r_checks = _ratio_rows(kind, quick, size, seed=HELD_OUT_SEED)
+            rows += r_rows
+            checks += r_checks
     mem = _memorial_rows(seeds)
     rows += mem[0]
     checks += mem[1]
@@ -135,14 +144,16 @@ def mn_rows(*, quick: bool = False, size=None) -> tuple[list[Row], list[Check]]:
     return rows, checks
 
 
-def _ratio_rows(kind: str, quick: bool, size) -> tuple[list[Row], list[Check]]:
-    """The refined ratios of ``kind`` (seed 1, 8 bits) over rough-time draws: ours
+def _ratio_rows(kind: str, quick: bool, size, seed: int = 1) -> tuple[list[Row], list[Check]]:
+    """The refined ratios of ``kind`` (``seed``, 8 bits) over rough-time draws: ours
     against the information bound, and with one or two exposures known exactly."""
     from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
 
     rows: list[Row] = []
     checks: list[Check] = []
-    z, t, gt, split = _family_seed(kind, 8, 1, size)
+    z, t, gt, split = _family_seed(kind, 8, seed, size)
+    if seed != 1:
+        split = f"held-out seed {seed}"
     ln_t = np.log(t)
     true_r = np.diff(ln_t)
     rng = np.random.default_rng(13)
@@ -161,7 +172,7 @@ def _ratio_rows(kind: str, quick: bool, size) -> tuple[list[Row], list[Check]]:
                                     reference_times={0: t[0], t.size - 1: t[-1]})
         two_ref.append(float(np.max(np.abs(np.array(r2.fit["refined_ratios_ascending"])
                                            / np.exp(true_r) - 1))))
-    case = f"family {kind} 8-bit seed 1, rough times (ln sd {TIME_ERROR_SD})"
+    case = f"family {kind} 8-bit seed {seed}, rough times (ln sd {TIME_ERROR_SD})"
     mo, mb = float(np.median(ours)), float(np.median(bound))
     rows.append(Row(STAGE, case, "mitsunaga-nayar (ours), refined ratios", None, "draws", draws,
                     math.nan, (), mo, "ok", {"per_draw": ours, "split": split}))

@@ -63,7 +63,9 @@ order at 3 and skips the ratio update):
   standard error of the best") picked 6/9/6 and 6/9/9 on Memorial with seeds
   0 and 1 (docs/decisions/hdr-mitsunaga-stable.md);
 - the final curve is bias-corrected by a parametric bootstrap (:func:`_debias`,
-  as Debevec's): the noise and the floor at code 0 bias the dark codes;
+  as Debevec's): the noise and the floor at code 0 bias the dark codes; the
+  noise it renders is measured by Debevec's fit at the exposures this fit
+  found (at rough times the residuals hold the times' errors too);
 - the final exposure ratios from linear sums through the corrected curve
   over every pixel (:func:`refine_exposures`): an ln-domain fit reads each
   dark code low by ``Var x / 2X²``, a per-cent bias on a read-noise-limited
@@ -684,6 +686,7 @@ def table_from_poly(a: np.ndarray, bit_depth: int,
     return np.exp(out)
 
 
+NOISE_COMPARE_X = 0.25  # the two noise readings compared at a quarter of the top code's X
 BIAS_DRAWS = 4  # renders of the fitted bracket stacked in the bias correction's refit
 
 
@@ -1102,6 +1105,19 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
     except np.linalg.LinAlgError:
         raise EstimationError("images", "too few pixels seen unclipped in two exposures for "
                                         "Mitsunaga-Nayar") from None
+    noise_rough = noise_top
+    if noise_top is not None and (bias_draws > 0 or refine_ratios):
+        # The noise again, by Debevec's fit at the exposures this fit found: at rough times
+        # the residuals hold the times' errors too (outdoor, ±10 %: the shot-noise level
+        # read 1.3-5x too high), and the bias correction and the sums' margins scale with it.
+        # Time errors and curve misfit only add to the residuals, so per channel the
+        # lower of the two readings is kept (a film scan's joint fit, with its ratios
+        # 0.5-1.3 stops for Memorial's 1-stop steps, reads higher than the given times).
+        at_fit = response_debevec1997(
+            z, np.exp(align_power(le, ln_nom, reference=ref)[1]), bit_depth=bd,
+            samples=samples, bias_draws=0, rng=np.random.default_rng(0)).fit["noise"]["a_b_top"]
+        noise_top = [min(nr, nf, key=lambda ab: ab[0] * NOISE_COMPARE_X + ab[1])
+                     for nr, nf in zip(noise_rough, at_fit, strict=True)]
     monotone = [is_monotone(a, m_range, zmax) for a, m_range in zip(coeffs, ranges, strict=True)]
     bias_max, lfs = [], []
     for ch in range(c):
@@ -1169,6 +1185,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
            "samples": int(idx.size), "static_pixels_dropped": n_static,
            "ratio_refinement": ratio_record,
            "bias_correction": {"draws": int(bias_draws), "noise_a_b_top": noise_top,
+                               "noise_a_b_top_at_rough_times": noise_rough,
                                "max_abs_ln": bias_max},
            "responsive_codes": [[round(float(a) * zmax), round(float(b) * zmax)]
                                 for a, b in zip(lo, hi, strict=True)],
