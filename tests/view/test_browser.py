@@ -193,6 +193,24 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
     print(f"browser test: {time.monotonic() - t0:.1f} s")
 
 
+def _scene_session(tmp_path, edit):
+    """The Façade scene (320x240, seed 2, 6 photographs) saved under ``tmp_path``,
+    its marks edited in place by ``edit(photographs)`` and opened for marking.
+    Returns the scene's marks before the edit (``{photo: [mark]}``) and the session."""
+    from lumigraph.capture.render import render
+    from lumigraph.view.marking import FacadeSession
+
+    s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
+               edge_noise=EDGE_NOISE_PX)
+    folder = s.save(tmp_path / "scene")
+    body = json.loads((folder / "edges.json").read_text())
+    full = {p: list(v) for p, v in body["photographs"].items()}
+    edit(body["photographs"])
+    edges = tmp_path / "edges.json"
+    edges.write_text(json.dumps(body))
+    return full, FacadeSession.open(folder, edges=edges)
+
+
 def _drag(d, canvas, seg):
     """A mouse drag on the canvas from image point seg[:2] to seg[2:]."""
     from selenium.webdriver.common.action_chains import ActionChains
@@ -215,24 +233,17 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
     lowers wing/width's σ."""
     from selenium.webdriver.common.by import By
 
-    from lumigraph.capture.render import render
     from lumigraph.view.app import create_app
-    from lumigraph.view.marking import FacadeSession
 
-    s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
-               edge_noise=EDGE_NOISE_PX)
-    folder = s.save(tmp_path / "scene")
-    body = json.loads((folder / "edges.json").read_text())
-    full = {p: list(v) for p, v in body["photographs"].items()}
-    kept = False
-    for p, ms in body["photographs"].items():
-        right = [m for m in ms if m["edge"].startswith("wing/") and m["edge"].endswith("-right")]
-        if not kept and right:
-            kept, right = True, right[1:]
-        body["photographs"][p] = [m for m in ms if m not in right]
-    edges = tmp_path / "edges.json"
-    edges.write_text(json.dumps(body))
-    session = FacadeSession.open(folder, edges=edges)
+    def one_right_side(photographs):
+        kept = False
+        for p, ms in photographs.items():
+            right = [m for m in ms if m["edge"].startswith("wing/") and m["edge"].endswith("-right")]
+            if not kept and right:
+                kept, right = True, right[1:]
+            photographs[p] = [m for m in ms if m not in right]
+
+    full, session = _scene_session(tmp_path, one_right_side)
     d = browser
     with _served(create_app(artifacts=[], facade=session)) as server:
         d.get(f"http://127.0.0.1:{server.port}/")
@@ -272,20 +283,13 @@ def test_a_refusal_lists_the_edges_that_would_constrain_and_leads_to_them(browse
     photograph with the edge highlighted."""
     from selenium.webdriver.common.by import By
 
-    from lumigraph.capture.render import render
     from lumigraph.view.app import create_app
-    from lumigraph.view.marking import FacadeSession
 
-    s = render("facade", size=(320, 240), seed=2, photos=6, novel=0, supersample=2,
-               edge_noise=EDGE_NOISE_PX)
-    folder = s.save(tmp_path / "scene")
-    body = json.loads((folder / "edges.json").read_text())
-    full = {p: list(v) for p, v in body["photographs"].items()}
-    for p, ms in body["photographs"].items():
-        body["photographs"][p] = [m for m in ms if not m["edge"].startswith(("tower/top", "spire/"))]
-    edges = tmp_path / "edges.json"
-    edges.write_text(json.dumps(body))
-    session = FacadeSession.open(folder, edges=edges)
+    def no_tower_top_or_spire(photographs):
+        for p, ms in photographs.items():
+            photographs[p] = [m for m in ms if not m["edge"].startswith(("tower/top", "spire/"))]
+
+    full, session = _scene_session(tmp_path, no_tower_top_or_spire)
     d = browser
     with _served(create_app(artifacts=[], facade=session)) as server:
         d.get(f"http://127.0.0.1:{server.port}/")

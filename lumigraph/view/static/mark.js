@@ -244,51 +244,40 @@
     e.className = "refused";
     e.textContent = `Not solved: ${ref.error}`;
     box.appendChild(e);
-    const items = (ref.unconstrained || []).filter((u) => u.suggest.length);
-    if (items.length) {
-      const h = document.createElement("p");
-      h.className = "weak-head";
-      h.textContent = "Unconstrained (mark the edges below where the photograph shows them, then Solve):";
-      box.appendChild(h);
-      const ul = document.createElement("ul");
-      for (const u of items) {
-        const li = document.createElement("li");
-        li.dataset.parameter = u.parameter;
-        li.textContent = `${u.parameter}: `;
-        for (const q of u.suggest) {
-          li.appendChild(suggestButton(q, q.constrains
-            ? `with this edge marked: ${u.parameter} ± ${q.std_after.toPrecision(2)} (at the solve's noise)`
-            : `one of the edges ${u.parameter} needs (this one alone does not fix it)`));
-        }
-        ul.appendChild(li);
-      }
-      box.appendChild(ul);
-    }
+    suggestList(box, "Unconstrained", (ref.unconstrained || []).filter((u) => u.suggest.length),
+      (u) => `${u.parameter}: `,
+      (u, q) => q.constrains
+        ? `with this edge marked: ${u.parameter} ± ${q.std_after.toPrecision(2)} (at the solve's noise)`
+        : `one of the edges ${u.parameter} needs (this one alone does not fix it)`);
     d.appendChild(box);
+  }
+  // a heading and, per parameter, its suggested edges as buttons (the weak list
+  // and a refusal's list look the same)
+  function suggestList(box, what, items, label, title) {
+    if (!items.length) return;
+    const h = document.createElement("p");
+    h.className = "weak-head";
+    h.textContent = `${what} (mark the edges below where the photograph shows them, then Solve):`;
+    box.appendChild(h);
+    const ul = document.createElement("ul");
+    for (const u of items) {
+      const li = document.createElement("li");
+      li.dataset.parameter = u.parameter;
+      li.textContent = label(u);
+      for (const q of u.suggest) li.appendChild(suggestButton(q, title(u, q)));
+      ul.appendChild(li);
+    }
+    box.appendChild(ul);
   }
   // the parameters the marks hold clearly less well than the rest, each with
   // the unmarked edges that would hold it best (the server's weak_spots):
   // a click opens the photograph with that edge highlighted, to mark it there
   function renderWeak(weak) {
-    const box = $("weak");
-    if (!weak.length) return;
     const pct = (v) => `${(100 * v).toFixed(1)} %`;
-    const h = document.createElement("p");
-    h.className = "weak-head";
-    h.textContent = "Weakly constrained (mark the edges below where the photograph shows them, then Solve):";
-    box.appendChild(h);
-    const ul = document.createElement("ul");
-    for (const w of weak) {
-      const li = document.createElement("li");
-      li.dataset.parameter = w.parameter;
-      li.textContent = `${w.parameter} ± ${pct(w.rel_std)} (median parameter ± ${pct(w.median_rel_std)}): `;
-      for (const q of w.suggest) {
-        li.appendChild(suggestButton(q, `with this edge marked: ${w.parameter} ± ` +
-          `${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`));
-      }
-      ul.appendChild(li);
-    }
-    box.appendChild(ul);
+    suggestList($("weak"), "Weakly constrained", weak,
+      (w) => `${w.parameter} ± ${pct(w.rel_std)} (median parameter ± ${pct(w.median_rel_std)}): `,
+      (w, q) => `with this edge marked: ${w.parameter} ± ` +
+        `${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`);
   }
 
   // ------------------------------------------------------------ actions
