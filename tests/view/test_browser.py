@@ -56,6 +56,18 @@ def _served(app):
         thread.join(5)
 
 
+@contextlib.contextmanager
+def _marking_page(d, session):
+    """The marking page of ``session`` served (:func:`_served`) and loaded in the
+    browser ``d``, idle; the server is shut down when the block ends."""
+    from lumigraph.view.app import create_app
+
+    with _served(create_app(artifacts=[], facade=session)) as server:
+        d.get(f"http://127.0.0.1:{server.port}/")
+        _idle(d)
+        yield server
+
+
 def _need_browser():
     missing = [p for p in (CHROMIUM, DRIVER) if not os.path.exists(p)]
     try:
@@ -106,7 +118,6 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
 
     from lumigraph.capture.render import render
     from lumigraph.stereo.debevec1996.edges import load_edges
-    from lumigraph.view.app import create_app
     from lumigraph.view.marking import FacadeSession
 
     t0 = time.monotonic()
@@ -123,9 +134,7 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
 
     session = FacadeSession.open(folder, edges=edges)
     d = browser
-    with _served(create_app(artifacts=[], facade=session)) as server:
-        d.get(f"http://127.0.0.1:{server.port}/")
-        _idle(d)
+    with _marking_page(d, session):
         canvas = d.find_element(By.ID, "photo-canvas")
         # drag along the edge, as a hand would: the marked segment plus 0.5 px noise
         seg = np.asarray(drawn["segment"]) + np.random.default_rng(3).normal(0, EDGE_NOISE_PX, 4)
@@ -233,7 +242,6 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
     lowers wing/width's σ."""
     from selenium.webdriver.common.by import By
 
-    from lumigraph.view.app import create_app
 
     def one_right_side(photographs):
         kept = False
@@ -245,9 +253,7 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
 
     full, session = _scene_session(tmp_path, one_right_side)
     d = browser
-    with _served(create_app(artifacts=[], facade=session)) as server:
-        d.get(f"http://127.0.0.1:{server.port}/")
-        _idle(d)
+    with _marking_page(d, session):
         d.find_element(By.ID, "solve").click()
         _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.solution !== null", 60)
         before = d.execute_script("return window.lumiMark.state.solution")
@@ -283,7 +289,6 @@ def test_a_refusal_lists_the_edges_that_would_constrain_and_leads_to_them(browse
     photograph with the edge highlighted."""
     from selenium.webdriver.common.by import By
 
-    from lumigraph.view.app import create_app
 
     def no_tower_top_or_spire(photographs):
         for p, ms in photographs.items():
@@ -291,9 +296,7 @@ def test_a_refusal_lists_the_edges_that_would_constrain_and_leads_to_them(browse
 
     full, session = _scene_session(tmp_path, no_tower_top_or_spire)
     d = browser
-    with _served(create_app(artifacts=[], facade=session)) as server:
-        d.get(f"http://127.0.0.1:{server.port}/")
-        _idle(d)
+    with _marking_page(d, session):
         d.find_element(By.ID, "solve").click()
         _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.refusal !== null", 60)
         ref = d.execute_script("return window.lumiMark.state.refusal")
