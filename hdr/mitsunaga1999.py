@@ -69,7 +69,9 @@ order at 3 and skips the ratio update):
 - the final exposure ratios from linear sums through the corrected curve
   over every pixel (:func:`refine_exposures`): an ln-domain fit reads each
   dark code low by ``Var x / 2X²``, a per-cent bias on a read-noise-limited
-  bracket whatever the weights (docs/decisions/hdr-mitsunaga-stable.md);
+  bracket whatever the weights (docs/decisions/hdr-mitsunaga-stable.md),
+  solved jointly with a smooth shape correction of the curve from the sums
+  in brightness bins (the polynomial is off by 0.5-1 % at some codes);
 - a channel whose own exposure ratios differ from the common ones beyond its
   sampling noise and far beyond the other channels' is named in ``warnings``;
 - exposures known exactly (``reference_times``) fix the scale, and with two
@@ -737,6 +739,13 @@ RATIO_MARGIN = 4.0
 RATIO_PRIOR_SD = 0.05  # ln sd given the fit's adjacent ratios in the final graph
 RATIO_ITERS = 6  # selection-ratio fixed-point iterations
 RATIO_OUTLIER = 6.0  # robust z-score beyond which a pixel's ratio is dropped (motion, flare)
+# The joint correction of the curve from binned sums (_binned_sums): the fitted polynomial
+# is off by 0.5-1 % at the codes some pairs can only be read through (outdoor: the shadows
+# at exposure 4's codes 15-35, where the sky clips at exposure 5), and the sums inherit it.
+CURVE_KNOTS = 12  # hat functions over each channel's usable codes (0: no correction)
+CURVE_BINS = 6  # brightness bins per (pair, channel), by the third exposure's reading
+CURVE_PRIOR_SD = 0.05  # ln sd of each knot's correction
+CURVE_ITERS = 3  # relinearisations (the bins' selection follows the exposures)
 
 
 def ratio_of_sums(xa: np.ndarray, xb: np.ndarray, *, var_a: np.ndarray | None = None,
@@ -765,6 +774,19 @@ def ratio_of_sums(xa: np.ndarray, xb: np.ndarray, *, var_a: np.ndarray | None = 
     >>> ratio_of_sums(xa, xb, var_a=v, var_b=v)[2]
     4990
     """
+    keep = _sums_keep(xa, xb, var_a, var_b)
+    if keep is None:
+        return math.nan, math.inf, 0
+    xa = np.asarray(xa, dtype=np.float64)[keep]
+    xb = np.asarray(xb, dtype=np.float64)[keep]
+    r = float(np.sum(xb) / np.sum(xa))
+    var = float(np.sum((xb - r * xa) ** 2) / (r * np.sum(xa)) ** 2)
+    return math.log(r), var, int(keep.sum())
+
+
+def _sums_keep(xa, xb, var_a, var_b) -> np.ndarray | None:
+    """:func:`ratio_of_sums`' pixels kept (robust z within :data:`RATIO_OUTLIER`),
+    or None when fewer than two with positive sums are left."""
     xa = np.asarray(xa, dtype=np.float64)
     xb = np.asarray(xb, dtype=np.float64)
     va = np.maximum(xa, 1e-12) if var_a is None else var_a
@@ -772,7 +794,7 @@ def ratio_of_sums(xa: np.ndarray, xb: np.ndarray, *, var_a: np.ndarray | None = 
     keep = np.ones(xa.size, dtype=bool)
     for _ in range(2):
         if keep.sum() < 2 or np.sum(xa[keep]) <= 0:
-            return math.nan, math.inf, 0
+            return None
         r = float(np.sum(xb[keep]) / np.sum(xa[keep]))
         s = (xb - r * xa) / np.sqrt(vb + r * r * va)
         med = float(np.median(s[keep]))
@@ -782,15 +804,13 @@ def ratio_of_sums(xa: np.ndarray, xb: np.ndarray, *, var_a: np.ndarray | None = 
             break
         keep = new
     if keep.sum() < 2 or np.sum(xa[keep]) <= 0 or np.sum(xb[keep]) <= 0:
-        return math.nan, math.inf, 0
-    r = float(np.sum(xb[keep]) / np.sum(xa[keep]))
-    res = xb[keep] - r * xa[keep]
-    var = float(np.sum(res ** 2) / (r * np.sum(xa[keep])) ** 2)
-    return math.log(r), var, int(keep.sum())
+        return None
+    return keep
 
 
 def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_max: int,
-                     *, min_pixels: int = 50) -> tuple[np.ndarray, dict]:
+                     *, min_pixels: int = 50, correct_curve: bool = True
+                     ) -> tuple[np.ndarray, dict]:
     """The final adjacent exposure ratios from every pixel (up to
     :data:`RATIO_PIXELS`) through the fitted curves, unbiased by noise.
 
@@ -810,8 +830,15 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
     floor, the next darker for the ceiling), else on the pair's other one,
     scaled by the ratios: a value selected on its own noise is biased by the
     selection. A pair with fewer than
-    ``min_pixels`` keeps the fit's ratio. Returns the ln exposures (same gauge
-    and mean as ``ln_e``) and a record per pair.
+    ``min_pixels`` keeps the fit's ratio. With ``correct_curve`` (default) the
+    exposures are then solved again jointly with a smooth correction of each
+    channel's curve, from the same sums split into brightness bins
+    (:func:`_binned_sums`): a pair read only through a few codes (outdoor's
+    shadows at the dark end, where its sky clips in the next exposure)
+    otherwise inherits the fitted curve's error there. Returns the ln
+    exposures (same gauge and mean as ``ln_e``) and a record: per pair, the
+    adjacent ratios' sd with the curve held (``sd_ln_adjacent``) and, under
+    ``curve_correction``, the correction and the sd with it free.
     """
     p, h, w, c = z.shape
     n = h * w
@@ -832,12 +859,12 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
         if k_hi <= k_lo or not floor_ok.any() or not ceil_ok.any():
             tables.append(None)
             continue
-        tables.append((x_tab, a, b, x_tab[np.flatnonzero(floor_ok)[0]],
-                       x_tab[np.flatnonzero(ceil_ok)[-1]]))
-    rows, rhs, wts, record = [], [], [], []
+        k_f, k_c = int(np.flatnonzero(floor_ok)[0]), int(np.flatnonzero(ceil_ok)[-1])
+        tables.append((x_tab, a, b, x_tab[k_f], x_tab[k_c], k_f, k_c))
+    rows, rhs, wts, record, usable = [], [], [], [], []
     for qa in range(p - 1):
         for qb in range(qa + 1, min(qa + MAX_PAIR_GAP, p - 1) + 1):
-            ests, vars_, kept = [], [], []
+            ests, vars_, kept, used = [], [], [], []
             d0 = float(ln_e[qb] - ln_e[qa])
             # Each condition is tested on a third exposure where there is one, whose
             # noise is independent of both values summed: the floor (the darker value's
@@ -849,7 +876,7 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
             for ch, tab in enumerate(tables):
                 if tab is None:
                     continue
-                x_tab, a, b, x_floor, x_ceil = tab
+                x_tab, a, b, x_floor, x_ceil = tab[:5]
                 xa, xb = x_tab[flat[qa, :, ch]], x_tab[flat[qb, :, ch]]
                 x_fl, x_ce = x_tab[flat[q_fl, :, ch]], x_tab[flat[q_ce, :, ch]]
                 # the selection uses the ratios: iterated to a fixed point, and a channel
@@ -877,13 +904,15 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
                     ests.append(ln_r)
                     vars_.append(var)
                     kept.append(k)
+                    used.append(ch)
+                    usable.append((qa, qb, q_fl, q_ce, ch))
                     row = np.zeros(p)
                     row[qb], row[qa] = 1.0, -1.0
                     rows.append(row)
                     rhs.append(ln_r)
                     wts.append(1.0 / var)
             if qb == qa + 1 or ests:
-                record.append({"exposures": [qa, qb], "pixels": kept,
+                record.append({"exposures": [qa, qb], "channels": used, "pixels": kept,
                                "ln_ratio_per_channel": ests, "fit_ln_ratio": d0})
     # The exposure graph by weighted least squares (the fit's own gauge: the mean ln
     # exposure kept). The fit's adjacent ratios enter with an sd of 0.05 in ln, so a
@@ -902,9 +931,166 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
                           np.concatenate([b_v, [float(ln_e.mean()) * math.sqrt(max(wts))]]),
                           rcond=None)[0]
     cov = np.linalg.pinv(a_m.T @ a_m + gauge.T @ gauge)
-    diff_sd = [float(math.sqrt(max(cov[q, q] + cov[q + 1, q + 1] - 2 * cov[q, q + 1], 0.0)))
-               for q in range(p - 1)]
-    return sol, {"pairs": record, "sd_ln_adjacent": diff_sd}
+    out = {"pairs": record, "sd_ln_adjacent": _adjacent_sd(cov, p)}
+    if usable and correct_curve and CURVE_KNOTS >= 3:
+        sol, out["sd_ln_adjacent"], out["curve_correction"] = _binned_sums(
+            flat, tables, usable, sol, ln_e, min_pixels)
+    return sol, out
+
+
+def hat_basis(k: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Piecewise-linear hat functions of codes ``k`` (``(N,)``) on ascending
+    ``knots`` (``(M,)``, codes), clamped outside them: ``(N, M)``, each row
+    summing to 1.
+
+    >>> hat_basis(np.array([0, 5, 10, 20]), np.array([0.0, 10.0, 20.0]))
+    array([[1. , 0. , 0. ],
+           [0.5, 0.5, 0. ],
+           [0. , 1. , 0. ],
+           [0. , 0. , 1. ]])
+    """
+    k = np.clip(np.asarray(k, dtype=np.float64), knots[0], knots[-1])
+    j = np.clip(np.searchsorted(knots, k, side="right") - 1, 0, knots.size - 2)
+    w = (k - knots[j]) / (knots[j + 1] - knots[j])
+    out = np.zeros((k.size, knots.size))
+    out[np.arange(k.size), j] = 1.0 - w
+    out[np.arange(k.size), j + 1] = w
+    return out
+
+
+def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
+    """The exposures and a per-channel correction of the curve, jointly, from
+    linear sums over brightness bins (see :func:`refine_exposures`).
+
+    Each usable (pair, channel) of :func:`refine_exposures` is split into up
+    to :data:`CURVE_BINS` bins of equal count by its third exposure's reading
+    (independent of both values summed; a pair without a third exposure is one
+    bin). The channel's curve is corrected by ``ln f + Σ c_m h_m(k)``, ``h_m``
+    hat functions on :data:`CURVE_KNOTS` codes over its usable range; each bin
+    gives one row, linear in the ln exposures and ``c`` (the sums' first
+    order in ``c``): ``ln ΣXb − ln ΣXa + (Σ Xa h(za)/ΣXa − Σ Xb h(zb)/ΣXb)·c =
+    e_b − e_a``, weighted by the bin's sandwich variance. The correction's
+    scale and power (``ln f → γ ln f + β``, which the ratios cannot see) are
+    fixed by ``c = 0`` at the top and the middle knots; every ``c`` has prior sd
+    :data:`CURVE_PRIOR_SD`, the fit's adjacent ratios :data:`RATIO_PRIOR_SD`.
+    Relinearised :data:`CURVE_ITERS` times (the bins' selection moves with the
+    exposures). Returns the ln exposures, the adjacent ln ratios' sd (the
+    curve's uncertainty included) and a record.
+    """
+    p = flat.shape[0]
+    codes = np.arange(next(t for t in tables if t is not None)[0].size)
+    chans = sorted({u[4] for u in usable})
+    knots = {}
+    for ch in chans:
+        k_f, k_c = tables[ch][5], tables[ch][6]
+        kn = np.unique(np.round(np.linspace(k_f, k_c, CURVE_KNOTS)).astype(np.float64))
+        if kn.size >= 3:
+            knots[ch] = kn
+    off, n_u = {}, p
+    for ch in knots:
+        off[ch], n_u = n_u, n_u + knots[ch].size
+    lfs = {ch: np.log(tables[ch][0]) for ch in knots}
+    h_codes = {ch: hat_basis(codes, knots[ch]) for ch in knots}
+    e = np.array(ln_e, dtype=np.float64)
+    c_all = {ch: np.zeros(knots[ch].size) for ch in knots}
+    n_rows, step = 0, math.inf
+    for _ in range(CURVE_ITERS):
+        rows, rhs, wts = [], [], []
+        for qa, qb, q_fl, q_ce, ch in usable:
+            x_tab, a, b, x_floor, x_ceil = tables[ch][:5]
+            if ch in knots:
+                x_tab = np.exp(lfs[ch] + h_codes[ch] @ c_all[ch])
+            za, zb = flat[qa, :, ch], flat[qb, :, ch]
+            xa, xb = x_tab[za], x_tab[zb]
+            x_fl = x_tab[flat[q_fl, :, ch]]
+            sel = ((x_fl >= math.exp(e[q_fl] - e[qa]) * x_floor)
+                   & (x_tab[flat[q_ce, :, ch]] * math.exp(e[qb] - e[q_ce]) <= x_ceil))
+            idx = np.flatnonzero(sel)
+            if idx.size < min_pixels:
+                continue
+            third = q_fl not in (qa, qb)
+            nb = min(CURVE_BINS, idx.size // min_pixels) if third else 1
+            groups = np.array_split(idx[np.argsort(x_fl[idx], kind="stable")], nb) if nb > 1 else [idx]
+            for gi in groups:
+                keep = _sums_keep(xa[gi], xb[gi], a * xa[gi] + b, a * xb[gi] + b)
+                if keep is None:
+                    continue
+                gi = gi[keep]
+                sa, sb = float(xa[gi].sum()), float(xb[gi].sum())
+                r = sb / sa
+                var = float(np.sum((xb[gi] - r * xa[gi]) ** 2) / (r * sa) ** 2)
+                if not 0 < var < math.inf:
+                    continue
+                row = np.zeros(n_u)
+                row[qb], row[qa] = 1.0, -1.0
+                lin = math.log(r)
+                if ch in knots:
+                    k = knots[ch].size
+                    ha = np.bincount(za[gi], weights=xa[gi], minlength=codes.size) @ h_codes[ch] / sa
+                    hb = np.bincount(zb[gi], weights=xb[gi], minlength=codes.size) @ h_codes[ch] / sb
+                    row[off[ch]:off[ch] + k] = ha - hb
+                    lin += float((ha - hb) @ c_all[ch])  # the row is linearised at the current c
+                rows.append(row)
+                rhs.append(lin)
+                wts.append(1.0 / var)
+        n_rows = len(rows)
+        for q in range(p - 1):
+            row = np.zeros(n_u)
+            row[q + 1], row[q] = 1.0, -1.0
+            rows.append(row)
+            rhs.append(float(ln_e_fit[q + 1] - ln_e_fit[q]))
+            wts.append(1.0 / RATIO_PRIOR_SD ** 2)
+        for ch in knots:
+            for m in range(knots[ch].size):
+                row = np.zeros(n_u)
+                row[off[ch] + m] = 1.0
+                rows.append(row)
+                rhs.append(0.0)
+                wts.append(1.0 / CURVE_PRIOR_SD ** 2)
+        a_m = np.array(rows) * np.sqrt(np.array(wts))[:, None]
+        b_v = np.array(rhs) * np.sqrt(np.array(wts))
+        # the gauges, exactly: the mean ln exposure; per channel the correction carries no
+        # scale and no power (c orthogonal to 1 and to ln f over the knots), so the
+        # exposures stay in the curve's gauge
+        cons = np.zeros((1 + 2 * len(knots), n_u))
+        d = np.zeros(cons.shape[0])
+        cons[0, :p] = 1.0 / p
+        d[0] = float(np.mean(ln_e_fit))
+        for i, ch in enumerate(knots):
+            sl = slice(off[ch], off[ch] + knots[ch].size)
+            ln_k = lfs[ch][knots[ch].astype(np.int64)]
+            cons[1 + 2 * i, sl] = 1.0 / knots[ch].size
+            cons[2 + 2 * i, sl] = (ln_k - ln_k.mean()) / max(float(np.ptp(ln_k)), 1e-12)
+        sol, cov = _lstsq_eq(a_m, b_v, cons, d)
+        cov_fixed = _lstsq_eq(a_m[:, :p], b_v, cons[:1, :p], d[:1])[1]
+        step = float(np.max(np.abs(sol[:p] - e)))
+        e = sol[:p]
+        for ch in knots:
+            c_all[ch] = sol[off[ch]:off[ch] + knots[ch].size]
+    record = {"rows": n_rows, "last_step_ln": step, "sd_ln_adjacent_curve_free":
+              _adjacent_sd(cov, p),
+              "channels": {str(ch): {"knots": knots[ch].astype(int).tolist(),
+                                     "ln_correction": c_all[ch].tolist()} for ch in knots}}
+    return e, _adjacent_sd(cov_fixed, p), record
+
+
+def _adjacent_sd(cov: np.ndarray, p: int) -> list[float]:
+    """The sd of each adjacent difference ``e[q+1] − e[q]`` from ``cov``."""
+    return [float(math.sqrt(max(cov[q, q] + cov[q + 1, q + 1] - 2 * cov[q, q + 1], 0.0)))
+            for q in range(p - 1)]
+
+
+def _lstsq_eq(a: np.ndarray, b: np.ndarray, cons: np.ndarray, d: np.ndarray):
+    """``min |a x − b|²`` subject to ``cons x = d`` (null-space method), and the
+    solution's covariance (``a`` already whitened)."""
+    q, _ = np.linalg.qr(cons.T, mode="complete")
+    r = cons.shape[0]
+    x0 = np.linalg.lstsq(cons, d, rcond=None)[0]
+    nb = q[:, r:]
+    y = np.linalg.lstsq(a @ nb, b - a @ x0, rcond=None)[0]
+    an = a @ nb
+    cov = nb @ np.linalg.pinv(an.T @ an) @ nb.T
+    return x0 + nb @ y, cov
 
 
 def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: int | None = None,
