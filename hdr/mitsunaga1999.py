@@ -746,6 +746,8 @@ CURVE_KNOTS = 12  # hat functions over each channel's usable codes (0: no correc
 CURVE_BINS = 6  # brightness bins per (pair, channel), by the third exposure's reading
 CURVE_PRIOR_SD = 0.05  # ln sd of each knot's correction
 CURVE_ITERS = 3  # relinearisations (the bins' selection follows the exposures)
+CURVE_MAX_LN = 0.15  # 3 prior sd: beyond it the first-order rows no longer hold; channel held
+CURVE_STEP_TOL = 1e-3  # ln: a correction whose last relinearisation moved more is not used
 
 
 def ratio_of_sums(xa: np.ndarray, xb: np.ndarray, *, var_a: np.ndarray | None = None,
@@ -933,8 +935,10 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
     cov = np.linalg.pinv(a_m.T @ a_m + gauge.T @ gauge)
     out = {"pairs": record, "sd_ln_adjacent": _adjacent_sd(cov, p)}
     if usable and correct_curve and CURVE_KNOTS >= 3:
-        sol, out["sd_ln_adjacent"], out["curve_correction"] = _binned_sums(
-            flat, tables, usable, sol, ln_e, min_pixels)
+        sol, sd_held, out["curve_correction"] = _binned_sums(flat, tables, usable, sol, ln_e,
+                                                             min_pixels)
+        if sd_held is not None:
+            out["sd_ln_adjacent"] = sd_held
     return sol, out
 
 
@@ -974,8 +978,12 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
     fixed by ``c = 0`` at the top and the middle knots; every ``c`` has prior sd
     :data:`CURVE_PRIOR_SD`, the fit's adjacent ratios :data:`RATIO_PRIOR_SD`.
     Relinearised :data:`CURVE_ITERS` times (the bins' selection moves with the
-    exposures). Returns the ln exposures, the adjacent ln ratios' sd (the
-    curve's uncertainty included) and a record.
+    exposures). A channel whose correction exceeds :data:`CURVE_MAX_LN` or
+    leaves its curve not increasing is held (named in the record) and the
+    rest solved again; a solve whose last step exceeds :data:`CURVE_STEP_TOL`
+    is not used. Returns the ln exposures, the adjacent ln ratios' sd with the
+    curves held (None when the correction is not used: ``ln_e`` is returned)
+    and a record.
     """
     p = flat.shape[0]
     codes = np.arange(next(t for t in tables if t is not None)[0].size)
@@ -986,6 +994,46 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
         kn = np.unique(np.round(np.linspace(k_f, k_c, CURVE_KNOTS)).astype(np.float64))
         if kn.size >= 3:
             knots[ch] = kn
+    # A channel whose correction leaves the small-correction regime the rows are
+    # linearised in (beyond CURVE_MAX_LN, or a curve no longer increasing) is held and
+    # the rest solved again: Memorial's blue, read through few bright pixels, ran to
+    # ln corrections of ±9 with the iterations diverging.
+    held: dict[str, str] = {}
+    while True:
+        e, c_all, cov, cov_fixed, step, n_rows = _binned_sums_solve(
+            flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, codes)
+        bad = {}
+        for ch, cc in c_all.items():
+            corrected = np.log(tables[ch][0]) + hat_basis(codes, knots[ch]) @ cc
+            k0, k1 = int(knots[ch][0]), int(knots[ch][-1])
+            if float(np.max(np.abs(cc))) > CURVE_MAX_LN:
+                bad[ch] = f"|ln correction| {float(np.max(np.abs(cc))):.3g} > {CURVE_MAX_LN}"
+            elif not np.all(np.diff(corrected[k0:k1 + 1]) > 0):
+                bad[ch] = "the corrected curve is not increasing"
+        if not bad:
+            break
+        for ch, why in bad.items():
+            held[str(ch)] = why
+            del knots[ch]
+    record = {"rows": n_rows, "last_step_ln": step, "held_channels": held}
+    if not knots or step > CURVE_STEP_TOL:
+        record["used"] = False
+        record["why"] = ("no channel's correction stayed small" if not knots else
+                         f"not converged: last step {step:.3g} ln > {CURVE_STEP_TOL}")
+        return np.array(ln_e, dtype=np.float64), None, record
+    record.update({"used": True, "sd_ln_adjacent_curve_free": _adjacent_sd(cov, p),
+                   "channels": {str(ch): {"knots": knots[ch].astype(int).tolist(),
+                                          "ln_correction": c_all[ch].tolist()}
+                                for ch in knots}})
+    return e, _adjacent_sd(cov_fixed, p), record
+
+
+def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, codes):
+    """:func:`_binned_sums` for one set of corrected channels (``knots``: channel ->
+    knot codes); the others' curves held. Returns the ln exposures, each corrected
+    channel's ``c``, the covariances with the curves free and held, the last
+    step and the number of data rows."""
+    p = flat.shape[0]
     off, n_u = {}, p
     for ch in knots:
         off[ch], n_u = n_u, n_u + knots[ch].size
@@ -1067,11 +1115,7 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
         e = sol[:p]
         for ch in knots:
             c_all[ch] = sol[off[ch]:off[ch] + knots[ch].size]
-    record = {"rows": n_rows, "last_step_ln": step, "sd_ln_adjacent_curve_free":
-              _adjacent_sd(cov, p),
-              "channels": {str(ch): {"knots": knots[ch].astype(int).tolist(),
-                                     "ln_correction": c_all[ch].tolist()} for ch in knots}}
-    return e, _adjacent_sd(cov_fixed, p), record
+    return e, c_all, cov, cov_fixed, step, n_rows
 
 
 def _adjacent_sd(cov: np.ndarray, p: int) -> list[float]:
