@@ -336,8 +336,15 @@ def sinusoid(images: np.ndarray, *, b: float = 0.0,
     if not 0.0 <= b < 1.0:
         raise ValueError(f"b: expected 0 <= b < 1, got {b}")
     ph = np.asarray(phases, np.float64)
-    cos = np.tensordot(np.cos(ph).astype(np.float32), a, axes=1)
-    sin = np.tensordot(np.sin(ph).astype(np.float32), a, axes=1)
+    # Weighted sums image by image, in order: elementwise float32 arithmetic gives every
+    # pixel the same bits whatever the array's size. A BLAS product (tensordot, numpy
+    # 2.4's OpenBLAS) rounds by the blocking, so a band of rows differed from the whole
+    # image in the last bit (issue 19's bands are bit-identical to the untiled run).
+    cw, sw = np.cos(ph).astype(np.float32), np.sin(ph).astype(np.float32)
+    cos, sin = cw[0] * a[0], sw[0] * a[0]
+    for k in range(1, len(ph)):
+        cos = cos + cw[k] * a[k]
+        sin = sin + sw[k] * a[k]
     amp = (2.0 / len(ph)) * np.sqrt(cos * cos + sin * sin)
     mean = a.mean(axis=0)
     direct = amp / (0.5 * (1.0 - b))
