@@ -277,6 +277,59 @@ def test_the_weak_list_moves_to_another_photograph_once_one_holds_the_parameter(
     assert solve(new).std["tower/width"] < solve(old).std["tower/width"]
 
 
+def test_a_refusal_list_moves_to_another_photograph_once_one_constrains_the_unknown():
+    """The same scene (photo_04 nearer, seeing the tower's right side) with
+    no right-side edge of the tower marked: its width is refused. The best
+    edge alone is a right vertical in photo_04, and so is the next best
+    alone (the old list's top two, one photograph: the list asked without
+    that first edge). Ranked given the first marked, the second suggestion
+    is in another photograph (a second vertical in photo_04 shares the
+    pose the first rests on), and the solver agrees: with the list's top
+    two marked the width's σ is lower than with the two best alone."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    from lumigraph.stereo.debevec1996.model import BlockModel
+    from lumigraph.stereo.debevec1996.solve import FIXTURE, Unconstrained, solve_facade
+    from lumigraph.view.marking import unconstrained_spots
+
+    m = BlockModel.from_dict(FIXTURE)
+    cams = _ring_with_a_nearer_view()
+    K = {p: c["K"] for p, c in cams.items()}
+    sizes = {p: c["image_size"] for p, c in cams.items()}
+    seen = project_edges(m, cams)
+    for i, e in enumerate(e for v in seen.values() for e in v):     # ±0.5 px, deterministic
+        e["segment"] = (np.asarray(e["segment"]) + 0.5 * np.cos(np.arange(4) + i)).tolist()
+    right = ("tower/front-right", "tower/back-right", "tower/top-right", "tower/bottom-right")
+    kept = {p: [e for e in v if e["edge"] not in right] for p, v in seen.items()}
+    marks = EdgeMarks.from_dict({"photographs": kept}, model=m, photographs=list(cams))
+    with pytest.raises(Unconstrained) as refused:
+        solve_facade(m, marks, K, noise_px=0.5)
+    assert "tower/width" in refused.value.unknowns
+
+    def listed(marked, n):
+        return unconstrained_spots(m, marks, K, sizes, ["tower/width"], noise_px=0.5,
+                                   marked=marked, suggestions=n)[0]["suggest"]
+
+    marked = {(p, e["edge"]) for p, v in kept.items() for e in v}
+    new = listed(marked, 2)
+    first = (new[0]["photo"], new[0]["edge"])
+    second_alone = listed(marked | {first}, 1)[0]                 # the old list's second
+    old = [first, (second_alone["photo"], second_alone["edge"])]
+    new = [first, (new[1]["photo"], new[1]["edge"])]
+    assert first[0] == old[1][0] == "photo_04.png" and first[1] in right, old
+    assert new[1][0] != "photo_04.png" and new[1][1] in right, new
+
+    def width_std(pair):
+        more = {p: list(v) for p, v in kept.items()}
+        for p, edge in pair:
+            more[p].append(next(e for e in seen[p] if e["edge"] == edge))
+        return solve_facade(m, EdgeMarks.from_dict({"photographs": more}, model=m,
+                                                   photographs=list(cams)), K,
+                            noise_px=0.5).std["tower/width"]
+
+    assert width_std(new) < width_std(old)
+
+
 def test_the_edges_a_refusal_suggests_constrain_what_it_refused():
     """The test model with every visible edge marked but the tower's top:
     the tower's height is free (its vertical edges slide along their own
