@@ -802,11 +802,11 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
     the unknown only what the first told it (the same photograph's pose
     absorbing it) ranks below one that tells it something new. A
     suggestion the held solve's faces hide (the photograph may not show
-    it) is listed but not assumed marked for those below it. The rows
-    added per step change the information matrix by rank two: each
-    candidate's σ comes from the current decomposition by the block
-    inverse with a Woodbury update (one SVD per suggestion, none per
-    candidate). Returns ``[{parameter, suggest: [{photo, edge,
+    it) is listed but not assumed marked for those below it. A candidate's
+    two rows change the information matrix by rank two: its σ comes from
+    the marks' SVD, taken once per suggestion, and a 2×2 and a two-row SVD
+    of the candidate's own (:func:`_std_with_rows`), not from a new
+    decomposition of the whole stack per candidate. Returns ``[{parameter, suggest: [{photo, edge,
     constrains, std_after, hidden_in_solve}]}]`` in the order of
     ``unknowns`` (an unknown of a photograph the held solve left out gets
     no suggestion); no suggestion at all when even the held solve fails.
@@ -935,34 +935,17 @@ def _constraining_in_turn(E, Jc, c, scale, *, var: float, count: int, markable) 
         weight_now = float(np.linalg.norm(N[:, c], axis=0).max()) if k else 0.0
         if k:
             JN = Jl @ N.T                               # (m, 2, k): what each sees of the null space
-            _, sm, Vm = np.linalg.svd(JN, full_matrices=True)
+            Um, sm, Vm = np.linalg.svd(JN, full_matrices=True)
             b = (sm > tau).sum(1)                       # null directions each one pins (0-2)
             VN = Vm @ N                                 # (m, k, ncol)
             rest = np.arange(k)[None, :] >= b[:, None]  # the null directions it leaves
             w = np.linalg.norm(VN[:, :, c] * rest[:, :, None], axis=1).max(1)
-            bm = min(2, k)
-            G_B = JN @ Vm[:, :bm].transpose(0, 2, 1)   # (m, 2, bm)
-            q_B = VN[:, :bm][:, :, c]                    # (m, bm, |c|)
-            pinned = np.arange(bm)[None, :] < b[:, None]
-            G_B = G_B * pinned[:, None, :]
-            q_B = q_B * pinned[:, :, None]
         else:
             w = np.zeros(len(left))
-            bm, pinned = 0, np.zeros((len(left), 0), bool)
-            G_B, q_B = np.zeros((len(left), 2, 0)), np.zeros((len(left), 0, len(c)))
         con = np.flatnonzero(w <= NULL_WEIGHT)          # the candidates that constrain it
         if len(con):
-            # σ² = var ‖R⁻ᵀ q‖², R the triangular factor of [diag(s) 0; G_R G_B]
-            # (the marks in the range's coordinates, the candidate's two rows
-            # on the range and on the null directions it pins): the two rows
-            # folded into diag(s) by Givens rotations, a rank-two update that
-            # stays exact where s is small (a Woodbury form cancels there)
-            G_R = Jl[con] @ VR.T                        # (m, 2, r)
-            R = _fold_rows(s[:r], np.concatenate([G_R, G_B[con]], 2), pinned[con])
-            q = np.concatenate([np.broadcast_to(VR[:, c], (len(con), r, len(c))), q_B[con]], 1)
-            z = np.linalg.solve(R.transpose(0, 2, 1), q)
-            std = (np.sqrt(var * np.einsum("mij,mij->mj", z, z))
-                   / np.where(scale > 0, scale, 1.0)).max(1)
+            std = _std_with_rows(s[:r], VR, Jl[con], c, scale, var=var,
+                                 pins=(Um[con], sm[con], b[con], VN[con]) if k else None)
             std_now = None
             if weight_now <= NULL_WEIGHT:               # constrained already: σ must fall
                 std_now = float((np.sqrt(var * ((VR[:, c] ** 2) / d[:, None]).sum(0))
@@ -984,37 +967,56 @@ def _constraining_in_turn(E, Jc, c, scale, *, var: float, count: int, markable) 
     return out
 
 
-def _fold_rows(s, ext, pinned):
-    """The upper triangular factor of ``[diag(s) 0; ext]`` for each of a
-    stack of two-row ``ext`` ``(m, 2, r + bm)`` (``s`` ``(r,)`` positive):
-    Givens rotations fold the two rows into the diagonal, column by column
-    (Golub & Van Loan 2013, §5.1.8), and a QR of what is left of them on the
-    last ``bm`` columns closes it; a last column the rows do not pin
-    (``pinned`` ``(m, bm)`` false) gets 1 on its diagonal (decoupled: its
-    right-hand side is zero). ``(m, r + bm, r + bm)``.
+def _std_with_rows(s, VR, J, c, scale, *, var: float, pins) -> np.ndarray:
+    """The σ of the unknown in columns ``c`` (column norms ``scale``) with
+    each candidate's two rows ``J`` ``(m, 2, ncol)`` added to marks whose
+    range is ``VR`` ``(r, ncol)`` with singular values ``s``: ``(m,)``.
 
-    >>> R = _fold_rows(np.array([2.0, 1.0]), np.array([[[1.0, 0.0, 3.0], [0.0, 1.0, 0.0]]]),
-    ...                np.array([[True]]))
-    >>> T = np.array([[2.0, 0, 0], [0, 1.0, 0], [1.0, 0, 3.0], [0, 1.0, 0]])
-    >>> bool(np.allclose(R[0].T @ R[0], T.T @ T))
+    ``pins`` ``(U, sm, b, VN)`` (None when the marks leave no null space):
+    per candidate the SVD ``U diag(sm) V`` of its rows on the null space
+    ``N``, ``b`` how many null directions it pins and ``VN = V N``. The
+    rows are turned by ``Uᵀ``: the first ``b`` then each pin one null
+    direction, which they fix and no more (no prior holds it); the rest
+    measure the range, where the marks hold it with information ``diag(s²)``.
+    So, for the unknown's coordinates ``q_R`` (range) and ``q_B`` (pinned),
+    ``σ² / var = ‖a‖² + p̂ᵀ (I + ĜᵀĜ)⁻¹ p̂`` with ``a = q_B / sm``, ``p = q_R -
+    G_pinᵀ a`` and ``p̂ = p / s``, ``Ĝ = G_rest / s`` (the range rows, whitened);
+    the last term, through the SVD ``Ĝ = W Σ Vᵀ``, is ``‖p̂ - V Vᵀ p̂‖² + Σ
+    (Vᵀp̂)² / (1 + Σ²)``: sums of squares, with no difference of large
+    terms to cancel where ``s`` is small (a weak direction that the
+    candidate measures well), as an inverse or Woodbury form does.
+
+    >>> s, VR = np.array([2.0, 1e-6]), np.eye(3)[:2]               # a weak direction, one null
+    >>> J = np.array([[[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]])          # measures it, pins the null
+    >>> pins = (np.array([[[0.0, 1.0], [1.0, 0.0]]]), np.array([[1.0, 0.0]]), np.array([1]),
+    ...         np.array([[[0.0, 0.0, 1.0]]]))
+    >>> T = np.array([[2.0, 0, 0], [0, 1e-6, 0], [0, 1.0, 0], [0, 0, 1.0]])   # the stack
+    >>> direct = [np.sqrt(np.linalg.pinv(T.T @ T)[i, i]) for i in range(3)]
+    >>> got = [_std_with_rows(s, VR, J, np.array([i]), np.ones(1), var=1.0, pins=pins)[0]
+    ...        for i in range(3)]
+    >>> bool(np.allclose(got, direct, rtol=1e-9))
     True
     """
-    m, _, n = ext.shape
-    r = len(s)
-    ext = np.array(ext, dtype=float)
-    R = np.zeros((m, n, n))
-    for j in range(r):
-        row = np.zeros((m, n))
-        row[:, j] = s[j]
-        for e in range(2):
-            x, a = ext[:, e, j], row[:, j]
-            rho = np.hypot(a, x)
-            c, sn = (a / rho)[:, None], (x / rho)[:, None]
-            row, ext[:, e] = c * row + sn * ext[:, e], c * ext[:, e] - sn * row
-        R[:, j] = row
-    bm = n - r
-    if bm:
-        R[:, r:, r:] = np.linalg.qr(ext[:, :, r:], mode="r")[:, :bm]
-        k = np.arange(bm)
-        R[:, r + k, r + k] = np.where(pinned, R[:, r + k, r + k], 1.0)
-    return R
+    m = len(J)
+    if pins is None:
+        G = J @ VR.T                                    # (m, 2, r)
+        a = np.zeros((m, 2, len(c)))
+        pin = np.zeros((m, 2), bool)
+    else:
+        U, sm, b, VN = pins
+        G = U.transpose(0, 2, 1) @ J @ VR.T             # the turned rows on the range
+        pin = np.arange(2)[None, :] < b[:, None]        # (m, 2): row i pins null direction i
+        nb = min(2, VN.shape[1])
+        qB = np.zeros((m, 2, len(c)))
+        qB[:, :nb] = VN[:, :nb][:, :, c]
+        safe = np.where(pin, sm[:, :2] if sm.shape[1] >= 2 else np.pad(sm, ((0, 0), (0, 1))), 1.0)
+        a = np.where(pin[:, :, None], qB / safe[:, :, None], 0.0)
+    p = VR[:, c][None] - G.transpose(0, 2, 1) @ a       # (m, r, |c|)
+    ph = p / s[None, :, None]
+    Gh = np.where(pin[:, :, None], 0.0, G) / s          # the rows that measure the range, whitened
+    _, sg, Vg = np.linalg.svd(Gh, full_matrices=False)  # (m, 2), (m, 2, r)
+    proj = Vg @ ph
+    resid = ph - Vg.transpose(0, 2, 1) @ proj
+    quad = ((resid ** 2).sum(1) + (proj ** 2 / (1.0 + sg[:, :, None] ** 2)).sum(1)
+            + (a ** 2).sum(1))
+    return (np.sqrt(var * quad) / np.where(scale > 0, scale, 1.0)).max(1)

@@ -186,8 +186,9 @@ def _in_turn_directly(E, Jc, c, scale, *, var, count, markable):
 
 
 def test_a_refusal_list_in_turn_matches_the_pseudo_inverse_of_the_whole_stack():
-    """The refusal list's cheap step (the candidate's two rows folded into
-    the marks' SVD by Givens rotations) gives the same list and σ as the
+    """The refusal list's cheap step (the candidate's two rows turned to
+    pin null directions or measure the range, against the marks' SVD)
+    gives the same list and σ as the
     SVD of the whole stack per candidate, on a stack built to be hard:
     five null directions (what the refusal names; one candidate's two
     rows cannot pin them all, so lists start with marks that do not
