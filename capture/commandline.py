@@ -508,6 +508,8 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
                 traceback.print_exc()
             where = argument_flags(parser, args).get(e.where, e.where)
             said.error(f"error: {where}: {_one_line(e.problem)}")
+            for line in getattr(e, "details", ()):   # after the one line: what to do, item by item
+                said.error(f"  {_one_line(line)}")
             return EXIT_USAGE
         except UnusableResult as e:  # the work ran; its result is not usable: nothing written
             if debug:

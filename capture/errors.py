@@ -1,7 +1,8 @@
 """Exceptions that carry a user-facing reason.
 
 The command line turns :class:`InputError` and :class:`EstimationError` into
-exit status 2 and one line ``error: <file>: <problem>``; anything else is an
+exit status 2 and one line ``error: <file>: <problem>`` (an
+:class:`EstimationError`'s ``details`` follow it, indented); anything else is an
 internal fault (exit 1). Both are ``ValueError`` subclasses, so library callers
 can catch them the ordinary way.
 """
@@ -36,11 +37,19 @@ class InputError(ValueError):
 
 class EstimationError(ValueError):
     """A fit or reconstruction that the data cannot support (degenerate views,
-    too few valid pixels, no convergence). ``where`` names the input."""
+    too few valid pixels, no convergence). ``where`` names the input;
+    ``details``, lines the command line prints after its one line (what to do
+    about it, item by item: a refused solve's edges to mark).
 
-    def __init__(self, where: str | os.PathLike, problem: str):
+    >>> e = EstimationError("edges.json", "too few marks", details=("mark photo_00.png's roof",))
+    >>> str(e), e.details
+    ('edges.json: too few marks', ("mark photo_00.png's roof",))
+    """
+
+    def __init__(self, where: str | os.PathLike, problem: str, *, details=()):
         self.where = os.fspath(where)
         self.problem = problem
+        self.details = tuple(details)
         super().__init__(f"{self.where}: {problem}")
 
 

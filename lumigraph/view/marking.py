@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 
 from lumigraph.capture.errors import EstimationError, InputError
+from lumigraph.stereo.debevec1996.automark import SUGGESTIONS, unconstrained_spots
 
 SNAP_ANGLE_DEG = 5.0     # a drag by hand is rarely further off an edge's direction
 SNAP_DISTANCE_PX = 3.0   # ... or further from its line; beyond, a parallel line (a window frame) is as likely
@@ -230,7 +231,7 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
 # hold it clearly less well than the rest (chosen on the tuned seeds 2, 7, 8,
 # docs/decisions/view-marking.md, "Told where the model is weak")
 WEAK_FACTOR = 2.0
-WEAK_SUGGESTIONS = 8     # unmarked edges suggested per weak parameter
+WEAK_SUGGESTIONS = SUGGESTIONS   # unmarked edges suggested per weak parameter (and per refused unknown)
 
 
 def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
@@ -246,16 +247,24 @@ def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
     ``factor`` times the median of them all are weak. For each, the
     unmarked model edges in front of each camera and in frame (hidden by
     the solved model's faces or not: ``hidden_in_solve`` says which, since
-    a weak model's occlusion is not to be trusted), ranked by the σ the
-    parameter would have with a mark on the edge's stretch in frame added
-    (:func:`~lumigraph.stereo.debevec1996.automark.std_with_mark`: what
-    the mark adds to the marks already there, poses and shared parameters
-    included); ``suggestions`` of them. Returns ``[{parameter, value, std, rel_std, median_rel_std,
-    suggest: [{photo, edge, std_after, hidden_in_solve}]}]``, weakest first.
+    a weak model's occlusion is not to be trusted), listed in turn: each
+    the one that gives the parameter the least σ with a mark on the edge's
+    stretch in frame added *to those above it*
+    (:func:`~lumigraph.stereo.debevec1996.automark.std_with_marks_in_turn`:
+    what the mark adds to the marks already there and to the suggestions
+    above it, poses and shared parameters included; a suggestion the
+    solved model hides is listed but not assumed marked, since the
+    photograph may not show it), while one lowers it; ``std_after`` is
+    that σ; ``suggestions`` of them. So a user who marks from the top does
+    not pile the marks into one photograph where another view would hold
+    the parameter better. Returns ``[{parameter, value, std, rel_std,
+    median_rel_std, suggest: [{photo, edge, std_after, hidden_in_solve}]}]``,
+    weakest first.
 
     The test scene's tower with its right side marked in one photograph
-    only (its left side in all): its width is weak, and the edges to mark
-    are on its right side.
+    only (its left side in all): its width is weak, the edges to mark are
+    on its right side, and the second is in another photograph than the
+    first.
 
     >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
     >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
@@ -277,11 +286,12 @@ def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
     ...                    {p: c["K"] for p, c in cams.items()})
     >>> weak = weak_spots(sol, {(k.photo, k.edge) for k in marks},
     ...                   {p: c["image_size"] for p, c in cams.items()})
-    >>> [w["parameter"] for w in weak], [q["edge"] for q in weak[0]["suggest"][:3]]
-    (['tower/width'], ['tower/back-right', 'tower/back-right', 'tower/front-right'])
+    >>> top = weak[0]["suggest"][:2]
+    >>> [w["parameter"] for w in weak], [q["edge"] for q in top], top[0]["photo"] != top[1]["photo"]
+    (['tower/width'], ['tower/back-right', 'tower/back-right'], True)
     """
     from lumigraph.capture.scenes.facade_edges import project_edges
-    from lumigraph.stereo.debevec1996.automark import _scale, std_with_mark
+    from lumigraph.stereo.debevec1996.automark import _scale, std_with_marks_in_turn
     from lumigraph.stereo.debevec1996.edges import Mark
 
     factor = WEAK_FACTOR if factor is None else factor
@@ -308,164 +318,19 @@ def weak_spots(sol, marked, sizes: dict, *, factor: float | None = None,
                   for m in project_edges(sol.model, cam, occlusion=False)[p]
                   if (p, m["edge"]) not in marked]
     for n in weak:
-        after = std_with_mark(sol, cands, n) if cands else np.zeros(0)
-        order = [i for i in np.argsort(after) if np.isfinite(after[i]) and after[i] < sol.std[n]]
+        # each suggestion the best given those above it marked: a list of
+        # marks that share one photograph's pose is not a list of best marks
+        # (one the solved model hides is listed, not assumed marked: the
+        # photograph may not show it)
+        order = std_with_marks_in_turn(sol, cands, n, count=suggestions,
+                                       markable=[(m.photo, m.edge) in shown for m in cands]) \
+            if cands else []
         out.append({"parameter": n, "value": float(sol.params[n]), "std": float(sol.std[n]),
                     "rel_std": float(rel[n]), "median_rel_std": med,
                     "suggest": [{"photo": cands[i].photo, "edge": cands[i].edge,
-                                 "std_after": float(after[i]),
+                                 "std_after": sd,
                                  "hidden_in_solve": (cands[i].photo, cands[i].edge) not in shown}
-                                for i in order[:suggestions]]})
-    return out
-
-
-def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_px: float = 1.0,
-                        marked=None, suggestions: int | None = None,
-                        where: str = "edges.json") -> list[dict]:
-    """The unmarked edges that would constrain what a solve refuses.
-
-    When no combination of the marks constrains some unknowns,
-    :func:`~lumigraph.stereo.debevec1996.solve.solve_facade` refuses
-    (:class:`~lumigraph.stereo.debevec1996.solve.Unconstrained`, naming
-    them: ``unknowns``). This says, for each, which unmarked (photograph,
-    edge) pairs would constrain it, ranked, as :func:`weak_spots` does for
-    the weakly constrained ones.
-
-    ``model`` a :class:`~lumigraph.stereo.debevec1996.model.BlockModel`,
-    ``marks`` the :class:`~lumigraph.stereo.debevec1996.edges.EdgeMarks`
-    the solve refused, ``K`` photo -> (3, 3) intrinsics (px), ``sizes``
-    photo -> (width, height) px, ``marked`` the ``(photo, edge)`` pairs
-    not to suggest (default: those of ``marks``), ``suggestions`` how many
-    per unknown (default :data:`WEAK_SUGGESTIONS`).
-
-    The poses to project candidate edges with come from the solve that
-    holds what the marks leave free (``hold_unconstrained``: the held
-    parameters at their starting values). At that solution the solver's
-    Jacobian of the signed end distances (eq. 5.3, both ends of every mark,
-    over the free parameters and every pose: the refused unknowns' columns
-    included) is column-scaled (by each column's norm over the marks and
-    the candidates) and its null space taken with the solver's own rank
-    test (singular values below ``RANK_RCOND`` times the largest). A
-    candidate (the in-frame stretch of an unmarked model edge, hidden by
-    the model's faces or not, ``hidden_in_solve`` says which) adds its two
-    rows; the null space left is the old one's part its rows do not see.
-    The candidate *constrains* an unknown when that unknown's weight in the
-    null space left is at most ``NULL_WEIGHT`` (the solver would no longer
-    name it); those are ranked by the unknown's first-order σ with the mark
-    added (``std_after``: the stacked Jacobian's pseudo-inverse, end
-    distances independent with standard deviation ``noise_px``; model
-    units, or for a pose the largest of its three columns'), best first.
-    After them come the candidates that only shrink the unknown's null
-    weight (``constrains`` false, ``std_after`` None: one of several marks
-    it needs), least weight left first. Returns ``[{parameter,
-    suggest: [{photo, edge, constrains, std_after, hidden_in_solve}]}]`` in
-    the order of ``unknowns`` (an unknown of a photograph the held solve
-    left out gets no suggestion); no suggestion at all when even the held
-    solve fails.
-
-    The test scene with every edge marked but the tower's top: its height
-    is free (its vertical edges slide along their own lines), and the edges
-    that fix it are the tower's top and the spire's (not the tower's
-    verticals, the longest).
-
-    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
-    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
-    >>> from lumigraph.stereo.debevec1996.model import BlockModel
-    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE
-    >>> m = BlockModel.from_dict(FIXTURE)
-    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
-    >>> seen = {p: [e for e in v if not e["edge"].startswith("tower/top")]
-    ...         for p, v in project_edges(m, cams).items()}
-    >>> marks = EdgeMarks.from_dict({"photographs": seen}, model=m, photographs=list(cams))
-    >>> K = {p: c["K"] for p, c in cams.items()}
-    >>> spots = unconstrained_spots(m, marks, K, {p: c["image_size"] for p, c in cams.items()},
-    ...                             ["tower/height"])
-    >>> first = spots[0]["suggest"][0]
-    >>> first["edge"].startswith("tower/top"), first["constrains"], first["std_after"] > 0
-    (True, True, True)
-    """
-    from lumigraph.capture.scenes.facade_edges import project_edges
-    from lumigraph.stereo.debevec1996.edges import Mark
-    from lumigraph.stereo.debevec1996.solve import NULL_WEIGHT, RANK_RCOND, _Problem, solve_facade
-
-    suggestions = WEAK_SUGGESTIONS if suggestions is None else suggestions
-    unknowns = list(unknowns)
-    marked = {(m.photo, m.edge) for m in marks.marks} if marked is None else set(marked)
-    none = [{"parameter": u, "suggest": []} for u in unknowns]
-    try:
-        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained=True,
-                            where=where)
-    except EstimationError:
-        return none
-    photos = list(held.poses)
-    # the model's own free / fixed split (the held ones free again) at the held solution
-    at = model.with_values(held.params)
-    kept = {(p, e) for p, e, _ in held.mark_rms_px}
-    have = [m for m in marks.marks if (m.photo, m.edge) in kept]
-    cands, shown = [], set()
-    for p in photos:
-        R, t = held.poses[p]
-        cam = {p: {"K": held.K[p], "R": R, "t": t, "image_size": sizes[p]}}
-        shown |= {(p, e["edge"]) for e in project_edges(at, cam)[p]}
-        cands += [Mark(p, e["edge"], np.asarray(e["segment"], float))
-                  for e in project_edges(at, cam, occlusion=False)[p] if (p, e["edge"]) not in marked]
-    if not have or not cands:
-        return none
-    prob = _Problem(at, have + cands, photos, {p: held.K[p] for p in photos},
-                    np.array([held.poses[p][0] for p in photos]), free_focal=False)
-    x = prob.pack(at.values, np.zeros((len(photos), 3)),
-                  np.array([held.poses[p][1] for p in photos]))
-    _, cols, vals = prob.distances(x, jac=True)
-    J = np.zeros((prob.n, 2, prob.ncol))
-    for e in range(2):
-        J[np.arange(prob.n)[:, None], e, cols[e]] = vals[e]
-    names = prob.column_names()
-    ok = np.all(np.isfinite(J.reshape(prob.n, -1)), 1)
-    J[~ok] = 0.0
-    norms = np.linalg.norm(J.reshape(-1, prob.ncol), axis=0)
-    J = J / np.where(norms > 0, norms, 1.0)
-    E = J[:len(have)].reshape(-1, prob.ncol)
-    _, s, Vt = np.linalg.svd(E, full_matrices=True)
-    tau = RANK_RCOND * s[0]
-    N = Vt[int((s > tau).sum()):]                       # the null space, (k, ncol)
-    var = float(noise_px) ** 2
-    where_cols = {u: [i for i, n in enumerate(names) if n == u] for u in unknowns}
-
-    def weight(basis, c):                               # an unknown's weight in a null space
-        return max((float(np.linalg.norm(basis[:, i])) for i in c), default=0.0)
-
-    before = {u: weight(N, c) for u, c in where_cols.items()}
-    ranked = {u: ([], []) for u in unknowns}
-    for j, mk in enumerate(cands):
-        i = len(have) + j
-        if not ok[i]:
-            continue
-        _, sm, Vm = np.linalg.svd(J[i] @ N.T, full_matrices=True)
-        left = Vm[int((sm > tau).sum()):] @ N            # what this mark's rows do not see
-        std = None
-        for u in unknowns:
-            c = where_cols[u]
-            if not c:
-                continue
-            w_after = weight(left, c)
-            if w_after <= NULL_WEIGHT:
-                if std is None:
-                    _, s2, V2 = np.linalg.svd(np.vstack([E, J[i]]), full_matrices=False)
-                    keep = s2 > RANK_RCOND * s2[0]
-                    std = np.sqrt(var * ((V2[keep] / s2[keep, None]) ** 2).sum(0)) / np.where(
-                        norms > 0, norms, 1.0)
-                ranked[u][0].append((float(max(std[c])), mk))
-            elif w_after < before[u] - 1e-6:
-                ranked[u][1].append((w_after, mk))
-    out = []
-    for u in unknowns:
-        full, part = ranked[u]
-        rows = ([(mk, True, sd) for sd, mk in sorted(full, key=lambda t: t[0])]
-                + [(mk, False, None) for _, mk in sorted(part, key=lambda t: t[0])])
-        out.append({"parameter": u,
-                    "suggest": [{"photo": mk.photo, "edge": mk.edge, "constrains": c,
-                                 "std_after": sd, "hidden_in_solve": (mk.photo, mk.edge) not in shown}
-                                for mk, c, sd in rows[:suggestions]]})
+                                for i, sd in order]})
     return out
 
 
@@ -848,7 +713,7 @@ class FacadeSession:
                 # that would constrain it (what to mark next, not just names)
                 e.unconstrained = unconstrained_spots(
                     self.model, self._undistorted(marks), self._K(), self.sizes, e.unknowns,
-                    noise_px=noise_px, where=str(self.edges_path),
+                    noise_px=noise_px, where=str(self.edges_path), suggestions=WEAK_SUGGESTIONS,
                     marked={(m["photo"], m["edge"]) for m in self.marks.values()})
                 self.refusal = {"error": str(e), "unconstrained": e.unconstrained}
                 raise

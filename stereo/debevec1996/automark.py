@@ -660,19 +660,363 @@ def std_with_mark(sol, marks, name: str, *, noise_px: float | None = None) -> np
     keep, cols, vals = _edge_rows(sol, marks)
     if not keep:
         return out
-    C = np.asarray(sol.covariance)
-    slot = sol.model.slot_of(name)
+    rows = _mark_rows(keep, cols, vals)
+    k, var = _slot_index(sol, name), float(noise_px if noise_px is not None else sol.sigma_px) ** 2
+    out[keep] = _std_after(np.asarray(sol.covariance), k, rows, var)
+    return out
+
+
+def std_with_marks_in_turn(sol, marks, name: str, *, count: int, noise_px: float | None = None,
+                           markable=None) -> list[tuple[int, float]]:
+    """Up to ``count`` of ``marks`` (candidate marks), each the one that
+    lowers parameter ``name``'s first-order σ most *given the ones before
+    it*: ``[(index into marks, σ with it and those before it added)]``;
+    it stops early when no candidate left lowers it. ``markable`` (one
+    bool per mark, default all true): a pick that is not (say, an edge the
+    solved model hides, which the photograph may not show) is listed but
+    not assumed marked for the ones after it.
+
+    The greedy (sequential) form of :func:`std_with_mark`: after each pick
+    the covariance takes that mark's rank-two (Kalman) update ``C' = C - C
+    Jᵀ (σ² I + J C Jᵀ)⁻¹ J C``, and the rest are ranked against ``C'``. A
+    second mark in the photograph of the first shares that photograph's
+    pose, whose error it cannot average out; where that error is what is
+    left of the parameter's, the same edge seen from another viewpoint
+    ranks higher, and the list moves to another photograph (not always:
+    a view that sees the parameter much better can keep both).
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+    ...                             photographs=list(cams))
+    >>> sol = solve_facade(m, marks, {p: c["K"] for p, c in cams.items()}, noise_px=0.5)
+    >>> got = std_with_marks_in_turn(sol, marks.marks, "tower/height", count=3)
+    >>> alone = std_with_mark(sol, marks.marks, "tower/height")
+    >>> got[0][0] == int(np.nanargmin(alone)), [a > b for (_, a), (_, b) in zip(got, got[1:])]
+    (True, [True, True])
+    """
+    marks = list(marks)
+    keep, cols, vals = _edge_rows(sol, marks)
+    if not keep or count < 1:
+        return []
+    rows = _mark_rows(keep, cols, vals)
+    k, var = _slot_index(sol, name), float(noise_px if noise_px is not None else sol.sigma_px) ** 2
+    C = np.array(sol.covariance, dtype=float)
+    left = list(range(len(keep)))
+    out: list[tuple[int, float]] = []
+    while left and len(out) < count:
+        after = _std_after(C, k, [rows[j] for j in left], var)
+        best = int(np.argmin(np.where(np.isfinite(after), after, np.inf)))
+        now = np.sqrt(max(C[k, k], 0.0))
+        if not (np.isfinite(after[best]) and after[best] < now):
+            break
+        j = left.pop(best)
+        out.append((keep[j], float(after[best])))
+        if markable is not None and not markable[keep[j]]:
+            continue
+        c, J = rows[j]
+        G = C[:, c] @ J.T                               # cov(every unknown, the mark's two rows)
+        S = var * np.eye(2) + J @ C[np.ix_(c, c)] @ J.T
+        C = C - G @ np.linalg.solve(S, G.T)
+    return out
+
+
+def _slot_index(sol, name: str) -> int:
+    """Parameter ``name``'s index among ``sol.unknowns`` (the free slots come first)."""
     free = [n for n, f in zip(sol.model.slot_names, ~sol.model.fixed, strict=True) if f]
-    k = free.index(sol.model.slot_names[slot])
-    var = float(noise_px if noise_px is not None else sol.sigma_px) ** 2
-    for j, i in enumerate(keep):
+    return free.index(sol.model.slot_names[sol.model.slot_of(name)])
+
+
+def _mark_rows(keep, cols, vals) -> list:
+    """Each kept mark's two Jacobian rows on the unknowns they touch: ``[(c, J (2, len(c)))]``."""
+    rows = []
+    for j in range(len(keep)):
         c = np.union1d(cols[0][j], cols[1][j])
         J = np.zeros((2, len(c)))
         for e in range(2):
             J[e, np.searchsorted(c, cols[e][j])] = vals[e][j]
-        Cc = C[np.ix_(c, c)]
-        Ck = C[k, c]                                    # cov(parameter, the row's unknowns)
-        S = var * np.eye(2) + J @ Cc @ J.T
-        g = J @ Ck
+        rows.append((c, J))
+    return rows
+
+
+def _std_after(C, k: int, rows, var: float) -> np.ndarray:
+    """Unknown ``k``'s σ after each one of ``rows`` (``[(c, J)]``) is added
+    alone to covariance ``C`` with noise variance ``var``: the rank-two update."""
+    out = np.empty(len(rows))
+    for i, (c, J) in enumerate(rows):
+        S = var * np.eye(2) + J @ C[np.ix_(c, c)] @ J.T
+        g = J @ C[k, c]                                 # cov(parameter, the row's two distances)
         out[i] = np.sqrt(max(C[k, k] - g @ np.linalg.solve(S, g), 0.0))
     return out
+
+
+# unmarked edges suggested per unknown (a refusal's list; the view's weak list too)
+SUGGESTIONS = 8
+
+
+def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_px: float = 1.0,
+                        marked=None, suggestions: int = SUGGESTIONS,
+                        where: str = "edges.json") -> list[dict]:
+    """The unmarked edges that would constrain what a solve refuses.
+
+    When no combination of the marks constrains some unknowns,
+    :func:`~lumigraph.stereo.debevec1996.solve.solve_facade` refuses
+    (:class:`~lumigraph.stereo.debevec1996.solve.Unconstrained`, naming
+    them: ``unknowns``). This says, for each, which unmarked (photograph,
+    edge) pairs would constrain it, in the order to mark them.
+
+    ``model`` a :class:`~lumigraph.stereo.debevec1996.model.BlockModel`,
+    ``marks`` the :class:`~lumigraph.stereo.debevec1996.edges.EdgeMarks`
+    the solve refused, ``K`` photo -> (3, 3) intrinsics (px), ``sizes``
+    photo -> (width, height) px, ``marked`` the ``(photo, edge)`` pairs
+    not to suggest (default: those of ``marks``), ``suggestions`` how many
+    per unknown.
+
+    The poses to project candidate edges with come from the solve that
+    holds what the marks leave free (``hold_unconstrained``: the held
+    parameters at their starting values). At that solution the solver's
+    Jacobian of the signed end distances (eq. 5.3, both ends of every mark,
+    over the free parameters and every pose: the refused unknowns' columns
+    included) is column-scaled (by each column's norm over the marks and
+    the candidates) and its null space taken with the solver's own rank
+    test (singular values below ``RANK_RCOND`` times the largest). A
+    candidate (the in-frame stretch of an unmarked model edge, hidden by
+    the model's faces or not, ``hidden_in_solve`` says which) adds its two
+    rows; the null space left is the old one's part its rows do not see.
+    It *constrains* an unknown when the unknown's weight in the null space
+    left is at most ``NULL_WEIGHT`` (the solver would no longer name it).
+
+    Each list is built one suggestion at a time, each the best *given the
+    ones above it marked* (their rows added): a candidate that constrains
+    the unknown, the one giving it the least first-order σ (``std_after``:
+    the pseudo-inverse of the stacked Jacobian, end distances independent
+    with standard deviation ``noise_px``; model units, or for a pose the
+    largest of its three columns'), while one lowers it; before the
+    unknown is constrained, when no single candidate does it, the one
+    leaving it the least null weight (``constrains`` false, ``std_after``
+    None: one of several marks it needs). So a second mark that would tell
+    the unknown only what the first told it (the same photograph's pose
+    absorbing it) ranks below one that tells it something new. A
+    suggestion the held solve's faces hide (the photograph may not show
+    it) is listed but not assumed marked for those below it. A candidate's
+    two rows change the information matrix by rank two: its σ comes from
+    the marks' SVD, taken once per suggestion, and a 2×2 and a two-row SVD
+    of the candidate's own (:func:`_std_with_rows`), not from a new
+    decomposition of the whole stack per candidate. Returns ``[{parameter, suggest: [{photo, edge,
+    constrains, std_after, hidden_in_solve}]}]`` in the order of
+    ``unknowns`` (an unknown of a photograph the held solve left out gets
+    no suggestion); no suggestion at all when even the held solve fails.
+
+    The test scene with every edge marked but the tower's top: its height
+    is free (its vertical edges slide along their own lines), and the edges
+    that fix it are the tower's top and the spire's (not the tower's
+    verticals, the longest).
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> seen = {p: [e for e in v if not e["edge"].startswith("tower/top")]
+    ...         for p, v in project_edges(m, cams).items()}
+    >>> marks = EdgeMarks.from_dict({"photographs": seen}, model=m, photographs=list(cams))
+    >>> K = {p: c["K"] for p, c in cams.items()}
+    >>> spots = unconstrained_spots(m, marks, K, {p: c["image_size"] for p, c in cams.items()},
+    ...                             ["tower/height"])
+    >>> first = spots[0]["suggest"][0]
+    >>> first["edge"].startswith("tower/top"), first["constrains"], first["std_after"] > 0
+    (True, True, True)
+    """
+    from lumigraph.capture.errors import EstimationError
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import Mark
+    from lumigraph.stereo.debevec1996.solve import _Problem, solve_facade
+
+    unknowns = list(unknowns)
+    marked = {(m.photo, m.edge) for m in marks.marks} if marked is None else set(marked)
+    none = [{"parameter": u, "suggest": []} for u in unknowns]
+    try:
+        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained=True,
+                            where=where)
+    except EstimationError:
+        return none
+    photos = list(held.poses)
+    # the model's own free / fixed split (the held ones free again) at the held solution
+    at = model.with_values(held.params)
+    kept = {(p, e) for p, e, _ in held.mark_rms_px}
+    have = [m for m in marks.marks if (m.photo, m.edge) in kept]
+    cands, shown = [], set()
+    for p in photos:
+        R, t = held.poses[p]
+        cam = {p: {"K": held.K[p], "R": R, "t": t, "image_size": sizes[p]}}
+        shown |= {(p, e["edge"]) for e in project_edges(at, cam)[p]}
+        cands += [Mark(p, e["edge"], np.asarray(e["segment"], float))
+                  for e in project_edges(at, cam, occlusion=False)[p] if (p, e["edge"]) not in marked]
+    if not have or not cands:
+        return none
+    prob = _Problem(at, have + cands, photos, {p: held.K[p] for p in photos},
+                    np.array([held.poses[p][0] for p in photos]), free_focal=False)
+    x = prob.pack(at.values, np.zeros((len(photos), 3)),
+                  np.array([held.poses[p][1] for p in photos]))
+    _, cols, vals = prob.distances(x, jac=True)
+    J = np.zeros((prob.n, 2, prob.ncol))
+    for e in range(2):
+        J[np.arange(prob.n)[:, None], e, cols[e]] = vals[e]
+    names = prob.column_names()
+    ok = np.all(np.isfinite(J.reshape(prob.n, -1)), 1)
+    J[~ok] = 0.0
+    norms = np.linalg.norm(J.reshape(-1, prob.ncol), axis=0)
+    J = J / np.where(norms > 0, norms, 1.0)
+    E = J[:len(have)].reshape(-1, prob.ncol)
+    usable = [j for j in range(len(cands)) if ok[len(have) + j]]
+    Jc = J[len(have):][usable]
+    out = []
+    for u in unknowns:
+        c = [i for i, n in enumerate(names) if n == u]
+        rows = []
+        if c:
+            picks = _constraining_in_turn(
+                E, Jc, np.array(c), norms[c], var=float(noise_px) ** 2, count=suggestions,
+                markable=np.array([(cands[j].photo, cands[j].edge) in shown for j in usable]))
+            rows = [(cands[usable[j]], sd is not None, sd) for j, sd in picks]
+        out.append({"parameter": u,
+                    "suggest": [{"photo": mk.photo, "edge": mk.edge, "constrains": con,
+                                 "std_after": sd, "hidden_in_solve": (mk.photo, mk.edge) not in shown}
+                                for mk, con, sd in rows]})
+    return out
+
+
+def refusal_lines(spots) -> list[str]:
+    """:func:`unconstrained_spots`' answer as lines for the command line: a
+    heading, then per unknown its edges (``photo edge``, in order; "(hidden
+    in the solve?)" where the held solve's faces hide it; "(one of several it needs)"
+    where it does not constrain the unknown on its own). An unknown with no
+    suggestion says so.
+
+    >>> print("\\n".join(refusal_lines([{"parameter": "tower/height", "suggest": [
+    ...     {"photo": "photo_00.png", "edge": "spire/hip-back-left", "constrains": False,
+    ...      "std_after": None, "hidden_in_solve": False},
+    ...     {"photo": "photo_04.png", "edge": "tower/top-left", "constrains": True,
+    ...      "std_after": 0.02, "hidden_in_solve": True}]}])))
+    mark where the photograph shows them, in this order (each the best with those before it), then solve again:
+    tower/height: photo_00.png spire/hip-back-left (one of several it needs), photo_04.png tower/top-left (hidden in the solve?)
+    """
+    out = ["mark where the photograph shows them, in this order (each the best with those before "
+           "it), then solve again:"]
+    for u in spots:
+        items = [f"{q['photo']} {q['edge']}" + (" (hidden in the solve?)" if q["hidden_in_solve"] else "")
+                 + ("" if q["constrains"] else " (one of several it needs)") for q in u["suggest"]]
+        out.append(f"{u['parameter']}: " + (", ".join(items) if items else "no unmarked edge found "
+                                              "that would constrain it"))
+    return out
+
+
+def _constraining_in_turn(E, Jc, c, scale, *, var: float, count: int, markable) -> list:
+    """The greedy list of :func:`unconstrained_spots` for one unknown (its
+    columns ``c`` of the column-scaled rows ``E`` (marks) and ``Jc`` (``(n,
+    2, ncol)``, candidates), the columns' norms ``scale``): ``[(candidate
+    index, σ with it and those above, or None while not yet constrained)]``;
+    a pick not ``markable`` is listed but its rows are not added."""
+    from lumigraph.stereo.debevec1996.solve import NULL_WEIGHT, RANK_RCOND
+
+    Q, left, out = E, list(range(len(Jc))), []
+    while left and len(out) < count:
+        _, s, Vt = np.linalg.svd(Q, full_matrices=True)
+        tau = RANK_RCOND * s[0]
+        r = int((s > tau).sum())
+        VR, d, N = Vt[:r], s[:r] ** 2, Vt[r:]          # range, its information, null space
+        k = N.shape[0]
+        Jl = Jc[left]                                   # (m, 2, ncol)
+        weight_now = float(np.linalg.norm(N[:, c], axis=0).max()) if k else 0.0
+        if k:
+            JN = Jl @ N.T                               # (m, 2, k): what each sees of the null space
+            Um, sm, Vm = np.linalg.svd(JN, full_matrices=True)
+            b = (sm > tau).sum(1)                       # null directions each one pins (0-2)
+            VN = Vm @ N                                 # (m, k, ncol)
+            rest = np.arange(k)[None, :] >= b[:, None]  # the null directions it leaves
+            w = np.linalg.norm(VN[:, :, c] * rest[:, :, None], axis=1).max(1)
+        else:
+            w = np.zeros(len(left))
+        con = np.flatnonzero(w <= NULL_WEIGHT)          # the candidates that constrain it
+        if len(con):
+            std = _std_with_rows(s[:r], VR, Jl[con], c, scale, var=var,
+                                 pins=(Um[con], sm[con], b[con], VN[con]) if k else None)
+            std_now = None
+            if weight_now <= NULL_WEIGHT:               # constrained already: σ must fall
+                std_now = float((np.sqrt(var * ((VR[:, c] ** 2) / d[:, None]).sum(0))
+                                 / np.where(scale > 0, scale, 1.0)).max())
+            best = int(np.argmin(std))
+            if std_now is not None and not std[best] < std_now:
+                break
+            i = int(con[best])
+            pick = (left[i], float(std[best]))
+        else:
+            i = int(np.argmin(w))
+            if not w[i] < weight_now - 1e-6:
+                break
+            pick = (left[i], None)
+        out.append(pick)
+        if markable[left[i]]:
+            Q = np.vstack([Q, Jc[left[i]]])
+        left.pop(i)
+    return out
+
+
+def _std_with_rows(s, VR, J, c, scale, *, var: float, pins) -> np.ndarray:
+    """The σ of the unknown in columns ``c`` (column norms ``scale``) with
+    each candidate's two rows ``J`` ``(m, 2, ncol)`` added to marks whose
+    range is ``VR`` ``(r, ncol)`` with singular values ``s``: ``(m,)``.
+
+    ``pins`` ``(U, sm, b, VN)`` (None when the marks leave no null space):
+    per candidate the SVD ``U diag(sm) V`` of its rows on the null space
+    ``N``, ``b`` how many null directions it pins and ``VN = V N``. The
+    rows are turned by ``Uᵀ``: the first ``b`` then each pin one null
+    direction, which they fix and no more (no prior holds it); the rest
+    measure the range, where the marks hold it with information ``diag(s²)``.
+    So, for the unknown's coordinates ``q_R`` (range) and ``q_B`` (pinned),
+    ``σ² / var = ‖a‖² + p̂ᵀ (I + ĜᵀĜ)⁻¹ p̂`` with ``a = q_B / sm``, ``p = q_R -
+    G_pinᵀ a`` and ``p̂ = p / s``, ``Ĝ = G_rest / s`` (the range rows, whitened);
+    the last term, through the SVD ``Ĝ = W Σ Vᵀ``, is ``‖p̂ - V Vᵀ p̂‖² + Σ
+    (Vᵀp̂)² / (1 + Σ²)``: sums of squares, with no difference of large
+    terms to cancel where ``s`` is small (a weak direction that the
+    candidate measures well), as an inverse or Woodbury form does.
+
+    >>> s, VR = np.array([2.0, 1e-6]), np.eye(3)[:2]               # a weak direction, one null
+    >>> J = np.array([[[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]])          # measures it, pins the null
+    >>> pins = (np.array([[[0.0, 1.0], [1.0, 0.0]]]), np.array([[1.0, 0.0]]), np.array([1]),
+    ...         np.array([[[0.0, 0.0, 1.0]]]))
+    >>> T = np.array([[2.0, 0, 0], [0, 1e-6, 0], [0, 1.0, 0], [0, 0, 1.0]])   # the stack
+    >>> direct = [np.sqrt(np.linalg.pinv(T.T @ T)[i, i]) for i in range(3)]
+    >>> got = [_std_with_rows(s, VR, J, np.array([i]), np.ones(1), var=1.0, pins=pins)[0]
+    ...        for i in range(3)]
+    >>> bool(np.allclose(got, direct, rtol=1e-9))
+    True
+    """
+    m = len(J)
+    if pins is None:
+        G = J @ VR.T                                    # (m, 2, r)
+        a = np.zeros((m, 2, len(c)))
+        pin = np.zeros((m, 2), bool)
+    else:
+        U, sm, b, VN = pins
+        G = U.transpose(0, 2, 1) @ J @ VR.T             # the turned rows on the range
+        pin = np.arange(2)[None, :] < b[:, None]        # (m, 2): row i pins null direction i
+        nb = min(2, VN.shape[1])
+        qB = np.zeros((m, 2, len(c)))
+        qB[:, :nb] = VN[:, :nb][:, :, c]
+        safe = np.where(pin, sm[:, :2] if sm.shape[1] >= 2 else np.pad(sm, ((0, 0), (0, 1))), 1.0)
+        a = np.where(pin[:, :, None], qB / safe[:, :, None], 0.0)
+    p = VR[:, c][None] - G.transpose(0, 2, 1) @ a       # (m, r, |c|)
+    ph = p / s[None, :, None]
+    Gh = np.where(pin[:, :, None], 0.0, G) / s          # the rows that measure the range, whitened
+    _, sg, Vg = np.linalg.svd(Gh, full_matrices=False)  # (m, 2), (m, 2, r)
+    proj = Vg @ ph
+    resid = ph - Vg.transpose(0, 2, 1) @ proj
+    quad = ((resid ** 2).sum(1) + (proj ** 2 / (1.0 + sg[:, :, None] ** 2)).sum(1)
+            + (a ** 2).sum(1))
+    return (np.sqrt(var * quad) / np.where(scale > 0, scale, 1.0)).max(1)

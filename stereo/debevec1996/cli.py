@@ -58,7 +58,8 @@ green, mis-marked ones in magenta, the marked edges reprojected in red, every ot
 in blue, each mark's RMS distance in px).
 A mark farther than 5x --noise-px from its reprojected edge is reported and left out; a
 photograph with fewer than 3 marks is left out (warning). Marks that leave a parameter or a
-pose unconstrained: exit 2 naming them.
+pose unconstrained: exit 2 naming them, then per unknown the unmarked edges (photo edge) that
+would constrain it, in the order to mark them (each the best with those before it marked).
 """
 
 AUTOMARK_EPILOG = """\
@@ -194,9 +195,10 @@ def _undistorted(marks, camera):
 # ----------------------------------------------------------------- solve
 def _solve(args) -> int:
     from lumigraph.capture.artifact import make_meta
+    from lumigraph.stereo.debevec1996.automark import refusal_lines, unconstrained_spots
     from lumigraph.stereo.debevec1996.edges import load_edges
     from lumigraph.stereo.debevec1996.outputs import planned_outputs, save_solution
-    from lumigraph.stereo.debevec1996.solve import check_solve_options, solve_facade
+    from lumigraph.stereo.debevec1996.solve import Unconstrained, check_solve_options, solve_facade
 
     check_solve_options(noise_px=args.noise_px, max_iterations=200)
     out = check_output_dir(args.out)
@@ -206,9 +208,16 @@ def _solve(args) -> int:
     edges_path = Path(args.edges) if args.edges else folder / "edges.json"
     marks = load_edges(edges_path, model=model, photographs=photos, image_sizes=sizes)
     rough = _rough(args, photos)
-    sol = solve_facade(model, _undistorted(marks, camera), {p: camera.K for p in photos},
-                       rough_rotations=rough, free_focal=args.free_focal,
-                       noise_px=args.noise_px, robust=not args.no_robust, where=str(edges_path))
+    try:
+        sol = solve_facade(model, _undistorted(marks, camera), {p: camera.K for p in photos},
+                           rough_rotations=rough, free_focal=args.free_focal,
+                           noise_px=args.noise_px, robust=not args.no_robust, where=str(edges_path))
+    except Unconstrained as e:
+        # after the one line, per refused unknown, the unmarked edges that
+        # would constrain it, in the order to mark them (as the view's page)
+        spots = unconstrained_spots(model, _undistorted(marks, camera), {p: camera.K for p in photos},
+                                    sizes, e.unknowns, noise_px=args.noise_px, where=str(edges_path))
+        raise Unconstrained(e.where, e.unknowns, details=refusal_lines(spots)) from None
     for w in sol.warnings:
         warn(w)
     meta = make_meta("lumigraph.facade.model",

@@ -109,17 +109,18 @@ class Unconstrained(EstimationError):
     carries the unknowns' names, ``unknowns`` (parameter names as the
     model's slots, ``"<photo>:position"`` / ``"<photo>:rotation"`` for a
     pose, ``"focal_scale"``), so a caller can say what would constrain each
-    (:func:`lumigraph.view.marking.unconstrained_spots`).
+    (:func:`lumigraph.stereo.debevec1996.automark.unconstrained_spots`; the
+    command line puts that list in ``details``).
 
     >>> str(Unconstrained("edges.json", ("tower/height",))).split(":")[:2]
     ['edges.json', ' the marks do not constrain tower/height']
     """
 
-    def __init__(self, where, unknowns):
+    def __init__(self, where, unknowns, *, details=()):
         self.unknowns = tuple(unknowns)
         super().__init__(where, "the marks do not constrain " + ", ".join(self.unknowns)
                          + ": mark more edges of those blocks / photographs, share or fix "
-                           "those parameters")
+                           "those parameters", details=details)
 
 
 @dataclass(frozen=True)

@@ -133,8 +133,12 @@ def test_cli_unknown_photograph_and_unconstrained(tmp_path, model):
                         for p, v in d["photographs"].items()}
     (folder / "edges.json").write_text(json.dumps(d))
     rc, _, err = run_cli(["stereo", "facade", "solve", str(folder), "--out", str(tmp_path / "o")])
-    line = _one_error_line(rc, err)
-    assert "spire/height" in line and "do not constrain" in line
+    # one error line, then (indented) the edges that would constrain each unknown
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2 and lines[0].startswith("error: "), (rc, err)
+    assert "spire/height" in lines[0] and "do not constrain" in lines[0]
+    assert all(ln.startswith("  ") for ln in lines[1:]) and any(
+        ln.strip().startswith("spire/height: ") for ln in lines[1:]), err
     assert not (tmp_path / "o").exists()
 
 

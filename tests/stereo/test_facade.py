@@ -220,6 +220,39 @@ def test_cli_unknown_edge_name_is_exit_2_naming_file_and_entry(tmp_path, model):
     assert "'tower/top-middle'" in lines[0]
 
 
+def test_cli_refusal_lists_the_edges_that_would_constrain_each_unknown(tmp_path, model):
+    """Marks without the tower's top and the spire leave both heights free
+    (the tower's verticals slide along their own lines): exit 2, the one
+    error line naming them, then (as the marking page does) per unknown,
+    in the error's order, the unmarked edges that would constrain it as
+    ``photo edge``. Down to the first that constrains the unknown they lie
+    on the tower or the spire, the only blocks whose edges carry the
+    heights; none is already marked. Nothing is written."""
+    folder, _ = _folder(tmp_path, model)
+    d = json.loads((folder / "edges.json").read_text())
+    d["photographs"] = {p: [m for m in ms if not m["edge"].startswith(("tower/top", "spire/"))]
+                        for p, ms in d["photographs"].items()}
+    (folder / "edges.json").write_text(json.dumps(d))
+    marked = {(p, m["edge"]) for p, ms in d["photographs"].items() for m in ms}
+    rc, _, err = run_cli(["stereo", "facade", "solve", str(folder), "--out", str(tmp_path / "o")])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert rc == 2, err
+    assert lines[0].startswith("error: ") and "edges.json" in lines[0], err
+    named = lines[0].split("do not constrain ")[1].split(":")[0].split(", ")
+    assert {"tower/height", "spire/height"} <= set(named), err
+    assert lines[1].startswith("  mark where the photograph shows them"), err
+    assert [ln.split(": ")[0].strip() for ln in lines[2:]] == named, err
+    for ln in lines[2:]:
+        if not ln.strip().startswith(("tower/height", "spire/height")):
+            continue
+        items = [it.split(" (")[0].split(" ") for it in ln.split(": ", 1)[1].split(", ")]
+        assert items and all(len(it) == 2 and (it[0], it[1]) not in marked for it in items), ln
+        upto = next(i for i, it in enumerate(ln.split(": ", 1)[1].split(", "))
+                    if "(one of several it needs)" not in it)
+        assert all(e.split("/")[0] in ("tower", "spire") for _, e in items[:upto + 1]), ln
+    assert not (tmp_path / "o").exists()
+
+
 def test_poorly_determined_rotations_and_parameters_are_said():
     """A solve whose first-order σ says a camera's rotation is unknown to more
     than 1° (or a size to more than a third of itself) warns, naming them;

@@ -146,3 +146,75 @@ def test_cli_refuses_to_overwrite_the_input_edges_naming_the_path(tmp_path):
     lines = err.strip().splitlines()
     assert rc == 2 and len(lines) == 1 and lines[0].startswith(f"error: {edges}:"), err
     assert "--out" not in lines[0] and edges.read_bytes() == before
+
+
+def _in_turn_directly(E, Jc, c, scale, *, var, count, markable):
+    """The refusal list's greedy rule computed the plain way: per step and
+    per candidate, the null space and the pseudo-inverse of the whole
+    stacked matrix from its own SVD (what the rank-two updates replace)."""
+    from lumigraph.stereo.debevec1996.solve import NULL_WEIGHT, RANK_RCOND
+
+    def null_and_std(Q):
+        _, s, Vt = np.linalg.svd(Q, full_matrices=True)
+        keep = s > RANK_RCOND * s[0]
+        r = int(keep.sum())
+        std = np.sqrt(var * ((Vt[:r] / s[:r, None]) ** 2).sum(0))[c] / scale
+        return Vt[r:], s, float(std.max())
+
+    Q, left, out = E, list(range(len(Jc))), []
+    while left and len(out) < count:
+        N, s, std_now = null_and_std(Q)
+        w_now = float(np.linalg.norm(N[:, c], axis=0).max()) if len(N) else 0.0
+        got = []
+        for j in left:
+            Nj = null_and_std(np.vstack([Q, Jc[j]]))[0]
+            w = float(np.linalg.norm(Nj[:, c], axis=0).max()) if len(Nj) else 0.0
+            got.append((j, w, null_and_std(np.vstack([Q, Jc[j]]))[2] if w <= NULL_WEIGHT else None))
+        con = [g for g in got if g[2] is not None]
+        if con:
+            j, _, sd = min(con, key=lambda g: g[2])
+            if w_now <= NULL_WEIGHT and not sd < std_now:
+                break
+        else:
+            j, w, sd = min(got, key=lambda g: g[1])
+            if not w < w_now - 1e-6:
+                break
+        out.append((j, sd))
+        Q = np.vstack([Q, Jc[j]]) if markable[j] else Q
+        left.remove(j)
+    return out
+
+
+def test_a_refusal_list_in_turn_matches_the_pseudo_inverse_of_the_whole_stack():
+    """The refusal list's cheap step (the candidate's two rows turned to
+    pin null directions or measure the range, against the marks' SVD)
+    gives the same list and σ as the
+    SVD of the whole stack per candidate, on a stack built to be hard:
+    five null directions (what the refusal names; one candidate's two
+    rows cannot pin them all, so lists start with marks that do not
+    constrain alone), one direction held 10⁻⁶ as strongly as the rest
+    (above the rank test's 10⁻⁹: an update through the inverse of the
+    information loses its digits there, as a first form of this step did
+    on a rendered scene, answering σ = 0), candidates that see none of the
+    null space, and some not markable."""
+    from lumigraph.stereo.debevec1996.automark import _constraining_in_turn
+
+    rng = np.random.default_rng(3)
+    n = 14
+    basis = np.linalg.qr(rng.normal(size=(n, n)))[0]
+    sv = np.r_[np.linspace(3.0, 1.0, n - 6), 1e-6, np.zeros(5)]
+    E = rng.normal(size=(40, n)) @ np.diag(np.r_[np.ones(n - 6), np.zeros(6)])
+    E = np.linalg.qr(E)[0][:, :n] @ np.diag(sv) @ basis.T          # singular values sv
+    Jc = rng.normal(size=(30, 2, n))
+    for j in range(0, 30, 3):                      # some see none of the null space
+        Jc[j] = Jc[j] @ (basis[:, :n - 5] @ basis[:, :n - 5].T)
+    markable = rng.random(30) > 0.2
+    for col in range(n):
+        c, scale = np.array([col]), np.array([1.0])
+        if np.linalg.norm(basis[col, n - 5:]) < 0.2:               # not an unknown of the null space
+            continue
+        fast = _constraining_in_turn(E, Jc, c, scale, var=0.25, count=6, markable=markable)
+        slow = _in_turn_directly(E, Jc, c, scale, var=0.25, count=6, markable=markable)
+        assert [j for j, _ in fast] == [j for j, _ in slow], (col, fast, slow)
+        for (_, a), (_, b) in zip(fast, slow, strict=True):
+            assert (a is None) == (b is None) and (a is None or abs(a - b) <= 1e-6 * b), (col, a, b)

@@ -154,7 +154,7 @@ def test_a_dragged_segment_snaps_onto_the_edge(scene, tmp_path):
 def test_the_weak_list_names_a_side_marked_once_and_the_edges_that_hold_it(scene, tmp_path):
     """The scene's own marks (σ = 0.5 px) with the wing's right side kept in
     one mark only: its width is then held by that mark alone (its left side
-    by many), so the solve lists wing/width as weak, and every edge it
+    by many), so the solve lists wing/width as weak, and the first edge it
     suggests lies on the wing's right side (the only unmarked edges that
     carry its width). Adding the first one the photographs show lowers the
     width's σ, to near the σ predicted (closer to it than to the σ before)."""
@@ -177,7 +177,12 @@ def test_the_weak_list_names_a_side_marked_once_and_the_edges_that_hold_it(scene
     assert [w["parameter"] for w in weak][:1] == ["wing/width"], weak
     w = weak[0]
     assert w["rel_std"] > 2 * w["median_rel_std"] and w["suggest"]
-    assert all(q["edge"].startswith("wing/") and q["edge"].endswith("-right") for q in w["suggest"])
+    # the first suggestion is on the right side (the only unmarked edges that
+    # carry the width alone); each later one is the best given those above
+    # it, so each lowers the σ those above reach
+    first = w["suggest"][0]
+    assert first["edge"].startswith("wing/") and first["edge"].endswith("-right"), w["suggest"]
+    _assert_each_lowers_the_sigma_above(w["suggest"], w["std"])
     q, m = next((q, m) for q in w["suggest"] for m in full[q["photo"]] if m["edge"] == q["edge"])
     assert c.post("/api/facade/marks", json={"photo": q["photo"], "segment": m["segment"],
                                              "edge": q["edge"], "snap": False}).status_code == 200
@@ -186,11 +191,150 @@ def test_the_weak_list_names_a_side_marked_once_and_the_edges_that_hold_it(scene
     assert now < w["std"] and abs(now - q["std_after"]) < abs(w["std"] - q["std_after"])
 
 
+def _assert_each_lowers_the_sigma_above(suggest, start):
+    """A list ranked in turn: each suggestion's σ (with it and those above
+    it added; one the solve hides is listed but not assumed marked) is
+    below the σ the suggestions above it reach (``start`` at the top)."""
+    now = start
+    for q in suggest:
+        if q["std_after"] is None:          # not yet constrained: no σ
+            continue
+        assert q["std_after"] < now, suggest
+        if not q["hidden_in_solve"]:
+            now = q["std_after"]
+
+
+def _ring_with_a_nearer_view(near="photo_04.png", radius=20.0):
+    """The test model's six ring cameras (30 m out) with ``near`` brought
+    to ``radius``: one photograph that sees its side of the scene larger
+    than the others do."""
+    from lumigraph.capture.scenes.facade_edges import ring_cameras
+
+    cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    cams[near] = ring_cameras(6, target=[1.5, 0, 4], radius=radius, height=4, focal_px=700)[near]
+    return cams
+
+
+def test_the_weak_list_moves_to_another_photograph_once_one_holds_the_parameter():
+    """The test model's tower with its right side marked in one photograph
+    only: its width is weak. photo_04 is brought nearer (20 m, the others
+    30 m) and sees that side, so each of its two right verticals, alone,
+    would hold the width best: ranked one mark at a time (the old list)
+    the top two are both in photo_04. But a width read in one photograph
+    rests on that photograph's pose (its distance sets the scale), which
+    the two verticals share: given the first, the second adds less than
+    the same edge seen from another viewpoint with its own pose. The list,
+    each suggestion the best given those above it, starts with the same
+    edge and puts the second in another photograph; and the solver agrees
+    (first-order σ of full solves with the pair added): the list's top two
+    hold the width better than the two best alone."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.automark import std_with_mark
+    from lumigraph.stereo.debevec1996.edges import EdgeMarks, Mark
+    from lumigraph.stereo.debevec1996.model import BlockModel
+    from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    from lumigraph.view.marking import weak_spots
+
+    m = BlockModel.from_dict(FIXTURE)
+    cams = _ring_with_a_nearer_view()
+    K = {p: c["K"] for p, c in cams.items()}
+    sizes = {p: c["image_size"] for p, c in cams.items()}
+    seen = project_edges(m, cams)
+    for i, e in enumerate(e for v in seen.values() for e in v):     # ±0.5 px, deterministic
+        e["segment"] = (np.asarray(e["segment"]) + 0.5 * np.cos(np.arange(4) + i)).tolist()
+    right = ("tower/front-right", "tower/back-right", "tower/top-right", "tower/bottom-right")
+    kept, once = {}, None
+    for p, v in seen.items():
+        mine = [e for e in v if e["edge"] in right]
+        if once is None and mine:
+            once = (p, mine[0]["edge"])
+        kept[p] = [e for e in v if e["edge"] not in right or (p, e["edge"]) == once]
+
+    def solve(extra=()):
+        marks = {p: list(v) for p, v in kept.items()}
+        for p, edge in extra:
+            marks[p].append(next(e for e in seen[p] if e["edge"] == edge))
+        return solve_facade(m, EdgeMarks.from_dict({"photographs": marks}, model=m,
+                                                   photographs=list(cams)), K, noise_px=0.5)
+
+    sol = solve()
+    marked = {(p, e["edge"]) for p, v in kept.items() for e in v}
+    weak = {w["parameter"]: w for w in weak_spots(sol, marked, sizes)}
+    assert "tower/width" in weak, list(weak)
+    new = [(q["photo"], q["edge"]) for q in weak["tower/width"]["suggest"][:2]]
+    # the old list: the same candidates, each ranked by the σ it gives alone
+    cands = []
+    for p, (R, t) in sol.poses.items():
+        cam = {p: {"K": sol.K[p], "R": R, "t": t, "image_size": sizes[p]}}
+        cands += [Mark(p, e["edge"], np.asarray(e["segment"], float))
+                  for e in project_edges(sol.model, cam, occlusion=False)[p]
+                  if (p, e["edge"]) not in marked]
+    alone = std_with_mark(sol, cands, "tower/width")
+    old = [(cands[i].photo, cands[i].edge) for i in np.argsort(alone)[:2]]
+    assert old[0][0] == old[1][0] == "photo_04.png", old
+    assert new[0] == old[0] and new[1][0] != "photo_04.png", new
+    assert all(e in {x["edge"] for x in seen[p]} for p, e in old + new)   # all four in view
+    assert solve(new).std["tower/width"] < solve(old).std["tower/width"]
+
+
+def test_a_refusal_list_moves_to_another_photograph_once_one_constrains_the_unknown():
+    """The same scene (photo_04 nearer, seeing the tower's right side) with
+    no right-side edge of the tower marked: its width is refused. The best
+    edge alone is a right vertical in photo_04, and so is the next best
+    alone (the old list's top two, one photograph: the list asked without
+    that first edge). Ranked given the first marked, the second suggestion
+    is in another photograph (a second vertical in photo_04 shares the
+    pose the first rests on), and the solver agrees: with the list's top
+    two marked the width's σ is lower than with the two best alone."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    from lumigraph.stereo.debevec1996.model import BlockModel
+    from lumigraph.stereo.debevec1996.solve import FIXTURE, Unconstrained, solve_facade
+    from lumigraph.view.marking import unconstrained_spots
+
+    m = BlockModel.from_dict(FIXTURE)
+    cams = _ring_with_a_nearer_view()
+    K = {p: c["K"] for p, c in cams.items()}
+    sizes = {p: c["image_size"] for p, c in cams.items()}
+    seen = project_edges(m, cams)
+    for i, e in enumerate(e for v in seen.values() for e in v):     # ±0.5 px, deterministic
+        e["segment"] = (np.asarray(e["segment"]) + 0.5 * np.cos(np.arange(4) + i)).tolist()
+    right = ("tower/front-right", "tower/back-right", "tower/top-right", "tower/bottom-right")
+    kept = {p: [e for e in v if e["edge"] not in right] for p, v in seen.items()}
+    marks = EdgeMarks.from_dict({"photographs": kept}, model=m, photographs=list(cams))
+    with pytest.raises(Unconstrained) as refused:
+        solve_facade(m, marks, K, noise_px=0.5)
+    assert "tower/width" in refused.value.unknowns
+
+    def listed(marked, n):
+        return unconstrained_spots(m, marks, K, sizes, ["tower/width"], noise_px=0.5,
+                                   marked=marked, suggestions=n)[0]["suggest"]
+
+    marked = {(p, e["edge"]) for p, v in kept.items() for e in v}
+    new = listed(marked, 2)
+    first = (new[0]["photo"], new[0]["edge"])
+    second_alone = listed(marked | {first}, 1)[0]                 # the old list's second
+    old = [first, (second_alone["photo"], second_alone["edge"])]
+    new = [first, (new[1]["photo"], new[1]["edge"])]
+    assert first[0] == old[1][0] == "photo_04.png" and first[1] in right, old
+    assert new[1][0] != "photo_04.png" and new[1][1] in right, new
+
+    def width_std(pair):
+        more = {p: list(v) for p, v in kept.items()}
+        for p, edge in pair:
+            more[p].append(next(e for e in seen[p] if e["edge"] == edge))
+        return solve_facade(m, EdgeMarks.from_dict({"photographs": more}, model=m,
+                                                   photographs=list(cams)), K,
+                            noise_px=0.5).std["tower/width"]
+
+    assert width_std(new) < width_std(old)
+
+
 def test_the_edges_a_refusal_suggests_constrain_what_it_refused():
     """The test model with every visible edge marked but the tower's top:
     the tower's height is free (its vertical edges slide along their own
     lines), the solve refuses naming it, and unconstrained_spots suggests
-    only edges that carry the height (the tower's top), not the verticals
+    first an edge that carries the height (the tower's top), not a vertical
     (the longest edges of the named block). The first suggestion the
     solved model shows, marked (±0.5 px, deterministic), makes the solve
     succeed with the height within 4σ of the truth."""
@@ -216,8 +360,11 @@ def test_the_edges_a_refusal_suggests_constrain_what_it_refused():
     assert [u["parameter"] for u in spots] == ["tower/height"]
     sug = spots[0]["suggest"]
     assert sug and all(q["constrains"] and q["std_after"] > 0 for q in sug)
-    assert all(q["edge"].startswith("tower/top") for q in sug), sug
-    assert [q["std_after"] for q in sug] == sorted(q["std_after"] for q in sug)
+    # the first is the best edge alone: the tower's top (its verticals do not
+    # carry the height); each later one is the best with those above it
+    # marked, so the σ the list reaches falls down it
+    assert sug[0]["edge"].startswith("tower/top"), sug
+    _assert_each_lowers_the_sigma_above(sug, np.inf)
     q = next(q for q in sug if not q["hidden_in_solve"])
     add = next(e for e in seen[q["photo"]] if e["edge"] == q["edge"])
     kept[q["photo"]].append(add)
@@ -256,7 +403,11 @@ def test_a_refused_solve_answers_the_edges_that_would_constrain_each_unknown(sce
         for q in u["suggest"]:
             assert set(q) == {"photo", "edge", "constrains", "std_after", "hidden_in_solve"}
             assert (q["std_after"] is None) != q["constrains"]
-            assert q["edge"].split("/")[0] in ("tower", "spire"), q
+        # the list down to the first mark that constrains it lies on the
+        # blocks that carry the heights; below it, any edge that lowers σ
+        upto = next(i for i, q in enumerate(u["suggest"]) if q["constrains"])
+        assert all(q["edge"].split("/")[0] in ("tower", "spire")
+                   for q in u["suggest"][:upto + 1]), u["suggest"]
     assert c.get("/api/facade/state").get_json()["refusal"] == {
         "error": got["error"], "unconstrained": got["unconstrained"]}
     for u in got["unconstrained"]:

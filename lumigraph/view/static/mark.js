@@ -247,12 +247,14 @@
     suggestList(box, "Unconstrained", (ref.unconstrained || []).filter((u) => u.suggest.length),
       (u) => `${u.parameter}: `,
       (u, q) => q.constrains
-        ? `with this edge marked: ${u.parameter} ± ${q.std_after.toPrecision(2)} (at the solve's noise)`
-        : `one of the edges ${u.parameter} needs (this one alone does not fix it)`);
+        ? `with this edge and those before it that the solve shows marked: ${u.parameter} ± ` +
+          `${q.std_after.toPrecision(2)} (at the solve's noise)`
+        : `one of the edges ${u.parameter} needs (with those before it, not yet enough)`);
     d.appendChild(box);
   }
   // a heading and, per parameter, its suggested edges as buttons (the weak list
-  // and a refusal's list look the same)
+  // and a refusal's list look the same), in order: each the best with those
+  // before it marked, so they are best taken from the left
   function suggestList(box, what, items, label, title) {
     if (!items.length) return;
     const h = document.createElement("p");
@@ -276,7 +278,7 @@
     const pct = (v) => `${(100 * v).toFixed(1)} %`;
     suggestList($("weak"), "Weakly constrained", weak,
       (w) => `${w.parameter} ± ${pct(w.rel_std)} (median parameter ± ${pct(w.median_rel_std)}): `,
-      (w, q) => `with this edge marked: ${w.parameter} ± ` +
+      (w, q) => `with this edge and those before it that the solve shows marked: ${w.parameter} ± ` +
         `${q.std_after.toPrecision(2)} (now ± ${w.std.toPrecision(2)})`);
   }
 
