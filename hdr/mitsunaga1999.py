@@ -920,12 +920,7 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
     # exposure kept). The fit's adjacent ratios enter with an sd of 0.05 in ln, so a
     # pair no channel could read keeps the fit's ratio and the graph stays connected;
     # against a measured pair's sd (0.0001-0.003) their weight is under 0.4 %.
-    for q in range(p - 1):
-        row = np.zeros(p)
-        row[q + 1], row[q] = 1.0, -1.0
-        rows.append(row)
-        rhs.append(float(ln_e[q + 1] - ln_e[q]))
-        wts.append(1.0 / RATIO_PRIOR_SD ** 2)
+    _fit_ratio_prior(ln_e, p, rows, rhs, wts)
     a_m = np.array(rows) * np.sqrt(np.array(wts))[:, None]
     b_v = np.array(rhs) * np.sqrt(np.array(wts))
     gauge = np.full((1, p), 1.0 / p) * math.sqrt(max(wts))
@@ -940,6 +935,17 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
         if sd_held is not None:
             out["sd_ln_adjacent"] = sd_held
     return sol, out
+
+
+def _fit_ratio_prior(ln_e_fit, n_u: int, rows: list, rhs: list, wts: list) -> None:
+    """Append the fit's adjacent ln ratios as rows of sd :data:`RATIO_PRIOR_SD`
+    (over ``n_u`` unknowns, the exposures first)."""
+    for q in range(len(ln_e_fit) - 1):
+        row = np.zeros(n_u)
+        row[q + 1], row[q] = 1.0, -1.0
+        rows.append(row)
+        rhs.append(float(ln_e_fit[q + 1] - ln_e_fit[q]))
+        wts.append(1.0 / RATIO_PRIOR_SD ** 2)
 
 
 def hat_basis(k: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -1082,12 +1088,7 @@ def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, 
                 rhs.append(lin)
                 wts.append(1.0 / var)
         n_rows = len(rows)
-        for q in range(p - 1):
-            row = np.zeros(n_u)
-            row[q + 1], row[q] = 1.0, -1.0
-            rows.append(row)
-            rhs.append(float(ln_e_fit[q + 1] - ln_e_fit[q]))
-            wts.append(1.0 / RATIO_PRIOR_SD ** 2)
+        _fit_ratio_prior(ln_e_fit, n_u, rows, rhs, wts)
         for ch in knots:
             for m in range(knots[ch].size):
                 row = np.zeros(n_u)

@@ -128,9 +128,10 @@ def test_ratio_of_sums_is_unbiased_where_an_ln_average_is_not():
     assert ln_avg - np.log(4.0) > predicted / 2 > 10 * np.sqrt(var)
 
 
-def test_refine_exposures_with_the_true_curve_recovers_the_ratios():
-    # A linear sensor, read noise 30 % of the darkest exposures' signal, the true
-    # curve given: every adjacent ratio within 4 of its reported sd.
+def _linear_sensor_bracket():
+    """A 12-bit linear sensor, 4 exposures two stops apart of a scene spread evenly
+    in log over 2.7 decades; read noise 30 % of the darkest exposures' signal.
+    Returns ``(z, ln_e, zmax, a, b)``, ``Var x = a x + b``."""
     rng = np.random.default_rng(5)
     p, h, w = 4, 200, 300
     scene = np.exp(rng.uniform(np.log(0.002), np.log(1.0), (h, w)))
@@ -142,6 +143,13 @@ def test_refine_exposures_with_the_true_curve_recovers_the_ratios():
         x = scene * np.exp(ln_e[q])
         x = x + rng.normal(0, 1, x.shape) * np.sqrt(a * np.minimum(x, 2) + b)
         z[q, ..., 0] = np.clip(np.rint(np.clip(x, 0, 1) * zmax), 0, zmax)
+    return z, ln_e, zmax, a, b
+
+
+def test_refine_exposures_with_the_true_curve_recovers_the_ratios():
+    # A linear sensor, read noise 30 % of the darkest exposures' signal, the true
+    # curve given: every adjacent ratio within 4 of its reported sd.
+    z, ln_e, zmax, a, b = _linear_sensor_bracket()
     lf = np.log(np.maximum(np.arange(zmax + 1), 0.5) / zmax)
     le, rec = mn.refine_exposures(z, [lf], ln_e + [0.0, 0.03, -0.02, 0.0], np.array([0.01]),
                                   np.array([0.99]), [(a, b)], zmax)
@@ -156,17 +164,8 @@ def test_refine_exposures_corrects_a_curve_wrong_at_the_dark_codes():
     # linear sums read through it are biased beyond 4 of the sd that includes the
     # correction's own uncertainty; with the binned sums' correction the ratios (power
     # fixed by the two end exposures, as --reference-time twice does) are within it.
-    rng = np.random.default_rng(5)
-    p, h, w = 4, 200, 300
-    scene = np.exp(rng.uniform(np.log(0.002), np.log(1.0), (h, w)))
-    ln_e = np.log([0.05, 0.2, 0.8, 3.2])
-    zmax = 4095
-    a, b = 1e-4, 1e-6
-    z = np.empty((p, h, w, 1), np.uint16)
-    for q in range(p):
-        x = scene * np.exp(ln_e[q])
-        x = x + rng.normal(0, 1, x.shape) * np.sqrt(a * np.minimum(x, 2) + b)
-        z[q, ..., 0] = np.clip(np.rint(np.clip(x, 0, 1) * zmax), 0, zmax)
+    z, ln_e, zmax, a, b = _linear_sensor_bracket()
+    p = ln_e.size
     k = np.arange(zmax + 1)
     lf = np.log(np.maximum(k, 0.5) / zmax) + 0.10 * np.clip(1 - k / (0.15 * zmax), 0, None) ** 2
     errs = {}

@@ -215,6 +215,25 @@ def _ring_with_a_nearer_view(near="photo_04.png", radius=20.0):
     return cams
 
 
+def _nearer_view_scene():
+    """The test scene with photo_04 nearer (:func:`_ring_with_a_nearer_view`), its
+    edges projected with ±0.5 px of deterministic noise, and the tower's right-side
+    edges: ``(model, cams, K, sizes, seen, right)``."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.model import BlockModel
+    from lumigraph.stereo.debevec1996.solve import FIXTURE
+
+    m = BlockModel.from_dict(FIXTURE)
+    cams = _ring_with_a_nearer_view()
+    K = {p: c["K"] for p, c in cams.items()}
+    sizes = {p: c["image_size"] for p, c in cams.items()}
+    seen = project_edges(m, cams)
+    for i, e in enumerate(e for v in seen.values() for e in v):     # ±0.5 px, deterministic
+        e["segment"] = (np.asarray(e["segment"]) + 0.5 * np.cos(np.arange(4) + i)).tolist()
+    right = ("tower/front-right", "tower/back-right", "tower/top-right", "tower/bottom-right")
+    return m, cams, K, sizes, seen, right
+
+
 def test_the_weak_list_moves_to_another_photograph_once_one_holds_the_parameter():
     """The test model's tower with its right side marked in one photograph
     only: its width is weak. photo_04 is brought nearer (20 m, the others
@@ -231,18 +250,10 @@ def test_the_weak_list_moves_to_another_photograph_once_one_holds_the_parameter(
     from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.automark import std_with_mark
     from lumigraph.stereo.debevec1996.edges import EdgeMarks, Mark
-    from lumigraph.stereo.debevec1996.model import BlockModel
-    from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    from lumigraph.stereo.debevec1996.solve import solve_facade
     from lumigraph.view.marking import weak_spots
 
-    m = BlockModel.from_dict(FIXTURE)
-    cams = _ring_with_a_nearer_view()
-    K = {p: c["K"] for p, c in cams.items()}
-    sizes = {p: c["image_size"] for p, c in cams.items()}
-    seen = project_edges(m, cams)
-    for i, e in enumerate(e for v in seen.values() for e in v):     # ±0.5 px, deterministic
-        e["segment"] = (np.asarray(e["segment"]) + 0.5 * np.cos(np.arange(4) + i)).tolist()
-    right = ("tower/front-right", "tower/back-right", "tower/top-right", "tower/bottom-right")
+    m, cams, K, sizes, seen, right = _nearer_view_scene()
     kept, once = {}, None
     for p, v in seen.items():
         mine = [e for e in v if e["edge"] in right]
@@ -286,20 +297,11 @@ def test_a_refusal_list_moves_to_another_photograph_once_one_constrains_the_unkn
     is in another photograph (a second vertical in photo_04 shares the
     pose the first rests on), and the solver agrees: with the list's top
     two marked the width's σ is lower than with the two best alone."""
-    from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.edges import EdgeMarks
-    from lumigraph.stereo.debevec1996.model import BlockModel
-    from lumigraph.stereo.debevec1996.solve import FIXTURE, Unconstrained, solve_facade
+    from lumigraph.stereo.debevec1996.solve import Unconstrained, solve_facade
     from lumigraph.view.marking import unconstrained_spots
 
-    m = BlockModel.from_dict(FIXTURE)
-    cams = _ring_with_a_nearer_view()
-    K = {p: c["K"] for p, c in cams.items()}
-    sizes = {p: c["image_size"] for p, c in cams.items()}
-    seen = project_edges(m, cams)
-    for i, e in enumerate(e for v in seen.values() for e in v):     # ±0.5 px, deterministic
-        e["segment"] = (np.asarray(e["segment"]) + 0.5 * np.cos(np.arange(4) + i)).tolist()
-    right = ("tower/front-right", "tower/back-right", "tower/top-right", "tower/bottom-right")
+    m, cams, K, sizes, seen, right = _nearer_view_scene()
     kept = {p: [e for e in v if e["edge"] not in right] for p, v in seen.items()}
     marks = EdgeMarks.from_dict({"photographs": kept}, model=m, photographs=list(cams))
     with pytest.raises(Unconstrained) as refused:
