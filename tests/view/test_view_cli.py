@@ -49,12 +49,15 @@ def test_a_port_in_use_by_default_takes_another(busy_port):
 
 
 def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
-    p = subprocess.Popen([sys.executable, "-m", "lumigraph", "view", "--facade", str(scene),
-                          "--edges", str(tmp_path / "edges.json"), "--no-browser"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # stderr to a file, not a pipe nobody drains (a full pipe would block the server)
+    err = tmp_path / "stderr.txt"
+    with open(err, "w") as err_file:
+        p = subprocess.Popen([sys.executable, "-m", "lumigraph", "view", "--facade", str(scene),
+                              "--edges", str(tmp_path / "edges.json"), "--no-browser"],
+                             stdout=subprocess.PIPE, stderr=err_file, text=True)
     try:
         line = p.stdout.readline()
-        assert line.startswith("lumigraph view: http://127.0.0.1:"), (line, p.stderr.read())
+        assert line.startswith("lumigraph view: http://127.0.0.1:"), (line, err.read_text())
         url = line.split()[2]
         with urllib.request.urlopen(url + "api/mode", timeout=10) as r:
             assert json.loads(r.read()) == {"facade": True, "artifacts": 0}
@@ -71,9 +74,10 @@ def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
             rc = p.wait(60)
         except subprocess.TimeoutExpired:
             p.kill()
-            raise AssertionError(f"did not stop on SIGINT within 60 s; stderr: "
-                                 f"{p.communicate()[1][-2000:]!r}") from None
-    assert rc == 0
+            p.wait()
+            raise AssertionError("did not stop on SIGINT within 60 s; stderr: "
+                                 f"{err.read_text()[-2000:]!r}") from None
+    assert rc == 0, err.read_text()
 
 
 def test_check_opens_the_inputs_and_exits(scene, tmp_path):
