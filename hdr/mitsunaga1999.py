@@ -1111,11 +1111,12 @@ def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, 
             cons[1 + 2 * i, sl] = 1.0 / knots[ch].size
             cons[2 + 2 * i, sl] = (ln_k - ln_k.mean()) / max(float(np.ptp(ln_k)), 1e-12)
         sol, cov = _lstsq_eq(a_m, b_v, cons, d)
-        cov_fixed = _lstsq_eq(a_m[:, :p], b_v, cons[:1, :p], d[:1])[1]
         step = float(np.max(np.abs(sol[:p] - e)))
         e = sol[:p]
         for ch in knots:
             c_all[ch] = sol[off[ch]:off[ch] + knots[ch].size]
+    # the sd with the curves held: the last relinearisation's rows, the exposures' columns
+    cov_fixed = _lstsq_eq(a_m[:, :p], b_v, cons[:1, :p], d[:1])[1]
     return e, c_all, cov, cov_fixed, step, n_rows
 
 
