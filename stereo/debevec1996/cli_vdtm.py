@@ -10,7 +10,16 @@ from pathlib import Path
 
 import numpy as np
 
-from lumigraph.capture.commandline import add_verb, input_path, number, output_file, say, warn
+from lumigraph.capture.commandline import (
+    add_verb,
+    check_planned,
+    input_path,
+    number,
+    output_file,
+    output_file_or_dir,
+    say,
+    warn,
+)
 from lumigraph.capture.errors import InputError
 
 DEPTH_EPILOG = """\
@@ -36,6 +45,15 @@ Model pixels no photograph sees are filled from their neighbours; pixels off the
 (<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
 "cameras". 8-bit/16-bit photographs give a PNG or EXR of code values; EXR photographs
 (linear radiance) stay linear: write .exr.
+
+Several views (--view A.json B.json ..., or a folder of camera.json files, taken in name
+order) render in one call: the photographs' depth maps and visibility (and, for view-map,
+the polygons' view maps) are prepared once and shared, which is most of a small view's
+cost. --out is then a folder: <view name>.png per view (.exr when the photographs are linear
+radiance), each with its .meta.json, and index.json listing them:
+
+  lumigraph stereo facade render --model solve/model.json --photos photos \\
+      --view photos/novel --method view-map --out renders/
 """
 
 
@@ -75,8 +93,9 @@ def add_verbs(fs) -> None:
     v.add_argument("--cameras", type=input_path,
                    help="folder of <photo stem>.json posed cameras (default FOLDER/cameras, or "
                         "the cameras of a model.json)")
-    v.add_argument("--view", required=True, type=input_path,
-                   help="camera.json with cam_from_world: the new viewpoint")
+    v.add_argument("--view", required=True, type=input_path, nargs="+",
+                   help="camera.json with cam_from_world: the new viewpoint; several, or a "
+                        "folder of them, render in one call (--out a folder)")
     v.add_argument("--method", choices=("blend", "view-map"), default="blend",
                    help="blend: every photograph, per-pixel angle weights (default); view-map: "
                         "at most three per plane, projective texture mapping (faster)")
@@ -89,8 +108,9 @@ def add_verbs(fs) -> None:
                    help="only the N nearest photographs by angle blend, each weight tapered to 0 "
                         "at the next nearest (default: the library's, 2); 0 = every photograph "
                         "that sees the point")
-    v.add_argument("--out", required=True, type=output_file(".png", ".exr"),
-                   help="the rendered view (.png, or .exr to keep linear values)")
+    v.add_argument("--out", required=True, type=output_file_or_dir(".png", ".exr"),
+                   help="the rendered view (.png, or .exr to keep linear values); for several "
+                        "views a folder (NAME.png or .exr per view, and index.json)")
     v.set_defaults(func=_render)
 
 
@@ -205,55 +225,112 @@ def _photographs(args, model_body):
     return photos, kinds.pop()
 
 
+def _views(args) -> list[Path]:
+    """The camera files of ``--view``: each file given, a folder's ``*.json`` in name order."""
+    views = []
+    for v in args.view:
+        v = Path(v)
+        if v.is_dir():
+            found = sorted(v.glob("*.json"))
+            found = [f for f in found if not f.name.endswith(".meta.json")]
+            if not found:
+                raise InputError(v, "a folder of views holds no camera.json files (*.json)")
+            views += found
+        else:
+            views.append(v)
+    stems = [v.stem for v in views]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise InputError(views[stems.index(dup[0])], f"two views are named {dup[0]!r}: each view's "
+                                                     "output is named after its camera file")
+    return views
+
+
 def _render(args) -> int:
-    from lumigraph.capture.artifact import make_meta, write_artifact
+    from lumigraph.capture.artifact import make_meta, write_artifact, write_json
     from lumigraph.capture.io import write_exr, write_image
     from lumigraph.stereo.debevec1996.vdtm import (
         DEFAULT_NEIGHBOURS,
         DEFAULT_POWER,
         load_model_mesh,
         load_posed_camera,
+        prepare_photographs,
+        prepare_view_maps,
         render_vdtm,
     )
 
     out = Path(args.out)
+    views = _views(args)
+    single = len(views) == 1 and out.suffix.lower() in (".png", ".exr")
+    if len(views) > 1 and out.suffix.lower() in (".png", ".exr"):
+        raise InputError(out, f"{len(views)} views write a folder (one image per view, and "
+                              "index.json); name a folder")
     mesh, body = load_model_mesh(args.model)
-    cam, R, t = load_posed_camera(args.view)
+    cams = [load_posed_camera(v) for v in views]  # every view read before any work
     photos, kind = _photographs(args, body)
-    if kind == "f" and out.suffix.lower() != ".exr":
+    if single and kind == "f" and out.suffix.lower() != ".exr":
         raise InputError(out, "the photographs are linear radiance (float): write .exr to keep "
                               "them linear")
+    ext = out.suffix.lower() if single else (".exr" if kind == "f" else ".png")
+    targets = [out] if single else [out / f"{v.stem}{ext}" for v in views]
+    if not single:
+        check_planned([*targets, out / "index.json"])
     power = DEFAULT_POWER if args.power is None else args.power
     neighbours = DEFAULT_NEIGHBOURS if args.neighbours is None else args.neighbours
+    # shared by every view: the photographs' depth maps and visibility, and the view maps
     t0 = time.perf_counter()
-    res = render_vdtm(mesh, photos, cam.K, R, t, cam.image_size, method=args.method,
-                      tolerance=args.tolerance, power=power, neighbours=neighbours)
-    dt = time.perf_counter() - t0
-    img = res.image
-    if img.shape[2] == 1:
-        img = img[..., 0]
-    warnings = []
-    if res.info["hole_fraction"] > 0.2:
-        warnings.append(f"{100 * res.info['hole_fraction']:.0f}% of the model in view is seen by "
-                        "no photograph (filled from its neighbours)")
-        warn(warnings[-1])
-    meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", args.view],
-                     warnings=warnings,
-                     params={"method": args.method, "tolerance": args.tolerance, "power": power,
-                             "neighbours": neighbours},
-                     quality={"model_fraction": float(res.model.mean()),
-                              "hole_fraction": res.info["hole_fraction"],
-                              "photographs_per_pixel": res.info["photographs_per_pixel"]},
-                     timings_s={"total": dt, **res.info["timings_s"]},
-                     extra={"what": "view-dependent texture mapping of the model "
-                                    "(Debevec, Taylor & Malik 1996); 0 off the model"})
-    if out.suffix.lower() == ".exr":
-        write_artifact(out, lambda tmp: write_exr(tmp, np.ascontiguousarray(img, np.float32)),
-                       meta=meta)
-    else:
-        hi = 65535 if kind == "uint16" else 255
-        codes = np.clip(np.rint(img), 0, hi).astype(np.uint16 if hi == 65535 else np.uint8)
-        write_artifact(out, lambda tmp: write_image(tmp, codes), meta=meta)
-    say(args, f"wrote {out} ({args.method}, {100 * res.model.mean():.0f}% of pixels on the model, "
-              f"{100 * res.info['hole_fraction']:.1f}% of them filled)")
+    photos = prepare_photographs(mesh, photos, tolerance=args.tolerance)
+    maps = (prepare_view_maps(mesh, photos, tolerance=args.tolerance)
+            if args.method == "view-map" else None)
+    prepared = time.perf_counter() - t0
+    index = {}
+    for k, (view, (cam, R, t), target) in enumerate(zip(views, cams, targets, strict=True)):
+        t0 = time.perf_counter()
+        res = render_vdtm(mesh, photos, cam.K, R, t, cam.image_size, method=args.method,
+                          tolerance=args.tolerance, power=power, neighbours=neighbours, maps=maps)
+        dt = time.perf_counter() - t0
+        img = res.image
+        if img.shape[2] == 1:
+            img = img[..., 0]
+        warnings = []
+        if res.info["hole_fraction"] > 0.2:
+            warnings.append(f"{view.name}: {100 * res.info['hole_fraction']:.0f}% of the model in "
+                            "view is seen by no photograph (filled from its neighbours)")
+            warn(warnings[-1])
+        quality = {"model_fraction": float(res.model.mean()),
+                   "hole_fraction": res.info["hole_fraction"],
+                   "photographs_per_pixel": res.info["photographs_per_pixel"]}
+        meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", view],
+                         warnings=warnings,
+                         params={"method": args.method, "tolerance": args.tolerance, "power": power,
+                                 "neighbours": neighbours},
+                         quality=quality,
+                         timings_s={"total": dt, "shared_preparation": prepared,
+                                    **res.info["timings_s"]},
+                         extra={"what": "view-dependent texture mapping of the model "
+                                        "(Debevec, Taylor & Malik 1996); 0 off the model",
+                                "shared_preparation": f"the photographs' depth and visibility"
+                                                      f"{' and the view maps' if maps else ''}, "
+                                                      f"once for {len(views)} view(s)"})
+        if target.suffix.lower() == ".exr":
+            write_artifact(target, lambda tmp, img=img: write_exr(tmp, np.ascontiguousarray(
+                img, np.float32)), meta=meta)
+        else:
+            hi = 65535 if kind == "uint16" else 255
+            codes = np.clip(np.rint(img), 0, hi).astype(np.uint16 if hi == 65535 else np.uint8)
+            write_artifact(target, lambda tmp, codes=codes: write_image(tmp, codes), meta=meta)
+        index[target.name] = {"view": str(view), **quality, "warnings": warnings,
+                              "seconds": dt}
+        say(args, f"{'' if single else f'view {k + 1}/{len(views)}: '}wrote {target} "
+                  f"({args.method}, {100 * res.model.mean():.0f}% of pixels on the model, "
+                  f"{100 * res.info['hole_fraction']:.1f}% of them filled)")
+    if not single:
+        meta = make_meta("lumigraph.vdtm-index", inputs=[args.model, Path(args.photos) / "stack.json",
+                                                         *views],
+                         params={"method": args.method, "tolerance": args.tolerance,
+                                 "power": power, "neighbours": neighbours},
+                         timings_s={"shared_preparation": prepared,
+                                    "views": sum(v["seconds"] for v in index.values())})
+        write_artifact(out / "index.json", lambda tmp: write_json(tmp, index), meta=meta)
+        say(args, f"rendered {len(views)} views into {out} (shared preparation {prepared:.2f} s)")
     return 0

@@ -1206,7 +1206,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     if not photos:
         raise InputError("photographs", "no photographs: VDTM needs at least one")
     if any(p.depth is None or p.whole is None for p in photos):
-        photos = list(prepare_photographs((v, f), photos))
+        photos = list(prepare_photographs((v, f), photos, tolerance=tolerance))
     first = np.asarray(photos[0].image)
     channels = 1 if first.ndim == 2 else first.shape[2]
     for i, p in enumerate(photos):

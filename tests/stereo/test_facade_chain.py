@@ -138,3 +138,32 @@ def test_linear_photographs_stay_linear(folder, tmp_path):
     # radiance into an 8-bit PNG would not be linear: refused
     r = lumigraph(*args, "--out", tmp_path / "view.png")
     assert_clean_error(r, "view.png", ".exr")
+
+
+def test_several_views_in_one_call(folder, tmp_path):
+    f, _ = folder
+    base = ("stereo", "facade", "render", "--model", f / "blocks.json", "--photos", f,
+            "--method", "view-map")
+    views = [f / "novel" / "view_0.json", f / "cameras" / "photo_01.json"]
+    r = lumigraph(*base, "--view", *views, "--out", tmp_path / "many")
+    assert r.returncode == 0, r.stderr
+    assert "view 2/2" in r.stderr  # progress per view
+    index = json.loads((tmp_path / "many" / "index.json").read_text())
+    assert sorted(index) == ["photo_01.png", "view_0.png"]
+    for v in views:
+        # the shared preparation changes nothing: each image is the one-view call's, bit for bit
+        r = lumigraph(*base, "--view", v, "--out", tmp_path / f"{v.stem}.png", "-q")
+        assert r.returncode == 0, r.stderr
+        assert np.array_equal(io.read_image(tmp_path / "many" / f"{v.stem}.png"),
+                              io.read_image(tmp_path / f"{v.stem}.png"))
+        assert (tmp_path / "many" / f"{v.stem}.png.meta.json").is_file()
+    # a folder of views: every camera.json in it, in name order
+    r = lumigraph(*base, "--view", f / "cameras", "--out", tmp_path / "cams", "-q")
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (tmp_path / "cams").glob("*.png")) == \
+        sorted(f"{p.stem}.png" for p in (f / "cameras").glob("*.json"))
+    # several views into one file, and two views of one name: refused, naming the file
+    r = lumigraph(*base, "--view", *views, "--out", tmp_path / "one.png")
+    assert_clean_error(r, "one.png", "folder")
+    r = lumigraph(*base, "--view", views[0], views[0], "--out", tmp_path / "twice")
+    assert_clean_error(r, "view_0")
