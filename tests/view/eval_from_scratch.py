@@ -247,6 +247,10 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
             if weak == "2" and r.status_code == 200:    # the weak list again, after each solve
                 r = mark_weak(r)
+        if r.status_code != 200:
+            # a later solve refused (the re-snap deleted marks it needed)
+            print(f"seed {seed}: no solve after the rounds: {r.get_json()['error']}", flush=True)
+            continue
         extra += len(weak_added)
         if os.environ.get("VERBOSE"):
             print("  weak marks added:", weak_added)
