@@ -811,8 +811,8 @@ def _sums_keep(xa, xb, var_a, var_b) -> np.ndarray | None:
 
 
 def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_max: int,
-                     *, min_pixels: int = 50, correct_curve: bool = True
-                     ) -> tuple[np.ndarray, dict]:
+                     *, min_pixels: int = 50, correct_curve: bool = True,
+                     reference: dict | None = None) -> tuple[np.ndarray, dict]:
     """The final adjacent exposure ratios from every pixel (up to
     :data:`RATIO_PIXELS`) through the fitted curves, unbiased by noise.
 
@@ -837,8 +837,11 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
     channel's curve, from the same sums split into brightness bins
     (:func:`_binned_sums`): a pair read only through a few codes (outdoor's
     shadows at the dark end, where its sky clips in the next exposure)
-    otherwise inherits the fitted curve's error there. Returns the ln
-    exposures (same gauge and mean as ``ln_e``) and a record: per pair, the
+    otherwise inherits the fitted curve's error there. ``reference``
+    (``{index: ln exposure}``, two or more, in the units of ``lfs`` and
+    ``ln_e``: exposures known exactly) holds the correction's solve at them
+    (:func:`_binned_sums`). Returns the ln exposures (same gauge and mean as
+    ``ln_e``; at ``reference`` when the correction is used) and a record: per pair, the
     adjacent ratios' sd with the curve held (``sd_ln_adjacent``) and, under
     ``curve_correction``, the correction and the sd with it free.
     """
@@ -931,7 +934,7 @@ def refine_exposures(z: np.ndarray, lfs, ln_e: np.ndarray, lo, hi, noise, code_m
     out = {"pairs": record, "sd_ln_adjacent": _adjacent_sd(cov, p)}
     if usable and correct_curve and CURVE_KNOTS >= 3:
         sol, sd_held, out["curve_correction"] = _binned_sums(flat, tables, usable, sol, ln_e,
-                                                             min_pixels)
+                                                             min_pixels, reference=reference)
         if sd_held is not None:
             out["sd_ln_adjacent"] = sd_held
     return sol, out
@@ -968,7 +971,7 @@ def hat_basis(k: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return out
 
 
-def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
+def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels, *, reference=None):
     """The exposures and a per-channel correction of the curve, jointly, from
     linear sums over brightness bins (see :func:`refine_exposures`).
 
@@ -979,9 +982,19 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
     hat functions on :data:`CURVE_KNOTS` codes over its usable range; each bin
     gives one row, linear in the ln exposures and ``c`` (the sums' first
     order in ``c``): ``ln ΣXb − ln ΣXa + (Σ Xa h(za)/ΣXa − Σ Xb h(zb)/ΣXb)·c =
-    e_b − e_a``, weighted by the bin's sandwich variance. The correction's
-    scale and power (``ln f → γ ln f + β``, which the ratios cannot see) are
-    fixed by ``c = 0`` at the top and the middle knots; every ``c`` has prior sd
+    e_b − e_a``, weighted by the bin's sandwich variance. The gauges: the
+    correction's scale (``ln f + β``, which no ratio of sums sees) by ``c``
+    summing to 0 over the knots; without ``reference`` the mean ln exposure
+    is ``ln_e_fit``'s and the correction's power (``ln f → γ ln f``, which a
+    single pixel's ratio cannot see) by ``c`` orthogonal to ``ln f`` over the
+    knots. With ``reference`` (``{index: ln exposure}``, two or more, in the
+    curve's units) the exposures are held at them instead, and the
+    correction's component along ``ln f`` is left to the data: the references
+    fix the power, so holding that component at 0 is no longer a gauge but a
+    constraint, and not even an exact gauge without them (the hat functions
+    interpolate ``ln f`` linearly between knots, worst at the dark codes where
+    ``ln f`` bends most: 0.08 in ln at code 25 between knots at 17 and 38).
+    Every ``c`` has prior sd
     :data:`CURVE_PRIOR_SD`, the fit's adjacent ratios :data:`RATIO_PRIOR_SD`.
     Relinearised :data:`CURVE_ITERS` times (the bins' selection moves with the
     exposures). A channel whose correction exceeds :data:`CURVE_MAX_LN` or
@@ -1007,7 +1020,7 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
     held: dict[str, str] = {}
     while True:
         e, c_all, cov, cov_fixed, step, n_rows = _binned_sums_solve(
-            flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, codes)
+            flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, codes, reference=reference)
         bad = {}
         for ch, cc in c_all.items():
             corrected = np.log(tables[ch][0]) + hat_basis(codes, knots[ch]) @ cc
@@ -1034,7 +1047,8 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels):
     return e, _adjacent_sd(cov_fixed, p), record
 
 
-def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, codes):
+def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, codes, *,
+                       reference=None):
     """:func:`_binned_sums` for one set of corrected channels (``knots``: channel ->
     knot codes); the others' curves held. Returns the ln exposures, each corrected
     channel's ``c``, the covariances with the curves free and held, the last
@@ -1101,22 +1115,35 @@ def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, 
         # the gauges, exactly: the mean ln exposure; per channel the correction carries no
         # scale and no power (c orthogonal to 1 and to ln f over the knots), so the
         # exposures stay in the curve's gauge
-        cons = np.zeros((1 + 2 * len(knots), n_u))
-        d = np.zeros(cons.shape[0])
-        cons[0, :p] = 1.0 / p
-        d[0] = float(np.mean(ln_e_fit))
-        for i, ch in enumerate(knots):
-            sl = slice(off[ch], off[ch] + knots[ch].size)
-            ln_k = lfs[ch][knots[ch].astype(np.int64)]
-            cons[1 + 2 * i, sl] = 1.0 / knots[ch].size
-            cons[2 + 2 * i, sl] = (ln_k - ln_k.mean()) / max(float(np.ptp(ln_k)), 1e-12)
+        if reference is not None and len(reference) >= 2:
+            # exposures known exactly fix the scale and the power: the exposures at them,
+            # and the correction free in power (only its scale, which no sum sees, held)
+            refs = sorted(reference)
+            cons = np.zeros((len(refs) + len(knots), n_u))
+            d = np.zeros(cons.shape[0])
+            for j, k in enumerate(refs):
+                cons[j, k] = 1.0
+                d[j] = float(reference[k])
+            for i, ch in enumerate(knots):
+                cons[len(refs) + i, off[ch]:off[ch] + knots[ch].size] = 1.0 / knots[ch].size
+        else:
+            cons = np.zeros((1 + 2 * len(knots), n_u))
+            d = np.zeros(cons.shape[0])
+            cons[0, :p] = 1.0 / p
+            d[0] = float(np.mean(ln_e_fit))
+            for i, ch in enumerate(knots):
+                sl = slice(off[ch], off[ch] + knots[ch].size)
+                ln_k = lfs[ch][knots[ch].astype(np.int64)]
+                cons[1 + 2 * i, sl] = 1.0 / knots[ch].size
+                cons[2 + 2 * i, sl] = (ln_k - ln_k.mean()) / max(float(np.ptp(ln_k)), 1e-12)
         sol, cov = _lstsq_eq(a_m, b_v, cons, d)
         step = float(np.max(np.abs(sol[:p] - e)))
         e = sol[:p]
         for ch in knots:
             c_all[ch] = sol[off[ch]:off[ch] + knots[ch].size]
     # the sd with the curves held: the last relinearisation's rows, the exposures' columns
-    cov_fixed = _lstsq_eq(a_m[:, :p], b_v, cons[:1, :p], d[:1])[1]
+    nc = len(reference) if reference is not None and len(reference) >= 2 else 1
+    cov_fixed = _lstsq_eq(a_m[:, :p], b_v, cons[:nc, :p], d[:nc])[1]
     return e, c_all, cov, cov_fixed, step, n_rows
 
 
@@ -1373,8 +1400,19 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
         lfs.append(lf)
     le_fit = le
     ratio_record = None
+    gam0 = 1.0  # the power applied before the refinement (two or more references)
     if refine_ratios:
-        le, ratio_record = refine_exposures(z, lfs, le, lo, hi, noise_top, zmax)
+        ref_in = None
+        if len(ref) >= 2:
+            # the references' units from the start: f -> f^γ0, e -> γ0 e + c (eq. 6.6
+            # unchanged), so the solve below can hold the exposures at them. The noise
+            # model stays in the fitted units (Var X = aX + b is not of that form in X^γ0):
+            # it sets only the sums' weights and margins, and γ0 is near 1: 0.97-1.06 on
+            # the bracket family (seeds 1 and 3, exact and rough times), 0.93 on Memorial
+            gam0, le = align_power(le, ln_nom, reference=ref)
+            lfs = [gam0 * lf for lf in lfs]
+            ref_in = ref
+        le, ratio_record = refine_exposures(z, lfs, le, lo, hi, noise_top, zmax, reference=ref_in)
     gam, ln_e = align_power(le, ln_nom, reference=ref)
     if not ref and abs(gam - 1.0) > 0.1:
         warnings.append(f"the data's exposure ratios are the given ones to the power {1 / gam:.3f}; "
@@ -1411,7 +1449,7 @@ def response_mitsunaga1999(images: np.ndarray, exposure_times_s, *, bit_depth: i
            "channel_disagreement_rms_sigma": [math.sqrt(x) for x, _ in disagree],
            "channel_disagreement_rms_ln": [x for _, x in disagree]}
     fit = {"basis": "shifted Chebyshev T_n(2M-1) - 1, f = 1 + sum a_n (...)",
-           "coefficients": [a.tolist() for a in coeffs], "power_gamma": gam,
+           "coefficients": [a.tolist() for a in coeffs], "power_gamma": gam * gam0,
            "refined_ratios_ascending": ratios.tolist(),
            "given_ratios_ascending": np.exp(np.diff(ln_nom)).tolist(),
            "samples": int(idx.size), "static_pixels_dropped": n_static,

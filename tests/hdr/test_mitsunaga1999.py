@@ -177,3 +177,22 @@ def test_refine_exposures_corrects_a_curve_wrong_at_the_dark_codes():
     sd_free = np.array(rec["curve_correction"]["sd_ln_adjacent_curve_free"])
     assert np.any(errs[False] > 4 * sd_free), (errs[False], sd_free)
     assert np.all(errs[True] < 4 * sd_free), (errs[True], sd_free)
+
+
+def test_refine_exposures_held_at_two_references():
+    # The same wrong curve, with the end exposures known exactly and given to the solve
+    # (as --reference-time twice does): the correction's power is then the data's, the
+    # exposures are held at the references exactly, and the ratios are within 4 of the
+    # sd that includes the correction's own uncertainty.
+    z, ln_e, zmax, a, b = _linear_sensor_bracket()
+    p = ln_e.size
+    k = np.arange(zmax + 1)
+    lf = np.log(np.maximum(k, 0.5) / zmax) + 0.10 * np.clip(1 - k / (0.15 * zmax), 0, None) ** 2
+    ref = {0: float(ln_e[0]), p - 1: float(ln_e[-1])}
+    le, rec = mn.refine_exposures(z, [lf], ln_e + [0.0, 0.03, -0.02, 0.0], np.array([0.01]),
+                                  np.array([0.99]), [(a, b)], zmax, reference=ref)
+    assert rec["curve_correction"]["used"]
+    assert le[0] == pytest.approx(ln_e[0], abs=1e-12) and le[-1] == pytest.approx(ln_e[-1], abs=1e-12)
+    sd_free = np.array(rec["curve_correction"]["sd_ln_adjacent_curve_free"])
+    err = np.abs(np.diff(le) - np.diff(ln_e))
+    assert np.all(err < 4 * sd_free), (err, sd_free)
