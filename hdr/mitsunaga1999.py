@@ -993,7 +993,8 @@ def _binned_sums(flat, tables, usable, ln_e, ln_e_fit, min_pixels, *, reference=
     fix the power, so holding that component at 0 is no longer a gauge but a
     constraint, and not even an exact gauge without them (the hat functions
     interpolate ``ln f`` linearly between knots, worst at the dark codes where
-    ``ln f`` bends most: 0.08 in ln at code 25 between knots at 17 and 38).
+    ``ln f`` bends most: for ``ln f = ln z``, 0.08 at code 25 between knots
+    at 17 and 38).
     Every ``c`` has prior sd
     :data:`CURVE_PRIOR_SD`, the fit's adjacent ratios :data:`RATIO_PRIOR_SD`.
     Relinearised :data:`CURVE_ITERS` times (the bins' selection moves with the
