@@ -1063,6 +1063,7 @@ def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, 
     e = np.array(ln_e, dtype=np.float64)
     c_all = {ch: np.zeros(knots[ch].size) for ch in knots}
     n_rows, step = 0, math.inf
+    held_at_refs = reference is not None and len(reference) >= 2
     for _ in range(CURVE_ITERS):
         rows, rhs, wts = [], [], []
         for qa, qb, q_fl, q_ce, ch in usable:
@@ -1116,7 +1117,7 @@ def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, 
         # the gauges, exactly: the mean ln exposure; per channel the correction carries no
         # scale and no power (c orthogonal to 1 and to ln f over the knots), so the
         # exposures stay in the curve's gauge
-        if reference is not None and len(reference) >= 2:
+        if held_at_refs:
             # exposures known exactly fix the scale and the power: the exposures at them,
             # and the correction free in power (only its scale, which no sum sees, held)
             refs = sorted(reference)
@@ -1143,7 +1144,7 @@ def _binned_sums_solve(flat, tables, usable, ln_e, ln_e_fit, min_pixels, knots, 
         for ch in knots:
             c_all[ch] = sol[off[ch]:off[ch] + knots[ch].size]
     # the sd with the curves held: the last relinearisation's rows, the exposures' columns
-    nc = len(reference) if reference is not None and len(reference) >= 2 else 1
+    nc = len(reference) if held_at_refs else 1
     cov_fixed = _lstsq_eq(a_m[:, :p], b_v, cons[:nc, :p], d[:nc])[1]
     return e, c_all, cov, cov_fixed, step, n_rows
 
