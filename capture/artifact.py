@@ -159,14 +159,19 @@ class ResultSet:
         ordered = [m for m in self.staged if not last(m)] + [m for m in self.staged if last(m)]
         moves = [(os.path.abspath(t), os.path.abspath(f)) for t, f in ordered]
         folder = ordered[-1][1].parent
-        fd, jtmp = tempfile.mkstemp(prefix=JOURNAL_PREFIX, suffix=".json.tmp", dir=folder)
+        fd, jtmp = _journal_file(folder)
+        if _failpoint("journal") is not None:
+            os.kill(os.getpid(), 9)  # tests: a crash before the journal is locked
         try:
             # locked before it becomes visible, so a recovering run sees it live
             fcntl.flock(fd, fcntl.LOCK_EX)
             os.write(fd, json.dumps({"version": 1, "pid": os.getpid(), "moves": moves}).encode())
             os.fsync(fd)
-            journal = Path(jtmp[: -len(".tmp")])
-            os.replace(jtmp, journal)  # the commit point
+            if jtmp is None:  # the commit point: the journal appears whole and locked
+                journal = _link_journal(fd, folder)
+            else:
+                journal = Path(jtmp[: -len(".tmp")])
+                os.replace(jtmp, journal)  # the commit point
             _fsync_dir(folder)
             crash_at = _failpoint("commit")
             for i, (tmp, final) in enumerate(moves):
@@ -179,14 +184,46 @@ class ResultSet:
             journal.unlink()
         finally:
             os.close(fd)
-            with contextlib.suppress(FileNotFoundError):
-                os.unlink(jtmp)
+            if jtmp is not None:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(jtmp)
         self.staged = []
+
+
+def _journal_file(folder: Path) -> tuple[int, str | None]:
+    """An open file for a commit's journal: unnamed (``O_TMPFILE``) where the
+    file system allows, so a kill before it is written and locked leaves
+    nothing behind; else a named temporary, ``(fd, its path)``, that a kill
+    between its creation and its lock leaves empty and unlocked (removed by
+    :func:`recover_commits` once it is :data:`STALE_EMPTY_JOURNAL_S` old)."""
+    if hasattr(os, "O_TMPFILE") and os.path.isdir("/proc/self/fd"):
+        with contextlib.suppress(OSError):  # EOPNOTSUPP, EISDIR (old kernels), ...
+            return os.open(folder, os.O_TMPFILE | os.O_RDWR, 0o600), None
+    return tempfile.mkstemp(prefix=JOURNAL_PREFIX, suffix=".json.tmp", dir=folder)
+
+
+def _link_journal(fd: int, folder: Path) -> Path:
+    """Give the unnamed journal ``fd`` a fresh name in ``folder`` (never an
+    existing one: ``link`` refuses to replace)."""
+    # linkat with AT_SYMLINK_FOLLOW, which os.link uses only with a dir_fd
+    dfd = os.open(folder, os.O_RDONLY)
+    try:
+        for _ in range(100):
+            name = f"{JOURNAL_PREFIX}{os.urandom(6).hex()}.json"
+            try:
+                os.link(f"/proc/self/fd/{fd}", name, dst_dir_fd=dfd, follow_symlinks=True)
+                return folder / name
+            except FileExistsError:
+                continue
+    finally:
+        os.close(dfd)
+    raise FileExistsError(f"{folder}: no free name for a commit journal")
 
 
 def _failpoint(name: str) -> int | None:
     """``LUMIGRAPH_FAILPOINT=commit:N``: die by SIGKILL before the N-th rename of
-    a commit (the kill tests' way to land inside the commit's short window)."""
+    a commit (the kill tests' way to land inside the commit's short window);
+    ``journal:0``: die as soon as the journal's file is open, before its lock."""
     spec = os.environ.get("LUMIGRAPH_FAILPOINT", "")
     if spec.startswith(name + ":"):
         with contextlib.suppress(ValueError):

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import pytest
 
-from lumigraph.capture.artifact import JOURNAL_PREFIX, recover_commits
+from lumigraph.capture.artifact import JOURNAL_PREFIX, _journal_file, recover_commits
 
 ROOT = Path(__file__).resolve().parents[2]
 FIX = ROOT / "fixtures"
@@ -125,12 +125,20 @@ def test_sigkill_leaves_old_or_new_set(case, tmp_path):
     n_files = len(_snapshot(outs))  # every file the commit renames, sidecars included
     rng = random.Random(f"kill-{case}")
     # random moments, then one failpoint trial before each rename of the commit
-    trials = [("random", None)] * TRIALS + [("commit", k) for k in range(n_files + 1)]
+    # and one just after the journal's file is opened, before it is locked (a
+    # window of microseconds that a random kill once hit in CI)
+    trials = ([("random", None)] * TRIALS + [("commit", k) for k in range(n_files + 1)]
+              + [("journal", 0)])
     current = 1  # the last complete run was cmds[1]
     kinds = {"old": 0, "new": 0, "recovered": 0}
+    fd, jtmp = _journal_file(folder)  # whether this file system gives unnamed journals
+    os.close(fd)
+    unnamed_journal = jtmp is None
+    if jtmp is not None:
+        os.unlink(jtmp)
     for kind, k in trials:
         new = 1 - current
-        env = _env() if kind == "random" else _env(LUMIGRAPH_FAILPOINT=f"commit:{k}")
+        env = _env() if kind == "random" else _env(LUMIGRAPH_FAILPOINT=f"{kind}:{k}")
         proc = subprocess.Popen(cmds[new], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                 env=env)
         if kind == "random":
@@ -144,6 +152,12 @@ def test_sigkill_leaves_old_or_new_set(case, tmp_path):
             after = _set_of(_snapshot(outs))
             assert after == sets[new], f"{kind} {k}: a recovered commit must be the new set"
             kinds["recovered"] += 1
+        elif kind == "journal":
+            assert after == sets[current], "a kill before the commit point must leave the old set"
+            kinds["old"] += 1
+            if unnamed_journal:  # no journal file is visible, before any rerun
+                left = [f.name for f in folder.rglob(JOURNAL_PREFIX + "*")]
+                assert not left, left
         elif after == sets[new]:
             kinds["new"] += 1
         else:
