@@ -6,12 +6,15 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     SNAPSTEP=1 ... (snapping onto the step, marking.refine_on_edge; default: the library's SNAP_ON_STEP)
     OVERDRAG=1 ... (snapping refines over the dragged stretch, no snap where the image shows no line there; default: the library's SNAP_OVER_DRAG)
     WSTEP=1 ... (refine_on_edge's line fit weighted by contrast squared; default: the library's WEIGHTED_STEPS)
+    CONSENSUS=0 ... (refine_on_edge's line through every profile's step, not the steps most agree on; default: the library's STEP_CONSENSUS)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
     ROUNDS=1 ... (further rounds: Re-snap, Propose again, accept, Solve again; default 2)
     WEAK=0 / WEAK=1 / WEAK=2 ... (the user marks the edges the solve's weak list suggests:
         never / after the first solve / after every solve, the default)
     WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
     WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
+    CHECK=0 ... (the user does not redraw the hand marks the last Solve lists to check,
+        marking.marks_to_check; default 1: redraws them, snapping off, and solves again)
     REDO=2.12 ... (the user redoes unsnapped a drag the snap moved farther than this, px; default 0: never)
     REFLAG=1 ... (after each re-snap the user redraws, snapping off, every hand mark it flagged)
     BLOCK=wing / PROBE=1 / VERBOSE=1 ... (diagnostics)
@@ -37,8 +40,9 @@ unknowns) up to four of the edges its list says would constrain them
 marked by hand (at most three rounds), Solve; the edges the solve's weak list suggests that the
 photograph shows marked by hand (up to four per weak parameter), Solve; then
 (ROUNDS, two) Re-snap to the model, Propose again, accept as before, Solve
-again, the weak list's edges again; the RMS relative parameter error against
-the fully marked (σ = 0.5 px) solve of the same scene.
+again, the weak list's edges again; the hand marks the last Solve lists to
+check redrawn with snapping off, Solve; the RMS relative parameter error
+against the fully marked (σ = 0.5 px) solve of the same scene.
 """
 
 import json
@@ -106,6 +110,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
     marking.SNAP_OVER_DRAG = os.environ.get("OVERDRAG", "1" if marking.SNAP_OVER_DRAG else "0") == "1"
     marking.WEIGHTED_STEPS = os.environ.get("WSTEP", "1" if marking.WEIGHTED_STEPS else "0") == "1"
     marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
+    marking.STEP_CONSENSUS = os.environ.get("CONSENSUS", "1" if marking.STEP_CONSENSUS else "0") == "1"
     for seed in seeds:
         t0 = time.time()
         s = render("facade", size=size, seed=seed, photos=6, novel=0, supersample=2,
@@ -120,10 +125,14 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
         rng = np.random.default_rng(7 + int(os.environ.get("DRAW", "0")))
         redone = []
 
-        def drag(p, m, c=c, rng=rng, redone=redone, truth=truth):
+        def drag(p, m, c=c, rng=rng, redone=redone, truth=truth, ses=ses):
             seg = np.asarray(m["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
+            w, h = ses.sizes[p]      # a drag cannot leave the photograph
+            seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
             r = c.post("/api/facade/marks", json={"photo": p, "segment": seg.tolist(), "snap": snap})
             got = r.get_json()
+            if r.status_code != 200:
+                raise RuntimeError(f"{p} {m['edge']}: the page refused the drag: {got}")
             c.post(f"/api/facade/marks/{got['id']}", json={"edge": m["edge"]})
             if REDO and got["jump_px"] > REDO:
                 # the page shows the snap leaving the line the user traced:
@@ -247,6 +256,21 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
             if weak == "2" and r.status_code == 200:    # the weak list again, after each solve
                 r = mark_weak(r)
+        if r.status_code == 200 and os.environ.get("CHECK", "1") == "1":
+            # the Solve lists the hand marks farthest from their reprojected
+            # edge (marking.marks_to_check): the user redraws each, carefully
+            # and snapping off, and Solves again
+            byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
+            for q in r.get_json()["check"]:
+                mk = ses.marks.get(q["id"])
+                if mk is None or mk["edge"] not in byedge[mk["photo"]]:
+                    continue
+                seg = (np.asarray(byedge[mk["photo"]][mk["edge"]]["segment"])
+                       + rng.normal(0, EDGE_NOISE_PX, 4))
+                w, h = ses.sizes[mk["photo"]]
+                seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
+                c.post(f"/api/facade/marks/{q['id']}", json={"segment": seg.tolist()})
+            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
         if r.status_code != 200:
             # a later solve refused (the re-snap deleted marks it needed)
             print(f"seed {seed}: no solve after the rounds: {r.get_json()['error']}", flush=True)

@@ -199,6 +199,12 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
             win = red[max(0, round(y) - r): round(y) + r + 1, max(0, round(x) - r): round(x) + r + 1]
             hits += bool(win.any())
         assert hits >= 0.8 * len(ts), f"red reprojection found at {hits} of {len(ts)} points"
+        # the hand marks to check are listed, and a click selects the first on its photograph
+        listed = d.find_elements(By.CSS_SELECTOR, "#check li button")
+        assert [int(b.find_element(By.XPATH, "..").get_attribute("data-mark")) for b in listed] == \
+            [q["id"] for q in sol["check"]] and listed
+        listed[0].click()
+        _wait(d, f"return window.lumiMark.busy === 0 && window.lumiMark.selected === {sol['check'][0]['id']}")
     print(f"browser test: {time.monotonic() - t0:.1f} s")
 
 

@@ -424,6 +424,49 @@ def test_a_refused_solve_answers_the_edges_that_would_constrain_each_unknown(sce
     assert c.get("/api/facade/state").get_json()["refusal"] is None
 
 
+def test_the_solve_lists_the_hand_marks_to_check(scene, tmp_path):
+    """After a Solve, ``check`` lists the hand-drawn marks farthest from
+    their reprojected edge, farthest first (``marking.marks_to_check``). The
+    scene's own marks (σ = 0.5 px) with one hand mark on the house's
+    bottom-front edge moved 2.5 px (5σ) off its line: that photograph's pose
+    absorbs most of the move, so the mark's own residual stays small, and
+    the largest residuals are the other marks it pulled off in that
+    photograph (there the tower's bottom-front edge, on the same image
+    line): the list's first entry is in that photograph, where the user
+    looks. An accepted proposal moved as far is not listed (it was accepted
+    because it lay on its edge)."""
+    from lumigraph.view.marking import CHECK_MARKS
+
+    folder, _ = scene
+    work = tmp_path / "scene"
+    shutil.copytree(folder, work)
+    c, s = _client(work, work / "edges.json")
+
+    def shifted(m, px):
+        a, b = np.asarray(m["segment"][:2]), np.asarray(m["segment"][2:])
+        d = (b - a) / np.hypot(*(b - a))
+        return (np.r_[a, b] + px * np.r_[-d[1], d[0], -d[1], d[0]]).tolist()
+
+    front = [k for k in s.marks if s.marks[k]["edge"] == "house/bottom-front"]
+    front.sort(key=lambda k: -np.hypot(s.marks[k]["segment"][2] - s.marks[k]["segment"][0],
+                                       s.marks[k]["segment"][3] - s.marks[k]["segment"][1]))
+    hand, prop = front[0], front[1]
+    c.post(f"/api/facade/marks/{hand}", json={"segment": shifted(s.marks[hand], 5 * EDGE_NOISE_PX)})
+    c.post(f"/api/facade/marks/{prop}", json={"segment": shifted(s.marks[prop], 5 * EDGE_NOISE_PX)})
+    s.marks[prop]["proposed"] = True
+    r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+    assert r.status_code == 200, r.get_json()
+    sol = r.get_json()
+    check = sol["check"]
+    assert len(check) == CHECK_MARKS
+    assert check[0]["photo"] == s.marks[hand]["photo"], check
+    assert prop not in [q["id"] for q in check]
+    assert [q["rms_px"] for q in check] == sorted((q["rms_px"] for q in check), reverse=True)
+    for q in check:
+        assert q["rms_px"] == sol["residual_by_id"][str(q["id"])]
+        assert (q["photo"], q["edge"]) == (s.marks[q["id"]]["photo"], s.marks[q["id"]]["edge"])
+
+
 def test_solve_answers_parameters_projections_and_residuals(scene, tmp_path):
     folder, _ = scene
     work = tmp_path / "scene"
@@ -558,7 +601,8 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
     blocks the solver names as unconstrained marked by hand, Solve; the
     edges the solve's weak list suggests marked by hand where the
     photograph shows them, Solve; then twice: Re-snap to the model, Propose
-    again, accept, Solve again, the weak list's edges again.
+    again, accept, Solve again, the weak list's edges again; the hand marks
+    the Solve lists to check redrawn with snapping off, Solve.
 
     Seed 2 is a scene the snapping gates and the flow were set on (tuned):
     this checks the flow end to end against issue 17's bound. On the
@@ -636,6 +680,14 @@ def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_pat
         r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
         assert r.status_code == 200, r.get_json()
         r = heed_weak(r)
+    # the hand marks the Solve lists to check: each redrawn, carefully and
+    # snapping off, where the photograph shows its edge; Solve
+    byedge = {p: {m["edge"]: m for m in full[p]} for p in s.photos}
+    for q in r.get_json()["check"]:
+        seg = np.asarray(byedge[q["photo"]][q["edge"]]["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
+        assert c.post(f"/api/facade/marks/{q['id']}", json={"segment": seg.tolist()}).status_code == 200
+    r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+    assert r.status_code == 200, r.get_json()
     sol = r.get_json()
     gt = json.loads((folder / "gt.json").read_text())["parameters"]
     free = list(s.model.parameter_names)
@@ -668,6 +720,37 @@ def test_a_segment_refines_onto_the_step_not_onto_a_texture_line():
     line = np.full((60, 80), 100.0)
     line[:, 37] = 0.0
     assert refine_on_edge(line, np.array([37.0, 5.0, 37.0, 55.0])) is None
+
+
+def test_a_segment_refines_onto_the_line_most_of_it_shows(monkeypatch):
+    """``STEP_CONSENSUS`` (an option, off by default): ``refine_on_edge``
+    fits the steps most of its profiles agree on. A wall's edge at x = 39.5
+    along 40 of 60 rows, and relief the model lacks (a pilaster's foot) 3 px
+    in front along rows 10-29: the line lands on the wall's edge at both
+    ends, where a least-squares line through every profile's step (the
+    default) comes out tilted, more than a drag's 0.5 px off at one end. Three parallel steps along a third of
+    the segment each: no line holds half the profiles, refused.
+    Noise-free image: the step's position is known to the ¼ px grid the
+    profiles are sampled on."""
+    import lumigraph.view.marking as marking
+
+    g = np.full((60, 80), 60.0)
+    g[:, 40:] = 140.0                       # the wall's edge between x = 39 and 40
+    g[10:30, 40:43] = 60.0                  # the relief: its step 3 px further, x = 42.5
+    seg = np.array([40.0, 2.0, 40.0, 58.0])
+    monkeypatch.setattr(marking, "STEP_CONSENSUS", True)
+    got = marking.refine_on_edge(g, seg)
+    assert got is not None
+    assert abs(got[0] - 39.5) <= 0.25 and abs(got[2] - 39.5) <= 0.25, got
+    monkeypatch.setattr(marking, "STEP_CONSENSUS", False)
+    old = marking.refine_on_edge(g, seg)
+    assert old is None or max(abs(old[0] - 39.5), abs(old[2] - 39.5)) > 0.5, old
+    monkeypatch.setattr(marking, "STEP_CONSENSUS", True)
+    thirds = np.full((60, 80), 60.0)
+    thirds[:, 40:] = 140.0                  # rows 0-19: the step at 39.5
+    thirds[20:40, 40:43] = 60.0             # rows 20-39: at 42.5
+    thirds[40:, 37:40] = 140.0              # rows 40-59: at 36.5
+    assert marking.refine_on_edge(thirds, seg) is None
 
 
 def test_snapping_over_the_drag_refuses_a_line_the_image_shows_on_a_fifth_of_it(monkeypatch):

@@ -214,8 +214,44 @@
     d.insertAdjacentHTML("beforeend",
       (ref ? `<p class="hint">the last solve that succeeded:</p>` : "") +
       `<p id="solve-rms">RMS ${sol.rms_px.toFixed(3)} px, σ ${sol.sigma_px.toFixed(3)} px</p>` +
-      `<ul>${warn}${out}</ul><div id="weak"></div><table>${rows}</table>`);
+      `<ul>${warn}${out}</ul><div id="check"></div><div id="weak"></div><table>${rows}</table>`);
+    renderCheck(sol.check || []);
     renderWeak(sol.weak || []);
+  }
+  // the hand-drawn marks farthest from the solved model (the server's
+  // marks_to_check): where a snap most likely took a line the image shows
+  // beside the model's edge; a click opens the photograph with the mark
+  // selected, to redraw it (snapping off) if it is not on the edge
+  function renderCheck(check) {
+    const box = $("check");
+    if (!check.length) return;
+    const h = document.createElement("p");
+    h.className = "weak-head";
+    h.textContent = "Check these hand marks (farthest from the solved model; redraw one with " +
+      "snapping off if it is not on its edge, then Solve):";
+    box.appendChild(h);
+    const ul = document.createElement("ul");
+    for (const q of check) {
+      const li = document.createElement("li");
+      li.dataset.mark = q.id;
+      const a = document.createElement("button");
+      a.type = "button";
+      a.className = "suggest";
+      a.textContent = `${q.photo} ${q.edge} (${q.rms_px.toFixed(2)} px)`;
+      a.addEventListener("click", async () => {
+        const i = S.state.photos.findIndex((p) => p.name === q.photo);
+        if (i >= 0) await choosePhoto(i);
+        S.selected = q.id;
+        S.currentEdge = q.edge;
+        status(`${q.edge} on ${q.photo} selected: ${q.rms_px.toFixed(2)} px from the solved ` +
+               "model; if the mark is off the edge, untick snap and drag it again");
+        renderSide();
+        draw();
+      });
+      li.appendChild(a);
+      ul.appendChild(li);
+    }
+    box.appendChild(ul);
   }
   // a click on a suggested edge opens its photograph with the edge highlighted
   function suggestButton(q, title) {
