@@ -41,14 +41,18 @@ marking mode (Façade, 'lumigraph stereo facade solve --help' for the files):
   drawn" undoes a snap that left the line you traced), click
   an edge in the list (or its reprojection) to assign the selected segment,
   Delete to remove it. "Solve" fits the model and overlays the reprojected
-  edges and each mark's residual (px), and lists the weakly constrained
-  parameters with the edges to mark for them (click one to go to it);
+  edges and each mark's residual (px), lists the weakly constrained
+  parameters with the edges to mark for them (click one to go to it), and
+  the three hand marks farthest from the solved model, to check (click one
+  to select it; a snap may have taken a line beside the model's edge);
   "Propose" runs automatic marking (mark about four edges per photograph
   first), each proposal then accepted or rejected; "Re-snap to model", after
   a Solve, moves each mark onto the image step near its reprojected edge.
   A good order: four marks per photograph, Propose, accept, Solve, mark what
-  the weak list names, then twice Re-snap, Propose, Solve. Every change is saved at once to --edges (atomically: the file is
-  always complete); an existing --edges file is read first.
+  the weak list names, then twice Re-snap, Propose, Solve; last, redraw with
+  "snap" unticked each listed mark that is off its edge, and Solve. Every
+  change is saved at once to --edges (atomically: the file is always
+  complete); an existing --edges file is read first.
 
 A port in use: with --port, exit 2; without it, another free port is taken.
 --check opens every input as the page would and exits (0, or 2 with the
