@@ -142,6 +142,18 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                                distance(got["segment"], truth[p][m["edge"]]),
                                distance(got["dragged"], truth[p][m["edge"]])))
 
+        def redraw(k, c=c, rng=rng, full=full, ses=ses):
+            """The user redraws hand mark ``k`` carefully, snapping off: where
+            the photograph shows its edge (the scene's mark), with the drag's noise."""
+            mk = ses.marks[k]
+            src = next((m for m in full[mk["photo"]] if m["edge"] == mk["edge"]), None)
+            if src is None:
+                return
+            seg = np.asarray(src["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
+            w, h = ses.sizes[mk["photo"]]
+            seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
+            c.post(f"/api/facade/marks/{k}", json={"segment": seg.tolist()})
+
         for p in ses.photos:
             for m in four_hand_marks(ses.model, full[p]):
                 drag(p, m)
@@ -235,16 +247,9 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 if os.environ.get("REFLAG", "0") == "1":
                     # the page lists the flagged marks ("check them"): the user
                     # redraws each hand mark among them, carefully, snapping off
-                    byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
                     for k in rs["flagged"]:
-                        mk = ses.marks.get(k)
-                        if mk is None or mk["proposed"]:
-                            continue
-                        seg = (np.asarray(byedge[mk["photo"]][mk["edge"]]["segment"])
-                               + rng.normal(0, EDGE_NOISE_PX, 4))
-                        w, h = ses.sizes[mk["photo"]]
-                        seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
-                        c.post(f"/api/facade/marks/{k}", json={"segment": seg.tolist()})
+                        if k in ses.marks and not ses.marks[k]["proposed"]:
+                            redraw(k)
             # the user's next round: look at the solve, Propose again (from
             # the marks so far), accept what lies on its edge, Solve again
             props2 = c.post("/api/facade/propose").get_json().get("proposals", [])
@@ -260,16 +265,9 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             # the Solve lists the hand marks farthest from their reprojected
             # edge (marking.marks_to_check): the user redraws each, carefully
             # and snapping off, and Solves again
-            byedge = {p: {m["edge"]: m for m in full[p]} for p in ses.photos}
             for q in r.get_json()["check"]:
-                mk = ses.marks.get(q["id"])
-                if mk is None or mk["edge"] not in byedge[mk["photo"]]:
-                    continue
-                seg = (np.asarray(byedge[mk["photo"]][mk["edge"]]["segment"])
-                       + rng.normal(0, EDGE_NOISE_PX, 4))
-                w, h = ses.sizes[mk["photo"]]
-                seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
-                c.post(f"/api/facade/marks/{q['id']}", json={"segment": seg.tolist()})
+                if q["id"] in ses.marks:
+                    redraw(q["id"])
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
         if r.status_code != 200:
             # a later solve refused (the re-snap deleted marks it needed)
