@@ -776,6 +776,7 @@ class FacadeSession:
         session's ``refusal`` ``{error, unconstrained}`` until the next
         Solve."""
         from lumigraph.stereo.debevec1996.solve import (
+            NoRotationStart,
             Unconstrained,
             project_model_edges,
             solve_facade,
@@ -786,9 +787,23 @@ class FacadeSession:
             if not marks.marks:
                 raise EstimationError(self.edges_path, "no marks tied to model edges yet: draw "
                                                        "segments and assign each to an edge")
+            prev = getattr(self, "_sol", None)
+            rough, started = {}, []
             try:
-                sol = solve_facade(self.model, self._undistorted(marks), self._K(),
-                                   noise_px=noise_px, where=str(self.edges_path))
+                while True:
+                    try:
+                        sol = solve_facade(self.model, self._undistorted(marks), self._K(),
+                                           noise_px=noise_px, where=str(self.edges_path),
+                                           rough_rotations=rough or None)
+                        break
+                    except NoRotationStart as e:
+                        # a photograph whose marks no longer start its rotation
+                        # (a re-snap deleted the solver's outliers among them, or
+                        # the user did) starts from its pose in the last solve
+                        if prev is None or e.photo not in prev.poses or e.photo in rough:
+                            raise
+                        rough[e.photo] = prev.poses[e.photo][0]
+                        started.append(e.photo)
             except Unconstrained as e:
                 # the page lists, per refused unknown, the unmarked edges
                 # that would constrain it (what to mark next, not just names)
@@ -801,6 +816,10 @@ class FacadeSession:
             self.refusal = None
             self._sol = sol
             self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
+            self.solution["warnings"] = [
+                f"photograph {p!r}: its marks alone cannot start its rotation (two edges along "
+                "each of two of the model's axes); started from its pose in the last solve"
+                for p in started] + list(self.solution["warnings"])
             # the page's "weakly constrained" list: what to mark next
             self.solution["weak"] = weak_spots(
                 sol, {(m["photo"], m["edge"]) for m in self.marks.values()}, self.sizes)

@@ -123,6 +123,24 @@ class Unconstrained(EstimationError):
                            "those parameters", details=details)
 
 
+class NoRotationStart(EstimationError):
+    """The solver's refusal when a photograph's marks cannot start its
+    rotation (eq. 5.4 needs two edges along each of two of the model's axes)
+    and no rough rotation was given for it: an :class:`EstimationError`
+    that also names the photograph, ``photo``, so a caller holding a rough
+    pose for it (a previous solve) can give it and solve again.
+
+    >>> NoRotationStart("edges.json", "photo_01.png").photo
+    'photo_01.png'
+    """
+
+    def __init__(self, where, photo):
+        self.photo = photo
+        super().__init__(where, f"photograph {photo!r}: cannot initialise its rotation (mark at "
+                                "least two edges along each of two of the model's axes, or give "
+                                "a rough pose)")
+
+
 @dataclass(frozen=True)
 class FacadeSolution:
     """The fitted model and cameras.
@@ -562,9 +580,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         else:
             cand = _rotation_from_vanishing(nj, ax[ax >= 0])
             if not cand:
-                raise EstimationError(where, f"photograph {p!r}: cannot initialise its rotation "
-                                      "(mark at least two edges along each of two of the "
-                                      "model's axes, or give a rough pose)")
+                raise NoRotationStart(where, p)
         candidates.append([_rotation_refine(R, nj, dirs) for R in cand])
     # choose among sign candidates photograph by photograph: the eq. 5.5 fit of
     # its translation alone (starting parameters), points in front
