@@ -15,6 +15,7 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
     CHECK=0 ... (the user does not redraw the hand marks the last Solve lists to check,
         marking.marks_to_check; default 1: redraws them, snapping off, and solves again)
+    CHECK_MARKS=3 CHECK_ROUNDS=1 ... (marking.CHECK_MARKS; rounds of redrawing the listed marks)
     REDO=2.12 ... (the user redoes unsnapped a drag the snap moved farther than this, px; default 0: never)
     REFLAG=1 ... (after each re-snap the user redraws, snapping off, every hand mark it flagged)
     BLOCK=wing / PROBE=1 / VERBOSE=1 ... (diagnostics)
@@ -104,7 +105,7 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
 
     if os.environ.get("SNAPPX"):
         marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
-    for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS"):
+    for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS", "CHECK_MARKS"):
         if os.environ.get(k):
             setattr(marking, k, type(getattr(marking, k))(os.environ[k]))
     marking.SNAP_OVER_DRAG = os.environ.get("OVERDRAG", "1" if marking.SNAP_OVER_DRAG else "0") == "1"
@@ -261,7 +262,9 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
             if weak == "2" and r.status_code == 200:    # the weak list again, after each solve
                 r = mark_weak(r)
-        if r.status_code == 200 and os.environ.get("CHECK", "1") == "1":
+        for _ in range(int(os.environ.get("CHECK_ROUNDS", "1"))):
+            if r.status_code != 200 or os.environ.get("CHECK", "1") != "1":
+                break
             # the Solve lists the hand marks farthest from their reprojected
             # edge (marking.marks_to_check): the user redraws each, carefully
             # and snapping off, and Solves again
