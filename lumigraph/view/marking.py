@@ -280,8 +280,8 @@ def marks_to_check(marks: dict, residual_by_id: dict, *, count: int | None = Non
     reprojected edge after a Solve, farthest first: ``count`` of them
     (default :data:`CHECK_MARKS`), each ``{id, photo, edge, rms_px}``.
 
-    Why hand marks: on the rendered Façade scene every mark that ended more
-    than 1.5 px (3σ) off its true edge was a hand mark that snapping or
+    Why hand marks: on the rendered Façade scene's tuned seeds every mark
+    that ended more than 1.5 px (3σ) off its true edge was a hand mark that snapping or
     re-snapping put on a line the image shows where the block model has no
     edge (a pilaster's foot beside a wall's bottom edge, a line 2-3 px from
     an edge the image barely shows), and redrawing those with snapping off
@@ -299,11 +299,10 @@ def marks_to_check(marks: dict, residual_by_id: dict, *, count: int | None = Non
     [3, 1]
     """
     count = CHECK_MARKS if count is None else count
-    res = {int(k): float(v) for k, v in residual_by_id.items()}
-    hand = [k for k, m in marks.items() if not m.get("proposed") and int(k) in res]
-    hand.sort(key=lambda k: -res[int(k)])
+    hand = [k for k, m in marks.items() if not m.get("proposed") and k in residual_by_id]
+    hand.sort(key=lambda k: -residual_by_id[k])
     return [{"id": k, "photo": marks[k]["photo"], "edge": marks[k]["edge"],
-             "rms_px": res[int(k)]} for k in hand[:count]]
+             "rms_px": float(residual_by_id[k])} for k in hand[:count]]
 
 
 # a free parameter is "weakly constrained" when its relative σ is more than
