@@ -12,6 +12,9 @@ Modules
                   from the marked edges (eqs. 5.3–5.5).
 ``automark``      automatic edge marking from a rough model and rough cameras.
 ``model_stereo``  stage 3, model-based stereo (:func:`model_stereo`).
+``vdtm``          stage 2, view-dependent texture mapping (:func:`render_vdtm`).
+``reflection``    a reflection layer at infinity for VDTM's blend on glossy
+                  planes (:func:`fit_reflection_layer`; beyond the paper).
 
 The model API (stage 1)
 -----------------------

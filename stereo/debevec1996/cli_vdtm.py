@@ -54,6 +54,18 @@ radiance), each with its .meta.json, and index.json listing them:
 
   lumigraph stereo facade render --model solve/model.json --photos photos \\
       --view photos/novel --method view-map --out renders/
+
+--reflection (blend only) first fits a reflection layer: per orientation of the model's
+planes, the part of the colour that moves with the view as a reflection of a far environment
+(or a highlight under a far light) does, a function of the mirror direction estimated from the
+differences between the photographs at each point, and moves each photograph's sample to the
+new view with it before blending. Each orientation keeps the plain blend unless the layer
+predicts each photograph, left out in turn, clearly better; the choice is printed. It suits
+glossy facades and windows reflecting the sky; it costs a fit (seconds to a minute) shared by
+every view:
+
+  lumigraph stereo facade render --model solve/model.json --photos photos \\
+      --view photos/novel --reflection --out renders/
 """
 
 
@@ -99,6 +111,12 @@ def add_verbs(fs) -> None:
     v.add_argument("--method", choices=("blend", "view-map"), default="blend",
                    help="blend: every photograph, per-pixel angle weights (default); view-map: "
                         "at most three per plane, projective texture mapping (faster)")
+    v.add_argument("--reflection", action="store_true",
+                   help="blend only: fit a reflection layer at infinity per plane orientation from "
+                        "the photographs (glossy surfaces reflecting a far environment) and move "
+                        "each photograph's sample to the new view with it; each orientation keeps "
+                        "the plain blend unless the layer predicts held-out photographs clearly "
+                        "better (the choice is printed and kept in the meta)")
     v.add_argument("--tolerance", type=number(float, lo=0, lo_open=True, hi=1), default=0.01,
                    help="visibility: relative depth difference still on the same surface "
                         "(default 0.01)")
@@ -259,6 +277,9 @@ def _render(args) -> int:
         render_vdtm,
     )
 
+    if args.reflection and args.method != "blend":
+        raise InputError("reflection", "the reflection layer corrects the blend: use "
+                                         "the blend method")
     out = Path(args.out)
     views = _views(args)
     single = len(views) == 1 and out.suffix.lower() in (".png", ".exr")
@@ -282,12 +303,31 @@ def _render(args) -> int:
     photos = prepare_photographs(mesh, photos, tolerance=args.tolerance)
     maps = (prepare_view_maps(mesh, photos, tolerance=args.tolerance)
             if args.method == "view-map" else None)
+    layer, layer_summary = None, None
+    if args.reflection:
+        from lumigraph.stereo.debevec1996.reflection import fit_reflection_layer
+
+        say(args, f"fitting the reflection layer to {len(photos)} photographs (leaving each out in "
+                  "turn)...")
+        layer = fit_reflection_layer(mesh, photos, tolerance=args.tolerance, power=power,
+                                     neighbours=neighbours)
+        layer_summary = layer.summary()
+        for g in layer_summary:
+            sc = g["held_out_mse"]
+            chosen = f"{g['border']} lambda={g['lambda']:g}"
+            say(args, f"  planes facing {g['normal']}: "
+                      f"{'layer ' + chosen if g['used'] else 'plain blend'} (held-out MSE none "
+                      f"{sc['none']:.1f}, layer {sc[chosen]:.1f}, {g['held_out_samples']} samples)")
+        if not any(g["used"] for g in layer_summary):
+            warn("--reflection: no plane orientation's layer predicts held-out photographs better "
+                 "than the plain blend; rendering the plain blend")
     prepared = time.perf_counter() - t0
     index = {}
     for k, (view, (cam, R, t), target) in enumerate(zip(views, cams, targets, strict=True)):
         t0 = time.perf_counter()
         res = render_vdtm(mesh, photos, cam.K, R, t, cam.image_size, method=args.method,
-                          tolerance=args.tolerance, power=power, neighbours=neighbours, maps=maps)
+                          tolerance=args.tolerance, power=power, neighbours=neighbours, maps=maps,
+                          reflection=layer)
         dt = time.perf_counter() - t0
         img = res.image
         if img.shape[2] == 1:
@@ -303,15 +343,17 @@ def _render(args) -> int:
         meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", view],
                          warnings=warnings,
                          params={"method": args.method, "tolerance": args.tolerance, "power": power,
-                                 "neighbours": neighbours},
+                                 "neighbours": neighbours, "reflection": bool(args.reflection)},
                          quality=quality,
                          timings_s={"total": dt, "shared_preparation": prepared,
                                     **res.info["timings_s"]},
                          extra={"what": "view-dependent texture mapping of the model "
                                         "(Debevec, Taylor & Malik 1996); 0 off the model",
                                 "shared_preparation": f"the photographs' depth and visibility"
-                                                      f"{' and the view maps' if maps else ''}, "
-                                                      f"once for {len(views)} view(s)"})
+                                                      f"{' and the view maps' if maps else ''}"
+                                                      f"{' and the reflection layer' if layer else ''}, "
+                                                      f"once for {len(views)} view(s)",
+                                **({"reflection_layer": layer_summary} if layer_summary else {})})
         if target.suffix.lower() == ".exr":
             write_artifact(target, lambda tmp, img=img: write_exr(tmp, np.ascontiguousarray(
                 img, np.float32)), meta=meta)

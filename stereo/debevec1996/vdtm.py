@@ -309,7 +309,7 @@ def _weights(theta, power, neighbours):
     return w
 
 
-def _blend(X, C, photos, tolerance, power, neighbours, channels):
+def _blend(X, C, photos, tolerance, power, neighbours, channels, reflection=None, faces=None):
     ray = _unit(X - C)
     theta = np.full((len(photos), len(X)), np.inf)
     samples = []
@@ -321,6 +321,12 @@ def _blend(X, C, photos, tolerance, power, neighbours, channels):
     acc = np.zeros((len(X), channels))
     for j, s in enumerate(samples):
         acc += W[j][:, None] * s
+    if reflection is not None:  # each sample moved to the new view by the layer
+        from lumigraph.stereo.debevec1996.reflection import corrections
+
+        for j, c in enumerate(corrections(reflection, X, faces, C, photos, which=W > 0)):
+            if c is not None:
+                acc += W[j][:, None] * c
     return acc, W.sum(0), (W > 0).sum(0)
 
 
@@ -1158,7 +1164,8 @@ def _rays(K, size):
 def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
                 tolerance: float = 0.01, power: float = DEFAULT_POWER,
                 neighbours: int = DEFAULT_NEIGHBOURS, background: float = 0.0,
-                fill: bool = True, maps: ViewMaps | None = None) -> VDTMImage:
+                fill: bool = True, maps: ViewMaps | None = None,
+                reflection=None) -> VDTMImage:
     """Render ``mesh`` from the camera ``K, R, t`` (``x_cam = R x_world +
     t``, ``size = (W, H)``) textured from ``photographs`` (see the module
     docstring for both methods).
@@ -1186,6 +1193,11 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     maps : ViewMaps, optional
         ``"view-map"``: the polygons' view maps, built once for many views
         by :func:`prepare_view_maps` (built here when not given).
+    reflection : ReflectionLayer, optional
+        ``"blend"``: move each photograph's sample to the new view by the
+        reflection layer fitted to these photographs
+        (:func:`~lumigraph.stereo.debevec1996.reflection.fit_reflection_layer`)
+        before blending.
 
     Returns
     -------
@@ -1194,6 +1206,9 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     """
     if method not in METHODS:
         raise InputError("method", f"expected one of {', '.join(METHODS)}, got {method!r}")
+    if reflection is not None and method != "blend":
+        raise InputError("reflection", "the reflection layer corrects the blend's samples: "
+                                       "use method='blend'")
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise InputError("tolerance", f"expected a positive relative depth tolerance, got {tolerance}")
     if not (np.isfinite(power) and power > 0):
@@ -1234,7 +1249,8 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
 
     if method == "blend":
         idx = np.flatnonzero(model.ravel())
-        acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels)
+        acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels,
+                              reflection, r.face.ravel()[idx] if reflection is not None else None)
         per_pixel = float(n.mean()) if len(n) else 0.0
     else:
         ids = maps.choose_planes(C, power=power, neighbours=neighbours,
@@ -1258,7 +1274,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     elif not fill:
         filled = np.zeros_like(model)
     t3 = time.perf_counter()
-    info = {"method": method, "tolerance": tolerance, "power": power, "neighbours": neighbours,
+    info = {"method": method, "reflection": reflection is not None, "tolerance": tolerance, "power": power, "neighbours": neighbours,
             "photographs": len(photos),
             "photographs_per_pixel": per_pixel,
             "hole_fraction": float(filled.sum() / max(model.sum(), 1)),

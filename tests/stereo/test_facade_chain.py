@@ -167,3 +167,37 @@ def test_several_views_in_one_call(folder, tmp_path):
     assert_clean_error(r, "one.png", "folder")
     r = lumigraph(*base, "--view", views[0], views[0], "--out", tmp_path / "twice")
     assert_clean_error(r, "view_0")
+
+
+def test_reflection_layer_on_the_command_line(folder, tmp_path):
+    f, _ = folder
+    base = ("stereo", "facade", "render", "--model", f / "blocks.json", "--photos", f,
+            "--view", f / "novel" / "view_0.json")
+    r = lumigraph(*base, "--reflection", "--out", tmp_path / "layer.png")
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((tmp_path / "layer.png.meta.json").read_text())
+    assert meta["params"]["reflection"] is True
+    groups = meta["reflection_layer"]
+    # every orientation's choice on stderr and in the meta, with every candidate's score
+    assert r.stderr.count("planes facing") == len(groups) > 0
+    for g in groups:
+        assert "none" in g["held_out_mse"] and len(g["held_out_mse"]) == 13
+        chosen = g["held_out_mse"][f"{g['border']} lambda={g['lambda']:g}"]
+        assert chosen < g["held_out_mse"]["none"] or not g["used"]
+    # the layer corrects the blend only
+    r = lumigraph(*base, "--reflection", "--method", "view-map", "--out", tmp_path / "vm.png")
+    assert_clean_error(r, "--reflection", "blend")
+
+
+def test_reflection_layer_on_a_glossy_building(tmp_path):
+    s = render("facade", size=(160, 120), seed=2, photos=8, novel=1, supersample=1)
+    f = s.save(tmp_path / "photos")
+    r = lumigraph("stereo", "facade", "render", "--model", f / "blocks.json", "--photos", f,
+                  "--view", f / "novel" / "view_0.json", "--reflection", "--out", tmp_path / "v.png")
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((tmp_path / "v.png.meta.json").read_text())
+    used = [g for g in meta["reflection_layer"] if g["used"]]
+    assert used  # the glossy walls' reflections are found
+    for g in used:  # a used layer predicts held-out photographs better than none
+        assert g["held_out_mse"][f"{g['border']} lambda={g['lambda']:g}"] < g["held_out_mse"]["none"]
+    assert "layer " in r.stderr

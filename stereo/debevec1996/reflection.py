@@ -1,0 +1,516 @@
+"""A reflection layer at infinity for view-dependent texture mapping: the
+view-dependent part of a glossy plane's appearance, estimated from the
+photographs and re-rendered for the new view.
+
+VDTM (:mod:`~lumigraph.stereo.debevec1996.vdtm`) blends what the
+photographs saw at a surface point. Where a glossy surface reflects a
+distant environment, the colour it shows changes with the viewing direction
+and no blend of the photographs' colours at that point is the new view's:
+at the ends of an arc of photographs it cannot even beat the nearest
+photograph (``docs/decisions/facade-vdtm.md``, the oracle bound). Layered
+image-based rendering separates what a surface shows into a part that stays
+on the surface and a reflected part that moves with the view (S. N. Sinha,
+J. Kopf, M. Goesele, D. Scharstein and R. Szeliski, "Image-Based Rendering
+for Scenes with Reflections", SIGGRAPH 2012, doi:10.1145/2185520.2185596,
+there with the reflection at a finite virtual depth). Here the reflection
+is at infinity, the case of a sky or a far environment, and of a highlight
+under a distant light:
+
+    I_i(X) = D(X) + S_g(r(d_i(X), n_g))
+
+``I_i(X)`` the colour photograph ``i`` shows at the surface point ``X``;
+``D(X)`` the view-independent part; ``d_i(X)`` the unit viewing direction
+from photograph ``i``'s centre to ``X``; ``r(d, n) = d − 2 (d·n) n`` its
+mirror direction about the plane's normal ``n``; ``S_g`` one function of
+direction per *orientation group* ``g`` (the planes of the model with one
+normal share it: a distant environment and a distant light look the same
+from every parallel plane). ``S_g`` is tabulated on a ``grid × grid``
+bilinear grid over the mirror direction's two in-plane components
+``(r·u, r·w) ∈ [−1, 1]²``.
+
+Fit (:func:`fit_reflection_layer`): ``D`` is eliminated per texel (texels
+of one photograph pixel's footprint over each plane, seen by two or more
+photographs), so ``S_g`` comes from the differences between the photographs
+at each texel: a sparse least-squares problem with a second-difference
+(Laplacian) penalty ``λ`` on the grid, solved with robust reweighting
+(Cauchy weights on each texel's residual: texture edges resampled
+differently by each photograph, and relief the model lacks, are not
+reflections). Only differences are observed, so ``S_g`` is known up to a
+constant, which cancels in the correction below.
+
+Model only what a scene needs: per group, ``λ`` and whether to use the
+layer at all are chosen by leaving each photograph out in turn and
+predicting its colours from the others (the blend's weights seen from its
+centre), with and without the layer's correction; the layer is used only
+where it predicts held-out photographs better, and every candidate's score
+is kept (``ReflectionLayer.groups[k].scores``). A matte plane, or one that
+only two photographs see from far apart (where the differences do not
+determine ``S_g``), keeps the plain blend.
+
+Render (``render_vdtm(..., reflection=layer)``): each photograph's sample
+is moved to the new view before the blend,
+
+    c_i(X) + S_g(r(d, n_g)) − S_g(r(d_i(X), n_g))
+
+with ``d`` the new view's direction at ``X``.
+
+Limits: one layer per orientation, the same for every material on it (a
+window's glass and the brick around it share ``S_g``, weighted by the
+robust fit); planar surfaces; the reflected world at infinity (a nearby
+reflected object has parallax this model lacks).
+
+Examples
+--------
+A matte plane (a texture and nothing that moves with the view): the
+held-out test keeps the plain blend, and says so.
+
+>>> import numpy as np
+>>> from lumigraph.stereo.debevec1996.vdtm import Photograph
+>>> from lumigraph.stereo.debevec1996.reflection import fit_reflection_layer
+>>> K = np.array([[40.0, 0, 23.5], [0, 40.0, 17.5], [0, 0, 1]])
+>>> quad = (np.array([[-2.0, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]]),
+...         np.array([[0, 1, 2], [0, 2, 3]]))
+>>> def camera(x):  # at (x, 0, 6) looking down at the plane z = 0
+...     R = np.diag([1.0, -1, -1]); return R, -R @ np.array([x, 0, 6.0])
+>>> yy, xx = np.mgrid[0:36, 0:48]
+>>> def photo(x):  # the texture 100 + 40 sin(X) cos(Y) seen from x
+...     R, t = camera(x); X = (np.stack([xx - 23.5, yy - 17.5], -1) / 40) * 6
+...     Xw = X * [1, -1] + [x, 0]
+...     return Photograph((100 + 40 * np.sin(Xw[..., 0]) * np.cos(Xw[..., 1]))[..., None], K, R, t)
+>>> layer = fit_reflection_layer(quad, [photo(x) for x in (-1.0, 0.0, 1.0)], grid=8)
+>>> [(g.used, g.held_out > 0, bool(np.allclose(g.normal, [0, 0, 1]))) for g in layer.groups]
+[(False, True, True)]
+>>> sorted(layer.groups[0].scores)[:2]
+['fading lambda=1', 'fading lambda=10']
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lumigraph.capture.errors import InputError
+
+DEFAULT_LAMBDAS = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0)
+# the smoothness prior's behaviour beyond the directions seen (:func:`_laplacian`)
+BORDERS = ("fading", "linear")
+# a candidate replaces a simpler one (none; the fading prior) only when its held-out
+# squared errors are lower by more than this many standard errors of the difference
+SIGNIFICANCE = 3.0
+DEFAULT_GRID = 48
+ROBUST_ITERATIONS = 3
+# texels per orientation group at most (a finer footprint is coarsened to this)
+MAX_TEXELS = 250_000
+# texel size in photograph pixels at the model: the layer is smooth, and texels
+# finer than the photographs' samples add cost, not information
+TEXEL_PIXELS = 1.5
+
+
+@dataclass(frozen=True)
+class ReflectionGroup:
+    """One orientation group's layer.
+
+    ``normal``, ``u``, ``w`` (3,) the plane's unit normal and in-plane axes
+    (world); ``planes`` the model planes (``vdtm._face_planes`` indices) in
+    the group; ``layer`` (grid², C) ``S_g`` on the grid (code values of the
+    photographs, up to a constant); ``used`` whether the held-out test chose
+    it; ``lam`` the chosen Laplacian weight and ``border`` its behaviour
+    beyond the directions seen (:func:`_laplacian`); ``scores`` the held-out
+    mean squared error per channel of every candidate (``"none"``,
+    ``"fading lambda=…"``, ``"linear lambda=…"``)
+    over ``held_out`` samples; ``texels`` how many texels the fit saw,
+    ``multi_view`` how many two or more photographs saw.
+    """
+
+    normal: np.ndarray
+    u: np.ndarray
+    w: np.ndarray
+    planes: tuple
+    layer: np.ndarray
+    used: bool
+    lam: float
+    border: str
+    scores: dict
+    held_out: int
+    texels: int
+    multi_view: int
+
+
+@dataclass(frozen=True)
+class ReflectionLayer:
+    """The reflection layer of a model seen by its photographs
+    (:func:`fit_reflection_layer`): ``groups``, ``plane_group`` (P,) the
+    group of each model plane, ``face_plane`` (M,) the plane of each
+    triangle, ``grid``, ``texel`` (the texel size, world units)."""
+
+    groups: tuple
+    plane_group: np.ndarray
+    face_plane: np.ndarray
+    grid: int
+    texel: float
+
+    def summary(self) -> list[dict]:
+        """One JSON-ready dict per group: normal, used, λ, scores."""
+        return [{"normal": [round(float(x), 6) for x in g.normal], "used": bool(g.used),
+                 "lambda": float(g.lam), "border": g.border, "held_out_samples": int(g.held_out),
+                 "texels": int(g.texels), "multi_view_texels": int(g.multi_view),
+                 "held_out_mse": {k: round(float(v), 4) for k, v in g.scores.items()}}
+                for g in self.groups]
+
+
+def _frame(n):
+    ref = np.array([0, 0, 1.0]) if abs(n[2]) < 0.9 else np.array([0, 1.0, 0])
+    u = np.cross(ref, n)
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
+
+
+def _mirror_coords(d, n, u, w):
+    """The mirror direction of the unit directions ``d (N, 3)`` about the
+    plane ``n``, as its components along ``u`` and ``w`` (N, 2) in [−1, 1]."""
+    r = d - 2 * (d @ n)[:, None] * n
+    return np.stack([r @ u, r @ w], 1)
+
+
+def _design(c, grid):
+    """Sparse (N, grid²) bilinear weights of the coordinates ``c (N, 2)``."""
+    import scipy.sparse as sp
+
+    x = np.clip((c[:, 0] + 1) / 2 * (grid - 1), 0, grid - 1 - 1e-9)
+    y = np.clip((c[:, 1] + 1) / 2 * (grid - 1), 0, grid - 1 - 1e-9)
+    x0 = np.floor(x).astype(np.int64)
+    y0 = np.floor(y).astype(np.int64)
+    fx, fy = x - x0, y - y0
+    idx = np.stack([y0 * grid + x0, y0 * grid + x0 + 1, (y0 + 1) * grid + x0,
+                    (y0 + 1) * grid + x0 + 1], 1)
+    wt = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
+    return sp.csr_matrix((wt.ravel(), (np.repeat(np.arange(len(c)), 4), idx.ravel())),
+                         shape=(len(c), grid * grid))
+
+
+def _laplacian(grid, border):
+    """Second differences on the grid's rows and columns. ``border="linear"``:
+    the interior nodes only, zero on every linear function, so the layer
+    extends linearly beyond the directions the photographs saw;
+    ``"fading"``: also at the border nodes against a zero outside the grid,
+    so beyond what was seen the layer levels off towards a constant."""
+    import scipy.sparse as sp
+
+    eye = sp.identity(grid)
+    if border == "linear":
+        d2 = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(grid - 2, grid))
+    else:
+        d2 = sp.diags([1.0, -2.0, 1.0], [-1, 0, 1], shape=(grid, grid))
+    return sp.vstack([sp.kron(eye, d2), sp.kron(d2, eye)]).tocsr()
+
+
+def _solve(B, obs, tex, n_tex, lap2, lam, weight):
+    """``S`` (G, C) minimising Σ weight_t |ΔI − ΔS|² + λ (rows/G) |L S|²,
+    Δ the deviation from the texel's mean over its photographs (texels seen
+    twice or more); also each texel's residual sum of squares and count."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spl
+
+    cnt = np.bincount(tex, minlength=n_tex)
+    rows = np.flatnonzero(cnt[tex] >= 2)
+    G = B.shape[1]
+    if not len(rows):
+        return np.zeros((G, obs.shape[1])), np.zeros(n_tex), cnt
+    tm = tex[rows]
+    inv = 1.0 / np.maximum(cnt, 1)
+    mean = sp.csr_matrix((inv[tm], (tm, np.arange(len(rows)))), shape=(n_tex, len(rows)))
+    Bm = B[rows]
+    Ac = (Bm - (mean @ Bm)[tm]).tocsr()
+    rhs = obs[rows] - (mean @ obs[rows])[tm]
+    sw = np.sqrt(weight[tm])
+    Aw = sp.diags(sw) @ Ac
+    A = (Aw.T @ Aw + lam * (float(weight[tm].sum()) / G) * lap2
+         + 1e-6 * sp.identity(G)).tocsc()
+    S = spl.splu(A).solve(np.asarray(Aw.T @ (sw[:, None] * rhs)))
+    r = rhs - Ac @ S
+    return S, np.bincount(tm, (r ** 2).sum(1), minlength=n_tex), cnt
+
+
+def _robust_solve(B, obs, tex, n_tex, lap2, lam, iterations):
+    """:func:`_solve` reweighted ``iterations`` times: Cauchy weights on each
+    texel's RMS residual, scale 2.385 × the MAD-based σ of the residuals.
+    Returns ``(S, weight)``, the weights of the last solve."""
+    weight = np.ones(n_tex)
+    for it in range(iterations + 1):
+        S, res, cnt = _solve(B, obs, tex, n_tex, lap2, lam, weight)
+        if it == iterations:
+            break
+        ok = cnt >= 2
+        if not ok.any():
+            break
+        rt = np.sqrt(res / np.maximum(cnt - 1, 1) / obs.shape[1])
+        c = max(2.385 * 1.4826 * float(np.median(rt[ok])), 1e-9)
+        weight = 1.0 / (1.0 + (rt / c) ** 2)
+    return S, weight
+
+
+def _texels(v, f, face_plane, planes, members, n, u, w, size):
+    """Texel centres (T, 3) on the polygons of the planes ``members``."""
+    out = []
+    for k in members:
+        tri = v[f[face_plane == k]]
+        s, q = tri @ u, tri @ w
+        ss = np.arange(s.min() + size / 2, s.max(), size)
+        qq = np.arange(q.min() + size / 2, q.max(), size)
+        S_, Q_ = np.meshgrid(ss, qq)
+        px, py = S_.ravel(), Q_.ravel()
+        inside = np.zeros(len(px), bool)
+        for a, b, c in zip(np.stack([s, q], 2)[:, 0], np.stack([s, q], 2)[:, 1],
+                           np.stack([s, q], 2)[:, 2], strict=True):
+            e = [(p1[0] - p0[0]) * (py - p0[1]) - (p1[1] - p0[1]) * (px - p0[0])
+                 for p0, p1 in ((a, b), (b, c), (c, a))]
+            inside |= (((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0))
+                       | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0)))
+        out.append(planes[k, 3] * n + px[inside, None] * u + py[inside, None] * w)
+    return np.concatenate(out) if out else np.zeros((0, 3))
+
+
+def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours):
+    """Photograph ``k``'s samples predicted from the others' (the blend's
+    weights seen from its centre), without and with the layer: the squared
+    errors of the samples the others see, summed over the channels."""
+    from lumigraph.stereo.debevec1996.vdtm import _angle_to, _unit, _weights
+
+    mine = cam == k
+    tk = tex[mine]
+    if not len(tk):
+        return np.zeros(0), np.zeros(0)
+    others = [j for j in np.unique(cam) if j != k]
+    if not others:
+        return np.zeros(0), np.zeros(0)
+    ray = _unit(X[tk] - photos[k].centre)
+    theta = np.full((len(others), len(tk)), np.inf)
+    C = obs.shape[1]
+    samp = np.zeros((len(others), len(tk), C))
+    cj = np.zeros((len(others), len(tk), 2))
+    lut = np.full(len(X), -1)
+    for a, j in enumerate(others):
+        sel = np.flatnonzero(cam == j)
+        lut[:] = -1
+        lut[tex[sel]] = sel
+        r = lut[tk]
+        ok = r >= 0
+        samp[a, ok] = obs[r[ok]]
+        cj[a, ok] = crd[r[ok]]
+        theta[a, ok] = _angle_to(ray[ok], X[tk[ok]], photos[j].centre)
+    W = _weights(theta, power, neighbours)
+    ws = W.sum(0)
+    good = ws > 0
+    if not good.any():
+        return np.zeros(0), np.zeros(0)
+    none = (W[..., None] * samp).sum(0)[good] / ws[good, None]
+    Sk = _design(crd[mine], grid) @ S
+    corr = np.stack([Sk - _design(cj[a], grid) @ S for a in range(len(others))])
+    lay = none + (W[..., None] * corr).sum(0)[good] / ws[good, None]
+    truth = obs[mine][good]
+    return ((none - truth) ** 2).sum(1), ((lay - truth) ** 2).sum(1)
+
+
+def _clearly_better(a, b):
+    """Whether the squared errors ``a`` (n,) are below ``b``'s (the same
+    samples) by more than :data:`SIGNIFICANCE` standard errors of the mean
+    difference."""
+    if len(a) < 2:
+        return False
+    d = b - a
+    return bool(d.mean() > SIGNIFICANCE * d.std() / math.sqrt(len(d)))
+
+
+def _texel_size(photos, v):
+    """:data:`TEXEL_PIXELS` photograph pixels' footprint at the model: the
+    median over the photographs of their median model depth over their
+    focal length, times that."""
+    sizes = []
+    for p in photos:
+        d = p.depth[np.isfinite(p.depth)]
+        if len(d):
+            sizes.append(float(np.median(d)) / float(np.sqrt(abs(np.linalg.det(
+                np.asarray(p.K, np.float64)[:2, :2])))) * TEXEL_PIXELS)
+    if not sizes:
+        return float(np.ptp(v, axis=0).max()) / 256
+    return float(np.median(sizes))
+
+
+def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
+                         lambdas=DEFAULT_LAMBDAS, grid: int = DEFAULT_GRID,
+                         texel: float | None = None,
+                         robust_iterations: int = ROBUST_ITERATIONS,
+                         power: float | None = None,
+                         neighbours: int | None = None) -> ReflectionLayer:
+    """Fit the reflection layer of ``mesh`` from its posed ``photographs``
+    (module docstring).
+
+    Parameters
+    ----------
+    mesh : ``(vertices, faces)`` or an object with ``vertices``/``faces``
+        World coordinates.
+    photographs : sequence of Photograph
+        As :func:`~lumigraph.stereo.debevec1996.vdtm.prepare_photographs`
+        returns them (prepared here when they have no depth maps).
+    tolerance : float
+        Visibility, as :func:`~lumigraph.stereo.debevec1996.vdtm.render_vdtm`'s.
+    lambdas : sequence of float
+        Candidate Laplacian weights (relative to the data's weight per grid
+        cell); each group takes the one that best predicts held-out
+        photographs.
+    grid : int
+        The layer's grid is ``grid × grid`` over the mirror direction.
+    texel : float, optional
+        Texel size (world units); default :data:`TEXEL_PIXELS` photograph
+        pixels' footprint at the model (:func:`_texel_size`).
+    robust_iterations : int
+        Reweighting rounds of the robust fit (0: plain least squares).
+    power, neighbours : optional
+        The blend's weights in the held-out test (default the blend's).
+
+    Returns
+    -------
+    ReflectionLayer
+    """
+    from lumigraph.stereo.debevec1996.vdtm import (
+        DEFAULT_NEIGHBOURS,
+        DEFAULT_POWER,
+        _face_planes,
+        _mesh,
+        _sample,
+        _unit,
+        prepare_photographs,
+    )
+
+    lambdas = tuple(float(x) for x in lambdas)
+    if not lambdas or not all(math.isfinite(x) and x > 0 for x in lambdas):
+        raise InputError("lambdas", f"expected positive weights, got {lambdas!r}")
+    if isinstance(grid, bool) or not isinstance(grid, (int, np.integer)) or not 4 <= grid <= 512:
+        raise InputError("grid", f"expected a whole number in [4, 512], got {grid!r}")
+    if texel is not None and not (math.isfinite(texel) and texel > 0):
+        raise InputError("texel", f"expected a positive size, got {texel!r}")
+    power = DEFAULT_POWER if power is None else float(power)
+    neighbours = DEFAULT_NEIGHBOURS if neighbours is None else int(neighbours)
+    v, f = _mesh(mesh)
+    photos = list(photographs)
+    if not photos:
+        raise InputError("photographs", "no photographs: the layer needs at least two")
+    if any(p.depth is None or p.whole is None for p in photos):
+        photos = list(prepare_photographs((v, f), photos, tolerance=tolerance))
+    face_plane, planes = _face_planes(v, f)
+    # orientation groups: the planes with one normal
+    normals: list = []
+    plane_group = np.full(len(planes), -1, np.int64)
+    for k, pl in enumerate(planes):
+        for gi, n in enumerate(normals):
+            if n @ pl[:3] > 1 - 1e-6:
+                plane_group[k] = gi
+                break
+        else:
+            plane_group[k] = len(normals)
+            normals.append(pl[:3].copy())
+    size = _texel_size(photos, v) if texel is None else float(texel)
+    laps = {b: (lambda L: (L.T @ L).tocsr())(_laplacian(grid, b)) for b in BORDERS}
+    cands = [(b, lam) for b in BORDERS for lam in lambdas]
+    groups = []
+    for gi, n in enumerate(normals):
+        u, w = _frame(n)
+        members = tuple(int(k) for k in np.flatnonzero(plane_group == gi))
+        gsize = size
+        X = _texels(v, f, face_plane, planes, members, n, u, w, gsize)
+        while len(X) > MAX_TEXELS:
+            gsize *= math.sqrt(len(X) / MAX_TEXELS) * 1.01
+            X = _texels(v, f, face_plane, planes, members, n, u, w, gsize)
+        tex, crd, obs, cam = [], [], [], []
+        for j, p in enumerate(photos):
+            if not len(X):
+                break
+            s, ok = _sample(p, X, tolerance)
+            d = _unit(X[ok] - p.centre)
+            front = d @ n < 0  # a photograph behind the plane does not see it
+            t_ = np.flatnonzero(ok)[front]
+            tex.append(t_)
+            crd.append(_mirror_coords(d[front], n, u, w))
+            obs.append(s[ok][front].astype(np.float64))
+            cam.append(np.full(len(t_), j))
+        C = 1 if np.asarray(photos[0].image).ndim == 2 else np.asarray(photos[0].image).shape[2]
+        if tex:
+            tex, crd = np.concatenate(tex), np.concatenate(crd)
+            obs, cam = np.concatenate(obs).reshape(-1, C), np.concatenate(cam)
+        else:
+            tex, crd = np.zeros(0, np.int64), np.zeros((0, 2))
+            obs, cam = np.zeros((0, C)), np.zeros(0, np.int64)
+        T = len(X)
+        cnt = np.bincount(tex, minlength=T)
+        B = _design(crd, grid)
+        # the robust weights of the whole fit for each λ, kept for its held-out
+        # folds (a texel's weight says whether it is a reflection, not which
+        # photograph is out): one solve a fold
+        fits = [_robust_solve(B, obs, tex, T, laps[b], lam, robust_iterations) for b, lam in cands]
+        e_none, e_cand = [], [[] for _ in cands]
+        for k in np.unique(cam):
+            keep = cam != k
+            Bk, ok_, tk_ = B[keep], obs[keep], tex[keep]
+            for ci, (b, lam) in enumerate(cands):
+                Sk = _solve(Bk, ok_, tk_, T, laps[b], lam, fits[ci][1])[0]
+                e0, e1 = _held_out(k, tex, crd, obs, cam, X, photos, Sk, grid, power, neighbours)
+                e_cand[ci].append(e1)
+            e_none.append(e0)
+        e_none = np.concatenate(e_none) if e_none else np.zeros(0)
+        e_cand = [np.concatenate(e) if e else np.zeros(0) for e in e_cand]
+        held = len(e_none)
+        denom = max(held, 1) * C
+        scores = {"none": float(e_none.sum()) / denom}
+        scores.update({f"{b} lambda={lam:g}": float(e.sum()) / denom
+                       for (b, lam), e in zip(cands, e_cand, strict=True)})
+
+        # the simpler prior (BORDERS[0]) unless the other predicts clearly better;
+        # the layer only where it predicts clearly better than none (a matte
+        # plane's layer fits the sampling's noise and gains by chance)
+        by = {b: min((ci for ci, c in enumerate(cands) if c[0] == b),
+                     key=lambda ci: e_cand[ci].sum()) for b in BORDERS}
+        best = by[BORDERS[0]]
+        for b in BORDERS[1:]:
+            if _clearly_better(e_cand[by[b]], e_cand[best]):
+                best = by[b]
+        used = _clearly_better(e_cand[best], e_none)
+        border, lam = cands[best]
+        S = fits[best][0] if used else np.zeros((grid * grid, C))
+        groups.append(ReflectionGroup(n, u, w, members, S, used, lam, border, scores, held, T,
+                                      int((cnt >= 2).sum())))
+    return ReflectionLayer(tuple(groups), plane_group, face_plane, int(grid), float(size))
+
+
+def corrections(layer: ReflectionLayer, X, faces, C, photos, *, which=None):
+    """``(N, C)`` per photograph: the layer's move of each photograph's
+    sample at the points ``X (N, 3)`` (on the triangles ``faces (N,)``) to
+    the view from ``C``: ``S_g(r(d)) − S_g(r(d_i))``; a list over ``photos``
+    (None where no point of a used group is seen; ``which[i]`` (N,) bool
+    restricts photograph ``i`` to the points it sees)."""
+    from lumigraph.stereo.debevec1996.vdtm import _unit
+
+    out = [None] * len(photos)
+    g_of = layer.plane_group[layer.face_plane[faces]]
+    ray = None
+    for gi, g in enumerate(layer.groups):
+        if not g.used:
+            continue
+        sel = np.flatnonzero(g_of == gi)
+        if not len(sel):
+            continue
+        if ray is None:
+            ray = _unit(X - C)
+        new = _design(_mirror_coords(ray[sel], g.normal, g.u, g.w), layer.grid) @ g.layer
+        for i, p in enumerate(photos):
+            at = sel if which is None else sel[which[i][sel]]
+            if not len(at):
+                continue
+            m = np.searchsorted(sel, at)
+            d = _unit(X[at] - p.centre)
+            own = _design(_mirror_coords(d, g.normal, g.u, g.w), layer.grid) @ g.layer
+            if out[i] is None:
+                out[i] = np.zeros((len(X), g.layer.shape[1]))
+            out[i][at] = new[m] - own
+    return out

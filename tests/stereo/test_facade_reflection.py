@@ -1,0 +1,102 @@
+"""The reflection layer of VDTM (stereo/debevec1996/reflection.py): a glossy
+plane whose colour is a texture plus a function of the mirror direction,
+rendered exactly, photographed from five places and seen from a sixth."""
+
+import numpy as np
+import pytest
+
+from lumigraph.capture.errors import InputError
+from lumigraph.stereo.debevec1996.reflection import fit_reflection_layer
+from lumigraph.stereo.debevec1996.vdtm import Photograph, prepare_photographs, render_vdtm
+
+W, H, F = 64, 48, 50.0
+K = np.array([[F, 0, (W - 1) / 2], [0, F, (H - 1) / 2], [0, 0, 1]])
+QUAD = (np.array([[-3.0, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]]), np.array([[0, 1, 2], [0, 2, 3]]))
+A_TEX, L_TEX_PX = 40.0, 40.0  # texture amplitude (codes) and wavelength in pixels at the photographs
+K_TEX = 2 * np.pi / (L_TEX_PX * 6.5 / F)  # rad per metre: 6.5 m from the plane, F px per unit
+SX, SY = 60.0, 40.0  # the layer: codes per unit of the mirror direction's x and y
+
+
+def pose(C):
+    """cam_from_world of a camera at ``C`` looking at the origin, y down."""
+    C = np.asarray(C, float)
+    z = -C / np.linalg.norm(C)
+    x = np.cross([0, 1.0, 0], z)
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(z, x), z])
+    return R, -R @ C
+
+
+def shade(C, glossy=True):
+    """The exact image from ``C``: texture + (glossy) the layer at the hit point."""
+    R, t = pose(C)
+    yy, xx = np.mgrid[0:H, 0:W]
+    ray = np.stack([(xx - K[0, 2]) / F, (yy - K[1, 2]) / F, np.ones_like(xx, float)], -1) @ R
+    lam = -np.asarray(C)[2] / ray[..., 2]
+    X = np.asarray(C) + lam[..., None] * ray
+    d = ray / np.linalg.norm(ray, axis=-1, keepdims=True)
+    img = 100 + A_TEX * np.sin(K_TEX * X[..., 0]) * np.cos(K_TEX * X[..., 1])
+    if glossy:  # the mirror direction about z: (dx, dy, -dz); S linear in its x, y
+        img = img + SX * d[..., 0] + SY * d[..., 1]
+    return img[..., None], X
+
+
+PHOTOS = [(-3.0, -2.0, 6.0), (-1.5, -2.5, 6.0), (0.0, -2.0, 6.5), (1.5, -2.5, 6.0), (3.0, -2.0, 6.0)]
+NEW = (4.5, -1.0, 6.0)  # beyond the last photograph: a blend can only copy its neighbours
+
+
+def photographs(glossy=True):
+    return prepare_photographs(QUAD, [Photograph(shade(C, glossy)[0], K, *pose(C)) for C in PHOTOS])
+
+
+def test_the_layer_moves_each_sample_to_the_new_view():
+    photos = photographs()
+    layer = fit_reflection_layer(QUAD, photos, grid=16)
+    (g,) = layer.groups
+    assert g.used and g.scores["none"] > min(v for k, v in g.scores.items() if k != "none")
+    truth, X = shade(NEW)
+    R, t = pose(NEW)
+    plain = render_vdtm(QUAD, photos, K, R, t, (W, H))
+    moved = render_vdtm(QUAD, photos, K, R, t, (W, H), reflection=layer)
+    assert moved.info["reflection"] and not plain.info["reflection"]
+    # away from the plane's rim, where every photograph sees the point
+    inner = (np.abs(X[..., 0]) < 2.5) & (np.abs(X[..., 1]) < 2.5)
+    err = np.sqrt(np.mean((moved.image[inner] - truth[inner]) ** 2))
+    err_plain = np.sqrt(np.mean((plain.image[inner] - truth[inner]) ** 2))
+    # the layer is linear in the mirror direction, which the bilinear grid holds
+    # exactly and the Laplacian does not penalise: what remains is the bilinear
+    # sampling of the texture, at most A (π / L)² / 2 a sample, in each of the
+    # blend's samples and in the two samples of each difference the fit used
+    eps = A_TEX * (np.pi / L_TEX_PX) ** 2 / 2
+    assert err <= 3 * eps, (err, eps)
+    # and the plain blend misses the view's change: its error is the layer's change
+    # between the photographs and the new view (tens of codes), not the sampling
+    assert err_plain > 10 * eps
+
+
+def test_a_matte_plane_keeps_the_blend_and_says_so():
+    layer = fit_reflection_layer(QUAD, photographs(glossy=False), grid=16)
+    (g,) = layer.groups
+    assert not g.used and g.held_out > 0
+    assert set(g.scores) == {"none"} | {f"{b} lambda={x:g}" for b in ("fading", "linear")
+                                        for x in (1, 3, 10, 30, 100, 300)}
+    assert layer.summary()[0]["used"] is False
+    R, t = pose(NEW)
+    photos = photographs(glossy=False)
+    a = render_vdtm(QUAD, photos, K, R, t, (W, H)).image
+    b = render_vdtm(QUAD, photos, K, R, t, (W, H), reflection=layer).image
+    assert np.array_equal(a, b)
+
+
+def test_bad_arguments_name_themselves():
+    photos = photographs()
+    with pytest.raises(InputError, match="lambdas"):
+        fit_reflection_layer(QUAD, photos, lambdas=(1.0, -2.0))
+    with pytest.raises(InputError, match="grid"):
+        fit_reflection_layer(QUAD, photos, grid=2)
+    with pytest.raises(InputError, match="photographs"):
+        fit_reflection_layer(QUAD, [])
+    layer = fit_reflection_layer(QUAD, photos, grid=8)
+    R, t = pose(NEW)
+    with pytest.raises(InputError, match="reflection"):
+        render_vdtm(QUAD, photos, K, R, t, (W, H), method="view-map", reflection=layer)
