@@ -378,10 +378,9 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         DEFAULT_NEIGHBOURS,
         DEFAULT_POWER,
         _face_planes,
-        _mesh,
+        _mesh_and_photographs,
         _sample,
         _unit,
-        prepare_photographs,
     )
 
     lambdas = tuple(float(x) for x in lambdas)
@@ -393,12 +392,7 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         raise InputError("texel", f"expected a positive size, got {texel!r}")
     power = DEFAULT_POWER if power is None else float(power)
     neighbours = DEFAULT_NEIGHBOURS if neighbours is None else int(neighbours)
-    v, f = _mesh(mesh)
-    photos = list(photographs)
-    if not photos:
-        raise InputError("photographs", "no photographs: the layer needs at least two")
-    if any(p.depth is None or p.whole is None for p in photos):
-        photos = list(prepare_photographs((v, f), photos, tolerance=tolerance))
+    v, f, photos, C = _mesh_and_photographs(mesh, photographs, tolerance)
     face_plane, planes = _face_planes(v, f)
     # orientation groups: the planes with one normal
     normals: list = []
@@ -435,7 +429,6 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
             crd.append(_mirror_coords(d[front], n, u, w))
             obs.append(s[ok][front].astype(np.float64))
             cam.append(np.full(len(t_), j))
-        C = 1 if np.asarray(photos[0].image).ndim == 2 else np.asarray(photos[0].image).shape[2]
         if tex:
             tex, crd = np.concatenate(tex), np.concatenate(crd)
             obs, cam = np.concatenate(obs).reshape(-1, C), np.concatenate(cam)

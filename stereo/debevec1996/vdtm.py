@@ -1161,6 +1161,27 @@ def _rays(K, size):
     return r
 
 
+def _mesh_and_photographs(mesh, photographs, tolerance):
+    """``(vertices, faces, photographs, channels)``: the mesh checked, the
+    photographs as a list, prepared when they have no depth maps, and their
+    common number of channels (``InputError`` naming ``photographs`` when
+    there are none or their channels differ)."""
+    v, f = _mesh(mesh)
+    photos = list(photographs)
+    if not photos:
+        raise InputError("photographs", "no photographs: VDTM needs at least one")
+    if any(p.depth is None or p.whole is None for p in photos):
+        photos = list(prepare_photographs((v, f), photos, tolerance=tolerance))
+    first = np.asarray(photos[0].image)
+    channels = 1 if first.ndim == 2 else first.shape[2]
+    for i, p in enumerate(photos):
+        img = np.asarray(p.image)
+        if (1 if img.ndim == 2 else img.shape[2]) != channels:
+            raise InputError("photographs", f"photograph {i} has {1 if img.ndim == 2 else img.shape[2]} "
+                                            f"channels, photograph 0 has {channels}")
+    return v, f, photos, channels
+
+
 def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
                 tolerance: float = 0.01, power: float = DEFAULT_POWER,
                 neighbours: int = DEFAULT_NEIGHBOURS, background: float = 0.0,
@@ -1216,19 +1237,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     if isinstance(neighbours, bool) or not isinstance(neighbours, (int, np.integer)) or neighbours < 0:
         raise InputError("neighbours", f"expected a whole number >= 0 (0 = every photograph), "
                                        f"got {neighbours!r}")
-    v, f = _mesh(mesh)
-    photos = list(photographs)
-    if not photos:
-        raise InputError("photographs", "no photographs: VDTM needs at least one")
-    if any(p.depth is None or p.whole is None for p in photos):
-        photos = list(prepare_photographs((v, f), photos, tolerance=tolerance))
-    first = np.asarray(photos[0].image)
-    channels = 1 if first.ndim == 2 else first.shape[2]
-    for i, p in enumerate(photos):
-        img = np.asarray(p.image)
-        if (1 if img.ndim == 2 else img.shape[2]) != channels:
-            raise InputError("photographs", f"photograph {i} has {1 if img.ndim == 2 else img.shape[2]} "
-                                            f"channels, photograph 0 has {channels}")
+    v, f, photos, channels = _mesh_and_photographs(mesh, photographs, tolerance)
     w, h = (int(s) for s in size)
     R = np.asarray(R, np.float64)
     t = np.asarray(t, np.float64).reshape(3)
