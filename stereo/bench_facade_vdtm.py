@@ -152,11 +152,7 @@ def vdtm(quick: bool):
             layered = render_vdtm(mesh, photos, K, R, t, size, reflection=layer)
             if seed not in REPORTED_SEEDS + TUNED_SEEDS:  # the layer's fresh seeds: its rows only
                 p_l = _psnr(layered.image, gt, m)
-                uniform = render_vdtm(mesh, photos, K, R, t, size, power=1e-9, neighbours=0)
-                C = -R.T @ t
-                j = int(np.argmin([np.linalg.norm(p.centre - C) for p in photos]))
-                nearest = render_vdtm(mesh, [photos[j]], K, R, t, size)
-                p_u, p_n = _psnr(uniform.image, gt, m), _psnr(nearest.image, gt, m)
+                p_u, p_n, j = _references(mesh, photos, K, R, t, size, gt, m)
                 p_b = _psnr(render_vdtm(mesh, photos, K, R, t, size).image, gt, m)
                 rows += [_row(case, "VDTM blend + reflection layer: PSNR dB", p_l,
                               layer_fit_s=t_layer, used=_used(layer)),
@@ -168,12 +164,8 @@ def vdtm(quick: bool):
                 layer_b.append(p_l - p_b)
                 continue
             (blend, vmap), (tb, tv) = _interleaved([lambda: call("blend"), lambda: call("view-map")])
-            uniform = render_vdtm(mesh, photos, K, R, t, size, power=1e-9, neighbours=0)
-            C = -R.T @ t
-            j = int(np.argmin([np.linalg.norm(p.centre - C) for p in photos]))
-            nearest = render_vdtm(mesh, [photos[j]], K, R, t, size)
+            p_u, p_n, j = _references(mesh, photos, K, R, t, size, gt, m)
             p_b, p_v = _psnr(blend.image, gt, m), _psnr(vmap.image, gt, m)
-            p_u, p_n = _psnr(uniform.image, gt, m), _psnr(nearest.image, gt, m)
             tex_b = blend.info["timings_s"]["texture"]
             tex_v = vmap.info["timings_s"]["texture"]
             p_l = _psnr(layered.image, gt, m)
@@ -237,6 +229,19 @@ def vdtm(quick: bool):
               f"{int(np.sum(np.array(layer_n) >= 2.0))} of {nl}"),
     ]
     return rows, checks
+
+
+def _references(mesh, photos, K, R, t, size, gt, m):
+    """PSNR of the issue's two references, the uniform average of the
+    photographs that see each point and the nearest photograph's texture
+    alone, and the nearest photograph's index."""
+    from lumigraph.stereo.debevec1996.vdtm import render_vdtm
+
+    uniform = render_vdtm(mesh, photos, K, R, t, size, power=1e-9, neighbours=0)
+    C = -R.T @ t
+    j = int(np.argmin([np.linalg.norm(p.centre - C) for p in photos]))
+    nearest = render_vdtm(mesh, [photos[j]], K, R, t, size)
+    return _psnr(uniform.image, gt, m), _psnr(nearest.image, gt, m), j
 
 
 def _used(layer):

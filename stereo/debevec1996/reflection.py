@@ -262,8 +262,7 @@ def _texels(v, f, face_plane, planes, members, n, u, w, size):
         S_, Q_ = np.meshgrid(ss, qq)
         px, py = S_.ravel(), Q_.ravel()
         inside = np.zeros(len(px), bool)
-        for a, b, c in zip(np.stack([s, q], 2)[:, 0], np.stack([s, q], 2)[:, 1],
-                           np.stack([s, q], 2)[:, 2], strict=True):
+        for a, b, c in np.stack([s, q], 2):  # each triangle's three corners (s, q)
             e = [(p1[0] - p0[0]) * (py - p0[1]) - (p1[1] - p0[1]) * (px - p0[0])
                  for p0, p1 in ((a, b), (b, c), (c, a))]
             inside |= (((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0))
