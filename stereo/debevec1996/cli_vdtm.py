@@ -60,7 +60,9 @@ planes, the part of the colour that moves with the view as a reflection of a far
 (or a highlight under a far light) does, a function of the mirror direction estimated from the
 differences between the photographs at each point, and moves each photograph's sample to the
 new view with it before blending. Each orientation keeps the plain blend unless the layer
-predicts each photograph, left out in turn, clearly better; the choice is printed. It suits
+predicts each photograph, left out in turn, clearly better; the choice is printed. On a plane
+of two materials (glass in brick) the layer is switched off where it explains the photographs'
+differences worse than no layer (the share is printed). It suits
 glossy facades and windows reflecting the sky; it costs a fit (seconds to a minute) shared by
 every view:
 
@@ -317,7 +319,10 @@ def _render(args) -> int:
             chosen = f"{g['border']} lambda={g['lambda']:g}"
             say(args, f"  planes facing {g['normal']}: "
                       f"{'layer ' + chosen if g['used'] else 'plain blend'} (held-out MSE none "
-                      f"{sc['none']:.1f}, layer {sc[chosen]:.1f}, {g['held_out_samples']} samples)")
+                      f"{sc['none']:.1f}, layer {sc[chosen]:.1f}, {g['held_out_samples']} samples"
+                      + (f"; off on {100 * g['gated_off_fraction']:.0f}% of the planes, where it "
+                         "explains the photographs' differences worse than none"
+                         if g["used"] else "") + ")")
         if not any(g["used"] for g in layer_summary):
             warn("--reflection: no plane orientation's layer predicts held-out photographs better "
                  "than the plain blend; rendering the plain blend")

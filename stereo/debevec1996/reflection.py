@@ -47,17 +47,29 @@ is kept (``ReflectionLayer.groups[k].scores``). A matte plane, or one that
 only two photographs see from far apart (where the differences do not
 determine ``S_g``), keeps the plain blend.
 
+Where on a plane the layer applies (the gate ``γ(X)``): one ``S_g`` is
+wrong for a second material on the plane (a window's glass reflects four
+times what the brick around it does, and its highlight is narrower), and
+moving its samples by the brick's layer is worse than not moving them. So
+per texel, summed over its ``(2 r + 1)²`` neighbourhood on the plane
+(:data:`GATE_RADIUS`), the layer's residual sum of squares is compared with
+the sum of squares of the photographs' differences without it: ``γ = 1``
+where the layer leaves less, ``0`` where it leaves more, ``1`` where no
+texel near was seen twice. The held-out test scores the gated layer (each
+fold's gate from that fold's fit).
+
 Render (``render_vdtm(..., reflection=layer)``): each photograph's sample
 is moved to the new view before the blend,
 
-    c_i(X) + S_g(r(d, n_g)) − S_g(r(d_i(X), n_g))
+    c_i(X) + γ(X) [S_g(r(d, n_g)) − S_g(r(d_i(X), n_g))]
 
 with ``d`` the new view's direction at ``X``.
 
-Limits: one layer per orientation, the same for every material on it (a
-window's glass and the brick around it share ``S_g``, weighted by the
-robust fit); planar surfaces; the reflected world at infinity (a nearby
-reflected object has parallax this model lacks).
+Limits: one layer per orientation (a second material keeps the plain blend
+where the gate finds it, rather than a layer of its own); planar surfaces;
+the reflected world at infinity (a nearby reflected object has parallax
+this model lacks); a highlight that falls between the directions the
+photographs saw is smoothed over, not recovered.
 
 Examples
 --------
@@ -106,6 +118,10 @@ MAX_TEXELS = 250_000
 # texel size in photograph pixels at the model: the layer is smooth, and texels
 # finer than the photographs' samples add cost, not information
 TEXEL_PIXELS = 1.5
+# the gate (:func:`_gate`): the layer applies only where, over a (2 r + 1)² texel
+# neighbourhood, it explains the photographs' differences better than none
+GATE = True
+GATE_RADIUS = 2
 
 
 @dataclass(frozen=True)
@@ -121,7 +137,10 @@ class ReflectionGroup:
     mean squared error per channel of every candidate (``"none"``,
     ``"fading lambda=…"``, ``"linear lambda=…"``)
     over ``held_out`` samples; ``texels`` how many texels the fit saw,
-    ``multi_view`` how many two or more photographs saw.
+    ``multi_view`` how many two or more photographs saw; ``gate`` per plane
+    ``(k, s_first, q_first, γ)``, the gate (:func:`_gate`) on the plane's
+    texel grid (``()``: the layer applies everywhere), ``texel`` that
+    grid's spacing (world units).
     """
 
     normal: np.ndarray
@@ -136,6 +155,8 @@ class ReflectionGroup:
     held_out: int
     texels: int
     multi_view: int
+    gate: tuple = ()
+    texel: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -155,9 +176,16 @@ class ReflectionLayer:
         """One JSON-ready dict per group: normal, used, λ, scores."""
         return [{"normal": [round(float(x), 6) for x in g.normal], "used": bool(g.used),
                  "lambda": float(g.lam), "border": g.border, "held_out_samples": int(g.held_out),
+                 "gated_off_fraction": _gated_off(g),
                  "texels": int(g.texels), "multi_view_texels": int(g.multi_view),
                  "held_out_mse": {k: round(float(v), 4) for k, v in g.scores.items()}}
                 for g in self.groups]
+
+
+def _gated_off(g):
+    """The share of a used group's texel grid cells where the gate is 0."""
+    cells = sum(x[3].size for x in g.gate)
+    return round(float(sum((x[3] == 0).sum() for x in g.gate)) / cells, 4) if cells else 0.0
 
 
 def _frame(n):
@@ -209,7 +237,8 @@ def _laplacian(grid, border):
 def _solve(B, obs, tex, n_tex, lap2, lam, weight):
     """``S`` (G, C) minimising Σ weight_t |ΔI − ΔS|² + λ (rows/G) |L S|²,
     Δ the deviation from the texel's mean over its photographs (texels seen
-    twice or more); also each texel's residual sum of squares and count."""
+    twice or more); also per texel the residual sum of squares, the count of
+    samples and the sum of squares without the layer (Σ |ΔI|²)."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spl
 
@@ -217,7 +246,7 @@ def _solve(B, obs, tex, n_tex, lap2, lam, weight):
     rows = np.flatnonzero(cnt[tex] >= 2)
     G = B.shape[1]
     if not len(rows):
-        return np.zeros((G, obs.shape[1])), np.zeros(n_tex), cnt
+        return np.zeros((G, obs.shape[1])), np.zeros(n_tex), cnt, np.zeros(n_tex)
     tm = tex[rows]
     inv = 1.0 / np.maximum(cnt, 1)
     mean = sp.csr_matrix((inv[tm], (tm, np.arange(len(rows)))), shape=(n_tex, len(rows)))
@@ -230,16 +259,18 @@ def _solve(B, obs, tex, n_tex, lap2, lam, weight):
          + 1e-6 * sp.identity(G)).tocsc()
     S = spl.splu(A).solve(np.asarray(Aw.T @ (sw[:, None] * rhs)))
     r = rhs - Ac @ S
-    return S, np.bincount(tm, (r ** 2).sum(1), minlength=n_tex), cnt
+    return (S, np.bincount(tm, (r ** 2).sum(1), minlength=n_tex), cnt,
+            np.bincount(tm, (rhs ** 2).sum(1), minlength=n_tex))
 
 
 def _robust_solve(B, obs, tex, n_tex, lap2, lam, iterations):
     """:func:`_solve` reweighted ``iterations`` times: Cauchy weights on each
     texel's RMS residual, scale 2.385 × the MAD-based σ of the residuals.
-    Returns ``(S, weight)``, the weights of the last solve."""
+    Returns ``(S, weight, res, res_none)``: the weights of the last solve,
+    and its residual sums of squares per texel with and without the layer."""
     weight = np.ones(n_tex)
     for it in range(iterations + 1):
-        S, res, cnt = _solve(B, obs, tex, n_tex, lap2, lam, weight)
+        S, res, cnt, res_none = _solve(B, obs, tex, n_tex, lap2, lam, weight)
         if it == iterations:
             break
         ok = cnt >= 2
@@ -248,12 +279,15 @@ def _robust_solve(B, obs, tex, n_tex, lap2, lam, iterations):
         rt = np.sqrt(res / np.maximum(cnt - 1, 1) / obs.shape[1])
         c = max(2.385 * 1.4826 * float(np.median(rt[ok])), 1e-9)
         weight = 1.0 / (1.0 + (rt / c) ** 2)
-    return S, weight
+    return S, weight, res, res_none
 
 
 def _texels(v, f, face_plane, planes, members, n, u, w, size):
-    """Texel centres (T, 3) on the polygons of the planes ``members``."""
-    out = []
+    """Texel centres (T, 3) on the polygons of the planes ``members``, and
+    their layout: per plane ``(k, s_first, q_first, index)``, ``index``
+    (rows along ``w``, columns along ``u``) the texel of each cell of the
+    plane's texel grid (−1 off its polygons)."""
+    out, layout, base = [], [], 0
     for k in members:
         tri = v[f[face_plane == k]]
         s, q = tri @ u, tri @ w
@@ -267,11 +301,56 @@ def _texels(v, f, face_plane, planes, members, n, u, w, size):
                  for p0, p1 in ((a, b), (b, c), (c, a))]
             inside |= (((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0))
                        | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0)))
+        index = np.full(len(px), -1, np.int64)
+        index[inside] = base + np.arange(int(inside.sum()))
+        base += int(inside.sum())
+        if len(ss) and len(qq):
+            layout.append((int(k), float(ss[0]), float(qq[0]), index.reshape(S_.shape)))
         out.append(planes[k, 3] * n + px[inside, None] * u + py[inside, None] * w)
-    return np.concatenate(out) if out else np.zeros((0, 3))
+    return (np.concatenate(out) if out else np.zeros((0, 3))), layout
 
 
-def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours):
+def _gate(res, res_none, layout, radius):
+    """Where the layer applies, per texel (T,) and per plane's texel grid:
+    1 where, summed over the texel's ``(2 radius + 1)²`` neighbourhood on its
+    plane, the layer leaves less of the photographs' differences than no
+    layer does (``res < res_none``), 0 where it leaves more (a material that
+    reflects differently from the one the layer fits: glass in a brick
+    wall), 1 where no texel near was seen twice (nothing to tell)."""
+    from scipy.ndimage import uniform_filter
+
+    g = np.ones(len(res))
+    grids = []
+    for k, s0, q0, index in layout:
+        inside = index >= 0
+        a = np.zeros(index.shape)
+        b = np.zeros(index.shape)
+        a[inside] = res[index[inside]]
+        b[inside] = res_none[index[inside]]
+        size = 2 * radius + 1
+        a = uniform_filter(a, size, mode="constant")
+        b = uniform_filter(b, size, mode="constant")
+        gk = np.where(b > 0, (a < b).astype(np.float64), 1.0)
+        g[index[inside]] = gk[inside]
+        grids.append((k, s0, q0, gk.astype(np.float32)))
+    return g, tuple(grids)
+
+
+def _gate_at(group, X, plane):
+    """The group's gate at the points ``X (N, 3)`` on the planes ``plane (N,)``
+    (the nearest cell of the plane's texel grid; 1 without a gate)."""
+    out = np.ones(len(X))
+    for k, s0, q0, gk in group.gate:
+        at = np.flatnonzero(plane == k)
+        if not len(at):
+            continue
+        i = np.clip(np.rint((X[at] @ group.u - s0) / group.texel).astype(np.int64), 0, gk.shape[1] - 1)
+        j = np.clip(np.rint((X[at] @ group.w - q0) / group.texel).astype(np.int64), 0, gk.shape[0] - 1)
+        out[at] = gk[j, i]
+    return out
+
+
+def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours, gate=None):
     """Photograph ``k``'s samples predicted from the others' (the blend's
     weights seen from its centre), without and with the layer: the squared
     errors of the samples the others see, summed over the channels."""
@@ -307,6 +386,8 @@ def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours):
     none = (W[..., None] * samp).sum(0)[good] / ws[good, None]
     Sk = _design(crd[mine], grid) @ S
     corr = np.stack([Sk - _design(cj[a], grid) @ S for a in range(len(others))])
+    if gate is not None:
+        corr *= gate[tk][None, :, None]
     lay = none + (W[..., None] * corr).sum(0)[good] / ws[good, None]
     truth = obs[mine][good]
     return ((none - truth) ** 2).sum(1), ((lay - truth) ** 2).sum(1)
@@ -412,10 +493,10 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         u, w = _frame(n)
         members = tuple(int(k) for k in np.flatnonzero(plane_group == gi))
         gsize = size
-        X = _texels(v, f, face_plane, planes, members, n, u, w, gsize)
+        X, layout = _texels(v, f, face_plane, planes, members, n, u, w, gsize)
         while len(X) > MAX_TEXELS:
             gsize *= math.sqrt(len(X) / MAX_TEXELS) * 1.01
-            X = _texels(v, f, face_plane, planes, members, n, u, w, gsize)
+            X, layout = _texels(v, f, face_plane, planes, members, n, u, w, gsize)
         tex, crd, obs, cam = [], [], [], []
         for j, p in enumerate(photos):
             if not len(X):
@@ -446,8 +527,10 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
             keep = cam != k
             Bk, ok_, tk_ = B[keep], obs[keep], tex[keep]
             for ci, (b, lam) in enumerate(cands):
-                Sk = _solve(Bk, ok_, tk_, T, laps[b], lam, fits[ci][1])[0]
-                e0, e1 = _held_out(k, tex, crd, obs, cam, X, photos, Sk, grid, power, neighbours)
+                Sk, rk, _, nk = _solve(Bk, ok_, tk_, T, laps[b], lam, fits[ci][1])
+                gk = _gate(rk, nk, layout, GATE_RADIUS)[0] if GATE else None
+                e0, e1 = _held_out(k, tex, crd, obs, cam, X, photos, Sk, grid, power, neighbours,
+                                   gk)
                 e_cand[ci].append(e1)
             e_none.append(e0)
         e_none = np.concatenate(e_none) if e_none else np.zeros(0)
@@ -470,8 +553,11 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         used = _clearly_better(e_cand[best], e_none)
         border, lam = cands[best]
         S = fits[best][0] if used else np.zeros((grid * grid, C))
+        gate = ()
+        if used and GATE:
+            gate = _gate(fits[best][2], fits[best][3], layout, GATE_RADIUS)[1]
         groups.append(ReflectionGroup(n, u, w, members, S, used, lam, border, scores, held, T,
-                                      int((cnt >= 2).sum())))
+                                      int((cnt >= 2).sum()), gate, gsize))
     return ReflectionLayer(tuple(groups), plane_group, face_plane, int(grid), float(size))
 
 
@@ -495,6 +581,7 @@ def corrections(layer: ReflectionLayer, X, faces, C, photos, *, which=None):
         if ray is None:
             ray = _unit(X - C)
         new = _design(_mirror_coords(ray[sel], g.normal, g.u, g.w), layer.grid) @ g.layer
+        gate = _gate_at(g, X[sel], layer.face_plane[faces[sel]])
         for i, p in enumerate(photos):
             at = sel if which is None else sel[which[i][sel]]
             if not len(at):
@@ -504,5 +591,5 @@ def corrections(layer: ReflectionLayer, X, faces, C, photos, *, which=None):
             own = _design(_mirror_coords(d, g.normal, g.u, g.w), layer.grid) @ g.layer
             if out[i] is None:
                 out[i] = np.zeros((len(X), g.layer.shape[1]))
-            out[i][at] = new[m] - own
+            out[i][at] = (new[m] - own) * gate[m, None]
     return out

@@ -27,8 +27,9 @@ def pose(C):
     return R, -R @ C
 
 
-def shade(C, glossy=True):
-    """The exact image from ``C``: texture + (glossy) the layer at the hit point."""
+def shade(C, glossy=True, patch=0.0):
+    """The exact image from ``C``: texture + (glossy) the layer at the hit
+    point, except on a matte square ``|X|, |Y| < patch`` (another material)."""
     R, t = pose(C)
     yy, xx = np.mgrid[0:H, 0:W]
     ray = np.stack([(xx - K[0, 2]) / F, (yy - K[1, 2]) / F, np.ones_like(xx, float)], -1) @ R
@@ -37,7 +38,8 @@ def shade(C, glossy=True):
     d = ray / np.linalg.norm(ray, axis=-1, keepdims=True)
     img = 100 + A_TEX * np.sin(K_TEX * X[..., 0]) * np.cos(K_TEX * X[..., 1])
     if glossy:  # the mirror direction about z: (dx, dy, -dz); S linear in its x, y
-        img = img + SX * d[..., 0] + SY * d[..., 1]
+        matte = (np.abs(X[..., 0]) < patch) & (np.abs(X[..., 1]) < patch)
+        img = img + np.where(matte, 0.0, SX * d[..., 0] + SY * d[..., 1])
     return img[..., None], X
 
 
@@ -45,8 +47,9 @@ PHOTOS = [(-3.0, -2.0, 6.0), (-1.5, -2.5, 6.0), (0.0, -2.0, 6.5), (1.5, -2.5, 6.
 NEW = (4.5, -1.0, 6.0)  # beyond the last photograph: a blend can only copy its neighbours
 
 
-def photographs(glossy=True):
-    return prepare_photographs(QUAD, [Photograph(shade(C, glossy)[0], K, *pose(C)) for C in PHOTOS])
+def photographs(glossy=True, patch=0.0):
+    return prepare_photographs(QUAD, [Photograph(shade(C, glossy, patch)[0], K, *pose(C))
+                                      for C in PHOTOS])
 
 
 def test_the_layer_moves_each_sample_to_the_new_view():
@@ -72,6 +75,40 @@ def test_the_layer_moves_each_sample_to_the_new_view():
     # and the plain blend misses the view's change: its error is the layer's change
     # between the photographs and the new view (tens of codes), not the sampling
     assert err_plain > 10 * eps
+
+
+def test_a_matte_patch_on_a_glossy_plane_keeps_the_blend_there(monkeypatch):
+    import lumigraph.stereo.debevec1996.reflection as reflection
+
+    patch = 1.2  # metres: a 2.4 m square of another material, about 12 texels across
+    photos = photographs(patch=patch)
+    truth, X = shade(NEW, patch=patch)
+    R, t = pose(NEW)
+    eps = A_TEX * (np.pi / L_TEX_PX) ** 2 / 2
+    inner = (np.abs(X[..., 0]) < 2.5) & (np.abs(X[..., 1]) < 2.5)
+    edge = np.maximum(np.abs(X[..., 0]), np.abs(X[..., 1]))
+    # the gate decides over 5 x 5 texels (0.2 m each): 0.6 m from the patch's edge
+    # is beyond every neighbourhood that holds both materials
+    matte, glossy = edge < patch - 0.6, inner & (edge > patch + 0.6)
+
+    def rms(img, at):
+        return float(np.sqrt(np.mean((img[at] - truth[at]) ** 2)))
+
+    layer = fit_reflection_layer(QUAD, photos, grid=16)
+    (g,) = layer.groups
+    assert g.used and g.gate
+    moved = render_vdtm(QUAD, photos, K, R, t, (W, H), reflection=layer).image
+    # on the matte patch the samples are not moved: the blend of a matte texture,
+    # exact but for the bilinear sampling; on the glossy rest, moved as before
+    assert rms(moved, matte) <= 3 * eps, rms(moved, matte)
+    assert rms(moved, glossy) <= 3 * eps, rms(moved, glossy)
+    # without the gate the layer moves the patch's samples too, by the glossy
+    # material's change between the photographs and the new view
+    monkeypatch.setattr(reflection, "GATE", False)
+    ungated = fit_reflection_layer(QUAD, photos, grid=16)
+    assert not ungated.groups[0].gate
+    wrong = render_vdtm(QUAD, photos, K, R, t, (W, H), reflection=ungated).image
+    assert rms(wrong, matte) > 10 * eps
 
 
 def test_a_matte_plane_keeps_the_blend_and_says_so():
