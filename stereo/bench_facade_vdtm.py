@@ -61,9 +61,10 @@ from lumigraph.capture.bench import Check, Row
 
 TUNED_SEEDS = (0,)  # seeds 4 and 5 were tuned on too (not run here: bench time)
 REPORTED_SEEDS = (1, 2, 3)
-# the reflection layer (reflection.py) was built on seeds 0, 4 and 5 and one view of seed 1
-# was looked at during its development; seeds 9-11 were first rendered for its report
-LAYER_FRESH_SEEDS = (9, 10, 11)
+# the reflection layer (reflection.py) was built on seeds 0, 4 and 5; one view of seed 1
+# (its left wall's windows) led to the layer's gate, and seed 9's worst view was looked at;
+# seeds 12-14 were first rendered for the gated layer's report (docs/decisions/facade-vdtm.md)
+LAYER_FRESH_SEEDS = (12, 13, 14)
 
 
 def _label(seed, view=None):

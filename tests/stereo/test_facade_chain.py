@@ -189,6 +189,23 @@ def test_reflection_layer_on_the_command_line(folder, tmp_path):
     assert_clean_error(r, "--reflection", "blend")
 
 
+def test_reflection_layer_from_two_photographs_warns_it_is_not_used(folder, tmp_path):
+    # two photographs: leaving one out leaves no point seen twice, so no layer can be
+    # tested, none is used, and the command says so on stderr (not only in the meta)
+    f, _ = folder
+    two = tmp_path / "two"
+    shutil.copytree(f, two)
+    stack = json.loads((two / "stack.json").read_text())
+    stack["images"] = ["photo_02.png", "photo_03.png"]
+    (two / "stack.json").write_text(json.dumps(stack))
+    r = lumigraph("stereo", "facade", "render", "--model", two / "blocks.json", "--photos", two,
+                  "--view", two / "novel" / "view_0.json", "--reflection", "--out", tmp_path / "v.png")
+    assert r.returncode == 0, r.stderr
+    assert "no plane orientation's layer" in r.stderr and "plain blend" in r.stderr
+    meta = json.loads((tmp_path / "v.png.meta.json").read_text())
+    assert meta["reflection_layer"] and not any(g["used"] for g in meta["reflection_layer"])
+
+
 def test_reflection_layer_on_a_glossy_building(tmp_path):
     s = render("facade", size=(160, 120), seed=2, photos=8, novel=1, supersample=1)
     f = s.save(tmp_path / "photos")
