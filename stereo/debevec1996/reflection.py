@@ -234,49 +234,64 @@ def _laplacian(grid, border):
     return sp.vstack([sp.kron(eye, d2), sp.kron(d2, eye)]).tocsr()
 
 
-def _solve(B, obs, tex, n_tex, lap2, lam, weight):
-    """``S`` (G, C) minimising Σ weight_t |ΔI − ΔS|² + λ (rows/G) |L S|²,
-    Δ the deviation from the texel's mean over its photographs (texels seen
-    twice or more); also per texel the residual sum of squares, the count of
-    samples and the sum of squares without the layer (Σ |ΔI|²)."""
+class _Centred:
+    """The fit's data with each texel's mean removed (texels seen twice or
+    more): ``Ac`` (rows, G) the centred bilinear design and ``AcT`` its
+    transpose (CSR), ``rhs`` (rows, C) the centred colours, ``tm`` (rows,)
+    each row's texel, ``cnt`` (T,) each texel's samples, ``res_none`` (T,)
+    each texel's sum of squares without a layer (Σ |ΔI|²). Built once for
+    a set of rows and shared by every candidate's solve on them."""
+
+    def __init__(self, B, obs, tex, n_tex):
+        import scipy.sparse as sp
+
+        self.cnt = np.bincount(tex, minlength=n_tex)
+        self.n_tex, self.G, self.C = n_tex, B.shape[1], obs.shape[1]
+        rows = np.flatnonzero(self.cnt[tex] >= 2)
+        self.tm = tex[rows]
+        inv = 1.0 / np.maximum(self.cnt, 1)
+        mean = sp.csr_matrix((inv[self.tm], (self.tm, np.arange(len(rows)))),
+                             shape=(n_tex, len(rows)))
+        Bm = B[rows]
+        self.Ac = (Bm - (mean @ Bm)[self.tm]).tocsr()
+        self.AcT = self.Ac.T.tocsr()
+        self.rhs = obs[rows] - (mean @ obs[rows])[self.tm]
+        self.res_none = np.bincount(self.tm, (self.rhs ** 2).sum(1), minlength=n_tex)
+
+
+def _solve(cen, lap2, lam, weight):
+    """``S`` (G, C) minimising Σ weight_t |ΔI − ΔS|² + λ (rows/G) |L S|²
+    over the centred data ``cen`` (:class:`_Centred`); also per texel the
+    residual sum of squares, the count of samples and the sum of squares
+    without the layer."""
     import scipy.sparse as sp
     import scipy.sparse.linalg as spl
 
-    cnt = np.bincount(tex, minlength=n_tex)
-    rows = np.flatnonzero(cnt[tex] >= 2)
-    G = B.shape[1]
-    if not len(rows):
-        return np.zeros((G, obs.shape[1])), np.zeros(n_tex), cnt, np.zeros(n_tex)
-    tm = tex[rows]
-    inv = 1.0 / np.maximum(cnt, 1)
-    mean = sp.csr_matrix((inv[tm], (tm, np.arange(len(rows)))), shape=(n_tex, len(rows)))
-    Bm = B[rows]
-    Ac = (Bm - (mean @ Bm)[tm]).tocsr()
-    rhs = obs[rows] - (mean @ obs[rows])[tm]
-    sw = np.sqrt(weight[tm])
-    Aw = sp.diags(sw) @ Ac
-    A = (Aw.T @ Aw + lam * (float(weight[tm].sum()) / G) * lap2
-         + 1e-6 * sp.identity(G)).tocsc()
-    S = spl.splu(A).solve(np.asarray(Aw.T @ (sw[:, None] * rhs)))
-    r = rhs - Ac @ S
-    return (S, np.bincount(tm, (r ** 2).sum(1), minlength=n_tex), cnt,
-            np.bincount(tm, (rhs ** 2).sum(1), minlength=n_tex))
+    G = cen.G
+    if not len(cen.tm):
+        return np.zeros((G, cen.C)), np.zeros(cen.n_tex), cen.cnt, cen.res_none
+    wr = weight[cen.tm]
+    AtW = cen.AcT.multiply(wr[None, :]).tocsr()
+    A = (AtW @ cen.Ac + lam * (float(wr.sum()) / G) * lap2 + 1e-6 * sp.identity(G)).tocsc()
+    S = spl.splu(A).solve(np.asarray(AtW @ cen.rhs))
+    r = cen.rhs - cen.Ac @ S
+    return S, np.bincount(cen.tm, (r ** 2).sum(1), minlength=cen.n_tex), cen.cnt, cen.res_none
 
 
-def _robust_solve(B, obs, tex, n_tex, lap2, lam, iterations):
+def _robust_solve(cen, lap2, lam, iterations):
     """:func:`_solve` reweighted ``iterations`` times: Cauchy weights on each
     texel's RMS residual, scale 2.385 × the MAD-based σ of the residuals.
     Returns ``(S, weight, res, res_none)``: the weights of the last solve,
     and its residual sums of squares per texel with and without the layer."""
-    weight = np.ones(n_tex)
+    weight = np.ones(cen.n_tex)
     for it in range(iterations + 1):
-        S, res, cnt, res_none = _solve(B, obs, tex, n_tex, lap2, lam, weight)
+        S, res, cnt, res_none = _solve(cen, lap2, lam, weight)
         if it == iterations:
             break
         ok = cnt >= 2
         if not ok.any():
             break
-        rt = np.sqrt(res / np.maximum(cnt - 1, 1) / obs.shape[1])
+        rt = np.sqrt(res / np.maximum(cnt - 1, 1) / cen.C)
         c = max(2.385 * 1.4826 * float(np.median(rt[ok])), 1e-9)
         weight = 1.0 / (1.0 + (rt / c) ** 2)
     return S, weight, res, res_none
@@ -521,13 +536,14 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         # the robust weights of the whole fit for each λ, kept for its held-out
         # folds (a texel's weight says whether it is a reflection, not which
         # photograph is out): one solve a fold
-        fits = [_robust_solve(B, obs, tex, T, laps[b], lam, robust_iterations) for b, lam in cands]
+        whole = _Centred(B, obs, tex, T)
+        fits = [_robust_solve(whole, laps[b], lam, robust_iterations) for b, lam in cands]
         e_none, e_cand = [], [[] for _ in cands]
         for k in np.unique(cam):
             keep = cam != k
-            Bk, ok_, tk_ = B[keep], obs[keep], tex[keep]
+            fold = _Centred(B[keep], obs[keep], tex[keep], T)
             for ci, (b, lam) in enumerate(cands):
-                Sk, rk, _, nk = _solve(Bk, ok_, tk_, T, laps[b], lam, fits[ci][1])
+                Sk, rk, _, nk = _solve(fold, laps[b], lam, fits[ci][1])
                 gk = _gate(rk, nk, layout, GATE_RADIUS)[0] if GATE else None
                 e0, e1 = _held_out(k, tex, crd, obs, cam, X, photos, Sk, grid, power, neighbours,
                                    gk)
