@@ -140,7 +140,8 @@ class ReflectionGroup:
     ``multi_view`` how many two or more photographs saw; ``gate`` per plane
     ``(k, s_first, q_first, γ)``, the gate (:func:`_gate`) on the plane's
     texel grid (``()``: the layer applies everywhere), ``texel`` that
-    grid's spacing (world units).
+    grid's spacing (world units), ``gated_off`` the share of the texels
+    where the gate is 0.
     """
 
     normal: np.ndarray
@@ -157,6 +158,7 @@ class ReflectionGroup:
     multi_view: int
     gate: tuple = ()
     texel: float = 0.0
+    gated_off: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -176,16 +178,10 @@ class ReflectionLayer:
         """One JSON-ready dict per group: normal, used, λ, scores."""
         return [{"normal": [round(float(x), 6) for x in g.normal], "used": bool(g.used),
                  "lambda": float(g.lam), "border": g.border, "held_out_samples": int(g.held_out),
-                 "gated_off_fraction": _gated_off(g),
+                 "gated_off_fraction": round(float(g.gated_off), 4),
                  "texels": int(g.texels), "multi_view_texels": int(g.multi_view),
                  "held_out_mse": {k: round(float(v), 4) for k, v in g.scores.items()}}
                 for g in self.groups]
-
-
-def _gated_off(g):
-    """The share of a used group's texel grid cells where the gate is 0."""
-    cells = sum(x[3].size for x in g.gate)
-    return round(float(sum((x[3] == 0).sum() for x in g.gate)) / cells, 4) if cells else 0.0
 
 
 def _frame(n):
@@ -569,11 +565,12 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         used = _clearly_better(e_cand[best], e_none)
         border, lam = cands[best]
         S = fits[best][0] if used else np.zeros((grid * grid, C))
-        gate = ()
+        gate, off = (), 0.0
         if used and GATE:
-            gate = _gate(fits[best][2], fits[best][3], layout, GATE_RADIUS)[1]
+            per_texel, gate = _gate(fits[best][2], fits[best][3], layout, GATE_RADIUS)
+            off = float((per_texel == 0).mean()) if len(per_texel) else 0.0
         groups.append(ReflectionGroup(n, u, w, members, S, used, lam, border, scores, held, T,
-                                      int((cnt >= 2).sum()), gate, gsize))
+                                      int((cnt >= 2).sum()), gate, gsize, off))
     return ReflectionLayer(tuple(groups), plane_group, face_plane, int(grid), float(size))
 
 

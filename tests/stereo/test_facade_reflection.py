@@ -97,6 +97,10 @@ def test_a_matte_patch_on_a_glossy_plane_keeps_the_blend_there(monkeypatch):
     layer = fit_reflection_layer(QUAD, photos, grid=16)
     (g,) = layer.groups
     assert g.used and g.gate
+    # the gate is off on the patch, give or take its window (2 texels) at the edges:
+    # between the patch shrunk and grown by that, as shares of the 6 x 6 m plane
+    off, win = layer.summary()[0]["gated_off_fraction"], 2 * layer.texel
+    assert (2 * (patch - win)) ** 2 / 36 <= off <= (2 * (patch + win)) ** 2 / 36, off
     moved = render_vdtm(QUAD, photos, K, R, t, (W, H), reflection=layer).image
     # on the matte patch the samples are not moved: the blend of a matte texture,
     # exact but for the bilinear sampling; on the glossy rest, moved as before
