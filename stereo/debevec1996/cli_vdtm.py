@@ -17,6 +17,7 @@ from lumigraph.capture.commandline import (
     number,
     output_file,
     output_file_or_dir,
+    progress,
     say,
     warn,
 )
@@ -311,8 +312,10 @@ def _render(args) -> int:
 
         say(args, f"fitting the reflection layer to {len(photos)} photographs (leaving each out in "
                   "turn)...")
-        layer = fit_reflection_layer(mesh, photos, tolerance=args.tolerance, power=power,
-                                     neighbours=neighbours)
+        layer = fit_reflection_layer(
+            mesh, photos, tolerance=args.tolerance, power=power, neighbours=neighbours,
+            progress=lambda it: progress(it, total=len(it), description="plane orientations",
+                                         quiet=getattr(args, "quiet", False)))
         layer_summary = layer.summary()
         for g in layer_summary:
             sc = g["held_out_mse"]

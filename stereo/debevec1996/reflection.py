@@ -434,7 +434,7 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
                          texel: float | None = None,
                          robust_iterations: int = ROBUST_ITERATIONS,
                          power: float | None = None,
-                         neighbours: int | None = None) -> ReflectionLayer:
+                         neighbours: int | None = None, progress=None) -> ReflectionLayer:
     """Fit the reflection layer of ``mesh`` from its posed ``photographs``
     (module docstring).
 
@@ -460,6 +460,10 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
         Reweighting rounds of the robust fit (0: plain least squares).
     power, neighbours : optional
         The blend's weights in the held-out test (default the blend's).
+    progress : callable, optional
+        Wraps the loop over the orientation groups (``progress(iterable)``,
+        one step a group: the fit takes seconds to a minute), e.g.
+        :func:`~lumigraph.capture.commandline.progress`.
 
     Returns
     -------
@@ -500,7 +504,8 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
     laps = {b: (lambda L: (L.T @ L).tocsr())(_laplacian(grid, b)) for b in BORDERS}
     cands = [(b, lam) for b in BORDERS for lam in lambdas]
     groups = []
-    for gi, n in enumerate(normals):
+    steps = list(enumerate(normals))
+    for gi, n in (steps if progress is None else progress(steps)):
         u, w = _frame(n)
         members = tuple(int(k) for k in np.flatnonzero(plane_group == gi))
         gsize = size
