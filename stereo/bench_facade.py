@@ -516,7 +516,7 @@ def _plot(path, stage, rows) -> None:
                       rotation=90, fontsize=6)
         ax.set_title(f"PSNR over the {ref} (dB), per new view", fontsize=10)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7, loc="lower left")
+    axes[0].legend(fontsize=7, loc="best", framealpha=0.8)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=110)
