@@ -13,6 +13,8 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
         never / after the first solve / after every solve, the default)
     WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
     WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
+    LATE_REFUSAL=0 ... (a refusal after the rounds is not answered from its list: before
+        the tenth pass, that run ends in "no solve after the rounds")
     CHECK=0 ... (the user does not redraw the hand marks the last Solve lists to check,
         marking.marks_to_check; default 1: redraws them, snapping off, and solves again)
     CHECK_MARKS=3 CHECK_ROUNDS=1 ... (marking.CHECK_MARKS; rounds of redrawing the listed marks)
@@ -28,6 +30,8 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     ATTRIB=tower/width ... (each mark's share of that parameter's error)
     PARAMS=1 ... (the parameters with the largest errors, in the fully marked solve's σ)
     TRIES=3 ... (rounds of four hand marks after a refusal)
+    (each run also prints its "σ-predicted ratio": the RMS relative first-order σ of the
+        from-scratch solve over the fully marked solve's, both at the same noise_px)
     REFUSAL=list / REFUSAL=blocks ... (after a refusal the user marks from the
         refusal's list of edges that would constrain each unknown, the
         default; or, before the sixth pass, the four longest unmarked edges
@@ -100,7 +104,11 @@ def expected_full_error(model, full, truth, rel, photos, K, *, draws, seed):
     return float(np.sqrt(np.mean(np.square(errs))))
 
 
-def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
+def main(size, seeds, snap=True, out=None):
+    # a folder of its own per run: two evals at once (draws in parallel) must
+    # not share the scenes' edges files
+    out = Path(os.environ.get("EVAL_OUT") or f"/tmp/lumigraph-view-eval-{os.getpid()}") \
+        if out is None else out
     import lumigraph.view.marking as marking
 
     if os.environ.get("SNAPPX"):
@@ -169,35 +177,43 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
             c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
         extra = 0
         tries = int(os.environ.get("TRIES", "3"))
-        for attempt in range(tries + 1):
-            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
-            if r.status_code == 200:
-                break
-            err = r.get_json()["error"]
-            # (the last try's marks are solved too: before, they were added unsolved)
-            if "do not constrain" not in err or attempt == tries:
-                break
-            have = {(m["photo"], m["edge"]) for m in ses.marks.values()}
-            if os.environ.get("REFUSAL", "list") == "list":
-                todo = refusal_marks(r.get_json().get("unconstrained", []), full, have)
-            else:
-                # (before the sixth pass) the four longest unmarked edges of the named blocks
-                blocks = {n.split("/")[0] for n in err.split("constrain ")[1].split(":")[0].split(", ")}
-                todo = [(p, m) for _, p, m in sorted(
-                    ((np.hypot(m["segment"][2] - m["segment"][0], m["segment"][3] - m["segment"][1]),
-                      p, m) for p in ses.photos for m in full[p]
-                     if m["edge"].split("/")[0] in blocks and (p, m["edge"]) not in have),
-                    key=lambda t: -t[0])][:4]
-            if os.environ.get("VERBOSE"):
-                print("  refused:", err.split(": ", 1)[1][:160])
-                for u in r.get_json().get("unconstrained", []):
-                    print(f"    {u['parameter']}:", [(q["photo"], q["edge"], q["constrains"],
-                                                     q["edge"] in {m["edge"] for m in full[q["photo"]]})
-                                                    for q in u["suggest"]])
-                print("    marked:", [(p, m["edge"]) for p, m in todo])
-            for p, m in todo:
-                drag(p, m)
-                extra += 1
+
+        def solve_answering(extra, c=c, ses=ses, full=full, drag=drag, tries=tries):
+            """Solve; on a refusal, mark from its list (up to ``tries``
+            rounds), as the page's user does at any Solve. Returns the last
+            answer and the count of hand marks added."""
+            for attempt in range(tries + 1):
+                r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+                if r.status_code == 200:
+                    break
+                err = r.get_json()["error"]
+                # (the last try's marks are solved too: before, they were added unsolved)
+                if "do not constrain" not in err or attempt == tries:
+                    break
+                have = {(m["photo"], m["edge"]) for m in ses.marks.values()}
+                if os.environ.get("REFUSAL", "list") == "list":
+                    todo = refusal_marks(r.get_json().get("unconstrained", []), full, have)
+                else:
+                    # (before the sixth pass) the four longest unmarked edges of the named blocks
+                    blocks = {n.split("/")[0] for n in err.split("constrain ")[1].split(":")[0].split(", ")}
+                    todo = [(p, m) for _, p, m in sorted(
+                        ((np.hypot(m["segment"][2] - m["segment"][0], m["segment"][3] - m["segment"][1]),
+                          p, m) for p in ses.photos for m in full[p]
+                         if m["edge"].split("/")[0] in blocks and (p, m["edge"]) not in have),
+                        key=lambda t: -t[0])][:4]
+                if os.environ.get("VERBOSE"):
+                    print("  refused:", err.split(": ", 1)[1][:160])
+                    for u in r.get_json().get("unconstrained", []):
+                        print(f"    {u['parameter']}:", [(q["photo"], q["edge"], q["constrains"],
+                                                         q["edge"] in {m["edge"] for m in full[q["photo"]]})
+                                                        for q in u["suggest"]])
+                    print("    marked:", [(p, m["edge"]) for p, m in todo])
+                for p, m in todo:
+                    drag(p, m)
+                    extra += 1
+            return r, extra
+
+        r, extra = solve_answering(extra)
         if r.status_code != 200:
             print(f"seed {seed}: no solve: {r.get_json()['error']}")
             continue
@@ -272,6 +288,11 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                 if q["id"] in ses.marks:
                     redraw(q["id"])
             r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+        if r.status_code != 200 and "do not constrain" in r.get_json()["error"] \
+                and os.environ.get("LATE_REFUSAL", "1") == "1":
+            # a later solve refused (the re-snap moved or deleted marks it
+            # needed): the page lists what would constrain it, as at the first
+            r, extra = solve_answering(extra)
         if r.status_code != 200:
             # a later solve refused (the re-snap deleted marks it needed)
             print(f"seed {seed}: no solve after the rounds: {r.get_json()['error']}", flush=True)
@@ -366,13 +387,15 @@ def main(size, seeds, snap=True, out=Path("/tmp/lumigraph-view-eval")):
                   ", ".join(f"{n} {(got[n]['value'] - gt[n]) / ref.std[n]:+.1f} / "
                             f"{(ref.params[n] - gt[n]) / ref.std[n]:+.1f} (σ ratio "
                             f"{got[n]['std'] / ref.std[n]:.2f})" for n in worst))
+        got_std = {n: v["std"] for n, v in r.get_json()["parameters"].items()}
+        pred = rel({n: gt[n] + got_std[n] for n in free}) / rel({n: gt[n] + ref.std[n] for n in free})
         print(f"{size[0]}x{size[1]} seed {seed}: from scratch {scratch:.5f}, fully marked "
               f"{fully:.5f}, ratio {scratch / fully:.2f}; fully marked expected (RMS over "
               f"fresh draws) {expected:.5f}, ratio {scratch / expected:.2f}; [fairer: all edges "
               f"dragged+snapped {allsnap:.5f}, ratio {scratch / allsnap:.2f}, fairer / fully "
               f"{allsnap / fully:.2f}, / expected {allsnap / expected:.2f}] proposals {len(props)} (accepted "
               f"{accepted}), extra hand marks {extra}, marks {len(ses.marks)} ({off} > 1.5 px off "
-              f"the true line); {time.time() - t0:.0f} s", flush=True)
+              f"the true line); σ-predicted ratio {pred:.2f}; {time.time() - t0:.0f} s", flush=True)
 
 
 if __name__ == "__main__":
