@@ -610,7 +610,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         # camera's centre (a weak direction, seed 44 of the marking eval): the
         # parameters' starting values, with the linear translations, instead
         x0 = prob.pack(model.values, np.zeros((len(photos), 3)), t)
-        J0 = prob.jacobian(x0, Aw, dense=True)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            J0 = prob.jacobian(x0, Aw, dense=True)
     if not np.all(np.isfinite(J0)):
         raise EstimationError(where, "the starting model projects a marked edge to a point "
                               "(a block of zero size?): check the starting values in blocks.json")
