@@ -187,6 +187,7 @@ def test_a_linear_start_that_projects_an_edge_to_a_point_starts_from_the_startin
     sol = solve_facade(start, marks_of(model, cams), K(cams))
     for n, v in model.named_values().items():
         assert abs(sol.params[n] - v) <= 1e-8 * abs(v), n
+    assert any("linear initialisation" in w for w in sol.warnings), sol.warnings
 
 
 # ------------------------------------------------------------------ the command line
