@@ -273,36 +273,64 @@ def snap_segment(segment: np.ndarray, detected: np.ndarray, *, grey: np.ndarray 
 # hand marks listed after a Solve for a second look (docs/decisions/view-marking.md,
 # ninth pass: set before any run, not tuned)
 CHECK_MARKS = 3
+# what orders them: "deleted" (the default), each mark's distance from where
+# the *other* marks put its edge, in σ (automark.deleted_residuals), listed
+# from CHECK_MIN_SCORE up; "residual" (before the eleventh pass), each mark's
+# RMS distance to its solved edge. Chosen on seeds 2-80 (eleventh pass)
+CHECK_BY = "deleted"
+CHECK_MIN_SCORE = 2.0   # P(√(χ²₂/2) > 2) = e⁻⁴ ≈ 0.02 per mark on noise alone
 
 
-def marks_to_check(marks: dict, residual_by_id: dict, *, count: int | None = None) -> list[dict]:
-    """The hand-drawn marks (not accepted proposals) farthest from their
-    reprojected edge after a Solve, farthest first: ``count`` of them
-    (default :data:`CHECK_MARKS`), each ``{id, photo, edge, rms_px}``.
+def marks_to_check(marks: dict, residual_by_id: dict, *, count: int | None = None,
+                   score_by_id: dict | None = None,
+                   min_score: float | None = None) -> list[dict]:
+    """The hand-drawn marks (not accepted proposals) to look at again after
+    a Solve: ``count`` of them (default :data:`CHECK_MARKS`), each ``{id,
+    photo, edge, rms_px}`` and, with ``score_by_id``, ``score``.
 
-    Why hand marks: on the rendered Façade scene's tuned seeds every mark
-    that ended more than 1.5 px (3σ) off its true edge was a hand mark that snapping or
-    re-snapping put on a line the image shows where the block model has no
-    edge (a pilaster's foot beside a wall's bottom edge, a line 2-3 px from
-    an edge the image barely shows), and redrawing those with snapping off
-    brought the solve within the fully marked solve's accuracy
-    (docs/decisions/view-marking.md, ninth pass). A proposal was accepted
-    because it lies on its edge, so it is not listed. The list does not say
-    a mark is wrong: an off mark pulls the solve towards itself, so its
-    residual is smaller than its error, and the largest residuals are where
-    to look first.
+    With ``score_by_id`` (each mark's deleted residual,
+    :func:`~lumigraph.stereo.debevec1996.automark.deleted_residuals`: its
+    distance from where the other marks put its edge, in σ), the marks
+    scoring ``min_score`` (default :data:`CHECK_MIN_SCORE`) or more,
+    highest first; a mark that alone holds some unknown (score ``inf``)
+    cannot be checked by the others and is not listed (the weak list says
+    where the model rests on few marks). Without it, the marks farthest from
+    their reprojected edge, farthest first.
+
+    Why the deleted residual: an off mark pulls the solve towards itself, so
+    its residual is smaller than its error, and most so where few other
+    marks hold the same unknowns; a residual ranking then lists the marks it
+    pulled off, not itself. On the rendered Façade scene (seeds 2-80) the
+    marks that spoiled a from-scratch solve were hand marks that snapping
+    put 1-3.5 px off an edge the image barely shows (a wall corner against
+    a wall of the same brick); ranked by their residual they were missed
+    (docs/decisions/view-marking.md, eleventh pass). Why hand marks: a
+    proposal was accepted because it lies on its edge.
 
     >>> marks = {1: {"photo": "a.png", "edge": "house/top-front", "proposed": False},
     ...          2: {"photo": "a.png", "edge": "house/front-left", "proposed": True},
-    ...          3: {"photo": "b.png", "edge": "tower/top-left", "proposed": False}}
-    >>> [m["id"] for m in marks_to_check(marks, {1: 0.4, 2: 2.0, 3: 1.1})]
-    [3, 1]
+    ...          3: {"photo": "b.png", "edge": "tower/top-left", "proposed": False},
+    ...          4: {"photo": "b.png", "edge": "tower/top-front", "proposed": False}}
+    >>> res = {1: 0.4, 2: 2.0, 3: 1.1, 4: 0.2}
+    >>> [m["id"] for m in marks_to_check(marks, res, score_by_id=None)]
+    [3, 1, 4]
+    >>> [m["id"] for m in marks_to_check(marks, res, score_by_id={1: 0.9, 2: 5.0, 3: 2.5,
+    ...                                                          4: 3.1})]
+    [4, 3]
     """
     count = CHECK_MARKS if count is None else count
     hand = [k for k, m in marks.items() if not m.get("proposed") and k in residual_by_id]
-    hand.sort(key=lambda k: -residual_by_id[k])
+    if score_by_id is None:
+        hand.sort(key=lambda k: -residual_by_id[k])
+    else:
+        lo = CHECK_MIN_SCORE if min_score is None else min_score
+        score = {k: float(score_by_id.get(k, np.nan)) for k in hand}
+        hand = [k for k in hand if np.isfinite(score[k]) and score[k] >= lo]
+        hand.sort(key=lambda k: -score[k])
     return [{"id": k, "photo": marks[k]["photo"], "edge": marks[k]["edge"],
-             "rms_px": float(residual_by_id[k])} for k in hand[:count]]
+             "rms_px": float(residual_by_id[k]),
+             **({"score": score[k]} if score_by_id is not None else {})}
+            for k in hand[:count]]
 
 
 # a free parameter is "weakly constrained" when its relative σ is more than
@@ -822,8 +850,29 @@ class FacadeSession:
             # the page's "weakly constrained" list: what to mark next
             self.solution["weak"] = weak_spots(
                 sol, {(m["photo"], m["edge"]) for m in self.marks.values()}, self.sizes)
-            self.solution["check"] = marks_to_check(self.marks, self.solution["residual_by_id"])
+            self.solution["check"] = marks_to_check(
+                self.marks, self.solution["residual_by_id"],
+                score_by_id=self._deleted_scores(sol, marks) if CHECK_BY == "deleted" else None)
             return self.solution
+
+    def _deleted_scores(self, sol, marks) -> dict | None:
+        """Each solved mark's deleted residual (:func:`deleted_residuals`: its
+        distance from where the other marks put its edge, in σ), by mark id."""
+        from dataclasses import replace
+
+        from lumigraph.stereo.debevec1996.automark import deleted_residuals
+
+        out = {(p, e) for p, e, _ in sol.outliers}
+        und = self._undistorted(marks)
+        kept = [m for m in und.marks if (m.photo, m.edge) not in out]
+        try:
+            t = deleted_residuals(sol, replace(und, marks=tuple(kept)).marks)
+        except np.linalg.LinAlgError:
+            # (a Jacobian with non-finite entries) the list falls back to the residuals
+            return None
+        score = dict(zip(((m.photo, m.edge) for m in kept), t, strict=True))
+        return {k: float(score[(m["photo"], m["edge"])]) for k, m in self.marks.items()
+                if (m["photo"], m["edge"]) in score}
 
     # ------------------------------------------------------------- re-snap
     def resnap(self, *, every: bool = True) -> dict:

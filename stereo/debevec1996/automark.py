@@ -604,7 +604,80 @@ def edge_offset_std(sol, marks) -> np.ndarray:
     return out
 
 
-def _edge_rows(sol, marks):
+def deleted_residuals(sol, marks) -> np.ndarray:
+    """How far each of ``marks`` (the marks of the solve ``sol``) lies from
+    where the *other* marks put its model edge, in units of that
+    disagreement's own standard deviation: ``(len(marks),)``, ``inf`` for a
+    mark that alone holds some direction of the unknowns (nothing else can
+    check it), NaN for a mark whose photograph the solve left out.
+
+    A mark that is off pulls the solve towards itself, so its residual after
+    the solve is smaller than its error, and most so where few other marks
+    hold the same unknowns (high leverage). The deleted residual undoes that
+    (Cook & Weisberg 1982, ch. 2; here for the weighted least squares of
+    eq. 5.3, linearised at the solution): with ``X`` the Jacobian of the
+    signed end distances ``h`` (``2n × p``), ``W`` the eq. 5.3 weights
+    (``Aᵀ A`` per mark) and ``N = Xᵀ W X``, mark ``i``'s distances predicted
+    by the others differ from its own by ``e = (I − X_i N⁻¹ X_iᵀ W_i)⁻¹ h_i``
+    with covariance ``σ² (I + X_i C_(i) X_iᵀ / σ²)``, ``C_(i)`` the sandwich
+    covariance of the solve without mark ``i`` (end noise ``σ`` =
+    ``sol.sigma_px``, independent). The score is ``√(eᵀ V⁻¹ e / 2)``: about
+    1 for a mark as good as the rest, 3 or more for one that the rest
+    contradict.
+
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+    ...                             photographs=list(cams))
+    >>> rng = np.random.default_rng(1)
+    >>> noisy = [type(k)(k.photo, k.edge, k.segment + rng.normal(0, 0.5, 4)) for k in marks.marks]
+    >>> noisy[5] = type(noisy[5])(noisy[5].photo, noisy[5].edge, noisy[5].segment + 4.0)  # 4 px off
+    >>> sol = solve_facade(m, type(marks)(tuple(noisy), marks.photographs),
+    ...                    {p: c["K"] for p, c in cams.items()}, robust=False)
+    >>> t = deleted_residuals(sol, noisy)
+    >>> int(np.argmax(t)), bool(t[5] > 3 and np.median(t) < 1.5)
+    (5, True)
+    """
+    from lumigraph.stereo.debevec1996.solve import _A0
+
+    marks = list(marks)
+    out = np.full(len(marks), np.nan)
+    keep, cols, vals, h, length = _edge_rows(sol, marks, distances=True)
+    if not keep:
+        return out
+    n, p = len(keep), len(sol.unknowns)
+    X = np.zeros((n, 2, p))
+    for k in range(2):
+        X[np.arange(n)[:, None], k, cols[k]] = vals[k]
+    A = np.sqrt(length / 3.0)[:, None, None] * _A0[None]
+    W = np.einsum("nki,nkj->nij", A, A)                      # (n, 2, 2): Aᵀ A
+    var = float(sol.sigma_px) ** 2
+    XW = np.einsum("nki,nkj->nij", X, W)                     # (n, p, 2): X_iᵀ W_i
+    N = np.einsum("nik,nkj->ij", XW, X)                      # Σ X_iᵀ W_i X_i
+    S = np.einsum("nik,nlk->il", XW, XW)                     # Σ X_iᵀ W_i² X_i (the sandwich's meat)
+    scale = np.sqrt(np.clip(np.diag(N), 1e-300, None))
+    for j, i in enumerate(keep):
+        Ni = N - XW[j] @ X[j]
+        # a mark that alone holds a direction: the rest leave it free
+        Nis = Ni / scale[:, None] / scale[None, :]
+        ev = np.linalg.eigvalsh(Nis)
+        if ev[0] <= 1e-9 * ev[-1]:
+            out[i] = np.inf
+            continue
+        Ninv = np.linalg.inv(Nis) / scale[:, None] / scale[None, :]
+        Ci = var * Ninv @ (S - XW[j] @ XW[j].T) @ Ninv
+        # the others' prediction of this mark's distances, and its spread
+        e = h[j] + X[j] @ (Ninv @ (XW[j] @ h[j]))            # h_i - X_i (δ - δ_(i)) to first order
+        V = var * np.eye(2) + X[j] @ Ci @ X[j].T
+        out[i] = float(np.sqrt(max(e @ np.linalg.solve(V, e), 0.0) / 2.0))
+    return out
+
+
+def _edge_rows(sol, marks, *, distances: bool = False):
     """The solver's Jacobian rows of ``marks``' signed end distances at the
     solution (rotations re-based on the solved ones): ``(keep, cols, vals)``,
     ``keep`` the indices of the marks on photographs the solve kept, and
@@ -616,14 +689,16 @@ def _edge_rows(sol, marks):
     free_focal = bool(sol.unknowns) and sol.unknowns[-1] == "focal_scale"
     keep = [i for i, m in enumerate(marks) if m.photo in photos]
     if not keep:
-        return keep, None, None
+        return (keep, None, None, None, None) if distances else (keep, None, None)
     R = np.array([sol.poses[p][0] for p in photos])
     t = np.array([sol.poses[p][1] for p in photos])
     K0 = {p: sol.K[p] / np.array([[sol.focal_scale] * 2 + [1.0], [1.0, sol.focal_scale, 1.0],
                                   [1.0, 1.0, 1.0]]) for p in photos}
     prob = _Problem(sol.model, [marks[i] for i in keep], photos, K0, R, free_focal=free_focal)
     x = prob.pack(sol.model.values, np.zeros((len(photos), 3)), t, sol.focal_scale)
-    _, cols, vals = prob.distances(x, jac=True)
+    h, cols, vals = prob.distances(x, jac=True)
+    if distances:
+        return keep, cols, vals, h, prob.length
     return keep, cols, vals
 
 
@@ -721,7 +796,11 @@ def std_with_marks_in_turn(sol, marks, name: str, *, count: int, noise_px: float
         c, J = rows[j]
         G = C[:, c] @ J.T                               # cov(every unknown, the mark's two rows)
         S = var * np.eye(2) + J @ C[np.ix_(c, c)] @ J.T
-        C = C - G @ np.linalg.solve(S, G.T)
+        try:
+            C = C - G @ np.linalg.solve(S, G.T)
+        except np.linalg.LinAlgError:
+            break           # (as in _std_after) the suggestions so far stand
+        C = (C + C.T) / 2
     return out
 
 
@@ -746,11 +825,17 @@ def _mark_rows(keep, cols, vals) -> list:
 def _std_after(C, k: int, rows, var: float) -> np.ndarray:
     """Unknown ``k``'s σ after each one of ``rows`` (``[(c, J)]``) is added
     alone to covariance ``C`` with noise variance ``var``: the rank-two update."""
-    out = np.empty(len(rows))
+    out = np.full(len(rows), np.nan)
     for i, (c, J) in enumerate(rows):
         S = var * np.eye(2) + J @ C[np.ix_(c, c)] @ J.T
         g = J @ C[k, c]                                 # cov(parameter, the row's two distances)
-        out[i] = np.sqrt(max(C[k, k] - g @ np.linalg.solve(S, g), 0.0))
+        try:
+            out[i] = np.sqrt(max(C[k, k] - g @ np.linalg.solve(S, g), 0.0))
+        except np.linalg.LinAlgError:
+            # a covariance that lost its positive definiteness to rounding
+            # (a solve with a nearly free direction, σ ~ 1e4 of the value):
+            # this row's update is undefined, not a fault; NaN leaves it out
+            continue
     return out
 
 

@@ -696,6 +696,38 @@ def _without(marks, photos):
                    photographs=tuple(p for p in marks.photographs if p not in photos))
 
 
+def sandwich_covariance(J: np.ndarray, D: np.ndarray, sigma: float) -> np.ndarray | None:
+    """The first-order covariance of a least-squares fit with Jacobian ``J``
+    (``m × p``, the weighted residuals') whose residuals are ``D`` (``m ×
+    p``, the same rows before a weighting the noise does not follow) times
+    noise of standard deviation ``sigma``: ``σ² N⁻¹ DᵀD N⁻¹``, ``N = JᵀJ``;
+    None when ``J`` is singular.
+
+    ``N⁻¹`` comes from the SVD of the column-scaled ``J``, not from
+    inverting ``JᵀJ``: that squares the condition number, and a Façade solve
+    with a nearly free direction (a scaled condition of 1e9, which the rank
+    test lets through) gave negative variances of 1e27 (the marking eval,
+    seed 81). Here the result is ``B Bᵀ``, positive semi-definite by
+    construction.
+
+    >>> J = np.array([[1.0, 0.0], [0.0, 2.0], [1.0, 1.0]])
+    >>> np.allclose(sandwich_covariance(J, J, 0.5), 0.25 * np.linalg.inv(J.T @ J))
+    True
+    """
+    J, D = np.asarray(J, float), np.asarray(D, float)
+    norms = np.linalg.norm(J, axis=0)
+    norms = np.where(norms > 0, norms, 1.0)
+    try:
+        _, sv, Vt = np.linalg.svd(J / norms, full_matrices=False)
+    except np.linalg.LinAlgError:
+        return None
+    if not (sv.size and sv[-1] > 0 and np.all(np.isfinite(sv))):
+        return None
+    Ninv = (Vt.T / sv**2) @ Vt / norms[:, None] / norms[None, :]
+    B = Ninv @ D.T
+    return sigma**2 * (B @ B.T)
+
+
 def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     Aw = prob.weights(True)
     dense = kw["tr_solver"] == "exact"
@@ -715,11 +747,9 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     J = np.asarray(prob.jacobian(x, Aw, dense=True))
     # sandwich: r = A h with cov(h) = σ² I -> cov(r) = σ² A Aᵀ
     D = np.einsum("nji,njc->nic", Aw, J.reshape(n, 2, p)).reshape(2 * n, p)   # Aᵀ J
-    try:
-        Ninv = np.linalg.inv(J.T @ J)
-    except np.linalg.LinAlgError:
-        raise EstimationError(where, "the normal equations are singular at the solution") from None
-    cov = sigma**2 * Ninv @ (D.T @ D) @ Ninv
+    cov = sandwich_covariance(J, D, sigma)
+    if cov is None:
+        raise EstimationError(where, "the normal equations are singular at the solution")
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     fitted = model.with_values(th[prob.free])
     std_slot = np.zeros(len(model.slot_names))

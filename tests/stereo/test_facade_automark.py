@@ -218,3 +218,81 @@ def test_a_refusal_list_in_turn_matches_the_pseudo_inverse_of_the_whole_stack():
         assert [j for j, _ in fast] == [j for j, _ in slow], (col, fast, slow)
         for (_, a), (_, b) in zip(fast, slow, strict=True):
             assert (a is None) == (b is None) and (a is None or abs(a - b) <= 1e-6 * b), (col, a, b)
+
+
+def _noisy_solve(seed, *, off=None):
+    """The solver's fixture building seen by six ring cameras, every visible
+    edge marked with σ = 0.5 px endpoint noise; ``off``: (mark index, px)
+    moved across its line."""
+    from lumigraph.stereo.debevec1996.solve import FIXTURE
+
+    m = BlockModel.from_dict(FIXTURE)
+    cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+                                photographs=list(cams))
+    rng = np.random.default_rng(seed)
+    noisy = [type(k)(k.photo, k.edge, k.segment + rng.normal(0, 0.5, 4)) for k in marks.marks]
+    if off is not None:
+        i, px = off
+        a, b = noisy[i].segment[:2], noisy[i].segment[2:]
+        d = (b - a) / np.hypot(*(b - a))
+        noisy[i] = type(noisy[i])(noisy[i].photo, noisy[i].edge,
+                                  noisy[i].segment + px * np.r_[-d[1], d[0], -d[1], d[0]])
+    sol = solve_facade(m, type(marks)(tuple(noisy), marks.photographs),
+                       {p: c["K"] for p, c in cams.items()}, robust=False)
+    return sol, noisy
+
+
+def test_deleted_residuals_are_unit_scaled_on_noise_alone():
+    """On marks with only their σ = 0.5 px noise, each mark's distance from
+    where the others put its edge, in its own σ, squared, is χ²₂/2: mean 1,
+    variance 1. Over the ~100 marks of 5 draws the mean of the squares has a
+    standard error of about 1/√500 ≈ 0.045 if they were independent; the
+    tolerance (0.25) allows for the marks' correlation and the
+    linearisation, and still fails a score off by a factor of 1.15 in σ."""
+    from lumigraph.stereo.debevec1996.automark import deleted_residuals
+
+    sq = []
+    for seed in range(5):
+        sol, noisy = _noisy_solve(seed)
+        t = deleted_residuals(sol, noisy)
+        assert np.all(np.isfinite(t)), "every edge of this building is seen in several photographs"
+        sq.append(t**2)
+    sq = np.concatenate(sq)
+    assert abs(sq.mean() - 1.0) < 0.25, sq.mean()
+
+
+def test_a_mark_off_its_edge_scores_highest_though_its_residual_does_not():
+    """A mark moved 2.5 px (5σ) across its line: the solve pulls towards it,
+    so its own residual need not be the largest, but its distance from
+    where the other marks put its edge is (the deleted residual), and
+    beyond what noise alone gives."""
+    from lumigraph.stereo.debevec1996.automark import deleted_residuals
+
+    for i in (3, 17, 40):
+        sol, noisy = _noisy_solve(11, off=(i, 2.5))
+        t = deleted_residuals(sol, noisy)
+        assert int(np.argmax(t)) == i, (i, np.argsort(-t)[:3], t[i])
+        # significant: P(√(χ²₂/2) > 2.5) = e^-6.25 ≈ 0.002 per mark on noise alone
+        assert t[i] > 2.5
+
+
+def test_a_mark_that_alone_holds_a_parameter_cannot_be_checked():
+    """The only mark of the building's one edge that fixes a parameter: the
+    others leave that parameter free, so nothing can check the mark (inf),
+    and the other marks still score finitely."""
+    from lumigraph.stereo.debevec1996.automark import deleted_residuals
+
+    sol, noisy = _noisy_solve(3)
+    model = sol.model
+    # keep one mark of each edge that moves with tower/height; drop the rest of them
+    names = [m.edge for m in noisy]
+    height_edges = [e for e in dict.fromkeys(names) if e.startswith("tower/top")]
+    keep = [m for m in noisy if m.edge not in height_edges]
+    first = next(m for m in noisy if m.edge == height_edges[0])
+    marks = keep + [first]
+    K = {p: sol.K[p] for p in sol.poses}
+    sol2 = solve_facade(model, EdgeMarks(tuple(marks), tuple(sol.poses)), K, robust=False)
+    t = deleted_residuals(sol2, marks)
+    assert np.isinf(t[-1])
+    assert np.all(np.isfinite(t[:-1]))

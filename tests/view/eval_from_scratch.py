@@ -113,7 +113,7 @@ def main(size, seeds, snap=True, out=None):
 
     if os.environ.get("SNAPPX"):
         marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
-    for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS", "CHECK_MARKS"):
+    for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS", "CHECK_MARKS", "CHECK_BY", "CHECK_MIN_SCORE"):
         if os.environ.get(k):
             setattr(marking, k, type(getattr(marking, k))(os.environ[k]))
     marking.SNAP_OVER_DRAG = os.environ.get("OVERDRAG", "1" if marking.SNAP_OVER_DRAG else "0") == "1"
@@ -284,6 +284,9 @@ def main(size, seeds, snap=True, out=None):
             # the Solve lists the hand marks farthest from their reprojected
             # edge (marking.marks_to_check): the user redraws each, carefully
             # and snapping off, and Solves again
+            if os.environ.get("VERBOSE"):
+                print("  check:", [(q["photo"], q["edge"], round(q["rms_px"], 2),
+                                    round(q.get("score", float("nan")), 2)) for q in r.get_json()["check"]])
             for q in r.get_json()["check"]:
                 if q["id"] in ses.marks:
                     redraw(q["id"])
@@ -341,7 +344,19 @@ def main(size, seeds, snap=True, out=None):
                 print(f"  all-snapped reference: no solve ({e})")
         off = sum(distance(m["segment"], truth[m["photo"]][m["edge"]]) > 3 * EDGE_NOISE_PX
                   for m in ses.marks.values())
+        shown = {p: {m["edge"] for m in full[p]} for p in ses.photos}
+        unseen = [(m["photo"], m["edge"], "P" if m["proposed"] else "H",
+                   round(distance(m["segment"], truth[m["photo"]][m["edge"]]), 2))
+                  for m in ses.marks.values() if m["edge"] not in shown[m["photo"]]]
+        if os.environ.get("UNSEEN"):
+            print(f"  marks on edges the scene's marks leave out: {len(unseen)}", unseen)
         if os.environ.get("BLOCK"):
+            scores = ses._deleted_scores(ses._sol, ses.edge_marks()) if r.status_code == 200 else {}
+            ids = {(m["photo"], m["edge"]): k for k, m in ses.marks.items()}
+            for m in sorted(ses.marks.values(), key=lambda m: (m["edge"], m["photo"])):
+                if m["edge"].startswith(os.environ["BLOCK"] + "/"):
+                    print(f"  score {scores.get(ids[(m['photo'], m['edge'])], float('nan')):.2f} "
+                          f"rms {r.get_json()['residual_by_id'].get(ids[(m['photo'], m['edge'])], float('nan')):.2f}", end="")
             for m in sorted(ses.marks.values(), key=lambda m: (m["edge"], m["photo"])):
                 if m["edge"].startswith(os.environ["BLOCK"] + "/"):
                     print(f"  {m['edge']} {m['photo']} {'P' if m['proposed'] else 'H'} "

@@ -227,8 +227,11 @@
     if (!check.length) return;
     const h = document.createElement("p");
     h.className = "weak-head";
-    h.textContent = "Check these hand marks (farthest from the solved model; redraw one with " +
-      "snapping off if it is not on its edge, then Solve):";
+    const scored = check.some((q) => typeof q.score === "number");
+    h.textContent = (scored
+      ? "Check these hand marks (farthest from where the other marks put their edges; "
+      : "Check these hand marks (farthest from the solved model; ") +
+      "redraw one with snapping off if it is not on its edge, then Solve):";
     box.appendChild(h);
     const ul = document.createElement("ul");
     for (const q of check) {
@@ -237,7 +240,8 @@
       const a = document.createElement("button");
       a.type = "button";
       a.className = "suggest";
-      a.textContent = `${q.photo} ${q.edge} (${q.rms_px.toFixed(2)} px)`;
+      const far = typeof q.score === "number" ? `, ${q.score.toFixed(1)}σ off the others` : "";
+      a.textContent = `${q.photo} ${q.edge} (${q.rms_px.toFixed(2)} px${far})`;
       a.addEventListener("click", async () => {
         const i = S.state.photos.findIndex((p) => p.name === q.photo);
         if (i >= 0) await choosePhoto(i);
