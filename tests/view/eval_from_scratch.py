@@ -287,6 +287,8 @@ def main(size, seeds, snap=True, out=None):
             if os.environ.get("VERBOSE"):
                 print("  check:", [(q["photo"], q["edge"], round(q["rms_px"], 2),
                                     round(q.get("score", float("nan")), 2)) for q in r.get_json()["check"]])
+            if not r.get_json()["check"]:
+                break       # nothing listed: the marks agree within their noise
             for q in r.get_json()["check"]:
                 if q["id"] in ses.marks:
                     redraw(q["id"])
