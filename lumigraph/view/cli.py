@@ -43,8 +43,9 @@ marking mode (Façade, 'lumigraph stereo facade solve --help' for the files):
   Delete to remove it. "Solve" fits the model and overlays the reprojected
   edges and each mark's residual (px), lists the weakly constrained
   parameters with the edges to mark for them (click one to go to it), and
-  the three hand marks farthest from the solved model, to check (click one
-  to select it; a snap may have taken a line beside the model's edge);
+  up to three hand marks to check: those farthest from where the other
+  marks put their edges, 2σ or more (click one to select it; a snap may
+  have taken a line beside the model's edge);
   "Propose" runs automatic marking (mark about four edges per photograph
   first), each proposal then accepted or rejected; "Re-snap to model", after
   a Solve, moves each mark onto the image step near its reprojected edge.

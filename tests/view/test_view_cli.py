@@ -5,6 +5,7 @@ without), ``--check``, and bad inputs as one-line exit 2."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
@@ -52,9 +53,11 @@ def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
     # stderr to a file, not a pipe nobody drains (a full pipe would block the server)
     err = tmp_path / "stderr.txt"
     with open(err, "w") as err_file:
+        # (faulthandler: a stuck server is sent SIGABRT below and prints every thread's stack)
         p = subprocess.Popen([sys.executable, "-m", "lumigraph", "view", "--facade", str(scene),
                               "--edges", str(tmp_path / "edges.json"), "--no-browser"],
-                             stdout=subprocess.PIPE, stderr=err_file, text=True)
+                             stdout=subprocess.PIPE, stderr=err_file, text=True,
+                             env={**os.environ, "PYTHONFAULTHANDLER": "1"})
     try:
         line = p.stdout.readline()
         assert line.startswith("lumigraph view: http://127.0.0.1:"), (line, err.read_text())
@@ -73,10 +76,14 @@ def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
         try:
             rc = p.wait(60)
         except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
+            p.send_signal(signal.SIGABRT)       # faulthandler dumps the stacks, then it dies
+            try:
+                p.wait(10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
             raise AssertionError("did not stop on SIGINT within 60 s; stderr: "
-                                 f"{err.read_text()[-2000:]!r}") from None
+                                 f"{err.read_text()[-6000:]!r}") from None
     assert rc == 0, err.read_text()
 
 

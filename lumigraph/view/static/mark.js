@@ -218,8 +218,8 @@
     renderCheck(sol.check || []);
     renderWeak(sol.weak || []);
   }
-  // the hand-drawn marks farthest from the solved model (the server's
-  // marks_to_check): where a snap most likely took a line the image shows
+  // the hand-drawn marks farthest from where the other marks put their
+  // edges (the server's marks_to_check): where a snap most likely took a line the image shows
   // beside the model's edge; a click opens the photograph with the mark
   // selected, to redraw it (snapping off) if it is not on the edge
   function renderCheck(check) {
