@@ -49,6 +49,18 @@ def test_a_port_in_use_by_default_takes_another(busy_port):
         server.server_close()
 
 
+def _as_from_a_terminal():
+    # Ctrl-C as a terminal delivers it. An ignored signal stays ignored
+    # across exec, and a blocked one blocked: a test process that inherited
+    # either (a run started in the background ignores SIGINT) would test its
+    # own signal state, not the server. This test hung twice on 2026-12-03
+    # in whole-suite runs started in the background, with nothing on the
+    # server's stderr; the cause is not pinned down (alone, in the
+    # background too, it passes), so the stack dump below stays
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGABRT})
+
+
 def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
     # stderr to a file, not a pipe nobody drains (a full pipe would block the server)
     err = tmp_path / "stderr.txt"
@@ -57,7 +69,8 @@ def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
         p = subprocess.Popen([sys.executable, "-m", "lumigraph", "view", "--facade", str(scene),
                               "--edges", str(tmp_path / "edges.json"), "--no-browser"],
                              stdout=subprocess.PIPE, stderr=err_file, text=True,
-                             env={**os.environ, "PYTHONFAULTHANDLER": "1"})
+                             env={**os.environ, "PYTHONFAULTHANDLER": "1"},
+                             preexec_fn=_as_from_a_terminal)
     try:
         line = p.stdout.readline()
         assert line.startswith("lumigraph view: http://127.0.0.1:"), (line, err.read_text())
@@ -82,7 +95,8 @@ def test_view_prints_the_url_and_serves_until_interrupted(scene, tmp_path):
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
-            raise AssertionError("did not stop on SIGINT within 60 s; stderr: "
+            raise AssertionError(f"did not stop on SIGINT within 60 s (status after SIGABRT: "
+                                 f"{p.returncode}); stderr: "
                                  f"{err.read_text()[-6000:]!r}") from None
     assert rc == 0, err.read_text()
 
