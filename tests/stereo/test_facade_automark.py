@@ -246,10 +246,10 @@ def _noisy_solve(seed, *, off=None):
 def test_deleted_residuals_are_unit_scaled_on_noise_alone():
     """On marks with only their σ = 0.5 px noise, each mark's distance from
     where the others put its edge, in its own σ, squared, is χ²₂/2: mean 1,
-    variance 1. Over the ~100 marks of 5 draws the mean of the squares has a
-    standard error of about 1/√500 ≈ 0.045 if they were independent; the
-    tolerance (0.25) allows for the marks' correlation and the
-    linearisation, and still fails a score off by a factor of 1.15 in σ."""
+    variance 1. Over the 410 marks of 5 draws the mean of the squares has a
+    standard error of about 1/√410 ≈ 0.05 if they were independent; the
+    tolerance (0.25, five of those) allows for the marks' correlation and
+    the linearisation, and still fails a score off by a factor of 1.15 in σ."""
     from lumigraph.stereo.debevec1996.automark import deleted_residuals
 
     sq = []
