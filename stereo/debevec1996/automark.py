@@ -642,18 +642,15 @@ def deleted_residuals(sol, marks) -> np.ndarray:
     >>> int(np.argmax(t)), bool(t[5] > 3 and np.median(t) < 1.5)
     (5, True)
     """
-    from lumigraph.stereo.debevec1996.solve import _A0
-
     marks = list(marks)
     out = np.full(len(marks), np.nan)
-    keep, cols, vals, h, length = _edge_rows(sol, marks, distances=True)
+    keep, cols, vals, h, A = _edge_rows(sol, marks, distances=True)
     if not keep:
         return out
     n, p = len(keep), len(sol.unknowns)
     X = np.zeros((n, 2, p))
     for k in range(2):
         X[np.arange(n)[:, None], k, cols[k]] = vals[k]
-    A = np.sqrt(length / 3.0)[:, None, None] * _A0[None]
     W = np.einsum("nki,nkj->nij", A, A)                      # (n, 2, 2): Aᵀ A
     var = float(sol.sigma_px) ** 2
     XW = np.einsum("nki,nkj->nij", X, W)                     # (n, p, 2): X_iᵀ W_i
@@ -682,7 +679,9 @@ def _edge_rows(sol, marks, *, distances: bool = False):
     solution (rotations re-based on the solved ones): ``(keep, cols, vals)``,
     ``keep`` the indices of the marks on photographs the solve kept, and
     per end ``k`` the columns ``cols[k]`` ``(len(keep), c)`` (of
-    ``sol.unknowns``) and values ``vals[k]`` of each row."""
+    ``sol.unknowns``) and values ``vals[k]`` of each row; with ``distances``
+    also the signed end distances ``h`` ``(len(keep), 2)`` and the solve's
+    per-mark weights ``A`` ``(len(keep), 2, 2)``."""
     from lumigraph.stereo.debevec1996.solve import _Problem
 
     photos = list(dict.fromkeys(u.split(":")[0] for u in sol.unknowns if ":" in u))
@@ -698,7 +697,7 @@ def _edge_rows(sol, marks, *, distances: bool = False):
     x = prob.pack(sol.model.values, np.zeros((len(photos), 3)), t, sol.focal_scale)
     h, cols, vals = prob.distances(x, jac=True)
     if distances:
-        return keep, cols, vals, h, prob.length
+        return keep, cols, vals, h, prob.weights(True)   # the solve's own eq. 5.3 weights
     return keep, cols, vals
 
 
