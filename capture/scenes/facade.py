@@ -506,13 +506,16 @@ def _edge_visibility(V, F, n_solid, normals, cam, size):
 
 
 def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=2,
-                  edge_noise=0.0, lambertian=False):
+                  edge_noise=0.0, lambertian=False, layout="arc"):
     """Photographs, marks and ground truth of the building (module docstring).
 
-    Cameras: ``photos`` on a ring around the building (azimuths evenly
-    spread over 360° with up to ±6° of jitter, 24–30 m from the centre, 2–9 m
-    high), each aimed near the building's centre; ``novel`` views between
-    consecutive photographs (half-way in azimuth, other heights). Focal
+    Cameras: ``photos`` with azimuths evenly spread (up to ±4° of jitter),
+    24–30 m from the centre, 2–9 m high, each aimed near the building's
+    centre. ``layout="arc"``: over 240° in front of the building (−y), the
+    arc's ends included, so the back wall is seen only at grazing angles
+    from the ends; ``"ring"``: over 360°, the building photographed all
+    round. ``novel`` views half-way in azimuth between consecutive
+    photographs (3–8 m high), spread over the layout. Focal
     ``1.05 W`` px, principal point at the image centre. Photographs: float
     radiance × 200 as code values, Gaussian read noise ``noise`` codes,
     rounded and clipped to 8 bits.
@@ -531,17 +534,24 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
     K = np.array([[1.05 * w, 0, (w - 1) / 2], [0, 1.05 * w, (h - 1) / 2], [0, 0, 1.0]])
     centre = np.array([-0.5, 0.0, 4.0])
 
+    if layout not in ("arc", "ring"):
+        raise ValueError(f"layout must be 'arc' or 'ring', got {layout!r}")
+    gaps = photos - 1 if layout == "arc" else photos  # spaces between consecutive photographs
+
     def ring(i, n, offset, heights):
-        # an arc of 240° in front of the building (−y), ends included
-        a = np.radians(-210 + 240 * (i + offset) / (n - 1) + rng.uniform(-4, 4))
+        # arc: 240° in front of the building (−y), ends included; ring: 360°, from the front
+        if layout == "arc":
+            a = np.radians(-210 + 240 * (i + offset) / (n - 1) + rng.uniform(-4, 4))
+        else:
+            a = np.radians(-90 + 360 * (i + offset) / n + rng.uniform(-4, 4))
         rad = rng.uniform(24, 30)
         c = centre + [rad * np.cos(a), rad * np.sin(a), rng.uniform(*heights) - centre[2]]
         aim = centre + rng.uniform(-1, 1, 3) * [1.0, 1.0, 0.5]
         return _view_camera(c, aim, K, size)
 
     cams = {f"photo_{i:02d}.png": ring(i, photos, 0.0, (2.0, 9.0)) for i in range(photos)}
-    # novel views half-way between photographs, spread along the arc
-    novels = {f"view_{k}": ring(round((k + 0.5) * (photos - 1) / max(novel, 1) - 0.5), photos, 0.5,
+    # novel views half-way between photographs, spread over the layout
+    novels = {f"view_{k}": ring(round((k + 0.5) * gaps / max(novel, 1) - 0.5), photos, 0.5,
                                 (3.0, 8.0))
               for k in range(novel)}
     ss = int(supersample)
@@ -629,4 +639,6 @@ SPECS = {"facade": SceneSpec("facade", (160, 120), (
     Option("edge_noise", float, 0.0, "Gaussian noise (px) on each marked endpoint coordinate",
            low=0),
     Option("lambertian", bool, False, "no specular or mirror terms (a diffuse building)"),
+    Option("layout", str, "arc", "cameras on a 240° arc in front (arc) or all round (ring)",
+           choices=("arc", "ring")),
 ), version=5, min_size=(48, 36))}

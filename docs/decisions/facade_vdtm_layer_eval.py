@@ -8,7 +8,10 @@ Usage::
     OPENBLAS_NUM_THREADS=1 GATE=1 python docs/decisions/facade_vdtm_layer_eval.py 12 13 14
 
 ``GATE=0`` fits the layer without its gate; ``LAMBDAS=10,30,100,300`` replaces
-the candidate smoothness weights. About 90 s of CPU a seed at 640x480.
+the candidate smoothness weights. ``LAYOUT=ring PHOTOS=10 NOVEL=10`` renders
+the building photographed all round (the scene's ``layout`` option) instead of
+the 240° arc of 8 photographs and 4 novel views. About 90 s of CPU a seed at
+640x480 (the arc).
 """
 
 import os
@@ -31,7 +34,8 @@ def main(seeds):
     if os.environ.get("LAMBDAS"):
         kw["lambdas"] = tuple(float(x) for x in os.environ["LAMBDAS"].split(","))
     for seed in seeds:
-        s = render("facade", size=SIZE, seed=seed)
+        s = render("facade", size=SIZE, seed=seed, layout=os.environ.get("LAYOUT", "arc"),
+                   photos=int(os.environ.get("PHOTOS", 8)), novel=int(os.environ.get("NOVEL", 4)))
         mesh, photos, _, _ = _photos(s)
         t0 = time.process_time()
         layer = RF.fit_reflection_layer(mesh, photos, **kw)

@@ -81,3 +81,28 @@ def test_edge_noise_moves_the_endpoints():
     d = (sb - sa).ravel()
     # the draws are N(0, 0.5²): their RMS within a wide band around 0.5 (n >= 24)
     assert 0.25 < np.sqrt(np.mean(d ** 2)) < 0.8
+
+
+def _azimuths(cams, centre=(-0.5, 0.0)):
+    C = np.array([-np.array(c["R"]).T @ np.array(c["t"]) for c in cams.values()])
+    return np.degrees(np.arctan2(C[:, 1] - centre[1], C[:, 0] - centre[0]))
+
+
+def test_the_ring_layout_photographs_the_building_all_round():
+    """``layout="ring"``: the photographs' azimuths (about the building's centre)
+    are 360°/n apart, up to the ±4° jitter either side; each novel view lies
+    between two consecutive photographs. The arc keeps every camera in front of
+    the building (−y): no azimuth within 30° of the back (+90°)."""
+    n = 10
+    ring = render("facade", size=(64, 48), seed=2, photos=n, novel=n, supersample=1, layout="ring")
+    arc = render("facade", size=(64, 48), seed=2, photos=8, novel=4, supersample=1)
+    a = np.sort(_azimuths(ring.gt["cameras"]) % 360)
+    gaps = np.diff(np.r_[a, a[0] + 360])
+    assert np.all(np.abs(gaps - 360 / n) <= 8 + 1e-9)
+    for v in _azimuths(ring.gt["novel_cameras"]) % 360:
+        # the angular distance to the nearest photograph: half a gap, ± the two jitters
+        d = np.min(np.abs((a - v + 180) % 360 - 180))
+        assert abs(d - 180 / n) <= 8 + 1e-9
+    back = np.abs((_azimuths(arc.gt["cameras"]) - 90 + 180) % 360 - 180)
+    assert back.min() > 30
+    assert len(ring.images) == n and len(ring.gt["novel_cameras"]) == n
