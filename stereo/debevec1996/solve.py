@@ -464,6 +464,25 @@ RANK_RCOND = 1e-9
 NULL_WEIGHT = 0.1
 
 
+# a parameter's Jacobian column this many times the median parameter column's: a marked edge
+# projects through (next to) a camera's centre at that start, not a real sensitivity
+DEGENERATE_COLUMN = 1e6
+
+
+def _degenerate_start(J, names) -> bool:
+    """Whether the Jacobian ``J`` at a start is unusable: not finite, or a
+    parameter's column ``DEGENERATE_COLUMN`` times the median parameter
+    column (an edge projected through, or next to, a camera's centre; the
+    rank test's round-off floor, scaled to the largest column, would then
+    call every other parameter unconstrained)."""
+    J = np.asarray(J)
+    if not np.all(np.isfinite(J)):
+        return True
+    norms = np.linalg.norm(J, axis=0)[[":" not in n for n in names]]
+    norms = norms[norms > 0]
+    return bool(norms.size and norms.max() > DEGENERATE_COLUMN * np.median(norms))
+
+
 def _rank_deficient(J, names, *, rcond=RANK_RCOND):
     """The unknowns no combination of marks constrains: names with weight in
     the null space of the column-scaled Jacobian."""
@@ -605,14 +624,17 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
     Aw = prob.weights(True)
     with np.errstate(invalid="ignore", divide="ignore"):
         J0 = prob.jacobian(x0, Aw, dense=True)
-    if not np.all(np.isfinite(J0)) and not np.array_equal(th, model.values):
+    if _degenerate_start(J0, names) and not np.array_equal(th, model.values):
         # the linear solve from few marks can put a marked edge through a
-        # camera's centre (a weak direction, seed 44 of the marking eval): the
+        # camera's centre (a weak direction, seed 44 of the marking eval), or
+        # next to it (a Jacobian column 10^10 times the others': seed 152, where
+        # the rank test then found every other parameter "zero" beside it): the
         # parameters' starting values, with the linear translations, instead
         x0 = prob.pack(model.values, np.zeros((len(photos), 3)), t)
         with np.errstate(invalid="ignore", divide="ignore"):
             J0 = prob.jacobian(x0, Aw, dense=True)
-        warnings.append("the linear initialisation put a marked edge through a camera's centre: "
+        warnings.append("the linear initialisation put a marked edge through (or next to) a "
+                        "camera's centre: "
                         "started from the starting values instead")
     if not np.all(np.isfinite(J0)):
         raise EstimationError(where, "the starting model projects a marked edge to a point "

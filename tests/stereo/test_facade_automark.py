@@ -220,6 +220,27 @@ def test_a_refusal_list_in_turn_matches_the_pseudo_inverse_of_the_whole_stack():
             assert (a is None) == (b is None) and (a is None or abs(a - b) <= 1e-6 * b), (col, a, b)
 
 
+def test_a_linear_start_with_an_edge_next_to_a_camera_centre_is_degenerate():
+    """A Jacobian column 10¹⁰ times the others' (a marked edge projected next to
+    a camera's centre at the linear start) is a degenerate start, as a
+    non-finite one is; a spread of 10³ between parameters' columns (a
+    parameter that barely moves its edges) is not. Beside such a column the
+    rank test's floor (10⁻⁹ of the largest) would call every other
+    parameter unconstrained."""
+    from lumigraph.stereo.debevec1996.solve import _degenerate_start, _rank_deficient
+
+    rng = np.random.default_rng(0)
+    names = ["a/width", "a/height", "b/width", "p.png:rotation", "p.png:position"]
+    J = rng.normal(size=(20, 5)) * [100, 0.1, 50, 1e4, 10]
+    assert not _degenerate_start(J, names)
+    assert _rank_deficient(J, names) == []
+    J[:3, 1] = 1e12
+    assert _degenerate_start(J, names)
+    assert _rank_deficient(J, names) == ["a/width", "b/width"]   # the false refusal it prevents
+    J[0, 0] = np.nan
+    assert _degenerate_start(J, names)
+
+
 def _noisy_solve(seed, *, off=None):
     """The solver's fixture building seen by six ring cameras, every visible
     edge marked with σ = 0.5 px endpoint noise; ``off``: (mark index, px)

@@ -18,6 +18,8 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     CHECK=0 ... (the user does not redraw the hand marks the last Solve lists to check,
         marking.marks_to_check; default 1: redraws them, snapping off, and solves again)
     CHECK_MARKS=3 CHECK_ROUNDS=1 ... (marking.CHECK_MARKS; rounds of redrawing the listed marks)
+    DEGEN=inf ... (the solver's test of a degenerate linear start looks for non-finite Jacobians
+        only, as before the twelfth pass: solve.DEGENERATE_COLUMN)
     REDO=2.12 ... (the user redoes unsnapped a drag the snap moved farther than this, px; default 0: never)
     REFLAG=1 ... (after each re-snap the user redraws, snapping off, every hand mark it flagged)
     BLOCK=wing / PROBE=1 / VERBOSE=1 ... (diagnostics)
@@ -120,6 +122,9 @@ def main(size, seeds, snap=True, out=None):
     marking.WEIGHTED_STEPS = os.environ.get("WSTEP", "1" if marking.WEIGHTED_STEPS else "0") == "1"
     marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
     marking.STEP_CONSENSUS = os.environ.get("CONSENSUS", "1" if marking.STEP_CONSENSUS else "0") == "1"
+    if os.environ.get("DEGEN"):
+        from lumigraph.stereo.debevec1996 import solve as _solve
+        _solve.DEGENERATE_COLUMN = float(os.environ["DEGEN"])
     for seed in seeds:
         t0 = time.time()
         s = render("facade", size=size, seed=seed, photos=6, novel=0, supersample=2,
@@ -175,6 +180,8 @@ def main(size, seeds, snap=True, out=None):
             ok = distance(q["segment"], truth[q["photo"]][q["edge"]]) <= 3 * EDGE_NOISE_PX
             accepted += ok
             c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
+        if os.environ.get("VERBOSE"):
+            print(f"  proposals {len(props)}, accepted {accepted}")
         extra = 0
         tries = int(os.environ.get("TRIES", "3"))
 
