@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lumigraph.capture.errors import InputError
 from lumigraph.capture.render import Option, RenderedScene, SceneSpec
 
 # The true model: (name, kind, parent, placement {on, x, y}, parameters).
@@ -535,7 +536,7 @@ def render_facade(*, size, seed, rng, photos=8, novel=4, noise=1.0, supersample=
     centre = np.array([-0.5, 0.0, 4.0])
 
     if layout not in ("arc", "ring"):
-        raise ValueError(f"layout must be 'arc' or 'ring', got {layout!r}")
+        raise InputError("layout", f"expected 'arc' or 'ring', got {layout!r}")
     gaps = photos - 1 if layout == "arc" else photos  # spaces between consecutive photographs
 
     def ring(i, n, offset, heights):

@@ -634,8 +634,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         with np.errstate(invalid="ignore", divide="ignore"):
             J0 = prob.jacobian(x0, Aw, dense=True)
         warnings.append("the linear initialisation put a marked edge through (or next to) a "
-                        "camera's centre: "
-                        "started from the starting values instead")
+                        "camera's centre: started from the starting values instead")
     if not np.all(np.isfinite(J0)):
         raise EstimationError(where, "the starting model projects a marked edge to a point "
                               "(a block of zero size?): check the starting values in blocks.json")

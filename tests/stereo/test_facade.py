@@ -190,6 +190,40 @@ def test_a_linear_start_that_projects_an_edge_to_a_point_starts_from_the_startin
     assert any("linear initialisation" in w for w in sol.warnings), sol.warnings
 
 
+def test_a_linear_start_with_an_edge_next_to_a_camera_centre_starts_from_the_starting_values(
+        model, cams, monkeypatch):
+    """A seventh camera stands at (20, 0, 6) on the tower's right, where the
+    line of ``tower/back-right`` (x = offset + 1.5, y = 0, vertical) passes
+    when ``tower/offset_x`` is 18.5. A linear start 10⁻¹¹ m from that puts
+    the edge next to the camera's centre: finite, but one Jacobian column
+    so large that the rank test's floor (10⁻⁹ of the largest) took every
+    other unknown for zero and the solve refused them all (the marking
+    eval's seed 152). The solve starts from the starting values instead,
+    says so, and noise-free marks give the truth."""
+    import lumigraph.stereo.debevec1996.solve as solve
+    from lumigraph.capture.scenes.facade_edges import look_at
+
+    cams = dict(cams)
+    R, t = look_at([20.0, 0.0, 6.0], [1.5, 0, 4])
+    cams["side.png"] = {"K": cams["photo_00.png"]["K"], "R": R, "t": t, "image_size": [640, 480]}
+    marks = marks_of(model, cams)
+    assert any(m.photo == "side.png" and m.edge == "tower/back-right" for m in marks.marks)
+    real, k = solve._linear_translations, model.slot_of("tower/offset_x")
+
+    def near(prob, R, th_start, cams_only=None):
+        th, t = real(prob, R, th_start, cams_only)
+        th = th.copy()
+        th[k] = 20.0 - 1.5 + 1e-11
+        return th, t
+
+    monkeypatch.setattr(solve, "_linear_translations", near)
+    start = model.with_values(model.values[~model.fixed] * 1.1)
+    sol = solve_facade(start, marks, K(cams))
+    for n, v in model.named_values().items():
+        assert abs(sol.params[n] - v) <= 1e-8 * abs(v), n
+    assert any("next to" in w for w in sol.warnings), sol.warnings
+
+
 # ------------------------------------------------------------------ the command line
 def _folder(tmp_path, model, n=4, **kw):
     cams = ring_cameras(n, target=[1.5, 0, 4], radius=30, height=4, focal_px=120,
