@@ -30,6 +30,9 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     FAIRER=0 ... (skip the all-edges-dragged reference)
     REF_DRAWS=20 ... (fresh noise draws for the fully marked solve's expected error)
     ATTRIB=tower/width ... (each mark's share of that parameter's error)
+    SPLIT=1 ... (the error to the expected one again with the accepted proposals, then the
+        hand marks, put back on their true lines: which kind of mark the error comes from;
+        and every hand mark's signed end offsets from its true line)
     PARAMS=1 ... (the parameters with the largest errors, in the fully marked solve's σ)
     TRIES=3 ... (rounds of four hand marks after a refusal)
     (each run also prints its "σ-predicted ratio": the RMS relative first-order σ of the
@@ -379,6 +382,41 @@ def main(size, seeds, snap=True, out=None):
                 if e > 3 * EDGE_NOISE_PX:
                     print(f"  {m['photo']} {m['edge']}: {e:.2f} px off "
                           f"({'proposed' if m['proposed'] else 'hand'})")
+        if os.environ.get("SPLIT"):
+            # which kind of mark the error comes from (diagnostic, uses the truth)
+            from dataclasses import replace as _replace
+
+            em = ses.edge_marks()
+
+            def on_line(mk, truth=truth):
+                a, b = (np.asarray(v, float) for v in truth[mk.photo][mk.edge])
+                d = (b - a) / np.hypot(*(b - a))
+                sg = np.asarray(mk.segment, float)
+                return _replace(mk, segment=np.r_[a + ((sg[:2] - a) @ d) * d, a + ((sg[2:] - a) @ d) * d])
+
+            def moved(which, em=em, ses=ses, expected=expected, on_line=on_line):
+                ms = tuple(on_line(mk) if which(mk) else mk for mk in em.marks)
+                try:
+                    return rel(solve_facade(ses.model, _replace(em, marks=ms), ses._K(),
+                                            noise_px=EDGE_NOISE_PX).params) / expected
+                except ValueError:      # (the page's solve starts from its last one)
+                    return float("nan")
+
+            def ends(mk, truth=truth):
+                a, b = (np.asarray(v, float) for v in truth[mk.photo][mk.edge])
+                d = (b - a) / np.hypot(*(b - a))
+                nrm, sg = np.array([-d[1], d[0]]), np.asarray(mk.segment, float)
+                return (sg[:2] - a) @ nrm, (sg[2:] - a) @ nrm
+
+            end_offs = {k: [e for mk in em.marks if mk.proposed == k for e in ends(mk)] for k in (True, False)}
+            print(f"  split (to expected): as marked {moved(lambda mk: False):.2f}, proposals on "
+                  f"their lines {moved(lambda mk: mk.proposed):.2f}, hand marks on their lines "
+                  f"{moved(lambda mk: not mk.proposed):.2f}; RMS end offset: proposals "
+                  f"{np.sqrt(np.mean(np.square(end_offs[True]))):.2f} px ({len(end_offs[True]) // 2}), hand "
+                  f"{np.sqrt(np.mean(np.square(end_offs[False]))):.2f} px ({len(end_offs[False]) // 2})")
+            for mk in em.marks:
+                if not mk.proposed:
+                    print(f"    hand {mk.photo} {mk.edge} %+.2f %+.2f" % ends(mk))
         if os.environ.get("ATTRIB"):
             # each mark's share of a parameter's error: the change when that
             # mark alone is put back on its true line (diagnostic)
