@@ -27,6 +27,8 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
         further round: every mark (default) / the marks beyond their band / none)
     SNAPPX=1.5 ... (snap radius in px, default marking.SNAP_DISTANCE_PX)
     DRAW=1 ... (another draw of the hand drags' noise: generator seed 7 + DRAW)
+    DRAW_PER_SCENE=1 ... (the generator seeded by (7 + DRAW, scene seed): the draws independent
+        across scenes; by default a draw is the same noise sequence on every scene)
     FAIRER=0 ... (skip the all-edges-dragged reference)
     REF_DRAWS=20 ... (fresh noise draws for the fully marked solve's expected error)
     ATTRIB=tower/width ... (each mark's share of that parameter's error)
@@ -139,7 +141,12 @@ def main(size, seeds, snap=True, out=None):
         full = json.loads((folder / "edges.json").read_text())["photographs"]
         ses = FacadeSession.open(folder, edges=edges)
         c = create_app(artifacts=[], facade=ses).test_client()
-        rng = np.random.default_rng(7 + int(os.environ.get("DRAW", "0")))
+        # the drags' noise by the draw alone: a draw puts the same noise on the same
+        # hand-marked edges of every scene (view-marking.md, thirteenth pass);
+        # DRAW_PER_SCENE=1 seeds it by the scene too, so draws are independent across scenes
+        rng = np.random.default_rng(
+            [7 + int(os.environ.get("DRAW", "0")), seed] if os.environ.get("DRAW_PER_SCENE") == "1"
+            else 7 + int(os.environ.get("DRAW", "0")))
         redone = []
 
         def drag(p, m, c=c, rng=rng, redone=redone, truth=truth, ses=ses):
