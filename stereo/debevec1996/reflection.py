@@ -232,8 +232,9 @@ def _laplacian(grid, border):
 
 class _Centred:
     """The fit's data with each texel's mean removed (texels seen twice or
-    more): ``Ac`` (rows, G) the centred bilinear design and ``AcT`` its
-    transpose (CSR), ``rhs`` (rows, C) the centred colours, ``tm`` (rows,)
+    more): the centred bilinear design ``Bm − M[tm]`` (rows, G) kept as
+    ``Bm`` (the rows' bilinear design) and ``M`` (T, G) (each texel's mean
+    row), with their transposes (CSR), ``rhs`` (rows, C) the centred colours, ``tm`` (rows,)
     each row's texel, ``cnt`` (T,) each texel's samples, ``res_none`` (T,)
     each texel's sum of squares without a layer (Σ |ΔI|²). Built once for
     a set of rows and shared by every candidate's solve on them."""
@@ -248,9 +249,14 @@ class _Centred:
         inv = 1.0 / np.maximum(self.cnt, 1)
         mean = sp.csr_matrix((inv[self.tm], (self.tm, np.arange(len(rows)))),
                              shape=(n_tex, len(rows)))
-        Bm = B[rows]
-        self.Ac = (Bm - (mean @ Bm)[self.tm]).tocsr()
-        self.AcT = self.Ac.T.tocsr()
+        # the centred design Ac = Bm − M[tm] is never formed: a row of it has
+        # the bilinear taps of every sample of its texel (4 × count), so its
+        # normal matrix costs count² times that of the plain design; with one
+        # weight per texel, Acᵀ W Ac = Bmᵀ W Bm − Mᵀ diag(w · count) M
+        self.Bm = B[rows].tocsr()
+        self.BmT = self.Bm.T.tocsr()
+        self.M = (mean @ self.Bm).tocsr()
+        self.MT = self.M.T.tocsr()
         self.rhs = obs[rows] - (mean @ obs[rows])[self.tm]
         self.res_none = np.bincount(self.tm, (self.rhs ** 2).sum(1), minlength=n_tex)
 
@@ -267,10 +273,14 @@ def _solve(cen, lap2, lam, weight):
     if not len(cen.tm):
         return np.zeros((G, cen.C)), np.zeros(cen.n_tex), cen.cnt, cen.res_none
     wr = weight[cen.tm]
-    AtW = cen.AcT.multiply(wr[None, :]).tocsr()
-    A = (AtW @ cen.Ac + lam * (float(wr.sum()) / G) * lap2 + 1e-6 * sp.identity(G)).tocsc()
-    S = spl.splu(A).solve(np.asarray(AtW @ cen.rhs))
-    r = cen.rhs - cen.Ac @ S
+    AtWA = (cen.BmT.multiply(wr[None, :]).tocsr() @ cen.Bm
+            - cen.MT.multiply((weight * cen.cnt)[None, :]).tocsr() @ cen.M)
+    A = (AtWA + lam * (float(wr.sum()) / G) * lap2 + 1e-6 * sp.identity(G)).tocsc()
+    # Acᵀ W rhs = Bmᵀ W rhs: each texel's centred colours sum to zero
+    # symmetric positive definite: no pivoting, a symmetric ordering
+    S = spl.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                 options={"SymmetricMode": True}).solve(np.asarray(cen.BmT @ (wr[:, None] * cen.rhs)))
+    r = cen.rhs - (cen.Bm @ S - (cen.M @ S)[cen.tm])
     return S, np.bincount(cen.tm, (r ** 2).sum(1), minlength=cen.n_tex), cen.cnt, cen.res_none
 
 
