@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests" / "view"))
-from facade_helpers import EDGE_NOISE_PX, truth_lines  # noqa: E402
+from facade_helpers import EDGE_NOISE_PX, noisy_full_marks, truth_lines  # noqa: E402
 
 from lumigraph.capture.render import render  # noqa: E402
 from lumigraph.stereo.debevec1996.edges import EdgeMarks  # noqa: E402
@@ -42,17 +42,7 @@ def main(lo, hi, draws):
         rng = np.random.default_rng(5000 + seed)
         errs = []
         for _ in range(draws):
-            body = {"photographs": {}}
-            for p in ses.photos:
-                marks = []
-                for m in full[p]:
-                    a, b = (np.asarray(v, float) for v in truth[p][m["edge"]])
-                    d = (b - a) / np.hypot(*(b - a))
-                    s = np.asarray(m["segment"], float)
-                    exact = np.r_[a + ((s[:2] - a) @ d) * d, a + ((s[2:] - a) @ d) * d]
-                    marks.append({"edge": m["edge"],
-                                  "segment": (exact + rng.normal(0, EDGE_NOISE_PX, 4)).tolist()})
-                body["photographs"][p] = marks
+            body = noisy_full_marks(full, truth, ses.photos, rng)
             sol = solve_facade(ses.model, EdgeMarks.from_dict(body, model=ses.model, photographs=ses.photos),
                                {p: ses.camera.K for p in ses.photos}, noise_px=EDGE_NOISE_PX)
             errs.append(np.sqrt(np.mean([((sol.params[n] - gt[n]) / gt[n]) ** 2 for n in free])))

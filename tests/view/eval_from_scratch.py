@@ -66,7 +66,14 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, refusal_marks, truth_lines  # noqa: E402
+from facade_helpers import (  # noqa: E402
+    EDGE_NOISE_PX,
+    distance,
+    four_hand_marks,
+    noisy_full_marks,
+    refusal_marks,
+    truth_lines,
+)
 
 from lumigraph.capture.render import render  # noqa: E402
 from lumigraph.stereo.debevec1996.edges import load_edges  # noqa: E402
@@ -94,17 +101,7 @@ def expected_full_error(model, full, truth, rel, photos, K, *, draws, seed):
     rng = np.random.default_rng(1000 + seed)
     errs = []
     for _ in range(draws):
-        body = {"photographs": {}}
-        for p in photos:
-            out = []
-            for m in full[p]:
-                a, b = (np.asarray(v, float) for v in truth[p][m["edge"]])
-                d = (b - a) / np.hypot(*(b - a))
-                s = np.asarray(m["segment"], float)
-                exact = np.r_[a + ((s[:2] - a) @ d) * d, a + ((s[2:] - a) @ d) * d]
-                out.append({"edge": m["edge"],
-                            "segment": (exact + rng.normal(0, EDGE_NOISE_PX, 4)).tolist()})
-            body["photographs"][p] = out
+        body = noisy_full_marks(full, truth, photos, rng)
         marks = EdgeMarks.from_dict(body, model=model, photographs=photos)
         errs.append(rel(solve_facade(model, marks, {p: K for p in photos},
                                      noise_px=EDGE_NOISE_PX).params))

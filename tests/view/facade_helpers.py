@@ -13,6 +13,24 @@ from lumigraph.stereo.bench_facade import four_hand_marks  # noqa: F401 - the be
 EDGE_NOISE_PX = 0.5  # the scene's endpoint noise on its marks (render --edge-noise)
 
 
+def noisy_full_marks(full: dict, truth: dict, photos, rng) -> dict:
+    """An ``edges.json`` body: every mark of the scene's ``full`` marks put
+    back on its true line (its ends' orthogonal projections), then a fresh
+    draw of the scene's σ = :data:`EDGE_NOISE_PX` endpoint noise from ``rng``
+    (the fully marked solve's noise, drawn again)."""
+    body = {"photographs": {}}
+    for p in photos:
+        out = []
+        for m in full[p]:
+            a, b = (np.asarray(v, float) for v in truth[p][m["edge"]])
+            d = (b - a) / np.hypot(*(b - a))
+            s = np.asarray(m["segment"], float)
+            exact = np.r_[a + ((s[:2] - a) @ d) * d, a + ((s[2:] - a) @ d) * d]
+            out.append({"edge": m["edge"], "segment": (exact + rng.normal(0, EDGE_NOISE_PX, 4)).tolist()})
+        body["photographs"][p] = out
+    return body
+
+
 def truth_lines(folder: Path) -> dict:
     """photo -> edge -> the true model edge projected by the true camera."""
     from lumigraph.stereo.debevec1996.model import load_blocks
