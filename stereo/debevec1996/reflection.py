@@ -232,10 +232,10 @@ def _laplacian(grid, border):
 
 class _Centred:
     """The fit's data with each texel's mean removed (texels seen twice or
-    more): the centred bilinear design ``Bm − M[tm]`` (rows, G) kept as
+    more): the centred bilinear design ``Bm − M[tm]`` (rows, G), kept as
     ``Bm`` (the rows' bilinear design) and ``M`` (T, G) (each texel's mean
-    row), with their transposes (CSR), ``rhs`` (rows, C) the centred colours, ``tm`` (rows,)
-    each row's texel, ``cnt`` (T,) each texel's samples, ``res_none`` (T,)
+    row) with their transposes (CSR); ``rhs`` (rows, C) the centred
+    colours, ``tm`` (rows,) each row's texel, ``cnt`` (T,) each texel's samples, ``res_none`` (T,)
     each texel's sum of squares without a layer (Σ |ΔI|²). Built once for
     a set of rows and shared by every candidate's solve on them."""
 
@@ -276,8 +276,8 @@ def _solve(cen, lap2, lam, weight):
     AtWA = (cen.BmT.multiply(wr[None, :]).tocsr() @ cen.Bm
             - cen.MT.multiply((weight * cen.cnt)[None, :]).tocsr() @ cen.M)
     A = (AtWA + lam * (float(wr.sum()) / G) * lap2 + 1e-6 * sp.identity(G)).tocsc()
-    # Acᵀ W rhs = Bmᵀ W rhs: each texel's centred colours sum to zero
-    # symmetric positive definite: no pivoting, a symmetric ordering
+    # A is symmetric positive definite: a symmetric ordering, no pivoting;
+    # Acᵀ W rhs = Bmᵀ W rhs, as each texel's centred colours sum to zero
     S = spl.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                  options={"SymmetricMode": True}).solve(np.asarray(cen.BmT @ (wr[:, None] * cen.rhs)))
     r = cen.rhs - (cen.Bm @ S - (cen.M @ S)[cen.tm])

@@ -141,3 +141,39 @@ def test_bad_arguments_name_themselves():
     R, t = pose(NEW)
     with pytest.raises(InputError, match="reflection"):
         render_vdtm(QUAD, photos, K, R, t, (W, H), method="view-map", reflection=layer)
+
+
+def test_the_fit_solves_the_centred_least_squares_problem():
+    """The fit's normal equations are built from the plain bilinear design and
+    each texel's mean row, never from the centred design; against a dense
+    solve of the centred problem written out, the layer agrees to round-off
+    (the system is well conditioned here: λ = 1 on a 6 × 6 grid)."""
+    from lumigraph.stereo.debevec1996.reflection import _Centred, _design, _laplacian, _solve
+
+    rng = np.random.default_rng(3)
+    T, grid = 40, 6
+    tex = np.repeat(np.arange(T), rng.integers(1, 5, T))      # 1–4 samples a texel
+    crd = rng.uniform(-1, 1, (len(tex), 2))
+    obs = rng.normal(100, 20, (len(tex), 3))
+    weight = rng.uniform(0.2, 1.0, T)
+    B = _design(crd, grid)
+    lap2 = (lambda L: (L.T @ L).tocsr())(_laplacian(grid, "fading"))
+    S, res, cnt, res_none = _solve(_Centred(B, obs, tex, T), lap2, 1.0, weight)
+
+    rows = np.flatnonzero(np.bincount(tex, minlength=T)[tex] >= 2)
+    Bd = B.toarray()
+    mean_B = np.array([Bd[tex == t].mean(0) for t in range(T)])
+    mean_o = np.array([obs[tex == t].mean(0) for t in range(T)])
+    Ac = Bd[rows] - mean_B[tex[rows]]
+    rc = obs[rows] - mean_o[tex[rows]]
+    w = weight[tex[rows]]
+    G = grid * grid
+    A = Ac.T @ (w[:, None] * Ac) + 1.0 * w.sum() / G * lap2.toarray() + 1e-6 * np.eye(G)
+    want = np.linalg.solve(A, Ac.T @ (w[:, None] * rc))
+    np.testing.assert_allclose(S, want, rtol=0, atol=1e-9 * np.abs(want).max())
+    r = rc - Ac @ want
+    np.testing.assert_allclose(res, np.bincount(tex[rows], (r ** 2).sum(1), minlength=T),
+                               rtol=1e-9, atol=1e-9)
+    np.testing.assert_array_equal(cnt, np.bincount(tex, minlength=T))
+    np.testing.assert_allclose(res_none, np.bincount(tex[rows], (rc ** 2).sum(1), minlength=T),
+                               rtol=1e-12)
