@@ -71,6 +71,7 @@ from facade_helpers import (  # noqa: E402
     distance,
     four_hand_marks,
     noisy_full_marks,
+    onto_line,
     refusal_marks,
     truth_lines,
 )
@@ -393,10 +394,7 @@ def main(size, seeds, snap=True, out=None):
             em = ses.edge_marks()
 
             def on_line(mk, truth=truth):
-                a, b = (np.asarray(v, float) for v in truth[mk.photo][mk.edge])
-                d = (b - a) / np.hypot(*(b - a))
-                sg = np.asarray(mk.segment, float)
-                return _replace(mk, segment=np.r_[a + ((sg[:2] - a) @ d) * d, a + ((sg[2:] - a) @ d) * d])
+                return _replace(mk, segment=onto_line(mk.segment, truth[mk.photo][mk.edge]))
 
             def moved(which, em=em, ses=ses, expected=expected, on_line=on_line):
                 ms = tuple(on_line(mk) if which(mk) else mk for mk in em.marks)
@@ -434,7 +432,7 @@ def main(size, seeds, snap=True, out=None):
                 a, b = (np.asarray(v, float) for v in truth[mk.photo][mk.edge])
                 d = (b - a) / np.hypot(*(b - a))
                 sg = np.asarray(mk.segment, float)
-                exact = np.r_[a + ((sg[:2] - a) @ d) * d, a + ((sg[2:] - a) @ d) * d]
+                exact = onto_line(sg, (a, b))
                 nrm = np.array([-d[1], d[0]])
                 marks2 = list(em.marks)
                 marks2[i] = replace(mk, segment=exact)

@@ -13,6 +13,15 @@ from lumigraph.stereo.bench_facade import four_hand_marks  # noqa: F401 - the be
 EDGE_NOISE_PX = 0.5  # the scene's endpoint noise on its marks (render --edge-noise)
 
 
+def onto_line(segment, line) -> np.ndarray:
+    """``segment`` ``(4,)`` with its ends moved onto the infinite ``line``
+    (two points): their orthogonal projections."""
+    a, b = np.asarray(line[0], float), np.asarray(line[1], float)
+    d = (b - a) / np.hypot(*(b - a))
+    s = np.asarray(segment, float)
+    return np.r_[a + ((s[:2] - a) @ d) * d, a + ((s[2:] - a) @ d) * d]
+
+
 def noisy_full_marks(full: dict, truth: dict, photos, rng) -> dict:
     """An ``edges.json`` body: every mark of the scene's ``full`` marks put
     back on its true line (its ends' orthogonal projections), then a fresh
@@ -22,10 +31,7 @@ def noisy_full_marks(full: dict, truth: dict, photos, rng) -> dict:
     for p in photos:
         out = []
         for m in full[p]:
-            a, b = (np.asarray(v, float) for v in truth[p][m["edge"]])
-            d = (b - a) / np.hypot(*(b - a))
-            s = np.asarray(m["segment"], float)
-            exact = np.r_[a + ((s[:2] - a) @ d) * d, a + ((s[2:] - a) @ d) * d]
+            exact = onto_line(m["segment"], truth[p][m["edge"]])
             out.append({"edge": m["edge"], "segment": (exact + rng.normal(0, EDGE_NOISE_PX, 4)).tolist()})
         body["photographs"][p] = out
     return body
