@@ -604,7 +604,7 @@ def edge_offset_std(sol, marks) -> np.ndarray:
     return out
 
 
-def deleted_residuals(sol, marks) -> np.ndarray:
+def deleted_residuals(sol, marks, *, own_noise: bool = True) -> np.ndarray:
     """How far each of ``marks`` (the marks of the solve ``sol``) lies from
     where the *other* marks put its model edge, in units of that
     disagreement's own standard deviation: ``(len(marks),)``, ``inf`` for a
@@ -623,7 +623,12 @@ def deleted_residuals(sol, marks) -> np.ndarray:
     covariance of the solve without mark ``i`` (end noise ``σ`` =
     ``sol.sigma_px``, independent). The score is ``√(eᵀ V⁻¹ e / 2)``: about
     1 for a mark as good as the rest, 3 or more for one that the rest
-    contradict.
+    contradict. A mark with its own noise (``spread_px`` above the solve's
+    ``noise_px``: end noise ``σ rel_i``) is weighted so in the fit; with
+    ``own_noise`` its disagreement is measured against that noise, without
+    it against ``σ`` (how far it is off as a mark placed with the solve's
+    care would be: a mark on an edge the image shows weakly, and off, is
+    then listed rather than excused by its scatter).
 
     >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
     >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
@@ -644,7 +649,7 @@ def deleted_residuals(sol, marks) -> np.ndarray:
     """
     marks = list(marks)
     out = np.full(len(marks), np.nan)
-    keep, cols, vals, h, A = _edge_rows(sol, marks, distances=True)
+    keep, cols, vals, h, A, rel = _edge_rows(sol, marks, distances=True)
     if not keep:
         return out
     n, p = len(keep), len(sol.unknowns)
@@ -652,10 +657,12 @@ def deleted_residuals(sol, marks) -> np.ndarray:
     for k in range(2):
         X[np.arange(n)[:, None], k, cols[k]] = vals[k]
     W = np.einsum("nki,nkj->nij", A, A)                      # (n, 2, 2): Aᵀ A
-    var = float(sol.sigma_px) ** 2
+    # mark i's end noise is σ rel_i (rel_i > 1 where its spread_px is above the solve's noise)
+    var = float(sol.sigma_px) ** 2 * rel ** 2                # (n,)
     XW = np.einsum("nki,nkj->nij", X, W)                     # (n, p, 2): X_iᵀ W_i
     N = np.einsum("nik,nkj->ij", XW, X)                      # Σ X_iᵀ W_i X_i
-    S = np.einsum("nik,nlk->il", XW, XW)                     # Σ X_iᵀ W_i² X_i (the sandwich's meat)
+    XWs = XW * rel[:, None, None]
+    S = np.einsum("nik,nlk->il", XWs, XWs)                   # Σ rel_i² X_iᵀ W_i² X_i (the meat, / σ²)
     scale = np.sqrt(np.clip(np.diag(N), 1e-300, None))
     for j, i in enumerate(keep):
         Ni = N - XW[j] @ X[j]
@@ -666,10 +673,10 @@ def deleted_residuals(sol, marks) -> np.ndarray:
             out[i] = np.inf
             continue
         Ninv = np.linalg.inv(Nis) / scale[:, None] / scale[None, :]
-        Ci = var * Ninv @ (S - XW[j] @ XW[j].T) @ Ninv
+        Ci = sol.sigma_px ** 2 * Ninv @ (S - XWs[j] @ XWs[j].T) @ Ninv
         # the others' prediction of this mark's distances, and its spread
         e = h[j] + X[j] @ (Ninv @ (XW[j] @ h[j]))            # h_i - X_i (δ - δ_(i)) to first order
-        V = var * np.eye(2) + X[j] @ Ci @ X[j].T
+        V = (var[j] if own_noise else sol.sigma_px ** 2) * np.eye(2) + X[j] @ Ci @ X[j].T
         out[i] = float(np.sqrt(max(e @ np.linalg.solve(V, e), 0.0) / 2.0))
     return out
 
@@ -680,24 +687,27 @@ def _edge_rows(sol, marks, *, distances: bool = False):
     ``keep`` the indices of the marks on photographs the solve kept, and
     per end ``k`` the columns ``cols[k]`` ``(len(keep), c)`` (of
     ``sol.unknowns``) and values ``vals[k]`` of each row; with ``distances``
-    also the signed end distances ``h`` ``(len(keep), 2)`` and the solve's
-    per-mark weights ``A`` ``(len(keep), 2, 2)``."""
+    also the signed end distances ``h`` ``(len(keep), 2)``, the solve's
+    per-mark weights ``A`` ``(len(keep), 2, 2)`` and each mark's endpoint
+    noise relative to the solve's ``rel`` ``(len(keep),)`` (its
+    ``spread_px``)."""
     from lumigraph.stereo.debevec1996.solve import _Problem
 
     photos = list(dict.fromkeys(u.split(":")[0] for u in sol.unknowns if ":" in u))
     free_focal = bool(sol.unknowns) and sol.unknowns[-1] == "focal_scale"
     keep = [i for i, m in enumerate(marks) if m.photo in photos]
     if not keep:
-        return (keep, None, None, None, None) if distances else (keep, None, None)
+        return (keep, None, None, None, None, None) if distances else (keep, None, None)
     R = np.array([sol.poses[p][0] for p in photos])
     t = np.array([sol.poses[p][1] for p in photos])
     K0 = {p: sol.K[p] / np.array([[sol.focal_scale] * 2 + [1.0], [1.0, sol.focal_scale, 1.0],
                                   [1.0, 1.0, 1.0]]) for p in photos}
-    prob = _Problem(sol.model, [marks[i] for i in keep], photos, K0, R, free_focal=free_focal)
+    prob = _Problem(sol.model, [marks[i] for i in keep], photos, K0, R, free_focal=free_focal,
+                    noise_px=getattr(sol, "noise_px", None))
     x = prob.pack(sol.model.values, np.zeros((len(photos), 3)), t, sol.focal_scale)
     h, cols, vals = prob.distances(x, jac=True)
     if distances:
-        return keep, cols, vals, h, prob.weights(True)   # the solve's own eq. 5.3 weights
+        return keep, cols, vals, h, prob.weights(True), prob.rel   # the solve's own weights
     return keep, cols, vals
 
 

@@ -13,7 +13,11 @@ the top-left pixel), each tied to a model edge by its stable name
 (``block/edge``, :attr:`BlockModel.edge_names`). A segment need not span the
 whole edge: any stretch of the line serves. An entry may carry
 ``"proposed": true`` (written by automatic marking) and is then used like
-any other.
+any other. An entry may also carry ``"spread_px"``: the scatter (px, RMS)
+of the image's intensity step about the segment's line along it, measured
+when the page snapped it onto the image; the solver then treats that mark's
+ends as noisy by the larger of it and its ``noise_px`` (an edge the image
+shows weakly, or broken by relief the model lacks, counts for less).
 
 Examples
 --------
@@ -45,12 +49,15 @@ EDGES_SCHEMA = "lumigraph.facade.edges"
 class Mark:
     """One marked segment: ``photo`` (file name), ``edge`` (model edge name),
     ``segment`` ``(4,)`` float64 ``x0, y0, x1, y1`` in pixels, ``proposed``
-    (found by automatic marking rather than by hand)."""
+    (found by automatic marking rather than by hand), ``spread_px`` the
+    scatter of the image's step about the segment's line (px; None: not
+    measured, the mark is as noisy as the solve's ``noise_px``)."""
 
     photo: str
     edge: str
     segment: np.ndarray
     proposed: bool = False
+    spread_px: float | None = None
 
 
 @dataclass(frozen=True)
@@ -109,7 +116,10 @@ class EdgeMarks:
                         raise fail(where, f"{key}.segment",
                                    f"segment of edge {name!r} lies outside photograph {photo!r} "
                                    f"({w}x{h}): marked on another image?")
-                marks.append(Mark(photo, name, seg, proposed))
+                spread = require(e, "spread_px", "number", path=where, where=key, default=None,
+                                 low=0)
+                marks.append(Mark(photo, name, seg, proposed,
+                                  None if spread is None else float(spread)))
         return cls(tuple(marks), tuple(photographs), where)
 
     def to_dict(self) -> dict:
@@ -118,6 +128,8 @@ class EdgeMarks:
             e = {"edge": m.edge, "segment": [float(v) for v in m.segment]}
             if m.proposed:
                 e["proposed"] = True
+            if m.spread_px is not None:
+                e["spread_px"] = float(m.spread_px)
             out.setdefault(m.photo, []).append(e)
         return {"schema": EDGES_SCHEMA, "schema_version": 1, "photographs": out}
 

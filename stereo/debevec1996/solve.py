@@ -16,7 +16,11 @@ segment, so the error integrated along it is in closed form
     Err = ∫₀ᴸ h(s)² ds = L/3 · (h1² + h1 h2 + h2²),
 
 written as two residuals ``√(L/3) · (h1 + h2/2, √3/2 · h2)`` whose squares
-add to ``Err``. The unknowns are the free block parameters, a rotation
+add to ``Err``. A mark that carries its own noise (``spread_px``, the
+scatter of the image's step along it, measured where the mark was snapped
+onto the photograph) above ``noise_px`` has its residuals divided by
+``rel = spread_px / noise_px``: weighted least squares, each mark's ends
+counted by the inverse of their variance. The unknowns are the free block parameters, a rotation
 (``R_j = exp([ω_j]×) R_j⁰``) and translation per photograph and, optionally,
 one focal-length scale shared by every photograph. The Jacobian is analytic
 (the edge endpoints are linear in ``θ``, :meth:`BlockModel.edge_matrices`);
@@ -47,8 +51,9 @@ of the final plain least-squares solve (eq. 5.3 as written).
 
 **Uncertainty.** First order: with ``J`` the Jacobian of the weighted
 residuals ``r = A h`` at the solution and the endpoint distances ``h``
-independent with variance ``σ²`` (estimated from the residual distances,
-``σ̂² = Σ h² / (2n − p)``), ``cov = σ̂² (JᵀJ)⁻¹ Jᵀ A Aᵀ J (JᵀJ)⁻¹``.
+independent with variance ``σ² rel²`` (``σ`` estimated from the residual
+distances, ``σ̂² = Σ (h / rel)² / (2n − p)``), ``cov = σ̂² (JᵀJ)⁻¹ Jᵀ (rel A)
+(rel A)ᵀ J (JᵀJ)⁻¹``.
 
 **Gauge.** The world frame is the model's (the root block stands centred on
 the origin, axis-aligned); the scale comes from the fixed parameter(s): at
@@ -155,7 +160,8 @@ class FacadeSolution:
     dropped : photographs left out; mark_rms_px : one RMS distance per kept
     mark, ``(photo, edge, px)``; sigma_px : the estimated endpoint noise;
     rms_px : RMS distance over the kept marks; covariance / unknowns : of
-    the final solve; warnings; seconds."""
+    the final solve; warnings; seconds; noise_px : the solve's endpoint
+    noise (a mark's ``spread_px`` above it weighs the mark down)."""
 
     model: BlockModel
     params: dict
@@ -176,6 +182,7 @@ class FacadeSolution:
     seconds: float = 0.0
     nfev: int = 0
     held: tuple = ()
+    noise_px: float = 1.0
 
     @property
     def centres(self) -> dict:
@@ -205,7 +212,7 @@ class _Problem:
     """The marks of the kept photographs as arrays, and the residual /
     Jacobian of eq. 5.3 over ``x = [θ_free, (ω, t) per photo, focal scale]``."""
 
-    def __init__(self, model, marks, photos, K, R0, *, free_focal):
+    def __init__(self, model, marks, photos, K, R0, *, free_focal, noise_px=None):
         self.model, self.photos, self.free_focal = model, list(photos), free_focal
         pi = {p: i for i, p in enumerate(self.photos)}
         self.marks = marks
@@ -222,6 +229,13 @@ class _Problem:
         self.n = len(marks)
         self.ncol = self.P + 6 * self.nc + (1 if free_focal else 0)
         self.length = np.hypot(self.seg[:, 2] - self.seg[:, 0], self.seg[:, 3] - self.seg[:, 1])
+        # each mark's endpoint noise relative to noise_px: the larger of it and
+        # the image's own scatter along the mark (Mark.spread_px), where measured
+        self.rel = np.ones(self.n)
+        self.noise_px = noise_px
+        if noise_px is not None:
+            self.rel = np.array([max(1.0, (getattr(m, "spread_px", None) or 0.0) / noise_px)
+                                 for m in marks], float).reshape(self.n)
 
     def split(self, x):
         th = self.base.copy()
@@ -293,9 +307,11 @@ class _Problem:
 
     def weights(self, weighted):
         """Per-mark 2x2 maps h -> residuals (the eq. 5.3 weighting √(L/3) or
-        the per-length mean, 1/√3)."""
+        the per-length mean, 1/√3), each divided by the mark's relative
+        endpoint noise (``rel``; 1 unless its ``spread_px`` is above the
+        solve's ``noise_px``)."""
         s = np.sqrt(self.length / 3.0) if weighted else np.full(self.n, 1 / np.sqrt(3.0))
-        return s[:, None, None] * _A0[None]
+        return (s / self.rel)[:, None, None] * _A0[None]
 
     def residuals(self, x, A):
         return np.einsum("nij,nj->ni", A, self.distances(x)).ravel()
@@ -514,6 +530,10 @@ def check_solve_options(*, noise_px: float, max_iterations: int) -> None:
         raise InputError("max_iterations", f"expected a positive integer, got {max_iterations}")
 
 
+# the mis-mark test against each mark's own noise (its spread_px) when True;
+# False, the default: against the solve's noise_px for every mark
+OUTLIER_OWN_NOISE = False
+
 def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                  free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
                  max_iterations: int = 200, hold_unconstrained: bool = False,
@@ -611,7 +631,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
             R0[j] = min(cand, key=lambda R, sel=sel: _camera_fit(
                 R, normals[sel], prob0.C0[sel] @ th0, prob0.C1[sel] @ th0, prob0.K0[j],
                 prob0.seg[sel]))
-    prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal)
+    prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal, noise_px=noise_px)
     th, t = _linear_translations(prob, R0, model.values)        # eq. 5.5
     # a size the linear solve makes non-positive (mis-marked edges pull it) starts
     # from the model's value instead: the robust pass then finds the bad marks
@@ -675,7 +695,11 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                           **{**kw, "ftol": 1e-8, "xtol": 1e-8, "gtol": 1e-8, "tr_solver": "lsmr"})
         nfev += r.nfev
         ran_off = bool(np.any(size & (prob.split(r.x)[0] <= 0)))
-        h = prob.distances(r.x)
+        # the mis-mark test in pixels for every mark: a mark's spread_px says how
+        # well the image shows its edge, not how far off a mark may be placed
+        # (tried per mark: a mark 2-3 px off a corner the image barely shows
+        # was excused by its scatter and kept; docs/decisions/view-marking.md)
+        h = prob.distances(r.x) / (prob.rel[:, None] if OUTLIER_OWN_NOISE else 1.0)
         d = np.sqrt((h[:, 0] ** 2 + h[:, 0] * h[:, 1] + h[:, 1] ** 2) / 3.0)
         spread = 1.4826 * np.median(np.abs(h))
         limit = 5.0 * max(noise_px, spread)
@@ -687,11 +711,12 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
             # the plain solve starts from the linear initialisation instead
             pass
         elif out.any():
-            outliers = [(m.photo, m.edge, float(di)) for m, di, o in zip(kept, d, out, strict=True)
-                        if o]
-            for o in outliers:
+            scale = prob.rel if OUTLIER_OWN_NOISE else np.ones(prob.n)
+            outliers = [(m.photo, m.edge, float(di * ri))
+                        for m, di, ri, o in zip(kept, d, scale, out, strict=True) if o]
+            for o, ri in zip(outliers, scale[out], strict=True):
                 warnings.append(f"mark of {o[1]!r} on {o[0]!r} is {o[2]:.1f} px from its projected "
-                                f"edge (limit {limit:.1f} px): mis-marked? left out")
+                                f"edge (limit {limit * ri:.1f} px): mis-marked? left out")
             # the final solve without them, from the robust solution's rotations
             # (a photograph left with too few marks is dropped, the rank test reruns)
             th, w, _, _ = prob.split(r.x)
@@ -764,10 +789,11 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     h = prob.distances(x)
     n, p = prob.n, prob.ncol
     dof = max(2 * n - p, 1)
-    sigma = float(np.sqrt((h**2).sum() / dof))
+    sigma = float(np.sqrt(((h / prob.rel[:, None]) ** 2).sum() / dof))
     J = np.asarray(prob.jacobian(x, Aw, dense=True))
-    # sandwich: r = A h with cov(h) = σ² I -> cov(r) = σ² A Aᵀ
-    D = np.einsum("nji,njc->nic", Aw, J.reshape(n, 2, p)).reshape(2 * n, p)   # Aᵀ J
+    # sandwich: r = A h with cov(h) = σ² rel² I -> cov(r) = σ² (rel A)(rel A)ᵀ
+    D = np.einsum("nji,njc->nic", Aw * prob.rel[:, None, None],
+                  J.reshape(n, 2, p)).reshape(2 * n, p)   # (rel A)ᵀ J
     cov = sandwich_covariance(J, D, sigma)
     if cov is None:
         raise EstimationError(where, "the normal equations are singular at the solution")
@@ -804,7 +830,8 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
         focal_scale=float(s), focal_scale_std=float(sd[-1]) if prob.free_focal else 0.0,
         K=Ks, outliers=outliers, dropped=dropped, mark_rms_px=mark_rms, sigma_px=sigma,
         rms_px=float(np.sqrt(np.mean(h**2))), covariance=cov, unknowns=tuple(prob.column_names()),
-        warnings=warnings, seconds=time.perf_counter() - t0, nfev=nfev)
+        warnings=warnings, seconds=time.perf_counter() - t0, nfev=nfev,
+        noise_px=float(prob.noise_px) if prob.noise_px is not None else 1.0)
 
 
 # A size whose 3σ interval reaches zero is not determined (not even its
