@@ -95,34 +95,18 @@ STEP_CONSENSUS = False
 STEP_CONSENSUS_PX = 0.5   # a step's position from a parabola on 1/4 px samples: ~0.2 px; 2-3 of that
 EDGE_SUPPORT = 0.5       # a segment whose profiles mostly show no step there lies on texture, not on an edge
 EDGE_HALF_WIDTH_PX = 2.5  # searched either side of the segment; less than the snap radius, more than a drag's error
+# True: a mark the page put onto the image (a snapped drag, a re-snapped mark, a
+# refined proposal) carries the scatter of the image's steps about it
+# (:func:`step_spread`, ``spread_px`` in edges.json), and the solve counts its
+# ends as noisy by the larger of that and its noise_px; a mark drawn with
+# snapping off is the user's own and carries none
+WEIGH_BY_SPREAD = True
 
 
-def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
-                   half_width: float = EDGE_HALF_WIDTH_PX, samples: int = 32,
-                   min_support: float = EDGE_SUPPORT) -> np.ndarray | None:
-    """``seg`` ``(4,)`` (px) moved onto the intensity *step* it lies on, or
-    None when fewer than ``min_support`` of its profiles show one.
-
-    Façade's edge term (Debevec, Taylor & Malik 1996, eq. 5.3 of the
-    reference) measures a mark against the projected model edge, and a model
-    edge is seen as a step between two faces (or a face and the sky), one
-    side brighter all along it. Texture inside a face (a brick course, a
-    mortar joint) is a thin line: two opposite steps close together, with
-    the same brightness either side. So, on ``samples`` profiles across the
-    segment (``grey`` 8-bit scaled, ±``half_width`` px, ¼ px steps): the
-    signed derivative; one sign for the whole segment (the side that is
-    brighter along most of it — the face order); per profile its peak of
-    that sign, sub-pixel by a parabola, kept only when the grey level 2 px
-    beyond the peak on either side still differs by half the peak's
-    contrast in that sense (a step, not a line). A total-least-squares line
-    through the kept peaks (one 3σ trim) gives the segment, its ends the
-    orthogonal projections of the given ones; None when it moved an end by
-    more than ``half_width``.
-
-    >>> g = np.zeros((40, 60)); g[:, 30:] = 200.0; g[:, 27] = 120.0  # step at x=29.5, a line at 27
-    >>> np.round(refine_on_edge(g, np.array([28.5, 5.0, 28.5, 35.0])), 1).tolist()
-    [29.5, 5.0, 29.5, 35.0]
-    """
+def _step_points(grey, seg, half_width, samples):
+    """The profiles' steps of :func:`refine_on_edge` along ``seg`` ``(4,)``:
+    ``(points (K, 2) px, their weights (K,))``, or None for a segment
+    shorter than 4 px."""
     from scipy.ndimage import map_coordinates
 
     seg = np.asarray(seg, float)
@@ -160,10 +144,44 @@ def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
             continue
         pts.append(a + ts[k] * d + off * n)
         wts.append(peak ** 2)
+    return np.array(pts).reshape(-1, 2), np.array(wts)
+
+
+def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
+                   half_width: float = EDGE_HALF_WIDTH_PX, samples: int = 32,
+                   min_support: float = EDGE_SUPPORT) -> np.ndarray | None:
+    """``seg`` ``(4,)`` (px) moved onto the intensity *step* it lies on, or
+    None when fewer than ``min_support`` of its profiles show one.
+
+    Façade's edge term (Debevec, Taylor & Malik 1996, eq. 5.3 of the
+    reference) measures a mark against the projected model edge, and a model
+    edge is seen as a step between two faces (or a face and the sky), one
+    side brighter all along it. Texture inside a face (a brick course, a
+    mortar joint) is a thin line: two opposite steps close together, with
+    the same brightness either side. So, on ``samples`` profiles across the
+    segment (``grey`` 8-bit scaled, ±``half_width`` px, ¼ px steps): the
+    signed derivative; one sign for the whole segment (the side that is
+    brighter along most of it — the face order); per profile its peak of
+    that sign, sub-pixel by a parabola, kept only when the grey level 2 px
+    beyond the peak on either side still differs by half the peak's
+    contrast in that sense (a step, not a line). A total-least-squares line
+    through the kept peaks (one 3σ trim) gives the segment, its ends the
+    orthogonal projections of the given ones; None when it moved an end by
+    more than ``half_width``.
+
+    >>> g = np.zeros((40, 60)); g[:, 30:] = 200.0; g[:, 27] = 120.0  # step at x=29.5, a line at 27
+    >>> np.round(refine_on_edge(g, np.array([28.5, 5.0, 28.5, 35.0])), 1).tolist()
+    [29.5, 5.0, 29.5, 35.0]
+    """
+    seg = np.asarray(seg, float)
+    a, b = seg[:2], seg[2:]
+    found = _step_points(grey, seg, half_width, samples)
+    if found is None:
+        return None
+    pts, wts = found
     need = max(6, min_support * samples)
     if len(pts) < need:
         return None
-    pts, wts = np.array(pts), np.array(wts)
     if STEP_CONSENSUS:
         # the line most of the profiles' steps lie on, not a least-squares line
         # through all of them: where the building has relief the block model
@@ -184,6 +202,34 @@ def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
     if max(np.hypot(*(out[:2] - a)), np.hypot(*(out[2:] - b))) > half_width:
         return None
     return out
+
+
+def step_spread(grey: np.ndarray, seg: np.ndarray, *, half_width: float = EDGE_HALF_WIDTH_PX,
+                samples: int = 32) -> float | None:
+    """The RMS distance (px) of the image's intensity steps from the line of
+    ``seg`` ``(4,)`` along it: the profiles' steps of :func:`refine_on_edge`
+    (within ±``half_width`` px), None when fewer than six profiles show one.
+
+    A segment on a clean edge scatters by the steps' sub-pixel noise (a
+    tenth to a few tenths of a pixel); one on an edge the image shows
+    weakly, or broken by relief the model lacks (a pilaster's foot along a
+    wall's bottom), by its steps' spread about the line fitted through them.
+
+    >>> g = np.zeros((40, 60)); g[:, 30:] = 200.0
+    >>> round(step_spread(g, np.array([29.5, 5.0, 29.5, 35.0])), 3)
+    0.0
+    >>> g[20:, 30:32] = 0.0; g[20:, 32:] = 200.0      # the lower half's step 2 px to the right
+    >>> round(step_spread(g, np.array([30.5, 5.0, 30.5, 35.0])), 1)
+    1.0
+    """
+    seg = np.asarray(seg, float)
+    found = _step_points(grey, seg, half_width, samples)
+    if found is None or len(found[0]) < 6:
+        return None
+    a, b = seg[:2], seg[2:]
+    d = (b - a) / np.hypot(*(b - a))
+    h = (found[0] - a) @ np.array([-d[1], d[0]])
+    return float(np.sqrt(np.mean(h ** 2)))
 
 
 def _consensus(pts: np.ndarray, tol: float) -> np.ndarray:
@@ -279,6 +325,9 @@ CHECK_MARKS = 3
 # RMS distance to its solved edge. Chosen on seeds 2-80 (eleventh pass)
 CHECK_BY = "deleted"
 CHECK_MIN_SCORE = 2.0   # P(√(χ²₂/2) > 2) = e⁻⁴ ≈ 0.02 per mark on noise alone
+# True: a mark's deleted residual is measured against its own noise (its
+# spread_px where that is above the solve's noise); False: against the solve's
+CHECK_OWN_NOISE = False
 
 
 def marks_to_check(marks: dict, residual_by_id: dict, *, count: int | None = None,
@@ -550,7 +599,7 @@ class FacadeSession:
         marks = EdgeMarks.from_dict(body, model=self.model, photographs=self.photos,
                                     image_sizes=self.sizes, where=path)
         for m in marks.marks:
-            self._store(m.photo, m.edge, m.segment, m.proposed)
+            self._store(m.photo, m.edge, m.segment, m.proposed, spread=m.spread_px)
         extra = body.get(UNASSIGNED_KEY, {})
         check(extra, "object", path=str(path), key=UNASSIGNED_KEY)
         for photo, segs in extra.items():
@@ -569,12 +618,19 @@ class FacadeSession:
     def sizes(self) -> dict:
         return {p: tuple(img.shape[1::-1]) for p, img in self.images.items()}
 
-    def _store(self, photo, edge, seg, proposed, *, into=None) -> dict:
+    def _store(self, photo, edge, seg, proposed, *, into=None, spread=None) -> dict:
         m = {"id": self._next, "photo": photo, "edge": edge,
              "segment": [float(v) for v in seg], "proposed": bool(proposed)}
+        if spread is not None:
+            m["spread_px"] = float(spread)
         (self.marks if into is None else into)[self._next] = m
         self._next += 1
         return m
+
+    def _spread(self, photo, seg) -> float | None:
+        """The image's step scatter about a segment the page put on the
+        image (:func:`step_spread`), when :data:`WEIGH_BY_SPREAD`."""
+        return step_spread(self.grey(photo), np.asarray(seg, float)) if WEIGH_BY_SPREAD else None
 
     def _photo(self, photo) -> str:
         if isinstance(photo, int) and not isinstance(photo, bool) and 0 <= photo < len(self.photos):
@@ -681,6 +737,8 @@ class FacadeSession:
                     e = {"edge": m["edge"], "segment": m["segment"]}
                     if m["proposed"]:
                         e["proposed"] = True
+                    if m.get("spread_px") is not None:
+                        e["spread_px"] = m["spread_px"]
                     body["photographs"][m["photo"]].append(e)
             return EdgeMarks.from_dict(body, model=self.model, photographs=self.photos,
                                        image_sizes=self.sizes, where=self.edges_path)
@@ -731,7 +789,8 @@ class FacadeSession:
         with self._lock:
             if edge is not None:
                 self._drop_same(photo, edge)
-            m = self._store(photo, edge, seg, False)
+            m = self._store(photo, edge, seg, False,
+                            spread=self._spread(photo, seg) if snapped else None)
             self.save()
             # how far snapping moved the drag (px, the farther end): the page
             # shows it, so a user sees a snap that left the line they traced
@@ -758,10 +817,12 @@ class FacadeSession:
             return m
 
     def move(self, mark_id, segment) -> dict:
-        """Replace a mark's segment (no snapping); saved."""
+        """Replace a mark's segment (no snapping: the user's own, with no
+        step scatter); saved."""
         with self._lock:
             m = self.find(mark_id)
             m["segment"] = [float(v) for v in self._segment(segment, "segment", m["photo"])]
+            m.pop("spread_px", None)
             self.save()
             return m
 
@@ -866,7 +927,8 @@ class FacadeSession:
         und = self._undistorted(marks)
         kept = [m for m in und.marks if (m.photo, m.edge) not in out]
         try:
-            t = deleted_residuals(sol, replace(und, marks=tuple(kept)).marks)
+            t = deleted_residuals(sol, replace(und, marks=tuple(kept)).marks,
+                                  own_noise=CHECK_OWN_NOISE)
         except np.linalg.LinAlgError:
             # (a Jacobian with non-finite entries) the list falls back to the residuals
             return None
@@ -945,6 +1007,11 @@ class FacadeSession:
                     flagged.append(k)
                     continue
                 self.marks[k]["segment"] = [float(v) for v in new]
+                sp = self._spread(m.photo, new)
+                if sp is None:
+                    self.marks[k].pop("spread_px", None)
+                else:
+                    self.marks[k]["spread_px"] = sp
                 moved.append(k)
             self.save()
             return {"moved": moved, "flagged": flagged, "deleted": deleted, "band_px": band}
@@ -978,7 +1045,8 @@ class FacadeSession:
                         seg = refine_on_edge(self.grey(m.photo), np.asarray(seg, float))
                         if seg is None:
                             continue
-                    self._store(m.photo, m.edge, seg, True, into=self.proposals)
+                    self._store(m.photo, m.edge, seg, True, into=self.proposals,
+                                spread=self._spread(m.photo, seg) if refine else None)
             self.proposal_warnings = list(res.warnings)
             return list(self.proposals.values())
 

@@ -6,6 +6,9 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
     SNAPSTEP=1 ... (snapping onto the step, marking.refine_on_edge; default: the library's SNAP_ON_STEP)
     OVERDRAG=1 ... (snapping refines over the dragged stretch, no snap where the image shows no line there; default: the library's SNAP_OVER_DRAG)
     WSTEP=1 ... (refine_on_edge's line fit weighted by contrast squared; default: the library's WEIGHTED_STEPS)
+    SPREAD=1 ... (the marks the page puts on the image carry their step scatter, the solve
+        weighs them by it; default: the library's WEIGH_BY_SPREAD)
+    SPREADTRY=1 ... (diagnostic: the final marks solved again weighted by their step scatter)
     CONSENSUS=0 ... (refine_on_edge's line through every profile's step, not the steps most agree on; default: the library's STEP_CONSENSUS)
     REFINE=0 ... (proposals not moved onto the intensity step, marking.refine_on_edge)
     ROUNDS=1 ... (further rounds: Re-snap, Propose again, accept, Solve again; default 2)
@@ -17,6 +20,10 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
         the tenth pass, that run ends in "no solve after the rounds")
     CHECK=0 ... (the user does not redraw the hand marks the last Solve lists to check,
         marking.marks_to_check; default 1: redraws them, snapping off, and solves again)
+    CHECK_OWN_NOISE=0 ... (with SPREAD=1: the check list's deleted residuals against the
+        solve's noise, not each mark's own; marking.CHECK_OWN_NOISE)
+    OUTLIER_OWN_NOISE=1 ... (with SPREAD=1: the solver's mis-mark test against each mark's own
+        noise; solve.OUTLIER_OWN_NOISE)
     CHECK_MARKS=3 CHECK_ROUNDS=1 ... (marking.CHECK_MARKS; rounds of redrawing the listed marks)
     DEGEN=inf ... (the solver's test of a degenerate linear start looks for non-finite Jacobians
         only, as before the twelfth pass: solve.DEGENERATE_COLUMN)
@@ -118,6 +125,11 @@ def main(size, seeds, snap=True, out=None):
 
     if os.environ.get("SNAPPX"):
         marking.SNAP_DISTANCE_PX = float(os.environ["SNAPPX"])
+    if os.environ.get("OUTLIER_OWN_NOISE"):
+        from lumigraph.stereo.debevec1996 import solve as _s
+        _s.OUTLIER_OWN_NOISE = os.environ["OUTLIER_OWN_NOISE"] == "1"
+    if os.environ.get("CHECK_OWN_NOISE"):
+        marking.CHECK_OWN_NOISE = os.environ["CHECK_OWN_NOISE"] == "1"
     for k in ("WEAK_FACTOR", "WEAK_SUGGESTIONS", "CHECK_MARKS", "CHECK_BY", "CHECK_MIN_SCORE"):
         if os.environ.get(k):
             setattr(marking, k, type(getattr(marking, k))(os.environ[k]))
@@ -125,6 +137,7 @@ def main(size, seeds, snap=True, out=None):
     marking.WEIGHTED_STEPS = os.environ.get("WSTEP", "1" if marking.WEIGHTED_STEPS else "0") == "1"
     marking.SNAP_ON_STEP = os.environ.get("SNAPSTEP", "1" if marking.SNAP_ON_STEP else "0") == "1"
     marking.STEP_CONSENSUS = os.environ.get("CONSENSUS", "1" if marking.STEP_CONSENSUS else "0") == "1"
+    marking.WEIGH_BY_SPREAD = os.environ.get("SPREAD", "1" if marking.WEIGH_BY_SPREAD else "0") == "1"
     if os.environ.get("DEGEN"):
         from lumigraph.stereo.debevec1996 import solve as _solve
         _solve.DEGENERATE_COLUMN = float(os.environ["DEGEN"])
@@ -419,6 +432,26 @@ def main(size, seeds, snap=True, out=None):
             for mk in em.marks:
                 if not mk.proposed:
                     print(f"    hand {mk.photo} {mk.edge} %+.2f %+.2f" % ends(mk))
+        if os.environ.get("SPREADTRY"):
+            # the solve again with every mark's measured step spread (marking.step_spread)
+            # as its own noise floor (diagnostic: would weighting by it help?)
+            from dataclasses import replace as _replace
+
+            from lumigraph.view.marking import step_spread
+            em = ses.edge_marks()
+            sp = [step_spread(ses.grey(mk.photo), mk.segment) for mk in em.marks]
+            ms = tuple(_replace(mk, spread_px=v) for mk, v in zip(em.marks, sp, strict=True))
+            try:
+                w = rel(solve_facade(ses.model, _replace(em, marks=ms), ses._K(),
+                                     noise_px=EDGE_NOISE_PX).params) / expected
+            except ValueError:
+                w = float("nan")
+            un = rel(solve_facade(ses.model, em, ses._K(), noise_px=EDGE_NOISE_PX).params) / expected
+            hs = [v for v, mk in zip(sp, em.marks, strict=True) if not mk.proposed and v is not None]
+            ps = [v for v, mk in zip(sp, em.marks, strict=True) if mk.proposed and v is not None]
+            print(f"  spread: as marked {un:.2f}, weighted by spread {w:.2f}; spread hand median "
+                  f"{np.median(hs):.2f} (>0.5: {sum(v > 0.5 for v in hs)} of {len(hs)}), proposals "
+                  f"{np.median(ps):.2f} (>0.5: {sum(v > 0.5 for v in ps)} of {len(ps)})", flush=True)
         if os.environ.get("ATTRIB"):
             # each mark's share of a parameter's error: the change when that
             # mark alone is put back on its true line (diagnostic)

@@ -151,6 +151,36 @@ def test_a_dragged_segment_snaps_onto_the_edge(scene, tmp_path):
     assert r.get_json()["segment"] == pytest.approx(drag.tolist())
 
 
+def test_a_snapped_mark_carries_its_step_spread_and_one_moved_by_hand_none(scene, tmp_path,
+                                                                           monkeypatch):
+    import lumigraph.view.marking as marking
+    from lumigraph.stereo.debevec1996.edges import load_edges
+
+    monkeypatch.setattr(marking, "WEIGH_BY_SPREAD", True)
+    folder, _ = scene
+    c, s = _client(folder, tmp_path / "e.json")
+    full = json.loads((folder / "edges.json").read_text())["photographs"]
+    m = max(full["photo_00.png"], key=lambda e: np.hypot(e["segment"][2] - e["segment"][0],
+                                                       e["segment"][3] - e["segment"][1]))
+    got = c.post("/api/facade/marks", json={"photo": "photo_00.png", "segment": m["segment"],
+                                            "edge": m["edge"]}).get_json()
+    assert got["snapped"]
+    # the scatter of the image's steps about the snapped segment, as step_spread measures it
+    assert got["spread_px"] == pytest.approx(
+        marking.step_spread(s.grey("photo_00.png"), np.asarray(got["segment"])))
+    saved = load_edges(tmp_path / "e.json", model=s.model, photographs=s.photos).marks
+    assert [k.spread_px for k in saved] == [pytest.approx(got["spread_px"])]
+    # moved by hand: the user's own placement, no measured scatter
+    moved = c.post(f"/api/facade/marks/{got['id']}", json={"segment": got["dragged"]}).get_json()
+    assert "spread_px" not in moved
+    saved = load_edges(tmp_path / "e.json", model=s.model, photographs=s.photos).marks
+    assert [k.spread_px for k in saved] == [None]
+    # drawn with snapping off: none either
+    got = c.post("/api/facade/marks", json={"photo": "photo_01.png", "segment": m["segment"],
+                                            "snap": False}).get_json()
+    assert "spread_px" not in got
+
+
 def test_the_weak_list_names_a_side_marked_once_and_the_edges_that_hold_it(scene, tmp_path):
     """The scene's own marks (σ = 0.5 px) with the wing's right side kept in
     one mark only: its width is then held by that mark alone (its left side

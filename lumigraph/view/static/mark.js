@@ -402,7 +402,11 @@
         // shown as such, with the way back ("keep as drawn")
         S.lastDrag = m.snapped ? { id: m.id, dragged: m.dragged } : null;
         $("unsnap").disabled = !m.snapped;
-        status(m.snapped ? `segment snapped to a detected line (moved ${m.jump_px.toFixed(1)} px; ` +
+        // the scatter of the image's steps about the snapped line: a weak or
+        // broken edge (relief the model lacks) counts for less in the Solve
+        const spread = typeof m.spread_px === "number" ? `, the image's edge scatters ` +
+                       `${m.spread_px.toFixed(2)} px about it` : "";
+        status(m.snapped ? `segment snapped to a detected line (moved ${m.jump_px.toFixed(1)} px${spread}; ` +
                            "not the line you traced? keep as drawn); click its model edge" :
                $("snap").checked ? "segment drawn (no detected line near); click its model edge" :
                                    "segment drawn; click its model edge");
