@@ -37,8 +37,10 @@ marking mode (Façade, 'lumigraph stereo facade solve --help' for the files):
                    (a folder with stack.json, blocks.json and camera.json)
   In the page: wheel to zoom, drag with the middle button (or Shift+drag) to pan,
   drag to draw a segment (it snaps to a detected line when one is near, unless
-  "snap" is unticked; the status line says how far it moved, and "Keep as
-  drawn" undoes a snap that left the line you traced), click
+  "snap" is unticked; the status line says how far it moved and how far the
+  image's edge scatters about it (a weak or broken edge: the Solve counts it
+  for less), and "Keep as drawn" undoes a snap that left the line you
+  traced), click
   an edge in the list (or its reprojection) to assign the selected segment,
   Delete to remove it. "Solve" fits the model and overlays the reprojected
   edges and each mark's residual (px), lists the weakly constrained

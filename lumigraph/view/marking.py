@@ -213,7 +213,10 @@ def step_spread(grey: np.ndarray, seg: np.ndarray, *, half_width: float = EDGE_H
     A segment on a clean edge scatters by the steps' sub-pixel noise (a
     tenth to a few tenths of a pixel); one on an edge the image shows
     weakly, or broken by relief the model lacks (a pilaster's foot along a
-    wall's bottom), by its steps' spread about the line fitted through them.
+    wall's bottom), by far more; and a segment off its step by that offset.
+    The page stores it with the mark (``spread_px``) and the solve counts
+    the mark's ends as noisy by the larger of it and its ``noise_px``
+    (``stereo/debevec1996/solve.py``).
 
     >>> g = np.zeros((40, 60)); g[:, 30:] = 200.0
     >>> round(step_spread(g, np.array([29.5, 5.0, 29.5, 35.0])), 3)

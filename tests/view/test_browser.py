@@ -140,8 +140,10 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
         seg = np.asarray(drawn["segment"]) + np.random.default_rng(3).normal(0, EDGE_NOISE_PX, 4)
         _drag(d, canvas, seg)
         _wait(d, "return window.lumiMark.selected !== null && window.lumiMark.busy === 0")
-        # the snap says how far it moved the drag, and offers the way back
+        # the snap says how far it moved the drag and how far the image's
+        # edge scatters about it, and offers the way back
         assert "moved" in d.find_element(By.ID, "status").text
+        assert "scatters" in d.find_element(By.ID, "status").text
         assert d.find_element(By.ID, "unsnap").is_enabled()
         d.find_element(By.CSS_SELECTOR, f'#edge-list li[data-edge="{drawn["edge"]}"]').click()
         _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.marks.some("
@@ -153,6 +155,8 @@ def test_draw_assign_propose_solve_in_the_browser(browser, tmp_path):
         # snapped onto the edge: within half a pixel of the true line (one
         # rendered sample per pixel side pair locates an edge that well)
         assert distance(mine[0].segment, truth[first][drawn["edge"]]) <= 0.5
+        # saved with the image's scatter about it, which the Solve weighs it by
+        assert mine[0].spread_px is not None
 
         d.find_element(By.ID, "propose").click()
         _wait(d, "return window.lumiMark.busy === 0 && "
