@@ -20,8 +20,9 @@ add to ``Err``. A mark that carries its own noise (``spread_px``, the
 scatter of the image's step along it, measured where the mark was snapped
 onto the photograph) above ``noise_px`` has its residuals divided by
 ``rel = spread_px / noise_px``: weighted least squares, each mark's ends
-counted by the inverse of their variance. The unknowns are the free block parameters, a rotation
-(``R_j = exp([ω_j]×) R_j⁰``) and translation per photograph and, optionally,
+counted by the inverse of their variance. The unknowns are the free block
+parameters, a rotation (``R_j = exp([ω_j]×) R_j⁰``) and translation per
+photograph and, optionally,
 one focal-length scale shared by every photograph. The Jacobian is analytic
 (the edge endpoints are linear in ``θ``, :meth:`BlockModel.edge_matrices`);
 it is block-sparse (a mark touches its own photograph's six pose columns and
@@ -533,6 +534,7 @@ def check_solve_options(*, noise_px: float, max_iterations: int) -> None:
 # the mis-mark test against each mark's own noise (its spread_px) when True;
 # False, the default: against the solve's noise_px for every mark
 OUTLIER_OWN_NOISE = False
+
 
 def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                  free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
