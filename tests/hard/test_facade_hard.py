@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import json
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 from cli_catalog import run_cli
+from facade_checks import fixture_cameras, fixture_model
 
 from lumigraph.capture.errors import EstimationError
 from lumigraph.capture.scenes.facade_edges import (
@@ -25,21 +25,17 @@ from lumigraph.capture.scenes.facade_edges import (
 from lumigraph.stereo.bench_facade import four_hand_marks
 from lumigraph.stereo.debevec1996.automark import automark
 from lumigraph.stereo.debevec1996.edges import EdgeMarks
-from lumigraph.stereo.debevec1996.model import load_blocks
 from lumigraph.stereo.debevec1996.solve import solve_facade
-
-BLOCKS = Path(__file__).resolve().parents[2] / "fixtures" / "facade" / "blocks.json"
 
 
 @pytest.fixture(scope="module")
 def model():
-    return load_blocks(BLOCKS)
+    return fixture_model()
 
 
 @pytest.fixture(scope="module")
 def cams():
-    return ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700,
-                        rng=np.random.default_rng(1), jitter=0.05)
+    return fixture_cameras()
 
 
 def marks_of(model, cams, photographs=None, **kw):

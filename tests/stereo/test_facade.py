@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from cli_catalog import run_cli
-from facade_checks import assert_jacobian_matches_differences
+from facade_checks import assert_jacobian_matches_differences, fixture_cameras, fixture_model
 
 from lumigraph.capture.errors import InputError
 from lumigraph.capture.scenes.facade_edges import project_edges, ring_cameras, write_facade_folder
 from lumigraph.stereo.debevec1996.edges import EdgeMarks
-from lumigraph.stereo.debevec1996.model import BlockModel, load_blocks
+from lumigraph.stereo.debevec1996.model import BlockModel
 from lumigraph.stereo.debevec1996.solve import _Problem, solve_facade
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -28,13 +28,12 @@ BLOCKS = ROOT / "fixtures" / "facade" / "blocks.json"
 
 @pytest.fixture(scope="module")
 def model():
-    return load_blocks(BLOCKS)
+    return fixture_model()
 
 
 @pytest.fixture(scope="module")
 def cams():
-    return ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700,
-                        rng=np.random.default_rng(1), jitter=0.05)
+    return fixture_cameras()
 
 
 def marks_of(model, cams, **kw):

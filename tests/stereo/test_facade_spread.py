@@ -10,30 +10,27 @@ levels, each told its own, the reported σ still predicts the error.
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
+from facade_checks import fixture_cameras, fixture_model
 
 from lumigraph.capture.errors import InputError
-from lumigraph.capture.scenes.facade_edges import project_edges, ring_cameras
+from lumigraph.capture.scenes.facade_edges import project_edges
 from lumigraph.stereo.debevec1996.edges import EdgeMarks
-from lumigraph.stereo.debevec1996.model import load_blocks
 from lumigraph.stereo.debevec1996.solve import solve_facade
 
-BLOCKS = Path(__file__).resolve().parents[2] / "fixtures" / "facade" / "blocks.json"
 NOISE = 0.5
 
 
 @pytest.fixture(scope="module")
 def model():
-    return load_blocks(BLOCKS)
+    return fixture_model()
 
 
 @pytest.fixture(scope="module")
 def cams():
-    return ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700,
-                        rng=np.random.default_rng(1), jitter=0.05)
+    return fixture_cameras()
 
 
 def _marks(model, cams, rng, noise=NOISE):
