@@ -217,7 +217,8 @@ def _solve(args) -> int:
         # would constrain it, in the order to mark them (as the view's page)
         spots = unconstrained_spots(model, _undistorted(marks, camera), {p: camera.K for p in photos},
                                     sizes, e.unknowns, noise_px=args.noise_px, where=str(edges_path))
-        raise Unconstrained(e.where, e.unknowns, details=refusal_lines(spots)) from None
+        raise Unconstrained(e.where, e.unknowns, details=refusal_lines(spots),
+                            at_solution=e.at_solution) from None
     for w in sol.warnings:
         warn(w)
     meta = make_meta("lumigraph.facade.model",
