@@ -133,6 +133,28 @@ class Unconstrained(EstimationError):
                            "those parameters", details=details)
 
 
+class CannotSeeMarks(EstimationError):
+    """The solver's refusal when a solved camera sits on the line of one of
+    its marked edges: the edge projects to a point there, eq. 5.3's
+    projected line is undefined, and a solve can end on it with small
+    residuals (a camera 20 m off on the corner where two of its marked
+    edges meet, seed 226 of the marking eval). ``photos`` names them,
+    ``edges`` maps each to ``(edge, why)``.
+
+    >>> CannotSeeMarks("edges.json", {"photo_03.png": ("house/top-front", "x")}).photos
+    ('photo_03.png',)
+    """
+
+    def __init__(self, where, edges):
+        self.edges = dict(edges)
+        self.photos = tuple(self.edges)
+        super().__init__(where, "; ".join(
+            f"the solved camera of {p!r} cannot see its mark of {e!r} ({why})"
+            for p, (e, why) in self.edges.items())
+            + ": a wrong pose that fits the marks; mark edges in other directions on that "
+              "photograph, or give a rough pose")
+
+
 class NoRotationStart(EstimationError):
     """The solver's refusal when a photograph's marks cannot start its
     rotation (eq. 5.4 needs two edges along each of two of the model's axes)
@@ -393,23 +415,52 @@ def _rotation_refine(R, normals, dirs, iterations=10):
 def _rotation_from_vanishing(normals, axes):
     """Candidate rotations from the vanishing directions of two or three
     world axes (eq. 5.4 without a start); None when fewer than two axes have
-    two marks."""
-    v = {}
+    two marks.
+
+    The axis whose marks' interpretation planes differ most (the largest
+    second singular value of their normals) gives its vanishing direction
+    alone; the next is fitted perpendicular to it (the smallest singular
+    vector of its normals projected on the plane normal to the first).
+    Two marks of one axis that nearly coincide in the image (two vertical
+    edges of a tower seen along its side, seed 226 of the marking eval)
+    make their own intersection meaningless; fitted perpendicular to a
+    well-seen axis the direction is one angle, not two, and each mark
+    fixes it. (Before 2026-12-03 each axis's direction was its own and the
+    two were made orthogonal afterwards: that start was 86° off there.)
+
+    >>> R = Rotation.from_euler("xyz", [100, 5, 30], degrees=True).as_matrix()
+    >>> pts = {0: [(0, 1, 5), (0, -1, 5), (0, 2, 7)], 2: [(1, 0, 5), (-1, 0, 6)]}
+    >>> N, ax = [], []
+    >>> for a, offs in pts.items():
+    ...     for o in offs:
+    ...         n = np.cross(R @ np.array(o, float), R[:, a])
+    ...         N.append(n / np.linalg.norm(n)); ax.append(a)
+    >>> cands = _rotation_from_vanishing(np.array(N), np.array(ax))
+    >>> bool(min(np.abs(c - R).max() for c in cands) < 1e-12)
+    True
+    """
+    v, spread = {}, {}
     for a in range(3):
         N = normals[axes == a]
         if len(N) >= 2:
-            v[a] = np.linalg.svd(N)[2][-1]
+            _, sv, Vt = np.linalg.svd(N)
+            v[a], spread[a] = Vt[-1], sv[1]    # (2 or more marks: sv[1] exists)
     if len(v) < 2:
         return None
+    first, second = sorted(v, key=lambda a: -spread[a])[:2]
+    # the second: min Σ (nᵀ v)² over unit v in the plane normal to the first,
+    # v = B c with B an orthonormal basis of that plane
+    B = np.linalg.svd(v[first][None])[2][1:].T
+    c = np.linalg.svd(normals[axes == second] @ B)[2][-1]
+    v = {first: v[first], second: B @ c}
     out = []
     for signs in np.ndindex(2, 2, 2):
         cols = {a: (1.0 - 2.0 * signs[a]) * v[a] for a in v}
-        if len(cols) == 2:
-            a, b = sorted(cols)
-            c = 3 - a - b
-            cols[c] = np.cross(cols[(c + 1) % 3], cols[(c + 2) % 3])
-            if signs[c]:
-                continue                  # the completed axis carries no sign of its own
+        a, b = sorted(cols)
+        c = 3 - a - b
+        cols[c] = np.cross(cols[(c + 1) % 3], cols[(c + 2) % 3])
+        if signs[c]:
+            continue                  # the completed axis carries no sign of its own
         M = np.stack([cols[0], cols[1], cols[2]], 1)
         U, _, Vt = np.linalg.svd(M)
         R = U @ Vt
@@ -417,6 +468,29 @@ def _rotation_from_vanishing(normals, axes):
             continue                      # a reflection, or world up looking down (y is down)
         out.append(R)
     return out
+
+
+# a marked edge projected this much shorter than its mark: the camera sits on
+# (next to) the edge's line. A mark can be longer than its edge's projection
+# (snapped along a collinear neighbour: 76 px on an 18 px edge, seed 239 of
+# the marking eval, a quarter flagged it), not twenty times longer; on the
+# line the projection is a point (0 px under 138 px marks, seed 226)
+COLLAPSED = 0.05
+
+
+def _unseen_edge(edges, uv, z, lengths):
+    """The first of ``edges`` (one photograph's marked edges) that its
+    camera cannot see, as ``(edge, why)``: projected ``COLLAPSED`` times
+    shorter than its mark (``uv`` its endpoints' pixels (k, 2, 2), ``z``
+    their depths (k, 2), ``lengths`` its marks' lengths (k,)): the camera
+    sits on the edge's line. None when none is."""
+    for i, e in enumerate(edges):
+        if np.all(z[i] > 0):
+            proj = float(np.linalg.norm(uv[i, 1] - uv[i, 0]))
+            if proj < COLLAPSED * lengths[i]:
+                return e, (f"the camera is on the edge's line: it projects to {proj:.1f} px, "
+                           f"its mark is {lengths[i]:.0f} px")
+    return None
 
 
 def _camera_fit(R, N, X0, X1, K, seg) -> float:
@@ -583,6 +657,50 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         constrains (named); a photograph whose rotation cannot be
         initialised; fewer than two photographs left.
     """
+    rough = dict(rough_rotations or {})
+    retried: list[str] = []
+    while True:
+        alternatives: dict = {}
+        try:
+            sol = _solve_facade(model, marks, K, rough_rotations=rough or None,
+                                free_focal=free_focal, noise_px=noise_px, robust=robust,
+                                max_iterations=max_iterations,
+                                hold_unconstrained=hold_unconstrained, where=where,
+                                alternatives=alternatives)
+            break
+        except (Unconstrained, CannotSeeMarks) as e:
+            # a pose free at the solution, or one that cannot see its marks,
+            # started from its vanishing directions' best-fitting sign: the
+            # mirror image of the pose through its marks can fit them as well
+            # (seed 226 of the marking eval: every mark of the photograph on the
+            # front wall but one). Its next candidate, once.
+            if isinstance(e, CannotSeeMarks):
+                named = set(e.photos)
+            else:
+                named = {u.split(":")[0] for u in e.unknowns if ":" in u}
+                if not (e.at_solution and all(":" in u for u in e.unknowns)):
+                    raise
+            if not (named and named <= alternatives.keys() and alternatives
+                    and all(alternatives[p] for p in named)):
+                raise
+            for p in sorted(named):
+                rough[p] = alternatives[p][0]
+                retried.append(p)
+    if retried:
+        sol = replace(sol, warnings=[
+            f"photograph {p!r}: its pose was free where the solve from its vanishing directions "
+            "ended; solved again from their next candidate rotation" for p in retried]
+            + sol.warnings)
+    return sol
+
+
+def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
+                  free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
+                  max_iterations: int = 200, hold_unconstrained: bool = False,
+                  where: str = "edges.json", alternatives: dict | None = None) -> FacadeSolution:
+    """:func:`solve_facade` from one start; ``alternatives``, when given, is
+    filled with ``photo -> [the other candidate rotations, best first]`` of
+    the photographs whose rotation came from vanishing directions."""
     check_solve_options(noise_px=noise_px, max_iterations=max_iterations)
     t0 = time.perf_counter()
     warnings: list[str] = []
@@ -634,9 +752,13 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
     for j, cand in enumerate(candidates):
         if len(cand) > 1:
             sel = prob0.cam == j
-            R0[j] = min(cand, key=lambda R, sel=sel: _camera_fit(
-                R, normals[sel], prob0.C0[sel] @ th0, prob0.C1[sel] @ th0, prob0.K0[j],
-                prob0.seg[sel]))
+            fit = [_camera_fit(R, normals[sel], prob0.C0[sel] @ th0, prob0.C1[sel] @ th0,
+                               prob0.K0[j], prob0.seg[sel]) for R in cand]
+            order = np.argsort(fit, kind="stable")
+            candidates[j] = [cand[i] for i in order]
+            R0[j] = candidates[j][0]
+            if alternatives is not None:
+                alternatives[photos[j]] = candidates[j][1:]
     prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal, noise_px=noise_px)
     th, t = _linear_translations(prob, R0, model.values)        # eq. 5.5
     # a size the linear solve makes non-positive (mis-marked edges pull it) starts
@@ -741,14 +863,22 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
             x0 = r.x
     try:
         return _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where)
-    except Unconstrained as e:
-        if not hold_unconstrained:
+    except (Unconstrained, CannotSeeMarks) as e:
+        # a camera that cannot see its marks, with candidate rotations left, goes
+        # back to solve_facade to start again from the next of them
+        retry = (isinstance(e, CannotSeeMarks) and bool(alternatives)
+                 and all(alternatives.get(p) for p in e.photos))
+        if not hold_unconstrained or retry:
             raise
         # a rough solve treats what the solution's rank test finds free as the
         # start's test does: the parameters held, else the photographs left out
-        # (a rough pose that ends with a marked edge through its centre, seed 226)
-        held = [b for b in e.unknowns if ":" not in b and b != "focal_scale"]
-        lost = [] if held else sorted({b.split(":")[0] for b in e.unknowns if ":" in b})
+        # (a rough pose that ends with a marked edge through its centre, seed 226);
+        # a camera that cannot see its marks is left out too
+        if isinstance(e, CannotSeeMarks):
+            held, lost = [], sorted(e.photos)
+        else:
+            held = [b for b in e.unknowns if ":" not in b and b != "focal_scale"]
+            lost = [] if held else sorted({b.split(":")[0] for b in e.unknowns if ":" in b})
         if not (held or lost):
             raise
         sol = solve_facade(model.with_fixed(held), _without(marks, lost) if lost else marks, K,
@@ -757,8 +887,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                            where=where, hold_unconstrained=True)
         # (the solve reruns from the marks: its warnings and dropped photographs are the new ones)
         said = ("held at their starting values (free at the solution): " + ", ".join(held)
-                if held else "left out (their marks do not fix their pose at the solution): "
-                + ", ".join(lost))
+                if held else "left out (their marks do not fix their pose at the solution, or "
+                "the solved camera cannot see them): " + ", ".join(lost))
         return replace(sol, warnings=[said] + sol.warnings, dropped=lost + sol.dropped,
                        held=tuple(held) + sol.held)
 
@@ -837,6 +967,25 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     std_slot[prob.free] = sd[: prob.P]
     params = fitted.named_values()
     std = {nm: float(std_slot[model.slot_of(nm)]) for nm in params}
+    # each solved camera must be able to see what it marked: not from a point on
+    # a marked edge's line (eq. 5.3's projected line is undefined there, and a
+    # solve can end on it: seed 226 of the marking eval, a camera 20 m off on
+    # the corner where two of its marked edges meet, the parameters right)
+    edge_names = [m.edge for m in prob.marks]
+    unseen = {}
+    P0, P1 = prob.C0 @ th, prob.C1 @ th
+    Y = [np.einsum("nij,nj->ni", R[prob.cam], P) + t[prob.cam] for P in (P0, P1)]
+    u = [np.einsum("nij,nj->ni", prob.K0[prob.cam], y) for y in Y]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        uv = np.stack([x[:, :2] / x[:, 2:] for x in u], 1)
+    z = np.stack([y[:, 2] for y in Y], 1)
+    for j, ph in enumerate(prob.photos):
+        sel = np.flatnonzero(prob.cam == j)
+        e = _unseen_edge([edge_names[i] for i in sel], uv[sel], z[sel], prob.length[sel])
+        if e is not None:
+            unseen[ph] = e
+    if unseen:
+        raise CannotSeeMarks(where, unseen)
     poses, pose_std, Ks = {}, {}, {}
     for j, ph in enumerate(prob.photos):
         poses[ph] = (R[j], t[j].copy())

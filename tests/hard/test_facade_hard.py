@@ -142,8 +142,95 @@ def test_a_rough_solve_leaves_out_a_photograph_free_at_the_solution(model, cams,
     assert exact(sol, model) < 1e-8
     calls.clear()
     with pytest.raises(S.Unconstrained) as e:      # a final solve refuses instead
-        solve_facade(model, mk(raw), K(cams))
+        # (from given rotations: no other candidate to start the photograph from)
+        solve_facade(model, mk(raw), K(cams), rough_rotations={p: c["R"] for p, c in cams.items()})
     assert e.value.at_solution and e.value.unknowns[0] == "photo_03.png:rotation"
+
+
+def test_a_vanishing_direction_from_two_nearly_coincident_marks(model, cams):
+    """Two vertical edges seen nearly one behind the other (a tower along its
+    side, seed 226 of the marking eval) give interpretation planes a
+    fraction of a degree apart; a 0.5 px error then moves their own
+    intersection anywhere (the directions fitted separately were 5-71° off
+    over these five draws). Fitted perpendicular to the well-seen
+    horizontal direction, the vertical is one angle, and the best candidate
+    must be a start the solve converges from: within the ±15° of rotation
+    that the bench's random starts show it reaches the minimum from."""
+    from scipy.spatial.transform import Rotation
+
+    from lumigraph.stereo.debevec1996.solve import _rotation_from_vanishing
+
+    R, t = (np.asarray(cams["photo_03.png"][k], float) for k in "Rt")
+    for seed in range(5):
+        rng = np.random.default_rng(seed)
+
+        def normal(X0, X1, rng=rng):
+            # the image segment's interpretation plane, endpoints off by 0.5 px at f = 700
+            u = [(R @ X + t) / (R @ X + t)[2] + np.r_[rng.normal(0, 0.5 / 700, 2), 0]
+                 for X in (X0, X1)]
+            n = np.cross(u[0], u[1])
+            return n / np.linalg.norm(n)
+
+        N = [normal(np.array([-5, -3, z]), np.array([5, -3, z])) for z in (0, 6, 3)]
+        N += [normal(np.array([8, -3, 0]), np.array([8, -3, 9])),
+              normal(np.array([8.05, -2.9, 0]), np.array([8.05, -2.9, 9]))]
+        ax = np.array([0, 0, 0, 2, 2])
+        err = min(np.degrees(Rotation.from_matrix(c.T @ R).magnitude())
+                  for c in _rotation_from_vanishing(np.array(N), ax))
+        assert err < 15.0, (seed, err)
+
+
+def test_a_camera_on_a_marked_edges_line_is_found():
+    """A camera on the line of one of its marked edges sees the edge as a
+    point: eq. 5.3's projected line is undefined there and a solve can end
+    on it with small residuals (seed 226 of the marking eval: 20 m off, on
+    the corner where two of its marked edges meet). The check on one
+    photograph's projected edges: a 120-px mark whose edge projects to
+    0.4 px is named with both lengths; a 190-px edge under its 190-px mark
+    is not (the solve's refusal path is the next test's)."""
+    import lumigraph.stereo.debevec1996.solve as S
+
+    uv = np.array([[[100.0, 50.0], [100.4, 50.0]], [[10.0, 10.0], [200.0, 10.0]]])
+    z = np.ones((2, 2))
+    e, why = S._unseen_edge(["house/top-front", "house/bottom-front"], uv, z,
+                            np.array([120.0, 190.0]))
+    assert e == "house/top-front" and "on the edge's line" in why and "0.4 px" in why
+    assert S._unseen_edge(["house/bottom-front"], uv[1:], z[1:], np.array([190.0])) is None
+
+
+def test_a_pose_that_cannot_see_its_marks_is_solved_again_from_the_next_candidate(
+        model, cams, monkeypatch):
+    """The solve from a photograph's best-fitting vanishing candidate can end
+    on a pose that cannot see its marks (the mirror image); the solver then
+    starts that photograph from its next candidate, once, and says so.
+    Made to happen here by the check failing once for ``photo_02.png``."""
+    import lumigraph.stereo.debevec1996.solve as S
+
+    raw, mk = marks_of(model, cams)
+    starts, real = [], S._solve_facade
+
+    def spy(*a, **kw):
+        starts.append(dict(kw.get("rough_rotations") or {}))
+        return real(*a, **kw)
+
+    real_unseen, flagged = S._unseen_edge, []
+
+    def once(edges, *a):
+        if not flagged and "house/top-front" in edges:
+            flagged.append(1)
+            return "house/top-front", "made to fail"
+        return real_unseen(edges, *a)
+
+    monkeypatch.setattr(S, "_solve_facade", spy)
+    monkeypatch.setattr(S, "_unseen_edge", once)
+    try:
+        sol = solve_facade(model, mk(raw), K(cams), robust=False)
+    except S.CannotSeeMarks:
+        sol = None          # the next candidate did not solve either: refused, not silent
+    flagged_photo = next(p for p in cams if p in starts[1])
+    assert len(starts) == 2 and starts[0] == {} and list(starts[1]) == [flagged_photo]
+    if sol is not None:
+        assert any(flagged_photo in w and "next candidate" in w for w in sol.warnings)
 
 
 def test_marks_from_another_photograph_are_reported(model, cams):
