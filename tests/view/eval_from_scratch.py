@@ -16,6 +16,7 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
         never / after the first solve / after every solve, the default)
     WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
     WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
+    USER_BASE=scene ... (drags start from the scene's noisy marks, not from their true lines)
     LATE_REFUSAL=0 ... (a refusal after the rounds is not answered from its list: before
         the tenth pass, that run ends in "no solve after the rounds")
     CHECK=0 ... (the user does not redraw the hand marks the last Solve lists to check,
@@ -98,6 +99,9 @@ REDO = float(os.environ.get("REDO", "0"))
 # the simulated user marks at most this many of the suggested edges a
 # photograph shows, per weakly constrained parameter
 WEAK_USER = int(os.environ.get("WEAK_USER", "4"))
+# where the simulated user's drags start: "truth" (the scene's mark on its true
+# line) or "scene" (its noisy mark, before the fifteenth pass)
+USER_BASE = os.environ.get("USER_BASE", "truth")
 
 
 def expected_full_error(model, full, truth, rel, photos, K, *, draws, seed):
@@ -160,8 +164,18 @@ def main(size, seeds, snap=True, out=None):
             else 7 + int(os.environ.get("DRAW", "0")))
         redone = []
 
+        def where_user_drags(p, m, truth=truth):
+            """The stretch of edge the user traces: the scene's mark put back on the
+            true line (as the reference's draws are, noisy_full_marks), to which the
+            drag adds its own noise. USER_BASE=scene (before the fifteenth pass):
+            the scene's noisy mark itself, so the drag's noise came on top of the
+            scene's, σ √2 · 0.5 px in all against the reference's 0.5."""
+            if USER_BASE == "scene":
+                return np.asarray(m["segment"], float)
+            return onto_line(m["segment"], truth[p][m["edge"]])
+
         def drag(p, m, c=c, rng=rng, redone=redone, truth=truth, ses=ses):
-            seg = np.asarray(m["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
+            seg = where_user_drags(p, m) + rng.normal(0, EDGE_NOISE_PX, 4)
             w, h = ses.sizes[p]      # a drag cannot leave the photograph
             seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
             r = c.post("/api/facade/marks", json={"photo": p, "segment": seg.tolist(), "snap": snap})
@@ -184,7 +198,7 @@ def main(size, seeds, snap=True, out=None):
             src = next((m for m in full[mk["photo"]] if m["edge"] == mk["edge"]), None)
             if src is None:
                 return
-            seg = np.asarray(src["segment"]) + rng.normal(0, EDGE_NOISE_PX, 4)
+            seg = where_user_drags(mk["photo"], src) + rng.normal(0, EDGE_NOISE_PX, 4)
             w, h = ses.sizes[mk["photo"]]
             seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
             c.post(f"/api/facade/marks/{k}", json={"segment": seg.tolist()})
