@@ -204,6 +204,28 @@ def refine_on_edge(grey: np.ndarray, seg: np.ndarray, *,
     return out
 
 
+def _turn_deg(a, b) -> float:
+    """The angle (degrees, 0–90) between two segments ``(4,)``' directions."""
+    da = np.asarray(a[2:], float) - np.asarray(a[:2], float)
+    db = np.asarray(b[2:], float) - np.asarray(b[:2], float)
+    c = abs(da @ db) / max(np.hypot(*da) * np.hypot(*db), 1e-12)
+    return float(np.degrees(np.arccos(min(c, 1.0))))
+
+
+def _posed_photos(e) -> list[str]:
+    """The photographs a solver refusal names only by their poses: every
+    photograph of a :class:`~lumigraph.stereo.debevec1996.solve.CannotSeeMarks`,
+    or of an :class:`~lumigraph.stereo.debevec1996.solve.Unconstrained` at
+    the solution whose unknowns are all poses (``photo:rotation``,
+    ``photo:position``); none otherwise (a free block parameter needs marks,
+    not a start)."""
+    if hasattr(e, "photos"):
+        return list(e.photos)
+    if getattr(e, "at_solution", False) and e.unknowns and all(":" in u for u in e.unknowns):
+        return sorted({u.split(":")[0] for u in e.unknowns})
+    return []
+
+
 def step_spread(grey: np.ndarray, seg: np.ndarray, *, half_width: float = EDGE_HALF_WIDTH_PX,
                 samples: int = 32) -> float | None:
     """The RMS distance (px) of the image's intensity steps from the line of
@@ -866,9 +888,13 @@ class FacadeSession:
         unmarked edges that would constrain each), also kept as the
         session's ``refusal`` ``{error, unconstrained}`` until the next
         Solve."""
+        from dataclasses import replace
+
         from lumigraph.stereo.debevec1996.solve import (
+            CannotSeeMarks,
             NoRotationStart,
             Unconstrained,
+            _without,
             project_model_edges,
             solve_facade,
         )
@@ -878,23 +904,46 @@ class FacadeSession:
             if not marks.marks:
                 raise EstimationError(self.edges_path, "no marks tied to model edges yet: draw "
                                                        "segments and assign each to an edge")
-            prev = getattr(self, "_sol", None)
-            rough, started = {}, []
+            # each photograph's pose in the last solve that had it (a photograph
+            # left out of the last solve keeps its pose from the one before)
+            known = dict(getattr(self, "_known_poses", {}))
+            rough, started, restarted, left_out = {}, [], [], []
             try:
                 while True:
                     try:
-                        sol = solve_facade(self.model, self._undistorted(marks), self._K(),
-                                           noise_px=noise_px, where=str(self.edges_path),
+                        sol = solve_facade(self.model, _without(self._undistorted(marks), left_out),
+                                           self._K(), noise_px=noise_px, where=str(self.edges_path),
                                            rough_rotations=rough or None)
                         break
                     except NoRotationStart as e:
                         # a photograph whose marks no longer start its rotation
                         # (a re-snap deleted the solver's outliers among them, or
                         # the user did) starts from its pose in the last solve
-                        if prev is None or e.photo not in prev.poses or e.photo in rough:
+                        if e.photo not in known or e.photo in rough:
                             raise
-                        rough[e.photo] = prev.poses[e.photo][0]
+                        rough[e.photo] = known[e.photo][0]
                         started.append(e.photo)
+                    except (Unconstrained, CannotSeeMarks) as e:
+                        # a pose the solve from the marks' vanishing directions
+                        # ended on, that the marks do not fix there or from
+                        # which the camera cannot see them (a wrong pose that
+                        # fits them): the last solve's pose of that photograph is
+                        # a start the page has, once (marking eval, fresh seeds
+                        # 261 and 274: no model without it)
+                        named = _posed_photos(e)
+                        if not named or set(named) & set(left_out):
+                            raise
+                        again = [p for p in named if p in known and p not in rough]
+                        if len(again) == len(named):
+                            for p in again:
+                                rough[p] = known[p][0]
+                            restarted += again
+                            continue
+                        # no start left to try: the model from the other
+                        # photographs, those left out and said so (marking eval,
+                        # fresh seed 274: three marks left on a photograph by a
+                        # re-snap, a pose they fit in two ways)
+                        left_out += named
             except Unconstrained as e:
                 # the page lists, per refused unknown, the unmarked edges
                 # that would constrain it (what to mark next, not just names)
@@ -905,12 +954,23 @@ class FacadeSession:
                 self.refusal = {"error": str(e), "unconstrained": e.unconstrained}
                 raise
             self.refusal = None
+            if left_out:
+                sol = replace(sol, dropped=list(sol.dropped) + left_out)
+                marks = _without(marks, left_out)
             self._sol = sol
+            self._known_poses = {**known, **sol.poses}
             self.solution = solution_dict(sol, self.photos, self.marks, project_model_edges)
             self.solution["warnings"] = [
                 f"photograph {p!r}: its marks alone cannot start its rotation (two edges along "
                 "each of two of the model's axes); started from its pose in the last solve"
-                for p in started] + list(self.solution["warnings"])
+                for p in started] + [
+                f"photograph {p!r}: the solve from its marks' directions ended on a pose they "
+                "do not fix, or that cannot see them; solved again from its pose in the last "
+                "solve (mark edges in other directions on it)" for p in restarted] + [
+                f"photograph {p!r} left out of this solve: its marks fit a wrong pose (they do not "
+                "fix it, or the camera could not see them from it) from every start the page has; "
+                "mark edges in other directions on it" for p in left_out] \
+                + list(self.solution["warnings"])
             # the page's "weakly constrained" list: what to mark next
             self.solution["weak"] = weak_spots(
                 sol, {(m["photo"], m["edge"]) for m in self.marks.values()}, self.sizes)
@@ -959,7 +1019,8 @@ class FacadeSession:
         course, the next face's shading). Within the band around the
         reprojected edge, :func:`refine_on_edge` looks for a step (one sign
         along the edge, a step not a line); the mark moves onto it when one
-        is found, else it is flagged for the user. Not circular: a mark only
+        is found and turns it by at most ``SNAP_ANGLE_DEG``, else it is
+        flagged for the user. Not circular: a mark only
         ever moves to where the *image* shows a step; the model line only
         bounds the search, and a band with no step moves nothing. A mark
         whose band is wider than its photograph (the solve does not know
@@ -1006,7 +1067,12 @@ class FacadeSession:
                 # the mark's stretch carried onto the reprojected edge: the search's centre
                 seg = np.r_[a + ((m.segment[:2] - a) @ d) * d, a + ((m.segment[2:] - a) @ d) * d]
                 new = refine_on_edge(self.grey(m.photo), seg, half_width=w)
-                if new is None:
+                if new is None or _turn_deg(new, m.segment) > SNAP_ANGLE_DEG:
+                    # no step in the band, or one that would turn the mark
+                    # further than a drag is off its edge's direction: a wide
+                    # band (a pose the solve barely holds) can take steps of
+                    # two lines at its two ends (marking eval, fresh seed 261:
+                    # a hand mark turned 19° and 38 px off at one end)
                     flagged.append(k)
                     continue
                 self.marks[k]["segment"] = [float(v) for v in new]
