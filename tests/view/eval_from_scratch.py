@@ -16,6 +16,7 @@ several scenes (not a test: the figures of docs/decisions/view-marking.md).
         never / after the first solve / after every solve, the default)
     WEAK_FACTOR=2 WEAK_SUGGESTIONS=8 ... (marking.WEAK_FACTOR, marking.WEAK_SUGGESTIONS)
     WEAK_USER=4 ... (at most this many suggested edges marked per weak parameter)
+    SOLVE_NOISE=1.0 ... (each Solve's noise_px; default the marks' 0.5 px)
     USER_BASE=scene ... (drags start from the scene's noisy marks, not from their true lines)
     LATE_REFUSAL=0 ... (a refusal after the rounds is not answered from its list: before
         the tenth pass, that run ends in "no solve after the rounds")
@@ -102,6 +103,8 @@ WEAK_USER = int(os.environ.get("WEAK_USER", "4"))
 # where the simulated user's drags start: "truth" (the scene's mark on its true
 # line) or "scene" (its noisy mark, before the fifteenth pass)
 USER_BASE = os.environ.get("USER_BASE", "truth")
+# the noise_px each Solve is asked with (the page's default is 1.0: the CLI's)
+SOLVE_NOISE = float(os.environ.get("SOLVE_NOISE", str(EDGE_NOISE_PX)))
 
 
 def expected_full_error(model, full, truth, rel, photos, K, *, draws, seed):
@@ -225,7 +228,7 @@ def main(size, seeds, snap=True, out=None):
             rounds), as the page's user does at any Solve. Returns the last
             answer and the count of hand marks added."""
             for attempt in range(tries + 1):
-                r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+                r = c.post("/api/facade/solve", json={"noise_px": SOLVE_NOISE})
                 if r.status_code == 200:
                     break
                 err = r.get_json()["error"]
@@ -290,7 +293,7 @@ def main(size, seeds, snap=True, out=None):
                         n_added += 1
                         weak_added.append((w["parameter"], q["photo"], q["edge"]))
             if len(weak_added) > n0:
-                r2 = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+                r2 = c.post("/api/facade/solve", json={"noise_px": SOLVE_NOISE})
                 if r2.status_code == 200:
                     return r2
             return r
@@ -317,7 +320,7 @@ def main(size, seeds, snap=True, out=None):
                 accepted += ok
                 c.post(f"/api/facade/proposals/{q['id']}/{'accept' if ok else 'reject'}")
             props = props + props2
-            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+            r = c.post("/api/facade/solve", json={"noise_px": SOLVE_NOISE})
             if weak == "2" and r.status_code == 200:    # the weak list again, after each solve
                 r = mark_weak(r)
         for _ in range(int(os.environ.get("CHECK_ROUNDS", "1"))):
@@ -334,7 +337,7 @@ def main(size, seeds, snap=True, out=None):
             for q in r.get_json()["check"]:
                 if q["id"] in ses.marks:
                     redraw(q["id"])
-            r = c.post("/api/facade/solve", json={"noise_px": EDGE_NOISE_PX})
+            r = c.post("/api/facade/solve", json={"noise_px": SOLVE_NOISE})
         if r.status_code != 200 and "do not constrain" in r.get_json()["error"] \
                 and os.environ.get("LATE_REFUSAL", "1") == "1":
             # a later solve refused (the re-snap moved or deleted marks it
