@@ -165,7 +165,9 @@ def create_app(*, artifacts=(), facade=None):
     @app.post("/api/facade/solve")
     def solve():
         d = request.get_json(silent=True) or {}
-        noise = d.get("noise_px", 1.0) if isinstance(d, dict) else 1.0
+        from lumigraph.view.marking import SOLVE_NOISE_PX
+
+        noise = d.get("noise_px", SOLVE_NOISE_PX) if isinstance(d, dict) else SOLVE_NOISE_PX
         if not isinstance(noise, int | float) or isinstance(noise, bool):
             raise InputError("noise_px", f"expected a positive number of pixels, got {noise!r}")
         return jsonify(session().solve(noise_px=float(noise)))

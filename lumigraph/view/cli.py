@@ -47,7 +47,9 @@ marking mode (Façade, 'lumigraph stereo facade solve --help' for the files):
   parameters with the edges to mark for them (click one to go to it), and
   up to three hand marks to check: those farthest from where the other
   marks put their edges, 2σ or more (click one to select it; a snap may
-  have taken a line beside the model's edge);
+  have taken a line beside the model's edge); "mark noise" (default 0.5 px,
+  what snapped marks achieve) is how far off its edge a mark may be: the
+  Solve leaves out a mark more than 5x that off;
   "Propose" runs automatic marking (mark about four edges per photograph
   first), each proposal then accepted or rejected; "Re-snap to model", after
   a Solve, moves each mark onto the image step near its reprojected edge.

@@ -102,6 +102,15 @@ EDGE_HALF_WIDTH_PX = 2.5  # searched either side of the segment; less than the s
 # snapping off is the user's own and carries none
 WEIGH_BY_SPREAD = True
 
+# The endpoint noise a Solve from the page assumes, px (the page's "mark noise"
+# field; the CLI's --noise-px default, 1.0, is for hand-typed files). The
+# page's marks are snapped drags and proposals refined onto the image step
+# (0.2-0.5 px off their edge on the rendered scenes), and every choice of the
+# marking flow was made with its Solves at 0.5 (docs/decisions/view-marking.md).
+# It sets the mis-mark test's radius (5x), which marks count as weighed by
+# their scatter, and the weak and check lists' scale.
+SOLVE_NOISE_PX = 0.5
+
 
 def _step_points(grey, seg, half_width, samples):
     """The profiles' steps of :func:`refine_on_edge` along ``seg`` ``(4,)``:
@@ -874,7 +883,7 @@ class FacadeSession:
             out.append(replace(m, segment=(uv[:, :2] / uv[:, 2:]).ravel()))
         return replace(marks, marks=tuple(out))
 
-    def solve(self, *, noise_px: float = 1.0) -> dict:
+    def solve(self, *, noise_px: float = SOLVE_NOISE_PX) -> dict:
         """Fit the model and the cameras to the assigned marks. Returns
         ``{parameters: {name: {value, std}}, rms_px, sigma_px, warnings,
         outliers: [{photo, edge, rms_px}], dropped, projected: {photo:
@@ -1169,6 +1178,7 @@ def solution_dict(sol, photos, marks: dict, project) -> dict:
     return {"parameters": {n: {"value": float(v), "std": float(sol.std[n])}
                            for n, v in sol.params.items()},
             "rms_px": float(sol.rms_px), "sigma_px": float(sol.sigma_px),
+            "noise_px": float(sol.noise_px),
             "warnings": list(sol.warnings),
             "outliers": [{"photo": p, "edge": e, "rms_px": float(r)} for p, e, r in sol.outliers],
             "dropped": list(sol.dropped), "projected": projected, "residuals": residuals,

@@ -17,7 +17,9 @@ wing's right side marked once: Solve lists wing/width as weakly constrained,
 a click on a suggested edge opens its photograph with the edge highlighted,
 and marking it there lowers the width's σ. A third, the tower's top and the
 spire unmarked: Solve is refused, and the panel lists the edges that would
-constrain the tower's and the spire's heights, leading to them.
+constrain the tower's and the spire's heights, leading to them. And the whole
+flow from scratch (every photograph unmarked) through the page's controls,
+checked against issue 17's bound.
 """
 
 from __future__ import annotations
@@ -34,7 +36,14 @@ import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from facade_helpers import EDGE_NOISE_PX, distance, four_hand_marks, truth_lines  # noqa: E402
+from facade_helpers import (  # noqa: E402
+    EDGE_NOISE_PX,
+    distance,
+    four_hand_marks,
+    onto_line,
+    refusal_marks,
+    truth_lines,
+)
 
 CHROMIUM = "/usr/bin/chromium"
 DRIVER = "/usr/bin/chromedriver"
@@ -264,9 +273,14 @@ def test_the_weak_list_leads_to_the_edge_to_mark(browser, tmp_path):
     full, session = _scene_session(tmp_path, one_right_side)
     d = browser
     with _marking_page(d, session):
+        # the mark noise field reaches the Solve (its default: the next test)
+        noise = d.find_element(By.ID, "noise")
+        noise.clear()
+        noise.send_keys("0.75")
         d.find_element(By.ID, "solve").click()
         _wait(d, "return window.lumiMark.busy === 0 && window.lumiMark.state.solution !== null", 60)
         before = d.execute_script("return window.lumiMark.state.solution")
+        assert before["noise_px"] == 0.75
         w = before["weak"][0]
         assert w["parameter"] == "wing/width"
         items = d.find_elements(By.CSS_SELECTOR, '#weak li[data-parameter="wing/width"] button.suggest')
@@ -440,3 +454,158 @@ def test_the_cursor_probe_shows_the_files_value_under_the_mouse(browser, tmp_pat
                     assert m, text
                     assert abs(float(m.group(3)) - disp[yi, xi]) <= _six_digits(disp[yi, xi]), \
                         (text, disp[yi, xi])
+
+
+def test_marking_from_scratch_in_the_browser_meets_the_facade_bound(browser, tmp_path):
+    """Issue 18's done-when in the browser, as a new user would go: every
+    photograph starts unmarked. On each, four edges dragged by mouse
+    (σ = 0.5 px about where the photograph shows the edge) and snapped, each
+    assigned by clicking its edge in the list; Propose, each proposal
+    accepted or rejected by its button (the user's eye: accepted when within
+    three times the marks' noise of its true edge); Solve, and on a refusal
+    the edges its panel lists dragged (at most three rounds); the edges the
+    weak list suggests dragged; twice: Re-snap to model, Propose, review,
+    Solve, the weak list; the hand marks the Solve lists to check selected
+    from its list, deleted and dragged again with snap unticked; Solve.
+
+    The same steps as ``test_marking_from_scratch_with_propose_meets_the_facade_bound``
+    (the API), here through the page's own controls, its "mark noise" left
+    at the default (0.5 px); the bound is issue 17's: the RMS relative parameter error within
+    1.2x of the fully marked (σ = 0.5 px) solve of the same scene. Seed 2 is
+    a tuned scene; the reported figures are docs/decisions/view-marking.md's."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    from lumigraph.stereo.debevec1996.edges import load_edges
+    from lumigraph.stereo.debevec1996.model import load_blocks
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+    from lumigraph.view.marking import SOLVE_NOISE_PX
+
+    t0 = time.monotonic()
+    full, session = _scene_session(tmp_path, lambda ph: ph.update({p: [] for p in ph}))
+    folder = tmp_path / "scene"
+    truth = truth_lines(folder)
+    names = list(session.photos)
+    rng = np.random.default_rng(7)
+    d = browser
+    js = "window.lumiMark."
+
+    def state():
+        return d.execute_script("return " + js + "state")
+
+    def open_photo(p):
+        i = names.index(p)
+        if d.execute_script("return " + js + "photo") != i:
+            Select(d.find_element(By.ID, "photo-select")).select_by_value(str(i))
+            _wait(d, f"return {js}photo === {i} && window.lumiMark.busy === 0")
+
+    def drag(p, m, *, snap=True):
+        """Drag edge m["edge"] on photograph p where the photograph shows it
+        (the scene's mark put back on its true line) with 0.5 px of hand
+        noise, then click the edge in the list."""
+        open_photo(p)
+        box = d.find_element(By.ID, "snap")
+        if box.is_selected() != snap:
+            box.click()
+        w, h = session.sizes[p]
+        seg = onto_line(m["segment"], truth[p][m["edge"]]) + rng.normal(0, EDGE_NOISE_PX, 4)
+        seg = np.clip(seg, -0.5, [w - 0.5, h - 0.5] * 2)
+        n = len(state()["marks"])
+        _drag(d, d.find_element(By.ID, "photo-canvas"), seg)
+        _wait(d, f"return {js}busy === 0 && {js}state.marks.length === {n + 1} && {js}selected !== null")
+        k = d.execute_script("return " + js + "selected")
+        d.find_element(By.CSS_SELECTOR, f'#edge-list li[data-edge="{m["edge"]}"]').click()
+        _wait(d, f"return {js}busy === 0 && {js}state.marks.some(q => q.id === {k} && q.edge === '{m['edge']}')")
+
+    def review():
+        d.find_element(By.ID, "propose").click()
+        _wait(d, f"return {js}busy === 0 && /proposals|nothing proposed/.test("
+                 "document.getElementById('status').textContent)", 120)
+        for p in names:
+            mine = [q for q in state()["proposals"] if q["photo"] == p]
+            if mine:
+                open_photo(p)
+            for q in mine:
+                ok = distance(q["segment"], truth[p][q["edge"]]) <= 3 * EDGE_NOISE_PX
+                d.find_element(By.CSS_SELECTOR, f'#proposal-list li[data-proposal="{q["id"]}"] '
+                                                f'button.{"accept" if ok else "reject"}').click()
+                _wait(d, f"return {js}busy === 0 && !{js}state.proposals.some(r => r.id === {q['id']})")
+        assert not state()["proposals"]
+
+    def solve():
+        """Press Solve; the solution, or None when refused."""
+        d.find_element(By.ID, "solve").click()
+        _wait(d, f"return {js}busy === 0 && /^(solved|not solved)/.test("
+                 "document.getElementById('status').textContent)", 120)
+        return None if state()["refusal"] else state()["solution"]
+
+    def have():
+        return {(m["photo"], m["edge"]) for m in state()["marks"]}
+
+    def heed_weak(sol):
+        added = 0
+        for w in sol["weak"]:
+            n = 0
+            for q in w["suggest"]:
+                m = next((m for m in full[q["photo"]] if m["edge"] == q["edge"]), None)
+                if m is not None and (q["photo"], q["edge"]) not in have() and n < 4:
+                    drag(q["photo"], m)
+                    n += 1
+            added += n
+        if not added:
+            return sol
+        sol = solve()
+        assert sol is not None, state()["refusal"]
+        return sol
+
+    model = load_blocks(folder / "blocks.json")
+    with _marking_page(d, session):
+        for p in names:
+            for m in four_hand_marks(model, full[p]):
+                drag(p, m)
+        review()
+        for attempt in range(4):
+            sol = solve()
+            if sol is not None or attempt == 3:
+                break
+            ref = state()["refusal"]
+            assert "do not constrain" in ref["error"], ref["error"]
+            for p, m in refusal_marks(ref["unconstrained"], full, have()):
+                drag(p, m)
+        assert sol is not None, state()["refusal"]
+        sol = heed_weak(sol)
+        for _ in range(2):
+            d.find_element(By.ID, "resnap").click()
+            _wait(d, f"return {js}busy === 0 && document.getElementById('status').textContent"
+                     ".startsWith('re-snapped')", 120)
+            review()
+            sol = solve()
+            assert sol is not None, state()["refusal"]
+            sol = heed_weak(sol)
+        byedge = {p: {m["edge"]: m for m in full[p]} for p in names}
+        for q in sol["check"]:
+            d.find_element(By.CSS_SELECTOR, f'#check li[data-mark="{q["id"]}"] button').click()
+            _wait(d, f"return {js}busy === 0 && {js}selected === {q['id']}")
+            d.find_element(By.ID, "delete-mark").click()
+            _wait(d, f"return {js}busy === 0 && !{js}state.marks.some(m => m.id === {q['id']})")
+            drag(q["photo"], byedge[q["photo"]][q["edge"]], snap=False)
+        sol = solve()
+        assert sol is not None, state()["refusal"]
+        n_marks = len(state()["marks"])
+        # every Solve at the page's mark noise field, left at its default
+        assert sol["noise_px"] == SOLVE_NOISE_PX == float(
+            d.find_element(By.ID, "noise").get_attribute("value"))
+
+    gt = json.loads((folder / "gt.json").read_text())["parameters"]
+    free = list(model.parameter_names)
+    scratch = np.sqrt(np.mean([((sol["parameters"][n]["value"] - gt[n]) / gt[n]) ** 2 for n in free]))
+    ref = solve_facade(model, load_edges(folder / "edges.json", model=model, photographs=names),
+                       {p: session.camera.K for p in names}, noise_px=EDGE_NOISE_PX)
+    fully = np.sqrt(np.mean([((ref.params[n] - gt[n]) / gt[n]) ** 2 for n in free]))
+    print(f"from scratch in the browser: RMS relative parameter error {scratch:.5f}, fully marked "
+          f"{fully:.5f}, ratio {scratch / fully:.2f} (bound 1.2), {n_marks} marks, "
+          f"{time.monotonic() - t0:.0f} s")
+    assert scratch <= 1.2 * fully
+    saved = load_edges(tmp_path / "edges.json", model=model, photographs=names)
+    assert sum(len(saved.of(p)) for p in names) == n_marks
+    assert any(m.proposed for p in names for m in saved.of(p))

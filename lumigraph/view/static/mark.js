@@ -477,7 +477,7 @@
   $("solve").addEventListener("click", async () => {
     status("solving…");
     try {
-      const sol = await api("POST", "/api/facade/solve", {});
+      const sol = await api("POST", "/api/facade/solve", { noise_px: Number($("noise").value) });
       status(`solved: RMS ${sol.rms_px.toFixed(3)} px`);
     } catch (e) {
       status("not solved");
