@@ -105,7 +105,8 @@ WEIGH_BY_SPREAD = True
 # The endpoint noise a Solve from the page assumes, px (the page's "mark noise"
 # field; the CLI's --noise-px default, 1.0, is for hand-typed files). The
 # page's marks are snapped drags and proposals refined onto the image step
-# (0.2-0.5 px off their edge on the rendered scenes), and every choice of the
+# (0.28-0.34 px RMS off their edge at the ends on the rendered scenes, off thin
+# strips; docs/decisions/view-marking.md, fifteenth pass), and every choice of the
 # marking flow was made with its Solves at 0.5 (docs/decisions/view-marking.md).
 # It sets the mis-mark test's radius (5x), which marks count as weighed by
 # their scatter, and the weak and check lists' scale.
