@@ -12,6 +12,7 @@ Usage::
 About 60 s of CPU a seed at 640x480 (the layer's fit).
 """
 
+import os
 import sys
 
 import numpy as np
@@ -27,9 +28,15 @@ MATERIALS = ((None, "any"), (0.25, "brick"), (1.0, "glass"), (0.05, "frame"), (0
 
 
 def main(seed, views):
-    s = render("facade", size=SIZE, seed=seed)
+    s = render("facade", size=SIZE, seed=seed, photos=int(os.environ.get("PHOTOS", 8)),
+               novel=int(os.environ.get("NOVEL", 4)))
     mesh, photos, _, _ = _photos(s)
     layer = fit_reflection_layer(mesh, photos)
+    if os.environ.get("COMPARE"):  # the layer without the shared environment beside it
+        import lumigraph.stereo.debevec1996.reflection as RF
+        RF.SHARED = False
+        own = fit_reflection_layer(mesh, photos)
+        RF.SHARED = True
     building = scene.Building(scene.true_values())
     V, F, n_model, n_solid = scene._scene_mesh(building)
     kinds = np.full(len(F), 3)
@@ -59,6 +66,8 @@ def main(seed, views):
         images = {"blend": render_vdtm(mesh, photos, K, R, t, SIZE).image,
                   "layer": render_vdtm(mesh, photos, K, R, t, SIZE, reflection=layer).image,
                   "nearest": render_vdtm(mesh, [photos[j]], K, R, t, SIZE).image}
+        if os.environ.get("COMPARE"):
+            images["own"] = render_vdtm(mesh, photos, K, R, t, SIZE, reflection=own).image
 
         def mse(img, sel, gt=gt):
             return float(((img - gt) ** 2)[sel].mean())
