@@ -7,8 +7,7 @@ Usage::
 
     OPENBLAS_NUM_THREADS=1 GATE=1 python docs/decisions/facade_vdtm_layer_eval.py 12 13 14
 
-``GATE=0`` fits the layer without its gate, ``SHARED=0`` without the
-environment shared by the orientation groups; ``LAMBDAS=10,30,100,300`` replaces
+``GATE=0`` fits the layer without its gate; ``LAMBDAS=10,30,100,300`` replaces
 the candidate smoothness weights. ``LAYOUT=ring PHOTOS=10 NOVEL=10`` renders
 the building photographed all round (the scene's ``layout`` option) instead of
 the 240° arc of 8 photographs and 4 novel views. About 90 s of CPU a seed at
@@ -27,7 +26,6 @@ from lumigraph.stereo.bench_facade_vdtm import _photos, _psnr, _references
 from lumigraph.stereo.debevec1996.vdtm import render_vdtm
 
 RF.GATE = os.environ.get("GATE", "1") == "1"
-RF.SHARED = os.environ.get("SHARED", "1") == "1"
 SIZE = (640, 480)
 
 

@@ -32,11 +32,6 @@ def main(seed, views):
                novel=int(os.environ.get("NOVEL", 4)))
     mesh, photos, _, _ = _photos(s)
     layer = fit_reflection_layer(mesh, photos)
-    if os.environ.get("COMPARE"):  # the layer without the shared environment beside it
-        import lumigraph.stereo.debevec1996.reflection as RF
-        RF.SHARED = False
-        own = fit_reflection_layer(mesh, photos)
-        RF.SHARED = True
     building = scene.Building(scene.true_values())
     V, F, n_model, n_solid = scene._scene_mesh(building)
     kinds = np.full(len(F), 3)
@@ -66,8 +61,6 @@ def main(seed, views):
         images = {"blend": render_vdtm(mesh, photos, K, R, t, SIZE).image,
                   "layer": render_vdtm(mesh, photos, K, R, t, SIZE, reflection=layer).image,
                   "nearest": render_vdtm(mesh, [photos[j]], K, R, t, SIZE).image}
-        if os.environ.get("COMPARE"):
-            images["own"] = render_vdtm(mesh, photos, K, R, t, SIZE, reflection=own).image
 
         def mse(img, sel, gt=gt):
             return float(((img - gt) ** 2)[sel].mean())

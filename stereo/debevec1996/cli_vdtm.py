@@ -321,8 +321,7 @@ def _render(args) -> int:
             sc = g["held_out_mse"]
             chosen = g["chosen"]
             say(args, f"  planes facing {g['normal']}: "
-                      f"{'layer ' + chosen if g['used'] else 'plain blend'}"
-                      + (f" (x {g['scale']:.3g})" if g["shared"] else "") + " (held-out MSE none "
+                      f"{'layer ' + chosen if g['used'] else 'plain blend'} (held-out MSE none "
                       f"{sc['none']:.1f}, layer {sc[chosen]:.1f}, {g['held_out_samples']} samples"
                       + (f"; off on {100 * g['gated_off_fraction']:.0f}% of the planes, where it "
                          "explains the photographs' differences worse than none"

@@ -58,21 +58,6 @@ where the layer leaves less, ``0`` where it leaves more, ``1`` where no
 texel near was seen twice. The held-out test scores the gated layer (each
 fold's gate from that fold's fit).
 
-One sky for every plane (the shared candidate, :func:`_choose_shared`): a
-distant environment is one function of the *world's* mirror direction, and
-every plane reflects it, each with its own strength (its material, its
-Fresnel factor). So besides its own ``S_g``, each group is offered
-``a_g E(r)``: ``E`` on a latitude-longitude grid over the world's
-directions (:data:`SHARED_GRID`, second differences along both, cyclic in
-azimuth), fitted to every group's differences at once with a scale ``a_g``
-per group (alternating least squares, robust as above). Directions one
-plane's photographs leave between them, or never see, are then fixed by
-other planes that reflect them; and a plane that only two photographs see
-(where its own layer cannot be tested) can still be tested, since the
-environment of a fold left out of every group comes from the other planes.
-A group takes it when it predicts held-out photographs clearly better than
-the group's own choice.
-
 Render (``render_vdtm(..., reflection=layer)``): each photograph's sample
 is moved to the new view before the blend,
 
@@ -114,7 +99,7 @@ held-out test keeps the plain blend, and says so.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -137,14 +122,6 @@ TEXEL_PIXELS = 1.5
 # neighbourhood, it explains the photographs' differences better than none
 GATE = True
 GATE_RADIUS = 2
-# the environment shared by the orientation groups (:func:`_fit_shared`): a
-# latitude-longitude grid over the world's mirror directions, its candidate weights
-SHARED = True
-SHARED_GRID = (96, 48)  # azimuth nodes (cyclic) x elevation nodes, pole to pole
-SHARED_LAMBDAS = (10.0, 30.0, 100.0, 300.0, 1000.0)
-# candidate Schlick factors F0 + (1 − F0)(1 − cos θ)^5 of the planes' reflectance
-# (1: none, a reflectance that does not change with the angle)
-SHARED_FRESNEL = (1.0, 0.3, 0.1, 0.04)
 
 
 @dataclass(frozen=True)
@@ -164,10 +141,7 @@ class ReflectionGroup:
     ``(k, s_first, q_first, γ)``, the gate (:func:`_gate`) on the plane's
     texel grid (``()``: the layer applies everywhere), ``texel`` that
     grid's spacing (world units), ``gated_off`` the share of the texels
-    where the gate is 0. ``shared``: the group took the environment shared
-    by every group (:func:`_choose_shared`): ``layer`` is then that
-    environment on the latitude-longitude grid (:data:`SHARED_GRID`, over the
-    world's mirror directions), fitted with ``lam``, times ``scale``.
+    where the gate is 0.
     """
 
     normal: np.ndarray
@@ -185,9 +159,6 @@ class ReflectionGroup:
     gate: tuple = ()
     texel: float = 0.0
     gated_off: float = 0.0
-    shared: bool = False  # the layer is ``scale`` times the shared environment
-    scale: float = 1.0
-    fresnel: float = 1.0  # the shared environment's Schlick F0 (1: no Fresnel factor)
 
 
 @dataclass(frozen=True)
@@ -207,9 +178,7 @@ class ReflectionLayer:
         """One JSON-ready dict per group: normal, used, λ, scores."""
         return [{"normal": [round(float(x), 6) for x in g.normal], "used": bool(g.used),
                  "lambda": float(g.lam), "border": g.border, "held_out_samples": int(g.held_out),
-                 "gated_off_fraction": round(float(g.gated_off), 4),
-                 "shared": bool(g.shared), "scale": round(float(g.scale), 4),
-                 "fresnel": float(g.fresnel), "chosen": _key(g),
+                 "gated_off_fraction": round(float(g.gated_off), 4), "chosen": _key(g),
                  "texels": int(g.texels), "multi_view_texels": int(g.multi_view),
                  "held_out_mse": {k: round(float(v), 4) for k, v in g.scores.items()}}
                 for g in self.groups]
@@ -217,11 +186,7 @@ class ReflectionLayer:
 
 def _key(g):
     """The score key of the group's chosen candidate (``"none"`` when unused)."""
-    if not g.used:
-        return "none"
-    if g.shared:
-        return f"shared fresnel={g.fresnel:g} lambda={g.lam:g}"
-    return f"{g.border} lambda={g.lam:g}"
+    return f"{g.border} lambda={g.lam:g}" if g.used else "none"
 
 
 def _frame(n):
@@ -268,53 +233,6 @@ def _laplacian(grid, border):
     else:
         d2 = sp.diags([1.0, -2.0, 1.0], [-1, 0, 1], shape=(grid, grid))
     return sp.vstack([sp.kron(eye, d2), sp.kron(d2, eye)]).tocsr()
-
-
-def _world_design(r, shape=SHARED_GRID):
-    """Sparse (N, A·E) bilinear weights of the unit world directions ``r (N, 3)``
-    on the latitude-longitude grid ``shape = (A, E)``: ``A`` azimuth nodes
-    (cyclic), ``E`` elevation nodes from −90° to 90°."""
-    import scipy.sparse as sp
-
-    A, E = shape
-    az = np.arctan2(r[:, 1], r[:, 0])
-    el = np.arcsin(np.clip(r[:, 2], -1, 1))
-    x = (az + np.pi) / (2 * np.pi) * A
-    y = np.clip((el + np.pi / 2) / np.pi * (E - 1), 0, E - 1 - 1e-9)
-    x0 = np.floor(x).astype(np.int64) % A
-    y0 = np.floor(y).astype(np.int64)
-    fx, fy = x - np.floor(x), y - y0
-    x1 = (x0 + 1) % A
-    idx = np.stack([y0 * A + x0, y0 * A + x1, (y0 + 1) * A + x0, (y0 + 1) * A + x1], 1)
-    wt = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
-    return sp.csr_matrix((wt.ravel(), (np.repeat(np.arange(len(r)), 4), idx.ravel())),
-                         shape=(len(r), A * E))
-
-
-def _world_laplacian(shape=SHARED_GRID):
-    """Second differences of the latitude-longitude grid: cyclic along the
-    azimuth, interior nodes along the elevation (``LᵀL``)."""
-    import scipy.sparse as sp
-
-    A, E = shape
-    ca = sp.diags([1.0, -2.0, 1.0], [-1, 0, 1], shape=(A, A)).tolil()
-    ca[0, A - 1] = 1.0
-    ca[A - 1, 0] = 1.0
-    de = sp.diags([1.0, -2.0, 1.0], [0, 1, 2], shape=(E - 2, E))
-    L = sp.vstack([sp.kron(sp.identity(E), ca.tocsr()), sp.kron(de, sp.identity(A))]).tocsr()
-    return (L.T @ L).tocsr()
-
-
-def _fresnel(cos, f0):
-    """Schlick's reflectance ``F0 + (1 − F0)(1 − cos θ)^5`` (C. Schlick, "An
-    Inexpensive BRDF Model for Physically-based Rendering", Computer
-    Graphics Forum 13(3), 1994) at the incidence cosines ``cos``."""
-    return f0 + (1 - f0) * (1 - cos) ** 5
-
-
-def _world_mirror(d, n):
-    """World mirror directions (N, 3) of the unit directions ``d`` about ``n``."""
-    return d - 2 * (d @ n)[:, None] * n
 
 
 class _Centred:
@@ -458,13 +376,10 @@ def _gate_at(group, X, plane):
     return out
 
 
-def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours, gate=None,
-              vals=None):
+def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours, gate=None):
     """Photograph ``k``'s samples predicted from the others' (the blend's
     weights seen from its centre), without and with the layer: the squared
-    errors of the samples the others see, summed over the channels.
-    ``vals`` (N, C), when given, is the layer's value at every sample (the
-    shared environment's), in place of ``S`` on the group's grid."""
+    errors of the samples the others see, summed over the channels."""
     from lumigraph.stereo.debevec1996.vdtm import _angle_to, _unit, _weights
 
     mine = cam == k
@@ -479,7 +394,6 @@ def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours, gate
     C = obs.shape[1]
     samp = np.zeros((len(others), len(tk), C))
     cj = np.zeros((len(others), len(tk), 2))
-    vj = np.zeros((len(others), len(tk), C))
     lut = np.full(len(X), -1)
     for a, j in enumerate(others):
         sel = np.flatnonzero(cam == j)
@@ -489,8 +403,6 @@ def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours, gate
         ok = r >= 0
         samp[a, ok] = obs[r[ok]]
         cj[a, ok] = crd[r[ok]]
-        if vals is not None:
-            vj[a, ok] = vals[r[ok]]
         theta[a, ok] = _angle_to(ray[ok], X[tk[ok]], photos[j].centre)
     W = _weights(theta, power, neighbours)
     ws = W.sum(0)
@@ -498,11 +410,8 @@ def _held_out(k, tex, crd, obs, cam, X, photos, S, grid, power, neighbours, gate
     if not good.any():
         return np.zeros(0), np.zeros(0)
     none = (W[..., None] * samp).sum(0)[good] / ws[good, None]
-    if vals is None:
-        Sk = _design(crd[mine], grid) @ S
-        corr = np.stack([Sk - _design(cj[a], grid) @ S for a in range(len(others))])
-    else:
-        corr = vals[mine][None] - vj
+    Sk = _design(crd[mine], grid) @ S
+    corr = np.stack([Sk - _design(cj[a], grid) @ S for a in range(len(others))])
     if gate is not None:
         corr *= gate[tk][None, :, None]
     lay = none + (W[..., None] * corr).sum(0)[good] / ws[good, None]
@@ -518,23 +427,6 @@ def _clearly_better(a, b):
         return False
     d = b - a
     return bool(d.mean() > SIGNIFICANCE * d.std() / math.sqrt(len(d)))
-
-
-def _clearly_better_folds(a, b, folds):
-    """Whether the squared errors ``a`` (n,) are below ``b``'s (the same
-    samples) with the photographs left out as the units: the samples of one
-    fold share that photograph's errors, so each fold gives one ratio
-    ``Σ b / Σ a`` (``folds``: where each fold's samples end), and the mean
-    of their logarithms must exceed :data:`SIGNIFICANCE` standard errors
-    (over the folds; scale-free, as the folds' sizes and errors differ
-    tenfold)."""
-    sa = np.array([x.sum() for x in np.split(a, folds)])
-    sb = np.array([x.sum() for x in np.split(b, folds)])
-    keep = (sa > 0) & (sb > 0)
-    if keep.sum() < 2:
-        return False
-    d = np.log(sb[keep] / sa[keep])
-    return bool(d.mean() > SIGNIFICANCE * d.std(ddof=1) / math.sqrt(len(d)))
 
 
 def _texel_size(photos, v):
@@ -626,7 +518,7 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
     size = _texel_size(photos, v) if texel is None else float(texel)
     laps = {b: (lambda L: (L.T @ L).tocsr())(_laplacian(grid, b)) for b in BORDERS}
     cands = [(b, lam) for b in BORDERS for lam in lambdas]
-    groups, data = [], []
+    groups = []
     steps = list(enumerate(normals))
     for gi, n in (steps if progress is None else progress(steps)):
         u, w = _frame(n)
@@ -673,7 +565,6 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
                                    gk)
                 e_cand[ci].append(e1)
             e_none.append(e0)
-        folds = np.cumsum([len(e) for e in e_none])[:-1]  # where each fold's samples end
         e_none = np.concatenate(e_none) if e_none else np.zeros(0)
         e_cand = [np.concatenate(e) if e else np.zeros(0) for e in e_cand]
         held = len(e_none)
@@ -700,170 +591,7 @@ def fit_reflection_layer(mesh, photographs, *, tolerance: float = 0.01,
             off = float((per_texel == 0).mean()) if len(per_texel) else 0.0
         groups.append(ReflectionGroup(n, u, w, members, S, used, lam, border, scores, held, T,
                                       int((cnt >= 2).sum()), gate, gsize, off))
-        data.append(dict(tex=tex, crd=crd, obs=obs, cam=cam, X=X, layout=layout, n=n, folds=folds,
-                         e_none=e_none, e_best=e_cand[best] if used else e_none))
-    if SHARED and sum(len(d["tex"]) > 0 for d in data) > 1:
-        groups = _choose_shared(groups, data, photos, C, power, neighbours)
     return ReflectionLayer(tuple(groups), plane_group, face_plane, int(grid), float(size))
-
-
-def _shared_solve(cens, a, weights, lap, lam):
-    """The shared environment ``E`` (G, C) minimising
-    Σ_g Σ_t w_gt |ΔI − a_g ΔE|² + λ (Σ w / G) |L E|² over the groups' centred
-    data ``cens`` (:class:`_Centred` on the world grid, None where a group
-    has none); per group its residual sums of squares per texel."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spl
-
-    G = lap.shape[0]
-    A = 1e-6 * sp.identity(G, format="csr")
-    b = 0.0
-    total = 0.0
-    for cen, ag, wt in zip(cens, a, weights, strict=True):
-        if cen is None or not len(cen.tm) or ag == 0:
-            continue
-        wr = wt[cen.tm]
-        A = A + ag * ag * (cen.BmT.multiply(wr[None, :]).tocsr() @ cen.Bm
-                           - cen.MT.multiply((wt * cen.cnt)[None, :]).tocsr() @ cen.M)
-        b = b + ag * np.asarray(cen.BmT @ (wr[:, None] * cen.rhs))
-        total += float(wr.sum())
-    if total == 0:
-        return None, None
-    A = (A + lam * (total / G) * lap).tocsc()
-    E = spl.splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
-                 options={"SymmetricMode": True}).solve(b)
-    out = []
-    for cen, ag in zip(cens, a, strict=True):
-        if cen is None:
-            out.append(None)
-            continue
-        dE = cen.Bm @ E - (cen.M @ E)[cen.tm]
-        r = cen.rhs - ag * dE
-        out.append((dE, np.bincount(cen.tm, (r ** 2).sum(1), minlength=cen.n_tex)))
-    return E, out
-
-
-def _fit_shared(cens, lap, lam, rounds):
-    """The whole data's shared environment for ``λ``: ``rounds`` times
-    alternately ``E``, each group's scale ``a_g`` (least squares, ≥ 0) and
-    robust weights per texel (Cauchy, as :func:`_robust_solve`), then ``E``
-    once more. Returns ``(E, a, weights, per group (res, res_none))``."""
-    a = [1.0] * len(cens)
-    weights = [None if c is None else np.ones(c.n_tex) for c in cens]
-    E, out = None, None
-    for it in range(rounds + 1):
-        E, out = _shared_solve(cens, a, weights, lap, lam)
-        if E is None or it == rounds:
-            break
-        for gi, (cen, o) in enumerate(zip(cens, out, strict=True)):
-            if cen is None or o is None or not len(cen.tm):
-                continue
-            dE, res = o
-            wr = weights[gi][cen.tm][:, None]
-            den = float((wr * dE * dE).sum())
-            a[gi] = max(float((wr * dE * cen.rhs).sum()) / den, 0.0) if den > 0 else 0.0
-            r = cen.rhs - a[gi] * dE
-            res = np.bincount(cen.tm, (r ** 2).sum(1), minlength=cen.n_tex)
-            ok = cen.cnt >= 2
-            if not ok.any():
-                continue
-            rt = np.sqrt(res / np.maximum(cen.cnt - 1, 1) / cen.C)
-            c = max(2.385 * 1.4826 * float(np.median(rt[ok])), 1e-9)
-            weights[gi] = 1.0 / (1.0 + (rt / c) ** 2)
-    if E is None:
-        return None, a, weights, None
-    res = [None if o is None else (o[1], cn.res_none) for o, cn in zip(out, cens, strict=True)]
-    return E, a, weights, res
-
-
-def _choose_shared(groups, data, photos, C, power, neighbours):
-    """Offer every group the environment shared by all groups (its own scale
-    times one function of the world's mirror direction: a distant sky and
-    sun seen by every plane) as one more candidate of the held-out test,
-    each fold's environment fitted without the left-out photograph's samples
-    in any group. A group takes it when it predicts held-out photographs
-    clearly better than the group's own choice (its layer, or none)."""
-    import scipy.sparse as sp
-
-    lap = _world_laplacian()
-    plain, cosines = [], []
-    for d in data:
-        if not len(d["tex"]):
-            plain.append(None)
-            cosines.append(None)
-            continue
-        r = _world_mirror(_unit_rows(d["X"][d["tex"]] - _centres(photos, d["cam"])), d["n"])
-        plain.append(_world_design(r))
-        cosines.append(np.clip(r @ d["n"], 0, 1))
-    cams = sorted({int(k) for d in data for k in np.unique(d["cam"])})
-    results = []
-    for f0 in SHARED_FRESNEL:
-        designs = [None if B is None else sp.diags(_fresnel(c, f0)) @ B
-                   for B, c in zip(plain, cosines, strict=True)]
-        cens = [None if B is None else _Centred(B, d["obs"], d["tex"], len(d["X"]))
-                for B, d in zip(designs, data, strict=True)]
-        for lam in SHARED_LAMBDAS:
-            E, a, weights, whole = _fit_shared(cens, lap, lam, ROBUST_ITERATIONS)
-            if E is None:
-                continue
-            errs = [dict() for _ in data]
-            for k in cams:
-                fold = [None if B is None else _Centred(B[d["cam"] != k], d["obs"][d["cam"] != k],
-                                                        d["tex"][d["cam"] != k], len(d["X"]))
-                        for B, d in zip(designs, data, strict=True)]
-                Ek, out = _shared_solve(fold, a, weights, lap, lam)
-                for gi, d in enumerate(data):
-                    if designs[gi] is None or k not in d["cam"]:
-                        continue
-                    gk = None
-                    if GATE:
-                        gk = (_gate(out[gi][1], fold[gi].res_none, d["layout"], GATE_RADIUS)[0]
-                              if Ek is not None and out[gi] is not None else np.ones(len(d["X"])))
-                    vals = (a[gi] * (designs[gi] @ Ek) if Ek is not None
-                            else np.zeros((len(d["tex"]), C)))
-                    errs[gi][k] = _held_out(k, d["tex"], d["crd"], d["obs"], d["cam"], d["X"],
-                                            photos, None, 0, power, neighbours, gk, vals=vals)[1]
-            results.append((f0, lam, E, a, errs, whole))
-    if not results:
-        return groups
-    out = []
-    for gi, (g, d) in enumerate(zip(groups, data, strict=True)):
-        scores = dict(g.scores)
-        options = []
-        for f0, lam, E, a, errs, whole in results:
-            e = errs[gi]
-            if not e:
-                continue
-            e_sh = np.concatenate([e[k] for k in sorted(e)])
-            scores[f"shared fresnel={f0:g} lambda={lam:g}"] = (float(e_sh.sum())
-                                                              / max(len(e_sh), 1) / C)
-            if a[gi] > 0 and len(e_sh) == len(d["e_best"]):
-                options.append((float(e_sh.sum()), f0, lam, E, a[gi], e_sh, whole[gi]))
-        if not options:
-            out.append(replace(g, scores=scores))
-            continue
-        _, f0, lam, E, ag, e_sh, (res, res_none) = min(options, key=lambda o: o[0])
-        if not _clearly_better_folds(e_sh, d["e_best"], d["folds"]):
-            out.append(replace(g, scores=scores))
-            continue
-        gate, off = (), 0.0
-        if GATE:
-            per_texel, gate = _gate(res, res_none, d["layout"], GATE_RADIUS)
-            off = float((per_texel == 0).mean()) if len(per_texel) else 0.0
-        out.append(replace(g, scores=scores, used=True, shared=True, scale=float(ag),
-                           fresnel=float(f0), lam=float(lam), border="shared", gate=gate,
-                           gated_off=off, layer=E))
-    return out
-
-
-def _unit_rows(v):
-    return v / np.linalg.norm(v, axis=1, keepdims=True)
-
-
-def _centres(photos, cam):
-    """The centres (N, 3) of the photographs ``cam (N,)``."""
-    centres = np.array([p.centre for p in photos])
-    return centres[cam]
 
 
 def corrections(layer: ReflectionLayer, X, faces, C, photos, *, which=None):
@@ -885,15 +613,7 @@ def corrections(layer: ReflectionLayer, X, faces, C, photos, *, which=None):
             continue
         if ray is None:
             ray = _unit(X - C)
-        if g.shared:
-            def value(d, g=g):
-                r = _world_mirror(d, g.normal)
-                f = _fresnel(np.clip(r @ g.normal, 0, 1), g.fresnel)
-                return g.scale * f[:, None] * (_world_design(r) @ g.layer)
-        else:
-            def value(d, g=g):
-                return _design(_mirror_coords(d, g.normal, g.u, g.w), layer.grid) @ g.layer
-        new = value(ray[sel])
+        new = _design(_mirror_coords(ray[sel], g.normal, g.u, g.w), layer.grid) @ g.layer
         gate = _gate_at(g, X[sel], layer.face_plane[faces[sel]])
         for i, p in enumerate(photos):
             at = sel if which is None else sel[which[i][sel]]
@@ -901,8 +621,8 @@ def corrections(layer: ReflectionLayer, X, faces, C, photos, *, which=None):
                 continue
             m = np.searchsorted(sel, at)
             d = _unit(X[at] - p.centre)
-            own = value(d)
+            own = _design(_mirror_coords(d, g.normal, g.u, g.w), layer.grid) @ g.layer
             if out[i] is None:
-                out[i] = np.zeros((len(X), new.shape[1]))
+                out[i] = np.zeros((len(X), g.layer.shape[1]))
             out[i][at] = (new[m] - own) * gate[m, None]
     return out

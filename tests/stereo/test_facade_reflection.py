@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lumigraph.capture.errors import InputError
-from lumigraph.stereo.debevec1996.reflection import GATE_RADIUS, fit_reflection_layer
+from lumigraph.stereo.debevec1996.reflection import fit_reflection_layer
 from lumigraph.stereo.debevec1996.vdtm import Photograph, prepare_photographs, render_vdtm
 
 W, H, F = 64, 48, 50.0
@@ -177,76 +177,3 @@ def test_the_fit_solves_the_centred_least_squares_problem():
     np.testing.assert_array_equal(cnt, np.bincount(tex, minlength=T))
     np.testing.assert_allclose(res_none, np.bincount(tex[rows], (rc ** 2).sum(1), minlength=T),
                                rtol=1e-12)
-
-
-# two planes of one material under one sky: a flat ground x <= 0 and a 30° slope
-# rising from its edge (normal (-sin 30°, 0, cos 30°)), the sky brightening with
-# the elevation of the mirror direction (SE codes a radian), the slope reflecting
-# 0.6 of what the ground does
-SLOPE = np.deg2rad(30)
-N_SLOPE = np.array([-np.sin(SLOPE), 0, np.cos(SLOPE)])
-X_TOP = 3.0
-TWO = (np.array([[-4.0, -3, 0], [0, -3, 0], [0, 3, 0], [-4, 3, 0],
-                 [X_TOP, -3, X_TOP * np.tan(SLOPE)], [X_TOP, 3, X_TOP * np.tan(SLOPE)]]),
-       np.array([[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]))
-SE, SLOPE_SCALE = 80.0, 0.6
-TWO_PHOTOS = [(-4.0, -2.0, 5.0), (-2.0, -2.5, 6.0), (0.0, -2.0, 6.5), (2.0, -2.5, 6.0),
-              (4.0, -2.0, 5.0)]
-TWO_NEW = (1.0, -4.0, 4.0)  # lower than every photograph: the mirror directions climb
-
-
-def shade_two(C):
-    """The exact image of the two planes from ``C``, the points hit, which are
-    on the slope, and which hit either plane."""
-    R, _ = pose(C)
-    C = np.asarray(C, float)
-    yy, xx = np.mgrid[0:H, 0:W]
-    ray = np.stack([(xx - K[0, 2]) / F, (yy - K[1, 2]) / F, np.ones_like(xx, float)], -1) @ R
-    la, lb = -C[2] / ray[..., 2], -(C @ N_SLOPE) / (ray @ N_SLOPE)
-    XA, XB = C + la[..., None] * ray, C + lb[..., None] * ray
-    on_a = (la > 0) & (XA[..., 0] <= 0) & (XA[..., 0] >= -4) & (np.abs(XA[..., 1]) <= 3)
-    on_b = (lb > 0) & (XB[..., 0] >= 0) & (XB[..., 0] <= X_TOP) & (np.abs(XB[..., 1]) <= 3)
-    slope = on_b & (~on_a | (lb < la))
-    X = np.where(slope[..., None], XB, XA)
-    n = np.where(slope[..., None], N_SLOPE, [0, 0, 1.0])
-    d = ray / np.linalg.norm(ray, axis=-1, keepdims=True)
-    r = d - 2 * (d * n).sum(-1, keepdims=True) * n
-    sky = SE * np.arcsin(np.clip(r[..., 2], -1, 1))
-    img = (100 + A_TEX * np.sin(K_TEX * X[..., 0]) * np.cos(K_TEX * X[..., 1])
-           + np.where(slope, SLOPE_SCALE, 1.0) * sky)
-    return img[..., None], X, slope, on_a | on_b
-
-
-def test_planes_of_two_orientations_share_one_sky():
-    """One environment seen by both planes: the shared candidate predicts each
-    plane's held-out photographs from both planes' differences, is chosen for
-    both, and moves every sample to a new view below the photographs."""
-    photos = prepare_photographs(TWO, [Photograph(shade_two(C)[0], K, *pose(C))
-                                       for C in TWO_PHOTOS])
-    layer = fit_reflection_layer(TWO, photos, grid=16)
-    ground, slope = sorted(layer.groups, key=lambda g: g.normal[0], reverse=True)
-    assert np.allclose(ground.normal, [0, 0, 1]) and np.allclose(slope.normal, N_SLOPE)
-    for g in (ground, slope):
-        local = min(v for k, v in g.scores.items() if k != "none" and not k.startswith("shared"))
-        assert g.used and g.shared and g.scores[f"shared fresnel={g.fresnel:g} lambda={g.lam:g}"] < local
-    # the sky is linear in the elevation, which the latitude-longitude grid holds
-    # exactly and its second differences do not penalise: the scales' ratio is
-    # the slope's 0.6, up to the texture's sampling (eps, a few tenths of a code)
-    # against differences of tens of codes between the photographs
-    assert slope.scale / ground.scale == pytest.approx(SLOPE_SCALE, rel=0.01)
-    truth, X, on_slope, hit = shade_two(TWO_NEW)
-    R, t = pose(TWO_NEW)
-    plain = render_vdtm(TWO, photos, K, R, t, (W, H))
-    moved = render_vdtm(TWO, photos, K, R, t, (W, H), reflection=layer)
-    eps = A_TEX * (np.pi / L_TEX_PX) ** 2 / 2
-    # away from the rim and from the crease, where a photograph's bilinear taps and the
-    # gate's (2 r + 1)-texel neighbourhood hold both planes
-    margin = (2 * GATE_RADIUS + 1) / 2 * layer.texel
-    inner = (hit & (np.abs(X[..., 1]) < 2.5) & (X[..., 0] > -3.5) & (X[..., 0] < X_TOP - 0.5)
-             & (np.abs(X[..., 0]) > margin) & ~moved.filled)
-    for at in (inner & ~on_slope, inner & on_slope):
-        assert at.sum() > 300
-        err = float(np.sqrt(np.mean((moved.image[at] - truth[at]) ** 2)))
-        err_plain = float(np.sqrt(np.mean((plain.image[at] - truth[at]) ** 2)))
-        assert err <= 3 * eps, (err, eps)
-        assert err_plain > 10 * eps
