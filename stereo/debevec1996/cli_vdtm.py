@@ -319,10 +319,13 @@ def _render(args) -> int:
         layer_summary = layer.summary()
         for g in layer_summary:
             sc = g["held_out_mse"]
-            chosen = g["chosen"]
+            # a plane left without a layer: its best candidate's score, to show how near it came
+            chosen = (g["chosen"] if g["used"]
+                      else min((k for k in sc if k != "none"), key=sc.get, default="none"))
             say(args, f"  planes facing {g['normal']}: "
                       f"{'layer ' + chosen if g['used'] else 'plain blend'} (held-out MSE none "
-                      f"{sc['none']:.1f}, layer {sc[chosen]:.1f}, {g['held_out_samples']} samples"
+                      f"{sc['none']:.1f}, {'layer' if g['used'] else 'best layer ' + chosen} "
+                      f"{sc[chosen]:.1f}, {g['held_out_samples']} samples"
                       + (f"; off on {100 * g['gated_off_fraction']:.0f}% of the planes, where it "
                          "explains the photographs' differences worse than none"
                          if g["used"] else "") + ")")
