@@ -348,8 +348,15 @@ def _render(args) -> int:
             warnings.append(f"{view.name}: {100 * res.info['hole_fraction']:.0f}% of the model in "
                             "view is seen by no photograph (filled from its neighbours)")
             warn(warnings[-1])
+        one = res.info["seen_by_one_fraction"]
+        if one is not None and one > 0.2:
+            warnings.append(f"{view.name}: {100 * one:.0f}% of the model in view is seen by one "
+                            "photograph only: its colour there is that photograph's, and "
+                            "highlights and reflections do not follow the view")
+            warn(warnings[-1])
         quality = {"model_fraction": float(res.model.mean()),
                    "hole_fraction": res.info["hole_fraction"],
+                   "seen_by_one_fraction": one,
                    "photographs_per_pixel": res.info["photographs_per_pixel"]}
         meta = make_meta("lumigraph.vdtm", inputs=[args.model, Path(args.photos) / "stack.json", view],
                          warnings=warnings,
@@ -376,7 +383,9 @@ def _render(args) -> int:
                               "seconds": dt}
         say(args, f"{'' if single else f'view {k + 1}/{len(views)}: '}wrote {target} "
                   f"({args.method}, {100 * res.model.mean():.0f}% of pixels on the model, "
-                  f"{100 * res.info['hole_fraction']:.1f}% of them filled)")
+                  f"{100 * res.info['hole_fraction']:.1f}% of them filled"
+                  + (f", {100 * one:.0f}% seen by one photograph only" if one is not None else "")
+                  + ")")
     if not single:
         meta = make_meta("lumigraph.vdtm-index", inputs=[args.model, Path(args.photos) / "stack.json",
                                                          *views],

@@ -354,9 +354,13 @@ def _gate(res, res_none, layout, radius):
         a[inside] = res[index[inside]]
         b[inside] = res_none[index[inside]]
         size = 2 * radius + 1
+        # which neighbourhoods hold a texel seen twice, counted, not read off
+        # the sums: a running-sum filter leaves round-off (~1e-16 of the sums
+        # nearby) where every term is 0, and a test on that residue is noise
+        near = uniform_filter((b > 0).astype(np.float64), size, mode="constant") * size**2 > 0.5
         a = uniform_filter(a, size, mode="constant")
         b = uniform_filter(b, size, mode="constant")
-        gk = np.where(b > 0, (a < b).astype(np.float64), 1.0)
+        gk = np.where(near, (a < b).astype(np.float64), 1.0)
         g[index[inside]] = gk[inside]
         grids.append((k, s0, q0, gk.astype(np.float32)))
     return g, tuple(grids)

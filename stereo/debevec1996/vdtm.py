@@ -139,7 +139,10 @@ class VDTMImage:
         Model pixels no photograph saw, filled from their neighbours.
     info : dict
         ``method``, ``photographs_per_pixel`` (mean number blended),
-        ``hole_fraction``, ``timings_s``.
+        ``hole_fraction``, ``seen_by_one_fraction`` (the share of the model's
+        pixels that one photograph alone sees, where the colour cannot follow
+        the view; ``None`` for the view map, which does not test every
+        photograph per pixel), ``timings_s``.
     """
 
     image: np.ndarray
@@ -327,7 +330,7 @@ def _blend(X, C, photos, tolerance, power, neighbours, channels, reflection=None
         for j, c in enumerate(corrections(reflection, X, faces, C, photos, which=W > 0)):
             if c is not None:
                 acc += W[j][:, None] * c
-    return acc, W.sum(0), (W > 0).sum(0)
+    return acc, W.sum(0), (W > 0).sum(0), np.isfinite(theta).sum(0)
 
 
 @dataclass(frozen=True)
@@ -1258,9 +1261,13 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
 
     if method == "blend":
         idx = np.flatnonzero(model.ravel())
-        acc, wsum, n = _blend(points(idx), C, photos, tolerance, power, neighbours, channels,
-                              reflection, r.face.ravel()[idx] if reflection is not None else None)
+        acc, wsum, n, seers = _blend(points(idx), C, photos, tolerance, power, neighbours,
+                                     channels, reflection,
+                                     r.face.ravel()[idx] if reflection is not None else None)
         per_pixel = float(n.mean()) if len(n) else 0.0
+        # where one photograph sees the point, its colour is that photograph's at
+        # every view: nothing there can follow the view (highlights, reflections)
+        seen_by_one = float((seers == 1).mean()) if len(seers) else 0.0
     else:
         ids = maps.choose_planes(C, power=power, neighbours=neighbours,
                                  planes=np.unique(maps.face_plane[r.covered > 0]))
@@ -1268,6 +1275,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
             out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
                                              power, neighbours, channels, float(background))
         per_pixel = float(n / max(model.sum(), 1))
+        seen_by_one = None  # the view map does not test every photograph per pixel
     t2 = time.perf_counter()
     if method == "blend":
         seen = wsum > 0
@@ -1286,6 +1294,7 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
     info = {"method": method, "reflection": reflection is not None, "tolerance": tolerance, "power": power, "neighbours": neighbours,
             "photographs": len(photos),
             "photographs_per_pixel": per_pixel,
+            "seen_by_one_fraction": seen_by_one,
             "hole_fraction": float(filled.sum() / max(model.sum(), 1)),
             "timings_s": {"rasterize": t1 - t0, "texture": t2 - t1, "fill": t3 - t2}}
     return VDTMImage(out.astype(np.float32, copy=False), model, filled, info)

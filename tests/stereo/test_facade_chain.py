@@ -206,6 +206,20 @@ def test_reflection_layer_from_two_photographs_warns_it_is_not_used(folder, tmp_
     assert "no plane orientation's layer" in r.stderr and "plain blend" in r.stderr
     meta = json.loads((tmp_path / "v.png.meta.json").read_text())
     assert meta["reflection_layer"] and not any(g["used"] for g in meta["reflection_layer"])
+    # two photographs of a building leave walls that one alone sees: the share is in
+    # the meta and the summary line, and on stderr as a warning past a fifth of the view
+    one = meta["quality"]["seen_by_one_fraction"]
+    assert 0 < one < 1 and "seen by one photograph only" in r.stderr, one
+    assert (one > 0.2) == ("colour there is that photograph's" in r.stderr)
+    # one photograph: every pixel it sees is seen by it alone, and the warning says so
+    stack["images"] = ["photo_02.png"]
+    (two / "stack.json").write_text(json.dumps(stack))
+    r = lumigraph("stereo", "facade", "render", "--model", two / "blocks.json", "--photos", two,
+                  "--view", two / "novel" / "view_0.json", "--out", tmp_path / "v1.png")
+    assert r.returncode == 0, r.stderr
+    q = json.loads((tmp_path / "v1.png.meta.json").read_text())["quality"]
+    assert q["seen_by_one_fraction"] == pytest.approx(1 - q["hole_fraction"], abs=1e-12)
+    assert "colour there is that photograph's" in r.stderr
 
 
 def test_reflection_layer_on_a_glossy_building(tmp_path):

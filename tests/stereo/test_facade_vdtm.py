@@ -101,6 +101,40 @@ def test_lambertian_within_the_bilinear_bound():
             assert err.max() <= bound, (method, err.max(), bound)
 
 
+def test_share_seen_by_one_photograph():
+    """A wall photographed whole from the front and, from its left, only as
+    far as x = 1.4 m: where the second photograph's frame ends, one
+    photograph alone sees the wall, and the rendering says how much of the
+    view that is (there its colour cannot follow the view)."""
+    V = np.array([[-4.0, 0, 0], [4, 0, 0], [4, 0, 5], [-4, 0, 5]])
+    F = np.array([[0, 1, 2], [0, 2, 3]])
+    K = np.array([[70.0, 0, 47.5], [0, 70.0, 35.5], [0, 0, 1]])
+    whole = _look(np.array([0.0, -12, 2.5]), np.array([0.0, 0, 2.5]))
+    left = _look(np.array([-4.0, -8, 2.5]), np.array([-4.0, 0, 2.5]))  # frame ends near x = 1.4
+
+    def f(X):
+        return 100 + 20 * np.sin(X[..., :1])
+
+    photos = prepare_photographs((V, F), [Photograph(p.image, p.K, p.R, p.t) for p in
+                                          _plane_photos(f, [(K, *whole), (K, *left)], V, F)])
+    R, t = _look(np.array([1.0, -11, 3.0]), np.array([0.0, 0, 2.5]))
+    out = render_vdtm((V, F), photos, K, R, t, SIZE)
+    r = rasterize(V, F, K, R, t, SIZE)
+    X = r.points(V, F)[r.hit]
+    # each point's place in the left photograph's frame, which ends half a pixel past
+    # the last pixel centre: points beyond it are not seen, points a full cell inside
+    # are (the wall is continuous there); the whole wall is in the front one's frame,
+    # which sees all of it but the pixels on its rim (their cells reach off the wall:
+    # the rendering's holes, seen by none)
+    x = (X @ left[0].T + left[1]) @ K.T
+    u = x[:, 0] / x[:, 2]
+    surely_one, maybe_one = np.mean(u > SIZE[0] - 0.5), np.mean(u > SIZE[0] - 1.5)
+    assert 0.2 < surely_one  # the fixture puts a fifth of the view or more in one photograph
+    assert surely_one - out.info["hole_fraction"] <= out.info["seen_by_one_fraction"] <= maybe_one
+    assert render_vdtm((V, F), photos, K, R, t, SIZE, method="view-map").info[
+        "seen_by_one_fraction"] is None
+
+
 def test_holes_are_filled_from_neighbours():
     img = np.zeros((8, 8, 1))
     img[:, :4] = 10.0
