@@ -204,7 +204,8 @@ def vdtm(quick: bool):
     def worst_at(gains, seen):  # the worst view and its share seen by one photograph
         i = int(np.argmin(gains))
         return (f"; worst view {seen[i][0]}, {100 * seen[i][1]:.0f}% of its model pixels seen by "
-                "one photograph only (there every method gives that photograph's colour)")
+                "one photograph only" + (" (there every method gives that photograph's colour)"
+                                         if seen[i][1] > 0 else ""))
 
     checks = [
         Check(f"VDTM blend >= 2 dB above the uniform average of the visible photographs "
