@@ -454,9 +454,10 @@ def build_parser(prog: str = "lumigraph calib"):
 
     s = add_verb(sp, "stereo", "calibrate a stereo rig from simultaneous board photos",
                  epilog="example:\n  lumigraph calib stereo --left L*.jpg --right R*.jpg --board checker:10x7:1 --out rig.json")
-    s.add_argument("--left", nargs="+", required=True, type=input_path,
+    s.add_argument("--left", nargs="+", action="extend", required=True, type=input_path,
                    help="left images (pairwise with --right)")
-    s.add_argument("--right", nargs="+", required=True, type=input_path, help="right images")
+    s.add_argument("--right", nargs="+", action="extend", required=True, type=input_path,
+                   help="right images")
     s.add_argument("--board", type=board_spec, help="board spec (see calibrate)")
     s.add_argument("--model", default="auto", choices=MODEL_CHOICES, help="distortion model of both cameras")
     s.add_argument("--strict", action="store_true", help="refuse instead of warning on degenerate views")

@@ -601,10 +601,12 @@ def build_parser(prog: str = "lumigraph lightfield"):
     v.add_argument("lightfield", nargs="+", type=input_path,
                    help="light-field folder; several (or one folder of them) are a batch")
     g = v.add_mutually_exclusive_group(required=True)
-    g.add_argument("--alpha", nargs="+", type=numbers(positive), help="Ng's alpha values")
-    g.add_argument("--depth", nargs="+", type=numbers(positive),
+    g.add_argument("--alpha", nargs="+", action="extend", type=numbers(positive),
+                   help="Ng's alpha values")
+    g.add_argument("--depth", nargs="+", action="extend", type=numbers(positive),
                    help="focal depths (units of spacing)")
-    g.add_argument("--slope", nargs="+", type=numbers(number(float)), help="slopes, px per view step")
+    g.add_argument("--slope", nargs="+", action="extend", type=numbers(number(float)),
+                   help="slopes, px per view step")
     v.add_argument("--method", choices=(*REFOCUS_METHODS.names, "auto"), default="auto",
                    help="refocusing method (see below; default auto)")
     v.add_argument("--kernel", choices=("linear", "cubic", "lanczos3"), default="lanczos3",

@@ -74,7 +74,7 @@ def build_parser(prog: str = "lumigraph view"):
     p.add_argument("--port", type=number(int, lo=1, hi=65535),
                    help=f"the port to listen on (default {DEFAULT_PORT}, or any free one if "
                         "that is taken)")
-    p.add_argument("--facade", nargs="+", type=input_path, metavar="PATH",
+    p.add_argument("--facade", nargs="+", action="extend", type=input_path, metavar="PATH",
                    help="marking mode: blocks.json and the photographs (or a folder with "
                         "stack.json, blocks.json, camera.json)")
     p.add_argument("--edges", type=output_file(".json"),

@@ -108,7 +108,7 @@ def add_verbs(fs) -> None:
     v.add_argument("--cameras", type=input_path,
                    help="folder of <photo stem>.json posed cameras (default FOLDER/cameras, or "
                         "the cameras of a model.json)")
-    v.add_argument("--view", required=True, type=input_path, nargs="+",
+    v.add_argument("--view", required=True, type=input_path, nargs="+", action="extend",
                    help="camera.json with cam_from_world: the new viewpoint; several, or a "
                         "folder of them, render in one call (--out a folder)")
     v.add_argument("--method", choices=("blend", "view-map"), default="blend",

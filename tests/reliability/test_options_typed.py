@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+from pathlib import Path
 
 import pytest
 
@@ -82,3 +83,25 @@ def test_help_states_the_range(command, action):
 
     text = _HelpFormatter("x")._get_help_string(action)
     assert action.type.range_text in text
+
+
+MANY = [(c, a) for c, a in OPTIONS if a.option_strings and a.nargs in ("+", "*")]
+
+
+@pytest.mark.parametrize("command,action", MANY, ids=[f"{c}:{a.dest}" for c, a in MANY])
+def test_a_repeated_list_option_adds_to_the_list(command, action):
+    """``--view a.json --view b.json`` means both views: argparse's plain store
+    would keep the last list and drop the others without a word."""
+    assert isinstance(action, argparse._ExtendAction), (
+        f"{command} {action.option_strings}: takes several values, so give it action='extend'")
+
+
+def test_two_views_given_apart_are_both_rendered(tmp_path):
+    parser = dict(_parsers())["stereo"]
+    for name in ("m.json", "a.json", "b.json", "c.json"):
+        (tmp_path / name).write_text("{}")
+    args = parser.parse_args(["facade", "render", "--model", str(tmp_path / "m.json"), "--photos",
+                              str(tmp_path), "--view", str(tmp_path / "a.json"), "--view",
+                              str(tmp_path / "b.json"), str(tmp_path / "c.json"), "--out",
+                              str(tmp_path / "o")])
+    assert [Path(p).name for p in args.view] == ["a.json", "b.json", "c.json"]
