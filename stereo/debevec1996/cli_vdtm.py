@@ -42,16 +42,21 @@ model, the three the blend weights most over it, projected onto the plane by hom
 each photograph's visibility of each plane computed once (--method view-map; Debevec, Yu &
 Borshukov 1998).
 Model pixels no photograph sees are filled from their neighbours; pixels off the model are 0.
+Where one photograph alone sees a point, its colour is that photograph's from every view:
+highlights and reflections there cannot follow the new view. Each view's line gives that
+share of its model pixels (blend), the meta keeps it, and past a fifth of the view a warning
+says so; a photograph of those surfaces from a second place is the remedy.
 --photos names a folder with stack.json; each photograph's pose comes from --cameras DIR
 (<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
 "cameras". 8-bit/16-bit photographs give a PNG or EXR of code values; EXR photographs
 (linear radiance) stay linear: write .exr.
 
-Several views (--view A.json B.json ..., or a folder of camera.json files, taken in name
-order) render in one call: the photographs' depth maps and visibility (and, for view-map,
-the polygons' view maps) are prepared once and shared, which is most of a small view's
-cost. --out is then a folder: <view name>.png per view (.exr when the photographs are linear
-radiance), each with its .meta.json, and index.json listing them:
+Several views (--view A.json B.json ..., --view given more than once, or a folder of
+camera.json files, taken in name order) render in one call: the photographs' depth maps and
+visibility (and, for view-map, the polygons' view maps) are prepared once and shared, which
+is most of a small view's cost. --out is then a folder: <view name>.png per view (.exr
+when the photographs are linear radiance), each with its .meta.json, and index.json listing
+them:
 
   lumigraph stereo facade render --model solve/model.json --photos photos \\
       --view photos/novel --method view-map --out renders/
