@@ -44,8 +44,9 @@ Borshukov 1998).
 Model pixels no photograph sees are filled from their neighbours; pixels off the model are 0.
 Where one photograph alone sees a point, its colour is that photograph's from every view:
 highlights and reflections there cannot follow the new view. Each view's line gives that
-share of its model pixels (blend), the meta keeps it, and past a fifth of the view a warning
-says so; a photograph of those surfaces from a second place is the remedy.
+share of its model pixels (both methods; the view map's visibility of a plane is a little
+stricter, so its share is a little larger), the meta keeps it, and past a fifth of the view a
+warning says so; a photograph of those surfaces from a second place is the remedy.
 --photos names a folder with stack.json; each photograph's pose comes from --cameras DIR
 (<stem>.json per photograph, default FOLDER/cameras) or, with a model.json, from its
 "cameras". 8-bit/16-bit photographs give a PNG or EXR of code values; EXR photographs

@@ -141,8 +141,9 @@ class VDTMImage:
         ``method``, ``photographs_per_pixel`` (mean number blended),
         ``hole_fraction``, ``seen_by_one_fraction`` (the share of the model's
         pixels that one photograph alone sees, where the colour cannot follow
-        the view; ``None`` for the view map, which does not test every
-        photograph per pixel), ``timings_s``.
+        the view; ``None`` for the view map with ``neighbours`` 0 or 1 where
+        a pixel one of its three photographs sees is not tested against the
+        others), ``timings_s``.
     """
 
     image: np.ndarray
@@ -716,8 +717,11 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
     over the plane: no per-pixel depth test, world point or angle. Where
     fewer of the three see a point than the blend would take and other
     photographs see the plane, :func:`_plane_pixels`. Returns ``(image (H,
-    W, C) float32, known (H, W) bool, count)``, ``count`` the number of
-    photographs blended summed over the model's pixels."""
+    W, C) float32, known (H, W) bool, count, one)``, ``count`` the number of
+    photographs blended summed over the model's pixels, ``one`` the number
+    of pixels that one photograph alone sees (``None`` where that is not
+    known: with ``neighbours`` 0 or 1 a pixel one of the three sees is not
+    tested against the others)."""
     import cv2
 
     h, w = plane.shape
@@ -726,6 +730,7 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
     image = np.zeros((h, w, channels), np.float32)
     known = np.zeros((h, w), bool)
     count = 0
+    one = 0  # pixels seen by one photograph alone; None once one such pixel is unsure
     K = np.asarray(K, np.float64)
     Kinv = np.linalg.inv(K)
     R = np.asarray(R, np.float64)
@@ -777,8 +782,10 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
             # none of the three sees the plane, or a few pixels (a sliver): the three
             # chosen over the whole plane may miss the photographs nearest these, and
             # warping costs more than asking all
-            count += _plane_put(image, known, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
-                                others, photos, power, neighbours, channels, cams)
+            c, o = _plane_put(image, known, *np.nonzero(inP), x0, y0, K, R, t, C, maps, P,
+                              others, photos, power, neighbours, channels, cams)
+            count += c
+            one = None if one is None else one + o
             continue
         nc, dc = ncs[P], dcs[P]
         # the angles on a grid placed as cv2.resize's linear upsampling samples it
@@ -844,6 +851,14 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
         has = W > 0
         count += int(np.count_nonzero(has))
         known[y0:y1, x0:x1] |= ok
+        # seen by one: exact where the three are every photograph that sees the plane;
+        # else the pixels that fewer than `need` of the three see are asked of all below,
+        # and with need = 1 a pixel one of the three sees is not
+        lone = inP & (np.isfinite(th).sum(0, dtype=np.int8) == 1)
+        if len(others) == len(js):
+            one = None if one is None else one + int(np.count_nonzero(lone))
+        elif need < 2 and lone.any():
+            one = None
         # where fewer of the three see the point than the blend would take (the plane
         # partly hidden from them) and other photographs see some of the plane: those
         # pixels blended from every photograph that sees the plane (as the blend)
@@ -852,11 +867,13 @@ def _view_map_planes(plane, covered, K, R, t, C, ids, maps, photos, power, neigh
             yy, xx = np.nonzero(inP & (n < need))
             if len(yy):
                 count -= int(n[yy, xx].sum(dtype=np.int64))
-                count += _plane_put(image, known, yy, xx, x0, y0, K, R, t, C, maps, P, others,
-                                    photos, power, neighbours, channels, cams)
+                c, o = _plane_put(image, known, yy, xx, x0, y0, K, R, t, C, maps, P, others,
+                                  photos, power, neighbours, channels, cams)
+                count += c
+                one = None if one is None else one + o
     if background != 0:
         image[~known] = background
-    return image, known, count
+    return image, known, count, one
 
 
 def _warp(image, H, size, maps=None):
@@ -888,20 +905,22 @@ SMALL_PLANE_PX = 256
 def _plane_put(image, known, yy, xx, x0, y0, *args):
     """:func:`_plane_pixels` of the box pixels ``(yy, xx)`` (offset ``x0,
     y0``) written into the frame's ``image`` and ``known``; returns the
-    number of photographs blended summed over the pixels."""
+    number of photographs blended summed over the pixels and the number of
+    pixels one photograph alone sees."""
     yy, xx = yy + y0, xx + x0
-    a, ws, c = _plane_pixels(xx, yy, *args)
+    a, ws, c, seers = _plane_pixels(xx, yy, *args)
     good = ws > 0
     image[yy, xx] = np.where(good[:, None], a / np.where(good, ws, 1.0)[:, None], 0.0)
     known[yy, xx] = good
-    return int(c.sum())
+    return int(c.sum()), int(np.count_nonzero(seers == 1))
 
 
 def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, channels, cams):
     """The pixels ``(xs, ys)`` of the plane ``P`` blended from the
     photographs ``js`` as the blend does (every one that sees the point, the
     blend's weights from exact angles), visibility from the planes' masks:
-    ``(acc (n, C), wsum (n,), count (n,))``. ``cams``: the photographs'
+    ``(acc (n, C), wsum (n,), count (n,), seers (n,))``: the number blended
+    and the number of ``js`` that see each point. ``cams``: the photographs'
     ``K`` stacked, the rotations and translations from the new camera's
     frame to theirs, their centres, which is the new view, and ``K⁻¹``."""
     import cv2
@@ -938,7 +957,7 @@ def _plane_pixels(xs, ys, K, R, t, C, maps, P, js, photos, power, neighbours, ch
     acc = np.zeros((n, channels))
     for k, s in enumerate(samples):
         acc += W[k][:, None] * s
-    return acc, W.sum(0), (W > 0).sum(0)
+    return acc, W.sum(0), (W > 0).sum(0), np.isfinite(th).sum(0)
 
 
 def fill_holes(image: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -1272,10 +1291,11 @@ def render_vdtm(mesh, photographs, K, R, t, size, *, method: str = "blend",
         ids = maps.choose_planes(C, power=power, neighbours=neighbours,
                                  planes=np.unique(maps.face_plane[r.covered > 0]))
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            out, known, n = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps, photos,
-                                             power, neighbours, channels, float(background))
+            out, known, n, one = _view_map_planes(r.face, r.covered, K, R, t, C, ids, maps,
+                                                  photos, power, neighbours, channels,
+                                                  float(background))
         per_pixel = float(n / max(model.sum(), 1))
-        seen_by_one = None  # the view map does not test every photograph per pixel
+        seen_by_one = None if one is None else one / max(int(model.sum()), 1)
     t2 = time.perf_counter()
     if method == "blend":
         seen = wsum > 0

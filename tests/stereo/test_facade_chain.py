@@ -220,6 +220,14 @@ def test_reflection_layer_from_two_photographs_warns_it_is_not_used(folder, tmp_
     q = json.loads((tmp_path / "v1.png.meta.json").read_text())["quality"]
     assert q["seen_by_one_fraction"] == pytest.approx(1 - q["hole_fraction"], abs=1e-12)
     assert "colour there is that photograph's" in r.stderr
+    # the view map counts them as well
+    r = lumigraph("stereo", "facade", "render", "--model", two / "blocks.json", "--photos", two,
+                  "--view", two / "novel" / "view_0.json", "--method", "view-map",
+                  "--out", tmp_path / "v2.png")
+    assert r.returncode == 0, r.stderr
+    q = json.loads((tmp_path / "v2.png.meta.json").read_text())["quality"]
+    assert q["seen_by_one_fraction"] == pytest.approx(1 - q["hole_fraction"], abs=1e-12)
+    assert "colour there is that photograph's" in r.stderr
 
 
 def test_reflection_layer_on_a_glossy_building(tmp_path):
