@@ -122,9 +122,10 @@ def _common(v) -> None:
     v.add_argument("--camera", type=input_path,
                    help="camera.json of the photographs (default FOLDER/camera.json)")
     v.add_argument("--rough-poses", type=input_path,
-                   help="a JSON with \"cameras\": {photo: {\"R\": 3x3}} (a gt.json works): rough "
-                        "rotations to start from (default: from each photograph's vanishing "
-                        "directions)")
+                   help="a JSON with \"cameras\": {photo: {\"R\": 3x3}}: rough rotations to "
+                        "start from (default: from each photograph's vanishing directions); a "
+                        "gt.json works, and so does an earlier solve's model.json, to solve "
+                        "again from where it ended after adding marks")
     v.add_argument("--noise-px", type=number(float, lo=0.01, hi=100), default=1.0,
                    help="the marks' endpoint noise (px, default 1): the robust loss's scale")
 

@@ -87,6 +87,35 @@ def test_chain(folder, tmp_path):
     assert 10 * np.log10(255 ** 2 / np.mean(err ** 2)) > 25
 
 
+def test_a_solve_starts_from_given_rotations(folder, tmp_path):
+    """--rough-poses takes the rotations of a gt.json or of an earlier solve's
+    model.json (to solve again after adding marks, from where the last solve
+    ended); with exact marks either start ends at the true model, and the
+    meta names the file."""
+    f, s = folder
+    first = tmp_path / "first"
+    r = lumigraph("stereo", "facade", "solve", f, "--out", first, "-q",
+                  "--rough-poses", f / "gt.json")
+    assert r.returncode == 0, r.stderr
+    again = tmp_path / "again"
+    r = lumigraph("stereo", "facade", "solve", f, "--out", again, "-q",
+                  "--rough-poses", first / "model.json")
+    assert r.returncode == 0, r.stderr
+    for out, start in ((first, f / "gt.json"), (again, first / "model.json")):
+        model = json.loads((out / "model.json").read_text())
+        for name, v in s.gt["parameters"].items():
+            assert model["parameters"][name]["value"] == pytest.approx(v, rel=1e-6)
+        meta = json.loads((out / "model.json.meta.json").read_text())
+        assert any(str(i.get("path", i)).endswith(str(start.name)) for i in meta["inputs"]), meta["inputs"]
+    # a camera there without its rotation: one line naming the file and the entry
+    bad = json.loads((first / "model.json").read_text())
+    del next(iter(bad["cameras"].values()))["R"]
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    r = lumigraph("stereo", "facade", "solve", f, "--out", tmp_path / "third",
+                  "--rough-poses", tmp_path / "bad.json")
+    assert_clean_error(r, "bad.json", "R")
+
+
 def test_bad_input_is_one_line(folder, tmp_path):
     f, _ = folder
     # a camera without a pose
