@@ -117,22 +117,14 @@ def _step_points(grey, seg, half_width, samples):
     """The profiles' steps of :func:`refine_on_edge` along ``seg`` ``(4,)``:
     ``(points (K, 2) px, their weights (K,))``, or None for a segment
     shorter than 4 px."""
-    from scipy.ndimage import map_coordinates
+    from lumigraph.stereo.debevec1996.automark import profiles_across
 
-    seg = np.asarray(seg, float)
-    a, b = seg[:2], seg[2:]
-    d = b - a
-    L = np.hypot(*d)
-    if L < 4:
-        return None
-    u = d / L
-    n = np.array([-u[1], u[0]])
-    ts = np.linspace(0.06, 0.94, samples)
     reach = half_width + 2.5                            # the step test looks 2 px beyond a peak
     offs = np.arange(-reach, reach + 1e-9, 0.25)
-    P = a[None, None] + ts[:, None, None] * d[None, None] + offs[None, :, None] * n[None, None]
-    prof = map_coordinates(grey, [P[..., 1].ravel(), P[..., 0].ravel()], order=1,
-                           mode="nearest").reshape(len(ts), len(offs))
+    across = profiles_across(grey, seg, np.linspace(0.06, 0.94, samples), offs, min_length=4)
+    if across is None:
+        return None
+    a, _, d, n, ts, prof = across
     g = (prof[:, 4:] - prof[:, :-4])                    # 1 px central difference at offs[2:-2]
     go = offs[2:-2]
     inside = np.abs(go) <= half_width

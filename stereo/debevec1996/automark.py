@@ -141,26 +141,48 @@ def fit_line(pts: np.ndarray, weights: np.ndarray | None = None) -> tuple[np.nda
     return c, Vt[0]
 
 
+def profiles_across(grey: np.ndarray, seg, ts, offs, *, min_length: float):
+    """Grey-level profiles across the segment ``seg`` ``(4,)`` (px):
+    bilinear samples of ``grey`` at the fractions ``ts`` along it and the
+    offsets ``offs`` (px) along its left normal, borders replicated.
+    Returns ``(a, b, d, n, ts, prof (len(ts), len(offs)))`` (its ends, ``b
+    − a``, the unit normal), or None for a segment shorter than
+    ``min_length`` px. Shared by :func:`refine_segment` and the marking
+    page's snap (:func:`lumigraph.view.marking.refine_on_edge`).
+
+    >>> g = np.tile(np.r_[np.zeros(10), np.full(10, 100.0)], (20, 1))  # a step at x = 9.5
+    >>> prof = profiles_across(g, np.array([9.5, 2, 9.5, 17]), np.array([0.5]),
+    ...                        np.array([-2.0, 0, 2]), min_length=4)[-1]
+    >>> prof.round(1).tolist()                      # the normal points to -x here
+    [[100.0, 50.0, 0.0]]
+    """
+    from scipy.ndimage import map_coordinates
+
+    seg = np.asarray(seg, float)
+    a, b = seg[:2], seg[2:]
+    d = b - a
+    L = np.hypot(*d)
+    if L < min_length:
+        return None
+    u = d / L
+    n = np.array([-u[1], u[0]])
+    P = a[None, None] + ts[:, None, None] * d[None, None] + offs[None, :, None] * n[None, None]
+    prof = map_coordinates(grey, [P[..., 1].ravel(), P[..., 0].ravel()], order=1,
+                           mode="nearest").reshape(len(ts), len(offs))
+    return a, b, d, n, ts, prof
+
+
 def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0,
                    samples: int = 24) -> np.ndarray | None:
     """The segment moved onto the intensity edge it lies on (sub-pixel; the
     module docstring); None when fewer than a quarter of the profiles peak
     (a faint edge) or the fitted line is more than 1.5 px from the detection
     (another edge nearby)."""
-    from scipy.ndimage import map_coordinates
-
-    a, b = seg[:2], seg[2:]
-    d = b - a
-    L = np.hypot(*d)
-    if L < 2:
-        return None
-    u = d / L
-    n = np.array([-u[1], u[0]])
-    ts = np.linspace(0.08, 0.92, samples)
     offs = np.arange(-half_width, half_width + 1e-9, 0.5)
-    P = a[None, None] + ts[:, None, None] * d[None, None] + offs[None, :, None] * n[None, None]
-    prof = map_coordinates(grey, [P[..., 1].ravel(), P[..., 0].ravel()], order=1,
-                           mode="nearest").reshape(len(ts), len(offs))
+    across = profiles_across(grey, seg, np.linspace(0.08, 0.92, samples), offs, min_length=2)
+    if across is None:
+        return None
+    a, b, d, n, ts, prof = across
     g = np.abs(np.diff(prof, axis=1))                   # between samples: offsets + 0.25
     mids = offs[:-1] + 0.25
     pts = []
