@@ -50,6 +50,9 @@ FOLDER holds:
   edges.json    {"photographs": {"photo_00.png": [{"edge": "house/top-front",
                                                    "segment": [x0, y0, x1, y1]}, ...]}}
   camera.json   the photographs' intrinsics (one camera), unless --camera names another
+(--blocks, --edges and --camera name other files than the folder's. To solve again after adding
+marks, from where a solve ended: --blocks OUT/blocks.json --rough-poses OUT/model.json, and a
+new --out.)
 Writes into --out: model.json (every parameter's value and first-order std, every camera's
 pose with std), blocks.json (the fitted model), model.obj and model.ply (the mesh),
 cameras/<photo>.json (camera.json with cam_from_world), COLMAP's text model (cameras.txt,
@@ -117,6 +120,9 @@ def add_facade(sp) -> None:
 
 
 def _common(v) -> None:
+    v.add_argument("--blocks", type=input_path,
+                   help="the block model and its starting values (default FOLDER/blocks.json): "
+                        "another model of the same photographs, or an earlier solve's blocks.json")
     v.add_argument("--edges", type=input_path,
                    help="the marked edges (default FOLDER/edges.json; e.g. automark's output)")
     v.add_argument("--camera", type=input_path,
@@ -149,7 +155,7 @@ def _folder(args):
         if not (folder / name).is_file():
             raise InputError(sj, f"key 'images[{i}]': {name} is not a file in {folder}")
         images[name] = read_image(folder / name)
-    model = load_blocks(folder / "blocks.json")
+    model = load_blocks(_blocks_path(args, folder))
     cam_path = Path(args.camera) if args.camera else folder / "camera.json"
     camera = Camera.load(cam_path)
     for name, img in images.items():
@@ -158,6 +164,10 @@ def _folder(args):
                                             f"({cam_path}) is {camera.image_size[0]}x"
                                             f"{camera.image_size[1]}")
     return folder, photos, images, model, camera, cam_path
+
+
+def _blocks_path(args, folder):
+    return Path(args.blocks) if getattr(args, "blocks", None) else folder / "blocks.json"
 
 
 def _rough(args, photos):
@@ -223,7 +233,7 @@ def _solve(args) -> int:
     for w in sol.warnings:
         warn(w)
     meta = make_meta("lumigraph.facade.model",
-                     inputs=[folder / "stack.json", folder / "blocks.json", edges_path, cam_path,
+                     inputs=[folder / "stack.json", _blocks_path(args, folder), edges_path, cam_path,
                              *[folder / p for p in photos]]
                      + ([args.rough_poses] if args.rough_poses else []),
                      params={"noise_px": args.noise_px, "free_focal": args.free_focal,
@@ -261,7 +271,7 @@ def _automark(args) -> int:
     for w in res.warnings:
         warn(w)
     meta = make_meta("lumigraph.facade.edges",
-                     inputs=[folder / "stack.json", folder / "blocks.json", edges_path, cam_path,
+                     inputs=[folder / "stack.json", _blocks_path(args, folder), edges_path, cam_path,
                              *[folder / p for p in photos]],
                      params={"max_angle_deg": args.max_angle, "max_distance_px": args.max_distance,
                              "noise_px": args.noise_px},

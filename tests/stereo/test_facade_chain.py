@@ -87,11 +87,13 @@ def test_chain(folder, tmp_path):
     assert 10 * np.log10(255 ** 2 / np.mean(err ** 2)) > 25
 
 
-def test_a_solve_starts_from_given_rotations(folder, tmp_path):
+def test_a_solve_starts_from_an_earlier_solve(folder, tmp_path):
     """--rough-poses takes the rotations of a gt.json or of an earlier solve's
-    model.json (to solve again after adding marks, from where the last solve
-    ended); with exact marks either start ends at the true model, and the
-    meta names the file."""
+    model.json, --blocks another block model (here the earlier solve's
+    blocks.json): to solve again after adding marks, from where the last
+    solve ended. With exact marks either start ends at the true model, the
+    meta names the files, and the earlier solve's files are never written
+    over."""
     f, s = folder
     first = tmp_path / "first"
     r = lumigraph("stereo", "facade", "solve", f, "--out", first, "-q",
@@ -99,8 +101,14 @@ def test_a_solve_starts_from_given_rotations(folder, tmp_path):
     assert r.returncode == 0, r.stderr
     again = tmp_path / "again"
     r = lumigraph("stereo", "facade", "solve", f, "--out", again, "-q",
-                  "--rough-poses", first / "model.json")
+                  "--rough-poses", first / "model.json", "--blocks", first / "blocks.json")
     assert r.returncode == 0, r.stderr
+    before = (first / "blocks.json").read_bytes()
+    r = lumigraph("stereo", "facade", "solve", f, "--out", first, "--blocks", first / "blocks.json")
+    assert_clean_error(r, "blocks.json", "input")
+    assert (first / "blocks.json").read_bytes() == before
+    meta = json.loads((again / "model.json.meta.json").read_text())
+    assert any(str(i.get("path", i)) == str(first / "blocks.json") for i in meta["inputs"])
     for out, start in ((first, f / "gt.json"), (again, first / "model.json")):
         model = json.loads((out / "model.json").read_text())
         for name, v in s.gt["parameters"].items():
