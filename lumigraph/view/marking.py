@@ -121,10 +121,11 @@ def _step_points(grey, seg, half_width, samples):
 
     reach = half_width + 2.5                            # the step test looks 2 px beyond a peak
     offs = np.arange(-reach, reach + 1e-9, 0.25)
-    across = profiles_across(grey, seg, np.linspace(0.06, 0.94, samples), offs, min_length=4)
+    ts = np.linspace(0.06, 0.94, samples)
+    across = profiles_across(grey, seg, ts, offs, min_length=4)
     if across is None:
         return None
-    a, _, d, n, ts, prof = across
+    a, _, d, n, prof = across
     g = (prof[:, 4:] - prof[:, :-4])                    # 1 px central difference at offs[2:-2]
     go = offs[2:-2]
     inside = np.abs(go) <= half_width

@@ -145,8 +145,8 @@ def profiles_across(grey: np.ndarray, seg, ts, offs, *, min_length: float):
     """Grey-level profiles across the segment ``seg`` ``(4,)`` (px):
     bilinear samples of ``grey`` at the fractions ``ts`` along it and the
     offsets ``offs`` (px) along its left normal, borders replicated.
-    Returns ``(a, b, d, n, ts, prof (len(ts), len(offs)))`` (its ends, ``b
-    − a``, the unit normal), or None for a segment shorter than
+    Returns ``(a, b, d, n, prof (len(ts), len(offs)))`` (its ends, ``b −
+    a``, the unit normal), or None for a segment shorter than
     ``min_length`` px. Shared by :func:`refine_segment` and the marking
     page's snap (:func:`lumigraph.view.marking.refine_on_edge`).
 
@@ -169,7 +169,7 @@ def profiles_across(grey: np.ndarray, seg, ts, offs, *, min_length: float):
     P = a[None, None] + ts[:, None, None] * d[None, None] + offs[None, :, None] * n[None, None]
     prof = map_coordinates(grey, [P[..., 1].ravel(), P[..., 0].ravel()], order=1,
                            mode="nearest").reshape(len(ts), len(offs))
-    return a, b, d, n, ts, prof
+    return a, b, d, n, prof
 
 
 def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0,
@@ -179,10 +179,11 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
     (a faint edge) or the fitted line is more than 1.5 px from the detection
     (another edge nearby)."""
     offs = np.arange(-half_width, half_width + 1e-9, 0.5)
-    across = profiles_across(grey, seg, np.linspace(0.08, 0.92, samples), offs, min_length=2)
+    ts = np.linspace(0.08, 0.92, samples)
+    across = profiles_across(grey, seg, ts, offs, min_length=2)
     if across is None:
         return None
-    a, b, d, n, ts, prof = across
+    a, b, d, n, prof = across
     g = np.abs(np.diff(prof, axis=1))                   # between samples: offsets + 0.25
     mids = offs[:-1] + 0.25
     pts = []

@@ -167,7 +167,7 @@ def _folder(args):
 
 
 def _blocks_path(args, folder):
-    return Path(args.blocks) if getattr(args, "blocks", None) else folder / "blocks.json"
+    return Path(args.blocks) if args.blocks else folder / "blocks.json"
 
 
 def _rough(args, photos):
