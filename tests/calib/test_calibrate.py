@@ -129,3 +129,49 @@ def test_undistort_straightens_the_board(clean):
     # the raw boards by several tenths of a pixel
     assert max(und) < 0.15
     assert np.mean(raw) > 2 * np.mean(und)
+
+
+def _fold_problem(clean):
+    """The fixture's corners with 0.2 px noise, rounded to float32 (the values
+    OpenCV's solver sees), and the all-view k1k2p1p2k3 solution."""
+    from lumigraph.calib.zhang2000 import calibrate_fixed
+
+    dets = [d for d in _dets(clean, noise_rms=0.2, seed=3) if len(d)]
+    obj = [d.object_points.astype(np.float32).astype(np.float64) for d in dets]
+    img = [d.image_points.astype(np.float32).astype(np.float64) for d in dets]
+    full = calibrate_fixed(obj, img, dets[0].image_size, model="k1k2p1p2k3")
+    return obj, img, dets[0].image_size, full
+
+
+def test_refine_reaches_opencvs_optimum_on_a_subset_of_views(clean):
+    # The held-out refits of model choice (calibrate._heldout) are Schur-complement
+    # Levenberg-Marquardt from the all-view solution (zhang2000.refine). On the same
+    # float32 points, run to convergence, it must land on OpenCV's own optimum for
+    # those views: every intrinsic within a thousandth of its standard deviation
+    # (a difference no choice of model could notice), the squared error no larger.
+    from lumigraph.calib.zhang2000 import calibrate_fixed, refine
+
+    obj, img, size, full = _fold_problem(clean)
+    train = [v for v in range(len(obj)) if v % 4 != 1]
+    ref = calibrate_fixed([obj[v] for v in train], [img[v] for v in train], size, model="k1k2p1p2k3",
+                          K0=full.K, dist0=full.dist, rvecs0=full.rvecs[train],
+                          tvecs0=full.tvecs[train], max_iter=200, eps=1e-14)
+    K, dist, _, _, sq, steps = refine(obj, img, model="k1k2p1p2k3", K=full.K, dist=full.dist,
+                                      rvecs=full.rvecs, tvecs=full.tvecs, views=train, rtol=1e-14)
+    assert steps >= 1
+    ours = np.r_[K[0, 0], K[1, 1], K[0, 2], K[1, 2], dist]
+    theirs = np.r_[ref.K[0, 0], ref.K[1, 1], ref.K[0, 2], ref.K[1, 2], ref.dist]
+    sigma = np.array([ref.std[n] for n in ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3")])
+    assert np.all(np.abs(ours - theirs) <= 1e-3 * sigma), (ours - theirs) / sigma
+    n = sum(len(img[v]) for v in train)
+    assert sq <= ref.rms_px ** 2 * n * (1 + 1e-9)
+
+
+def test_refine_frees_only_the_models_terms(clean):
+    # started from the richer solution, a simpler model's fixed terms are zero and stay zero
+    from lumigraph.calib.zhang2000 import refine
+
+    obj, img, _, full = _fold_problem(clean)
+    _, dist, _, _, _, _ = refine(obj, img, model="k1k2", K=full.K, dist=full.dist,
+                                 rvecs=full.rvecs, tvecs=full.tvecs)
+    assert dist.shape == (5,) and np.all(dist[2:] == 0) and np.all(dist[:2] != 0)
