@@ -28,6 +28,7 @@ import json
 import math
 import os
 import re
+import signal
 import sys
 import tempfile
 import threading
@@ -173,14 +174,18 @@ class ResultSet:
                 journal = Path(jtmp[: -len(".tmp")])
                 os.replace(jtmp, journal)  # the commit point
             _fsync_dir(folder)
-            crash_at = _failpoint("commit")
+            crash_at, ctrl_c_at = _failpoint("commit"), _failpoint("interrupt")
             for i, (tmp, final) in enumerate(moves):
                 if i == crash_at:
                     os.kill(os.getpid(), 9)  # tests: a crash between two renames
+                if i == ctrl_c_at:
+                    os.kill(os.getpid(), signal.SIGINT)  # tests: a Ctrl-C inside the commit
                 os.replace(tmp, final)
                 _TEMPS.discard(tmp)
             if crash_at == len(moves):
                 os.kill(os.getpid(), 9)
+            if ctrl_c_at is not None and ctrl_c_at >= len(moves):
+                os.kill(os.getpid(), signal.SIGINT)
             journal.unlink()
         finally:
             os.close(fd)
@@ -223,7 +228,9 @@ def _link_journal(fd: int, folder: Path) -> Path:
 def _failpoint(name: str) -> int | None:
     """``LUMIGRAPH_FAILPOINT=commit:N``: die by SIGKILL before the N-th rename of
     a commit (the kill tests' way to land inside the commit's short window);
-    ``journal:0``: die as soon as the journal's file is open, before its lock."""
+    ``journal:0``: die as soon as the journal's file is open, before its lock;
+    ``interrupt:N``: a Ctrl-C (SIGINT to itself) before the N-th rename, or
+    after the last one for N past them."""
     spec = os.environ.get("LUMIGRAPH_FAILPOINT", "")
     if spec.startswith(name + ":"):
         with contextlib.suppress(ValueError):
@@ -238,6 +245,22 @@ def _fsync_dir(folder: Path) -> None:
             os.fsync(dfd)
         finally:
             os.close(dfd)
+
+
+# Set when an outermost result set has committed something. The console
+# script's Ctrl-C handlers read it: an interrupt that lands after the commit,
+# on the way out, finds the result written, and must not say otherwise.
+_COMMITTED = [False]
+
+
+def results_committed() -> bool:
+    """Whether a result set committed files since :func:`forget_commits`."""
+    return _COMMITTED[0]
+
+
+def forget_commits() -> None:
+    """Start a command afresh for :func:`results_committed`."""
+    _COMMITTED[0] = False
 
 
 @contextlib.contextmanager
@@ -270,6 +293,7 @@ def result_set(outputs: Iterable[tuple[str | os.PathLike, str]]) -> Iterator[Res
     finally:
         _SET.reset(token)
     rs.commit()
+    _COMMITTED[0] = _COMMITTED[0] or bool(rs.staged)
 
 
 def recover_commits(folder: str | os.PathLike) -> int:

@@ -465,6 +465,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     """
     from lumigraph.capture import artifact
 
+    artifact.forget_commits()
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if allow_extra:
@@ -482,6 +483,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     args.batch_argv, args.batch_prog = argv, parser.prog
     args.batch_verbs, args.batch_parser = _verbs(parser, args), _chosen_parser(parser, args)
     locks: list[_Lock] = []
+    held = None
     with _foreign_messages(debug) as said:
         try:
             inputs, outputs = declared_paths(parser, args)
@@ -499,6 +501,10 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
                     before = RUNS[0]
                 with artifact.result_set([(p, k) for _, p, k in outputs]):
                     rc = args.func(args)
+                    # the work is done: a Ctrl-C from here on would land in the
+                    # commit or on the way out, and report "nothing written" over
+                    # a written result; it is held off until the command ends
+                    held = _hold_interrupts()
                 if asked and RUNS[0] == before:
                     warn("--workers/--scheduler: these inputs are one item, not a batch; it ran "
                          "in this process")
@@ -517,6 +523,8 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             said.error(f"error: {e.where}: {_one_line(e.problem)}")
             return EXIT_UNUSABLE
         except KeyboardInterrupt:
+            if artifact.results_committed():  # it landed after the commit: the result stands
+                return EXIT_OK
             said.error("error: interrupted; nothing half-written was left behind")
             return 130
         except OSError as e:
@@ -536,6 +544,34 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
         finally:
             for lock in locks:
                 lock.release()
+            _release_interrupts(held)
+
+
+def _hold_interrupts():
+    """Ctrl-C does nothing until :func:`_release_interrupts`; returns the
+    handler to restore (None off the main thread, where Python delivers no
+    signal)."""
+    import signal
+
+    try:
+        return signal.signal(signal.SIGINT, lambda signum, frame: None)
+    except ValueError:
+        return None
+
+
+def _release_interrupts(held) -> None:
+    if held is not None:
+        import signal
+
+        signal.signal(signal.SIGINT, held)
+
+
+def interrupted_after_commit() -> bool:
+    """For the outermost Ctrl-C handlers (the console script, ``python -m``):
+    whether the command had already committed its result when the interrupt
+    landed on its way out (then it ends as done, status 0)."""
+    artifact = sys.modules.get("lumigraph.capture.artifact")
+    return bool(artifact is not None and artifact.results_committed())
 
 
 _MODULE_STAGES = {"capture": "render", "separation": "separate", "stereo.flow_cli": "flow"}
@@ -940,6 +976,8 @@ def module_main(module: str, prog: str) -> int:
 
         return importlib.import_module(module).main(prog=prog)
     except KeyboardInterrupt:
+        if interrupted_after_commit():
+            return EXIT_OK
         sys.stderr.write("error: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
     except Exception as e:

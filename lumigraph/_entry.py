@@ -17,6 +17,13 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt
 
 
+def _after_commit() -> bool:
+    # the command had committed its result when the Ctrl-C landed on its way
+    # out: it ends as done (nothing is imported here that was not already)
+    artifact = sys.modules.get("lumigraph.capture.artifact")
+    return bool(artifact is not None and artifact.results_committed())
+
+
 def main() -> int:
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _on_sigint)
@@ -25,6 +32,8 @@ def main() -> int:
 
         return command_main()
     except KeyboardInterrupt:
+        if _after_commit():
+            return 0
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
     except Exception as e:
@@ -32,5 +41,7 @@ def main() -> int:
 
         if not (_interrupted or caused_by_interrupt(e)):
             raise
+        if _after_commit():
+            return 0
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
