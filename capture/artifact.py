@@ -247,22 +247,6 @@ def _fsync_dir(folder: Path) -> None:
             os.close(dfd)
 
 
-# Set when an outermost result set has committed something. The console
-# script's Ctrl-C handlers read it: an interrupt that lands after the commit,
-# on the way out, finds the result written, and must not say otherwise.
-_COMMITTED = [False]
-
-
-def results_committed() -> bool:
-    """Whether a result set committed files since :func:`forget_commits`."""
-    return _COMMITTED[0]
-
-
-def forget_commits() -> None:
-    """Start a command afresh for :func:`results_committed`."""
-    _COMMITTED[0] = False
-
-
 @contextlib.contextmanager
 def result_set(outputs: Iterable[tuple[str | os.PathLike, str]]) -> Iterator[ResultSet]:
     """Stage every artifact written inside the block to one of ``outputs``
@@ -293,7 +277,6 @@ def result_set(outputs: Iterable[tuple[str | os.PathLike, str]]) -> Iterator[Res
     finally:
         _SET.reset(token)
     rs.commit()
-    _COMMITTED[0] = _COMMITTED[0] or bool(rs.staged)
 
 
 def recover_commits(folder: str | os.PathLike) -> int:

@@ -465,7 +465,9 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     """
     from lumigraph.capture import artifact
 
-    artifact.forget_commits()
+    outermost = _RUNS[0] == 0  # not an item that a batch runs in-process
+    if outermost:
+        _RUNS[1] = False
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if allow_extra:
@@ -484,6 +486,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
     args.batch_verbs, args.batch_parser = _verbs(parser, args), _chosen_parser(parser, args)
     locks: list[_Lock] = []
     held = None
+    _RUNS[0] += 1
     with _foreign_messages(debug) as said:
         try:
             inputs, outputs = declared_paths(parser, args)
@@ -504,7 +507,11 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
                     # the work is done: a Ctrl-C from here on would land in the
                     # commit or on the way out, and report "nothing written" over
                     # a written result; it is held off until the command ends
-                    held = _hold_interrupts()
+                    # (a batch's items are the batch's to stop: not held)
+                    if outermost:
+                        held = _hold_interrupts()
+                if outermost:
+                    _RUNS[1] = True
                 if asked and RUNS[0] == before:
                     warn("--workers/--scheduler: these inputs are one item, not a batch; it ran "
                          "in this process")
@@ -523,7 +530,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             said.error(f"error: {e.where}: {_one_line(e.problem)}")
             return EXIT_UNUSABLE
         except KeyboardInterrupt:
-            if artifact.results_committed():  # it landed after the commit: the result stands
+            if outermost and _RUNS[1]:  # it landed after the commit: the result stands
                 return EXIT_OK
             said.error("error: interrupted; nothing half-written was left behind")
             return 130
@@ -545,6 +552,12 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             for lock in locks:
                 lock.release()
             _release_interrupts(held)
+            _RUNS[0] -= 1
+
+
+# [how many run() calls are under way in this process (a batch runs its items
+# through run() too), whether the outermost one has committed its result]
+_RUNS = [0, False]
 
 
 def _hold_interrupts():
@@ -570,8 +583,7 @@ def interrupted_after_commit() -> bool:
     """For the outermost Ctrl-C handlers (the console script, ``python -m``):
     whether the command had already committed its result when the interrupt
     landed on its way out (then it ends as done, status 0)."""
-    artifact = sys.modules.get("lumigraph.capture.artifact")
-    return bool(artifact is not None and artifact.results_committed())
+    return _RUNS[1]
 
 
 _MODULE_STAGES = {"capture": "render", "separation": "separate", "stereo.flow_cli": "flow"}

@@ -20,8 +20,8 @@ def _on_sigint(signum, frame):
 def _after_commit() -> bool:
     # the command had committed its result when the Ctrl-C landed on its way
     # out: it ends as done (nothing is imported here that was not already)
-    artifact = sys.modules.get("lumigraph.capture.artifact")
-    return bool(artifact is not None and artifact.results_committed())
+    commandline = sys.modules.get("lumigraph.capture.commandline")
+    return bool(commandline is not None and commandline.interrupted_after_commit())
 
 
 def main() -> int:
