@@ -291,7 +291,7 @@ def refine(object_points, image_points, *, model: str, K: np.ndarray, dist: np.n
     solved on the reduced normal equations ``(Σ_v A_v − B_v C_v⁻¹ B_vᵀ) Δa =
     −Σ_v (ga_v − B_v C_v⁻¹ gp_v)`` (Triggs et al. 2000, "Bundle adjustment — a
     modern synthesis", §6.1): a (≤ 12)-square solve per step instead of OpenCV's
-    (12 + 6V)-square one, and the Jacobians from ``cv2.projectPoints``. Meant for
+    (18 + 6V)-square one, and the Jacobians from ``cv2.projectPoints``. Meant for
     starts near the optimum (the held-out refits of model choice, a candidate
     started from a richer one's solution); a step is kept only if it lowers the
     error (Marquardt's diagonal damping otherwise grows tenfold).

@@ -467,7 +467,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
 
     outermost = _RUNS[0] == 0  # not an item that a batch runs in-process
     if outermost:
-        _RUNS[1] = False
+        _RUNS[1] = None
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         if allow_extra:
@@ -511,7 +511,7 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
                     if outermost:
                         held = _hold_interrupts()
                 if outermost:
-                    _RUNS[1] = True
+                    _RUNS[1] = EXIT_OK if rc is None else int(rc)
                 if asked and RUNS[0] == before:
                     warn("--workers/--scheduler: these inputs are one item, not a batch; it ran "
                          "in this process")
@@ -530,8 +530,8 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
             said.error(f"error: {e.where}: {_one_line(e.problem)}")
             return EXIT_UNUSABLE
         except KeyboardInterrupt:
-            if outermost and _RUNS[1]:  # it landed after the commit: the result stands
-                return EXIT_OK
+            if outermost and _RUNS[1] is not None:  # it landed after the commit: the result stands
+                return _RUNS[1]
             said.error("error: interrupted; nothing half-written was left behind")
             return 130
         except OSError as e:
@@ -556,8 +556,9 @@ def run(parser: argparse.ArgumentParser, argv: Sequence[str] | None, *,
 
 
 # [how many run() calls are under way in this process (a batch runs its items
-# through run() too), whether the outermost one has committed its result]
-_RUNS = [0, False]
+# through run() too), the outermost one's exit status once its result is
+# committed (None before)]
+_RUNS: list = [0, None]
 
 
 def _hold_interrupts():
@@ -579,10 +580,11 @@ def _release_interrupts(held) -> None:
         signal.signal(signal.SIGINT, held)
 
 
-def interrupted_after_commit() -> bool:
+def committed_status() -> int | None:
     """For the outermost Ctrl-C handlers (the console script, ``python -m``):
-    whether the command had already committed its result when the interrupt
-    landed on its way out (then it ends as done, status 0)."""
+    the exit status of a command that had already committed its result when
+    the interrupt landed on its way out (it ends with that status); None when
+    it had not."""
     return _RUNS[1]
 
 
@@ -988,8 +990,8 @@ def module_main(module: str, prog: str) -> int:
 
         return importlib.import_module(module).main(prog=prog)
     except KeyboardInterrupt:
-        if interrupted_after_commit():
-            return EXIT_OK
+        if committed_status() is not None:
+            return committed_status()
         sys.stderr.write("error: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
     except Exception as e:

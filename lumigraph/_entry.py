@@ -17,11 +17,12 @@ def _on_sigint(signum, frame):
     raise KeyboardInterrupt
 
 
-def _after_commit() -> bool:
+def _after_commit():
     # the command had committed its result when the Ctrl-C landed on its way
-    # out: it ends as done (nothing is imported here that was not already)
+    # out: it ends with its own status (nothing is imported here that was not
+    # already); None when it had not
     commandline = sys.modules.get("lumigraph.capture.commandline")
-    return bool(commandline is not None and commandline.interrupted_after_commit())
+    return None if commandline is None else commandline.committed_status()
 
 
 def main() -> int:
@@ -32,8 +33,8 @@ def main() -> int:
 
         return command_main()
     except KeyboardInterrupt:
-        if _after_commit():
-            return 0
+        if _after_commit() is not None:
+            return _after_commit()
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
     except Exception as e:
@@ -41,7 +42,7 @@ def main() -> int:
 
         if not (_interrupted or caused_by_interrupt(e)):
             raise
-        if _after_commit():
-            return 0
+        if _after_commit() is not None:
+            return _after_commit()
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130

@@ -67,10 +67,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return _main(argv)
     except KeyboardInterrupt:  # Ctrl-C while the stage's libraries load: no traceback
-        from lumigraph.capture.commandline import interrupted_after_commit
+        from lumigraph.capture.commandline import committed_status
 
-        if interrupted_after_commit():  # or on the way out, the result written
-            return EXIT_OK
+        if committed_status() is not None:  # or on the way out, the result written
+            return committed_status()
         sys.stderr.write("error: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
 
