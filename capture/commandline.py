@@ -990,8 +990,8 @@ def module_main(module: str, prog: str) -> int:
 
         return importlib.import_module(module).main(prog=prog)
     except KeyboardInterrupt:
-        if committed_status() is not None:
-            return committed_status()
+        if (status := committed_status()) is not None:
+            return status
         sys.stderr.write("error: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
     except Exception as e:

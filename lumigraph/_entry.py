@@ -33,8 +33,8 @@ def main() -> int:
 
         return command_main()
     except KeyboardInterrupt:
-        if _after_commit() is not None:
-            return _after_commit()
+        if (status := _after_commit()) is not None:
+            return status
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130
     except Exception as e:
@@ -42,7 +42,7 @@ def main() -> int:
 
         if not (_interrupted or caused_by_interrupt(e)):
             raise
-        if _after_commit() is not None:
-            return _after_commit()
+        if (status := _after_commit()) is not None:
+            return status
         sys.stderr.write("error: interrupted; nothing was written\n")
         return 130

@@ -69,8 +69,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:  # Ctrl-C while the stage's libraries load: no traceback
         from lumigraph.capture.commandline import committed_status
 
-        if committed_status() is not None:  # or on the way out, the result written
-            return committed_status()
+        if (status := committed_status()) is not None:  # on the way out, the result written
+            return status
         sys.stderr.write("error: interrupted; nothing was written\n")
         return EXIT_INTERRUPTED
 

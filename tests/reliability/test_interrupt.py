@@ -23,14 +23,21 @@ FIX = Path(__file__).resolve().parents[2] / "fixtures"
 PKG = Path(__file__).resolve().parents[2]
 
 
-@pytest.mark.parametrize("delay_s", [0.15, 0.25, 0.4, 0.6, 1.0])
-def test_ctrl_c_is_one_line_and_130(delay_s, tmp_path):
+def _response_command(tmp_path):
+    """``lumigraph hdr response`` on a copy of the 8-bit bracket fixture, run by
+    the console script beside this Python: ``(argv, its output path)``."""
     script = Path(sys.executable).with_name("lumigraph")
     if not script.exists():
         pytest.skip("the lumigraph console script is not installed beside this Python")
     shutil.copytree(FIX / "bracket-8bit", tmp_path / "b")
     out = tmp_path / "out" / "r.json"
-    p = subprocess.Popen([str(script), "hdr", "response", str(tmp_path / "b"), "--out", str(out)],
+    return [str(script), "hdr", "response", str(tmp_path / "b"), "--out", str(out)], out
+
+
+@pytest.mark.parametrize("delay_s", [0.15, 0.25, 0.4, 0.6, 1.0])
+def test_ctrl_c_is_one_line_and_130(delay_s, tmp_path):
+    argv, out = _response_command(tmp_path)
+    p = subprocess.Popen(argv,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(delay_s)
@@ -68,14 +75,9 @@ def test_ctrl_c_inside_the_commit_ends_as_done(at, tmp_path):
     import json
     import os
 
-    script = Path(sys.executable).with_name("lumigraph")
-    if not script.exists():
-        pytest.skip("the lumigraph console script is not installed beside this Python")
-    shutil.copytree(FIX / "bracket-8bit", tmp_path / "b")
-    out = tmp_path / "out" / "r.json"
+    argv, out = _response_command(tmp_path)
     env = dict(os.environ, LUMIGRAPH_FAILPOINT=f"interrupt:{at}")
-    p = subprocess.run([str(script), "hdr", "response", str(tmp_path / "b"), "--out", str(out)],
-                       capture_output=True, text=True, env=env, timeout=120)
+    p = subprocess.run(argv, capture_output=True, text=True, env=env, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "interrupted" not in p.stderr
     assert json.loads(out.read_text())  # whole, parseable
