@@ -88,6 +88,12 @@ def _occluded(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray
     edge lies on, do not count)."""
     if tris is None or len(tris) == 0:
         return np.zeros(len(P), bool)
+    return _hits(P, centre, tris).any(axis=1)
+
+
+def _hits(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(K, T) bool: triangle t lies between point k and ``centre``
+    (:func:`_occluded`'s test, per triangle)."""
     d = centre[None, :] - P                        # (K, 3) towards the camera
     v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
     pv = np.cross(d[:, None, :], e2[None])          # (K, T, 3)
@@ -100,8 +106,7 @@ def _occluded(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray
     v = np.einsum("kj,ktj->kt", d, q) * inv
     tt = np.einsum("ktj,tj->kt", q, e2) * inv
     eps = 1e-9
-    hit = ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (tt > 1e-6) & (tt < 1 - 1e-9)
-    return hit.any(axis=1)
+    return ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (tt > 1e-6) & (tt < 1 - 1e-9)
 
 
 def project_edges(model, cameras: dict[str, dict], *, params=None, noise_px: float = 0.0,

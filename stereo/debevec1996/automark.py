@@ -20,7 +20,10 @@ mark of a reprojected edge when
   extent.
 
 Only edges visible in the rough model (sampled points not hidden by its
-faces) are candidates, so a hidden edge gets no proposal. Rounds re-solve
+faces) are candidates, so a hidden edge gets no proposal; a point inside
+another block by less than the round's distance gate is not hidden by it
+(a flush edge that a rough model a little too small buries in its
+neighbour stays a candidate). Rounds re-solve
 from the hand marks and the proposals so far with gates that start wide
 and tighten; the rough solve holds at its starting value any parameter
 the marks leave free or only pretend to fix (it moves more than ``trust``
@@ -268,6 +271,61 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
     return out
 
 
+def _visible_near_flush(model, cam: dict, *, tol_px: float):
+    """A visibility test for :func:`project_edges`' ``visible``: the model's
+    own occlusion test, except that a point inside a convex block by less
+    than ``tol_px`` (at the point's depth) is not hidden by that block.
+
+    A block flush with its neighbour has edges on the neighbour's faces
+    (an annex's corner against the house's wall). A rough model a little
+    too small buries them just inside the neighbour, and the plain test
+    hides them from every photograph: no round could propose them, and
+    what only they fix stayed at its rough value (the bench's village s13,
+    ``docs/decisions/facade.md``). ``tol_px`` is the association's distance
+    gate: an edge that far from where the photograph shows it is matched
+    anyway."""
+    from lumigraph.capture.scenes.facade_edges import _hits
+
+    mesh = model.mesh()
+    tris = mesh.vertices[mesh.faces]
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)     # outward
+    names = list(dict.fromkeys(mesh.face_block.tolist()))
+    of = np.array([names.index(b) for b in mesh.face_block.tolist()])
+    # the convex blocks: every vertex of the block on or behind each of its faces
+    convex = []
+    for i in range(len(names)):
+        V = tris[of == i].reshape(-1, 3)
+        sd = np.einsum("tj,vtj->vt", n[of == i], V[:, None] - tris[of == i][None, :, 0])
+        convex.append(bool(np.all(sd <= 1e-9 * max(1.0, float(np.ptp(V))))))
+    K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
+    t = t.ravel()
+    centre = -R.T @ t
+    f = float(K[0, 0])
+    eps = 1e-9 * max(1.0, float(np.ptp(mesh.vertices)))
+
+    def visible(_photo, P):
+        P = np.asarray(P, float)
+        hit = _hits(P, centre, tris)
+        if not hit.any():
+            return np.ones(len(P), bool)
+        tol = tol_px * (P @ R.T + t)[:, 2] / f                  # metres at each point's depth
+        sd = np.einsum("tj,ktj->kt", n, P[:, None] - tris[None, :, 0])   # > 0: in front
+        for i, ok in enumerate(convex):
+            if not ok:
+                continue
+            own = of == i
+            # inside by this much; a point on the block's own surface (an
+            # edge of it, depth 0) stays subject to its faces, which hide
+            # the block's far edges
+            depth = -sd[:, own].max(axis=1)
+            shallow = (depth > eps) & (depth < tol)
+            hit[np.ix_(shallow, own)] = False
+        return ~hit.any(axis=1)
+
+    return visible
+
+
 def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     """Values for the parameters ``names`` that the marks left unconstrained
     (held at their starting values): each is scanned over ±30 % of its value
@@ -453,7 +511,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             img = images[photo]
             cam = {"K": sol.K[photo], "R": R, "t": t, "image_size": list(img.shape[1::-1])}
             vis = project_edges(sol.model, {photo: cam}, min_length_px=min_length_px,
-                                samples=41)[photo]
+                                samples=41, visible=_visible_near_flush(
+                                    sol.model, cam, tol_px=widen * max_distance_px))[photo]
             # hand-marked edges stay candidates, so that their detections are not
             # taken for a neighbouring edge; what they win is dropped
             hand = {m.edge for m in marks.of(photo)}
