@@ -410,7 +410,8 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
     every proposal matched against that model is wrong)."""
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
-    sol = solve_facade(model, marks, K, hold_unconstrained=True, **kw)
+    # automatic marking's own solves pool one noise: what they were chosen with
+    sol = solve_facade(model, marks, K, hold_unconstrained=True, separate_noise=False, **kw)
     v0 = rough.named_values()
     weak: list = []
     again = sol
@@ -424,7 +425,8 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
         if not new:
             break
         weak += new
-        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=True, **kw)
+        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=True,
+                             separate_noise=False, **kw)
     if not weak:
         return sol
     return replace(again, held=tuple(weak) + again.held,
@@ -554,7 +556,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     for _ in range(3):
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
-                           noise_px=noise_px, hold_unconstrained=True, where=where)
+                           noise_px=noise_px, hold_unconstrained=True, where=where,
+                           separate_noise=False)
         limit = 3.0 * max(sol.sigma_px, 0.1)
         far = {(p, e) for p, e, d in sol.mark_rms_px if d > limit} | {
             (p, e) for p, e, _ in sol.outliers}
@@ -572,7 +575,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             merged = replace(marks, marks=tuple(marks.marks) + tuple(old.values()))
             alt = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}),
                                                                     **last},
-                               noise_px=noise_px, hold_unconstrained=True, where=where)
+                               noise_px=noise_px, hold_unconstrained=True, where=where,
+                               separate_noise=False)
             if len(alt.held) < len(sol.held):
                 sol, kept = alt, dict(old)
                 if not sol.held:
@@ -595,7 +599,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
             alt = solve_facade(current, merged, K,
                                rough_rotations={**(rough_rotations or {}), **last},
-                               noise_px=noise_px, hold_unconstrained=True, where=where)
+                               noise_px=noise_px, hold_unconstrained=True, where=where,
+                               separate_noise=False)
             score = (len(_hand_outliers(alt, marks)), len(_weak(alt, model, trust)), len(alt.held),
                      _hand_rms(alt, marks))
             if best is None or score < best[0]:
@@ -625,7 +630,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         kept = {key: m for key, m in kept.items() if m.edge not in moved_edges}
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
-                           noise_px=noise_px, hold_unconstrained=True, where=where)
+                           noise_px=noise_px, hold_unconstrained=True, where=where,
+                           separate_noise=False)
         warnings.append("the proposals took " + ", ".join(weak) + " beyond the rough model's "
                         f"accuracy ({trust:.0%}) or fix them loosely: their edges' proposals "
                         "are withdrawn; mark some of those edges by hand")
@@ -1018,7 +1024,7 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
     none = [{"parameter": u, "suggest": []} for u in unknowns]
     try:
         held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained=True,
-                            where=where)
+                            where=where, separate_noise=False)
     except EstimationError:
         return none
     photos = list(held.poses)

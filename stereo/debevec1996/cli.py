@@ -239,11 +239,15 @@ def _solve(args) -> int:
                      params={"noise_px": args.noise_px, "free_focal": args.free_focal,
                              "robust": not args.no_robust},
                      quality={"rms_px": sol.rms_px, "sigma_px": sol.sigma_px,
+                              "sigma_px_by_kind": dict(sol.sigma_px_by_kind) or None,
                               "outliers": len(sol.outliers), "dropped": sol.dropped},
                      timings_s={"solve": sol.seconds}, warnings=sol.warnings)
     save_solution(out, sol, photos, images, marks, camera, meta=meta)
+    kinds = sol.sigma_px_by_kind
+    noise = (f"; endpoint noise hand {kinds['hand']:.2f} px, proposed {kinds['proposed']:.2f} px"
+             if kinds else "")
     say(args, f"{len(sol.poses)} photographs, {len(sol.mark_rms_px)} marks, RMS {sol.rms_px:.3f} "
-              f"px -> {out}/model.json, model.obj, model.ply, cameras/, overlay/")
+              f"px{noise} -> {out}/model.json, model.obj, model.ply, cameras/, overlay/")
     return 0
 
 

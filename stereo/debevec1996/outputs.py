@@ -8,7 +8,8 @@ with its uncertainties, the mesh, the cameras and the overlays.
      "parameter_covariance": {"names": [free names], "matrix": n x n} (or null),
      "cameras": {"photo_00.png": {"K": 3x3, "R": 3x3, "t": [3], "centre": [3],
                                   "std": {"rotation_rad": [3], "t": [3], "centre": [3]}}},
-     "focal_scale": {"value", "std"}, "sigma_px", "rms_px",
+     "focal_scale": {"value", "std"}, "sigma_px",
+     "sigma_px_by_kind": {"hand", "proposed"} (or null), "rms_px",
      "marks": [{"photo", "edge", "rms_px"}], "outliers": [...], "dropped": [...]}
 
 Every parameter name of the model (shared and fixed ones too) is a key, as
@@ -66,7 +67,8 @@ def model_dict(sol) -> dict:
             "parameter_covariance": cov,
             "cameras": cams,
             "focal_scale": {"value": sol.focal_scale, "std": sol.focal_scale_std},
-            "sigma_px": sol.sigma_px, "rms_px": sol.rms_px,
+            "sigma_px": sol.sigma_px, "sigma_px_by_kind": dict(sol.sigma_px_by_kind) or None,
+            "rms_px": sol.rms_px,
             "marks": [{"photo": p, "edge": e, "rms_px": r} for p, e, r in sol.mark_rms_px],
             "outliers": [{"photo": p, "edge": e, "rms_px": r} for p, e, r in sol.outliers],
             "dropped": list(sol.dropped)}

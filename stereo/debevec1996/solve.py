@@ -54,7 +54,13 @@ of the final plain least-squares solve (eq. 5.3 as written).
 residuals ``r = A h`` at the solution and the endpoint distances ``h``
 independent with variance ``σ² rel²`` (``σ`` estimated from the residual
 distances, ``σ̂² = Σ (h / rel)² / (2n − p)``), ``cov = σ̂² (JᵀJ)⁻¹ Jᵀ (rel A)
-(rel A)ᵀ J (JᵀJ)⁻¹``.
+(rel A)ᵀ J (JᵀJ)⁻¹``. Where the marks mix hand marks and automatic marking's
+proposals (``proposed``; at least ``VARIANCE_COMPONENTS_MIN_MARKS`` of each,
+``separate_noise``), the two kinds' noise is estimated separately (Helmert's
+variance components, :func:`group_variances`): each kind's
+``rel`` is scaled by its noise relative to the hand marks' and the solve
+repeated until the ratio settles (at most four times). ``σ̂`` is then the
+hand marks' noise, ``sigma_px_by_kind`` holds both.
 
 **Gauge.** The world frame is the model's (the root block stands centred on
 the origin, axis-aligned); the scale comes from the fixed parameter(s): at
@@ -185,7 +191,10 @@ class FacadeSolution:
     when not fitted); K : photo -> the (fitted) intrinsics; outliers : the
     marks left out as mis-marked, ``(photo, edge, rms distance px)``;
     dropped : photographs left out; mark_rms_px : one RMS distance per kept
-    mark, ``(photo, edge, px)``; sigma_px : the estimated endpoint noise;
+    mark, ``(photo, edge, px)``; sigma_px : the estimated endpoint noise (of
+    the hand marks, where each kind's is estimated); sigma_px_by_kind :
+    ``{"hand": px, "proposed": px}`` where each kind's noise was estimated
+    (``separate_noise``), else empty;
     rms_px : RMS distance over the kept marks; covariance / unknowns : of
     the final solve; warnings; seconds; noise_px : the solve's endpoint
     noise (a mark's ``spread_px`` above it weighs the mark down)."""
@@ -210,6 +219,7 @@ class FacadeSolution:
     nfev: int = 0
     held: tuple = ()
     noise_px: float = 1.0
+    sigma_px_by_kind: dict = field(default_factory=dict)
 
     @property
     def centres(self) -> dict:
@@ -260,6 +270,8 @@ class _Problem:
         # the image's own scatter along the mark (Mark.spread_px), where measured
         self.rel = np.ones(self.n)
         self.noise_px = noise_px
+        self.separate_noise = False
+        self.proposed = np.array([bool(getattr(m, "proposed", False)) for m in marks], bool)
         if noise_px is not None:
             self.rel = np.array([max(1.0, (getattr(m, "spread_px", None) or 0.0) / noise_px)
                                  for m in marks], float).reshape(self.n)
@@ -617,7 +629,7 @@ OUTLIER_OWN_NOISE = False
 def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                  free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
                  max_iterations: int = 200, hold_unconstrained: bool = False,
-                 where: str = "edges.json") -> FacadeSolution:
+                 separate_noise: bool = True, where: str = "edges.json") -> FacadeSolution:
     """Fit the free block parameters and every photograph's pose to the
     marked edges (module docstring).
 
@@ -645,6 +657,11 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         Instead of refusing, hold the parameters the marks do not constrain
         at their starting values and leave out the photographs whose pose
         they do not constrain (a rough solve, as automatic marking uses).
+    separate_noise : bool
+        When the marks mix hand marks and automatic marking's proposals (at
+        least ``VARIANCE_COMPONENTS_MIN_MARKS`` of each), estimate each
+        kind's endpoint noise (Helmert's variance components) and weight the
+        marks by it (module docstring); False: one noise for all.
 
     Returns
     -------
@@ -665,7 +682,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
             sol = _solve_facade(model, marks, K, rough_rotations=rough or None,
                                 free_focal=free_focal, noise_px=noise_px, robust=robust,
                                 max_iterations=max_iterations,
-                                hold_unconstrained=hold_unconstrained, where=where,
+                                hold_unconstrained=hold_unconstrained,
+                                separate_noise=separate_noise, where=where,
                                 alternatives=alternatives)
             break
         except (Unconstrained, CannotSeeMarks) as e:
@@ -697,7 +715,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
 def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                   free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
                   max_iterations: int = 200, hold_unconstrained: bool = False,
-                  where: str = "edges.json", alternatives: dict | None = None) -> FacadeSolution:
+                  separate_noise: bool = True, where: str = "edges.json",
+                  alternatives: dict | None = None) -> FacadeSolution:
     """:func:`solve_facade` from one start; ``alternatives``, when given, is
     filled with ``photo -> [the other candidate rotations, best first]`` of
     the photographs whose rotation came from vanishing directions."""
@@ -760,6 +779,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
             if alternatives is not None:
                 alternatives[photos[j]] = candidates[j][1:]
     prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal, noise_px=noise_px)
+    prob.separate_noise = separate_noise
     th, t = _linear_translations(prob, R0, model.values)        # eq. 5.5
     # a size the linear solve makes non-positive (mis-marked edges pull it) starts
     # from the model's value instead: the robust pass then finds the bad marks
@@ -803,7 +823,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
                            rough_rotations=rough_rotations,
                            free_focal=free_focal and "focal_scale" not in bad, noise_px=noise_px,
                            robust=robust, max_iterations=max_iterations, where=where,
-                           hold_unconstrained=True)
+                           hold_unconstrained=True, separate_noise=separate_noise)
         return replace(sol, warnings=warnings + sol.warnings, dropped=dropped + lost + sol.dropped,
                        held=tuple(held) + sol.held)
     if bad:
@@ -855,7 +875,8 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
                                                                 enumerate(photos)},
                                free_focal=free_focal, noise_px=noise_px, robust=False,
                                max_iterations=max_iterations,
-                               hold_unconstrained=hold_unconstrained, where=where)
+                               hold_unconstrained=hold_unconstrained,
+                               separate_noise=separate_noise, where=where)
             return replace(sol, outliers=outliers, warnings=warnings + sol.warnings,
                            dropped=dropped + sol.dropped, nfev=nfev + sol.nfev,
                            seconds=time.perf_counter() - t0)
@@ -884,7 +905,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
         sol = solve_facade(model.with_fixed(held), _without(marks, lost) if lost else marks, K,
                            rough_rotations=rough_rotations, free_focal=free_focal,
                            noise_px=noise_px, robust=robust, max_iterations=max_iterations,
-                           where=where, hold_unconstrained=True)
+                           where=where, hold_unconstrained=True, separate_noise=separate_noise)
         # (the solve reruns from the marks: its warnings and dropped photographs are the new ones)
         said = ("held at their starting values (free at the solution): " + ", ".join(held)
                 if held else "left out (their marks do not fix their pose at the solution, or "
@@ -931,6 +952,63 @@ def sandwich_covariance(J: np.ndarray, D: np.ndarray, sigma: float) -> np.ndarra
     return sigma**2 * (B @ B.T)
 
 
+# Hand marks and automatic marking's proposals are not equally accurate (on
+# the rendered scenes the proposals sit ~0.2 px from the solved edges, the
+# hand marks at the 0.5 px they were drawn with); one pooled σ̂ then states
+# too small a σ for what the hand marks fix, and weighs the proposals too
+# little (docs/decisions/facade.md). With at least this many marks of each
+# kind, each kind's noise is estimated and the marks are weighted by it.
+VARIANCE_COMPONENTS_MIN_MARKS = 8
+
+
+def group_variances(J: np.ndarray, W: np.ndarray, e: np.ndarray, groups: np.ndarray):
+    """Helmert's variance components: each group's noise variance from the
+    residuals of one weighted least-squares fit.
+
+    The fit minimises ``‖W e‖²`` over the unknowns (``W`` block-diagonal,
+    one ``(2, 2)`` block per mark, ``(n, 2, 2)``); ``e`` ``(n, 2)`` are the
+    residual endpoint distances at the solution and ``J`` ``(2n, p)`` the
+    Jacobian of ``W e``. With ``M = W⁻¹ J (JᵀJ)⁻¹ Jᵀ W`` the residuals are
+    ``(I − M) ε``, so ``E[RSS_g] = Σ_k σ_k² ‖P_g (I − M) P_k‖²_F``: one
+    linear equation per group, solved for the ``σ_k²``. ``groups`` ``(n,)``
+    integers ``0 … G−1``. Returns the ``(G,)`` variances, or None when a
+    solution is not positive (too few marks of a kind to tell).
+
+    The Frobenius norms come from ``A = W⁻¹ Q`` and ``B = Wᵀ Q`` (``Q`` an
+    orthonormal basis of ``J``'s columns), ``‖P_g (I − A Bᵀ) P_k‖²_F =
+    [g = k] (|g| − 2 Σ_{i∈g} a_i·b_i) + tr(A_gᵀ A_g B_kᵀ B_k)``: O(n p²).
+
+    >>> rng = np.random.default_rng(1)
+    >>> n = 400
+    >>> groups = (np.arange(n) >= 100).astype(int)      # 100 marks at 0.6, 300 at 0.2
+    >>> X = rng.normal(size=(2 * n, 3))                  # a linear model, unit weights
+    >>> noise = rng.normal(size=(n, 2)) * np.where(groups, 0.2, 0.6)[:, None]
+    >>> beta = np.linalg.lstsq(X, noise.ravel(), rcond=None)[0]
+    >>> e = (noise.ravel() - X @ beta).reshape(n, 2)
+    >>> W = np.repeat(np.eye(2)[None], n, 0)
+    >>> np.sqrt(group_variances(X, W, e, groups)).round(2).tolist()  # ± 0.03 and ± 0.006
+    [0.56, 0.19]
+    """
+    n = len(groups)
+    Q, _ = np.linalg.qr(np.asarray(J, float))
+    Qm = Q.reshape(n, 2, -1)
+    A = np.einsum("nij,njc->nic", np.linalg.inv(W), Qm).reshape(2 * n, -1)
+    B = np.einsum("nji,njc->nic", W, Qm).reshape(2 * n, -1)
+    rows = np.repeat(np.asarray(groups, int), 2)
+    G = int(rows.max()) + 1
+    AA = [A[rows == g].T @ A[rows == g] for g in range(G)]
+    BB = [B[rows == g].T @ B[rows == g] for g in range(G)]
+    T = np.array([[float(np.sum(AA[g] * BB[k].T)) for k in range(G)] for g in range(G)])
+    for g in range(G):
+        T[g, g] += float((rows == g).sum() - 2 * np.einsum("ic,ic->", A[rows == g], B[rows == g]))
+    rss = np.array([float(np.sum(np.asarray(e, float).ravel()[rows == g] ** 2)) for g in range(G)])
+    try:
+        s2 = np.linalg.solve(T, rss)
+    except np.linalg.LinAlgError:
+        return None
+    return s2 if np.all(s2 > 0) else None
+
+
 def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     Aw = prob.weights(True)
     dense = kw["tr_solver"] == "exact"
@@ -941,12 +1019,37 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
                       jac=lambda x: prob.jacobian(x, Aw, dense=dense), **kw)
     nfev += r.nfev
     x = r.x
+    kind_ratio = None
+    groups = prob.proposed.astype(int)
+    if prob.separate_noise and min(int(groups.sum()), int(len(groups) - groups.sum())) \
+            >= VARIANCE_COMPONENTS_MIN_MARKS:
+        # each kind's noise relative to the hand marks' (rel scales a mark's
+        # noise): estimate, re-weight, re-solve, until the ratio settles
+        kind_ratio = np.ones(2)
+        for _ in range(4):
+            Wb = Aw * prob.rel[:, None, None]
+            s2 = group_variances(prob.jacobian(x, Aw, dense=True), Wb,
+                                 prob.distances(x) / prob.rel[:, None], groups)
+            if s2 is None:
+                break
+            ratio = np.sqrt(s2 / s2[0])
+            if np.all(np.abs(ratio - 1) < 0.02):
+                break
+            kind_ratio *= ratio
+            prob.rel = prob.rel * ratio[groups]
+            Aw = prob.weights(True)
+            r = least_squares(lambda x, A=Aw: prob.residuals(x, A), x,
+                              jac=lambda x, A=Aw: prob.jacobian(x, A, dense=dense), **kw)
+            nfev += r.nfev
+            x = r.x
     th, w, t, s = prob.split(x)
     R = prob.rotations(w)
     h = prob.distances(x)
     n, p = prob.n, prob.ncol
     dof = max(2 * n - p, 1)
     sigma = float(np.sqrt(((h / prob.rel[:, None]) ** 2).sum() / dof))
+    by_kind = ({} if kind_ratio is None else
+               {"hand": sigma, "proposed": sigma * float(kind_ratio[1])})
     J = np.asarray(prob.jacobian(x, Aw, dense=True))
     # the rank test again, where the answer is: the start's test sees the
     # Jacobian at the linear initialisation, and a solve can end where a
@@ -1014,7 +1117,8 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
         K=Ks, outliers=outliers, dropped=dropped, mark_rms_px=mark_rms, sigma_px=sigma,
         rms_px=float(np.sqrt(np.mean(h**2))), covariance=cov, unknowns=tuple(prob.column_names()),
         warnings=warnings, seconds=time.perf_counter() - t0, nfev=nfev,
-        noise_px=float(prob.noise_px) if prob.noise_px is not None else 1.0)
+        noise_px=float(prob.noise_px) if prob.noise_px is not None else 1.0,
+        sigma_px_by_kind=by_kind)
 
 
 # A size whose 3σ interval reaches zero is not determined (not even its
