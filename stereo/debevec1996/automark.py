@@ -778,7 +778,8 @@ def _edge_rows(sol, marks, *, distances: bool = False):
     also the signed end distances ``h`` ``(len(keep), 2)``, the solve's
     per-mark weights ``A`` ``(len(keep), 2, 2)`` and each mark's endpoint
     noise relative to the solve's ``rel`` ``(len(keep),)`` (its
-    ``spread_px``)."""
+    ``spread_px``, and for a proposal its kind's noise where the solve
+    estimated each kind's)."""
     from lumigraph.stereo.debevec1996.solve import _Problem
 
     photos = list(dict.fromkeys(u.split(":")[0] for u in sol.unknowns if ":" in u))
@@ -792,6 +793,10 @@ def _edge_rows(sol, marks, *, distances: bool = False):
                                   [1.0, 1.0, 1.0]]) for p in photos}
     prob = _Problem(sol.model, [marks[i] for i in keep], photos, K0, R, free_focal=free_focal,
                     noise_px=getattr(sol, "noise_px", None))
+    kinds = getattr(sol, "sigma_px_by_kind", None)
+    if kinds:
+        # the solve weighed each kind by its own noise (sol.sigma_px is the hand marks')
+        prob.rel = prob.rel * np.where(prob.proposed, kinds["proposed"] / kinds["hand"], 1.0)
     x = prob.pack(sol.model.values, np.zeros((len(photos), 3)), t, sol.focal_scale)
     h, cols, vals = prob.distances(x, jac=True)
     if distances:

@@ -92,3 +92,37 @@ def test_too_few_of_a_kind_pool_one_noise():
     pooled = solve_facade(model, marks, BF._K(cams), noise_px=HAND, separate_noise=False)
     assert sep.sigma_px_by_kind == {}
     assert sep.params == pooled.params and sep.sigma_px == pooled.sigma_px
+
+
+def test_deleted_residuals_measure_a_proposal_by_its_kinds_noise():
+    # the marking page's "marks to check": a proposal 1.2 px off (eight
+    # times the proposals' 0.15 px, two and a half times the hand marks'
+    # 0.5 px) stands out when judged by its own kind's noise
+    from lumigraph.stereo.debevec1996.automark import deleted_residuals
+
+    model, cams = BF.scene("house", 1)
+    exact, _ = BF._marks(model, cams, noise=0.0)
+    rng = np.random.default_rng(7)
+    ph, bad = {}, None
+    for p, v in exact.items():
+        hand = {h["edge"] for h in BF.four_hand_marks(model, v)}
+        ph[p] = []
+        for m in v:
+            seg = np.array(m["segment"]) + rng.normal(0, HAND if m["edge"] in hand else PROPOSED, 4)
+            e = {"edge": m["edge"], "segment": seg}
+            if m["edge"] not in hand:
+                e["proposed"] = True
+                if bad is None:
+                    d = seg[2:] - seg[:2]
+                    seg += np.tile(np.array([-d[1], d[0]]) / np.hypot(*d) * 1.2, 2)
+                    bad = (p, m["edge"])
+            e["segment"] = seg.tolist()
+            ph[p].append(e)
+    marks = EdgeMarks.from_dict({"photographs": ph}, model=model, photographs=list(cams))
+    sol = solve_facade(model, marks, BF._K(cams), noise_px=HAND, robust=False)
+    t = deleted_residuals(sol, marks.marks)
+    i = [(m.photo, m.edge) for m in marks.marks].index(bad)
+    others = np.delete(t, i)
+    # ~1 for a mark as good as its kind (a chi statistic with 2 dof: median 0.83)
+    assert 0.6 < np.median(others) < 1.2
+    assert t[i] > 4 and t[i] == np.max(t)
