@@ -249,7 +249,8 @@ class _Problem:
     """The marks of the kept photographs as arrays, and the residual /
     Jacobian of eq. 5.3 over ``x = [θ_free, (ω, t) per photo, focal scale]``."""
 
-    def __init__(self, model, marks, photos, K, R0, *, free_focal, noise_px=None):
+    def __init__(self, model, marks, photos, K, R0, *, free_focal, noise_px=None,
+                 separate_noise=False):
         self.model, self.photos, self.free_focal = model, list(photos), free_focal
         pi = {p: i for i, p in enumerate(self.photos)}
         self.marks = marks
@@ -270,7 +271,7 @@ class _Problem:
         # the image's own scatter along the mark (Mark.spread_px), where measured
         self.rel = np.ones(self.n)
         self.noise_px = noise_px
-        self.separate_noise = False
+        self.separate_noise = separate_noise
         self.proposed = np.array([bool(getattr(m, "proposed", False)) for m in marks], bool)
         if noise_px is not None:
             self.rel = np.array([max(1.0, (getattr(m, "spread_px", None) or 0.0) / noise_px)
@@ -778,8 +779,8 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
             R0[j] = candidates[j][0]
             if alternatives is not None:
                 alternatives[photos[j]] = candidates[j][1:]
-    prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal, noise_px=noise_px)
-    prob.separate_noise = separate_noise
+    prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal, noise_px=noise_px,
+                    separate_noise=separate_noise)
     th, t = _linear_translations(prob, R0, model.values)        # eq. 5.5
     # a size the linear solve makes non-positive (mis-marked edges pull it) starts
     # from the model's value instead: the robust pass then finds the bad marks
