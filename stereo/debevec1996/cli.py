@@ -63,6 +63,9 @@ A mark farther than 5x --noise-px from its reprojected edge is reported and left
 photograph with fewer than 3 marks is left out (warning). Marks that leave a parameter or a
 pose unconstrained: exit 2 naming them, then per unknown the unmarked edges (photo edge) that
 would constrain it, in the order to mark them (each the best with those before it marked).
+Hand marks and automark's proposals ("proposed": true), 8 or more of each: each kind's endpoint
+noise is estimated and each mark weighted by its kind's (printed; model.json sigma_px_by_kind);
+the σ of every parameter follows from both.
 """
 
 AUTOMARK_EPILOG = """\
