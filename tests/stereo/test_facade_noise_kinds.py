@@ -17,6 +17,28 @@ from lumigraph.stereo.debevec1996.solve import solve_facade
 HAND, PROPOSED, DRAWS = 0.5, 0.15, 40
 
 
+def _noisy_marks(model, cams, exact, rng, *, shift_px=0.0):
+    """Four hand marks per photograph at HAND px, every other visible edge
+    a proposal at PROPOSED px; the first proposal moved ``shift_px`` across
+    its edge. Returns the marks and that proposal's (photo, edge)."""
+    ph, first = {}, None
+    for p, v in exact.items():
+        hand = {h["edge"] for h in BF.four_hand_marks(model, v)}
+        ph[p] = []
+        for m in v:
+            seg = np.array(m["segment"]) + rng.normal(0, HAND if m["edge"] in hand else PROPOSED, 4)
+            e = {"edge": m["edge"]}
+            if m["edge"] not in hand:
+                e["proposed"] = True
+                if first is None:
+                    d = seg[2:] - seg[:2]
+                    seg += np.tile(np.array([-d[1], d[0]]) / np.hypot(*d) * shift_px, 2)
+                    first = (p, m["edge"])
+            e["segment"] = seg.tolist()
+            ph[p].append(e)
+    return EdgeMarks.from_dict({"photographs": ph}, model=model, photographs=list(cams)), first
+
+
 @pytest.fixture(scope="module")
 def draws():
     model, cams = BF.scene("house", 1)
@@ -25,19 +47,7 @@ def draws():
     out = {False: ([], []), True: ([], [])}
     kinds = []
     for d in range(DRAWS):
-        rng = np.random.default_rng(d)
-        ph = {}
-        for p, v in exact.items():
-            hand = {h["edge"] for h in BF.four_hand_marks(model, v)}
-            ph[p] = []
-            for m in v:
-                sd = HAND if m["edge"] in hand else PROPOSED
-                e = {"edge": m["edge"], "segment": (np.array(m["segment"])
-                                                    + rng.normal(0, sd, 4)).tolist()}
-                if m["edge"] not in hand:
-                    e["proposed"] = True
-                ph[p].append(e)
-        marks = EdgeMarks.from_dict({"photographs": ph}, model=model, photographs=list(cams))
+        marks, _ = _noisy_marks(model, cams, exact, np.random.default_rng(d))
         for sep in (False, True):
             sol = solve_facade(model, marks, BF._K(cams), noise_px=HAND, separate_noise=sep)
             out[sep][0].append([sol.params[n] - tv[n] for n in model.parameter_names])
@@ -102,23 +112,7 @@ def test_deleted_residuals_measure_a_proposal_by_its_kinds_noise():
 
     model, cams = BF.scene("house", 1)
     exact, _ = BF._marks(model, cams, noise=0.0)
-    rng = np.random.default_rng(7)
-    ph, bad = {}, None
-    for p, v in exact.items():
-        hand = {h["edge"] for h in BF.four_hand_marks(model, v)}
-        ph[p] = []
-        for m in v:
-            seg = np.array(m["segment"]) + rng.normal(0, HAND if m["edge"] in hand else PROPOSED, 4)
-            e = {"edge": m["edge"], "segment": seg}
-            if m["edge"] not in hand:
-                e["proposed"] = True
-                if bad is None:
-                    d = seg[2:] - seg[:2]
-                    seg += np.tile(np.array([-d[1], d[0]]) / np.hypot(*d) * 1.2, 2)
-                    bad = (p, m["edge"])
-            e["segment"] = seg.tolist()
-            ph[p].append(e)
-    marks = EdgeMarks.from_dict({"photographs": ph}, model=model, photographs=list(cams))
+    marks, bad = _noisy_marks(model, cams, exact, np.random.default_rng(7), shift_px=1.2)
     sol = solve_facade(model, marks, BF._K(cams), noise_px=HAND, robust=False)
     t = deleted_residuals(sol, marks.marks)
     i = [(m.photo, m.edge) for m in marks.marks].index(bad)
