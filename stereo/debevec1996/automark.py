@@ -37,7 +37,12 @@ marks outrank proposals): the edge whose proposals' withdrawal lets the
 most hand marks back in, without leaving a parameter failing the trust
 test or unconstrained, is withdrawn (up to three edges); the trust test
 runs once more on that solve (the proposals on the edges of
-a parameter it fails are withdrawn, the parameter named); a parameter that
+a parameter it fails are withdrawn, the parameter named). Last, a proposal
+pulls its own edge towards itself, so one off at an end can pass the
+residual check: solved with each kind's noise, the proposal that the other
+marks contradict most (its deleted residual over 3 of its kind's σ) is
+dropped, and again, while leaving it out changes nothing the marks fix (no
+parameter held, freed or failing the trust test that was not). A parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently).
 
@@ -67,6 +72,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from lumigraph.capture.errors import InputError
+
+# automatic marking's last step (tests and the decision record switch it off to compare)
+_CHECK_CONTRADICTED = True
 
 
 @dataclass(frozen=True)
@@ -635,6 +643,24 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         warnings.append("the proposals took " + ", ".join(weak) + " beyond the rough model's "
                         f"accuracy ({trust:.0%}) or fix them loosely: their edges' proposals "
                         "are withdrawn; mark some of those edges by hand")
+    if _CHECK_CONTRADICTED and kept:
+        # the residual check above measures each proposal against a model
+        # it helped fit: a proposal off at one end pulls its edge towards
+        # itself and passes. The deleted residual measures it against where
+        # the *other* marks put its edge; the worst contradicted one goes,
+        # and again, once what the marks fix has settled (above)
+        rr = {**(rough_rotations or {}), **last}
+        merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        sol = solve_facade(current, merged, K, rough_rotations=rr, noise_px=noise_px,
+                           hold_unconstrained=True, where=where)
+        for _ in range(len(kept)):
+            key, sol = _contradicted(current, merged, K, sol, rough=model, trust=trust,
+                                     candidates=set(kept), rough_rotations=rr,
+                                     noise_px=noise_px, where=where)
+            if key is None:
+                break
+            kept.pop(key)
+            merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
     warnings = [w for w in warnings if not w.startswith("held at")]
     if sol.held:
         # never silently wrong: what no mark or proposal constrains is named
@@ -643,6 +669,39 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
     return AutomarkResult(merged, len(proposals), sol, warnings)
+
+
+# a proposal is dropped when the other marks contradict it by more than this
+# many of its own standard deviations (the deleted residual's unit scale: the
+# score of a good mark exceeds 3 with probability e^-9, about 1 in 8000)
+CONTRADICTED = 3.0
+
+
+def _contradicted(model, merged, K, sol, *, rough, trust, candidates, **kw):
+    """The proposal (of ``candidates``: (photo, edge) pairs; marks the user
+    accepted earlier are not among them) that the other marks contradict most
+    (:func:`deleted_residuals` over :data:`CONTRADICTED`, in its kind's
+    noise), and the solve without it: ``((photo, edge), solution)``, or
+    ``(None, sol)`` when there is none or leaving out each of the three
+    highest would change what the marks fix (a parameter held or failing
+    the trust test that was not, or freed: a block that a handful of
+    proposals fix is not re-decided by dropping one of them).
+
+    ``sol``: the solve of ``merged`` (each kind's noise separate)."""
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    marks = list(merged.marks)
+    t = deleted_residuals(sol, marks)
+    order = [int(i) for i in np.argsort(-np.nan_to_num(t, nan=-1.0, posinf=-1.0))
+             if (marks[i].photo, marks[i].edge) in candidates
+             and np.isfinite(t[i]) and t[i] > CONTRADICTED][:3]
+    weak = set(_weak(sol, rough, trust))
+    for i in order:
+        trial = replace(merged, marks=tuple(m for j, m in enumerate(marks) if j != i))
+        alt = solve_facade(model, trial, K, hold_unconstrained=True, **kw)
+        if set(alt.held) == set(sol.held) and set(_weak(alt, rough, trust)) <= weak:
+            return (marks[i].photo, marks[i].edge), alt
+    return None, sol
 
 
 def edge_offset_std(sol, marks) -> np.ndarray:

@@ -120,3 +120,28 @@ def test_deleted_residuals_measure_a_proposal_by_its_kinds_noise():
     # ~1 for a mark as good as its kind (a chi statistic with 2 dof: median 0.83)
     assert 0.6 < np.median(others) < 1.2
     assert t[i] > 4 and t[i] == np.max(t)
+
+
+@pytest.mark.parametrize("shift_px", [0.0, 1.2])
+def test_automatic_marking_drops_the_contradicted_proposal_and_only_it(shift_px):
+    # automatic marking's last step: the proposal the other marks contradict
+    # beyond 3 of its kind's σ goes. On noise alone a proposal's score passes
+    # 3 with probability e^-9 (χ²₂/2), ~1.7 % for all 110 together: none goes
+    from lumigraph.stereo.debevec1996.automark import _contradicted
+
+    model, cams = BF.scene("house", 1)
+    exact, _ = BF._marks(model, cams, noise=0.0)
+    marks, bad = _noisy_marks(model, cams, exact, np.random.default_rng(7), shift_px=shift_px)
+    sol = solve_facade(model, marks, BF._K(cams), noise_px=HAND, hold_unconstrained=True)
+    mine = {(m.photo, m.edge) for m in marks.marks if m.proposed}
+    key, alt = _contradicted(model, marks, BF._K(cams), sol, rough=model, trust=0.3,
+                             candidates=mine, noise_px=HAND)
+    if shift_px:
+        assert key == bad
+        assert len(alt.mark_rms_px) == len(marks.marks) - 1
+    else:
+        assert key is None and alt is sol
+    # proposals the user accepted earlier (marks given to automatic marking) are not its to drop
+    key, alt = _contradicted(model, marks, BF._K(cams), sol, rough=model, trust=0.3,
+                             candidates=set(), noise_px=HAND)
+    assert key is None and alt is sol
