@@ -53,8 +53,11 @@ peaks (total least squares); the proposal is the detected stretch on that
 line; a proposal whose refinement finds too few gradient peaks or moves it
 more than 1.5 px is dropped. An edge already marked by hand in a photograph
 keeps the hand mark (its detections are matched to it and dropped, so they
-are not taken for a neighbour); of several detections of one edge the
-longest is proposed.
+are not taken for a neighbour); of several detections of one edge, the
+longest on the line nearest its projection is proposed, and none when a
+detection on another line is nearly as near (a face seen nearly edge-on
+shows its near and far sides a pixel or two apart, and the rough pose may
+hide the far one).
 
 Examples
 --------
@@ -75,6 +78,7 @@ from lumigraph.capture.errors import InputError
 
 # automatic marking's last step (tests and the decision record switch it off to compare)
 _CHECK_CONTRADICTED = True
+_ONE_LINE_EACH = True
 
 
 @dataclass(frozen=True)
@@ -277,6 +281,27 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
             c0, c1 = sorted((float(np.clip(c0, 0, 1)), float(np.clip(c1, 0, 1))))
             out.append((int(i), int(k), np.r_[det[i, :2] + c0 * d, det[i, :2] + c1 * d]))
     return out
+
+
+def _one_line(segs, edge, *, coincident_px=1.0):
+    """Of the detections given to one projected ``edge`` (each ``(4,)``),
+    the one to propose: the longest of those on the line nearest the edge,
+    or None when a detection on another line (its mean offset across the
+    edge more than ``coincident_px`` from that line's) is nearly as near
+    (``_associate``'s test, seen from the edge: two image lines, either of
+    which the rough model could mean, as a face's near and far sides seen
+    nearly edge-on)."""
+    edge = np.asarray(edge, float)
+    d = edge[2:] - edge[:2]
+    n = np.array([-d[1], d[0]]) / max(np.hypot(*d), 1e-9)
+    segs = [np.asarray(s, float) for s in segs]
+    h = np.array([((s[:2] - edge[:2]) @ n + (s[2:] - edge[:2]) @ n) / 2 for s in segs])
+    k = int(np.argmin(np.abs(h)))
+    same = np.abs(h - h[k]) <= coincident_px
+    if np.any(~same & (np.abs(h) < 1.5 * abs(h[k]) + 0.5)):
+        return None
+    return max((s for s, o in zip(segs, same, strict=True) if o),
+               key=lambda s: np.hypot(*(s[2:] - s[:2])))
 
 
 def _visible_near_flush(model, cam: dict, *, tol_px: float):
@@ -532,13 +557,17 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             pairs = _associate(det, np.array([e for _, e in vis], float),
                                max_angle_deg=min(widen * max_angle_deg, 20.0),
                                max_distance_px=widen * max_distance_px)
-            best: dict[str, np.ndarray] = {}
+            # of several detections given to one edge, the nearest line's
+            # longest piece, none when two lines are nearly as near
+            got: dict[str, list] = {}
             for _, j, s in pairs:
-                name = vis[j][0]
-                if name in hand:
-                    continue
-                if name not in best or (np.hypot(*(s[2:] - s[:2]))
-                                        > np.hypot(*(best[name][2:] - best[name][:2]))):
+                if vis[j][0] not in hand:
+                    got.setdefault(vis[j][0], []).append(s)
+            best: dict[str, np.ndarray] = {}
+            for name, segs in got.items():
+                s = _one_line(segs, dict(vis)[name]) if _ONE_LINE_EACH else max(
+                    segs, key=lambda s: np.hypot(*(s[2:] - s[:2])))
+                if s is not None:
                     best[name] = s
             for name, s in best.items():
                 seg = refine_segment(greys[photo], s)
