@@ -65,7 +65,9 @@ pose unconstrained: exit 2 naming them, then per unknown the unmarked edges (pho
 would constrain it, in the order to mark them (each the best with those before it marked).
 Hand marks and automark's proposals ("proposed": true), 8 or more of each: each kind's endpoint
 noise is estimated and each mark weighted by its kind's (printed; model.json sigma_px_by_kind);
-the σ of every parameter follows from both.
+the σ of every parameter follows from both. Marks that fit worse than --noise-px can explain
+(beyond the χ² 0.1 % limit; each kind on its own) are said in a warning: some are off their
+edges, and the σ do not cover that.
 """
 
 AUTOMARK_EPILOG = """\

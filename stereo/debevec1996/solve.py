@@ -1111,6 +1111,8 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     mark_rms = [(m.photo, m.edge, float(v)) for m, v in zip(prob.marks, d, strict=True)]
     if not r.success:
         warnings.append(f"the solver stopped before converging ({r.message})")
+    if prob.noise_px is not None:
+        warnings += _noisier_than_given(sigma, by_kind, float(prob.noise_px), groups, p)
     warnings += _weak_unknowns(params, std, pose_std)
     return FacadeSolution(
         model=fitted, params=params, std=std, poses=poses, pose_std=pose_std,
@@ -1120,6 +1122,31 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
         warnings=warnings, seconds=time.perf_counter() - t0, nfev=nfev,
         noise_px=float(prob.noise_px) if prob.noise_px is not None else 1.0,
         sigma_px_by_kind=by_kind)
+
+
+def _noisier_than_given(sigma: float, by_kind: dict, noise_px: float, groups, p: int) -> list:
+    """A warning when the marks fit worse than the endpoint noise the caller
+    gave can explain. With marks off their edges by that noise alone, σ̂²
+    dof / σ² is χ²(dof) (dof = 2 × marks − unknowns, per kind its share);
+    past its 0.1 % tail some marks are off by more: the σ, scaled by σ̂,
+    still assume every kept mark is on its edge."""
+    from scipy.stats import chi2
+
+    kinds = by_kind or {"": sigma}
+    n = len(groups)
+    out = []
+    for kind, s in kinds.items():
+        k = int(np.sum(groups == (1 if kind == "proposed" else 0))) if by_kind else n
+        dof = 2 * k - p * k / max(n, 1)
+        if dof < 10:
+            continue
+        limit = noise_px * math.sqrt(chi2.ppf(0.999, dof) / dof)
+        if s > limit:
+            out.append(f"{kind + ' ' if kind else ''}marks fit at σ̂ = {s:.2f} px, beyond the "
+                       f"{noise_px:g} px endpoint noise given (χ² 0.1 % limit {limit:.2f} px): "
+                       "some marks are off their edges, which the σ do not cover; look at the "
+                       "largest residuals")
+    return out
 
 
 # A size whose 3σ interval reaches zero is not determined (not even its

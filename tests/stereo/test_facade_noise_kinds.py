@@ -145,3 +145,20 @@ def test_automatic_marking_drops_the_contradicted_proposal_and_only_it(shift_px)
     key, alt = _contradicted(model, marks, BF._K(cams), sol, rough=model, trust=0.3,
                              candidates=set(), noise_px=HAND)
     assert key is None and alt is sol
+
+
+def test_marks_noisier_than_the_noise_given_are_said():
+    # hand marks at 0.5 px said to be at 0.5 px: within the χ² 0.1 % limit (a
+    # false alarm one solve in a thousand); said to be at 0.3 px: the hand
+    # kind is beyond it, the proposals (0.15 px) are not
+    model, cams = BF.scene("house", 1)
+    exact, _ = BF._marks(model, cams, noise=0.0)
+    marks, _ = _noisy_marks(model, cams, exact, np.random.default_rng(3))
+
+    def said(noise):
+        sol = solve_facade(model, marks, BF._K(cams), noise_px=noise)
+        return [w for w in sol.warnings if "beyond the" in w]
+
+    assert said(HAND) == []
+    got = said(0.3)
+    assert len(got) == 1 and got[0].startswith("hand marks fit at") and "0.3 px" in got[0]
