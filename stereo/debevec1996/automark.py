@@ -564,8 +564,9 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 if vis[j][0] not in hand:
                     got.setdefault(vis[j][0], []).append(s)
             best: dict[str, np.ndarray] = {}
+            projected = dict(vis)
             for name, segs in got.items():
-                s = _one_line(segs, dict(vis)[name]) if _ONE_LINE_EACH else max(
+                s = _one_line(segs, projected[name]) if _ONE_LINE_EACH else max(
                     segs, key=lambda s: np.hypot(*(s[2:] - s[:2])))
                 if s is not None:
                     best[name] = s
