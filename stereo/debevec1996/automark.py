@@ -21,9 +21,11 @@ mark of a reprojected edge when
 
 Only edges visible in the rough model (sampled points not hidden by its
 faces) are candidates, so a hidden edge gets no proposal; a point inside
-another block by less than the round's distance gate is not hidden by it
-(a flush edge that a rough model a little too small buries in its
-neighbour stays a candidate). Rounds re-solve
+another block by less than the round's distance gate is taken to lie on
+that block's nearest face, which does not hide it, while the block's other
+faces do (a flush edge that a rough model a little too small buries in its
+neighbour stays a candidate where its wall faces the camera, and is hidden
+from behind the wall). Rounds re-solve
 from the hand marks and the proposals so far with gates that start wide
 and tighten; the rough solve holds at its starting value any parameter
 the marks leave free or only pretend to fix (it moves more than ``trust``
@@ -51,7 +53,10 @@ across the segment is sampled at points along it, the gradient peak located
 by a parabola through the three largest samples, and a line fitted to the
 peaks (total least squares); the proposal is the detected stretch on that
 line; a proposal whose refinement finds too few gradient peaks or moves it
-more than 1.5 px is dropped. An edge already marked by hand in a photograph
+more than 1.5 px is dropped, and so is one whose step does not run on
+along the edge's whole visible stretch (:func:`_continues`: a window frame
+or a brick joint beside a corner is shorter than the corner). An edge
+already marked by hand in a photograph
 keeps the hand mark (its detections are matched to it and dropped, so they
 are not taken for a neighbour); of several detections of one edge, the
 longest on the line nearest its projection is proposed, and none when a
@@ -79,6 +84,8 @@ from lumigraph.capture.errors import InputError
 # automatic marking's last step (tests and the decision record switch it off to compare)
 _CHECK_CONTRADICTED = True
 _ONE_LINE_EACH = True
+_CONTINUES = True
+_ON_NEAREST_FACE = True
 
 
 @dataclass(frozen=True)
@@ -218,6 +225,36 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
     return out
 
 
+def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: float = 3.0,
+               within_px: float = 1.0, share: float = 0.5) -> bool:
+    """Whether the intensity step of the refined detection ``seg`` ``(4,)``
+    runs along the whole visible stretch of the projected model ``edge``
+    ``(4,)``, as a block's edge does, and not over a part of it only, as a
+    window frame or a brick joint beside the edge does: across ``seg``'s
+    line, every ``step_px`` over the stretch (the edge's ends projected on
+    that line), the largest grey-level step within 3 px lies within
+    ``within_px`` of the line, with the detection's sign, at ``share`` or
+    more of the places."""
+    seg = np.asarray(seg, float)
+    a, d = seg[:2], seg[2:] - seg[:2]
+    L = float(np.hypot(*d))
+    if L < 2:
+        return False
+    u = d / L
+    t0, t1 = sorted(((np.asarray(edge[:2], float) - a) @ u, (np.asarray(edge[2:], float) - a) @ u))
+    n_s = max(8, int((t1 - t0) / step_px))
+    ts = (t0 + (t1 - t0) * np.linspace(0.04, 0.96, n_s)) / L
+    offs = np.arange(-3.0, 3.0 + 1e-9, 0.5)
+    prof = profiles_across(grey, seg, ts, offs, min_length=2)[-1]
+    own = profiles_across(grey, seg, np.linspace(0.1, 0.9, 9), offs, min_length=2)[-1]
+    sign = np.sign(np.median(own[:, -1] - own[:, 0]))
+    g = np.diff(prof, axis=1) * (sign or 1.0)
+    i = np.argmax(g, 1)
+    at = offs[:-1][i] + 0.25
+    ok = (g[np.arange(len(ts)), i] > 4.0) & (np.abs(at) <= within_px)
+    return bool(ok.mean() >= share)
+
+
 def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
                min_overlap_px=10.0):
     """The proposals the detections ``det`` (N, 4) make for the projected
@@ -353,7 +390,15 @@ def _visible_near_flush(model, cam: dict, *, tol_px: float):
             # the block's far edges
             depth = -sd[:, own].max(axis=1)
             shallow = (depth > eps) & (depth < tol)
-            hit[np.ix_(shallow, own)] = False
+            if _ON_NEAREST_FACE:
+                # taken as lying on its nearest face (and that face's
+                # coplanar triangles), which then does not hide it; the
+                # block's other faces still do (an edge against a wall is
+                # hidden from the wall's back)
+                on = own[None, :] & (sd >= -depth[:, None] - eps)
+                hit[shallow] &= ~on[shallow]
+            else:
+                hit[np.ix_(shallow, own)] = False
         return ~hit.any(axis=1)
 
     return visible
@@ -572,6 +617,9 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                     best[name] = s
             for name, s in best.items():
                 seg = refine_segment(greys[photo], s)
+                if seg is not None and _CONTINUES and not _continues(greys[photo], seg,
+                                                                     projected[name]):
+                    seg = None
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
         moved = False
