@@ -960,6 +960,7 @@ def sandwich_covariance(J: np.ndarray, D: np.ndarray, sigma: float) -> np.ndarra
 # little (docs/decisions/facade.md). With at least this many marks of each
 # kind, each kind's noise is estimated and the marks are weighted by it.
 VARIANCE_COMPONENTS_MIN_MARKS = 8
+_OWN_RESIDUALS_BOUND = True
 
 
 def group_variances(J: np.ndarray, W: np.ndarray, e: np.ndarray, groups: np.ndarray):
@@ -973,7 +974,11 @@ def group_variances(J: np.ndarray, W: np.ndarray, e: np.ndarray, groups: np.ndar
     ``(I − M) ε``, so ``E[RSS_g] = Σ_k σ_k² ‖P_g (I − M) P_k‖²_F``: one
     linear equation per group, solved for the ``σ_k²``. ``groups`` ``(n,)``
     integers ``0 … G−1``. Returns the ``(G,)`` variances, or None when a
-    solution is not positive (too few marks of a kind to tell).
+    solution is not positive (too few marks of a kind to tell); a group
+    whose component comes out at or below zero (far more precise than the
+    rest, whose noise leaking into its residuals explains them) gets the
+    upper bound ``RSS_g / ‖P_g (I − M) P_g‖²_F`` (its residuals as its own
+    noise alone).
 
     The Frobenius norms come from ``A = W⁻¹ Q`` and ``B = Wᵀ Q`` (``Q`` an
     orthonormal basis of ``J``'s columns), ``‖P_g (I − A Bᵀ) P_k‖²_F =
@@ -1007,6 +1012,14 @@ def group_variances(J: np.ndarray, W: np.ndarray, e: np.ndarray, groups: np.ndar
         s2 = np.linalg.solve(T, rss)
     except np.linalg.LinAlgError:
         return None
+    if _OWN_RESIDUALS_BOUND:
+        # a group far more precise than the rest: the others' noise leaking
+        # into its residuals explains them all and its component comes out
+        # at or below zero. Its residuals taken as its own noise alone bound
+        # its variance from above (precise proposals among hand marks:
+        # pooling them with the hand marks weighed them down 25-fold)
+        own = rss / np.maximum(np.diag(T), 1e-300)
+        s2 = np.where(s2 > 0, s2, own)
     return s2 if np.all(s2 > 0) else None
 
 
