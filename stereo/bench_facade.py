@@ -36,9 +36,10 @@ Rows and checks:
   before any run; ``--quick``: tower s3 and s6); the detail also names what
   the full marks of 15 px or more (the detectable ones) leave unconstrained;
 - the same on the rendered building (``lumigraph render facade``, Lambertian,
-  640x480: bricks, tiles, windows; seeds 1-3, never tuned on; ``--quick``
-  seed 1 at 320x240) — ≤ 1.2×: the painted photographs have flat faces, a
-  photograph has texture;
+  640x480: bricks, tiles, windows; tuned on seeds 0 and 4-19, reported on
+  seeds 1-3 and 20-27, worst and median; ``--quick`` seed 1 at 320x240) —
+  ≤ 1.2×: the painted photographs have flat faces, a photograph has
+  texture;
 - solve time, ``village`` (10 blocks) × 8 photographs × 150 segments each
   (each visible edge marked as several pieces) — ≤ 1 s;
 - the real case (``stereo/bench_facade_temple.py``, skipped without the
@@ -411,40 +412,59 @@ def automatic_marking(quick: bool):
                            "unconstrained " + "; ".join(blinds) if blinds else ""))]
 
 
-def automatic_marking_rendered(quick: bool):
-    """Automatic marking on the rendered building (``lumigraph render facade``,
-    Lambertian, 640x480: brick walls, tiled roofs, windows, a tower built
-    against the house's end wall), the scene the VDTM and model-stereo rows
-    use; the painted scenes above have flat faces. Four hand marks per
-    photograph from the scene's marks with σ = 0.5 px (``edge_noise``), the
-    start 10 % off the truth as above, the rough rotations given."""
+def rendered_case(seed: int, size=(640, 480)) -> dict:
+    """Automatic marking's case on the rendered building (``lumigraph render
+    facade``, Lambertian: brick walls, tiled roofs, windows, a tower built
+    against the house's end wall): the true model, the scene's marks with
+    σ = 0.5 px (``edge_noise``) as the full marks and four of them per
+    photograph as the hand marks, the start 10 % off the truth (one factor,
+    as the painted scenes'), the rough rotations (the true ones), the
+    photographs and the intrinsics."""
     from lumigraph.capture.render import render
-    from lumigraph.stereo.debevec1996.automark import automark
     from lumigraph.stereo.debevec1996.edges import EdgeMarks
     from lumigraph.stereo.debevec1996.model import BlockModel
+
+    s = render("facade", size=size, seed=seed, lambertian=True, novel=0, edge_noise=0.5)
+    rough = BlockModel.from_dict(s.files["blocks.json"])
+    tv = {n: s.gt["parameters"][n] for n in rough.parameter_names}
+    model = rough.with_values(tv)
+    photos = list(s.image_names)
+    full = EdgeMarks.from_dict(s.files["edges.json"], model=model, photographs=photos)
+    hand = EdgeMarks.from_dict({"photographs": {
+        p: four_hand_marks(model, v) for p, v in s.files["edges.json"]["photographs"].items()}},
+        model=model, photographs=photos)
+    rng = np.random.default_rng(700 + seed)
+    start = model.with_values(model.values[~model.fixed] * rng.uniform(0.9, 1.1))
+    return dict(model=model, truth=tv, full=full, hand=hand, start=start,
+                K={p: np.array(c["K"]) for p, c in s.gt["cameras"].items()},
+                rotations={p: np.array(c["R"]) for p, c in s.gt["cameras"].items()},
+                cameras=s.gt["cameras"], images=dict(zip(photos, s.images, strict=True)))
+
+
+# the rendered building's layouts automatic marking was tuned on (and its
+# tests use); the bench reports the others
+RENDERED_TUNED = (0, *range(4, 20))
+RENDERED_REPORTED = (1, 2, 3, *range(20, 28))
+
+
+def automatic_marking_rendered(quick: bool):
+    """Automatic marking on the rendered building (:func:`rendered_case`),
+    the scene the VDTM and model-stereo rows use; the painted scenes above
+    have flat faces. Tuned on the seeds of ``RENDERED_TUNED``, reported on
+    ``RENDERED_REPORTED``'s."""
+    from lumigraph.stereo.debevec1996.automark import automark
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     size = (320, 240) if quick else (640, 480)
     rows, ratios = [], []
-    for seed in (1,) if quick else (1, 2, 3):
-        s = render("facade", size=size, seed=seed, lambertian=True, novel=0, edge_noise=0.5)
-        rough = BlockModel.from_dict(s.files["blocks.json"])
-        free = list(rough.parameter_names)
-        tv = {n: s.gt["parameters"][n] for n in free}
-        model = rough.with_values({n: tv[n] for n in free})
-        full = EdgeMarks.from_dict(s.files["edges.json"], model=model,
-                                   photographs=list(s.image_names))
-        hand = EdgeMarks.from_dict({"photographs": {
-            p: four_hand_marks(model, v) for p, v in s.files["edges.json"]["photographs"].items()}},
-            model=model, photographs=list(s.image_names))
-        Ks = {p: np.array(c["K"]) for p, c in s.gt["cameras"].items()}
-        rng = np.random.default_rng(700 + seed)
-        start = model.with_values(model.values[~model.fixed] * rng.uniform(0.9, 1.1))
-        sf = solve_facade(start, full, Ks, noise_px=0.5)
-        images = dict(zip(s.image_names, s.images, strict=True))
-        res = automark(start, hand, images, Ks, noise_px=0.5, rough_rotations={
-            p: np.array(c["R"]) for p, c in s.gt["cameras"].items()})
-        sa = solve_facade(start, res.marks, Ks, noise_px=0.5, hold_unconstrained=True)
+    seeds = (1,) if quick else RENDERED_REPORTED
+    for seed in seeds:
+        c = rendered_case(seed, size)
+        tv, free = c["truth"], list(c["truth"])
+        sf = solve_facade(c["start"], c["full"], c["K"], noise_px=0.5)
+        res = automark(c["start"], c["hand"], c["images"], c["K"], noise_px=0.5,
+                       rough_rotations=c["rotations"])
+        sa = solve_facade(c["start"], res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
         ra = float(np.sqrt(np.mean([((sa.params[n] - tv[n]) / tv[n]) ** 2 for n in free])))
         rf = float(np.sqrt(np.mean([((sf.params[n] - tv[n]) / tv[n]) ** 2 for n in free])))
         ratios.append(ra / rf)
@@ -453,10 +473,14 @@ def automatic_marking_rendered(quick: bool):
                          held=list(sa.held)))
     worst = float(max(ratios))
     return rows, [Check("automatic marking on the rendered building (bricks, windows): RMS "
-                        "parameter error within 1.2x the fully marked solve (worst seed)", worst,
-                        1.2, worst <= 1.2, "per seed " + ", ".join(f"{r:.2f}" for r in ratios)
-                        + "; proposals matched to window and brick lines near the model's "
-                          "edges (docs/decisions/facade.md, 2026-12-05)")]
+                        "parameter error within 1.2x the fully marked solve (reported seeds, "
+                        "worst)", worst, 1.2, worst <= 1.2,
+                        f"median {float(np.median(ratios)):.2f} over seeds "
+                        + ", ".join(f"s{sd} {r:.2f}" for sd, r in zip(seeds, ratios, strict=True))
+                        + f"; tuned on seeds {RENDERED_TUNED[0]}, {RENDERED_TUNED[1]}-"
+                          f"{RENDERED_TUNED[-1]}; short where the crease of the wing against the "
+                          "house, which the line detector does not find, alone fixes the wing's "
+                          "width (docs/decisions/facade.md, 2026-12-05)")]
 
 
 def solve_time(quick: bool):
