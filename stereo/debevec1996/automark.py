@@ -55,8 +55,11 @@ peaks (total least squares); the proposal is the detected stretch on that
 line; a proposal whose refinement finds too few gradient peaks or moves it
 more than 1.5 px is dropped, and so is one whose step does not run on
 along the edge's whole visible stretch (:func:`_continues`: a window frame
-or a brick joint beside a corner is shorter than the corner). An edge
-already marked by hand in a photograph
+or a brick joint beside a corner is shorter than the corner). In the
+narrow rounds, an edge no detection lies near (too faint or too short for
+the line detector) is searched for along its projection
+(:func:`_search_edge`: profiles across it averaged along it, one peak in
+the gate, no other edge near). An edge already marked by hand in a photograph
 keeps the hand mark (its detections are matched to it and dropped, so they
 are not taken for a neighbour); of several detections of one edge, the
 longest on the line nearest its projection is proposed, and none when a
@@ -86,6 +89,7 @@ _CHECK_CONTRADICTED = True
 _ONE_LINE_EACH = True
 _CONTINUES = True
 _ON_NEAREST_FACE = True
+_SEARCH_UNDETECTED = True
 
 
 @dataclass(frozen=True)
@@ -253,6 +257,59 @@ def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: 
     at = offs[:-1][i] + 0.25
     ok = (g[np.arange(len(ts)), i] > 4.0) & (np.abs(at) <= within_px)
     return bool(ok.mean() >= share)
+
+
+def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=None,
+                 step_px: float = 2.0) -> np.ndarray | None:
+    """The image step of the projected model ``edge`` ``(4,)`` found
+    without a line detection: the grey-level profiles across the edge,
+    every ``step_px`` along it, averaged along it (texture not aligned
+    with the edge averages out), peak within ``gate_px`` of it; refined
+    like a detection (:func:`refine_segment`) and kept only when that peak
+    is unique (no other peak, 1.5 px or more away, two thirds as high), the
+    step runs along the edge (:func:`_continues`) and no other projected
+    edge of ``others`` ``(M, 4)`` lies parallel within the gate (the step
+    could be its). None otherwise."""
+    edge = np.asarray(edge, float)
+    d = edge[2:] - edge[:2]
+    L = float(np.hypot(*d))
+    if L < 15.0:
+        return None
+    u = d / L
+    n = np.array([-u[1], u[0]])
+    if others is not None and len(others):
+        o = np.asarray(others, float).reshape(-1, 4)
+        od = o[:, 2:] - o[:, :2]
+        ol = np.maximum(np.hypot(*od.T), 1e-9)
+        par = np.abs(od @ u) / ol >= np.cos(np.radians(3.0))
+        on = np.stack([-od[:, 1], od[:, 0]], 1) / ol[:, None]
+        h0 = ((edge[:2] - o[:, :2]) * on).sum(1)
+        h1 = ((edge[2:] - o[:, :2]) * on).sum(1)
+        # overlapping along the edge and near it, but not on its line
+        ta = ((o[:, :2] - edge[:2]) @ u)
+        tb = ((o[:, 2:] - edge[:2]) @ u)
+        over = (np.maximum(ta, tb) > 0) & (np.minimum(ta, tb) < L)
+        near = (np.maximum(np.abs(h0), np.abs(h1)) <= gate_px + 1.5) & \
+            ~((np.abs(h0) <= 1.0) & (np.abs(h1) <= 1.0))
+        if np.any(par & over & near):
+            return None
+    offs = np.arange(-gate_px - 1.0, gate_px + 1.0 + 1e-9, 0.5)
+    ts = np.linspace(0.05, 0.95, max(8, int(L / step_px)))
+    prof = profiles_across(grey, edge, ts, offs, min_length=2)[-1]
+    m = np.abs(np.diff(prof, axis=1).mean(0))
+    mids = offs[:-1] + 0.25
+    peaks = [i for i in range(1, len(m) - 1) if m[i] >= m[i - 1] and m[i] >= m[i + 1]]
+    if not peaks:
+        return None
+    k = max(peaks, key=lambda i: m[i])
+    if abs(mids[k]) > gate_px or any(m[i] >= m[k] / 1.5 for i in peaks
+                                     if abs(mids[i] - mids[k]) >= 1.5):
+        return None
+    shifted = np.r_[edge[:2] + mids[k] * n, edge[2:] + mids[k] * n]
+    seg = refine_segment(grey, shifted)
+    if seg is None or not _continues(grey, seg, edge):
+        return None
+    return seg
 
 
 def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
@@ -622,6 +679,19 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                     seg = None
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
+            if _SEARCH_UNDETECTED and widen == 1.0:
+                # an edge no detection lies near (too faint or too short
+                # for the line detector): its step searched for along the
+                # whole projected edge, where the model places it well (the
+                # narrow rounds) and no other edge is near
+                E = np.array([e for _, e in vis], float)
+                for j, (name, e) in enumerate(vis):
+                    if name in hand or name in got:
+                        continue
+                    seg = _search_edge(greys[photo], e, gate_px=max_distance_px,
+                                       others=np.delete(E, j, axis=0))
+                    if seg is not None:
+                        kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
         moved = False
         if sol.held:
             # what the marks leave free stays at its starting value: find it by

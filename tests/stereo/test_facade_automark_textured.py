@@ -1,7 +1,8 @@
 """Automatic marking on textured walls (stereo/debevec1996/automark.py):
 the checks that keep window frames, brick joints and a flush edge seen
-from behind its wall from giving proposals, unit by unit on images whose
-edges are known exactly, then on the rendered building."""
+from behind its wall from giving proposals, and the search for an edge
+the line detector misses, unit by unit on images whose edges are known
+exactly, then on the rendered building."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import pytest
 
 from lumigraph.stereo.debevec1996.automark import (
     _continues,
+    _search_edge,
     _visible_near_flush,
     refine_segment,
 )
@@ -18,11 +20,14 @@ from lumigraph.stereo.debevec1996.model import BlockModel
 STEP = 40.0          # grey levels across the edges below
 
 
-def _wall(*, rows=120, cols=120, edge_x=60.5):
+def _wall(*, rows=120, cols=120, edge_x=60.5, rng=None, noise=0.0):
     """A vertical step of STEP grey levels at x = ``edge_x`` (pixel centres
-    at integers: the step lies between columns)."""
+    at integers: the step lies between columns), plus Gaussian ``noise``."""
     x = np.arange(cols)[None, :].repeat(rows, 0).astype(float)
-    return 100.0 + STEP * np.clip(x - edge_x + 0.5, 0.0, 1.0)
+    g = 100.0 + STEP * np.clip(x - edge_x + 0.5, 0.0, 1.0)
+    if rng is not None:
+        g = g + rng.normal(0.0, noise, g.shape)
+    return g
 
 
 def test_a_step_along_the_whole_edge_continues():
@@ -51,6 +56,36 @@ def test_a_step_of_the_other_sign_does_not_continue_it():
     g[40:, :61] += STEP
     seg = refine_segment(g, np.array([60.3, 5.0, 60.3, 35.0]))
     assert not _continues(g, seg, np.array([60.5, 5.0, 60.5, 115.0]))
+
+
+def test_a_faint_step_in_noise_is_found_along_the_projected_edge():
+    # a step of 40 under noise of sd 15: each profile's own peak is
+    # unreliable, their average along the edge is not; the projected edge is
+    # 2.5 px off
+    rng = np.random.default_rng(3)
+    g = _wall(rng=rng, noise=15.0, edge_x=60.3)
+    seg = _search_edge(g, np.array([62.8, 5.0, 62.8, 115.0]), gate_px=6.0)
+    assert seg is not None
+    # ~20 profile peaks within ±0.5 px each fix the line to ~0.2 px
+    assert abs(seg[0] - 60.3) < 0.25 and abs(seg[2] - 60.3) < 0.25
+
+
+def test_two_steps_in_the_gate_are_not_searched():
+    # a second step as strong 3 px away: either could be the edge
+    g = _wall() + STEP * (np.arange(120)[None, :] >= 64)
+    assert _search_edge(g, np.array([62.0, 5.0, 62.0, 115.0]), gate_px=6.0) is None
+
+
+def test_a_neighbouring_projected_edge_in_the_gate_stops_the_search():
+    g = _wall()
+    edge = np.array([61.0, 5.0, 61.0, 115.0])
+    assert _search_edge(g, edge, gate_px=6.0) is not None
+    # another model edge 4 px away and parallel: the step could be its
+    other = np.array([[65.0, 0.0, 65.0, 120.0]])
+    assert _search_edge(g, edge, gate_px=6.0, others=other) is None
+    # one on the same line (a flush neighbour) does not
+    assert _search_edge(g, edge, gate_px=6.0, others=np.array([[61.3, 0.0, 61.3, 60.0]])) \
+        is not None
 
 
 TWO = {"blocks": [
@@ -121,7 +156,7 @@ def test_on_the_rendered_building_no_proposal_is_off_its_edge(rendered):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     c = rendered
-    switches = ("_CONTINUES", "_ON_NEAREST_FACE")
+    switches = ("_CONTINUES", "_ON_NEAREST_FACE", "_SEARCH_UNDETECTED")
 
     def run():
         res = am.automark(c["start"], c["hand"], c["images"], c["K"], noise_px=0.5,
