@@ -25,7 +25,10 @@ another block by less than the round's distance gate is taken to lie on
 that block's nearest face, which does not hide it, while the block's other
 faces do (a flush edge that a rough model a little too small buries in its
 neighbour stays a candidate where its wall faces the camera, and is hidden
-from behind the wall). Rounds re-solve
+from behind the wall). An edge between two faces in one plane (a seam: a
+tower aligned with the house's front meets it there; :func:`_seam`) shows
+as a line only where the two blocks differ in colour, so its proposals
+must lie within a third of the distance gate. Rounds re-solve
 from the hand marks and the proposals so far with gates that start wide
 and tighten; the rough solve holds at its starting value any parameter
 the marks leave free or only pretend to fix (it moves more than ``trust``
@@ -462,6 +465,14 @@ def _visible_near_flush(model, cam: dict, *, tol_px: float):
     return visible
 
 
+def _off(seg, edge) -> float:
+    """The larger distance (px) of the ends of ``seg`` ``(4,)`` from the
+    line of ``edge`` ``(4,)``."""
+    d = edge[2:] - edge[:2]
+    n = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-9)
+    return max(abs((seg[:2] - edge[:2]) @ n), abs((seg[2:] - edge[:2]) @ n))
+
+
 def _first_planes(tris, normals, centre, rays):
     """The plane ``(n, n·x)`` of the first triangle each of ``rays`` ``(K,
     3)`` from ``centre`` meets (NaN where it meets none)."""
@@ -486,16 +497,31 @@ def _first_planes(tris, normals, centre, rays):
 
 
 def _seam(model, cam: dict, seg, *, tol_px: float, samples: int = 7) -> bool:
-    """Whether the projected model edge ``seg`` ``(4,)`` (px) shows as no
-    line in the photograph: the model surfaces ``tol_px`` to either side of
-    it (the rays through those pixels) lie in one plane at most of
-    ``samples`` places along it, as where a tower aligned with the house's
-    front meets it. A rough model a little off opens a gap there, which
-    makes the house's corner a visible edge of the model; in the photograph
-    the walls run on in one plane, and a window column beside it took the
-    corner's proposal (the bench's rendered seeds 20 and 26,
-    ``docs/decisions/facade.md``). Planes match when their normals agree
-    to 3° and their offsets to ``tol_px`` at the point's depth."""
+    """Whether the projected model edge ``seg`` ``(4,)`` (px) is a seam:
+    the model surfaces ``tol_px`` to either side of it (the rays through
+    those pixels) lie in one plane at most of ``samples`` places along it,
+    as where a tower aligned with the house's front meets it. A rough model
+    a little off opens a gap there, which makes the house's corner a
+    visible edge of the model; in the photograph the walls run on in one
+    plane (a line only where the blocks differ in colour), and window
+    columns beside it took the corner's proposals (the bench's rendered
+    seeds 19 and 20, ``docs/decisions/facade.md``). Planes match when their
+    normals agree to 3° and their offsets to ``tol_px`` at the point's
+    distance.
+
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import project_model_edges
+    >>> box = {"width": 2.0, "depth": 2.0, "height": 2.0}
+    >>> m = BlockModel.from_dict({"blocks": [{"name": "a", "kind": "box", "params": box},
+    ...     {"name": "b", "kind": "box", "parent": "a", "on": "base", "x": "offset",
+    ...      "y": "front", "params": {**box, "offset_x": 2.0}}]}, where="doc")
+    >>> K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+    >>> R = np.diag([1.0, -1.0, -1.0]); t = -R @ np.array([1.0, 0.0, 12.0])   # above
+    >>> E = project_model_edges(m, K, R, t)
+    >>> cam = {"K": K, "R": R, "t": t}
+    >>> [_seam(m, cam, np.r_[E[e]].ravel(), tol_px=6.0) for e in ("a/top-right", "a/top-left")]
+    [True, False]
+    """
     mesh = model.mesh()
     tris = mesh.vertices[mesh.faces]
     nrm = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
@@ -719,11 +745,12 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             # taken for a neighbouring edge; what they win is dropped
             hand = {m.edge for m in marks.of(photo)}
             vis = [(v["edge"], np.array(v["segment"])) for v in vis]
-            if _NO_SEAMS:
-                # an edge between two faces in one plane shows as no line:
-                # what lies beside it is some other line's
-                vis = [(e, sg) for e, sg in vis if e in hand or not _seam(
-                    sol.model, cam, sg, tol_px=widen * max_distance_px)]
+            # an edge between two faces in one plane shows as a line only
+            # where the two blocks differ in colour, and a line the gates
+            # let through beside it is likelier some other's (a window
+            # column): its proposals are held to a third of the gate
+            seams = {e for e, sg in vis if e not in hand and _seam(
+                sol.model, cam, sg, tol_px=widen * max_distance_px)} if _NO_SEAMS else set()
             det = found[photo]
             views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
             pairs = _associate(det, np.array([e for _, e in vis], float),
@@ -743,6 +770,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 if s is not None:
                     best[name] = s
             for name, s in best.items():
+                if name in seams and _off(s, projected[name]) > max_distance_px / 3:
+                    continue
                 seg = refine_segment(greys[photo], s)
                 if seg is not None and _CONTINUES and not _continues(greys[photo], seg,
                                                                      projected[name]):
@@ -758,8 +787,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 for j, (name, e) in enumerate(vis):
                     if name in hand or name in got:
                         continue
-                    seg = _search_edge(greys[photo], e, gate_px=max_distance_px,
-                                       others=np.delete(E, j, axis=0))
+                    seg = _search_edge(greys[photo], e, gate_px=max_distance_px / (
+                        3 if name in seams else 1), others=np.delete(E, j, axis=0))
                     if seg is not None:
                         kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
         moved = False
