@@ -94,6 +94,9 @@ _CONTINUES = True
 _ON_NEAREST_FACE = True
 _SEARCH_UNDETECTED = True
 _NO_SEAMS = True
+# the offset (px) either side of an edge at which _seam looks for two faces in one
+# plane when suggesting marks (the association's distance gate, max_distance_px)
+SEAM_TOL_PX = 6.0
 
 
 @dataclass(frozen=True)
@@ -1299,8 +1302,12 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
     two rows change the information matrix by rank two: its σ comes from
     the marks' SVD, taken once per suggestion, and a 2×2 and a two-row SVD
     of the candidate's own (:func:`_std_with_rows`), not from a new
-    decomposition of the whole stack per candidate. Returns ``[{parameter, suggest: [{photo, edge,
-    constrains, std_after, hidden_in_solve}]}]`` in the order of
+    decomposition of the whole stack per candidate. A suggestion that is a
+    seam at the held solution (:func:`_seam`: the faces beside it in one
+    plane, a line only where the two blocks differ in colour) is flagged
+    and, like a hidden one, not assumed marked. Returns ``[{parameter,
+    suggest: [{photo, edge, constrains, std_after, hidden_in_solve,
+    seam}]}]`` in the order of
     ``unknowns`` (an unknown of a photograph the held solve left out gets
     no suggestion); no suggestion at all when even the held solve fails.
 
@@ -1343,11 +1350,16 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
     at = model.with_values(held.params)
     kept = {(p, e) for p, e, _ in held.mark_rms_px}
     have = [m for m in marks.marks if (m.photo, m.edge) in kept]
-    cands, shown = [], set()
+    cands, shown, seams = [], set(), set()
     for p in photos:
         R, t = held.poses[p]
         cam = {p: {"K": held.K[p], "R": R, "t": t, "image_size": sizes[p]}}
-        shown |= {(p, e["edge"]) for e in project_edges(at, cam)[p]}
+        vis = project_edges(at, cam)[p]
+        shown |= {(p, e["edge"]) for e in vis}
+        # a seam (two faces in one plane) is a line only where the blocks
+        # differ in colour: named as such, and not assumed marked
+        seams |= {(p, e["edge"]) for e in vis
+                  if _seam(at, cam[p], np.asarray(e["segment"], float), tol_px=SEAM_TOL_PX)}
         cands += [Mark(p, e["edge"], np.asarray(e["segment"], float))
                   for e in project_edges(at, cam, occlusion=False)[p] if (p, e["edge"]) not in marked]
     if not have or not cands:
@@ -1375,11 +1387,13 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
         if c:
             picks = _constraining_in_turn(
                 E, Jc, np.array(c), norms[c], var=float(noise_px) ** 2, count=suggestions,
-                markable=np.array([(cands[j].photo, cands[j].edge) in shown for j in usable]))
+                markable=np.array([(cands[j].photo, cands[j].edge) in shown - seams
+                                   for j in usable]))
             rows = [(cands[usable[j]], sd is not None, sd) for j, sd in picks]
         out.append({"parameter": u,
                     "suggest": [{"photo": mk.photo, "edge": mk.edge, "constrains": con,
-                                 "std_after": sd, "hidden_in_solve": (mk.photo, mk.edge) not in shown}
+                                 "std_after": sd, "hidden_in_solve": (mk.photo, mk.edge) not in shown,
+                                 "seam": (mk.photo, mk.edge) in seams}
                                 for mk, con, sd in rows]})
     return out
 
@@ -1387,7 +1401,8 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
 def refusal_lines(spots) -> list[str]:
     """:func:`unconstrained_spots`' answer as lines for the command line: a
     heading, then per unknown its edges (``photo edge``, in order; "(hidden
-    in the solve?)" where the held solve's faces hide it; "(one of several it needs)"
+    in the solve?)" where the held solve's faces hide it; "(a seam: …)"
+    where it lies between two faces in one plane; "(one of several it needs)"
     where it does not constrain the unknown on its own). An unknown with no
     suggestion says so.
 
@@ -1403,6 +1418,8 @@ def refusal_lines(spots) -> list[str]:
            "it), then solve again:"]
     for u in spots:
         items = [f"{q['photo']} {q['edge']}" + (" (hidden in the solve?)" if q["hidden_in_solve"] else "")
+                 + (" (a seam: a line only where the blocks differ in colour)"
+                    if q.get("seam") else "")
                  + ("" if q["constrains"] else " (one of several it needs)") for q in u["suggest"]]
         out.append(f"{u['parameter']}: " + (", ".join(items) if items else "no unmarked edge found "
                                               "that would constrain it"))

@@ -247,3 +247,32 @@ def test_on_the_rendered_building_a_seam_takes_no_line_beside_it():
         am._NO_SEAMS = True
     assert sum(e == "house/front-right" for _, e in _far(c, before)) >= 2      # the premise
     assert not _far(c, run())
+
+
+def test_a_suggested_seam_is_flagged_and_not_assumed_marked():
+    """A refusal's suggestions (``unconstrained_spots``): with the tower
+    (its front aligned with the house's, flush against its right wall)
+    unmarked, its offset is free; the tower's front-left corner is a seam
+    (the house's front runs on into the tower's), flagged as such, and the
+    tower's far corners are not."""
+    from lumigraph.capture.scenes.facade_edges import project_edges, ring_cameras
+    from lumigraph.stereo.debevec1996.automark import refusal_lines, unconstrained_spots
+    from lumigraph.stereo.debevec1996.edges import EdgeMarks
+
+    spec = {"blocks": [*TWO["blocks"][:1], {**THREE["blocks"][-1], "params": {
+        **THREE["blocks"][-1]["params"], "offset_x": 6.5}}]}         # flush: 5 + 3/2
+    model = BlockModel.from_dict(spec, where="test")
+    cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700,
+                        arc_deg=(-160.0, -70.0))
+    seen = {p: [e for e in v if not e["edge"].startswith("tower/")]
+            for p, v in project_edges(model, cams).items()}
+    marks = EdgeMarks.from_dict({"photographs": seen}, model=model, photographs=list(cams))
+    spots = unconstrained_spots(model, marks, {p: c["K"] for p, c in cams.items()},
+                                {p: c["image_size"] for p, c in cams.items()},
+                                ["tower/offset_x"], suggestions=12)
+    sug = spots[0]["suggest"]
+    flags = {q["edge"]: q["seam"] for q in sug}
+    assert flags.get("tower/front-left") is True, sug
+    assert all(not f for e, f in flags.items() if e in ("tower/front-right", "tower/top-right"))
+    line = refusal_lines(spots)[1]
+    assert "(a seam: a line only where the blocks differ in colour)" in line

@@ -440,7 +440,7 @@ def test_a_refused_solve_answers_the_edges_that_would_constrain_each_unknown(sce
     for u in got["unconstrained"]:
         assert u["suggest"], u
         for q in u["suggest"]:
-            assert set(q) == {"photo", "edge", "constrains", "std_after", "hidden_in_solve"}
+            assert set(q) == {"photo", "edge", "constrains", "std_after", "hidden_in_solve", "seam"}
             assert (q["std_after"] is None) != q["constrains"]
         # the list down to the first mark that constrains it lies on the
         # blocks that carry the heights; below it, any edge that lowers σ

@@ -263,7 +263,8 @@
     a.type = "button";
     a.className = "suggest";
     a.title = title;
-    a.textContent = `${q.photo} ${q.edge}` + (q.hidden_in_solve ? " (hidden in the solve?)" : "");
+    a.textContent = `${q.photo} ${q.edge}` + (q.hidden_in_solve ? " (hidden in the solve?)" : "")
+      + (q.seam ? " (a seam: a line only where the blocks differ in colour)" : "");
     a.addEventListener("click", async () => {
       const i = S.state.photos.findIndex((p) => p.name === q.photo);
       if (i >= 0) await choosePhoto(i);
