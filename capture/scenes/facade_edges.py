@@ -91,20 +91,30 @@ def _occluded(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray
     return _hits(P, centre, tris).any(axis=1)
 
 
-def _hits(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """(K, T) bool: triangle t lies between point k and ``centre``
-    (:func:`_occluded`'s test, per triangle)."""
-    d = centre[None, :] - P                        # (K, 3) towards the camera
+def ray_triangles(O: np.ndarray, d: np.ndarray, tris: np.ndarray):
+    """Möller–Trumbore for every ray against every triangle: rays from
+    ``O`` ``(K, 3)`` (or one ``(3,)`` origin for all) along ``d`` ``(K,
+    3)``, triangles ``tris`` ``(T, 3, 3)``. Returns ``(ok, u, v, tt)``, each
+    ``(K, T)``: ``ok`` false where ray and triangle are parallel, ``u, v``
+    the barycentric coordinates of the hit, ``tt`` its parameter along
+    ``d`` (in units of ``d``'s length)."""
     v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
     pv = np.cross(d[:, None, :], e2[None])          # (K, T, 3)
     det = np.einsum("ktj,tj->kt", pv, e1)
     ok = np.abs(det) > 1e-12
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = P[:, None, :] - v0[None]
+    s = np.asarray(O, float).reshape(-1, 1, 3) - v0[None]
     u = np.einsum("ktj,ktj->kt", s, pv) * inv
     q = np.cross(s, e1[None])
     v = np.einsum("kj,ktj->kt", d, q) * inv
     tt = np.einsum("ktj,tj->kt", q, e2) * inv
+    return ok, u, v, tt
+
+
+def _hits(P: np.ndarray, centre: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """(K, T) bool: triangle t lies between point k and ``centre``
+    (:func:`_occluded`'s test, per triangle)."""
+    ok, u, v, tt = ray_triangles(P, centre[None, :] - P, tris)   # towards the camera
     eps = 1e-9
     return ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (tt > 1e-6) & (tt < 1 - 1e-9)
 

@@ -479,16 +479,9 @@ def _off(seg, edge) -> float:
 def _first_planes(tris, normals, centre, rays):
     """The plane ``(n, n·x)`` of the first triangle each of ``rays`` ``(K,
     3)`` from ``centre`` meets (NaN where it meets none)."""
-    v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
-    pv = np.cross(rays[:, None, :], e2[None])
-    det = np.einsum("ktj,tj->kt", pv, e1)
-    ok = np.abs(det) > 1e-12
-    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = centre[None, None, :] - v0[None]
-    u = np.einsum("ktj,ktj->kt", s, pv) * inv
-    q = np.cross(s, e1[None])
-    v = np.einsum("kj,ktj->kt", rays, q) * inv
-    dist = np.einsum("ktj,tj->kt", q, e2) * inv
+    from lumigraph.capture.scenes.facade_edges import ray_triangles
+
+    ok, u, v, dist = ray_triangles(centre, rays, tris)
     hit = ok & (u >= -1e-9) & (v >= -1e-9) & (u + v <= 1 + 1e-9) & (dist > 1e-9)
     dist = np.where(hit, dist, np.inf)
     j = np.argmin(dist, axis=1)
@@ -508,7 +501,7 @@ def _seam(model, cam: dict, seg, *, tol_px: float, samples: int = 7) -> bool:
     visible edge of the model; in the photograph the walls run on in one
     plane (a line only where the blocks differ in colour), and window
     columns beside it took the corner's proposals (the bench's rendered
-    seeds 19 and 20, ``docs/decisions/facade.md``). Planes match when their
+    seeds 20 and 37, ``docs/decisions/facade.md``). Planes match when their
     normals agree to 3° and their offsets to ``tol_px`` at the point's
     distance.
 
@@ -525,34 +518,47 @@ def _seam(model, cam: dict, seg, *, tol_px: float, samples: int = 7) -> bool:
     >>> [_seam(m, cam, np.r_[E[e]].ravel(), tol_px=6.0) for e in ("a/top-right", "a/top-left")]
     [True, False]
     """
+    return bool(_seams(model, cam, {"": seg}, tol_px=tol_px, samples=samples))
+
+
+def _seams(model, cam: dict, segs: dict, *, tol_px: float, samples: int = 7) -> set:
+    """The names of ``segs`` (name -> projected segment ``(4,)``, px) that
+    are seams (:func:`_seam`), the model's mesh built once."""
+    if not segs:
+        return set()
     mesh = model.mesh()
     tris = mesh.vertices[mesh.faces]
     nrm = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
     K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
     centre = -R.T @ t.ravel()
-    seg = np.asarray(seg, float)
-    a, d = seg[:2], seg[2:] - seg[:2]
-    L = float(np.hypot(*d))
-    if L < 1e-9:
-        return False
-    n2 = np.array([-d[1], d[0]]) / L
+    Kinv = np.linalg.inv(K)
     fr = np.linspace(0.1, 0.9, samples)
-    pts = a[None] + fr[:, None] * d[None]
-    px = np.r_[pts + tol_px * n2, pts - tol_px * n2]
-    rays = (np.c_[px, np.ones(len(px))] @ np.linalg.inv(K).T) @ R      # world directions
-    rays /= np.linalg.norm(rays, axis=1, keepdims=True)
-    pl = _first_planes(tris, nrm, centre, rays)
-    p, q = pl[:samples], pl[samples:]
-    both = np.isfinite(p[:, 0]) & np.isfinite(q[:, 0])
-    # metres per pixel at each hit: its distance along the ray over the focal
-    cos = np.abs(np.einsum("kj,kj->k", p[:, :3], rays[:samples]))
-    dist = np.abs((p[:, 3] - p[:, :3] @ centre) / np.maximum(cos, 1e-9))
-    tol_m = tol_px * dist / float(K[0, 0])
-    same = both & (np.einsum("kj,kj->k", np.nan_to_num(p[:, :3]), np.nan_to_num(q[:, :3]))
-                   >= np.cos(np.radians(3.0))) & (np.abs(np.nan_to_num(p[:, 3] - q[:, 3]))
-                                                  <= np.nan_to_num(tol_m))
-    return bool(same.sum() * 2 > samples)
+    out = set()
+    for name, seg in segs.items():
+        seg = np.asarray(seg, float)
+        a, d = seg[:2], seg[2:] - seg[:2]
+        L = float(np.hypot(*d))
+        if L < 1e-9:
+            continue
+        n2 = np.array([-d[1], d[0]]) / L
+        pts = a[None] + fr[:, None] * d[None]
+        px = np.r_[pts + tol_px * n2, pts - tol_px * n2]
+        rays = (np.c_[px, np.ones(len(px))] @ Kinv.T) @ R          # world directions
+        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        pl = _first_planes(tris, nrm, centre, rays)
+        p, q = pl[:samples], pl[samples:]
+        both = np.isfinite(p[:, 0]) & np.isfinite(q[:, 0])
+        # metres per pixel at each hit: its distance along the ray over the focal
+        cos = np.abs(np.einsum("kj,kj->k", p[:, :3], rays[:samples]))
+        dist = np.abs((p[:, 3] - p[:, :3] @ centre) / np.maximum(cos, 1e-9))
+        tol_m = tol_px * dist / float(K[0, 0])
+        same = both & (np.einsum("kj,kj->k", np.nan_to_num(p[:, :3]), np.nan_to_num(q[:, :3]))
+                       >= np.cos(np.radians(3.0))) & (np.abs(np.nan_to_num(p[:, 3] - q[:, 3]))
+                                                      <= np.nan_to_num(tol_m))
+        if same.sum() * 2 > samples:
+            out.add(name)
+    return out
 
 
 def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
@@ -752,8 +758,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             # where the two blocks differ in colour, and a line the gates
             # let through beside it is likelier some other's (a window
             # column): its proposals are held to a third of the gate
-            seams = {e for e, sg in vis if e not in hand and _seam(
-                sol.model, cam, sg, tol_px=widen * max_distance_px)} if _NO_SEAMS else set()
+            seams = _seams(sol.model, cam, {e: sg for e, sg in vis if e not in hand},
+                           tol_px=widen * max_distance_px) if _NO_SEAMS else set()
             det = found[photo]
             views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
             pairs = _associate(det, np.array([e for _, e in vis], float),
@@ -1358,8 +1364,8 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
         shown |= {(p, e["edge"]) for e in vis}
         # a seam (two faces in one plane) is a line only where the blocks
         # differ in colour: named as such, and not assumed marked
-        seams |= {(p, e["edge"]) for e in vis
-                  if _seam(at, cam[p], np.asarray(e["segment"], float), tol_px=SEAM_TOL_PX)}
+        seams |= {(p, e) for e in _seams(at, cam[p], {e["edge"]: e["segment"] for e in vis},
+                                         tol_px=SEAM_TOL_PX)}
         cands += [Mark(p, e["edge"], np.asarray(e["segment"], float))
                   for e in project_edges(at, cam, occlusion=False)[p] if (p, e["edge"]) not in marked]
     if not have or not cands:
