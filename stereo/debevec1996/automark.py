@@ -726,15 +726,15 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         # a proposal made under wider gates stays only while it passes this
         # round's gates against the re-solved model (wrong early matches go)
         gate = widen * max_distance_px
+        proj: dict[str, dict] = {}          # photo -> its projected edges, once
         for key, m in list(kept.items()):
             if m.photo not in sol.poses:
                 kept.pop(key)
                 continue
-            R, t = sol.poses[m.photo]
-            a, b = project_model_edges(sol.model, sol.K[m.photo], R, t)[m.edge]
-            d = b - a
-            nrm = np.array([-d[1], d[0]]) / max(np.hypot(*d), 1e-9)
-            if max(abs((m.segment[:2] - a) @ nrm), abs((m.segment[2:] - a) @ nrm)) > gate:
+            if m.photo not in proj:
+                R, t = sol.poses[m.photo]
+                proj[m.photo] = project_model_edges(sol.model, sol.K[m.photo], R, t)
+            if _off(m.segment, np.r_[proj[m.photo][m.edge]].ravel()) > gate:
                 kept.pop(key)
         warnings = list(sol.warnings)
         before = set(kept)
