@@ -47,7 +47,14 @@ pulls its own edge towards itself, so one off at an end can pass the
 residual check: solved with each kind's noise, the proposal that the other
 marks contradict most (its deleted residual over 3 of its kind's σ) is
 dropped, and again, while leaving it out changes nothing the marks fix (no
-parameter held, freed or failing the trust test that was not). A parameter that
+parameter held, freed or failing the trust test that was not). Where a
+block's parameters stay held and the marks leave them one free direction
+(its outer face marked, its inner face not), the inner face is searched
+for as a crease against its neighbour (:func:`_crease`: brick against
+brick, a step in mean grey that keeps its sign along the line and from
+photograph to photograph, which the line detector misses); a clear peak
+within ``trust`` of the rough values is proposed and kept if the solve
+then fixes the block. A parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently).
 
@@ -94,6 +101,7 @@ _CONTINUES = True
 _ON_NEAREST_FACE = True
 _SEARCH_UNDETECTED = True
 _NO_SEAMS = True
+_CREASE = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -692,6 +700,204 @@ def _hand_rms(sol, marks) -> float:
     return float(np.sqrt(np.mean(np.square(d)))) if d else 0.0
 
 
+def _free_direction(model, names, marked) -> np.ndarray:
+    """The directions over the slots of ``names`` that move no marked
+    edge's 3-D line (an endpoint may slide along its own line: a block's
+    top edge is marked, its end is not): ``(k, len(names))``, orthonormal
+    rows (k = 0 where the marked edges fix every combination)."""
+    C0, C1 = model.edge_matrices()
+    th = model.values
+    index = {n: i for i, n in enumerate(model.edge_names)}
+    slots = [model.slot_of(n) for n in names]
+    rows = []
+    for e in set(marked):
+        i = index[e]
+        d = C1[i] @ th - C0[i] @ th
+        d /= max(float(np.linalg.norm(d)), 1e-300)
+        across = np.eye(3) - np.outer(d, d)
+        rows += [across @ C0[i][:, slots], across @ C1[i][:, slots]]
+    A = np.vstack(rows) if rows else np.zeros((1, len(slots)))
+    _, s, Vt = np.linalg.svd(A)
+    return Vt[int((s > 1e-9 * max(float(s[0]), 1e-300)).sum()):]
+
+
+def _crease_lines(model, slots, v, alpha, cams: dict, *, tol_px: float, samples: int = 41,
+                  outer: float = 4.0):
+    """The edges whose 3-D lines the move ``alpha * v`` of the ``slots``
+    shifts, projected at that move: ``{(photo, edge index): (a, b, px per
+    unit alpha)}``, each the visible stretch (at least 8 px, 5 px inside the
+    frame) oriented so that its left normal points where the edge moves."""
+    C0, C1 = model.edge_matrices()
+    th = model.values.copy()
+    th[slots] += alpha * v
+    moved = model.with_values({n: float(th[model.slot_of(n)]) for n in model.parameter_names})
+    s = np.linspace(0.0, 1.0, samples)[1:-1]
+    edges, still = [], []
+    for i in range(len(C0)):
+        p0, p1 = C0[i] @ th, C1[i] @ th
+        d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-300)
+        m0, m1 = C0[i][:, slots] @ v, C1[i][:, slots] @ v
+        P = p0 + s[:, None] * (p1 - p0)
+        if max(np.linalg.norm(m0 - (m0 @ d) * d), np.linalg.norm(m1 - (m1 @ d) * d)) > 1e-9:
+            edges.append((i, P, m0 + s[:, None] * (m1 - m0)))
+        else:
+            still.append(P)
+    out = {}
+    for photo, cam in cams.items():
+        K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
+        t = t.ravel()
+        w, h = cam["image_size"]
+        vis = _visible_near_flush(moved, cam, tol_px=tol_px)
+        fixed = []                      # the visible samples of the edges that stay
+        for P in still:
+            Y = P @ R.T + t
+            if np.all(Y[:, 2] > 1e-9):
+                q = ((Y @ K.T)[:, :2] / Y[:, 2:])[np.asarray(vis(photo, P), bool)]
+                if len(q) >= 3:
+                    fixed.append(q)
+        for i, P, M in edges:
+            Y = P @ R.T + t
+            if np.any(Y[:, 2] <= 1e-9):
+                continue
+            uv = (Y @ K.T)[:, :2] / Y[:, 2:]
+            ok = (uv[:, 0] >= 5) & (uv[:, 0] <= w - 6) & (uv[:, 1] >= 5) & (uv[:, 1] <= h - 6)
+            ok &= np.asarray(vis(photo, P), bool)
+            if ok.sum() < 3:
+                continue
+            a, b = uv[ok][0], uv[ok][-1]
+            L = float(np.hypot(*(b - a)))
+            if L < 8.0:
+                continue
+            n = np.array([-(b - a)[1], (b - a)[0]]) / L           # left normal
+            u = (b - a) / L
+            # a band beside an edge that stays (the block's roofline seen
+            # from below, along which its end's top edge runs) sees that
+            # edge's step at every move: no evidence
+            if any(abs(float(np.cross(u, q[-1] - q[0]))) <= np.sin(np.radians(10.0))
+                   * float(np.hypot(*(q[-1] - q[0]))) and (
+                       (np.abs((q - a) @ n) <= outer + 1.0) & ((q - a) @ u >= 0)
+                       & ((q - a) @ u <= L)).sum() >= 3 for q in fixed):
+                continue
+            Yq = (P + 1e-3 * M) @ R.T + t
+            rate = float((((Yq @ K.T)[:, :2] / Yq[:, 2:] - uv)[ok] @ n).mean()) / 1e-3
+            if rate < 0:
+                a, b, rate = b, a, -rate
+            out[(photo, i)] = (a, b, rate)
+    return out
+
+
+def _band_steps(grey, a, b, *, shift: float = 0.0, step_px: float = 2.0,
+                inner: float = 0.75, outer: float = 4.0) -> np.ndarray:
+    """Every ``step_px`` along the segment ``a → b``: the mean grey of a band
+    ``inner``–``outer`` px to its left less the band to its right, the
+    segment moved ``shift`` px to the left. A crease between two walls of one
+    material lit differently is such a step all along it; a brick joint
+    beside it is a thin line, not a step."""
+    L = float(np.hypot(*(b - a)))
+    n = np.array([-(b - a)[1], (b - a)[0]]) / L
+    offs = np.arange(inner, outer + 1e-9, 0.5)
+    ts = np.arange(step_px / 2, L, step_px) / L
+    got = profiles_across(grey, np.r_[a + shift * n, b + shift * n], ts, np.r_[-offs[::-1], offs],
+                          min_length=0.0)
+    prof = got[-1]
+    return prof[:, len(offs):].mean(1) - prof[:, :len(offs)].mean(1)
+
+
+def _robust_z(d: np.ndarray) -> float:
+    """The median of ``d`` over its standard error from the MAD (0 for fewer
+    than 5): a step that runs along the whole line, not a window frame's
+    piece of it."""
+    if len(d) < 5:
+        return 0.0
+    med = float(np.median(d))
+    mad = 1.4826 * float(np.median(np.abs(d - med)))
+    return med / (mad / np.sqrt(len(d)) + 1e-9)
+
+
+# the crease search's acceptance: the summed |z| of the moving edges at its
+# peak, and the largest share of it allowed anywhere 5 px or more away
+CREASE_Z = 20.0
+CREASE_SECOND = 0.5
+
+
+def _crease(model, names, marked, cams: dict, greys: dict, *, rough, trust: float,
+            skip=frozenset()):
+    """Proposals for the held parameters ``names`` of one block along the one
+    direction the ``marked`` edges leave free, or ``[]``.
+
+    Where the marks fix a block's outer face and no line was found for its
+    inner one, the inner face is a concave crease against its neighbour
+    (the rendered building's wing against the house's end wall): brick
+    against brick, which the line detector misses. Along that direction,
+    within ``trust`` of the ``rough`` model's values, every moving edge is
+    projected every half pixel of move; its band steps (:func:`_band_steps`)
+    across all photographs, oriented by the move, give one robust z per
+    edge (a crease keeps its sign from photograph to photograph: its two
+    walls' shading is the light's, not the view's); the summed |z| must peak
+    at :data:`CREASE_Z` or more, with no other move 5 px away above
+    :data:`CREASE_SECOND` of it (a window column on the block's face is
+    also a 3-D line of the family). Each moving edge with |z| ≥ 5 at the
+    peak, not a seam, is refined in each photograph (the band step's peak
+    within 1.5 px, its own z ≥ 3) and proposed there; ``skip`` holds the
+    (photo, edge) pairs already marked."""
+    from lumigraph.stereo.debevec1996.edges import Mark
+
+    N = _free_direction(model, names, marked)
+    if len(N) != 1:
+        return []
+    v = N[0] * np.sign(N[0][np.argmax(np.abs(N[0]))])
+    slots = np.array([model.slot_of(n) for n in names])
+    r0, sc = rough.named_values(), _scale(rough, names)
+    lo, hi = -np.inf, np.inf
+    for n, sl, vi in zip(names, slots, v, strict=True):
+        if abs(vi) > 1e-12:
+            ends = sorted(((r0[n] + f * trust * sc[n] - model.values[sl]) / vi) for f in (-1, 1))
+            lo, hi = max(lo, ends[0]), min(hi, ends[1])
+    if not lo < hi:
+        return []
+    at0 = _crease_lines(model, slots, v, 0.5 * (lo + hi), cams, tol_px=1e9)
+    if not at0:
+        return []
+    rates = np.array([r for _, _, r in at0.values()])
+    step, px = 0.5 / rates.max(), float(np.median(rates))
+    alphas = np.arange(lo, hi + 1e-12, step)
+    edges = sorted({i for _, i in at0})
+    Z = np.zeros((len(edges), len(alphas)))
+    for k, al in enumerate(alphas):
+        lines = _crease_lines(model, slots, v, al, cams, tol_px=2.0)
+        for j, i in enumerate(edges):
+            d = [_band_steps(greys[p], a, b) for (p, ii), (a, b, _) in lines.items() if ii == i]
+            Z[j, k] = _robust_z(np.concatenate(d)) if d else 0.0
+    S = np.abs(Z).sum(0)
+    k = int(np.argmax(S))
+    far = np.abs(alphas - alphas[k]) * px >= 5.0
+    if S[k] < CREASE_Z or (far.any() and S[far].max() > CREASE_SECOND * S[k]):
+        return []
+    th = model.values.copy()
+    th[slots] += alphas[k] * v
+    at = model.with_values({n: float(th[model.slot_of(n)]) for n in model.parameter_names})
+    out = []
+    for (p, i), (a, b, _) in _crease_lines(model, slots, v, alphas[k], cams, tol_px=2.0).items():
+        z = Z[edges.index(i), k] if i in edges else 0.0
+        name = model.edge_names[i]
+        if abs(z) < 5.0 or (p, name) in skip or _seams(at, cams[p], {name: np.r_[a, b]},
+                                                       tol_px=SEAM_TOL_PX):
+            continue
+        offs = np.arange(-1.5, 1.5 + 1e-9, 0.25)
+        sc_ = np.array([np.sign(z) * _band_steps(greys[p], a, b, shift=o).mean() for o in offs])
+        j = int(np.argmax(sc_))
+        if j in (0, len(offs) - 1):
+            continue
+        y0, y1, y2 = sc_[j - 1:j + 2]
+        den = y0 - 2 * y1 + y2
+        o = offs[j] + (0.125 * (y0 - y2) / den if den < 0 else 0.0)
+        if np.sign(z) * _robust_z(_band_steps(greys[p], a, b, shift=o)) < 3.0:
+            continue
+        n = np.array([-(b - a)[1], (b - a)[0]]) / float(np.hypot(*(b - a)))
+        out.append(Mark(p, name, np.r_[a + o * n, b + o * n], proposed=True))
+    return out
+
+
 def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise_px: float = 1.0,
              max_angle_deg: float = 3.0, max_distance_px: float = 6.0,
              min_length_px: float = 15.0, rounds: int = 8, trust: float = 0.3,
@@ -917,6 +1123,32 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 break
             kept.pop(key)
             merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+    if _CREASE and sol.held:
+        # what stays held may be a block's inner face, a crease against its
+        # neighbour that no line was found for: searched for along the one
+        # direction the marks leave free (:func:`_crease`), block by block
+        rr = {**(rough_rotations or {}), **last}
+        cams = {p: {"K": sol.K[p], "R": sol.poses[p][0], "t": sol.poses[p][1],
+                    "image_size": list(images[p].shape[1::-1])} for p in sol.poses}
+        out = {(p, e) for p, e, _ in sol.outliers}
+        merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+        marked = [m.edge for m in merged.marks if (m.photo, m.edge) not in out]
+        blocks: dict[str, list] = {}
+        for name in sol.held:
+            blocks.setdefault(name.split("/")[0], []).append(name)
+        for names in blocks.values():
+            found = _crease(sol.model, names, marked, cams, greys, rough=model, trust=trust,
+                            skip={(m.photo, m.edge) for m in merged.marks})
+            if not found:
+                continue
+            trial = {**kept, **{(m.photo, m.edge): m for m in found}}
+            merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
+            alt = solve_facade(current, merged, K, rough_rotations=rr, noise_px=noise_px,
+                               hold_unconstrained=True, where=where)
+            if set(alt.held) < set(sol.held) and not set(_weak(alt, model, trust)) & set(names):
+                sol, kept = alt, trial
+                warnings.append("a crease found for " + ", ".join(names) + ": "
+                                + ", ".join(sorted({m.edge for m in found})) + " proposed")
     warnings = [w for w in warnings if not w.startswith("held at")]
     if sol.held:
         # never silently wrong: what no mark or proposal constrains is named
