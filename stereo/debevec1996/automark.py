@@ -733,12 +733,12 @@ def _crease_lines(model, slots, v, alpha, cams: dict, *, tol_px: float, samples:
     moved = model.with_values({n: float(th[model.slot_of(n)]) for n in model.parameter_names})
     s = np.linspace(0.0, 1.0, samples)[1:-1]
     edges, still = [], []
+    moves = _moving(model, slots, v)
     for i in range(len(C0)):
         p0, p1 = C0[i] @ th, C1[i] @ th
-        d = (p1 - p0) / max(float(np.linalg.norm(p1 - p0)), 1e-300)
         m0, m1 = C0[i][:, slots] @ v, C1[i][:, slots] @ v
         P = p0 + s[:, None] * (p1 - p0)
-        if max(np.linalg.norm(m0 - (m0 @ d) * d), np.linalg.norm(m1 - (m1 @ d) * d)) > 1e-9:
+        if moves[i]:
             edges.append((i, P, m0 + s[:, None] * (m1 - m0)))
         else:
             still.append(P)
@@ -814,38 +814,84 @@ def _robust_z(d: np.ndarray) -> float:
     return med / (mad / np.sqrt(len(d)) + 1e-9)
 
 
+def _moving(model, slots, v) -> np.ndarray:
+    """Per model edge, how far (m per unit move) the move ``v`` of ``slots``
+    shifts its 3-D line across itself (the larger of its two ends; an end
+    sliding along the line does not count), zeroed below 5 % of the largest:
+    a direction from a covariance has small components that are the solve's
+    correlations, not a face moving."""
+    C0, C1 = model.edge_matrices()
+    th = model.values
+    d = np.einsum("eij,j->ei", C1 - C0, th)
+    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+    out = np.zeros(len(C0))
+    for C in (C0, C1):
+        m = C[:, :, slots] @ v
+        out = np.maximum(out, np.linalg.norm(m - np.einsum("ei,ei->e", m, d)[:, None] * d, axis=1))
+    return np.where(out >= 0.05 * out.max(), out, 0.0) if out.max() > 0 else out
+
+
+def _against_neighbours(model, slots, v, *, reach: float) -> bool:
+    """Whether every edge that the move ``v`` of ``slots`` shifts has its
+    middle inside another (convex) block or within ``reach`` (m) of one:
+    the move slides a face along its neighbour (a wing's end against the
+    house's wall), the one situation :func:`_crease` looks for."""
+    mesh = model.mesh()
+    tris = mesh.vertices[mesh.faces]
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    owner = np.array([b.split("/")[0] for b in mesh.face_block.tolist()])
+    C0, C1 = model.edge_matrices()
+    th = model.values
+    moves = _moving(model, slots, v)
+    for i, name in enumerate(model.edge_names):
+        if not moves[i]:
+            continue
+        mid = 0.5 * (C0[i] @ th + C1[i] @ th)
+        block = name.split("/")[0]
+        near = False
+        for other in set(owner.tolist()) - {block}:
+            f = owner == other
+            if float((np.einsum("tj,tj->t", n[f], mid[None] - tris[f, 0])).max()) <= reach:
+                near = True
+                break
+        if not near:
+            return False
+    return bool(moves.any())
+
+
 # the crease search's acceptance: the summed |z| of the moving edges at its
 # peak, and the largest share of it allowed anywhere 5 px or more away
 CREASE_Z = 20.0
 CREASE_SECOND = 0.5
 
 
-def _crease(model, names, marked, cams: dict, greys: dict, *, rough, trust: float,
-            skip=frozenset()):
-    """Proposals for the held parameters ``names`` of one block along the one
-    direction the ``marked`` edges leave free, or ``[]``.
+def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: float,
+            skip=frozenset(), sigma: float | None = None, only=None):
+    """Proposals for the parameters ``names`` of one block along
+    ``direction`` (over their slots), or ``[]``.
 
     Where the marks fix a block's outer face and no line was found for its
-    inner one, the inner face is a concave crease against its neighbour
-    (the rendered building's wing against the house's end wall): brick
-    against brick, which the line detector misses. Along that direction,
-    within ``trust`` of the ``rough`` model's values, every moving edge is
-    projected every half pixel of move; its band steps (:func:`_band_steps`)
-    across all photographs, oriented by the move, give one robust z per
-    edge (a crease keeps its sign from photograph to photograph: its two
-    walls' shading is the light's, not the view's); the summed |z| must peak
-    at :data:`CREASE_Z` or more, with no other move 5 px away above
+    inner one, the inner face is often a concave crease against its
+    neighbour (the rendered building's wing against the house's end wall):
+    brick against brick, which the line detector misses. Along the
+    direction, within ``trust`` of the ``rough`` model's values (and, where
+    ``sigma`` (the direction's σ, m) is given, within 4 σ; skipped when 1 σ
+    moves no edge by a pixel), every moving edge is projected every half
+    pixel of move; its band steps (:func:`_band_steps`) across all
+    photographs, oriented by the move, give one robust z per edge (a crease
+    keeps its sign from photograph to photograph: its two walls' shading
+    is the light's, not the view's); the summed |z| must peak at
+    :data:`CREASE_Z` or more, with no other move 5 px away above
     :data:`CREASE_SECOND` of it (a window column on the block's face is
     also a 3-D line of the family). Each moving edge with |z| ≥ 5 at the
-    peak, not a seam, is refined in each photograph (the band step's peak
-    within 1.5 px, its own z ≥ 3) and proposed there; ``skip`` holds the
-    (photo, edge) pairs already marked."""
+    peak, not a seam, in ``only`` (edge names; None: any), is refined in
+    each photograph (the band step's peak within 1.5 px, its own z ≥ 3) and
+    proposed there; ``skip`` holds the (photo, edge) pairs already marked."""
     from lumigraph.stereo.debevec1996.edges import Mark
 
-    N = _free_direction(model, names, marked)
-    if len(N) != 1:
-        return []
-    v = N[0] * np.sign(N[0][np.argmax(np.abs(N[0]))])
+    v = np.asarray(direction, float)
+    v = v * np.sign(v[np.argmax(np.abs(v))])
     slots = np.array([model.slot_of(n) for n in names])
     r0, sc = rough.named_values(), _scale(rough, names)
     lo, hi = -np.inf, np.inf
@@ -853,12 +899,16 @@ def _crease(model, names, marked, cams: dict, greys: dict, *, rough, trust: floa
         if abs(vi) > 1e-12:
             ends = sorted(((r0[n] + f * trust * sc[n] - model.values[sl]) / vi) for f in (-1, 1))
             lo, hi = max(lo, ends[0]), min(hi, ends[1])
+    if sigma is not None:
+        lo, hi = max(lo, -4.0 * sigma), min(hi, 4.0 * sigma)     # where the marks allow it
     if not lo < hi:
         return []
     at0 = _crease_lines(model, slots, v, 0.5 * (lo + hi), cams, tol_px=1e9)
     if not at0:
         return []
     rates = np.array([r for _, _, r in at0.values()])
+    if sigma is not None and sigma * rates.max() < 1.0:
+        return []           # the marks place it to a pixel already
     step, px = 0.5 / rates.max(), float(np.median(rates))
     alphas = np.arange(lo, hi + 1e-12, step)
     edges = sorted({i for _, i in at0})
@@ -880,7 +930,7 @@ def _crease(model, names, marked, cams: dict, greys: dict, *, rough, trust: floa
     for (p, i), (a, b, _) in _crease_lines(model, slots, v, alphas[k], cams, tol_px=2.0).items():
         z = Z[edges.index(i), k] if i in edges else 0.0
         name = model.edge_names[i]
-        if abs(z) < 5.0 or (p, name) in skip or _seams(at, cams[p], {name: np.r_[a, b]},
+        if abs(z) < 5.0 or (p, name) in skip or (only is not None and name not in only) or _seams(at, cams[p], {name: np.r_[a, b]},
                                                        tol_px=SEAM_TOL_PX):
             continue
         offs = np.arange(-1.5, 1.5 + 1e-9, 0.25)
@@ -1123,10 +1173,12 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 break
             kept.pop(key)
             merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-    if _CREASE and sol.held:
-        # what stays held may be a block's inner face, a crease against its
-        # neighbour that no line was found for: searched for along the one
-        # direction the marks leave free (:func:`_crease`), block by block
+    if _CREASE:
+        # a block's inner face may be a crease against its neighbour, brick
+        # against brick, that no line was found for: where the marks leave
+        # a block one free direction (held), or place it loosely (its
+        # least-determined direction moves an edge by a pixel or more at
+        # 1 σ), it is searched for along that direction (:func:`_crease`)
         rr = {**(rough_rotations or {}), **last}
         cams = {p: {"K": sol.K[p], "R": sol.poses[p][0], "t": sol.poses[p][1],
                     "image_size": list(images[p].shape[1::-1])} for p in sol.poses}
@@ -1134,20 +1186,46 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         marked = [m.edge for m in merged.marks if (m.photo, m.edge) not in out]
         blocks: dict[str, list] = {}
-        for name in sol.held:
+        for name in model.parameter_names:
             blocks.setdefault(name.split("/")[0], []).append(name)
         for names in blocks.values():
-            found = _crease(sol.model, names, marked, cams, greys, rough=model, trust=trust,
-                            skip={(m.photo, m.edge) for m in merged.marks})
+            held = [n for n in names if n in sol.held]
+            if held:
+                N = _free_direction(sol.model, held, marked)
+                if len(N) != 1:
+                    continue
+                names, v, sd = held, N[0], None
+            else:
+                idx = [sol.unknowns.index(n) for n in names if n in sol.unknowns]
+                if len(idx) != len(names):
+                    continue
+                w, V = np.linalg.eigh(sol.covariance[np.ix_(idx, idx)])
+                v, sd = V[:, -1], float(np.sqrt(max(w[-1], 0.0)))
+                # its small components are the solve's correlations, not a
+                # second face moving: the move is that of the main ones
+                v = np.where(np.abs(v) < 0.1, 0.0, v)
+                v /= np.linalg.norm(v)
+                if not _against_neighbours(sol.model, np.array([sol.model.slot_of(n)
+                                                                for n in names]), v,
+                                           reach=4.0 * sd):
+                    continue
+            found = _crease(sol.model, names, v, cams, greys, rough=model, trust=trust,
+                            skip={(m.photo, m.edge) for m in marks.marks} | set(kept), sigma=sd,
+                            only=None if sd is None else set(model.edge_names) - set(marked))
             if not found:
                 continue
             trial = {**kept, **{(m.photo, m.edge): m for m in found}}
-            merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
-            alt = solve_facade(current, merged, K, rough_rotations=rr, noise_px=noise_px,
-                               hold_unconstrained=True, where=where)
-            if set(alt.held) < set(sol.held) and not set(_weak(alt, model, trust)) & set(names):
+            alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
+                trial.values())), K, rough_rotations=rr, noise_px=noise_px,
+                hold_unconstrained=True, where=where)
+            new = {(m.photo, m.edge) for m in found}
+            fits = all(d <= 3.0 * max(alt.sigma_px, 0.1) for p, e, d in alt.mark_rms_px
+                       if (p, e) in new) and not new & {(p, e) for p, e, _ in alt.outliers}
+            if (set(alt.held) <= set(sol.held) - set(names) and fits
+                    and not set(_weak(alt, model, trust)) - set(_weak(sol, model, trust))):
                 sol, kept = alt, trial
-                warnings.append("a crease found for " + ", ".join(names) + ": "
+                moved = [n for n, x in zip(names, v, strict=True) if abs(x) > 0]
+                warnings.append("a crease found for " + ", ".join(moved) + ": "
                                 + ", ".join(sorted({m.edge for m in found})) + " proposed")
     warnings = [w for w in warnings if not w.startswith("held at")]
     if sol.held:
