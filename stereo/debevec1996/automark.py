@@ -49,12 +49,14 @@ marks contradict most (its deleted residual over 3 of its kind's σ) is
 dropped, and again, while leaving it out changes nothing the marks fix (no
 parameter held, freed or failing the trust test that was not). Where a
 block's parameters stay held and the marks leave them one free direction
-(its outer face marked, its inner face not), the inner face is searched
-for as a crease against its neighbour (:func:`_crease`: brick against
-brick, a step in mean grey that keeps its sign along the line and from
-photograph to photograph, which the line detector misses); a clear peak
-within ``trust`` of the rough values is proposed and kept if the solve
-then fixes the block. A parameter that
+(its outer face marked, its inner face not), or its least-determined
+direction slides a face along a neighbour and moves an edge by a pixel
+or more at 1 σ, that face is searched for as a crease against the
+neighbour (:func:`_crease`: brick against brick, a step in mean grey that
+keeps its sign along the line and from photograph to photograph, which
+the line detector misses); a clear peak within ``trust`` of the rough
+values is proposed and kept if the solve then fits it and fixes the
+block. A parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently).
 
@@ -1212,8 +1214,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             found = _crease(sol.model, names, v, cams, greys, rough=model, trust=trust,
                             skip={(m.photo, m.edge) for m in marks.marks} | set(kept), sigma=sd,
                             only=None if sd is None else set(model.edge_names) - set(marked))
-            if not found:
-                continue
+            if len({m.photo for m in found}) < 2:
+                continue        # a crease seen in one photograph only is a guess
             trial = {**kept, **{(m.photo, m.edge): m for m in found}}
             alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
                 trial.values())), K, rough_rotations=rr, noise_px=noise_px,
