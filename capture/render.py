@@ -376,9 +376,15 @@ def render(name: str, *, size: tuple[int, int] | None = None, seed: int = 0,
             pass
     rng = np.random.default_rng(seed)
     result = SCENES[name](size=(w, h), seed=seed, rng=rng, **opts)
+    # the JSON parts as the disk cache (and ``lumigraph render --out``) gives
+    # them back: keys sorted. Same seed, same result, fresh or cached: a
+    # block model's parameters come in its file's order, and automatic
+    # marking's rounds can land elsewhere for another order
+    # (docs/decisions/facade.md, 2026-12-05)
+    canon = lambda doc: json.loads(dumps_json(doc))  # noqa: E731
     result = RenderedScene(result.scene, {"size": [w, h], "seed": seed, **opts}, result.images,
-                           result.image_names, result.stack, result.gt, result.gt_arrays,
-                           result.files)
+                           result.image_names, canon(result.stack), canon(result.gt),
+                           result.gt_arrays, {n: canon(result.files[n]) for n in sorted(result.files)})
     if cache:
         _MEMORY[key] = result
         try:
