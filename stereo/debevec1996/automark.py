@@ -794,7 +794,15 @@ def _band_steps(grey, a, b, *, shift: float = 0.0, step_px: float = 2.0,
     ``inner``–``outer`` px to its left less the band to its right, the
     segment moved ``shift`` px to the left. A crease between two walls of one
     material lit differently is such a step all along it; a brick joint
-    beside it is a thin line, not a step."""
+    beside it is a thin line, not a step.
+
+    >>> g = np.tile(np.r_[np.zeros(10), np.full(10, 100.0)], (20, 1))   # a step at x = 9.5
+    >>> up = np.array([9.5, 17.0]), np.array([9.5, 2.0])     # drawn upwards: left is +x
+    >>> _band_steps(g, *up).round(1).tolist()
+    [100.0, 100.0, 100.0, 100.0, 100.0, 100.0, 100.0]
+    >>> _band_steps(g, *up, shift=-5.0).round(1).tolist()    # on the dark side: no step
+    [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    """
     L = float(np.hypot(*(b - a)))
     n = np.array([-(b - a)[1], (b - a)[0]]) / L
     offs = np.arange(inner, outer + 1e-9, 0.5)
@@ -808,12 +816,18 @@ def _band_steps(grey, a, b, *, shift: float = 0.0, step_px: float = 2.0,
 def _robust_z(d: np.ndarray) -> float:
     """The median of ``d`` over its standard error from the MAD (0 for fewer
     than 5): a step that runs along the whole line, not a window frame's
-    piece of it."""
+    piece of it.
+
+    >>> round(_robust_z(np.tile([4.0, 6.0], 8)), 2)          # a step of 5 at every place
+    13.49
+    >>> round(_robust_z(np.r_[np.tile([-1.0, 1.0], 6), np.full(6, 30.0)]), 2)  # at a third
+    1.43
+    """
     if len(d) < 5:
         return 0.0
     med = float(np.median(d))
     mad = 1.4826 * float(np.median(np.abs(d - med)))
-    return med / (mad / np.sqrt(len(d)) + 1e-9)
+    return float(med / (mad / np.sqrt(len(d)) + 1e-9))
 
 
 def _moving(model, slots, v) -> np.ndarray:
