@@ -415,6 +415,16 @@ def _one_line(segs, edge, *, coincident_px=1.0):
                key=lambda s: np.hypot(*(s[2:] - s[:2])))
 
 
+def _mesh_planes(model):
+    """The model's mesh, its triangles ``(T, 3, 3)`` and their unit outward
+    normals ``(T, 3)``: shared by the occlusion, seam and neighbour tests."""
+    mesh = model.mesh()
+    tris = mesh.vertices[mesh.faces]
+    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return mesh, tris, n
+
+
 def _visible_near_flush(model, cam: dict, *, tol_px: float):
     """A visibility test for :func:`project_edges`' ``visible``: the model's
     own occlusion test, except that a point inside a convex block by less
@@ -430,10 +440,7 @@ def _visible_near_flush(model, cam: dict, *, tol_px: float):
     anyway."""
     from lumigraph.capture.scenes.facade_edges import _hits
 
-    mesh = model.mesh()
-    tris = mesh.vertices[mesh.faces]
-    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)     # outward
+    mesh, tris, n = _mesh_planes(model)
     names = list(dict.fromkeys(mesh.face_block.tolist()))
     of = np.array([names.index(b) for b in mesh.face_block.tolist()])
     # the convex blocks: every vertex of the block on or behind each of its faces
@@ -536,10 +543,7 @@ def _seams(model, cam: dict, segs: dict, *, tol_px: float, samples: int = 7) -> 
     are seams (:func:`_seam`), the model's mesh built once."""
     if not segs:
         return set()
-    mesh = model.mesh()
-    tris = mesh.vertices[mesh.faces]
-    nrm = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
+    _, tris, nrm = _mesh_planes(model)
     K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
     centre = -R.T @ t.ravel()
     Kinv = np.linalg.inv(K)
@@ -852,10 +856,7 @@ def _against_neighbours(model, slots, v, *, reach: float) -> bool:
     middle inside another (convex) block or within ``reach`` (m) of one:
     the move slides a face along its neighbour (a wing's end against the
     house's wall), the one situation :func:`_crease` looks for."""
-    mesh = model.mesh()
-    tris = mesh.vertices[mesh.faces]
-    n = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    mesh, tris, n = _mesh_planes(model)
     owner = np.array([b.split("/")[0] for b in mesh.face_block.tolist()])
     C0, C1 = model.edge_matrices()
     th = model.values
