@@ -660,7 +660,7 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     # automatic marking's own solves pool one noise: what they were chosen with
-    sol = solve_facade(model, marks, K, hold_unconstrained=True, separate_noise=False, **kw)
+    sol = solve_facade(model, marks, K, hold_unconstrained="parameters", separate_noise=False, **kw)
     v0 = rough.named_values()
     weak: list = []
     again = sol
@@ -674,7 +674,7 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
         if not new:
             break
         weak += new
-        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=True,
+        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained="parameters",
                              separate_noise=False, **kw)
     if not weak:
         return sol
@@ -779,7 +779,8 @@ def _crease_lines(model, slots, v, alpha, cams: dict, *, tol_px: float, samples:
             # a band beside an edge that stays (the block's roofline seen
             # from below, along which its end's top edge runs) sees that
             # edge's step at every move: no evidence
-            if any(abs(float(np.cross(u, q[-1] - q[0]))) <= np.sin(np.radians(10.0))
+            if any(abs(float(u[0] * (q[-1] - q[0])[1] - u[1] * (q[-1] - q[0])[0]))
+                   <= np.sin(np.radians(10.0))
                    * float(np.hypot(*(q[-1] - q[0]))) and (
                        (np.abs((q - a) @ n) <= outer + 1.0) & ((q - a) @ u >= 0)
                        & ((q - a) @ u <= L)).sum() >= 3 for q in fixed):
@@ -1093,7 +1094,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     for _ in range(3):
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
-                           noise_px=noise_px, hold_unconstrained=True, where=where,
+                           noise_px=noise_px, hold_unconstrained="parameters", where=where,
                            separate_noise=False)
         limit = 3.0 * max(sol.sigma_px, 0.1)
         far = {(p, e) for p, e, d in sol.mark_rms_px if d > limit} | {
@@ -1112,7 +1113,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             merged = replace(marks, marks=tuple(marks.marks) + tuple(old.values()))
             alt = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}),
                                                                     **last},
-                               noise_px=noise_px, hold_unconstrained=True, where=where,
+                               noise_px=noise_px, hold_unconstrained="parameters", where=where,
                                separate_noise=False)
             if len(alt.held) < len(sol.held):
                 sol, kept = alt, dict(old)
@@ -1136,7 +1137,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
             alt = solve_facade(current, merged, K,
                                rough_rotations={**(rough_rotations or {}), **last},
-                               noise_px=noise_px, hold_unconstrained=True, where=where,
+                               noise_px=noise_px, hold_unconstrained="parameters", where=where,
                                separate_noise=False)
             score = (len(_hand_outliers(alt, marks)), len(_weak(alt, model, trust)), len(alt.held),
                      _hand_rms(alt, marks))
@@ -1167,7 +1168,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         kept = {key: m for key, m in kept.items() if m.edge not in moved_edges}
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
-                           noise_px=noise_px, hold_unconstrained=True, where=where,
+                           noise_px=noise_px, hold_unconstrained="parameters", where=where,
                            separate_noise=False)
         warnings.append("the proposals took " + ", ".join(weak) + " beyond the rough model's "
                         f"accuracy ({trust:.0%}) or fix them loosely: their edges' proposals "
@@ -1181,7 +1182,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         rr = {**(rough_rotations or {}), **last}
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations=rr, noise_px=noise_px,
-                           hold_unconstrained=True, where=where)
+                           hold_unconstrained="parameters", where=where)
         for _ in range(len(kept)):
             key, sol = _contradicted(current, merged, K, sol, rough=model, trust=trust,
                                      candidates=set(kept), rough_rotations=rr,
@@ -1234,7 +1235,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             trial = {**kept, **{(m.photo, m.edge): m for m in found}}
             alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
                 trial.values())), K, rough_rotations=rr, noise_px=noise_px,
-                hold_unconstrained=True, where=where)
+                hold_unconstrained="parameters", where=where)
             new = {(m.photo, m.edge) for m in found}
             fits = all(d <= 3.0 * max(alt.sigma_px, 0.1) for p, e, d in alt.mark_rms_px
                        if (p, e) in new) and not new & {(p, e) for p, e, _ in alt.outliers}
@@ -1281,7 +1282,7 @@ def _contradicted(model, merged, K, sol, *, rough, trust, candidates, **kw):
     weak = set(_weak(sol, rough, trust))
     for i in order:
         trial = replace(merged, marks=tuple(m for j, m in enumerate(marks) if j != i))
-        alt = solve_facade(model, trial, K, hold_unconstrained=True, **kw)
+        alt = solve_facade(model, trial, K, hold_unconstrained="parameters", **kw)
         if set(alt.held) == set(sol.held) and set(_weak(alt, rough, trust)) <= weak:
             return (marks[i].photo, marks[i].edge), alt
     return None, sol
@@ -1674,7 +1675,7 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
     marked = {(m.photo, m.edge) for m in marks.marks} if marked is None else set(marked)
     none = [{"parameter": u, "suggest": []} for u in unknowns]
     try:
-        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained=True,
+        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained="parameters",
                             where=where, separate_noise=False)
     except EstimationError:
         return none

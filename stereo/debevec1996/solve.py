@@ -250,7 +250,7 @@ class _Problem:
     Jacobian of eq. 5.3 over ``x = [θ_free, (ω, t) per photo, focal scale]``."""
 
     def __init__(self, model, marks, photos, K, R0, *, free_focal, noise_px=None,
-                 separate_noise=False):
+                 separate_noise=False, hold_along=None):
         self.model, self.photos, self.free_focal = model, list(photos), free_focal
         pi = {p: i for i, p in enumerate(self.photos)}
         self.marks = marks
@@ -260,12 +260,24 @@ class _Problem:
         self.free = ~model.fixed
         self.Cf = (self.C0[:, :, self.free], self.C1[:, :, self.free])
         self.base = model.values
-        self.P = int(self.free.sum())
+        self.Px = int(self.free.sum())
+        # directions of the free parameters held at the model's values
+        # (``hold_along``, slot-space rows): the unknowns are then ``z`` with
+        # θ_free = base_free + B z, B an orthonormal basis of the rest
+        self.B, self.hold_along = None, hold_along
+        if hold_along is not None and len(hold_along):
+            A = np.asarray(hold_along, float)[:, self.free]
+            _, s, Vt = np.linalg.svd(A, full_matrices=True)
+            r = int((s > 1e-9 * max(float(s[0]), 1e-300)).sum()) if s.size else 0
+            if r:
+                self.B = Vt[r:].T
+        self.P = self.Px if self.B is None else self.B.shape[1]
         self.nc = len(self.photos)
         self.K0 = np.array([K[p] for p in self.photos], float)
         self.R0 = np.array(R0, float)
         self.n = len(marks)
         self.ncol = self.P + 6 * self.nc + (1 if free_focal else 0)
+        self.ncol_x = self.Px + 6 * self.nc + (1 if free_focal else 0)
         self.length = np.hypot(self.seg[:, 2] - self.seg[:, 0], self.seg[:, 3] - self.seg[:, 1])
         # each mark's endpoint noise relative to noise_px: the larger of it and
         # the image's own scatter along the mark (Mark.spread_px), where measured
@@ -277,9 +289,38 @@ class _Problem:
             self.rel = np.array([max(1.0, (getattr(m, "spread_px", None) or 0.0) / noise_px)
                                  for m in marks], float).reshape(self.n)
 
-    def split(self, x):
+    def theta(self, z):
+        """All slot values from the parameter unknowns ``z`` (P,)."""
         th = self.base.copy()
-        th[self.free] = x[: self.P]
+        th[self.free] = z if self.B is None else self.base[self.free] + self.B @ z
+        return th
+
+    def unknowns_of(self, th):
+        """The parameter unknowns ``z`` of slot values ``th`` (projected onto
+        the held directions' complement where directions are held)."""
+        return th[self.free] if self.B is None else self.B.T @ (th[self.free] - self.base[self.free])
+
+    def embedding(self) -> np.ndarray:
+        """``T`` (ncol_x, ncol): d(every unknown, parameters as named) / dz."""
+        if self.B is None:
+            return np.eye(self.ncol)
+        T = np.zeros((self.ncol_x, self.ncol))
+        T[: self.Px, : self.P] = self.B
+        T[self.Px:, self.P:] = np.eye(self.ncol - self.P)
+        return T
+
+    def ties(self):
+        """The held directions as rows over the unknowns as named (``ncol_x``
+        columns, zero on the poses), or None."""
+        if self.B is None:
+            return None
+        hold = np.asarray(self.hold_along, float)
+        T = np.zeros((len(hold), self.ncol_x))
+        T[:, : self.Px] = hold[:, self.free]
+        return T
+
+    def split(self, x):
+        th = self.theta(x[: self.P])
         cams = x[self.P: self.P + 6 * self.nc].reshape(self.nc, 6)
         s = x[-1] if self.free_focal else 1.0
         return th, cams[:, :3], cams[:, 3:], s
@@ -288,14 +329,15 @@ class _Problem:
         return Rotation.from_rotvec(w).as_matrix() @ self.R0
 
     def pack(self, th, w, t, s=1.0):
-        x = [th[self.free], np.concatenate([w, t], 1).ravel()]
+        x = [self.unknowns_of(th), np.concatenate([w, t], 1).ravel()]
         if self.free_focal:
             x.append([s])
         return np.concatenate(x)
 
-    def distances(self, x, *, jac=False):
+    def distances(self, x, *, jac=False, full=False):
         """Signed endpoint distances ``h`` (n, 2) and, with ``jac``, their
-        Jacobian as (rows, cols, values) of a (2n, ncol) sparse matrix."""
+        Jacobian as (rows, cols, values) of a (2n, ncol) sparse matrix
+        (``full``: (2n, ncol_x), by the parameters as named, not ``z``)."""
         th, w, t, s = self.split(x)
         E = Rotation.from_rotvec(w).as_matrix()
         R = E @ self.R0
@@ -317,13 +359,16 @@ class _Problem:
         l12 = np.c_[lvec[:, :2], np.zeros(self.n)]
         Jr = _right_jacobian(w)
         Kn = K[c]
-        fo = np.arange(self.P)
+        P = self.Px if (full or self.B is None) else self.P
+        fo = np.arange(P)
         for i in range(2):
             g = p[i] / n12[:, None] - ((lvec * p[i]).sum(1) / n12**3)[:, None] * l12
             b = [np.cross(u[1], g), np.cross(g, u[0])]              # dh/du0, dh/du1
             a = [np.einsum("nji,nj->ni", Kn, bk) for bk in b]         # dh/dY_k
             dth = sum(np.einsum("ni,nis->ns", np.einsum("nj,nji->ni", a[k], R[c]), self.Cf[k])
                       for k in range(2))
+            if P != self.Px:
+                dth = dth @ self.B
             dt = a[0] + a[1]
             dw = np.zeros((self.n, 3))
             for k in range(2):
@@ -331,16 +376,16 @@ class _Problem:
                 q = np.einsum("nji,nj->ni", E[c], a[k])
                 dw += np.einsum("nji,nj->ni", Jr[c], np.cross(v, q))
             blocks = [dth, dw, dt]
-            ccols = [np.broadcast_to(fo, (self.n, self.P)),
-                     self.P + 6 * c[:, None] + np.arange(3)[None],
-                     self.P + 6 * c[:, None] + 3 + np.arange(3)[None]]
+            ccols = [np.broadcast_to(fo, (self.n, P)),
+                     P + 6 * c[:, None] + np.arange(3)[None],
+                     P + 6 * c[:, None] + 3 + np.arange(3)[None]]
             if self.free_focal:
                 K1 = self.K0[c]
                 ds = sum((bk * np.c_[np.einsum("nj,nj->n", K1[:, 0, :2], Y[k][:, :2]),
                                      K1[:, 1, 1] * Y[k][:, 1], np.zeros(self.n)]).sum(1)
                          for k, bk in enumerate(b))
                 blocks.append(ds[:, None])
-                ccols.append(np.full((self.n, 1), self.ncol - 1))
+                ccols.append(np.full((self.n, 1), (self.ncol_x if full else self.ncol) - 1))
             cols.append(np.concatenate(ccols, 1))
             vals.append(np.concatenate(blocks, 1))
         return h, cols, vals
@@ -356,21 +401,22 @@ class _Problem:
     def residuals(self, x, A):
         return np.einsum("nij,nj->ni", A, self.distances(x)).ravel()
 
-    def jacobian(self, x, A, *, dense):
+    def jacobian(self, x, A, *, dense, full=False):
         from scipy.sparse import csr_matrix
 
-        _, cols, vals = self.distances(x, jac=True)
+        _, cols, vals = self.distances(x, jac=True, full=full)
+        ncol = self.ncol_x if full else self.ncol
         if dense:  # each row's columns are distinct: plain fancy assignment
             rows = np.arange(self.n)[:, None]
             Jh = []
             for j in range(2):
-                M = np.zeros((self.n, self.ncol))
+                M = np.zeros((self.n, ncol))
                 M[rows, cols[j]] = vals[j]
                 Jh.append(M)
-            J = np.empty((self.n, 2, self.ncol))
+            J = np.empty((self.n, 2, ncol))
             for i in range(2):
                 J[:, i] = A[:, i, 0, None] * Jh[0] + A[:, i, 1, None] * Jh[1]
-            return J.reshape(2 * self.n, self.ncol)
+            return J.reshape(2 * self.n, ncol)
         # rows of r = A h: r_i = Σ_j A_ij h_j, so each residual row mixes both endpoints' rows
         rows, cc, vv = [], [], []
         for i in range(2):
@@ -383,7 +429,7 @@ class _Problem:
                 vv.append(coef[:, None] * vals[j])
         M = csr_matrix((np.concatenate([v.ravel() for v in vv]),
                         (np.concatenate([r.ravel() for r in rows]),
-                         np.concatenate([c.ravel() for c in cc]))), shape=(2 * self.n, self.ncol))
+                         np.concatenate([c.ravel() for c in cc]))), shape=(2 * self.n, ncol))
         return M.toarray() if dense else M
 
     def column_names(self):
@@ -532,7 +578,11 @@ def _linear_translations(prob: _Problem, R, th_start, cams_only=None):
     endpoint depths of a first solve so they measure pixels."""
     n = prob.n
     N = _plane_normals(prob.seg, prob.K0[prob.cam])
-    fixed_th = np.where(prob.free, 0.0, prob.base)
+    # θ = off + E z: the fixed slots (and, where directions are held, the
+    # free ones' base) plus the unknowns' span
+    E = np.zeros((len(prob.base), prob.P))
+    E[prob.free] = np.eye(prob.P) if prob.B is None else prob.B
+    fixed_th = np.where(prob.free, 0.0, prob.base) if prob.B is None else prob.base
     scale = np.ones((n, 2))
     sol = None
     for _ in range(2):
@@ -541,7 +591,7 @@ def _linear_translations(prob: _Problem, R, th_start, cams_only=None):
         for k, Ck in enumerate((prob.C0, prob.C1)):
             nR = np.einsum("ni,nij->nj", N, R[prob.cam])            # nᵀ R
             rows = 2 * np.arange(n) + k
-            A[rows, : prob.P] = np.einsum("nj,njs->ns", nR, Ck[:, :, prob.free]) * scale[:, k:k + 1]
+            A[rows, : prob.P] = np.einsum("nj,njs->ns", nR, Ck @ E) * scale[:, k:k + 1]
             A[rows[:, None], prob.P + 3 * prob.cam[:, None] + np.arange(3)] = N * scale[:, k:k + 1]
             b[rows] = -np.einsum("nj,njs,s->n", nR, Ck, fixed_th) * scale[:, k]
         # columns scaled to unit norm and a faint pull (1e-7) towards the
@@ -550,13 +600,12 @@ def _linear_translations(prob: _Problem, R, th_start, cams_only=None):
         # ~1e-14 relative (the nonlinear solve removes even that)
         cn = np.linalg.norm(A, axis=0)
         cn = np.where(cn > 0, cn, 1.0)
-        x_start = np.r_[th_start[prob.free], np.zeros(3 * prob.nc)] * cn
+        x_start = np.r_[prob.unknowns_of(th_start), np.zeros(3 * prob.nc)] * cn
         lam = 1e-7
         y = np.linalg.lstsq(np.vstack([A / cn, lam * np.eye(A.shape[1])]),
                             np.r_[b, lam * x_start], rcond=None)[0]
         sol = y / cn
-        th = prob.base.copy()
-        th[prob.free] = sol[: prob.P]
+        th = prob.theta(sol[: prob.P])
         t = sol[prob.P:].reshape(prob.nc, 3)
         z = np.stack([np.einsum("nij,nj->ni", R[prob.cam], Ck @ th)[:, 2] + t[prob.cam, 2]
                       for Ck in (prob.C0, prob.C1)], 1)
@@ -591,9 +640,12 @@ def _degenerate_start(J, names) -> bool:
     return bool(norms.size and norms.max() > DEGENERATE_COLUMN * np.median(norms))
 
 
-def _rank_deficient(J, names, *, rcond=RANK_RCOND):
-    """The unknowns no combination of marks constrains: names with weight in
-    the null space of the column-scaled Jacobian."""
+def _null_space(J, names, *, rcond=RANK_RCOND, ties=None):
+    """The column-scaled Jacobian's null space: ``(zero, keep, norms,
+    null)``, the round-off columns, the rest, every column's norm and the
+    null directions (rows over ``keep``, scaled). ``ties`` (k, columns):
+    directions held (rows in the unknowns' own units), appended as unit rows
+    of the scaled system."""
     J = np.asarray(J)
     norms = np.linalg.norm(J, axis=0)
     # a column is zero when it is round-off next to the largest of its kind (a
@@ -604,22 +656,57 @@ def _rank_deficient(J, names, *, rcond=RANK_RCOND):
     for k in set(kind):
         sel = kind == k
         zero[sel] = norms[sel] <= 1e-9 * norms[sel].max()
-    bad = {names[i] for i in np.flatnonzero(zero)}
     keep = np.flatnonzero(~zero)
     Js = J[:, keep] / norms[keep]
+    if ties is not None and len(ties):
+        Ts = np.asarray(ties, float)[:, keep] / norms[keep]
+        tn = np.linalg.norm(Ts, axis=1)
+        Js = np.vstack([Js, Ts[tn > 0] / tn[tn > 0, None]])
     _, s, Vt = np.linalg.svd(Js, full_matrices=False)
     null = Vt[s < rcond * s[0]] if s.size else Vt[:0]
+    return zero, keep, norms, null
+
+
+def _rank_deficient(J, names, *, rcond=RANK_RCOND, ties=None):
+    """The unknowns no combination of marks constrains: names with weight in
+    the null space of the column-scaled Jacobian (``ties``: directions held,
+    :func:`_null_space`)."""
+    zero, keep, _, null = _null_space(J, names, rcond=rcond, ties=ties)
+    bad = {names[i] for i in np.flatnonzero(zero)}
     for v in null:
         for i in np.flatnonzero(np.abs(v) > NULL_WEIGHT):
             bad.add(names[keep[i]])
     return sorted(bad, key=names.index)
 
 
-def check_solve_options(*, noise_px: float, max_iterations: int) -> None:
+def _free_parameter_directions(J, names, *, rcond, ties=None) -> np.ndarray:
+    """The null directions' parameter parts, in the parameters' own units
+    (rows over the ``names`` columns, zero on poses and the focal scale,
+    orthonormal): a direction with no more than ``NULL_WEIGHT`` of its
+    scaled weight on parameters (a photograph's pose) is left out."""
+    _, keep, norms, null = _null_space(J, names, rcond=rcond, ties=ties)
+    par = np.array([":" not in names[i] and names[i] != "focal_scale" for i in keep])
+    rows = []
+    for v in null:
+        if np.linalg.norm(v[par]) > NULL_WEIGHT:
+            u = np.zeros(len(names))
+            u[keep[par]] = v[par] / norms[keep[par]]
+            rows.append(u / np.linalg.norm(u))
+    if not rows:
+        return np.zeros((0, len(names)))
+    _, s, Vt = np.linalg.svd(np.array(rows), full_matrices=False)
+    return Vt[s > 1e-6 * s[0]]
+
+
+def check_solve_options(*, noise_px: float, max_iterations: int,
+                        hold_unconstrained: bool | str = False) -> None:
     if not (np.isfinite(noise_px) and noise_px > 0):
         raise InputError("noise_px", f"expected a positive endpoint noise in pixels, got {noise_px}")
     if not (isinstance(max_iterations, int) and max_iterations >= 1):
         raise InputError("max_iterations", f"expected a positive integer, got {max_iterations}")
+    if not (isinstance(hold_unconstrained, bool) or hold_unconstrained in HOLD_MODES):
+        raise InputError("hold_unconstrained", "expected False, True, \"directions\" or "
+                         f"\"parameters\", got {hold_unconstrained!r}")
 
 
 # the mis-mark test against each mark's own noise (its spread_px) when True;
@@ -629,8 +716,9 @@ OUTLIER_OWN_NOISE = False
 
 def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                  free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
-                 max_iterations: int = 200, hold_unconstrained: bool = False,
-                 separate_noise: bool = True, where: str = "edges.json") -> FacadeSolution:
+                 max_iterations: int = 200, hold_unconstrained: bool | str = False,
+                 separate_noise: bool = True, where: str = "edges.json",
+                 hold_along=None) -> FacadeSolution:
     """Fit the free block parameters and every photograph's pose to the
     marked edges (module docstring).
 
@@ -654,10 +742,19 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         the mis-marked test.
     robust : bool
         Find and leave out mis-marked edges first.
-    hold_unconstrained : bool
-        Instead of refusing, hold the parameters the marks do not constrain
-        at their starting values and leave out the photographs whose pose
-        they do not constrain (a rough solve, as automatic marking uses).
+    hold_unconstrained : bool or {"directions", "parameters"}
+        Instead of refusing, hold what the marks do not constrain at its
+        starting value and leave out the photographs whose pose they do not
+        constrain (a rough solve). ``True`` or ``"directions"``: where a free
+        direction mixes parameters (a wing's width and offset when only one
+        of its side edges is marked), only that direction is held, and the
+        combination the marks fix is solved; ``"parameters"``: every
+        parameter a free direction moves is held (automatic marking's own
+        rough solves, whose searches then scan those parameters). Either
+        way ``held`` names the parameters a held direction moves.
+    hold_along : array_like, optional
+        ``(k, S)`` directions over the model's slots held at the model's
+        values (what ``hold_unconstrained`` passes on to its re-solve).
     separate_noise : bool
         When the marks mix hand marks and automatic marking's proposals (at
         least ``VARIANCE_COMPONENTS_MIN_MARKS`` of each), estimate each
@@ -685,7 +782,7 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
                                 max_iterations=max_iterations,
                                 hold_unconstrained=hold_unconstrained,
                                 separate_noise=separate_noise, where=where,
-                                alternatives=alternatives)
+                                alternatives=alternatives, hold_along=hold_along)
             break
         except (Unconstrained, CannotSeeMarks) as e:
             # a pose free at the solution, or one that cannot see its marks,
@@ -715,13 +812,14 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
 
 def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | None = None,
                   free_focal: bool = False, noise_px: float = 1.0, robust: bool = True,
-                  max_iterations: int = 200, hold_unconstrained: bool = False,
+                  max_iterations: int = 200, hold_unconstrained: bool | str = False,
                   separate_noise: bool = True, where: str = "edges.json",
-                  alternatives: dict | None = None) -> FacadeSolution:
+                  alternatives: dict | None = None, hold_along=None) -> FacadeSolution:
     """:func:`solve_facade` from one start; ``alternatives``, when given, is
     filled with ``photo -> [the other candidate rotations, best first]`` of
     the photographs whose rotation came from vanishing directions."""
-    check_solve_options(noise_px=noise_px, max_iterations=max_iterations)
+    check_solve_options(noise_px=noise_px, max_iterations=max_iterations,
+                        hold_unconstrained=hold_unconstrained)
     t0 = time.perf_counter()
     warnings: list[str] = []
     if not model.fixed.any():
@@ -780,7 +878,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
             if alternatives is not None:
                 alternatives[photos[j]] = candidates[j][1:]
     prob = _Problem(model, kept, photos, K, R0, free_focal=free_focal, noise_px=noise_px,
-                    separate_noise=separate_noise)
+                    separate_noise=separate_noise, hold_along=hold_along)
     th, t = _linear_translations(prob, R0, model.values)        # eq. 5.5
     # a size the linear solve makes non-positive (mis-marked edges pull it) starts
     # from the model's value instead: the robust pass then finds the bad marks
@@ -792,7 +890,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
     names = prob.column_names()
     Aw = prob.weights(True)
     with np.errstate(invalid="ignore", divide="ignore"):
-        J0 = prob.jacobian(x0, Aw, dense=True)
+        J0 = prob.jacobian(x0, Aw, dense=True, full=True)
     if _degenerate_start(J0, names) and not np.array_equal(th, model.values):
         # the linear solve from few marks can put a marked edge through a
         # camera's centre (a weak direction, seed 44 of the marking eval), or
@@ -801,7 +899,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
         # parameters' starting values, with the linear translations, instead
         x0 = prob.pack(model.values, np.zeros((len(photos), 3)), t)
         with np.errstate(invalid="ignore", divide="ignore"):
-            J0 = prob.jacobian(x0, Aw, dense=True)
+            J0 = prob.jacobian(x0, Aw, dense=True, full=True)
         warnings.append("the linear initialisation put a marked edge through (or next to) a "
                         "camera's centre: started from the starting values instead")
     if not np.all(np.isfinite(J0)):
@@ -809,24 +907,28 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
                               "(a block of zero size?): check the starting values in blocks.json")
     # a rough solve (hold_unconstrained) also holds what the marks barely
     # constrain: with four noisy marks a weak direction wanders far
-    bad = _rank_deficient(J0, names, rcond=1e-3 if hold_unconstrained else RANK_RCOND)
+    rcond = 1e-3 if hold_unconstrained else RANK_RCOND
+    ties = prob.ties()
+    bad = _rank_deficient(J0, names, rcond=rcond, ties=ties)
     if bad and hold_unconstrained:
         # hold the model's unconstrained parameters first; only a photograph
         # still unconstrained with them held is left out
         held = [b for b in bad if ":" not in b and b != "focal_scale"]
         lost = [] if held else sorted({b.split(":")[0] for b in bad if ":" in b})
+        fixed, along = (_hold(prob, J0, names, held, rcond=rcond, ties=ties, hold_along=hold_along,
+                              mode=hold_unconstrained) if held else ([], hold_along))
         if held:
-            warnings.append("held at their starting values (no mark constrains them): "
-                            + ", ".join(held))
+            warnings.append(_held_said(held, fixed, "no mark constrains them"))
         if lost:
             warnings.append("left out (their marks do not fix their pose): " + ", ".join(lost))
-        sol = solve_facade(model.with_fixed(held), _without(marks, lost) if lost else marks, K,
+        sol = solve_facade(model.with_fixed(fixed), _without(marks, lost) if lost else marks, K,
                            rough_rotations=rough_rotations,
                            free_focal=free_focal and "focal_scale" not in bad, noise_px=noise_px,
                            robust=robust, max_iterations=max_iterations, where=where,
-                           hold_unconstrained=True, separate_noise=separate_noise)
+                           hold_unconstrained=hold_unconstrained,
+                           separate_noise=separate_noise, hold_along=along)
         return replace(sol, warnings=warnings + sol.warnings, dropped=dropped + lost + sol.dropped,
-                       held=tuple(held) + sol.held)
+                       held=tuple(dict.fromkeys(tuple(held) + sol.held)))
     if bad:
         raise Unconstrained(where, tuple(dict.fromkeys(bad)))
     dense = prob.ncol <= DENSE_MAX_COLUMNS
@@ -877,7 +979,7 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
                                free_focal=free_focal, noise_px=noise_px, robust=False,
                                max_iterations=max_iterations,
                                hold_unconstrained=hold_unconstrained,
-                               separate_noise=separate_noise, where=where)
+                               separate_noise=separate_noise, where=where, hold_along=hold_along)
             return replace(sol, outliers=outliers, warnings=warnings + sol.warnings,
                            dropped=dropped + sol.dropped, nfev=nfev + sol.nfev,
                            seconds=time.perf_counter() - t0)
@@ -903,16 +1005,57 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
             lost = [] if held else sorted({b.split(":")[0] for b in e.unknowns if ":" in b})
         if not (held or lost):
             raise
-        sol = solve_facade(model.with_fixed(held), _without(marks, lost) if lost else marks, K,
-                           rough_rotations=rough_rotations, free_focal=free_focal,
+        fixed, along = [], hold_along
+        if held:
+            fixed, along = _hold(prob, e.jacobian, e.unknowns_all, held, rcond=RANK_RCOND,
+                                 ties=prob.ties(), hold_along=hold_along, mode=hold_unconstrained)
+        sol = solve_facade(model.with_fixed(fixed or []), _without(marks, lost) if lost else marks,
+                           K, rough_rotations=rough_rotations, free_focal=free_focal,
                            noise_px=noise_px, robust=robust, max_iterations=max_iterations,
-                           where=where, hold_unconstrained=True, separate_noise=separate_noise)
+                           where=where, hold_unconstrained=hold_unconstrained,
+                           separate_noise=separate_noise, hold_along=along)
         # (the solve reruns from the marks: its warnings and dropped photographs are the new ones)
-        said = ("held at their starting values (free at the solution): " + ", ".join(held)
+        said = (_held_said(held, fixed, "free at the solution")
                 if held else "left out (their marks do not fix their pose at the solution, or "
                 "the solved camera cannot see them): " + ", ".join(lost))
         return replace(sol, warnings=[said] + sol.warnings, dropped=lost + sol.dropped,
-                       held=tuple(held) + sol.held)
+                       held=tuple(dict.fromkeys(tuple(held) + sol.held)))
+
+
+HOLD_MODES = ("directions", "parameters")
+
+
+def _hold(prob, J, names, held, *, rcond, ties, hold_along, mode):
+    """What a rough solve holds of the parameters ``held`` (those the rank
+    test of ``J``, columns ``names``, found free): ``(fixed, hold_along)``,
+    the parameters to fix (a zero column; all of ``held`` in the mode
+    ``"parameters"``, or where the directions found add nothing to those
+    already held) and the slot-space directions to hold."""
+    if mode == "parameters":
+        return list(held), hold_along
+    zero = _null_space(J, names, rcond=rcond, ties=ties)[0]
+    fixed = [n for n, z in zip(names, zero, strict=True) if z and n in held]
+    D = _free_parameter_directions(J, names, rcond=rcond, ties=ties)
+    rows = np.zeros((len(D), len(prob.base)))
+    rows[:, np.flatnonzero(prob.free)] = D[:, : prob.Px]
+    old = np.zeros((0, len(prob.base))) if hold_along is None else np.asarray(hold_along, float)
+    new = np.vstack([old, rows])
+    if _rank(new) == _rank(old):
+        if fixed:
+            return fixed, hold_along
+        return list(held), hold_along
+    return fixed, new
+
+
+def _rank(M) -> int:
+    return int(np.linalg.matrix_rank(M)) if len(M) else 0
+
+
+def _held_said(held, fixed, why):
+    if set(held) <= set(fixed or ()):
+        return f"held at their starting values ({why}): " + ", ".join(held)
+    return (f"held at their starting values along the direction(s) the marks leave free ({why}; "
+            "the combination the marks fix is solved): " + ", ".join(held))
 
 
 def _without(marks, photos):
@@ -1069,19 +1212,26 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     # Jacobian at the linear initialisation, and a solve can end where a
     # direction the start held is free (a marking-eval run, seed 205, ended
     # 8e3 off with σ of that size; a fresh solve of its marks refused)
-    bad = _rank_deficient(J, prob.column_names()) if np.all(np.isfinite(J)) else []
+    Jx = J if prob.B is None else np.asarray(prob.jacobian(x, Aw, dense=True, full=True))
+    names = prob.column_names()
+    bad = (_rank_deficient(Jx, names, ties=prob.ties()) if np.all(np.isfinite(Jx)) else [])
     if bad:
-        raise Unconstrained(where, tuple(dict.fromkeys(bad)), at_solution=True)
+        e = Unconstrained(where, tuple(dict.fromkeys(bad)), at_solution=True)
+        e.jacobian, e.unknowns_all = Jx, names
+        raise e
     # sandwich: r = A h with cov(h) = σ² rel² I -> cov(r) = σ² (rel A)(rel A)ᵀ
     D = np.einsum("nji,njc->nic", Aw * prob.rel[:, None, None],
                   J.reshape(n, 2, p)).reshape(2 * n, p)   # (rel A)ᵀ J
     cov = sandwich_covariance(J, D, sigma)
     if cov is None:
         raise EstimationError(where, "the normal equations are singular at the solution")
+    if prob.B is not None:   # by the unknowns as named (a held direction's variance is 0)
+        T = prob.embedding()
+        cov = T @ cov @ T.T
     sd = np.sqrt(np.clip(np.diag(cov), 0, None))
     fitted = model.with_values(th[prob.free])
     std_slot = np.zeros(len(model.slot_names))
-    std_slot[prob.free] = sd[: prob.P]
+    std_slot[prob.free] = sd[: prob.Px]
     params = fitted.named_values()
     std = {nm: float(std_slot[model.slot_of(nm)]) for nm in params}
     # each solved camera must be able to see what it marked: not from a point on
@@ -1106,7 +1256,7 @@ def _final(prob, x0, kw, model, dropped, outliers, warnings, t0, nfev, where):
     poses, pose_std, Ks = {}, {}, {}
     for j, ph in enumerate(prob.photos):
         poses[ph] = (R[j], t[j].copy())
-        c = prob.P + 6 * j
+        c = prob.Px + 6 * j
         Cj = cov[c:c + 6, c:c + 6]
         # centre = -Rᵀ t: d/dω = -R⁰ᵀ... evaluated at the solution through the full R
         Gw = R[j].T @ _skew(t[j])

@@ -15,7 +15,7 @@ import pytest
 from cli_catalog import run_cli
 from facade_checks import fixture_cameras, fixture_model
 
-from lumigraph.capture.errors import EstimationError
+from lumigraph.capture.errors import EstimationError, InputError
 from lumigraph.capture.scenes.facade_edges import (
     paint_facade,
     project_edges,
@@ -298,3 +298,49 @@ def test_automatic_marking_from_four_hand_marks(model, cams):
         if sol.std[n] > 0:
             assert abs(sol.params[n] - v) < 5 * sol.std[n], (n, sol.params[n], v, sol.std[n])
     assert replace(res.marks, marks=()).photographs == tuple(cams)
+
+
+def test_a_rough_solve_holds_only_the_direction_the_marks_leave_free():
+    """The tower's right-hand side unmarked (and its back hidden): its width
+    and offset are free together (the right side moves), while the marks
+    fix the left side, ``offset - width / 2``; its depth no mark sees.
+    Held along that direction only (the default), the left side and every
+    other parameter come out exact from a start 0.6 m off; held parameter
+    by parameter (``"parameters"``, automatic marking's own rough solves),
+    width and offset stay at their start and the left side with them, and
+    the marks that see it call themselves mis-marked. Exact marks: judged
+    at round-off."""
+    import copy
+
+    from lumigraph.stereo.debevec1996.model import BlockModel
+    from lumigraph.stereo.debevec1996.solve import FIXTURE
+
+    d = copy.deepcopy(FIXTURE)
+    d["blocks"][2]["params"]["depth"] = 3.0          # the tower's depth its own
+    model = BlockModel.from_dict(d)
+    cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    raw = {p: [e for e in v if not e["edge"].endswith("-right") or not e["edge"].startswith("tower/")]
+           for p, v in project_edges(model, cams).items()}
+    marks = EdgeMarks.from_dict({"photographs": raw}, model=model, photographs=list(cams))
+    with pytest.raises(EstimationError, match="tower/width"):
+        solve_facade(model, marks, K(cams))
+    start = model.with_values({"tower/width": 3.6, "tower/offset_x": 6.2})   # left side at 4.4, not 5
+    truth = model.named_values()
+    left = lambda p: p["tower/offset_x"] - p["tower/width"] / 2     # noqa: E731
+    sol = solve_facade(start, marks, K(cams), hold_unconstrained=True)
+    assert set(sol.held) == {"tower/width", "tower/offset_x", "tower/depth"}
+    assert any("along the direction" in w for w in sol.warnings) and not sol.outliers
+    assert sol.params["tower/depth"] == 3.0                  # a zero column: held outright
+    assert abs(left(sol.params) - 5.0) < 1e-8
+    others = [n for n in truth if n not in sol.held]
+    assert max(abs(sol.params[n] - truth[n]) / truth[n] for n in others) < 1e-8
+    # what stays free stays where the start put it: the held direction's
+    # component (over width and offset, in metres) is the start's
+    dw, do = sol.params["tower/width"] - 3.6, sol.params["tower/offset_x"] - 6.2
+    free = np.array([1.0, 0.5]) / np.hypot(1.0, 0.5)          # (width, offset): the right side
+    assert abs(free @ [dw, do]) < 1e-8
+    held = solve_facade(start, marks, K(cams), hold_unconstrained="parameters")
+    assert (held.params["tower/width"], held.params["tower/offset_x"]) == (3.6, 6.2)
+    assert abs(left(held.params) - 5.0) > 0.5 and held.outliers
+    with pytest.raises(InputError, match="hold_unconstrained"):
+        solve_facade(start, marks, K(cams), hold_unconstrained="both")
