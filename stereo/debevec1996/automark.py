@@ -17,7 +17,9 @@ mark of a reprojected edge when
   except edges whose projected lines coincide with it (a block flush with
   its neighbour puts its edges on the neighbour's image lines): those share
   the detection, each taking the part that overlaps its own projected
-  extent.
+  extent, where they are one line in the rough model's 3-D or lie side by
+  side on the image line (a corner the rough model shows just beside a
+  nearer block's silhouette, over the same stretch, stays ambiguous).
 
 Only edges visible in the rough model (sampled points not hidden by its
 faces) are candidates, so a hidden edge gets no proposal; a point inside
@@ -118,6 +120,12 @@ class AutomarkResult:
     proposed: int
     solution: object = field(repr=False)
     warnings: list = field(default_factory=list)
+
+
+# how automatic marking's rough solves hold what the marks leave free: every
+# parameter a free direction moves, at its starting value (its searches, the
+# vote and the crease scan, then move those parameters)
+ROUGH_HOLD = "parameters"
 
 
 def check_automark_options(*, max_angle_deg: float, max_distance_px: float,
@@ -277,7 +285,7 @@ def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: 
 
 
 def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=None,
-                 step_px: float = 2.0) -> np.ndarray | None:
+                 step_px: float = 2.0, same_line=None) -> np.ndarray | None:
     """The image step of the projected model ``edge`` ``(4,)`` found
     without a line detection: the grey-level profiles across the edge,
     every ``step_px`` along it, averaged along it (texture not aligned
@@ -286,7 +294,9 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
     is unique (no other peak, 1.5 px or more away, two thirds as high), the
     step runs along the edge (:func:`_continues`) and no other projected
     edge of ``others`` ``(M, 4)`` lies parallel within the gate (the step
-    could be its). None otherwise."""
+    could be its; one on the edge's own image line does not count where
+    ``same_line`` ``(M,)``, when given, says it is the same line in 3-D).
+    None otherwise."""
     edge = np.asarray(edge, float)
     d = edge[2:] - edge[:2]
     L = float(np.hypot(*d))
@@ -306,8 +316,10 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
         ta = ((o[:, :2] - edge[:2]) @ u)
         tb = ((o[:, 2:] - edge[:2]) @ u)
         over = (np.maximum(ta, tb) > 0) & (np.minimum(ta, tb) < L)
-        near = (np.maximum(np.abs(h0), np.abs(h1)) <= gate_px + 1.5) & \
-            ~((np.abs(h0) <= 1.0) & (np.abs(h1) <= 1.0))
+        on = (np.abs(h0) <= 1.0) & (np.abs(h1) <= 1.0)
+        if same_line is not None:
+            on &= np.asarray(same_line, bool)
+        near = (np.maximum(np.abs(h0), np.abs(h1)) <= gate_px + 1.5) & ~on
         if np.any(par & over & near):
             return None
     offs = np.arange(-gate_px - 1.0, gate_px + 1.0 + 1e-9, 0.5)
@@ -330,7 +342,7 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
 
 
 def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
-               min_overlap_px=10.0):
+               min_overlap_px=10.0, same_line=None):
     """The proposals the detections ``det`` (N, 4) make for the projected
     edges ``E`` (M, 4): ``(i, j, segment)`` for
     detection ``i`` given to edge ``j`` (vectorised over detections x edges;
@@ -343,7 +355,11 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
     between the two ends of one edge. Each of them whose projected extent
     overlaps it by ``min_overlap_px`` or more gets the overlapping part
     (the solver measures distance to the line; the part is where that edge
-    is seen), instead of the detection being dropped as ambiguous."""
+    is seen), instead of the detection being dropped as ambiguous.
+    ``same_line`` (M, M), when given, says which edges are one line in 3-D
+    (:func:`_same_lines`): two that coincide only in the photograph (a
+    corner seen just beside a nearer block's silhouette in the rough model)
+    stay ambiguous."""
     E = np.asarray(E, float).reshape(-1, 4)
     if not len(E) or not len(det):
         return []
@@ -370,6 +386,18 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
     nn = nrm[0, j] @ nrm[0].T                          # ±1 for parallel lines
     same = gate & (np.abs(ha - ha[rows, j][:, None] * nn) <= coincident_px) \
         & (np.abs(hb - hb[rows, j][:, None] * nn) <= coincident_px)
+    if same_line is not None:
+        # two edges on one image line but not in 3-D compete for a detection
+        # only where their projected extents overlap (side by side, each
+        # takes its own part)
+        Ej = E[j]
+        dj = (Ej[:, 2:] - Ej[:, :2]) / np.maximum(np.hypot(*(Ej[:, 2:] - Ej[:, :2]).T), 1e-9)[:, None]
+        t0 = ((E[None, :, :2] - Ej[:, None, :2]) * dj[:, None]).sum(-1)
+        t1 = ((E[None, :, 2:] - Ej[:, None, :2]) * dj[:, None]).sum(-1)
+        Lj = np.hypot(*(Ej[:, 2:] - Ej[:, :2]).T)[:, None]
+        shared = (np.minimum(np.maximum(t0, t1), Lj) - np.maximum(np.minimum(t0, t1), 0.0)
+                  >= min_overlap_px)
+        same &= np.asarray(same_line, bool)[j] | ~shared
     other = np.where(same, np.inf, score)
     # any other line in the gates (even one the detection overruns: a
     # silhouette spanning several edges) nearly as near makes it ambiguous
@@ -392,6 +420,44 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
             c0, c1 = sorted((float(np.clip(c0, 0, 1)), float(np.clip(c1, 0, 1))))
             out.append((int(i), int(k), np.r_[det[i, :2] + c0 * d, det[i, :2] + c1 * d]))
     return out
+
+
+# edges on one image line share a detection only where they are one line in
+# the rough model's 3-D (flush blocks); False: wherever they coincide in the
+# photograph (before session 31)
+_SAME_LINE_IN_3D = True
+
+
+def _same_lines(model, names, cam: dict | None = None, tol_px: float = 0.0) -> np.ndarray:
+    """``(M, M)`` bool: which of the edges ``names`` lie on one 3-D line
+    of ``model`` (a block flush with its neighbour: the annex's front
+    corner on the tower's): parallel, and no farther apart than ``tol_px``
+    at their depth in the camera ``cam`` (``K``, ``R``, ``t``; a rough
+    model need not keep a flush pair flush), or 1e-9 of the model's extent
+    without one.
+
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> _same_lines(m, ["house/bottom-front", "tower/bottom-front", "house/top-front"]).astype(int)
+    array([[1, 1, 0],
+           [1, 1, 0],
+           [0, 0, 1]])
+    """
+    E = model.edges()
+    P = np.array([E[n][0] for n in names], float)
+    D = np.array([E[n][1] - E[n][0] for n in names], float)
+    D /= np.maximum(np.linalg.norm(D, axis=1), 1e-300)[:, None]
+    tol = np.full((len(names), len(names)), 1e-9 * max(1.0, float(np.ptp(model.vertices()))))
+    if cam is not None and tol_px > 0:
+        K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
+        mid = np.array([(E[n][0] + E[n][1]) / 2 for n in names], float)
+        z = np.abs(mid @ R.T + t.ravel())[:, 2]
+        tol = np.maximum(tol, tol_px * np.maximum(z[:, None], z[None]) / float(K[0, 0]))
+    par = np.linalg.norm(np.cross(D[:, None], D[None]), axis=-1) <= 1e-3
+    w = P[None] - P[:, None]                          # (i, k): from i's point to k's
+    off = np.linalg.norm(w - (w * D[:, None]).sum(-1, keepdims=True) * D[:, None], axis=-1)
+    return par & (off <= tol)
 
 
 def _one_line(segs, edge, *, coincident_px=1.0):
@@ -660,7 +726,7 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     # automatic marking's own solves pool one noise: what they were chosen with
-    sol = solve_facade(model, marks, K, hold_unconstrained="parameters", separate_noise=False, **kw)
+    sol = solve_facade(model, marks, K, hold_unconstrained=ROUGH_HOLD, separate_noise=False, **kw)
     v0 = rough.named_values()
     weak: list = []
     again = sol
@@ -674,7 +740,7 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
         if not new:
             break
         weak += new
-        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained="parameters",
+        again = solve_facade(model.with_fixed(weak), marks, K, hold_unconstrained=ROUGH_HOLD,
                              separate_noise=False, **kw)
     if not weak:
         return sol
@@ -1036,9 +1102,12 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                            tol_px=widen * max_distance_px) if _NO_SEAMS else set()
             det = found[photo]
             views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
+            same3 = (_same_lines(sol.model, [e for e, _ in vis], cam, widen * max_distance_px)
+                     if _SAME_LINE_IN_3D else None)
             pairs = _associate(det, np.array([e for _, e in vis], float),
                                max_angle_deg=min(widen * max_angle_deg, 20.0),
-                               max_distance_px=widen * max_distance_px)
+                               max_distance_px=widen * max_distance_px,
+                               same_line=same3)
             # of several detections given to one edge, the nearest line's
             # longest piece, none when two lines are nearly as near
             got: dict[str, list] = {}
@@ -1071,7 +1140,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                     if name in hand or name in got:
                         continue
                     seg = _search_edge(greys[photo], e, gate_px=max_distance_px / (
-                        3 if name in seams else 1), others=np.delete(E, j, axis=0))
+                        3 if name in seams else 1), others=np.delete(E, j, axis=0),
+                        same_line=None if same3 is None else np.delete(same3[j], j))
                     if seg is not None:
                         kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
         moved = False
@@ -1094,7 +1164,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     for _ in range(3):
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
-                           noise_px=noise_px, hold_unconstrained="parameters", where=where,
+                           noise_px=noise_px, hold_unconstrained=ROUGH_HOLD, where=where,
                            separate_noise=False)
         limit = 3.0 * max(sol.sigma_px, 0.1)
         far = {(p, e) for p, e, d in sol.mark_rms_px if d > limit} | {
@@ -1113,7 +1183,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             merged = replace(marks, marks=tuple(marks.marks) + tuple(old.values()))
             alt = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}),
                                                                     **last},
-                               noise_px=noise_px, hold_unconstrained="parameters", where=where,
+                               noise_px=noise_px, hold_unconstrained=ROUGH_HOLD, where=where,
                                separate_noise=False)
             if len(alt.held) < len(sol.held):
                 sol, kept = alt, dict(old)
@@ -1137,7 +1207,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             merged = replace(marks, marks=tuple(marks.marks) + tuple(trial.values()))
             alt = solve_facade(current, merged, K,
                                rough_rotations={**(rough_rotations or {}), **last},
-                               noise_px=noise_px, hold_unconstrained="parameters", where=where,
+                               noise_px=noise_px, hold_unconstrained=ROUGH_HOLD, where=where,
                                separate_noise=False)
             score = (len(_hand_outliers(alt, marks)), len(_weak(alt, model, trust)), len(alt.held),
                      _hand_rms(alt, marks))
@@ -1168,7 +1238,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         kept = {key: m for key, m in kept.items() if m.edge not in moved_edges}
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations={**(rough_rotations or {}), **last},
-                           noise_px=noise_px, hold_unconstrained="parameters", where=where,
+                           noise_px=noise_px, hold_unconstrained=ROUGH_HOLD, where=where,
                            separate_noise=False)
         warnings.append("the proposals took " + ", ".join(weak) + " beyond the rough model's "
                         f"accuracy ({trust:.0%}) or fix them loosely: their edges' proposals "
@@ -1182,7 +1252,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         rr = {**(rough_rotations or {}), **last}
         merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
         sol = solve_facade(current, merged, K, rough_rotations=rr, noise_px=noise_px,
-                           hold_unconstrained="parameters", where=where)
+                           hold_unconstrained=ROUGH_HOLD, where=where)
         for _ in range(len(kept)):
             key, sol = _contradicted(current, merged, K, sol, rough=model, trust=trust,
                                      candidates=set(kept), rough_rotations=rr,
@@ -1235,7 +1305,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             trial = {**kept, **{(m.photo, m.edge): m for m in found}}
             alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
                 trial.values())), K, rough_rotations=rr, noise_px=noise_px,
-                hold_unconstrained="parameters", where=where)
+                hold_unconstrained=ROUGH_HOLD, where=where)
             new = {(m.photo, m.edge) for m in found}
             fits = all(d <= 3.0 * max(alt.sigma_px, 0.1) for p, e, d in alt.mark_rms_px
                        if (p, e) in new) and not new & {(p, e) for p, e, _ in alt.outliers}
@@ -1282,7 +1352,7 @@ def _contradicted(model, merged, K, sol, *, rough, trust, candidates, **kw):
     weak = set(_weak(sol, rough, trust))
     for i in order:
         trial = replace(merged, marks=tuple(m for j, m in enumerate(marks) if j != i))
-        alt = solve_facade(model, trial, K, hold_unconstrained="parameters", **kw)
+        alt = solve_facade(model, trial, K, hold_unconstrained=ROUGH_HOLD, **kw)
         if set(alt.held) == set(sol.held) and set(_weak(alt, rough, trust)) <= weak:
             return (marks[i].photo, marks[i].edge), alt
     return None, sol
@@ -1675,7 +1745,7 @@ def unconstrained_spots(model, marks, K: dict, sizes: dict, unknowns, *, noise_p
     marked = {(m.photo, m.edge) for m in marks.marks} if marked is None else set(marked)
     none = [{"parameter": u, "suggest": []} for u in unknowns]
     try:
-        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained="parameters",
+        held = solve_facade(model, marks, K, noise_px=noise_px, hold_unconstrained=ROUGH_HOLD,
                             where=where, separate_noise=False)
     except EstimationError:
         return none

@@ -110,6 +110,57 @@ def test_collinear_edges_share_a_detection_by_extent():
     assert _associate(det, E, max_angle_deg=3, max_distance_px=6) == []
 
 
+def test_edges_on_one_image_line_but_not_in_3d_stay_ambiguous():
+    """A corner seen just beside a nearer block's silhouette in the rough
+    model (reported seed 41 at stop 50: the house's back corner, hidden
+    behind the tower in truth, projected onto the tower's silhouette and
+    took its detection): the two project within 1 px over the same stretch
+    but are different 3-D lines, so the detection is neither's. Where they
+    are one 3-D line (a flush neighbour) they share it, as before; where
+    they lie side by side on the image line (their extents apart), each
+    takes its own part."""
+    E = np.array([[10, 0, 10, 100], [10.4, 20, 10.4, 90], [40, 0, 40, 100]], float)
+    det = np.array([[10.2, 10, 10.2, 95]])
+    kw = dict(max_angle_deg=3, max_distance_px=6)
+    assert {j for _, j, _ in _associate(det, E, **kw)} == {0, 1}          # image lines only
+    apart = np.eye(3, dtype=bool)
+    assert _associate(det, E, same_line=apart, **kw) == []
+    one = apart.copy()
+    one[0, 1] = one[1, 0] = True
+    assert {j for _, j, _ in _associate(det, E, same_line=one, **kw)} == {0, 1}
+    E[1] = [10.4, 100, 10.4, 160]                  # side by side: edge 1 beyond edge 0's end
+    det = np.array([[10.2, 10, 10.2, 150]])
+    got = {j: s for _, j, s in _associate(det, E, same_line=apart, **kw)}
+    assert set(got) == {0, 1}
+    np.testing.assert_allclose(got[0], [10.2, 10, 10.2, 100])
+    np.testing.assert_allclose(got[1], [10.2, 100, 10.2, 150])
+
+
+def test_same_lines_are_one_line_in_3d():
+    from lumigraph.stereo.debevec1996.automark import _same_lines
+    from lumigraph.stereo.debevec1996.model import BlockModel
+    from lumigraph.stereo.debevec1996.solve import FIXTURE
+
+    m = BlockModel.from_dict(FIXTURE)
+    names = ["house/bottom-front", "tower/bottom-front", "tower/bottom-back", "house/front-right",
+             "tower/front-right"]
+    got = _same_lines(m, names)
+    assert np.array_equal(got, got.T) and got.diagonal().all()
+    # the tower stands flush with the house's front: its front bottom edge is
+    # on the house's; its back one and the two vertical corners are not
+    assert got[0, 1] and not got[0, 2] and not got[3, 4]
+    assert got.sum() == len(names) + 2
+    # a rough model need not keep a flush pair flush: the tower's left corner
+    # 5 cm off the house's right one is one line within 2 px at 30 m (700 px
+    # focal: 5 cm is 1.2 px there), not within 0.5 px
+    rough = m.with_values({"tower/offset_x": 6.55})
+    pair = ["house/front-right", "tower/front-left"]
+    assert _same_lines(m, pair)[0, 1] and not _same_lines(rough, pair)[0, 1]
+    cam = {"K": np.diag([700.0, 700.0, 1.0]), "R": np.eye(3), "t": np.array([-5.0, -3.0, 30.0])}
+    assert _same_lines(rough, pair, cam, 2.0)[0, 1]
+    assert not _same_lines(rough, pair, cam, 0.5)[0, 1]
+
+
 def test_of_two_lines_given_to_one_edge_the_nearest_is_proposed():
     """A face seen nearly edge-on: its near and far sides project a pixel or
     two apart, and the rough pose can turn it away and hide the far side.
