@@ -67,7 +67,12 @@ the origin, axis-aligned); the scale comes from the fixed parameter(s): at
 least one length must be fixed. Unconstrained unknowns (no mark constrains a
 parameter, a photograph with too few marks) are found by a rank test of the
 column-scaled Jacobian at the start and named in an :class:`EstimationError`
-(:class:`Unconstrained`, which also carries the names).
+(:class:`Unconstrained`, which also carries the names). A rough solve
+(``hold_unconstrained``) holds them instead: only the null directions, in
+the parameters' own units (the unknowns become ``z`` with ``θ_free =
+θ_start + B z``, ``B`` an orthonormal basis of the rest), so the
+combination the marks do fix is solved; or, with ``"parameters"``, every
+parameter such a direction moves.
 A photograph with fewer than three marks (six constraints on its six pose
 unknowns) is left out with a warning.
 
