@@ -444,6 +444,8 @@ def _same_lines(model, names, cam: dict | None = None, tol_px: float = 0.0) -> n
            [1, 1, 0],
            [0, 0, 1]])
     """
+    if not len(names):
+        return np.zeros((0, 0), bool)
     E = model.edges()
     P = np.array([E[n][0] for n in names], float)
     D = np.array([E[n][1] - E[n][0] for n in names], float)

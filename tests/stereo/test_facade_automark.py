@@ -159,6 +159,7 @@ def test_same_lines_are_one_line_in_3d():
     cam = {"K": np.diag([700.0, 700.0, 1.0]), "R": np.eye(3), "t": np.array([-5.0, -3.0, 30.0])}
     assert _same_lines(rough, pair, cam, 2.0)[0, 1]
     assert not _same_lines(rough, pair, cam, 0.5)[0, 1]
+    assert _same_lines(m, []).shape == (0, 0)          # a photograph that shows no edge
 
 
 def test_of_two_lines_given_to_one_edge_the_nearest_is_proposed():
