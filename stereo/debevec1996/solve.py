@@ -277,6 +277,11 @@ class _Problem:
             if r:
                 self.B = Vt[r:].T
         self.P = self.Px if self.B is None else self.B.shape[1]
+        # θ = off + E z over every slot: the fixed slots (and, where
+        # directions are held, the free ones' base) plus the unknowns' span
+        self.E = np.zeros((len(self.base), self.P))
+        self.E[self.free] = np.eye(self.P) if self.B is None else self.B
+        self.off = np.where(self.free, 0.0, self.base) if self.B is None else self.base.copy()
         self.nc = len(self.photos)
         self.K0 = np.array([K[p] for p in self.photos], float)
         self.R0 = np.array(R0, float)
@@ -583,11 +588,7 @@ def _linear_translations(prob: _Problem, R, th_start, cams_only=None):
     endpoint depths of a first solve so they measure pixels."""
     n = prob.n
     N = _plane_normals(prob.seg, prob.K0[prob.cam])
-    # θ = off + E z: the fixed slots (and, where directions are held, the
-    # free ones' base) plus the unknowns' span
-    E = np.zeros((len(prob.base), prob.P))
-    E[prob.free] = np.eye(prob.P) if prob.B is None else prob.B
-    fixed_th = np.where(prob.free, 0.0, prob.base) if prob.B is None else prob.base
+    E, fixed_th = prob.E, prob.off
     scale = np.ones((n, 2))
     sol = None
     for _ in range(2):
@@ -684,12 +685,12 @@ def _rank_deficient(J, names, *, rcond=RANK_RCOND, ties=None):
     return sorted(bad, key=names.index)
 
 
-def _free_parameter_directions(J, names, *, rcond, ties=None) -> np.ndarray:
-    """The null directions' parameter parts, in the parameters' own units
-    (rows over the ``names`` columns, zero on poses and the focal scale,
-    orthonormal): a direction with no more than ``NULL_WEIGHT`` of its
-    scaled weight on parameters (a photograph's pose) is left out."""
-    _, keep, norms, null = _null_space(J, names, rcond=rcond, ties=ties)
+def _free_parameter_directions(names, keep, norms, null) -> np.ndarray:
+    """The null directions' parameter parts (:func:`_null_space`'s
+    ``keep, norms, null``), in the parameters' own units (rows over the
+    ``names`` columns, zero on poses and the focal scale, orthonormal): a
+    direction with no more than ``NULL_WEIGHT`` of its scaled weight on
+    parameters (a photograph's pose) is left out."""
     par = np.array([":" not in names[i] and names[i] != "focal_scale" for i in keep])
     rows = []
     for v in null:
@@ -1038,9 +1039,9 @@ def _hold(prob, J, names, held, *, rcond, ties, hold_along, mode):
     already held) and the slot-space directions to hold."""
     if mode == "parameters":
         return list(held), hold_along
-    zero = _null_space(J, names, rcond=rcond, ties=ties)[0]
+    zero, keep, norms, null = _null_space(J, names, rcond=rcond, ties=ties)
     fixed = [n for n, z in zip(names, zero, strict=True) if z and n in held]
-    D = _free_parameter_directions(J, names, rcond=rcond, ties=ties)
+    D = _free_parameter_directions(names, keep, norms, null)
     rows = np.zeros((len(D), len(prob.base)))
     rows[:, np.flatnonzero(prob.free)] = D[:, : prob.Px]
     old = np.zeros((0, len(prob.base))) if hold_along is None else np.asarray(hold_along, float)
