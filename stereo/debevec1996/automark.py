@@ -106,6 +106,8 @@ _ON_NEAREST_FACE = True
 _SEARCH_UNDETECTED = True
 _NO_SEAMS = True
 _CREASE = True
+_RESECT = True
+_COLOUR = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -147,6 +149,39 @@ def _grey(image) -> np.ndarray:
     img = img.astype(float)
     peak = 65535.0 if np.asarray(image).dtype == np.uint16 else (255.0 if img.max() > 1.5 else 1.0)
     return img * (255.0 / peak)
+
+
+def _opponent(image) -> list:
+    """The colour-opponent channels of an RGB ``image`` on :func:`_grey`'s
+    scale, ``R − G`` and ``(R + G) / 2 − B``, each centred at 128; ``[]``
+    for a grey image. An edge between two materials of one luminance (a
+    red brick wall under a darker, greyer tiled spire: red up, green and
+    blue down) has no step in grey and a clear one here."""
+    img = np.asarray(image)
+    if img.ndim != 3 or img.shape[2] < 3:
+        return []
+    peak = 65535.0 if img.dtype == np.uint16 else (255.0 if float(img[..., :3].max()) > 1.5 else 1.0)
+    r, g, b = (img[..., c].astype(float) * (255.0 / peak) for c in range(3))
+    return [r - g + 128.0, (r + g) / 2 - b + 128.0]
+
+
+def _strongest(channels: list, seg) -> np.ndarray:
+    """Of ``channels`` (2-D images), the one with the largest step across
+    the segment ``seg`` (median over profiles along it of the largest
+    step within 2 px): where a detection is refined and followed."""
+    if len(channels) == 1:
+        return channels[0]
+    offs = np.arange(-2.0, 2.0 + 1e-9, 0.5)
+    ts = np.linspace(0.1, 0.9, 9)
+    best, out = -1.0, channels[0]
+    for ch in channels:
+        got = profiles_across(ch, seg, ts, offs, min_length=2)
+        if got is None:
+            return channels[0]
+        v = float(np.median(np.abs(np.diff(got[-1], axis=1)).max(1)))
+        if v > best:
+            best, out = v, ch
+    return out
 
 
 def detect_segments(grey: np.ndarray, *, min_length_px: float = 12.0) -> np.ndarray:
@@ -751,6 +786,47 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
                              + ", ".join(weak)] + again.warnings)
 
 
+def _resect(model, marks, K, photos, *, rough_rotations) -> dict:
+    """photo -> ``(R, t)`` of each of ``photos`` with a rough rotation:
+    ``R`` that rotation, ``t`` from its marks against ``model``'s edges
+    (eq. 5.5 with the model known: each marked line's two 3-D endpoints
+    project onto it, linear in ``t``); none where the marks leave ``t``
+    free. A photograph whose hand marks fix its pose only together with
+    parameters the others leave free (two of its four on one corner seen
+    edge-on) is left out of the joint solve; against the rough model it
+    still has a pose to propose from, and its proposals bring it into the
+    next round's."""
+    if not rough_rotations:
+        return {}
+    C0, C1 = model.edge_matrices()
+    th = model.values
+    index = {n: i for i, n in enumerate(model.edge_names)}
+    out = {}
+    for photo in photos:
+        own = marks.of(photo)
+        if photo not in rough_rotations or len(own) < 2:
+            continue
+        R = np.asarray(rough_rotations[photo], float)
+        Kp = np.asarray(K[photo], float)
+        A, y = [], []
+        for m in own:
+            i = index[m.edge]
+            a, b = np.r_[m.segment[:2], 1.0], np.r_[m.segment[2:], 1.0]
+            line = np.cross(a, b)
+            line /= max(float(np.hypot(*line[:2])), 1e-300)   # rows in pixels
+            for X in (C0[i] @ th, C1[i] @ th):
+                A.append(line @ Kp)
+                y.append(-(line @ Kp @ (R @ X)))
+        A, y = np.array(A), np.array(y)
+        sv = np.linalg.svd(A, compute_uv=False)
+        if len(sv) < 3 or sv[2] <= 1e-6 * sv[0]:
+            continue
+        t = np.linalg.lstsq(A, y, rcond=None)[0]
+        if np.all((R @ np.array([C0[index[m.edge]] @ th for m in own]).T)[2] + t[2] > 0):
+            out[photo] = (R, t)      # only a pose that has its marks in front
+    return out
+
+
 def _hand_outliers(sol, marks) -> set:
     """The hand marks (not proposals) the robust solve ``sol`` left out."""
     hand = {(m.photo, m.edge) for m in marks.marks}
@@ -1050,7 +1126,10 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
                            trust=trust)
     greys = {p: _grey(images[p]) for p in marks.photographs}
-    found = {p: detect_segments(greys[p], min_length_px=min_length_px) for p in marks.photographs}
+    # the colour-opponent channels too: an edge of one luminance is a colour edge
+    chans = {p: [greys[p]] + (_opponent(images[p]) if _COLOUR else []) for p in marks.photographs}
+    found = {p: np.vstack([detect_segments(c, min_length_px=min_length_px) for c in chans[p]])
+             for p in marks.photographs}
     kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
     current = model
     vetted: list[dict] = []
@@ -1065,17 +1144,22 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                            noise_px=noise_px, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
+        poses = dict(sol.poses)
+        if _RESECT:
+            poses.update(_resect(sol.model, marks, K, [p for p in marks.photographs
+                                                       if p not in sol.poses],
+                                 rough_rotations=rough_rotations))
         # a proposal made under wider gates stays only while it passes this
         # round's gates against the re-solved model (wrong early matches go)
         gate = widen * max_distance_px
         proj: dict[str, dict] = {}          # photo -> its projected edges, once
         for key, m in list(kept.items()):
-            if m.photo not in sol.poses:
+            if m.photo not in poses:
                 kept.pop(key)
                 continue
             if m.photo not in proj:
-                R, t = sol.poses[m.photo]
-                proj[m.photo] = project_model_edges(sol.model, sol.K[m.photo], R, t)
+                R, t = poses[m.photo]
+                proj[m.photo] = project_model_edges(sol.model, np.asarray(K[m.photo], float), R, t)
             if _off(m.segment, np.r_[proj[m.photo][m.edge]].ravel()) > gate:
                 kept.pop(key)
         warnings = list(sol.warnings)
@@ -1083,12 +1167,13 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         vetted.append(dict(kept))      # what this round's solve accepted
         views = []
         for photo in marks.photographs:
-            if photo not in sol.poses:
+            if photo not in poses:
                 warnings.append(f"photograph {photo!r}: no pose from the marks, nothing proposed")
                 continue
-            R, t = sol.poses[photo]
+            R, t = poses[photo]
             img = images[photo]
-            cam = {"K": sol.K[photo], "R": R, "t": t, "image_size": list(img.shape[1::-1])}
+            Kp = np.asarray(K[photo], float)
+            cam = {"K": Kp, "R": R, "t": t, "image_size": list(img.shape[1::-1])}
             vis = project_edges(sol.model, {photo: cam}, min_length_px=min_length_px,
                                 samples=41, visible=_visible_near_flush(
                                     sol.model, cam, tol_px=widen * max_distance_px))[photo]
@@ -1103,7 +1188,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             seams = _seams(sol.model, cam, {e: sg for e, sg in vis if e not in hand},
                            tol_px=widen * max_distance_px) if _NO_SEAMS else set()
             det = found[photo]
-            views.append(([e for e, _ in vis], sol.K[photo], R, t, det))
+            views.append(([e for e, _ in vis], Kp, R, t, det))
             same3 = (_same_lines(sol.model, [e for e, _ in vis], cam, widen * max_distance_px)
                      if _SAME_LINE_IN_3D else None)
             pairs = _associate(det, np.array([e for _, e in vis], float),
@@ -1126,9 +1211,9 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             for name, s in best.items():
                 if name in seams and _off(s, projected[name]) > max_distance_px / 3:
                     continue
-                seg = refine_segment(greys[photo], s)
-                if seg is not None and _CONTINUES and not _continues(greys[photo], seg,
-                                                                     projected[name]):
+                ch = _strongest(chans[photo], s)
+                seg = refine_segment(ch, s)
+                if seg is not None and _CONTINUES and not _continues(ch, seg, projected[name]):
                     seg = None
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
@@ -1141,7 +1226,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 for j, (name, e) in enumerate(vis):
                     if name in hand or name in got:
                         continue
-                    seg = _search_edge(greys[photo], e, gate_px=max_distance_px / (
+                    seg = _search_edge(_strongest(chans[photo], e), e,
+                                       gate_px=max_distance_px / (
                         3 if name in seams else 1), others=np.delete(E, j, axis=0),
                         same_line=None if same3 is None else np.delete(same3[j], j))
                     if seg is not None:

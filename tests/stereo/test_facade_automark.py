@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from lumigraph.capture.scenes.facade_edges import paint_facade, project_edges, ring_cameras
-from lumigraph.stereo.debevec1996.automark import _associate, automark
+from lumigraph.stereo.debevec1996.automark import _associate, _resect, automark
 from lumigraph.stereo.debevec1996.edges import EdgeMarks
 from lumigraph.stereo.debevec1996.model import BlockModel
 from lumigraph.stereo.debevec1996.solve import _known_axis, solve_facade
@@ -498,3 +498,43 @@ def test_proposals_off_their_edge_are_not_kept(name, seed, draw, switch):
     assert not far_ends(after.marks)
     # nothing else is lost: the solve holds no parameter it did not
     assert set(after.solution.held) <= set(before.solution.held)
+
+
+def _resect_case(seed=3):
+    model = BlockModel.from_dict(FLUSH, where="test")
+    V = model.vertices()
+    centre = (V.min(0) + V.max(0)) / 2
+    size = float(np.linalg.norm(np.ptp(V, axis=0)))
+    cams = ring_cameras(3, target=centre, radius=2.2 * size, height=0.3 * size, focal_px=700,
+                        arc_deg=(-160.0, -20.0), rng=np.random.default_rng(seed), jitter=0.05)
+    raw = project_edges(model, cams)
+    marks = EdgeMarks.from_dict({"photographs": {p: _hand(model, v) for p, v in raw.items()}},
+                                model=model, photographs=list(cams))
+    return model, cams, marks
+
+
+def test_a_photograph_left_out_is_resected_from_its_rough_rotation():
+    # the translation from exact marks and the true rotation is exact: eq. 5.5
+    # with the model known is linear in t, and 4 lines give 8 rows for 3 unknowns
+    model, cams, marks = _resect_case()
+    K = {p: c["K"] for p, c in cams.items()}
+    got = _resect(model, marks, K, list(cams),
+                  rough_rotations={p: c["R"] for p, c in cams.items()})
+    assert set(got) == set(cams)
+    for p, (R, t) in got.items():
+        np.testing.assert_array_equal(R, cams[p]["R"])
+        scale = np.linalg.norm(np.ravel(cams[p]["t"]))
+        np.testing.assert_allclose(t, np.ravel(cams[p]["t"]), rtol=0, atol=1e-9 * scale)
+
+
+def test_resection_needs_a_rough_rotation_and_marks_that_fix_t():
+    model, cams, marks = _resect_case()
+    K = {p: c["K"] for p, c in cams.items()}
+    p = list(cams)[0]
+    assert _resect(model, marks, K, [p], rough_rotations=None) == {}
+    # only the two vertical marks: parallel lines leave t free along them
+    from dataclasses import replace
+    vert = [m for m in marks.of(p) if _known_axis(model, [m.edge])[0] == 2]
+    assert len(vert) == 2
+    only = replace(marks, marks=tuple(vert))
+    assert _resect(model, only, K, [p], rough_rotations={p: cams[p]["R"]}) == {}

@@ -11,8 +11,12 @@ import pytest
 
 from lumigraph.stereo.debevec1996.automark import (
     _continues,
+    _grey,
+    _opponent,
+    _strongest,
     _search_edge,
     _visible_near_flush,
+    detect_segments,
     refine_segment,
 )
 from lumigraph.stereo.debevec1996.model import BlockModel
@@ -36,6 +40,43 @@ def test_a_step_along_the_whole_edge_continues():
     assert seg is not None and abs(seg[0] - 60.5) < 0.05
     # the detection covers a third of the edge; the step runs all along it
     assert _continues(g, seg, np.array([60.5, 5.0, 60.5, 115.0]))
+
+
+def _isoluminant(edge_x=60.5, rows=120, cols=120):
+    """Brick red left of x = ``edge_x``, a greyer, bluer tile right of it,
+    of one luminance (0.299 R + 0.587 G + 0.114 B equal to 1e-9): the
+    rendered spire over its tower wall, as 8-bit codes (no rounding)."""
+    left = np.array([90.0, 40.0, 30.0])
+    # right = left + a step orthogonal to the luminance weights
+    w = np.array([0.299, 0.587, 0.114])
+    step = np.array([-20.0, 8.0, 0.0])
+    step[2] = -(w[:2] @ step[:2]) / w[2]
+    x = np.arange(cols)[None, :].repeat(rows, 0).astype(float)
+    t = np.clip(x - edge_x + 0.5, 0.0, 1.0)[..., None]
+    return left + t * step, w @ step
+
+
+def test_an_edge_of_one_luminance_is_found_in_the_colour_opponent_channels():
+    img, dlum = _isoluminant()
+    assert abs(dlum) < 1e-9
+    grey = _grey(img)
+    assert np.ptp(grey) < 1e-9                     # nothing to see in grey
+    assert len(detect_segments(grey, min_length_px=15)) == 0
+    chans = [grey] + _opponent(img)
+    det = np.vstack([detect_segments(c, min_length_px=15) for c in chans])
+    assert len(det) and np.all(np.abs(det[:, [0, 2]] - 60.5) < 1.0)
+    ch = _strongest(chans, np.array([60.0, 10.0, 60.0, 110.0]))
+    assert ch is not grey
+    seg = refine_segment(ch, np.array([60.0, 10.0, 60.0, 110.0]))
+    # a noise-free step between pixel columns is refined to the boundary
+    assert seg is not None and np.all(np.abs(seg[[0, 2]] - 60.5) < 0.05)
+
+
+def test_a_grey_photograph_has_no_opponent_channels():
+    assert _opponent(np.zeros((10, 10))) == []
+    assert _opponent(np.zeros((10, 10, 1))) == []
+    g = _wall()
+    assert _strongest([g], np.array([60.0, 10.0, 60.0, 110.0])) is g
 
 
 def test_a_step_along_a_third_of_the_edge_does_not_continue():
