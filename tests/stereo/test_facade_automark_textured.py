@@ -194,8 +194,9 @@ def _far(c, marks, limit=1.5):
 
 def test_on_the_rendered_building_no_proposal_is_off_its_edge(rendered):
     """Window frames, brick courses, a buried flush edge and a seam: with the checks
-    of this module switched off, a dozen proposals sit on them and the
-    solve lands 20x the fully marked error off; with them, none does and
+    of this module switched off, proposals sit on them and the solve lands
+    beyond 1.2x the fully marked error (a dozen and 20x before the colour
+    channels were searched too, four and more since); with them, none does and
     the error is within the issue's 1.2x of the fully marked solve's."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo.debevec1996.solve import solve_facade
@@ -220,7 +221,7 @@ def test_on_the_rendered_building_no_proposal_is_off_its_edge(rendered):
     after, err = run()
     full = solve_facade(c["start"], c["full"], c["K"], noise_px=0.5)
     err_full = np.sqrt(np.mean([((full.params[n] - v) / v) ** 2 for n, v in c["truth"].items()]))
-    assert len(_far(c, before.marks)) >= 5 and err_before > 1.2 * err_full     # the premise
+    assert _far(c, before.marks) and err_before > 1.2 * err_full, (err_before, err_full)  # premise
     assert not _far(c, after.marks)
     assert err <= 1.2 * err_full, (err, err_full)
 
