@@ -108,7 +108,6 @@ _NO_SEAMS = True
 _CREASE = True
 _RESECT = True
 _COLOUR = True
-_SEAM_LAST = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -1350,33 +1349,6 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                 break
             kept.pop(key)
             merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-    if _SEAM_LAST and kept:
-        # a proposal of an edge that the solved model makes a seam (two
-        # blocks' faces in one plane: the house's corner behind a tower
-        # flush with its front) has no crease to rest on; a line there is a
-        # colour boundary at best and a window column at worst, which alone
-        # can set the house's visible width, and so the scale of every
-        # other parameter. Withdrawn, if the marks still fix all they fixed
-        rr = {**(rough_rotations or {}), **last}
-        seam_keys = set()
-        for photo in {m.photo for m in kept.values()} & set(sol.poses):
-            R, t = sol.poses[photo]
-            cam = {"K": sol.K[photo], "R": R, "t": t}
-            E = project_model_edges(sol.model, sol.K[photo], R, t)
-            segs = {m.edge: np.r_[E[m.edge]].ravel() for m in kept.values() if m.photo == photo}
-            seam_keys |= {(photo, e) for e in _seams(sol.model, cam, segs,
-                                                      tol_px=max_distance_px)}
-        if seam_keys:
-            trial = {k: m for k, m in kept.items() if k not in seam_keys}
-            alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
-                trial.values())), K, rough_rotations=rr, noise_px=noise_px,
-                hold_unconstrained=ROUGH_HOLD, where=where)
-            if (set(alt.held) <= set(sol.held)
-                    and not set(_weak(alt, model, trust)) - set(_weak(sol, model, trust))):
-                sol, kept = alt, trial
-                warnings.append("proposals on seams of the solved model (faces of two blocks "
-                                "in one plane) withdrawn: " + ", ".join(
-                                    f"{e} on {p}" for p, e in sorted(seam_keys)))
     if _CREASE:
         # a block's inner face may be a crease against its neighbour, brick
         # against brick, that no line was found for: where the marks leave
