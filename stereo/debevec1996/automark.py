@@ -6,9 +6,11 @@ the six pose unknowns), :func:`~lumigraph.stereo.debevec1996.solve.solve_facade`
 gives rough cameras and a rough model. Every model edge visible in a
 photograph (its sampled points in front, in frame and not hidden by the
 model's own faces) is reprojected; line segments are detected in the
-photograph (OpenCV contrib's ``ximgproc`` fast line detector, Lee et al.
-2014; LSD where ``ximgproc`` is missing), and a detection is proposed as a
-mark of a reprojected edge when
+photograph's grey image and, for a colour photograph, in two
+colour-opponent channels (:func:`_opponent`: a wall and a roof of one
+luminance meet in a colour edge only) (OpenCV contrib's ``ximgproc`` fast
+line detector, Lee et al. 2014; LSD where ``ximgproc`` is missing), and a
+detection is proposed as a mark of a reprojected edge when
 
 - its direction is within ``max_angle_deg`` of the edge's,
 - both its ends lie within ``max_distance_px`` of the edge's line,
@@ -62,7 +64,13 @@ block. A parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently).
 
-Each proposal is refined to sub-pixel precision first: the intensity profile
+A photograph whose hand marks fix its pose only together with parameters
+the others leave free is left out of the joint rough solve; with a rough
+rotation it is resected against the rough model (:func:`_resect`) and
+proposed in all the same.
+
+Each proposal is refined to sub-pixel precision first, in whichever
+channel shows the larger step across it (:func:`_strongest`): the intensity profile
 across the segment is sampled at points along it, the gradient peak located
 by a parabola through the three largest samples, and a line fitted to the
 peaks (total least squares); the proposal is the detected stretch on that
