@@ -150,13 +150,22 @@ def check_automark_options(*, max_angle_deg: float, max_distance_px: float,
                                             f"{max_distance_px}")
 
 
+_LUMA = np.array([0.299, 0.587, 0.114])
+
+
+def _code_scale(image, grey: np.ndarray) -> float:
+    """The factor to 8-bit codes of ``image`` (16-bit, 8-bit, or floats in
+    [0, 1] where its ``grey`` stays under 1.5)."""
+    peak = 65535.0 if np.asarray(image).dtype == np.uint16 else (255.0 if grey.max() > 1.5 else 1.0)
+    return 255.0 / peak
+
+
 def _grey(image) -> np.ndarray:
     img = np.asarray(image)
     if img.ndim == 3:
-        img = img[..., :3].astype(float) @ np.array([0.299, 0.587, 0.114])
+        img = img[..., :3].astype(float) @ _LUMA
     img = img.astype(float)
-    peak = 65535.0 if np.asarray(image).dtype == np.uint16 else (255.0 if img.max() > 1.5 else 1.0)
-    return img * (255.0 / peak)
+    return img * _code_scale(image, img)
 
 
 def _opponent(image) -> list:
@@ -168,8 +177,8 @@ def _opponent(image) -> list:
     img = np.asarray(image)
     if img.ndim != 3 or img.shape[2] < 3:
         return []
-    peak = 65535.0 if img.dtype == np.uint16 else (255.0 if float(img[..., :3].max()) > 1.5 else 1.0)
-    r, g, b = (img[..., c].astype(float) * (255.0 / peak) for c in range(3))
+    k = _code_scale(img, img[..., :3].astype(float) @ _LUMA)      # _grey's scale
+    r, g, b = (img[..., c].astype(float) * k for c in range(3))
     return [r - g + 128.0, (r + g) / 2 - b + 128.0]
 
 
