@@ -444,6 +444,14 @@ def rendered_case(seed: int, size=(640, 480)) -> dict:
                 cameras=s.gt["cameras"], images=dict(zip(photos, s.images, strict=True)))
 
 
+class _Draws(list):
+    """:func:`rendered_draws`' list, with ``rough``: the render's own rough
+    model (its ``blocks.json`` depends on the renderer's draws, so it is
+    this exact-mark render's, not :func:`rendered_case`'s)."""
+
+    rough = None
+
+
 def rendered_draws(seed: int, size=(640, 480), *, draws: int = 4) -> list:
     """``draws`` noise draws of :func:`rendered_case`'s marks: ``[(full,
     hand), …]``, σ = 0.5 px on every endpoint coordinate of the scene's exact
@@ -462,7 +470,8 @@ def rendered_draws(seed: int, size=(640, 480), *, draws: int = 4) -> list:
     model = rough.with_values({n: s.gt["parameters"][n] for n in rough.parameter_names})
     photos = list(s.image_names)
     exact = s.files["edges.json"]["photographs"]
-    out = []
+    out = _Draws()
+    out.rough = rough       # this render's rough blocks.json (the row's second start)
     for k in range(draws):
         rng = np.random.default_rng(9000 + 100 * seed + k)
         noisy = {p: [{"edge": m["edge"], "segment": list(np.asarray(m["segment"], float)
@@ -493,9 +502,7 @@ def automatic_marking_rendered(quick: bool):
     automatic marking was tuned with), and the rough model the renderer
     writes (``blocks.json``: each parameter off by its own amount, up to
     15 %; what ``lumigraph render facade`` gives a user, never tuned on)."""
-    from lumigraph.capture.render import render
     from lumigraph.stereo.debevec1996.automark import automark
-    from lumigraph.stereo.debevec1996.model import BlockModel
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     size = (320, 240) if quick else (640, 480)
@@ -509,9 +516,7 @@ def automatic_marking_rendered(quick: bool):
         for seed in seeds:
             c = cases[seed]
             tv, free = c["truth"], list(c["truth"])
-            start = c["start"] if kind == "one factor" else BlockModel.from_dict(render(
-                "facade", size=size, seed=seed, lambertian=True, novel=0,
-                edge_noise=0.0).files["blocks.json"])
+            start = c["start"] if kind == "one factor" else marks[seed].rough
             ea, ef, props, held, each = [], [], [], set(), []
             for full, hand in marks[seed]:
                 sf = solve_facade(start, full, c["K"], noise_px=0.5)
