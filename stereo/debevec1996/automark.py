@@ -39,10 +39,7 @@ the marks leave free or only pretend to fix (it moves more than ``trust``
 of its value or its σ is a third of that; tested again after each
 re-solve, since holding one can let another wander), and a held parameter (one or,
 for two of one block, a pair together) is set by the detected length it
-would explain; in the first round, before anything is proposed (a rough
-model 15 % off puts an edge on a neighbouring line the wide first gates
-take), kept where the hand marks fit the voted model no worse. After the
-last round a residual check drops every proposal
+would explain. After the last round a residual check drops every proposal
 farther than 3x the estimated noise from the solved model and re-solves;
 a hand mark that solve rejects means proposals conflict with it (hand
 marks outrank proposals): the edge whose proposals' withdrawal lets the
@@ -119,7 +116,6 @@ _NO_SEAMS = True
 _CREASE = True
 _RESECT = True
 _COLOUR = True
-_VOTE_FIRST = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -699,43 +695,6 @@ def _seams(model, cam: dict, segs: dict, *, tol_px: float, samples: int = 7) -> 
     return out
 
 
-def _visible_names(model, photo, pose, image, K, *, tol_px, min_length_px):
-    """``(names, K, R, t)``: the edges of ``model`` visible in ``photo``
-    from ``pose`` (as the proposal rounds see them), for :func:`_vote`."""
-    from lumigraph.capture.scenes.facade_edges import project_edges
-
-    R, t = pose
-    Kp = np.asarray(K, float)
-    cam = {"K": Kp, "R": R, "t": t, "image_size": list(image.shape[1::-1])}
-    vis = project_edges(model, {photo: cam}, min_length_px=min_length_px, samples=41,
-                        visible=_visible_near_flush(model, cam, tol_px=tol_px))[photo]
-    return [v["edge"] for v in vis], Kp, R, t
-
-
-def _support(model, th, moves, views, *, max_angle_deg, max_distance_px) -> float:
-    """The detected length (px, summed over ``views``: (visible edge names,
-    K, R, t, detections) per photograph) that the edges flagged in
-    ``moves`` explain with the parameter vector ``th``."""
-    C0, C1 = model.edge_matrices()
-    index = {n: i for i, n in enumerate(model.edge_names)}
-    total = 0.0
-    for vis, K, R, t, det in views:
-        idx = np.array([index[e] for e in vis], int)
-        if not len(idx) or not len(det):
-            continue
-        P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
-        if np.any(P[:, 2] <= 1e-9):
-            continue
-        uv = P @ K.T
-        uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
-        E = np.concatenate([uv[0], uv[1]], 1)
-        for _, j, s in _associate(det, E, max_angle_deg=max_angle_deg,
-                                  max_distance_px=max_distance_px):
-            if moves[idx[j]]:
-                total += float(np.hypot(*(s[2:] - s[:2])))
-    return total
-
-
 def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     """Values for the parameters ``names`` that the marks left unconstrained
     (held at their starting values): each is scanned over ±30 % of its value
@@ -752,8 +711,22 @@ def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     def support(slots, vals, moves):
         th = values.copy()
         th[slots] = vals
-        return _support(model, th, moves, views, max_angle_deg=max_angle_deg,
-                        max_distance_px=max_distance_px)
+        total = 0.0
+        for vis, K, R, t, det in views:
+            idx = np.array([index[e] for e in vis], int)
+            if not len(idx) or not len(det):
+                continue
+            P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
+            if np.any(P[:, 2] <= 1e-9):
+                continue
+            uv = P @ K.T
+            uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
+            E = np.concatenate([uv[0], uv[1]], 1)
+            for _, j, s in _associate(det, E, max_angle_deg=max_angle_deg,
+                                      max_distance_px=max_distance_px):
+                if moves[idx[j]]:
+                    total += float(np.hypot(*(s[2:] - s[:2])))
+        return total
 
     groups: dict[str, list] = {}
     for name in names:
@@ -1188,26 +1161,6 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                            noise_px=noise_px, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
-        if _VOTE_FIRST and sol.held and k == 0:
-            # what the marks leave free is set by the detections it explains
-            # *before* anything is proposed against it: a rough model 15 %
-            # off puts an edge on a neighbouring line (a face's far side, a
-            # window column) that the wide first gates would take
-            views0 = [(*_visible_names(sol.model, p, sol.poses[p], images[p], K[p],
-                                       tol_px=widen * max_distance_px,
-                                       min_length_px=min_length_px), found[p])
-                      for p in marks.photographs if p in sol.poses]
-            v = _vote(sol.model, sol.model.values, sol.held, views0,
-                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
-            new = {n: float(v[sol.model.slot_of(n)]) for n in sol.held}
-            if any(new[n] != sol.params[n] for n in new):
-                alt = _rough_solve(current.with_values(new), cur, K, rough=model, trust=trust,
-                                   rough_rotations=rough_rotations,
-                                   noise_px=noise_px, where=where)
-                # kept only where the hand marks fit it no worse: a scan of
-                # one parameter at a time can move a block against them
-                if alt.sigma_px <= sol.sigma_px and len(alt.held) <= len(sol.held):
-                    current, sol = current.with_values(new), alt
         poses = dict(sol.poses)
         if _RESECT:
             poses.update(_resect(sol.model, marks, K, [p for p in marks.photographs
