@@ -39,7 +39,15 @@ the marks leave free or only pretend to fix (it moves more than ``trust``
 of its value or its σ is a third of that; tested again after each
 re-solve, since holding one can let another wander), and a held parameter (one or,
 for two of one block, a pair together) is set by the detected length it
-would explain. After the last round a residual check drops every proposal
+would explain. In the first round that vote comes before anything is
+proposed (a rough model 15 % off puts an edge on a neighbouring line,
+which the wide first gates take), and its values are kept where the hand
+marks fit them no worse. Where the
+vote moved the start, automatic marking runs again from the rough model as
+given, and of the two ends keeps the one whose solve rejects fewer hand
+marks, then holds fewer parameters, then has more proposals, then fits
+at the lower σ̂ (both are recorded: ``AutomarkResult.candidates``). After the
+last round a residual check drops every proposal
 farther than 3x the estimated noise from the solved model and re-solves;
 a hand mark that solve rejects means proposals conflict with it (hand
 marks outrank proposals): the edge whose proposals' withdrawal lets the
@@ -116,6 +124,7 @@ _NO_SEAMS = True
 _CREASE = True
 _RESECT = True
 _COLOUR = True
+_VOTE_FIRST = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -124,12 +133,15 @@ SEAM_TOL_PX = 6.0
 @dataclass(frozen=True)
 class AutomarkResult:
     """marks : EdgeMarks (the hand marks, then the proposals); proposed :
-    how many were proposed; solution : the rough solve they came from."""
+    how many were proposed; solution : the rough solve they came from;
+    candidates : the starts tried and how each ended (:func:`automark`)."""
 
     marks: object
     proposed: int
     solution: object = field(repr=False)
     warnings: list = field(default_factory=list)
+    # each start tried: {"start", "hand_marks_rejected", "held", "sigma_px", "proposed", "chosen"}
+    candidates: list = field(default_factory=list)
 
 
 # how automatic marking's rough solves hold what the marks leave free: every
@@ -695,6 +707,43 @@ def _seams(model, cam: dict, segs: dict, *, tol_px: float, samples: int = 7) -> 
     return out
 
 
+def _visible_names(model, photo, pose, image, K, *, tol_px, min_length_px):
+    """``(names, K, R, t)``: the edges of ``model`` visible in ``photo``
+    from ``pose`` (as the proposal rounds see them), for :func:`_vote`."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+
+    R, t = pose
+    Kp = np.asarray(K, float)
+    cam = {"K": Kp, "R": R, "t": t, "image_size": list(image.shape[1::-1])}
+    vis = project_edges(model, {photo: cam}, min_length_px=min_length_px, samples=41,
+                        visible=_visible_near_flush(model, cam, tol_px=tol_px))[photo]
+    return [v["edge"] for v in vis], Kp, R, t
+
+
+def _support(model, th, moves, views, *, max_angle_deg, max_distance_px) -> float:
+    """The detected length (px, summed over ``views``: (visible edge names,
+    K, R, t, detections) per photograph) that the edges flagged in
+    ``moves`` explain with the parameter vector ``th``."""
+    C0, C1 = model.edge_matrices()
+    index = {n: i for i, n in enumerate(model.edge_names)}
+    total = 0.0
+    for vis, K, R, t, det in views:
+        idx = np.array([index[e] for e in vis], int)
+        if not len(idx) or not len(det):
+            continue
+        P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
+        if np.any(P[:, 2] <= 1e-9):
+            continue
+        uv = P @ K.T
+        uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
+        E = np.concatenate([uv[0], uv[1]], 1)
+        for _, j, s in _associate(det, E, max_angle_deg=max_angle_deg,
+                                  max_distance_px=max_distance_px):
+            if moves[idx[j]]:
+                total += float(np.hypot(*(s[2:] - s[:2])))
+    return total
+
+
 def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     """Values for the parameters ``names`` that the marks left unconstrained
     (held at their starting values): each is scanned over ±30 % of its value
@@ -711,22 +760,8 @@ def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
     def support(slots, vals, moves):
         th = values.copy()
         th[slots] = vals
-        total = 0.0
-        for vis, K, R, t, det in views:
-            idx = np.array([index[e] for e in vis], int)
-            if not len(idx) or not len(det):
-                continue
-            P = np.concatenate([C0[idx] @ th, C1[idx] @ th]) @ R.T + t
-            if np.any(P[:, 2] <= 1e-9):
-                continue
-            uv = P @ K.T
-            uv = (uv[:, :2] / uv[:, 2:]).reshape(2, len(idx), 2)
-            E = np.concatenate([uv[0], uv[1]], 1)
-            for _, j, s in _associate(det, E, max_angle_deg=max_angle_deg,
-                                      max_distance_px=max_distance_px):
-                if moves[idx[j]]:
-                    total += float(np.hypot(*(s[2:] - s[:2])))
-        return total
+        return _support(model, th, moves, views, max_angle_deg=max_angle_deg,
+                        max_distance_px=max_distance_px)
 
     groups: dict[str, list] = {}
     for name in names:
@@ -1135,11 +1170,15 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     (module docstring). ``images``: photo -> image (8/16-bit or float in
     [0, 1]); ``K``: photo -> (3, 3) intrinsics (undistorted photographs);
     ``trust``: how far (relative) the rough ``model``'s parameters may be
-    from the truth (a rough solve that moves one farther holds it)."""
-    from lumigraph.capture.scenes.facade_edges import project_edges
-    from lumigraph.stereo.debevec1996.edges import Mark
-    from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
+    from the truth (a rough solve that moves one farther holds it).
 
+    Two starts where they differ: the rough model as given, and with what
+    the hand marks leave free first voted on the detections (module
+    docstring). Each ends in a solve of the hand marks and its proposals;
+    the one that rejects fewer hand marks wins (hand marks outrank
+    proposals), then the one holding fewer parameters, then the one with
+    more proposals, then the lower σ̂ (:func:`_rank`). Both are recorded
+    in ``candidates``."""
     check_automark_options(max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
                            trust=trust)
     greys = {p: _grey(images[p]) for p in marks.photographs}
@@ -1147,6 +1186,53 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     chans = {p: [greys[p]] + (_opponent(images[p]) if _COLOUR else []) for p in marks.photographs}
     found = {p: np.vstack([detect_segments(c, min_length_px=min_length_px) for c in chans[p]])
              for p in marks.photographs}
+    kw = dict(greys=greys, chans=chans, found=found, rough_rotations=rough_rotations,
+              noise_px=noise_px, max_angle_deg=max_angle_deg, max_distance_px=max_distance_px,
+              min_length_px=min_length_px, rounds=rounds, trust=trust, where=where)
+    res, voted = _automark_once(model, marks, images, K, vote_first=_VOTE_FIRST, **kw)
+    if not voted:
+        return replace(res, candidates=[_candidate("rough model", res, marks, chosen=True)])
+    other, _ = _automark_once(model, marks, images, K, vote_first=False, **kw)
+    pick = min((res, other), key=lambda r: _rank(r, marks))
+    cands = [_candidate("held parameters voted first", res, marks, chosen=pick is res),
+             _candidate("rough model", other, marks, chosen=pick is other)]
+    said = [f"two starts tried ({c['start']}: {c['hand_marks_rejected']} hand marks rejected, "
+            f"{c['held']} held, σ̂ {c['sigma_px']:.2f} px)" for c in cands]
+    return replace(pick, candidates=cands, warnings=list(pick.warnings) + (
+        ["; ".join(said) + f"; kept the {'first' if pick is res else 'second'}"]
+        if _rank(pick, marks)[0] else []))
+
+
+def _rank(res, marks) -> tuple:
+    """The order :func:`automark` picks its starts by: hand marks the final
+    solve rejects, parameters held, proposals (more first: each is a model
+    edge on a detected line that passed every check), σ̂ (px). Both ends
+    fit their own proposals: a block locked onto the wrong lines agrees
+    with itself, so σ̂ comes last (on the tuning seeds it picked the wrong
+    end as often as the right one where the two differed by under 5 %)."""
+    sol = res.solution
+    return (len(_hand_outliers(sol, marks)), len(sol.held), -res.proposed, float(sol.sigma_px))
+
+
+def _candidate(start: str, res, marks, *, chosen: bool) -> dict:
+    """One start's record for :attr:`AutomarkResult.candidates`."""
+    out, held, _, sigma = _rank(res, marks)
+    return {"start": start, "hand_marks_rejected": out, "held": held, "sigma_px": round(sigma, 4),
+            "proposed": res.proposed, "chosen": chosen}
+
+
+def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, vote_first: bool,
+                   rough_rotations, noise_px, max_angle_deg, max_distance_px, min_length_px,
+                   rounds, trust, where):
+    """:func:`automark` from one start: ``(AutomarkResult, voted)``,
+    ``voted`` whether the first round's vote moved the start (with
+    ``vote_first``); ``greys``, ``chans``, ``found``: each photograph's
+    grey image, channels and detected segments."""
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import Mark
+    from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
+
+    voted = False
     kept: dict[tuple[str, str], Mark] = {}     # (photo, edge) -> proposal, across rounds
     current = model
     vetted: list[dict] = []
@@ -1161,6 +1247,27 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                            noise_px=noise_px, where=where)
         for p, e, _ in sol.outliers:
             kept.pop((p, e), None)
+        if vote_first and sol.held and k == 0:
+            # what the marks leave free is set by the detections it explains
+            # *before* anything is proposed against it: a rough model 15 %
+            # off puts an edge on a neighbouring line (a face's far side, a
+            # window column) that the wide first gates would take
+            views0 = [(*_visible_names(sol.model, p, sol.poses[p], images[p], K[p],
+                                       tol_px=widen * max_distance_px,
+                                       min_length_px=min_length_px), found[p])
+                      for p in marks.photographs if p in sol.poses]
+            v = _vote(sol.model, sol.model.values, sol.held, views0,
+                      max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
+            new = {n: float(v[sol.model.slot_of(n)]) for n in sol.held}
+            if any(new[n] != sol.params[n] for n in new):
+                alt = _rough_solve(current.with_values(new), cur, K, rough=model, trust=trust,
+                                   rough_rotations=rough_rotations,
+                                   noise_px=noise_px, where=where)
+                # kept only where the hand marks fit it no worse: a scan of
+                # one parameter at a time can move a block against them
+                if alt.sigma_px <= sol.sigma_px and len(alt.held) <= len(sol.held):
+                    current, sol = current.with_values(new), alt
+                    voted = True
         poses = dict(sol.poses)
         if _RESECT:
             poses.update(_resect(sol.model, marks, K, [p for p in marks.photographs
@@ -1427,7 +1534,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                         + ": held at the rough model's values; mark an edge that moves them")
     proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
-    return AutomarkResult(merged, len(proposals), sol, warnings)
+    return AutomarkResult(merged, len(proposals), sol, warnings), voted
 
 
 # a proposal is dropped when the other marks contradict it by more than this

@@ -284,8 +284,14 @@ def _automark(args) -> int:
                              *[folder / p for p in photos]],
                      params={"max_angle_deg": args.max_angle, "max_distance_px": args.max_distance,
                              "noise_px": args.noise_px},
-                     quality={"proposed": res.proposed, "hand": len(marks.marks)},
+                     quality={"proposed": res.proposed, "hand": len(marks.marks),
+                              "starts": res.candidates},
                      warnings=res.warnings)
     save_json_artifact(args.out, res.marks.to_dict(), meta=meta)
+    if len(res.candidates) > 1:
+        say(args, "starts: " + "; ".join(
+            f"{c['start']} ({c['hand_marks_rejected']} hand marks rejected, {c['held']} held, "
+            f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px)" + (" <- kept" if c["chosen"] else "")
+            for c in res.candidates))
     say(args, f"{len(marks.marks)} hand marks, {res.proposed} proposed -> {args.out}")
     return 0
