@@ -1197,7 +1197,8 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
     cands = [_candidate("held parameters voted first", res, marks, chosen=pick is res),
              _candidate("rough model", other, marks, chosen=pick is other)]
     said = [f"two starts tried ({c['start']}: {c['hand_marks_rejected']} hand marks rejected, "
-            f"{c['held']} held, σ̂ {c['sigma_px']:.2f} px)" for c in cands]
+            f"{c['held']} held, {c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px)"
+            for c in cands]
     return replace(pick, candidates=cands, warnings=list(pick.warnings) + (
         ["; ".join(said) + f"; kept the {'first' if pick is res else 'second'}"]
         if _rank(pick, marks)[0] else []))
