@@ -538,3 +538,22 @@ def test_resection_needs_a_rough_rotation_and_marks_that_fix_t():
     assert len(vert) == 2
     only = replace(marks, marks=tuple(vert))
     assert _resect(model, only, K, [p], rough_rotations={p: cams[p]["R"]}) == {}
+
+
+def test_cli_records_each_start_tried_in_the_meta(tmp_path):
+    # the brief's rule for automatic choices: every candidate's score is on
+    # record, and exactly one is marked kept
+    import json
+
+    from cli_catalog import _facade_folder, run_cli
+
+    _facade_folder(tmp_path)
+    out = tmp_path / "proposed.json"
+    rc, _, err = run_cli(["stereo", "facade", "automark", tmp_path / "facade", "--out", out, "-q"])
+    assert rc == 0, err
+    from lumigraph.capture.artifact import meta_path
+
+    starts = json.loads(meta_path(out).read_text())["quality"]["starts"]
+    assert 1 <= len(starts) <= 2 and sum(s["chosen"] for s in starts) == 1, starts
+    assert all({"start", "hand_marks_rejected", "held", "proposed", "sigma_px"} <= set(s)
+               for s in starts), starts
