@@ -424,7 +424,10 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
     run on the grey channel, where they were found; the colour-opponent
     channels (session 32) often see the crease's line themselves, so the
     last run, as automatic marking runs, checks the outcome: nothing held,
-    no proposal off its edge, and on seed 49 the 1.2x."""
+    no proposal off its edge, and on seed 49 the 1.2x. The first-round vote
+    (session 33) is off in the premise and the search too: with it, seed
+    19 holds nothing even without the crease search, so the premise is
+    not there to test."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
     from lumigraph.stereo.debevec1996.solve import solve_facade
@@ -438,20 +441,20 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
     # the premise on the grey channel alone: the colour-opponent channels
     # often find the crease's line (the two walls face different ways, so
     # their shading differs in colour as well), which the search is for
-    am._CREASE = am._COLOUR = False
+    am._CREASE = am._COLOUR = am._VOTE_FIRST = False
     try:
         before = run()
     finally:
-        am._CREASE = am._COLOUR = True
+        am._CREASE = am._COLOUR = am._VOTE_FIRST = True
     # the premise
     assert (set(before.solution.held) == {"wing/width", "wing/offset_x"}) is held
     assert not any(m.edge == "wing/front-right" for m in before.marks.marks)
     # the search on the grey channel: the crease is found
-    am._COLOUR = False
+    am._COLOUR = am._VOTE_FIRST = False
     try:
         grey = run()
     finally:
-        am._COLOUR = True
+        am._COLOUR = am._VOTE_FIRST = True
     assert not grey.solution.held
     creases = {(m.photo, m.edge) for m in grey.marks.marks
                if m.proposed and m.edge == "wing/front-right"}
