@@ -1191,17 +1191,25 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
               min_length_px=min_length_px, rounds=rounds, trust=trust, where=where)
     res, voted = _automark_once(model, marks, images, K, vote_first=_VOTE_FIRST, **kw)
     if not voted:
-        return replace(res, candidates=[_candidate("rough model", res, marks, chosen=True)])
-    other, _ = _automark_once(model, marks, images, K, vote_first=False, **kw)
-    pick = min((res, other), key=lambda r: _rank(r, marks))
-    cands = [_candidate("held parameters voted first", res, marks, chosen=pick is res),
-             _candidate("rough model", other, marks, chosen=pick is other)]
-    said = [f"two starts tried ({c['start']}: {c['hand_marks_rejected']} hand marks rejected, "
-            f"{c['held']} held, {c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px)"
-            for c in cands]
-    return replace(pick, candidates=cands, warnings=list(pick.warnings) + (
-        ["; ".join(said) + f"; kept the {'first' if pick is res else 'second'}"]
-        if _rank(pick, marks)[0] else []))
+        pick, cands = res, [_candidate("rough model", res, marks, chosen=True)]
+    else:
+        other, _ = _automark_once(model, marks, images, K, vote_first=False, **kw)
+        pick = min((res, other), key=lambda r: _rank(r, marks))
+        cands = [_candidate("held parameters voted first", res, marks, chosen=pick is res),
+                 _candidate("rough model", other, marks, chosen=pick is other)]
+    out = sorted(_hand_outliers(pick.solution, marks))
+    if not out:
+        return replace(pick, candidates=cands)
+    # the solve's own lines call each of these "mis-marked?"; with proposals
+    # in, the proposals are as likely at fault, and the user should know
+    said = "; ".join(f"{c['start']}: {c['hand_marks_rejected']} rejected, {c['held']} held, "
+                     f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px"
+                     + (", kept" if c["chosen"] else "") for c in cands)
+    return replace(pick, candidates=cands, warnings=list(pick.warnings) + [
+        f"the solve with the proposals leaves out {len(out)} hand mark(s) ("
+        + ", ".join(f"{e!r} on {p!r}" for p, e in out) + "): either they are off their "
+        "edges, or proposals hold a block on other image lines; solve the hand marks alone "
+        f"to tell (starts tried: {said})"])
 
 
 def _rank(res, marks) -> tuple:

@@ -511,3 +511,25 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     voted, rough = res.candidates
     assert voted["chosen"] and not rough["chosen"]
     assert voted["proposed"] > rough["proposed"], res.candidates
+
+
+def test_hand_marks_the_proposals_push_out_are_not_blamed_alone():
+    """Seed 0 (a tuning layout), its third noise draw, from the renderer's
+    rough ``blocks.json``: the proposals hold the wing 36 % too shallow and
+    the final solve leaves out five hand marks, each called "mis-marked?"
+    by the solve's own lines. Automatic marking says as well that the
+    proposals may be at fault, naming each left-out mark (not yet fixed:
+    docs/decisions/facade.md, session 33)."""
+    import lumigraph.stereo.debevec1996.automark as am
+    from lumigraph.stereo import bench_facade as BF
+
+    c = BF.rendered_case(0)
+    draws = BF.rendered_draws(0, draws=3)
+    _, hand = draws[2]
+    res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
+                      rough_rotations=c["rotations"])
+    out = am._hand_outliers(res.solution, hand)
+    said = [w for w in res.warnings if w.startswith("the solve with the proposals leaves out")]
+    assert out and len(said) == 1, res.warnings
+    assert all(f"{e!r} on {p!r}" in said[0] for p, e in out), said
+    assert "solve the hand marks alone" in said[0]
