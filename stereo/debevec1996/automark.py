@@ -707,17 +707,17 @@ def _seams(model, cam: dict, segs: dict, *, tol_px: float, samples: int = 7) -> 
     return out
 
 
-def _visible_names(model, photo, pose, image, K, *, tol_px, min_length_px):
-    """``(names, K, R, t)``: the edges of ``model`` visible in ``photo``
-    from ``pose`` (as the proposal rounds see them), for :func:`_vote`."""
+def _visible(model, photo, pose, image, K, *, tol_px, min_length_px):
+    """``(cam, edges)``: the camera dict of ``photo`` at ``pose`` (``(R, t)``)
+    and the edges of ``model`` visible in it as the proposal rounds see
+    them: ``[(name, (4,) projected segment), …]``."""
     from lumigraph.capture.scenes.facade_edges import project_edges
 
     R, t = pose
-    Kp = np.asarray(K, float)
-    cam = {"K": Kp, "R": R, "t": t, "image_size": list(image.shape[1::-1])}
+    cam = {"K": np.asarray(K, float), "R": R, "t": t, "image_size": list(image.shape[1::-1])}
     vis = project_edges(model, {photo: cam}, min_length_px=min_length_px, samples=41,
                         visible=_visible_near_flush(model, cam, tol_px=tol_px))[photo]
-    return [v["edge"] for v in vis], Kp, R, t
+    return cam, [(v["edge"], np.array(v["segment"])) for v in vis]
 
 
 def _support(model, th, moves, views, *, max_angle_deg, max_distance_px) -> float:
@@ -1237,7 +1237,6 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
     ``voted`` whether the first round's vote moved the start (with
     ``vote_first``); ``greys``, ``chans``, ``found``: each photograph's
     grey image, channels and detected segments."""
-    from lumigraph.capture.scenes.facade_edges import project_edges
     from lumigraph.stereo.debevec1996.edges import Mark
     from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
 
@@ -1261,10 +1260,13 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
             # *before* anything is proposed against it: a rough model 15 %
             # off puts an edge on a neighbouring line (a face's far side, a
             # window column) that the wide first gates would take
-            views0 = [(*_visible_names(sol.model, p, sol.poses[p], images[p], K[p],
-                                       tol_px=widen * max_distance_px,
-                                       min_length_px=min_length_px), found[p])
-                      for p in marks.photographs if p in sol.poses]
+            views0 = []
+            for p in marks.photographs:
+                if p in sol.poses:
+                    cam, vis = _visible(sol.model, p, sol.poses[p], images[p], K[p],
+                                        tol_px=widen * max_distance_px,
+                                        min_length_px=min_length_px)
+                    views0.append(([e for e, _ in vis], cam["K"], cam["R"], cam["t"], found[p]))
             v = _vote(sol.model, sol.model.values, sol.held, views0,
                       max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)
             new = {n: float(v[sol.model.slot_of(n)]) for n in sol.held}
@@ -1303,17 +1305,12 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
             if photo not in poses:
                 warnings.append(f"photograph {photo!r}: no pose from the marks, nothing proposed")
                 continue
-            R, t = poses[photo]
-            img = images[photo]
-            Kp = np.asarray(K[photo], float)
-            cam = {"K": Kp, "R": R, "t": t, "image_size": list(img.shape[1::-1])}
-            vis = project_edges(sol.model, {photo: cam}, min_length_px=min_length_px,
-                                samples=41, visible=_visible_near_flush(
-                                    sol.model, cam, tol_px=widen * max_distance_px))[photo]
+            cam, vis = _visible(sol.model, photo, poses[photo], images[photo], K[photo],
+                                tol_px=widen * max_distance_px, min_length_px=min_length_px)
+            Kp, R, t = cam["K"], cam["R"], cam["t"]
             # hand-marked edges stay candidates, so that their detections are not
             # taken for a neighbouring edge; what they win is dropped
             hand = {m.edge for m in marks.of(photo)}
-            vis = [(v["edge"], np.array(v["segment"])) for v in vis]
             # an edge between two faces in one plane shows as a line only
             # where the two blocks differ in colour, and a line the gates
             # let through beside it is likelier some other's (a window
