@@ -476,6 +476,28 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
         assert err[0] <= 1.2 * err[1], err
 
 
+def _from_the_rough_blocks(seed: int, draw: int):
+    """Automatic marking of the rendered building ``seed``'s noise draw
+    ``draw`` from its rough ``blocks.json``, as the bench runs it: a
+    function returning the result and each parameter's error in units of
+    the σ the final solve reports; also the draw's hand marks."""
+    import lumigraph.stereo.debevec1996.automark as am
+    from lumigraph.stereo import bench_facade as BF
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    c = BF.rendered_case(seed)
+    draws = BF.rendered_draws(seed, draws=draw + 1)
+    _, hand = draws[draw]
+
+    def z():
+        res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
+                          rough_rotations=c["rotations"])
+        sol = solve_facade(draws.rough, res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
+        return res, {n: abs(sol.params[n] - v) / sol.std[n] for n, v in c["truth"].items()}
+
+    return z, hand, c, draws
+
+
 def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     """Seed 5 (a tuning layout), its first noise draw, started from the
     renderer's own rough ``blocks.json`` (each parameter off by its own
@@ -495,18 +517,8 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     tested with those off (:func:`loose_poses_believed`), the outcome as
     automatic marking runs."""
     import lumigraph.stereo.debevec1996.automark as am
-    from lumigraph.stereo import bench_facade as BF
-    from lumigraph.stereo.debevec1996.solve import solve_facade
 
-    c = BF.rendered_case(5)
-    draws = BF.rendered_draws(5, draws=1)
-    _, hand = draws[0]
-
-    def z():
-        res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
-                          rough_rotations=c["rotations"])
-        sol = solve_facade(draws.rough, res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
-        return res, {n: abs(sol.params[n] - v) / sol.std[n] for n, v in c["truth"].items()}
+    z, _, _, _ = _from_the_rough_blocks(5, 0)
 
     with loose_poses_believed():     # as found (session 33)
         am._VOTE_FIRST = False
@@ -539,18 +551,8 @@ def test_a_photograph_its_hand_marks_barely_orient_is_left_out_of_the_rough_solv
     rotation, and every parameter ends within 3 σ of the truth, σ as the
     solve reports it, and no hand mark is left out."""
     import lumigraph.stereo.debevec1996.automark as am
-    from lumigraph.stereo import bench_facade as BF
-    from lumigraph.stereo.debevec1996.solve import solve_facade
 
-    c = BF.rendered_case(0)
-    draws = BF.rendered_draws(0, draws=3)
-    _, hand = draws[2]
-
-    def z():
-        res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
-                          rough_rotations=c["rotations"])
-        sol = solve_facade(draws.rough, res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
-        return res, {n: abs(sol.params[n] - v) / sol.std[n] for n, v in c["truth"].items()}
+    z, hand, c, draws = _from_the_rough_blocks(0, 2)
 
     with loose_poses_believed():
         _, before = z()
