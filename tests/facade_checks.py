@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -38,21 +37,3 @@ def assert_jacobian_matches_differences(prob, x: np.ndarray, A) -> np.ndarray:
     # central differences: error ~ h² f''' ≪ 1e-5 of the largest entry
     assert np.abs(J - Jn).max() < 1e-5 * np.abs(J).max()
     return J
-
-
-@contextmanager
-def loose_poses_believed():
-    """Automatic marking as before session 34: eq. 5.4 refines a rough
-    rotation undamped (``solve.ROUGH_ROTATION_PRIOR`` 0) and a rough solve
-    keeps a photograph whose marks barely orient it (``automark._LOOSE_POSES``
-    off). A test whose premise is a failure found before then recreates it
-    with these off, as with its own step."""
-    import lumigraph.stereo.debevec1996.automark as am
-    import lumigraph.stereo.debevec1996.solve as S
-
-    prior = S.ROUGH_ROTATION_PRIOR
-    S.ROUGH_ROTATION_PRIOR, am._LOOSE_POSES = 0.0, False
-    try:
-        yield
-    finally:
-        S.ROUGH_ROTATION_PRIOR, am._LOOSE_POSES = prior, True

@@ -37,10 +37,7 @@ from the hand marks and the proposals so far with gates that start wide
 and tighten; the rough solve holds at its starting value any parameter
 the marks leave free or only pretend to fix (it moves more than ``trust``
 of its value or its σ is a third of that; tested again after each
-re-solve, since holding one can let another wander), and leaves out a
-photograph whose marks fix its rotation worse than a rough rotation is
-known (15°: four hand marks, two of them nearly one image line), which
-:func:`_resect` then places from its rough rotation; a held parameter (one or,
+re-solve, since holding one can let another wander), and a held parameter (one or,
 for two of one block, a pair together) is set by the detected length it
 would explain. In the first round that vote comes before anything is
 proposed (a rough model 15 % off puts an edge on a neighbouring line,
@@ -128,7 +125,6 @@ _CREASE = True
 _RESECT = True
 _COLOUR = True
 _VOTE_FIRST = True
-_LOOSE_POSES = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -809,43 +805,7 @@ def _scale(model, names):
     return {n: max(abs(v[n]), floor) for n in names}
 
 
-# a rough solve leaves out a photograph whose marks fix its rotation worse
-# than this (rad, its largest σ): the rough rotation a user gives is
-# believed to about 15° (solve.ROUGH_ROTATION_PRIOR), and a pose known no
-# better proposes its edges anywhere
-LOOSE_ROTATION_RAD = 0.26
-
-
 def _rough_solve(model, marks, K, *, rough, trust, **kw):
-    """:func:`_rough_solve_all`, leaving out the photographs whose marks fix
-    their rotation worse than ``LOOSE_ROTATION_RAD`` (four hand marks with
-    two nearly coincident: seed 0 draw 2 of the rendered building, a
-    rotation σ of 142°, the pose 29° off, its proposals none or wrong);
-    :func:`_resect` then places each from its rough rotation, if given, and
-    its proposals bring it back into the next round's solve."""
-    sol = _rough_solve_all(model, marks, K, rough=rough, trust=trust, **kw)
-    if not _LOOSE_POSES:
-        return sol
-    from lumigraph.stereo.debevec1996.solve import _without
-
-    out: list[str] = []
-    for _ in range(3):
-        # once more where one left out lets another in loosely (a
-        # photograph the rank test left out returns with more held)
-        loose = sorted(p for p, s in sol.pose_std.items()
-                       if np.nanmax(np.r_[s["rotation_rad"], 0.0]) > LOOSE_ROTATION_RAD)
-        if not loose or len(sol.poses) - len(loose) < 2:
-            break
-        out += loose
-        sol = _rough_solve_all(model, _without(marks, out), K, rough=rough, trust=trust, **kw)
-    if not out:
-        return sol
-    return replace(sol, dropped=list(sol.dropped) + out, warnings=[
-        "left out of the rough solve (their marks fix their rotation to worse than "
-        f"{np.degrees(LOOSE_ROTATION_RAD):.0f}°): " + ", ".join(out)] + list(sol.warnings))
-
-
-def _rough_solve_all(model, marks, K, *, rough, trust, **kw):
     """:func:`solve_facade` holding what the marks leave free, and also
     what they only pretend to fix: a parameter whose fitted value leaves
     ``trust`` (relative) of its value in the user's ``rough`` model, or

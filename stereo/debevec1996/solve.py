@@ -106,11 +106,6 @@ from lumigraph.stereo.debevec1996.model import BlockModel
 
 _A0 = np.array([[1.0, 0.5], [0.0, np.sqrt(3.0) / 2.0]])  # h -> residuals: rᵀr = h1² + h1h2 + h2²
 MIN_MARKS = 3
-# the weight of a rough rotation in eq. 5.4's refinement (:func:`_rotation_refine`):
-# the noise of a mark's residual nᵀRv over the rough rotation's own (both in
-# rad): about √2 σ / L for a mark L px long with endpoint noise σ (0.5 px on
-# 100 px: 0.007) against a rough rotation within 15° (0.26 rad)
-ROUGH_ROTATION_PRIOR = 0.007 / 0.26
 DENSE_MAX_COLUMNS = 600  # above: a sparse Jacobian and LSMR trust-region steps
 
 FIXTURE = {"blocks": [
@@ -472,25 +467,13 @@ def _known_axis(model, edges):
     return np.where(nz.sum(1) == 1, nz.argmax(1), -1)
 
 
-def _rotation_refine(R, normals, dirs, iterations=10, *, prior: float = 0.0):
+def _rotation_refine(R, normals, dirs, iterations=10):
     """Gauss–Newton on Σ (nᵀ R v)² (eq. 5.4) from ``R``; directions it does
-    not constrain keep their start (minimum-norm steps). ``prior`` > 0 adds
-    ``prior² ‖ω‖²``, ω the rotation (rad) from the start: a rough rotation
-    the user gave is believed where the marks barely fix a direction (two
-    marks of one axis nearly coincident in the image leave their vanishing
-    point anywhere along them; undamped, that moved a true rotation 85°
-    on seed 0 draw 2 of the rendered building, where the edge solve then
-    ended 98° off)."""
-    R0 = R
+    not constrain keep their start (minimum-norm steps)."""
     for _ in range(iterations):
         Rv = dirs @ R.T
         r = (normals * Rv).sum(1)
         J = np.cross(Rv, normals)       # d(nᵀ exp(ω) R v)/dω at ω = 0
-        if prior > 0:
-            # ω from the start, to first order in the step: the prior's rows
-            w = Rotation.from_matrix(R @ R0.T).as_rotvec()
-            J = np.vstack([J, prior * np.eye(3)])
-            r = np.r_[r, prior * w]
         step = np.linalg.lstsq(J, -r, rcond=1e-10)[0]
         R = Rotation.from_rotvec(step).as_matrix() @ R
         if np.linalg.norm(step) < 1e-15:
@@ -756,10 +739,8 @@ def solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | N
         photo -> (3, 3) intrinsics in pixels (undistorted photographs).
     rough_rotations : dict, optional
         photo -> (3, 3) rough ``R`` (``x_cam = R x + t``) to start eq. 5.4
-        from, believed to about 15° where the marks barely fix a direction
-        (``ROUGH_ROTATION_PRIOR``); without one, a photograph's rotation
-        comes from its vanishing directions (two world axes marked twice
-        each).
+        from; without one, a photograph's rotation comes from its vanishing
+        directions (two world axes marked twice each).
     free_focal : bool
         Fit one focal-length scale shared by every photograph.
     noise_px : float
@@ -883,13 +864,11 @@ def _solve_facade(model: BlockModel, marks, K: dict, *, rough_rotations: dict | 
         nj = normals[sel][ax >= 0]
         if rough_rotations is not None and p in rough_rotations:
             cand = [np.asarray(rough_rotations[p], float)]
-            prior = ROUGH_ROTATION_PRIOR
         else:
             cand = _rotation_from_vanishing(nj, ax[ax >= 0])
             if not cand:
                 raise NoRotationStart(where, p)
-            prior = 0.0
-        candidates.append([_rotation_refine(R, nj, dirs, prior=prior) for R in cand])
+        candidates.append([_rotation_refine(R, nj, dirs) for R in cand])
     # choose among sign candidates photograph by photograph: the eq. 5.5 fit of
     # its translation alone (starting parameters), points in front
     R0 = np.array([c[0] for c in candidates])

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from facade_checks import loose_poses_believed
 
 from lumigraph.stereo.debevec1996.automark import (
     _continues,
@@ -428,9 +427,7 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
     no proposal off its edge, and on seed 49 the 1.2x. The first-round vote
     (session 33) is off in the premise and the search too: with it, seed
     19 holds nothing even without the crease search, so the premise is
-    not there to test; so are session 34's rough poses
-    (:func:`loose_poses_believed`), with which the grey run places the
-    wing without the search."""
+    not there to test."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
     from lumigraph.stereo.debevec1996.solve import solve_facade
@@ -446,8 +443,7 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
     # their shading differs in colour as well), which the search is for
     am._CREASE = am._COLOUR = am._VOTE_FIRST = False
     try:
-        with loose_poses_believed():
-            before = run()
+        before = run()
     finally:
         am._CREASE = am._COLOUR = am._VOTE_FIRST = True
     # the premise
@@ -456,8 +452,7 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
     # the search on the grey channel: the crease is found
     am._COLOUR = am._VOTE_FIRST = False
     try:
-        with loose_poses_believed():
-            grey = run()
+        grey = run()
     finally:
         am._COLOUR = am._VOTE_FIRST = True
     assert not grey.solution.held
@@ -476,28 +471,6 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
         assert err[0] <= 1.2 * err[1], err
 
 
-def _from_the_rough_blocks(seed: int, draw: int):
-    """Automatic marking of the rendered building ``seed``'s noise draw
-    ``draw`` from its rough ``blocks.json``, as the bench runs it: a
-    function returning the result and each parameter's error in units of
-    the σ the final solve reports; also the draw's hand marks."""
-    import lumigraph.stereo.debevec1996.automark as am
-    from lumigraph.stereo import bench_facade as BF
-    from lumigraph.stereo.debevec1996.solve import solve_facade
-
-    c = BF.rendered_case(seed)
-    draws = BF.rendered_draws(seed, draws=draw + 1)
-    _, hand = draws[draw]
-
-    def z():
-        res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
-                          rough_rotations=c["rotations"])
-        sol = solve_facade(draws.rough, res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
-        return res, {n: abs(sol.params[n] - v) / sol.std[n] for n, v in c["truth"].items()}
-
-    return z, hand, c, draws
-
-
 def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     """Seed 5 (a tuning layout), its first noise draw, started from the
     renderer's own rough ``blocks.json`` (each parameter off by its own
@@ -511,87 +484,52 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     (neither rejects a hand mark or holds a parameter; the voted end found
     more edges on detected lines, 88 proposals against 82). Every
     parameter then lands within 3 σ of the truth, σ as the solve reports
-    it. Since session 34 a rough rotation is refined with a prior and a
-    rough solve leaves out a photograph its marks barely orient, which
-    alone avoids this failure; the premise and the vote's own effect are
-    tested with those off (:func:`loose_poses_believed`), the outcome as
-    automatic marking runs."""
+    it."""
     import lumigraph.stereo.debevec1996.automark as am
+    from lumigraph.stereo import bench_facade as BF
+    from lumigraph.stereo.debevec1996.solve import solve_facade
 
-    z, _, _, _ = _from_the_rough_blocks(5, 0)
+    c = BF.rendered_case(5)
+    draws = BF.rendered_draws(5, draws=1)
+    _, hand = draws[0]
 
-    with loose_poses_believed():     # as found (session 33)
-        am._VOTE_FIRST = False
-        try:
-            res, before = z()
-        finally:
-            am._VOTE_FIRST = True
-        assert before["wing/width"] > 10, before          # the premise: far beyond its σ
-        assert [x["start"] for x in res.candidates] == ["rough model"]
-        res, after = z()
+    def z():
+        res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
+                          rough_rotations=c["rotations"])
+        sol = solve_facade(draws.rough, res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
+        return res, {n: abs(sol.params[n] - v) / sol.std[n] for n, v in c["truth"].items()}
+
+    am._VOTE_FIRST = False
+    try:
+        res, before = z()
+    finally:
+        am._VOTE_FIRST = True
+    assert before["wing/width"] > 10, before          # the premise: far beyond its σ
+    assert [x["start"] for x in res.candidates] == ["rough model"]
+    res, after = z()
     assert max(after.values()) <= 3.0, after
     voted, rough = res.candidates
     assert voted["chosen"] and not rough["chosen"]
     assert voted["proposed"] > rough["proposed"], res.candidates
-    # as it runs now (the rough solve's poses too: session 34)
-    _, now = z()
-    assert max(now.values()) <= 3.0, now
-
-
-def test_a_photograph_its_hand_marks_barely_orient_is_left_out_of_the_rough_solve():
-    """Seed 0 (a tuning layout), its third noise draw, from the renderer's
-    rough ``blocks.json``. Photo 04's four hand marks are two vertical
-    edges of the tower on nearly one image line and two horizontal ones:
-    they fix its rotation to σ 142°. Before session 34, eq. 5.4's undamped
-    refinement moved its (true) rough rotation 85° and the rough solve kept
-    it; the proposals then held the wing 36 % too shallow and the final
-    solve left out five hand marks (the premise, with the rough rotation
-    believed undamped and the photograph kept). Now the first rough solve
-    leaves it out and says so, :func:`_resect` places it from its rough
-    rotation, and every parameter ends within 3 σ of the truth, σ as the
-    solve reports it, and no hand mark is left out."""
-    import lumigraph.stereo.debevec1996.automark as am
-
-    z, hand, c, draws = _from_the_rough_blocks(0, 2)
-
-    with loose_poses_believed():
-        _, before = z()
-    assert before["wing/depth"] > 10, before          # the premise: far beyond its σ
-    first = am._rough_solve(draws.rough, hand, c["K"], rough=draws.rough, trust=0.3,
-                            rough_rotations=c["rotations"], noise_px=0.5)
-    assert "photo_04.png" in first.dropped and "photo_04.png" not in first.poses
-    assert any(w.startswith("left out of the rough solve") and "photo_04.png" in w
-               for w in first.warnings), first.warnings
-    res, after = z()
-    assert max(after.values()) <= 3.0, after
-    assert not am._hand_outliers(res.solution, hand)
 
 
 def test_hand_marks_the_proposals_push_out_are_not_blamed_alone():
-    """Seed 5 (a tuning layout), its scene's marks, one hand mark moved 8 px
-    (16 σ of the marks' noise) off its edge: the final solve leaves it out,
-    and automatic marking names it, saying that either it is off its edge
-    or the proposals hold a block on other lines (the solve's own line
-    calls it "mis-marked?"; with proposals in, they are as likely at fault:
-    seed 0 draw 2 before session 34, five hand marks left out that were
-    on their edges)."""
-    from dataclasses import replace
-
+    """Seed 0 (a tuning layout), its third noise draw, from the renderer's
+    rough ``blocks.json``: the proposals hold the wing 36 % too shallow and
+    the final solve leaves out five hand marks, each called "mis-marked?"
+    by the solve's own lines. Automatic marking says as well that the
+    proposals may be at fault, naming each left-out mark (not yet fixed:
+    docs/decisions/facade.md, session 33)."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
 
-    c = BF.rendered_case(5)
-    hand = c["hand"]
-    m = hand.marks[0]
-    d = m.segment[2:] - m.segment[:2]
-    n = np.array([-d[1], d[0]]) / np.hypot(*d)
-    moved = replace(m, segment=m.segment + 8.0 * np.r_[n, n])
-    hand = replace(hand, marks=(moved,) + tuple(hand.marks[1:]))
-    res = am.automark(c["start"], hand, c["images"], c["K"], noise_px=0.5,
+    c = BF.rendered_case(0)
+    draws = BF.rendered_draws(0, draws=3)
+    _, hand = draws[2]
+    res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
                       rough_rotations=c["rotations"])
     out = am._hand_outliers(res.solution, hand)
-    assert (m.photo, m.edge) in out, out
     said = [w for w in res.warnings if w.startswith("the solve with the proposals leaves out")]
-    assert len(said) == 1, res.warnings
+    assert out and len(said) == 1, res.warnings
     assert all(f"{e!r} on {p!r}" in said[0] for p, e in out), said
     assert "solve the hand marks alone" in said[0]
