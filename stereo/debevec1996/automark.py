@@ -1534,6 +1534,17 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                 warnings.append("a crease found for " + ", ".join(moved) + ": "
                                 + ", ".join(sorted({m.edge for m in found})) + " proposed")
     warnings = [w for w in warnings if not w.startswith("held at")]
+    unseen = _unseen_proposals(sol, list(kept.values()), images, min_length_px=min_length_px)
+    if unseen:
+        # the solve fits these (a lone proposal that fixes a direction has no
+        # residual to test), yet the model it reached hides their edges or
+        # places them elsewhere on their line: a block has moved onto other
+        # image lines (a window frame taken for the wing's corner moves the
+        # wing behind the house)
+        warnings.append("proposals on edges the solved model hides, or shows elsewhere along "
+                        "their line: " + ", ".join(f"{e!r} on {p!r}" for p, e in unseen)
+                        + "; a block may rest on the wrong image lines there: check them in "
+                        "the overlays, or mark those edges by hand")
     if sol.held:
         # never silently wrong: what no mark or proposal constrains is named
         warnings.append("no hand mark or proposal constrains " + ", ".join(sol.held)
@@ -1541,6 +1552,46 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
     proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
     return AutomarkResult(merged, len(proposals), sol, warnings), voted
+
+
+def _unseen_proposals(sol, proposals, images: dict, *, min_length_px: float) -> list:
+    """``[(photo, edge), …]`` of the ``proposals`` (marks) whose edge the
+    solve ``sol``'s model does not show in their photograph at its solved
+    pose: hidden, shorter than ``min_length_px``, or its visible stretch
+    covering less than half of the mark (measured along the stretch's
+    line). Hand marks are not asked: a user may mark an edge through an
+    occluder, and their noise is the user's."""
+    out = []
+    shown: dict[str, dict] = {}
+    for m in proposals:
+        if m.photo not in sol.poses:
+            continue
+        if m.photo not in shown:
+            _, vis = _visible(sol.model, m.photo, sol.poses[m.photo], images[m.photo],
+                              sol.K[m.photo], tol_px=1.0, min_length_px=min_length_px)
+            shown[m.photo] = dict(vis)
+        e = shown[m.photo].get(m.edge)
+        if e is None or _on_stretch(np.asarray(m.segment, float), e) < 0.5:
+            out.append((m.photo, m.edge))
+    return sorted(out)
+
+
+def _on_stretch(seg: np.ndarray, edge: np.ndarray) -> float:
+    """The share of segment ``seg`` ``(4,)`` whose projection on the line of
+    ``edge`` ``(4,)`` falls within the edge's ends.
+
+    >>> _on_stretch(np.array([5.0, 1, 15, 1]), np.array([0.0, 0, 10, 0]))
+    0.5
+    """
+    d = edge[2:] - edge[:2]
+    L = float(np.hypot(*d))
+    if L <= 0:
+        return 0.0
+    u = d / L
+    t0, t1 = sorted(((seg[:2] - edge[:2]) @ u, (seg[2:] - edge[:2]) @ u))
+    if t1 - t0 <= 1e-9:
+        return float(0.0 <= t0 <= L)
+    return float(max(0.0, min(t1, L) - max(t0, 0.0)) / (t1 - t0))
 
 
 # a proposal is dropped when the other marks contradict it by more than this

@@ -559,3 +559,39 @@ def test_cli_records_each_start_tried_in_the_meta(tmp_path):
     assert 1 <= len(starts) <= 2 and sum(s["chosen"] for s in starts) == 1, starts
     assert all({"start", "hand_marks_rejected", "held", "proposed", "sigma_px"} <= set(s)
                for s in starts), starts
+
+
+def test_proposals_on_edges_the_solved_model_hides_are_named():
+    # a proposal the solve fits but whose edge the solved model hides (or
+    # shows elsewhere on its line) is the mark of a block moved onto other
+    # image lines (session 36: the wing's corner on a window frame)
+    from lumigraph.stereo.debevec1996.automark import _unseen_proposals
+    from lumigraph.stereo.debevec1996.edges import Mark
+    from lumigraph.stereo.debevec1996.solve import project_model_edges
+
+    model = BlockModel.from_dict(FLUSH, where="test")
+    V = model.vertices()
+    centre = (V.min(0) + V.max(0)) / 2
+    size = float(np.linalg.norm(np.ptp(V, axis=0)))
+    cams = ring_cameras(5, target=centre, radius=2.2 * size, height=0.3 * size, focal_px=700,
+                        arc_deg=(-160.0, -20.0), rng=np.random.default_rng(0), jitter=0.05)
+    raw = project_edges(model, cams)
+    marks = EdgeMarks.from_dict({"photographs": raw}, model=model, photographs=list(cams))
+    K = {p: c["K"] for p, c in cams.items()}
+    sol = solve_facade(model, marks, K, noise_px=0.5)
+    images = {p: np.zeros((c["image_size"][1], c["image_size"][0]), np.uint8)
+              for p, c in cams.items()}
+    photo = next(iter(cams))
+    seen = {m["edge"]: np.asarray(m["segment"], float) for m in raw[photo]}
+    shown = next(e for e, s in seen.items() if np.hypot(*(s[2:] - s[:2])) > 60)
+    hidden = next(e for e in model.edge_names if e not in seen)
+    full = project_model_edges(model, K[photo], *sol.poses[photo])
+    s = seen[shown]
+    d = s[2:] - s[:2]
+    beyond = np.r_[s[2:] + 0.1 * d, s[2:] + 0.9 * d]        # on its line, past its end
+    props = [Mark(photo, shown, s, proposed=True),
+             Mark(photo, hidden, np.r_[full[hidden][0], full[hidden][1]], proposed=True),
+             Mark(photo, shown + "", beyond, proposed=True)]
+    got = _unseen_proposals(sol, props[:2], images, min_length_px=15.0)
+    assert got == [(photo, hidden)]
+    assert _unseen_proposals(sol, props[2:], images, min_length_px=15.0) == [(photo, shown)]
