@@ -68,7 +68,13 @@ neighbour (:func:`_crease`: brick against brick, a step in mean grey that
 keeps its sign along the line and from photograph to photograph, which
 the line detector misses); a clear peak within ``trust`` of the rough
 values is proposed and kept if the solve then fits it and fixes the
-block. A parameter that
+block. A proposal whose edge the solved model hides in its photograph (or
+shows elsewhere along its line) is the mark of a block moved onto other
+image lines, which no residual can show where it alone fixes a direction
+(:func:`_unseen_proposals`): such proposals are left out and the crease
+searched for along the direction they fixed (:func:`_replace_unseen`); a
+crease found in two photographs or more replaces them, and otherwise they
+stay and are named in the warnings. A parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently).
 
@@ -122,6 +128,7 @@ _ON_NEAREST_FACE = True
 _SEARCH_UNDETECTED = True
 _NO_SEAMS = True
 _CREASE = True
+_UNSEEN_CREASE = True
 _RESECT = True
 _COLOUR = True
 _VOTE_FIRST = True
@@ -1479,62 +1486,22 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                 break
             kept.pop(key)
             merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+    crease_kw = dict(current=current, marks=marks, K=K, images=images, greys=greys,
+                     rough=model, trust=trust, rough_rotations={**(rough_rotations or {}), **last},
+                     noise_px=noise_px, where=where)
     if _CREASE:
         # a block's inner face may be a crease against its neighbour, brick
-        # against brick, that no line was found for: where the marks leave
-        # a block one free direction (held), or place it loosely (its
-        # least-determined direction moves an edge by a pixel or more at
-        # 1 σ), it is searched for along that direction (:func:`_crease`)
-        rr = {**(rough_rotations or {}), **last}
-        cams = {p: {"K": sol.K[p], "R": sol.poses[p][0], "t": sol.poses[p][1],
-                    "image_size": list(images[p].shape[1::-1])} for p in sol.poses}
-        out = {(p, e) for p, e, _ in sol.outliers}
-        merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
-        marked = [m.edge for m in merged.marks if (m.photo, m.edge) not in out]
-        blocks: dict[str, list] = {}
-        for name in model.parameter_names:
-            blocks.setdefault(name.split("/")[0], []).append(name)
-        for names in blocks.values():
-            held = [n for n in names if n in sol.held]
-            if held:
-                N = _free_direction(sol.model, held, marked)
-                if len(N) != 1:
-                    continue
-                names, v, sd = held, N[0], None
-            else:
-                idx = [sol.unknowns.index(n) for n in names if n in sol.unknowns]
-                if len(idx) != len(names):
-                    continue
-                w, V = np.linalg.eigh(sol.covariance[np.ix_(idx, idx)])
-                v, sd = V[:, -1], float(np.sqrt(max(w[-1], 0.0)))
-                # its small components are the solve's correlations, not a
-                # second face moving: the move is that of the main ones
-                v = np.where(np.abs(v) < 0.1, 0.0, v)
-                v /= np.linalg.norm(v)
-                if not _against_neighbours(sol.model, np.array([sol.model.slot_of(n)
-                                                                for n in names]), v,
-                                           reach=4.0 * sd):
-                    continue
-            found = _crease(sol.model, names, v, cams, greys, rough=model, trust=trust,
-                            skip={(m.photo, m.edge) for m in marks.marks} | set(kept), sigma=sd,
-                            only=None if sd is None else set(model.edge_names) - set(marked))
-            if len({m.photo for m in found}) < 2:
-                continue        # a crease seen in one photograph only is a guess
-            trial = {**kept, **{(m.photo, m.edge): m for m in found}}
-            alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
-                trial.values())), K, rough_rotations=rr, noise_px=noise_px,
-                hold_unconstrained=ROUGH_HOLD, where=where)
-            new = {(m.photo, m.edge) for m in found}
-            fits = all(d <= 3.0 * max(alt.sigma_px, 0.1) for p, e, d in alt.mark_rms_px
-                       if (p, e) in new) and not new & {(p, e) for p, e, _ in alt.outliers}
-            if (set(alt.held) <= set(sol.held) - set(names) and fits
-                    and not set(_weak(alt, model, trust)) - set(_weak(sol, model, trust))):
-                sol, kept = alt, trial
-                moved = [n for n, x in zip(names, v, strict=True) if abs(x) > 0]
-                warnings.append("a crease found for " + ", ".join(moved) + ": "
-                                + ", ".join(sorted({m.edge for m in found})) + " proposed")
-    warnings = [w for w in warnings if not w.startswith("held at")]
+        # against brick, that no line was found for (:func:`_creases`)
+        sol, kept, said = _creases(sol, kept, **crease_kw)
+        warnings += said
     unseen = _unseen_proposals(sol, list(kept.values()), images, min_length_px=min_length_px)
+    if unseen and _CREASE and _UNSEEN_CREASE:
+        sol, kept, said = _replace_unseen(sol, kept, unseen, **crease_kw)
+        if said:
+            warnings += said
+            unseen = _unseen_proposals(sol, list(kept.values()), images,
+                                       min_length_px=min_length_px)
+    warnings = [w for w in warnings if not w.startswith("held at")]
     if unseen:
         # the solve fits these (a lone proposal that fixes a direction has no
         # residual to test), yet the model it reached hides their edges or
@@ -1552,6 +1519,98 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
     proposals = list(kept.values())
     merged = replace(marks, marks=tuple(marks.marks) + tuple(proposals))
     return AutomarkResult(merged, len(proposals), sol, warnings), voted
+
+
+def _creases(sol, kept: dict, *, current, marks, K, images, greys, rough, trust,
+             rough_rotations, noise_px, where):
+    """Where the marks leave a block one free direction (held), or place it
+    loosely (its least-determined direction moves an edge by a pixel or
+    more at 1 σ), the block's inner face is searched for along that
+    direction as a crease (:func:`_crease`) and proposed where it is found
+    in two photographs or more and the solve with it fits it, holds nothing
+    new and fails the trust test on nothing new. Returns ``(solution, kept,
+    warnings)``: ``kept`` the proposals ((photo, edge) -> mark) with the
+    creases'."""
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    model, rr, warnings = rough, rough_rotations, []
+    cams = {p: {"K": sol.K[p], "R": sol.poses[p][0], "t": sol.poses[p][1],
+                "image_size": list(images[p].shape[1::-1])} for p in sol.poses}
+    out = {(p, e) for p, e, _ in sol.outliers}
+    merged = replace(marks, marks=tuple(marks.marks) + tuple(kept.values()))
+    marked = [m.edge for m in merged.marks if (m.photo, m.edge) not in out]
+    blocks: dict[str, list] = {}
+    for name in model.parameter_names:
+        blocks.setdefault(name.split("/")[0], []).append(name)
+    for names in blocks.values():
+        held = [n for n in names if n in sol.held]
+        if held:
+            N = _free_direction(sol.model, held, marked)
+            if len(N) != 1:
+                continue
+            names, v, sd = held, N[0], None
+        else:
+            idx = [sol.unknowns.index(n) for n in names if n in sol.unknowns]
+            if len(idx) != len(names):
+                continue
+            w, V = np.linalg.eigh(sol.covariance[np.ix_(idx, idx)])
+            v, sd = V[:, -1], float(np.sqrt(max(w[-1], 0.0)))
+            # its small components are the solve's correlations, not a
+            # second face moving: the move is that of the main ones
+            v = np.where(np.abs(v) < 0.1, 0.0, v)
+            v /= np.linalg.norm(v)
+            if not _against_neighbours(sol.model, np.array([sol.model.slot_of(n)
+                                                            for n in names]), v,
+                                       reach=4.0 * sd):
+                continue
+        found = _crease(sol.model, names, v, cams, greys, rough=model, trust=trust,
+                        skip={(m.photo, m.edge) for m in marks.marks} | set(kept), sigma=sd,
+                        only=None if sd is None else set(model.edge_names) - set(marked))
+        if len({m.photo for m in found}) < 2:
+            continue        # a crease seen in one photograph only is a guess
+        trial = {**kept, **{(m.photo, m.edge): m for m in found}}
+        alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
+            trial.values())), K, rough_rotations=rr, noise_px=noise_px,
+            hold_unconstrained=ROUGH_HOLD, where=where)
+        new = {(m.photo, m.edge) for m in found}
+        fits = all(d <= 3.0 * max(alt.sigma_px, 0.1) for p, e, d in alt.mark_rms_px
+                   if (p, e) in new) and not new & {(p, e) for p, e, _ in alt.outliers}
+        if (set(alt.held) <= set(sol.held) - set(names) and fits
+                and not set(_weak(alt, model, trust)) - set(_weak(sol, model, trust))):
+            sol, kept = alt, trial
+            moved = [n for n, x in zip(names, v, strict=True) if abs(x) > 0]
+            warnings.append("a crease found for " + ", ".join(moved) + ": "
+                            + ", ".join(sorted({m.edge for m in found})) + " proposed")
+    return sol, kept, warnings
+
+
+def _replace_unseen(sol, kept: dict, unseen: list, **crease_kw):
+    """The proposals ``unseen`` ((photo, edge) pairs of ``kept``) replaced
+    by a crease where that is what the photographs show: ``(solution,
+    kept, warnings)``, unchanged with no warnings where it is not.
+
+    A lone proposal that fixes a direction has no residual to test, and
+    the model it leads to can hide its edge (session 36: a window frame
+    taken for the wing's corner moves the wing behind the house). Left out,
+    the direction it fixed is free; where :func:`_creases` finds a crease
+    along it in two photographs or more and the solve with the crease holds
+    nothing the solve with the proposals did not, the crease replaces
+    them. ``crease_kw``: :func:`_creases`'s options."""
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    marks, K = crease_kw["marks"], crease_kw["K"]
+    trial = {key: m for key, m in kept.items() if key not in set(unseen)}
+    alt = solve_facade(crease_kw["current"], replace(marks, marks=tuple(marks.marks) + tuple(
+        trial.values())), K, rough_rotations=crease_kw["rough_rotations"],
+        noise_px=crease_kw["noise_px"], hold_unconstrained=ROUGH_HOLD, where=crease_kw["where"])
+    if not set(alt.held) - set(sol.held):
+        return sol, kept, []        # they fixed nothing alone: nothing to search
+    alt, trial, said = _creases(alt, trial, **crease_kw)
+    if not said or set(alt.held) - set(sol.held):
+        return sol, kept, []
+    return alt, trial, said + ["proposals on edges the solved model hid were left out ("
+                               + ", ".join(f"{e!r} on {p!r}" for p, e in unseen) + "): the "
+                               "crease found along the direction they fixed replaces them"]
 
 
 def _unseen_proposals(sol, proposals, images: dict, *, min_length_px: float) -> list:

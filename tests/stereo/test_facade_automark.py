@@ -595,3 +595,88 @@ def test_proposals_on_edges_the_solved_model_hides_are_named():
     got = _unseen_proposals(sol, props[:2], images, min_length_px=15.0)
     assert got == [(photo, hidden)]
     assert _unseen_proposals(sol, props[2:], images, min_length_px=15.0) == [(photo, shown)]
+
+
+WING = {"blocks": [
+    {"name": "house", "kind": "box",
+     "params": {"width": {"value": 10.0, "fixed": True}, "depth": 6.0, "height": 6.0}},
+    # the wing's right face is the house's left wall: its right end is a
+    # concave crease against the house (the rendered building's wing)
+    {"name": "wing", "kind": "box", "parent": "house", "on": "base", "x": "offset", "y": "back",
+     "params": {"width": 4.0, "depth": 4.0, "height": 4.0, "offset_x": -7.0}}]}
+
+
+@pytest.mark.parametrize("crease", [True, False])
+def test_a_lone_proposal_on_an_edge_the_model_hides_is_replaced_by_the_crease(crease):
+    # session 36's s21 d3: the one proposal for the wing's front-right corner
+    # lay on a window frame, fixed the wing's right end alone (no residual
+    # can test it) and put that end behind the house, which then hides the
+    # edge it was made for. Left out, the end is free again; where the
+    # photographs show the crease along it (painted walls facing two ways:
+    # two grey levels), the crease replaces it; where they show nothing
+    # (a flat grey picture), nothing changes
+    from dataclasses import replace
+
+    from lumigraph.stereo.debevec1996 import automark as am
+    from lumigraph.stereo.debevec1996.edges import Mark
+    from lumigraph.stereo.debevec1996.solve import project_model_edges
+
+    model = BlockModel.from_dict(WING, where="test")
+    V = model.vertices()
+    centre = (V.min(0) + V.max(0)) / 2
+    size = float(np.linalg.norm(np.ptp(V, axis=0)))
+    cams = ring_cameras(5, target=centre, radius=2.2 * size, height=0.3 * size, focal_px=700,
+                        arc_deg=(-170.0, -100.0), rng=np.random.default_rng(0), jitter=0.05)
+    rng = np.random.default_rng(1)
+    raw = project_edges(model, cams, noise_px=0.5, rng=rng)
+    # every edge marked but those whose 3-D line slides with the wing's right end
+    right = {"wing/front-right", "wing/back-right", "wing/top-right", "wing/bottom-right"}
+    hand = EdgeMarks.from_dict({"photographs": {p: [m for m in v if m["edge"] not in right]
+                                                for p, v in raw.items()}},
+                               model=model, photographs=list(cams))
+    if crease:
+        images = {p: paint_facade(model, c, rng=rng) for p, c in cams.items()}
+    else:
+        images = {p: np.clip(120 + rng.normal(0, 1, (c["image_size"][1], c["image_size"][0])),
+                             0, 255).astype(np.uint8) for p, c in cams.items()}
+    K = {p: c["K"] for p, c in cams.items()}
+    rough = model.with_values(model.values[~model.fixed] * 1.1)
+    assert set(solve_facade(rough, hand, K, noise_px=0.5, hold_unconstrained=True).held) == {
+        "wing/width", "wing/offset_x"}                          # the premise: the end is free
+    # the lone wrong proposal: the corner 0.6 m inside the house, in one photograph
+    photo = next(iter(cams))
+    wrong = model.with_values({"wing/width": 4.6, "wing/offset_x": -6.7})
+    a, b = project_model_edges(wrong, np.asarray(K[photo], float),
+                               np.asarray(cams[photo]["R"], float),
+                               np.asarray(cams[photo]["t"], float).ravel())["wing/front-right"]
+    prop = Mark(photo, "wing/front-right", np.r_[a, b], proposed=True)
+    sol = solve_facade(rough, replace(hand, marks=tuple(hand.marks) + (prop,)), K, noise_px=0.5,
+                       hold_unconstrained=True)
+    assert not sol.held
+    unseen = am._unseen_proposals(sol, [prop], images, min_length_px=15.0)
+    assert unseen == [(photo, "wing/front-right")]
+    kept = {(photo, prop.edge): prop}
+    got, now, said = am._replace_unseen(
+        sol, kept, unseen, current=rough, marks=hand, K=K, images=images,
+        greys={p: am._grey(i) for p, i in images.items()}, rough=rough, trust=0.3,
+        rough_rotations=None, noise_px=0.5, where="test")
+    if not crease:
+        assert got is sol and now is kept and said == []
+        return
+    assert said and "crease found along the direction they fixed replaces them" in said[-1]
+    assert not got.held
+    assert all(m is not prop for m in now.values())
+    assert len({m.photo for m in now.values()}) >= 2
+    # each crease proposal on its true edge within 1.5 px (3 σ of a mark)
+    for m in now.values():
+        cam = cams[m.photo]
+        e0, e1 = project_model_edges(model, np.asarray(cam["K"], float), np.asarray(cam["R"], float),
+                                     np.asarray(cam["t"], float).ravel())[m.edge]
+        n = np.array([-(e1 - e0)[1], (e1 - e0)[0]]) / np.hypot(*(e1 - e0))
+        assert max(abs((m.segment[:2] - e0) @ n), abs((m.segment[2:] - e0) @ n)) <= 1.5
+    # the right end (offset + width / 2) where it is, within 3 σ of the solve's own
+    i, j = got.unknowns.index("wing/offset_x"), got.unknowns.index("wing/width")
+    c = np.zeros(len(got.unknowns))
+    c[i], c[j] = 1.0, 0.5
+    end = got.params["wing/offset_x"] + got.params["wing/width"] / 2
+    assert abs(end + 5.0) <= 3.0 * np.sqrt(c @ got.covariance @ c), end
