@@ -484,7 +484,10 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     (neither rejects a hand mark or holds a parameter; the voted end found
     more edges on detected lines, 88 proposals against 82). Every
     parameter then lands within 3 σ of the truth, σ as the solve reports
-    it."""
+    it. The premise runs without session 37's replacement of proposals on
+    edges the solved model hides as well: that alone also rescues this
+    start (the wing's width then 0.1 σ from the truth), so the premise
+    is the start as given with neither."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
     from lumigraph.stereo.debevec1996.solve import solve_facade
@@ -499,11 +502,11 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
         sol = solve_facade(draws.rough, res.marks, c["K"], noise_px=0.5, hold_unconstrained=True)
         return res, {n: abs(sol.params[n] - v) / sol.std[n] for n, v in c["truth"].items()}
 
-    am._VOTE_FIRST = False
+    am._VOTE_FIRST = am._UNSEEN_CREASE = False
     try:
         res, before = z()
     finally:
-        am._VOTE_FIRST = True
+        am._VOTE_FIRST = am._UNSEEN_CREASE = True
     assert before["wing/width"] > 10, before          # the premise: far beyond its σ
     assert [x["start"] for x in res.candidates] == ["rough model"]
     res, after = z()
