@@ -561,6 +561,15 @@ def test_cli_records_each_start_tried_in_the_meta(tmp_path):
                for s in starts), starts
 
 
+def _around(model, photos: int, *, arc):
+    """``photos`` cameras on an arc around the model, 700 px focal length."""
+    V = model.vertices()
+    centre = (V.min(0) + V.max(0)) / 2
+    size = float(np.linalg.norm(np.ptp(V, axis=0)))
+    return ring_cameras(photos, target=centre, radius=2.2 * size, height=0.3 * size,
+                        focal_px=700, arc_deg=arc, rng=np.random.default_rng(0), jitter=0.05)
+
+
 def test_proposals_on_edges_the_solved_model_hides_are_named():
     # a proposal the solve fits but whose edge the solved model hides (or
     # shows elsewhere on its line) is the mark of a block moved onto other
@@ -570,11 +579,7 @@ def test_proposals_on_edges_the_solved_model_hides_are_named():
     from lumigraph.stereo.debevec1996.solve import project_model_edges
 
     model = BlockModel.from_dict(FLUSH, where="test")
-    V = model.vertices()
-    centre = (V.min(0) + V.max(0)) / 2
-    size = float(np.linalg.norm(np.ptp(V, axis=0)))
-    cams = ring_cameras(5, target=centre, radius=2.2 * size, height=0.3 * size, focal_px=700,
-                        arc_deg=(-160.0, -20.0), rng=np.random.default_rng(0), jitter=0.05)
+    cams = _around(model, 5, arc=(-160.0, -20.0))
     raw = project_edges(model, cams)
     marks = EdgeMarks.from_dict({"photographs": raw}, model=model, photographs=list(cams))
     K = {p: c["K"] for p, c in cams.items()}
@@ -622,11 +627,7 @@ def test_a_lone_proposal_on_an_edge_the_model_hides_is_replaced_by_the_crease(cr
     from lumigraph.stereo.debevec1996.solve import project_model_edges
 
     model = BlockModel.from_dict(WING, where="test")
-    V = model.vertices()
-    centre = (V.min(0) + V.max(0)) / 2
-    size = float(np.linalg.norm(np.ptp(V, axis=0)))
-    cams = ring_cameras(5, target=centre, radius=2.2 * size, height=0.3 * size, focal_px=700,
-                        arc_deg=(-170.0, -100.0), rng=np.random.default_rng(0), jitter=0.05)
+    cams = _around(model, 5, arc=(-170.0, -100.0))
     rng = np.random.default_rng(1)
     raw = project_edges(model, cams, noise_px=0.5, rng=rng)
     # every edge marked but those whose 3-D line slides with the wing's right end
