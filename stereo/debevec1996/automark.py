@@ -1599,7 +1599,8 @@ def _replace_unseen(sol, kept: dict, unseen: list, **crease_kw):
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     marks, K = crease_kw["marks"], crease_kw["K"]
-    trial = {key: m for key, m in kept.items() if key not in set(unseen)}
+    left_out = set(unseen)
+    trial = {key: m for key, m in kept.items() if key not in left_out}
     alt = solve_facade(crease_kw["current"], replace(marks, marks=tuple(marks.marks) + tuple(
         trial.values())), K, rough_rotations=crease_kw["rough_rotations"],
         noise_px=crease_kw["noise_px"], hold_unconstrained=ROUGH_HOLD, where=crease_kw["where"])
