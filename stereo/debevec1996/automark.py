@@ -32,7 +32,10 @@ neighbour stays a candidate where its wall faces the camera, and is hidden
 from behind the wall). An edge between two faces in one plane (a seam: a
 tower aligned with the house's front meets it there; :func:`_seam`) shows
 as a line only where the two blocks differ in colour, so its proposals
-must lie within a third of the distance gate. Rounds re-solve
+must lie within a third of the distance gate, and their step must run
+along ``SEAM_SHARE`` (80 %) of its stretch, not half: a change of
+material runs along the whole seam, a window column beside it over part
+of it. Rounds re-solve
 from the hand marks and the proposals so far with gates that start wide
 and tighten; the rough solve holds at its starting value any parameter
 the marks leave free or only pretend to fix (it moves more than ``trust``
@@ -135,6 +138,10 @@ _VOTE_FIRST = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
+# the share of a seam's stretch its step must run along (:func:`_continues`;
+# 0.5 for every other edge): a seam shows only as a change of material, which
+# runs along all of it; a window column beside it steps over part of it
+SEAM_SHARE = 0.8
 
 
 @dataclass(frozen=True)
@@ -356,7 +363,7 @@ def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: 
 
 
 def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=None,
-                 step_px: float = 2.0, same_line=None) -> np.ndarray | None:
+                 step_px: float = 2.0, same_line=None, share: float = 0.5) -> np.ndarray | None:
     """The image step of the projected model ``edge`` ``(4,)`` found
     without a line detection: the grey-level profiles across the edge,
     every ``step_px`` along it, averaged along it (texture not aligned
@@ -366,8 +373,8 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
     step runs along the edge (:func:`_continues`) and no other projected
     edge of ``others`` ``(M, 4)`` lies parallel within the gate (the step
     could be its; one on the edge's own image line does not count where
-    ``same_line`` ``(M,)``, when given, says it is the same line in 3-D).
-    None otherwise."""
+    ``same_line`` ``(M,)``, when given, says it is the same line in 3-D);
+    ``share``: :func:`_continues`' (a seam's is higher). None otherwise."""
     edge = np.asarray(edge, float)
     d = edge[2:] - edge[:2]
     L = float(np.hypot(*d))
@@ -407,7 +414,7 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
         return None
     shifted = np.r_[edge[:2] + mids[k] * n, edge[2:] + mids[k] * n]
     seg = refine_segment(grey, shifted)
-    if seg is None or not _continues(grey, seg, edge):
+    if seg is None or not _continues(grey, seg, edge, share=share):
         return None
     return seg
 
@@ -1350,7 +1357,8 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                     continue
                 ch = _strongest(chans[photo], s)
                 seg = refine_segment(ch, s)
-                if seg is not None and _CONTINUES and not _continues(ch, seg, projected[name]):
+                if seg is not None and _CONTINUES and not _continues(
+                        ch, seg, projected[name], share=SEAM_SHARE if name in seams else 0.5):
                     seg = None
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
@@ -1365,7 +1373,8 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                         continue
                     seg = _search_edge(_strongest(chans[photo], e), e,
                                        gate_px=max_distance_px / (
-                        3 if name in seams else 1), others=np.delete(E, j, axis=0),
+                        3 if name in seams else 1), share=SEAM_SHARE if name in seams else 0.5,
+                        others=np.delete(E, j, axis=0),
                         same_line=None if same3 is None else np.delete(same3[j], j))
                     if seg is not None:
                         kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
