@@ -567,7 +567,7 @@ def automatic_marking_rendered(quick: bool):
               "26, 65, 66, and replacing them by a crease on those and 70-81: s21 is not "
               "held out; judged on 82-87, docs/decisions/facade.md, session 37; a seam's "
               "step held to 80 % of its stretch: designed on s82, where it fixes one draw and "
-              "breaks another, so s82 is not held out; judged on 90-95, session 38)"
+              "breaks another, so s82 is not held out; judged on 90-98, session 38)"
             + "; tuned on seeds 0, 4-19, 28-59; the causes followed so far: window "
               "columns and brick courses beside a block's edge taken for it, the "
               "rough model's occlusions (docs/decisions/facade.md, 2026-12-05)"))
