@@ -138,9 +138,10 @@ _VOTE_FIRST = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
-# the share of a seam's stretch its step must run along (:func:`_continues`;
-# 0.5 for every other edge): a seam shows only as a change of material, which
-# runs along all of it; a window column beside it steps over part of it
+# the share of an edge's visible stretch a proposal's step must run along
+# (:func:`_continues`), and a seam's: a seam shows only as a change of material,
+# which runs along all of it; a window column beside it steps over part of it
+CONTINUES_SHARE = 0.5
 SEAM_SHARE = 0.8
 
 
@@ -333,7 +334,7 @@ def refine_segment(grey: np.ndarray, seg: np.ndarray, *, half_width: float = 3.0
 
 
 def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: float = 3.0,
-               within_px: float = 1.0, share: float = 0.5) -> bool:
+               within_px: float = 1.0, share: float = CONTINUES_SHARE) -> bool:
     """Whether the intensity step of the refined detection ``seg`` ``(4,)``
     runs along the whole visible stretch of the projected model ``edge``
     ``(4,)``, as a block's edge does, and not over a part of it only, as a
@@ -363,7 +364,8 @@ def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: 
 
 
 def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=None,
-                 step_px: float = 2.0, same_line=None, share: float = 0.5) -> np.ndarray | None:
+                 step_px: float = 2.0, same_line=None,
+                 share: float = CONTINUES_SHARE) -> np.ndarray | None:
     """The image step of the projected model ``edge`` ``(4,)`` found
     without a line detection: the grey-level profiles across the edge,
     every ``step_px`` along it, averaged along it (texture not aligned
@@ -1358,7 +1360,7 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                 ch = _strongest(chans[photo], s)
                 seg = refine_segment(ch, s)
                 if seg is not None and _CONTINUES and not _continues(
-                        ch, seg, projected[name], share=SEAM_SHARE if name in seams else 0.5):
+                        ch, seg, projected[name], share=SEAM_SHARE if name in seams else CONTINUES_SHARE):
                     seg = None
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)
@@ -1373,7 +1375,8 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                         continue
                     seg = _search_edge(_strongest(chans[photo], e), e,
                                        gate_px=max_distance_px / (
-                        3 if name in seams else 1), share=SEAM_SHARE if name in seams else 0.5,
+                        3 if name in seams else 1),
+                        share=SEAM_SHARE if name in seams else CONTINUES_SHARE,
                         others=np.delete(E, j, axis=0),
                         same_line=None if same3 is None else np.delete(same3[j], j))
                     if seg is not None:

@@ -522,7 +522,7 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
 
     def z(*, vote):
         am._VOTE_FIRST = vote
-        am._UNSEEN_CREASE, share, am.SEAM_SHARE = False, am.SEAM_SHARE, 0.5
+        am._UNSEEN_CREASE, share, am.SEAM_SHARE = False, am.SEAM_SHARE, am.CONTINUES_SHARE
         try:
             return z_all()
         finally:
