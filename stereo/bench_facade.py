@@ -567,7 +567,10 @@ def automatic_marking_rendered(quick: bool):
               "26, 65, 66, and replacing them by a crease on those and 70-81: s21 is not "
               "held out; judged on 82-87, docs/decisions/facade.md, session 37; a seam's "
               "step held to 80 % of its stretch: designed on s82, where it fixes one draw and "
-              "breaks another, so s82 is not held out; judged on 90-98, session 38)"
+              "breaks another, so s82 is not held out; judged on 90-98, session 38; a texture's "
+              "lines refused (a parallel step of the line's sign two thirds as strong within "
+              "twice the gate on each side): designed on seeds 0, 4-11 and the failures of 82, "
+              "90, 95, 96, 98; judged on 99-109, session 39)"
             + "; tuned on seeds 0, 4-19, 28-59; the causes followed so far: window "
               "columns and brick courses beside a block's edge taken for it, the "
               "rough model's occlusions (docs/decisions/facade.md, 2026-12-05)"))

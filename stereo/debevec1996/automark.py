@@ -15,6 +15,9 @@ detection is proposed as a mark of a reprojected edge when
 - its direction is within ``max_angle_deg`` of the edge's,
 - both its ends lie within ``max_distance_px`` of the edge's line,
 - at least half its length overlaps the edge's visible stretch,
+- it is not one of a texture's parallel lines (:func:`_in_texture`: a
+  brick course inside a wall has a step of its sign two thirds as strong
+  within twice the gate on each side; a block's edge parts two materials),
 - no other edge passes these gates nearly as well (ambiguous: left out),
   except edges whose projected lines coincide with it (a block flush with
   its neighbour puts its edges on the neighbour's image lines): those share
@@ -135,6 +138,7 @@ _UNSEEN_CREASE = True
 _RESECT = True
 _COLOUR = True
 _VOTE_FIRST = True
+_IN_TEXTURE = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -143,6 +147,9 @@ SEAM_TOL_PX = 6.0
 # which runs along all of it; a window column beside it steps over part of it
 CONTINUES_SHARE = 0.5
 SEAM_SHARE = 0.8
+# a line with a parallel step of its sign this high (relative) on each side is one
+# of a texture's lines (:func:`_in_texture`); _search_edge's uniqueness ratio
+TEXTURE_RATIO = 2.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -361,6 +368,44 @@ def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: 
     at = offs[:-1][i] + 0.25
     ok = (g[np.arange(len(ts)), i] > 4.0) & (np.abs(at) <= within_px)
     return bool(ok.mean() >= share)
+
+
+def _in_texture(grey: np.ndarray, seg: np.ndarray, *, reach_px: float,
+                ratio: float = TEXTURE_RATIO) -> bool:
+    """Whether the refined detection ``seg`` ``(4,)`` is one of a texture's
+    parallel lines (a brick course, a row of tiles) rather than a block's
+    edge: the grey-level profiles across it, averaged along it, have a step
+    of its own sign at least ``ratio`` times its own on *each* side within
+    ``reach_px``. A block's edge parts two materials, so a texture's lines
+    lie on one side of it at most; a course inside a wall has the next
+    course above and below. ``reach_px``: twice the distance gate (two
+    lines each within the gate of an edge lie up to that far apart).
+
+    >>> g = np.tile((np.arange(60) % 10 < 5) * 100.0, (40, 1)).T   # stripes: rows 0-4 bright
+    >>> bool(_in_texture(g, np.array([5, 24.5, 35, 24.5]), reach_px=12))   # one stripe's edge
+    True
+    >>> g[30:] = 100.0; g[:30] = 0.0                                 # one step at row 29.5
+    >>> bool(_in_texture(g, np.array([5, 29.5, 35, 29.5]), reach_px=12))
+    False
+    """
+    offs = np.arange(-reach_px, reach_px + 1e-9, 0.5)
+    seg = np.asarray(seg, float)
+    L = float(np.hypot(*(seg[2:] - seg[:2])))
+    ts = np.linspace(0.05, 0.95, max(8, int(L / 2)))
+    across = profiles_across(grey, seg, ts, offs, min_length=2)
+    if across is None:
+        return False
+    m = np.diff(across[-1], axis=1).mean(0)
+    mids = offs[:-1] + 0.25
+    near = np.abs(mids) <= 1.0
+    i0 = np.flatnonzero(near)[np.argmax(np.abs(m[near]))]
+    own = m[i0]
+    if own == 0:
+        return False
+    ms = m * np.sign(own)
+    peaks = [i for i in range(1, len(ms) - 1) if ms[i] >= ms[i - 1] and ms[i] >= ms[i + 1]
+             and abs(mids[i] - mids[i0]) >= 1.5 and ms[i] >= ratio * abs(own)]
+    return any(mids[i] > mids[i0] for i in peaks) and any(mids[i] < mids[i0] for i in peaks)
 
 
 def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=None,
@@ -1361,6 +1406,9 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
                 seg = refine_segment(ch, s)
                 if seg is not None and _CONTINUES and not _continues(
                         ch, seg, projected[name], share=SEAM_SHARE if name in seams else CONTINUES_SHARE):
+                    seg = None
+                if seg is not None and _IN_TEXTURE and _in_texture(
+                        ch, seg, reach_px=2 * max_distance_px):
                     seg = None
                 if seg is not None:
                     kept[(photo, name)] = Mark(photo, name, seg, proposed=True)

@@ -409,6 +409,28 @@ def test_the_band_step_peaks_on_a_crease_between_brick_walls_with_a_joint_beside
 
 
 @pytest.mark.parametrize("seed", range(4))
+def test_a_course_inside_a_brick_wall_is_a_textures_line_and_the_walls_top_is_not(seed):
+    """``_in_texture`` on horizontal brick courses (bed joints every 8 px,
+    12 px reach: the joints above and below are within it) under a flat
+    sky from row 41: a bed joint's edge inside the wall has a parallel step
+    of its sign, as strong, on each side; the wall's top edge against the
+    sky has courses below it only, and the sky side none at all."""
+    from lumigraph.stereo.debevec1996.automark import _in_texture
+
+    g = _bricks(np.random.default_rng(seed), crease_x=1e9)
+    g[:41] = 180.0 + np.random.default_rng(100 + seed).normal(0.0, 2.0, (41, g.shape[1]))
+    joint = refine_segment(g, np.array([10.0, 79.6, 110.0, 79.6]))   # the joint at row 80
+    # on the joint: between its two edges (79.5, 80.5), to a tenth of a pixel
+    assert joint is not None and np.all(np.abs(joint[[1, 3]] - 80.0) <= 0.6)
+    assert _in_texture(g, joint, reach_px=12.0)
+    top = refine_segment(g, np.array([10.0, 40.6, 110.0, 40.6]))
+    assert top is not None and abs(top[1] - 40.5) < 0.5
+    assert not _in_texture(g, top, reach_px=12.0)
+    # with the reach under the course height, the joint has no neighbour either
+    assert not _in_texture(g, joint, reach_px=6.0)
+
+
+@pytest.mark.parametrize("seed", range(4))
 def test_a_step_along_a_third_of_the_line_counts_little_in_the_robust_z(seed):
     """A window frame on the wall, twice the crease's step, reaches along a
     third of a candidate line: the t statistic of the mean step counts it
@@ -509,9 +531,10 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     session 37's replacement of proposals on edges the solved model hides
     (the wing's width then 0.1 σ off) and session 38's seam share
     (``SEAM_SHARE``: 1.0 σ off, the start as given then ends with 89
-    proposals and is kept). So the premise and the vote's own case run
-    with neither, and the last run, with everything, asks only that the
-    result be right and both starts be recorded."""
+    proposals and is kept), and session 39's refusal of a texture's lines
+    (``_in_texture``: 0.9 σ off). So the premise and the vote's own case
+    run with none of them, and the last run, with everything, asks only
+    that the result be right and both starts be recorded."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
     from lumigraph.stereo.debevec1996.solve import solve_facade
@@ -523,10 +546,11 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     def z(*, vote):
         am._VOTE_FIRST = vote
         am._UNSEEN_CREASE, share, am.SEAM_SHARE = False, am.SEAM_SHARE, am.CONTINUES_SHARE
+        am._IN_TEXTURE = False
         try:
             return z_all()
         finally:
-            am._VOTE_FIRST = am._UNSEEN_CREASE = True
+            am._VOTE_FIRST = am._UNSEEN_CREASE = am._IN_TEXTURE = True
             am.SEAM_SHARE = share
 
     def z_all():
