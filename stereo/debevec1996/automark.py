@@ -147,9 +147,9 @@ SEAM_TOL_PX = 6.0
 # which runs along all of it; a window column beside it steps over part of it
 CONTINUES_SHARE = 0.5
 SEAM_SHARE = 0.8
-# a line with a parallel step of its sign this high (relative) on each side is one
-# of a texture's lines (:func:`_in_texture`); _search_edge's uniqueness ratio
-TEXTURE_RATIO = 2.0 / 3.0
+# a second step this high (relative) makes a line doubtful: another peak in
+# _search_edge's gate, a parallel step of its sign on each side in _in_texture's reach
+RIVAL_RATIO = 2.0 / 3.0
 
 
 @dataclass(frozen=True)
@@ -371,7 +371,7 @@ def _continues(grey: np.ndarray, seg: np.ndarray, edge: np.ndarray, *, step_px: 
 
 
 def _in_texture(grey: np.ndarray, seg: np.ndarray, *, reach_px: float,
-                ratio: float = TEXTURE_RATIO) -> bool:
+                ratio: float = RIVAL_RATIO) -> bool:
     """Whether the refined detection ``seg`` ``(4,)`` is one of a texture's
     parallel lines (a brick course, a row of tiles) rather than a block's
     edge: the grey-level profiles across it, averaged along it, have a step
@@ -416,7 +416,7 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
     every ``step_px`` along it, averaged along it (texture not aligned
     with the edge averages out), peak within ``gate_px`` of it; refined
     like a detection (:func:`refine_segment`) and kept only when that peak
-    is unique (no other peak, 1.5 px or more away, two thirds as high), the
+    is unique (no other peak, 1.5 px or more away, ``RIVAL_RATIO`` as high), the
     step runs along the edge (:func:`_continues`) and no other projected
     edge of ``others`` ``(M, 4)`` lies parallel within the gate (the step
     could be its; one on the edge's own image line does not count where
@@ -456,7 +456,7 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
     if not peaks:
         return None
     k = max(peaks, key=lambda i: m[i])
-    if abs(mids[k]) > gate_px or any(m[i] >= m[k] / 1.5 for i in peaks
+    if abs(mids[k]) > gate_px or any(m[i] >= RIVAL_RATIO * m[k] for i in peaks
                                      if abs(mids[i] - mids[k]) >= 1.5):
         return None
     shifted = np.r_[edge[:2] + mids[k] * n, edge[2:] + mids[k] * n]
