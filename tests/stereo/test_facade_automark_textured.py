@@ -413,8 +413,9 @@ def test_a_course_inside_a_brick_wall_is_a_textures_line_and_the_walls_top_is_no
     """``_in_texture`` on horizontal brick courses (bed joints every 8 px,
     12 px reach: the joints above and below are within it) under a flat
     sky from row 41: a bed joint's edge inside the wall has a parallel step
-    of its sign, as strong, on each side; the wall's top edge against the
-    sky has courses below it only, and the sky side none at all."""
+    of its sign, at least ``RIVAL_RATIO`` as strong, on each side; the
+    wall's top edge against the sky has courses below it only, and the sky
+    side none at all."""
     from lumigraph.stereo.debevec1996.automark import _in_texture
 
     g = _bricks(np.random.default_rng(seed), crease_x=1e9)
