@@ -139,6 +139,7 @@ _RESECT = True
 _COLOUR = True
 _VOTE_FIRST = True
 _IN_TEXTURE = True
+_CREASE_MOVING = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -1139,6 +1140,8 @@ def _against_neighbours(model, slots, v, *, reach: float) -> bool:
 # peak, and the largest share of it allowed anywhere 5 px or more away
 CREASE_Z = 20.0
 CREASE_SECOND = 0.5
+# how far apart (px, at the median line's rate) a rival crease must lie
+CREASE_APART_PX = 5.0
 
 
 def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: float,
@@ -1153,11 +1156,14 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     direction, within ``trust`` of the ``rough`` model's values (and, where
     ``sigma`` (the direction's σ, m) is given, within 4 σ; skipped when 1 σ
     moves no edge by a pixel), every moving edge is projected every half
-    pixel of move; its band steps (:func:`_band_steps`) across all
+    pixel of move (a line that moves less than :data:`CREASE_APART_PX`
+    over the whole scan is left out of it: it scores every move alike);
+    its band steps (:func:`_band_steps`) across all
     photographs, oriented by the move, give one robust z per edge (a crease
     keeps its sign from photograph to photograph: its two walls' shading
     is the light's, not the view's); the summed |z| must peak at
-    :data:`CREASE_Z` or more, with no other move 5 px away above
+    :data:`CREASE_Z` or more, with no other move :data:`CREASE_APART_PX`
+    away above
     :data:`CREASE_SECOND` of it (a window column on the block's face is
     also a 3-D line of the family). Each moving edge with |z| ≥ 5 at the
     peak, not a seam, in ``only`` (edge names; None: any), is refined in
@@ -1184,18 +1190,30 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     rates = np.array([r for _, _, r in at0.values()])
     if sigma is not None and sigma * rates.max() < 1.0:
         return []           # the marks place it to a pixel already
-    step, px = 0.5 / rates.max(), float(np.median(rates))
+    # a line that moves less over the whole scan than the uniqueness test's
+    # 5 px sees the same step at the peak and at its rivals: it cannot tell
+    # one move from another (a roofline seen end-on moved 1 px over the
+    # scan and added one score to every move, so the true peak had rivals),
+    # so the scan leaves it out at each move (it is proposed at the peak
+    # only where its edge is scanned in another photograph and its own step
+    # is there)
+    least = CREASE_APART_PX / (hi - lo) if _CREASE_MOVING else 0.0     # px per unit move
+    at0 = {key: val for key, val in at0.items() if val[2] >= least}
+    if not at0:
+        return []
+    step, px = 0.5 / rates.max(), float(np.median([r for _, _, r in at0.values()]))
     alphas = np.arange(lo, hi + 1e-12, step)
     edges = sorted({i for _, i in at0})
     Z = np.zeros((len(edges), len(alphas)))
     for k, al in enumerate(alphas):
         lines = _crease_lines(model, slots, v, al, cams, tol_px=2.0)
         for j, i in enumerate(edges):
-            d = [_band_steps(greys[p], a, b) for (p, ii), (a, b, _) in lines.items() if ii == i]
+            d = [_band_steps(greys[p], a, b) for (p, ii), (a, b, r) in lines.items()
+                 if ii == i and r >= least]
             Z[j, k] = _robust_z(np.concatenate(d)) if d else 0.0
     S = np.abs(Z).sum(0)
     k = int(np.argmax(S))
-    far = np.abs(alphas - alphas[k]) * px >= 5.0
+    far = np.abs(alphas - alphas[k]) * px >= CREASE_APART_PX
     if S[k] < CREASE_Z or (far.any() and S[far].max() > CREASE_SECOND * S[k]):
         return []
     th = model.values.copy()
