@@ -570,7 +570,9 @@ def automatic_marking_rendered(quick: bool):
               "breaks another, so s82 is not held out; judged on 90-98, session 38; a texture's "
               "lines refused (a parallel step of the line's sign two thirds as strong within "
               "twice the gate on each side): designed on seeds 0, 4-11 and the failures of 82, "
-              "90, 95, 96, 98; judged on 99-109, session 39)"
+              "90, 95, 96, 98; judged on 99-109, session 39; a line the crease scan moves "
+              "under 5 px left out of it: designed on s118 and s99; it changed no other "
+              "crease search on 0, 4-11 or 114-127, session 40)"
             + "; tuned on seeds 0, 4-19, 28-59; the causes followed so far: window "
               "columns and brick courses beside a block's edge taken for it, the "
               "rough model's occlusions (docs/decisions/facade.md, 2026-12-05)"))
