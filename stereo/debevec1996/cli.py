@@ -291,7 +291,9 @@ def _automark(args) -> int:
     if len(res.candidates) > 1:
         say(args, "starts: " + "; ".join(
             f"{c['start']} ({c['hand_marks_rejected']} hand marks rejected, {c['held']} held, "
-            f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px)" + (" <- kept" if c["chosen"] else "")
+            f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px"
+            + ("" if c["fits_noise"] else ", beyond the noise given") + ")"
+            + (" <- kept" if c["chosen"] else "")
             for c in res.candidates))
     say(args, f"{len(marks.marks)} hand marks, {res.proposed} proposed -> {args.out}")
     return 0
