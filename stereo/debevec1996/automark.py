@@ -56,9 +56,9 @@ at the lower σ̂ (both are recorded: ``AutomarkResult.candidates``). Where
 the kept end's marks fit worse than the noise given explains (σ̂ past the
 χ² test's 0.1 % tail: a start far off in shape held on wrong lines), it
 runs once more from that end's solved values (clipped to the rough
-model's trust) with the hand marks alone, and keeps the restart where it
-rejects no more hand marks and fits the noise or ranks higher (recorded
-too). After the
+model's trust) with the hand marks alone, and of the two ends keeps the
+one that rejects fewer hand marks, then fits the noise, then ranks higher
+as above (recorded too). After the
 last round a residual check drops every proposal
 farther than 3x the estimated noise from the solved model and re-solves;
 a hand mark that solve rejects means proposals conflict with it (hand
