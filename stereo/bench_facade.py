@@ -40,7 +40,8 @@ Rows and checks:
   on seeds 1-3, 20-27 and 60-69, worst, median and geometric mean; the RMS
   error over four noise draws of the marks per seed; two starts, a check
   each: one factor off (as tuned) and the renderer's own rough
-  ``blocks.json``; ``--quick`` seed 1 at 320x240, one draw) —
+  ``blocks.json``; a run whose marks do not fit the noise restarts from
+  its own solve; ``--quick`` seed 1 at 320x240, one draw) —
   ≤ 1.2×: the painted photographs have flat faces, a photograph has
   texture;
 - solve time, ``village`` (10 blocks) × 8 photographs × 150 segments each
@@ -572,7 +573,10 @@ def automatic_marking_rendered(quick: bool):
               "twice the gate on each side): designed on seeds 0, 4-11 and the failures of 82, "
               "90, 95, 96, 98; judged on 99-109, session 39; a line the crease scan moves "
               "under 5 px left out of it: designed on s118 and s99; it changed no other "
-              "crease search on 0, 4-11 or 114-127, session 40)"
+              "crease search on 0, 4-11 or 114-127, session 40; a run whose marks do not "
+              "fit the noise restarted from its own solve, the restart kept where it fits "
+              "the noise and ranks higher: designed on s124, judged on 128-139 and 140-151, "
+              "sessions 41-42)"
             + "; tuned on seeds 0, 4-19, 28-59; the causes followed so far: window "
               "columns and brick courses beside a block's edge taken for it, the "
               "rough model's occlusions (docs/decisions/facade.md, 2026-12-05)"))

@@ -76,6 +76,12 @@ detects line segments in each photograph (OpenCV's fast line detector), refines 
 sub-pixel precision and proposes those that match a reprojected model edge within
 --max-angle degrees and --max-distance px, over at least half their length. Writes an
 edges.json with the hand marks and the proposals ("proposed": true); run 'solve' on it.
+What the marks leave free is tried from two starts (the rough model as given, and with those
+parameters first set by the detected lines they explain); where the kept run's marks fit
+worse than --noise-px explains, it runs once more from that run's solved values, and keeps
+that run where its marks fit the noise and it ranks higher. Each start's end (hand marks
+rejected, parameters held, proposals, σ̂, whether it fits the noise) is printed where more
+than one was tried, and recorded in the output's meta ("starts").
 """
 
 
@@ -291,7 +297,9 @@ def _automark(args) -> int:
     if len(res.candidates) > 1:
         say(args, "starts: " + "; ".join(
             f"{c['start']} ({c['hand_marks_rejected']} hand marks rejected, {c['held']} held, "
-            f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px)" + (" <- kept" if c["chosen"] else "")
+            f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px"
+            + ("" if c["fits_noise"] else ", beyond the noise given") + ")"
+            + (" <- kept" if c["chosen"] else "")
             for c in res.candidates))
     say(args, f"{len(marks.marks)} hand marks, {res.proposed} proposed -> {args.out}")
     return 0
