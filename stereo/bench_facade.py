@@ -574,9 +574,9 @@ def automatic_marking_rendered(quick: bool):
               "90, 95, 96, 98; judged on 99-109, session 39; a line the crease scan moves "
               "under 5 px left out of it: designed on s118 and s99; it changed no other "
               "crease search on 0, 4-11 or 114-127, session 40; a run whose marks do not "
-              "fit the noise restarted from its own solve, the restart kept where it fits "
-              "the noise and ranks higher: designed on s124, judged on 128-139 and 140-151, "
-              "sessions 41-42)"
+              "fit the noise restarted from its own solve, the ends then ranked with the fit to "
+              "the noise before the proposals: designed on s124, judged on 128-139 (session 41); "
+              "redesigned on 140-151, judged on 152-163, session 42)"
             + "; tuned on seeds 0, 4-19, 28-59; the causes followed so far: window "
               "columns and brick courses beside a block's edge taken for it, the "
               "rough model's occlusions (docs/decisions/facade.md, 2026-12-05)"))

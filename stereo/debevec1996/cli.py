@@ -78,10 +78,11 @@ sub-pixel precision and proposes those that match a reprojected model edge withi
 edges.json with the hand marks and the proposals ("proposed": true); run 'solve' on it.
 What the marks leave free is tried from two starts (the rough model as given, and with those
 parameters first set by the detected lines they explain); where the kept run's marks fit
-worse than --noise-px explains, it runs once more from that run's solved values, and keeps
-that run where its marks fit the noise and it ranks higher. Each start's end (hand marks
-rejected, parameters held, proposals, σ̂, whether it fits the noise) is printed where more
-than one was tried, and recorded in the output's meta ("starts").
+worse than --noise-px explains, it runs once more from that run's solved values, and where
+that run fits the noise (or rejects fewer hand marks, or holds fewer parameters) keeps, of
+all the ends, one whose marks fit the noise before one with more proposals. Each start's end (hand marks rejected, parameters held, proposals, σ̂,
+whether it fits the noise) is printed where more than one was tried, and recorded in the
+output's meta ("starts").
 """
 
 

@@ -657,15 +657,21 @@ def test_hand_marks_the_proposals_push_out_are_not_blamed_alone():
     the final solve leaves out five hand marks, each called "mis-marked?"
     by the solve's own lines. Automatic marking says as well that the
     proposals may be at fault, naming each left-out mark (not yet fixed:
-    docs/decisions/facade.md, session 33)."""
+    docs/decisions/facade.md, session 33). Session 42's restart of a run
+    whose marks do not fit the noise (``_RESTART``) keeps here an end that
+    rejects none of them, so the warning's case runs without it."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
 
     c = BF.rendered_case(0)
     draws = BF.rendered_draws(0, draws=3)
     _, hand = draws[2]
-    res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
-                      rough_rotations=c["rotations"])
+    am._RESTART = False
+    try:
+        res = am.automark(draws.rough, hand, c["images"], c["K"], noise_px=0.5,
+                          rough_rotations=c["rotations"])
+    finally:
+        am._RESTART = True
     out = am._hand_outliers(res.solution, hand)
     said = [w for w in res.warnings if w.startswith("the solve with the proposals leaves out")]
     assert out and len(said) == 1, res.warnings
@@ -687,7 +693,7 @@ def test_a_start_whose_marks_do_not_fit_the_noise_is_restarted_from_its_solve():
     from those values, the marks fit the noise and every parameter lands
     within 3 σ of the truth. The
     premise is read from the record: the first run's end does not fit the
-    noise; the restart's does, ranks higher, and is kept."""
+    noise; the restart's does and is kept."""
     from lumigraph.stereo import bench_facade as BF
     from lumigraph.stereo.debevec1996.automark import automark
     from lumigraph.stereo.debevec1996.solve import solve_facade
