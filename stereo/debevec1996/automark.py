@@ -1170,6 +1170,10 @@ def _against_neighbours(model, slots, v, *, reach: float) -> bool:
 # the crease search's acceptance: the summed |z| of the moving edges at its
 # peak, and the largest share of it allowed anywhere 5 px or more away
 CREASE_Z = 20.0
+# the same for a block the marks fix but loosely, scanned only within 4 σ of
+# where they put it (18-47 moves against 83-148 for a held block's scan over
+# the rough model's trust): fewer places for a chance peak to rise at
+CREASE_Z_LOOSE = 10.0
 CREASE_SECOND = 0.5
 # how far apart (px, at the median line's rate) a rival crease must lie
 CREASE_APART_PX = 5.0
@@ -1193,7 +1197,8 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     photographs, oriented by the move, give one robust z per edge (a crease
     keeps its sign from photograph to photograph: its two walls' shading
     is the light's, not the view's); the summed |z| must peak at
-    :data:`CREASE_Z` or more, with no other move :data:`CREASE_APART_PX`
+    :data:`CREASE_Z` or more (:data:`CREASE_Z_LOOSE` where ``sigma`` is
+    given), with no other move :data:`CREASE_APART_PX`
     away above
     :data:`CREASE_SECOND` of it (a window column on the block's face is
     also a 3-D line of the family). Each moving edge with |z| ≥ 5 at the
@@ -1245,7 +1250,8 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     S = np.abs(Z).sum(0)
     k = int(np.argmax(S))
     far = np.abs(alphas - alphas[k]) * px >= CREASE_APART_PX
-    if S[k] < CREASE_Z or (far.any() and S[far].max() > CREASE_SECOND * S[k]):
+    need = CREASE_Z if sigma is None else CREASE_Z_LOOSE
+    if S[k] < need or (far.any() and S[far].max() > CREASE_SECOND * S[k]):
         return []
     th = model.values.copy()
     th[slots] += alphas[k] * v
