@@ -576,7 +576,9 @@ def automatic_marking_rendered(quick: bool):
               "crease search on 0, 4-11 or 114-127, session 40; a run whose marks do not "
               "fit the noise restarted from its own solve, the ends then ranked with the fit to "
               "the noise before the proposals: designed on s124, judged on 128-139 (session 41); "
-              "redesigned on 140-151, judged on 152-163, session 42)"
+              "redesigned on 140-151, judged on 152-163, session 42; a loosely fixed block's "
+              "crease accepted at half a held block's summed |z|: designed on s148 and s141, "
+              "judged on 164-175, session 42)"
             + "; tuned on seeds 0, 4-19, 28-59; the causes followed so far: window "
               "columns and brick courses beside a block's edge taken for it, the "
               "rough model's occlusions (docs/decisions/facade.md, 2026-12-05)"))
