@@ -909,16 +909,13 @@ def _rough_solve(model, marks, K, *, rough, trust, **kw):
 
     # automatic marking's own solves pool one noise: what they were chosen with
     sol = solve_facade(model, marks, K, hold_unconstrained=ROUGH_HOLD, separate_noise=False, **kw)
-    v0 = rough.named_values()
     weak: list = []
     again = sol
     for _ in range(4):
         # holding some can let another wander (the re-solve moves what the
         # held ones pinned): test again until none fails
-        names = [n for n in model.parameter_names if n not in again.held and n not in weak]
-        sc = _scale(rough, names)
-        new = [n for n in names if not (abs(again.params[n] - v0[n]) <= trust * sc[n]
-                                        and again.std[n] <= trust / 3 * sc[n])]
+        new = _weak(again, rough, trust, names=[n for n in model.parameter_names
+                                                if n not in again.held and n not in weak])
         if not new:
             break
         weak += new
@@ -978,11 +975,13 @@ def _hand_outliers(sol, marks) -> set:
     return {(p, e) for p, e, _ in sol.outliers} & hand
 
 
-def _weak(sol, rough, trust) -> list:
-    """The parameters ``sol`` takes beyond ``trust`` (relative) of the
-    ``rough`` model's values or fixes only loosely (σ above a third of that)."""
+def _weak(sol, rough, trust, *, names=None) -> list:
+    """The parameters (of ``names``; None: all) ``sol`` takes beyond
+    ``trust`` (relative) of the ``rough`` model's values or fixes only
+    loosely (σ above a third of that): the trust test of
+    :func:`_rough_solve` and of the final solve."""
     v0 = rough.named_values()
-    names = list(sol.model.parameter_names)
+    names = list(sol.model.parameter_names) if names is None else list(names)
     sc = _scale(rough, names)
     return [n for n in names if not (abs(sol.params[n] - v0[n]) <= trust * sc[n]
                                      and sol.std[n] <= trust / 3 * sc[n])]
