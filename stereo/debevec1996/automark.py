@@ -75,11 +75,12 @@ dropped, and again, while leaving it out changes nothing the marks fix (no
 parameter held, freed or failing the trust test that was not). Where a
 block's parameters stay held and the marks leave them one free direction
 (its outer face marked, its inner face not), or its least-determined
-direction slides a face along a neighbour and moves an edge by a pixel
-or more at 1 σ, that face is searched for as a crease against the
-neighbour (:func:`_crease`: brick against brick, a step in mean grey that
-keeps its sign along the line and from photograph to photograph, which
-the line detector misses); a clear peak within ``trust`` of the rough
+direction slides a face along a neighbour and moves an edge at 1 σ by
+more than a crease is placed to (a third of a pixel), that face is
+searched for as a crease against the neighbour (:func:`_crease`: brick
+against brick, a step in mean grey that keeps its sign along the line
+and from photograph to photograph, which the line detector misses); a
+clear peak within ``trust`` of the rough
 values is proposed and kept if the solve then fits it and fixes the
 block. A proposal whose edge the solved model hides in its photograph (or
 shows elsewhere along its line) is the mark of a block moved onto other
@@ -1174,6 +1175,13 @@ CREASE_Z = 20.0
 # the rough model's trust): fewer places for a chance peak to rise at
 CREASE_Z_LOOSE = 10.0
 CREASE_SECOND = 0.5
+# a loosely fixed block is scanned only where 1 σ of its least-determined
+# direction moves an edge by this much (px) in some photograph: the crease's
+# own placement error (RMS distance of its proposals' endpoints from the
+# true line, at the true model and cameras of tuning seeds 4-11: 0.30 px,
+# median 0.17; docs/decisions/facade_crease_precision.py). At 1 px (the
+# first rule) s163 kept its wing's end 2.2 σ (1.4 px) inside the truth
+CREASE_PLACED_PX = 0.3
 # how far apart (px, at the median line's rate) a rival crease must lie
 CREASE_APART_PX = 5.0
 
@@ -1189,7 +1197,7 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     brick against brick, which the line detector misses. Along the
     direction, within ``trust`` of the ``rough`` model's values (and, where
     ``sigma`` (the direction's σ, m) is given, within 4 σ; skipped when 1 σ
-    moves no edge by a pixel), every moving edge is projected every half
+    moves no edge by :data:`CREASE_PLACED_PX`), every moving edge is projected every half
     pixel of move (a line that moves less than :data:`CREASE_APART_PX`
     over the whole scan is left out of it: it scores every move alike);
     its band steps (:func:`_band_steps`) across all
@@ -1223,8 +1231,8 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     if not at0:
         return []
     rates = np.array([r for _, _, r in at0.values()])
-    if sigma is not None and sigma * rates.max() < 1.0:
-        return []           # the marks place it to a pixel already
+    if sigma is not None and sigma * rates.max() < CREASE_PLACED_PX:
+        return []           # the marks place it as well as a crease would
     # a line that moves less over the whole scan than the uniqueness test's
     # 5 px sees the same step at the peak and at its rivals: it cannot tell
     # one move from another (a roofline seen end-on moved 1 px over the
@@ -1680,8 +1688,8 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
 def _creases(sol, kept: dict, *, current, marks, K, images, greys, rough, trust,
              rough_rotations, noise_px, where):
     """Where the marks leave a block one free direction (held), or place it
-    loosely (its least-determined direction moves an edge by a pixel or
-    more at 1 σ), the block's inner face is searched for along that
+    loosely (its least-determined direction moves an edge by
+    :data:`CREASE_PLACED_PX` or more at 1 σ), the block's inner face is searched for along that
     direction as a crease (:func:`_crease`) and proposed where it is found
     in two photographs or more and the solve with it fits it, holds nothing
     new and fails the trust test on nothing new. Returns ``(solution, kept,
