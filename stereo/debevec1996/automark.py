@@ -1227,8 +1227,10 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     :data:`CREASE_SECOND` of it (a window column on the block's face is
     also a 3-D line of the family). Each moving edge with |z| ≥ 5 at the
     peak, not a seam, in ``only`` (edge names; None: any), is refined in
-    each photograph (the band step's peak within 1.5 px, its own z ≥ 3) and
-    proposed there; ``skip`` holds the (photo, edge) pairs already marked."""
+    each photograph (:func:`_refine_crease`: the band step's peak within
+    :data:`CREASE_NEAR_PX`, or :data:`CREASE_REACH_PX` where that finds it in
+    fewer than two photographs; its own z ≥ 3) and proposed there; ``skip``
+    holds the (photo, edge) pairs already marked."""
     from lumigraph.stereo.debevec1996.edges import Mark
 
     v = np.asarray(direction, float)
@@ -1280,26 +1282,86 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     th = model.values.copy()
     th[slots] += alphas[k] * v
     at = model.with_values({n: float(th[model.slot_of(n)]) for n in model.parameter_names})
-    out = []
+    lines = []
     for (p, i), (a, b, _) in _crease_lines(model, slots, v, alphas[k], cams, tol_px=2.0).items():
         z = Z[edges.index(i), k] if i in edges else 0.0
         name = model.edge_names[i]
         if abs(z) < 5.0 or (p, name) in skip or (only is not None and name not in only) or _seams(at, cams[p], {name: np.r_[a, b]},
                                                        tol_px=SEAM_TOL_PX):
             continue
-        offs = np.arange(-1.5, 1.5 + 1e-9, 0.25)
-        sc_ = np.array([np.sign(z) * _band_steps(greys[p], a, b, shift=o).mean() for o in offs])
-        j = int(np.argmax(sc_))
-        if j in (0, len(offs) - 1):
-            continue
-        y0, y1, y2 = sc_[j - 1:j + 2]
-        den = y0 - 2 * y1 + y2
-        o = offs[j] + (0.125 * (y0 - y2) / den if den < 0 else 0.0)
-        if np.sign(z) * _robust_z(_band_steps(greys[p], a, b, shift=o)) < 3.0:
-            continue
-        n = np.array([-(b - a)[1], (b - a)[0]]) / float(np.hypot(*(b - a)))
-        out.append(Mark(p, name, np.r_[a + o * n, b + o * n], proposed=True))
+        lines.append((p, name, a, b, float(np.sign(z))))
+
+    def refined(reach):
+        out = []
+        for p, name, a, b, sign in lines:
+            o = _refine_crease(greys[p], a, b, sign=sign, reach_px=reach)
+            if o is not None:
+                n = np.array([-(b - a)[1], (b - a)[0]]) / float(np.hypot(*(b - a)))
+                out.append(Mark(p, name, np.r_[a + o * n, b + o * n], proposed=True))
+        return out
+
+    out = refined(CREASE_NEAR_PX)
+    if len({m.photo for m in out}) < 2:
+        # seen in one photograph it is no proposal; further out, the band
+        # step's own pull is in the proposal, so only to make the second
+        out = refined(CREASE_REACH_PX)
     return out
+
+
+# how far (px) the refinement of a crease proposal looks either side of the
+# scan's peak line first: the 1.5 px by which a joint column pulls the
+# scan's robust z (and the band step's mean: the refinement's own
+# placement error). Where that finds the crease in fewer than two
+# photographs, it looks CREASE_REACH_PX out.
+CREASE_NEAR_PX = 1.5
+# how far (px) it looks then: the scan's robust z is pulled towards a joint column
+# beside the crease by up to 1.5 px (synthetic bricks with a joint 4.5 px
+# away; the band-step test in tests/stereo/test_facade_automark_textured.py),
+# the mean band step is flat to within the bands' inner 0.75 px of the
+# crease, and the peak must lie one 0.25 px sample inside the window:
+# 1.5 + 0.75 + 0.25 (on those bricks, 8 seeds and three joint placements,
+# the z's line and the mean's peak lie up to 1.8 px apart). At 1.5 px
+# alone (sessions 30-44) the refinement of the wing's crease on seeds 66
+# and 27 peaked on the window's edge in one photograph, 1.2-1.7 px from the
+# scan's line, and was dropped: a crease seen in one photograph is no
+# proposal. Looking this far in every case (tried in session 45) also
+# took a third photograph's proposal 1.2 px off its edge, pulled by a joint,
+# where two were found near (fresh seeds 212 and 216, one factor: 0.58x ->
+# 0.84x, 0.69x -> 1.12x): docs/decisions/facade.md, session 45
+CREASE_REACH_PX = 2.5
+
+
+def _refine_crease(grey: np.ndarray, a, b, *, sign: float, reach_px: float | None = None,
+                   min_z: float = 3.0) -> float | None:
+    """Where (px along the left normal of ``a → b``) the crease near the
+    line ``a → b`` lies: the peak of the mean band step (:func:`_band_steps`,
+    signed by ``sign``, the crease's side) over shifts every 0.25 px within
+    ``reach_px`` (default :data:`CREASE_REACH_PX`), refined by a parabola;
+    ``None`` where the peak is at the window's edge (the crease lies
+    beyond it, or nowhere) or its robust z (:func:`_robust_z`) there is
+    under ``min_z``.
+
+    >>> g = np.tile(np.r_[np.zeros(10), np.full(10, 100.0)], (30, 1))   # a step at x = 9.5
+    >>> a, b = np.array([11.5, 27.0]), np.array([11.5, 2.0])   # 2 px right of it, drawn upwards
+    >>> round(_refine_crease(g, a, b, sign=1.0), 2)   # -2 px, to the flat top's quarter pixel
+    -2.12
+    >>> _refine_crease(g, a, b, sign=1.0, reach_px=1.5) is None    # beyond a 1.5 px reach
+    True
+    >>> _refine_crease(g, a, b, sign=-1.0) is None                 # the step the wrong way
+    True
+    """
+    reach = CREASE_REACH_PX if reach_px is None else float(reach_px)
+    offs = np.arange(-reach, reach + 1e-9, 0.25)
+    sc = np.array([sign * _band_steps(grey, a, b, shift=o).mean() for o in offs])
+    j = int(np.argmax(sc))
+    if j in (0, len(offs) - 1):
+        return None
+    y0, y1, y2 = sc[j - 1:j + 2]
+    den = y0 - 2 * y1 + y2
+    o = float(offs[j] + (0.125 * (y0 - y2) / den if den < 0 else 0.0))
+    if sign * _robust_z(_band_steps(grey, a, b, shift=o)) < min_z:
+        return None
+    return o
 
 
 # the run-on test (:func:`_runs_on`): along a model edge's image line, past
