@@ -1606,6 +1606,17 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                                "corners by hand"]
     if said_run_on:
         pick = replace(pick, warnings=list(pick.warnings) + said_run_on)
+    alone = _alone(pick.solution, pick.marks)
+    if alone:
+        # nothing else checks such a proposal: on the wrong image line it
+        # moves its parameters with a σ that looks sure (fresh s233 d1 from
+        # blocks.json: the wing's right end on a line 36 px from its edge,
+        # wing/width 40 % short at σ 0.4 %, and nothing said)
+        pick = replace(pick, warnings=list(pick.warnings) + [
+            "proposals that alone place what they move, which no other mark checks: "
+            + "; ".join(f"{e!r} on {p!r} ({', '.join(names)})" for (p, e), names in alone)
+            + ": look at them in the overlays, or mark by hand another edge that moves those "
+              "parameters"])
     cands = [_candidate(name, r, marks, chosen=r is pick) for name, r in tried]
     out = sorted(_hand_outliers(pick.solution, marks))
     if not out:
@@ -1620,6 +1631,64 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         + ", ".join(f"{e!r} on {p!r}" for p, e in out) + "): either they are off their "
         "edges, or proposals hold a block on other image lines; solve the hand marks alone "
         f"to tell (starts tried: {said})"])
+
+
+def _alone(sol, marks) -> list:
+    """The proposals among ``marks`` (an :class:`EdgeMarks` the solve ``sol``
+    fitted) that alone hold some direction of the unknowns
+    (:func:`deleted_residuals` is infinite: without the mark the normal
+    matrix is singular), each with the model parameters that direction
+    moves (its components of 10 % of its largest or more, in the
+    column-scaled unknowns; a direction that moves only a photograph's
+    pose is left out): ``[((photo, edge), [names])]``.
+
+    >>> from dataclasses import replace
+    >>> from lumigraph.capture.scenes.facade_edges import ring_cameras, project_edges
+    >>> from lumigraph.stereo.debevec1996.edges import EdgeMarks
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE, solve_facade
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> cams = ring_cameras(6, target=[1.5, 0, 4], radius=30, height=4, focal_px=700)
+    >>> K = {p: c["K"] for p, c in cams.items()}
+    >>> marks = EdgeMarks.from_dict({"photographs": project_edges(m, cams)}, model=m,
+    ...                             photographs=list(cams))
+    >>> _alone(solve_facade(m, marks, K, noise_px=0.5), marks)   # each edge seen twice or more
+    []
+    >>> top = [k for k in marks.marks if k.edge.startswith("tower/top")][0]   # one top edge left
+    >>> one = replace(marks, marks=tuple(k for k in marks.marks if not k.edge.startswith(
+    ...     "tower/top")) + (replace(top, proposed=True),))
+    >>> _alone(solve_facade(m, one, K, noise_px=0.5), one)
+    [(('photo_00.png', 'tower/top-front'), ['tower/height'])]
+    """
+    ms = list(marks.marks)
+    t = deleted_residuals(sol, ms)
+    out = []
+    for i in np.flatnonzero(np.isinf(t)):
+        if not ms[i].proposed:
+            continue                    # a hand mark is the user's to check
+        keep, cols, vals = _edge_rows(sol, ms)
+        names = _held_by(sol, ms, keep, cols, vals, int(i))
+        if names:           # a photograph's pose alone is that photograph's
+            out.append(((ms[i].photo, ms[i].edge), names))
+    return out
+
+
+def _held_by(sol, ms, keep, cols, vals, i: int) -> list:
+    """The model parameters of the direction that mark ``i`` alone holds
+    (see :func:`_alone`)."""
+    n, p = len(keep), len(sol.unknowns)
+    X = np.zeros((n, 2, p))
+    for k in range(2):
+        X[np.arange(n)[:, None], k, cols[k]] = vals[k]
+    rest = [j for j, m in enumerate(keep) if m != i]
+    N = np.einsum("nki,nkj->ij", X[rest], X[rest])
+    scale = np.sqrt(np.clip(np.diag(N + np.einsum("ki,kj->ij", X[keep.index(i)],
+                                                  X[keep.index(i)])), 1e-300, None))
+    w, V = np.linalg.eigh(N / scale[:, None] / scale[None, :])
+    v = np.abs(V[:, 0])
+    names = [u for u, x in zip(sol.unknowns, v, strict=True) if ":" not in u and u != "focal_scale"
+             and x >= 0.1 * v.max()]
+    return names
 
 
 def _rank(res, marks) -> tuple:
