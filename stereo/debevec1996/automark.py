@@ -1661,19 +1661,20 @@ def _alone(sol, marks) -> list:
     [(('photo_00.png', 'tower/top-front'), ['tower/height'])]
     """
     ms = list(marks.marks)
-    t = deleted_residuals(sol, ms)
+    lone = [int(i) for i in np.flatnonzero(np.isinf(deleted_residuals(sol, ms)))
+            if ms[i].proposed]          # a hand mark is the user's to check
+    if not lone:
+        return []
+    keep, cols, vals = _edge_rows(sol, ms)
     out = []
-    for i in np.flatnonzero(np.isinf(t)):
-        if not ms[i].proposed:
-            continue                    # a hand mark is the user's to check
-        keep, cols, vals = _edge_rows(sol, ms)
-        names = _held_by(sol, ms, keep, cols, vals, int(i))
+    for i in lone:
+        names = _held_by(sol, keep, cols, vals, i)
         if names:           # a photograph's pose alone is that photograph's
             out.append(((ms[i].photo, ms[i].edge), names))
     return out
 
 
-def _held_by(sol, ms, keep, cols, vals, i: int) -> list:
+def _held_by(sol, keep, cols, vals, i: int) -> list:
     """The model parameters of the direction that mark ``i`` alone holds
     (see :func:`_alone`)."""
     n, p = len(keep), len(sol.unknowns)

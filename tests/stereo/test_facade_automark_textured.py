@@ -887,6 +887,29 @@ def test_a_tower_locked_short_of_its_top_is_restarted_where_its_edges_end():
     assert max(z.values()) <= 3.0, z
 
 
+def _crease_draw(seed, k):
+    """The rendered case ``seed``'s noise draw ``k`` from the renderer's
+    rough model: ``(c, start, hand, err, creases, err_full)``, ``err`` the
+    RMS relative parameter error of a solve of some marks, ``creases`` the
+    photographs of an automatic marking's ``wing/front-right`` proposals."""
+    from lumigraph.stereo import bench_facade as BF
+    from lumigraph.stereo.debevec1996.solve import solve_facade
+
+    c = BF.rendered_case(seed)
+    draws = BF.rendered_draws(seed, draws=k + 1)
+    full, hand = draws[k]
+    start = draws.rough
+
+    def err(marks, **kw):
+        sol = solve_facade(start, marks, c["K"], noise_px=0.5, **kw)
+        return np.sqrt(np.mean([((sol.params[n] - v) / v) ** 2 for n, v in c["truth"].items()]))
+
+    def creases(res):
+        return {m.photo for m in res.marks.marks if m.proposed and m.edge == "wing/front-right"}
+
+    return c, start, hand, err, creases, err(full)
+
+
 def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others():
     """Seed 193 (seen in session 44, where this rule was designed), its
     second noise draw, from the renderer's rough ``blocks.json``. The wing's
@@ -902,21 +925,8 @@ def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others
     1.2x of the fully marked solve's."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
-    from lumigraph.stereo.debevec1996.solve import solve_facade
 
-    c = BF.rendered_case(193)
-    draws = BF.rendered_draws(193, draws=2)
-    full, hand = draws[1]
-    start = draws.rough
-
-    def err(marks, **kw):
-        sol = solve_facade(start, marks, c["K"], noise_px=0.5, **kw)
-        return np.sqrt(np.mean([((sol.params[n] - v) / v) ** 2 for n, v in c["truth"].items()]))
-
-    def creases(res):
-        return {m.photo for m in res.marks.marks if m.proposed and m.edge == "wing/front-right"}
-
-    err_full = err(full)
+    c, start, hand, err, creases, err_full = _crease_draw(193, 1)
     am._CREASE_MARKED = False
     try:
         before = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
@@ -950,21 +960,8 @@ def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_ph
     issue's 1.2x of the fully marked solve's."""
     import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
-    from lumigraph.stereo.debevec1996.solve import solve_facade
 
-    c = BF.rendered_case(66)
-    draws = BF.rendered_draws(66, draws=2)
-    full, hand = draws[1]
-    start = draws.rough
-
-    def err(marks, **kw):
-        sol = solve_facade(start, marks, c["K"], noise_px=0.5, **kw)
-        return np.sqrt(np.mean([((sol.params[n] - v) / v) ** 2 for n, v in c["truth"].items()]))
-
-    def creases(res):
-        return {m.photo for m in res.marks.marks if m.proposed and m.edge == "wing/front-right"}
-
-    err_full = err(full)
+    c, start, hand, err, creases, err_full = _crease_draw(66, 1)
     now = am.CREASE_REACH_PX
     am.CREASE_REACH_PX = 1.5
     try:
