@@ -498,7 +498,8 @@ RENDERED_DRAWS = 4      # noise draws of the marks per seed (:func:`rendered_dra
 # informational ones): the rendered row counts the failing draws they cover
 DOUBTS = ("proposals on edges the solved model hides", "no hand mark or proposal constrains",
           "the solve with the proposals leaves out", "the proposals took",
-          "the image lines of the edges that", "proposals that alone place what they move")
+          "the image lines of the edges that", "proposals that alone place what they move",
+          "the image lines past the corners that")
 
 
 def automatic_marking_rendered(quick: bool):

@@ -157,6 +157,7 @@ _IN_TEXTURE = True
 _CREASE_MOVING = True
 _RESTART = True
 _RUN_ON = True
+_RUN_ON_ALONE = True
 # the loose crease scan (a block the marks place, loosely) may propose an edge
 # that is marked in other photographs, not only edges marked nowhere: the
 # edge that places a wing's end is often the very crease one proposal
@@ -1381,19 +1382,41 @@ def _ends_of(model, name: str) -> list:
     ``model``'s edges that the parameter ``name`` slides along their own
     line (a block's height moves its vertical edges' top ends so); an end
     it also moves across the line does not count."""
+    d = np.zeros(len(model.values))
+    d[model.slot_of(name)] = 1.0
+    return _ends_along(model, d)
+
+
+def _ends_along(model, d: np.ndarray) -> list:
+    """:func:`_ends_of` for a direction ``d`` ``(S,)`` of the slots (a wing's
+    width and offset together, moving its right end alone).
+
+    >>> from lumigraph.stereo.debevec1996.model import BlockModel
+    >>> from lumigraph.stereo.debevec1996.solve import FIXTURE
+    >>> m = BlockModel.from_dict(FIXTURE)
+    >>> d = np.zeros(len(m.values)); d[m.slot_of("tower/height")] = 1.0
+    >>> [(m.edge_names[i], w) for i, w in _ends_along(m, d)]     # the verticals' tops
+    [('tower/front-left', 1), ('tower/front-right', 1), ('tower/back-left', 1), ('tower/back-right', 1)]
+    >>> d[:] = 0.0; d[m.slot_of("tower/width")] = 1.0             # centred: both ends
+    >>> sorted((m.edge_names[i], w) for i, w in _ends_along(m, d))
+    [('tower/bottom-front', 0), ('tower/bottom-front', 1), ('tower/top-front', 0), ('tower/top-front', 1)]
+    >>> d[m.slot_of("tower/offset_x")] = 0.5    # the right end only (and the depth, tied to width)
+    >>> sorted((m.edge_names[i], w) for i, w in _ends_along(m, d))
+    [('tower/bottom-front', 1), ('tower/bottom-left', 1), ('tower/top-front', 1), ('tower/top-left', 1)]
+    """
     C0, C1 = model.edge_matrices()
-    th, s = model.values, model.slot_of(name)
+    th = model.values
     out = []
     for i in range(len(C0)):
-        d = (C1[i] - C0[i]) @ th
-        L = float(np.linalg.norm(d))
+        e = (C1[i] - C0[i]) @ th
+        L = float(np.linalg.norm(e))
         if L <= 1e-12:
             continue
-        d /= L
+        e /= L
         for w, C in enumerate((C0, C1)):
-            m = C[i][:, s]
+            m = C[i] @ d
             nm = float(np.linalg.norm(m))
-            if nm > 1e-12 and np.linalg.norm(m - (m @ d) * d) < 0.05 * nm:
+            if nm > 1e-12 and np.linalg.norm(m - (m @ e) * e) < 0.05 * nm:
                 out.append((i, w))
     return out
 
@@ -1429,22 +1452,74 @@ def _steps_on_line(grey, a, u, ts, *, sign=None, within_px: float = 1.0):
     return ok, inside, sign
 
 
+def _end_views(sol, images: dict, *, min_length_px: float) -> dict:
+    """Per photograph of the solve ``sol``: its visible edges (name ->
+    segment), every edge's full projection and its intrinsics."""
+    from lumigraph.stereo.debevec1996.solve import project_model_edges
+
+    views = {}
+    for p, pose in sol.poses.items():
+        Kp = np.asarray(sol.K[p], float)
+        _, vis = _visible(sol.model, p, pose, images[p], Kp, tol_px=1.0,
+                          min_length_px=min_length_px)
+        views[p] = (dict(vis), project_model_edges(sol.model, Kp, *pose), Kp)
+    return views
+
+
+def _end_pairs(model, ends: list, views: dict, chans: dict, *, min_length_px: float):
+    """The (photograph, edge end) pairs the run-on tests read: each end of
+    ``ends`` (:func:`_ends_along`) whose edge is visible, whose visible
+    stretch reaches that end and whose own step shows along half its
+    stretch or more. Yields ``(photo, edge name, end, other end, u, L,
+    channel, sign)``: the line is ``other + t u`` (px), the end at ``t = L``."""
+    for p, (vis, full, _) in views.items():
+        for i, w in ends:
+            en = model.edge_names[i]
+            if en not in vis:
+                continue
+            seg, fe = vis[en], np.r_[full[en]].ravel()
+            end, other = (fe[2:], fe[:2]) if w == 1 else (fe[:2], fe[2:])
+            L = float(np.hypot(*(end - other)))
+            # the visible stretch is sampled at 41 places: its ends are
+            # within a 40th of the edge of the true ones
+            if L < min_length_px or min(np.hypot(*(seg[:2] - end)),
+                                        np.hypot(*(seg[2:] - end))) > 2.0 + L / 40:
+                continue
+            u = (end - other) / L
+            g = _strongest(chans[p], seg)
+            t0 = float(min((seg[:2] - other) @ u, (seg[2:] - other) @ u))
+            ok, ins, sign = _steps_on_line(g, other, u, np.arange(t0 + 2.0, L - 2.0, 3.0))
+            if ins.sum() < 3 or ok[ins].mean() < 0.5:
+                continue        # its own step does not show: nothing to follow
+            yield p, en, w, other, u, L, g, sign
+
+
+def _run_past(g, other, u, L: float, sign: float) -> float:
+    """How far (px) the step along ``other + t u`` goes on past ``t = L``: to
+    the first three places in a row 3 px apart without it, up to 200 px (0:
+    none of ``L + 3, L + 6, L + 9`` has it)."""
+    ts = np.arange(L + RUN_ON_REACH_PX[0], L + 200.0, 3.0)
+    ok, ins, _ = _steps_on_line(g, other, u, ts, sign=sign)
+    stop = next((j for j in range(len(ts) - 2) if not ins[j] or not ok[j:j + 3].any()),
+                len(ts))
+    return float(ts[stop - 1] - L) if stop > 0 else 0.0
+
+
 def _runs_on(sol, images: dict, chans: dict, *, min_length_px: float) -> dict:
     """The parameters whose ends the image lines run on past, at the solve
     ``sol``: ``{name: (median share, move, pairs, rate)}``, ``move``
     (parameter units) the median over the pairs of how far the step runs on
-    past the end (to its first three missing places in a row, up to 200 px)
-    over the end's rate, ``rate`` the median rate (px per unit of the
-    parameter).
+    past the end (:func:`_run_past`) over the end's rate, ``rate`` the
+    median rate (px per unit of the parameter).
 
     A block locked onto a window row or a course below its true top (the
     rendered tower 16 % short, session 35) fits its marks and proposals; the
     one evidence against it is its vertical edges, whose steps go on past
     the model's top. Each visible edge whose end the parameter slides (see
     :func:`_ends_of`), whose visible stretch reaches that end and whose own
-    step shows along half its stretch or more, gives one pair: the share of
-    places 3-30 px past the end where the step goes on
-    (:data:`RUN_ON_SHARE`, :data:`RUN_ON_PAIRS`)."""
+    step shows along half its stretch or more, gives one pair
+    (:func:`_end_pairs`): the share of places 3-30 px past the end where
+    the step goes on (:data:`RUN_ON_SHARE`, :data:`RUN_ON_PAIRS`)."""
     from lumigraph.stereo.debevec1996.solve import project_model_edges
 
     model, out = sol.model, {}
@@ -1453,59 +1528,98 @@ def _runs_on(sol, images: dict, chans: dict, *, min_length_px: float) -> dict:
     ends = {n: e for n, e in ends.items() if e}
     if not ends:
         return out
-    views = {}
-    for p, pose in sol.poses.items():
-        Kp = np.asarray(sol.K[p], float)
-        _, vis = _visible(model, p, pose, images[p], Kp, tol_px=1.0, min_length_px=min_length_px)
-        views[p] = (dict(vis), project_model_edges(model, Kp, *pose), Kp)
+    views = _end_views(sol, images, min_length_px=min_length_px)
     lo, hi = RUN_ON_REACH_PX
     for name, E in ends.items():
         th = model.values.copy()
         h = 1e-4 * max(1.0, abs(th[model.slot_of(name)]))
         th[model.slot_of(name)] += h
         moved = model.with_values({n: float(th[model.slot_of(n)]) for n in model.parameter_names})
-        pairs = []
-        for p, (vis, full, Kp) in views.items():
-            full2 = None
-            for i, w in E:
-                en = model.edge_names[i]
-                if en not in vis:
-                    continue
-                seg, fe = vis[en], np.r_[full[en]].ravel()
-                end, other = (fe[2:], fe[:2]) if w == 1 else (fe[:2], fe[2:])
-                L = float(np.hypot(*(end - other)))
-                # the visible stretch is sampled at 41 places: its ends are
-                # within a 40th of the edge of the true ones
-                if L < min_length_px or min(np.hypot(*(seg[:2] - end)),
-                                            np.hypot(*(seg[2:] - end))) > 2.0 + L / 40:
-                    continue
-                u = (end - other) / L
-                g = _strongest(chans[p], seg)
-                t0 = float(min((seg[:2] - other) @ u, (seg[2:] - other) @ u))
-                ok, ins, sign = _steps_on_line(g, other, u, np.arange(t0 + 2.0, L - 2.0, 3.0))
-                if ins.sum() < 3 or ok[ins].mean() < 0.5:
-                    continue        # its own step does not show: nothing to follow
-                ok, ins, _ = _steps_on_line(g, other, u, np.arange(L + lo, L + hi + 1e-9, 3.0),
-                                            sign=sign)
-                if ins.sum() < 3:
-                    continue
-                if full2 is None:
-                    R, t = sol.poses[p]
-                    full2 = project_model_edges(moved, Kp, R, t)
-                f2 = np.r_[full2[en]].ravel()
-                rate = float(((f2[2:] if w == 1 else f2[:2]) - end) @ u) / h
-                ts = np.arange(L + lo, L + 200.0, 3.0)
-                ok2, ins2, _ = _steps_on_line(g, other, u, ts, sign=sign)
-                stop = next((j for j in range(len(ts) - 2) if not ins2[j] or not ok2[j:j + 3].any()),
-                            len(ts))
-                run = float(ts[stop - 1] - L) if stop > 0 else 0.0
-                pairs.append((p, float(ok[ins].mean()), run / rate if abs(rate) > 1e-9 else 0.0,
-                              abs(rate)))
+        pairs, full2 = [], {}
+        for p, en, w, other, u, L, g, sign in _end_pairs(model, E, views, chans,
+                                                         min_length_px=min_length_px):
+            ok, ins, _ = _steps_on_line(g, other, u, np.arange(L + lo, L + hi + 1e-9, 3.0),
+                                        sign=sign)
+            if ins.sum() < 3:
+                continue
+            if p not in full2:
+                R, t = sol.poses[p]
+                full2[p] = project_model_edges(moved, views[p][2], R, t)
+            f2 = np.r_[full2[p][en]].ravel()
+            end = other + L * u
+            rate = float(((f2[2:] if w == 1 else f2[:2]) - end) @ u) / h
+            run = _run_past(g, other, u, L, sign)
+            pairs.append((p, float(ok[ins].mean()), run / rate if abs(rate) > 1e-9 else 0.0,
+                          abs(rate)))
         if len(pairs) >= RUN_ON_PAIRS and len({q[0] for q in pairs}) >= 2:
             med = float(np.median([q[1] for q in pairs]))
             if med >= RUN_ON_SHARE:
                 out[name] = (med, float(np.median([q[2] for q in pairs])), len(pairs),
                              float(np.median([q[3] for q in pairs])))
+    return out
+
+
+# a proposal that alone holds a direction (:func:`_alone`) is checked by
+# nothing but the image lines of the edges whose ends that direction slides:
+# where their steps go on past the ends it places, in the median pair, by
+# two of the run test's places (3 px apart) or more, it is on a line short
+# of the corner (fresh s233's second draw from blocks.json: the wing's right
+# end on a window's edge, its lines running on 39 px in the median pair, and
+# wing/width 40 % short). At the true models of seeds 0, 4-6 (the true
+# cameras), the median run along each parameter's ends and each wing end is
+# 0 px but for one (9 px, s5's wing depth, 7 pairs)
+RUN_ON_ALONE_PX = 6.0
+
+
+def _direction_run(sol, d: np.ndarray, views: dict, chans: dict, *, min_length_px: float):
+    """Along the direction ``d`` ``(S,)`` of the slots of ``sol.model``: the
+    median run (px, :func:`_run_past`) past the ends it slides
+    (:func:`_ends_along`) over the pairs :func:`_end_pairs` reads, the move
+    along ``d`` to where the median pair's step ends (units of ``d``), the
+    count of pairs, the median rate (px per unit of ``d``); None for fewer
+    than :data:`RUN_ON_PAIRS` pairs or one photograph."""
+    from lumigraph.stereo.debevec1996.solve import project_model_edges
+
+    model = sol.model
+    E = _ends_along(model, d)
+    if not E:
+        return None
+    h = 1e-4 * max(1.0, float(np.abs(model.values[d != 0]).max()))
+    th = model.values + h * d
+    moved = model.with_values({n: float(th[model.slot_of(n)]) for n in model.parameter_names})
+    runs, moves, rates, photos, full2 = [], [], [], set(), {}
+    for p, en, w, other, u, L, g, sign in _end_pairs(model, E, views, chans,
+                                                     min_length_px=min_length_px):
+        if p not in full2:
+            full2[p] = project_model_edges(moved, views[p][2], *sol.poses[p])
+        f2 = np.r_[full2[p][en]].ravel()
+        rate = float(((f2[2:] if w == 1 else f2[:2]) - (other + L * u)) @ u) / h
+        run = _run_past(g, other, u, L, sign)
+        runs.append(run)
+        moves.append(run / rate if abs(rate) > 1e-9 else 0.0)
+        rates.append(abs(rate))
+        photos.add(p)
+    if len(runs) < RUN_ON_PAIRS or len(photos) < 2:
+        return None
+    return float(np.median(runs)), float(np.median(moves)), len(runs), float(np.median(rates))
+
+
+def _alone_runs_on(sol, marks, images: dict, chans: dict, *, min_length_px: float) -> dict:
+    """The proposals that alone hold a direction (:func:`_alone`) whose ends
+    the image lines run on past by :data:`RUN_ON_ALONE_PX` or more in the
+    median pair (:func:`_direction_run`): ``{(photo, edge): (median run
+    px, move, pairs, rate, d)}``, ``d`` ``(S,)`` the direction over the model's
+    slots (its largest component ±1) and ``move`` along it to where the
+    lines end."""
+    out = {}
+    alone = _alone_directions(sol, marks)
+    if not alone:
+        return out
+    views = _end_views(sol, images, min_length_px=min_length_px)
+    for key, _, d in alone:
+        got = _direction_run(sol, d, views, chans, min_length_px=min_length_px)
+        if got is not None and got[0] >= RUN_ON_ALONE_PX:
+            out[key] = (*got, d)
     return out
 
 
@@ -1584,26 +1698,49 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
         # new end is kept where the steps end at its corners and it rejects
         # and holds no more than the kept one
         over = _runs_on(pick.solution, images, chans, min_length_px=min_length_px)
-        if over:
+        lone = (_alone_runs_on(pick.solution, pick.marks, images, chans,
+                               min_length_px=min_length_px) if _RUN_ON_ALONE else {})
+        if over or lone:
             s = pick.solution
             free = [n for n in model.parameter_names if n in s.params and n not in s.held]
             bounds = _trust_bounds(model, free, trust)
+            step = {n: v[1] for n, v in over.items()}
+            for _, move, _, _, d in lone.values():
+                for n in free:
+                    if n not in step and d[model.slot_of(n)]:
+                        step[n] = move * d[model.slot_of(n)]
             again, _ = _automark_once(model, marks, images, K, vote_first=_VOTE_FIRST,
                                       start=model.with_values({n: float(np.clip(
-                                          s.params[n] + (over[n][1] if n in over else 0.0),
-                                          *bounds[n])) for n in free}), **kw)
+                                          s.params[n] + step.get(n, 0.0), *bounds[n]))
+                                          for n in free}), **kw)
             tried.append(("restarted where the image lines past its corners end", again))
             still = _runs_on(again.solution, images, chans, min_length_px=min_length_px)
-            if not set(over) & set(still) and _rank(again, marks)[:2] <= _rank(pick, marks)[:2]:
+            views = _end_views(again.solution, images, min_length_px=min_length_px) if lone else {}
+            still_lone = [k for k, (*_, d) in lone.items()
+                          if (r := _direction_run(again.solution, d, views, chans,
+                                                  min_length_px=min_length_px)) is not None
+                          and r[0] >= RUN_ON_ALONE_PX]
+            if (not set(over) & set(still) and not still_lone
+                    and _rank(again, marks)[:2] <= _rank(pick, marks)[:2]):
                 pick = again
             else:
-                said_run_on = ["the image lines of the edges that " + ", ".join(sorted(over))
-                               + " end run on past their ends in the photographs (median share "
-                               + ", ".join(f"{v[0]:.2f}" for _, v in sorted(over.items()))
-                               + "): those parameters are likely "
-                               "locked on lines short of the true corners, and a restart from "
-                               "where the lines end did not settle it; mark an edge at those "
-                               "corners by hand"]
+                if over:
+                    said_run_on.append(
+                        "the image lines of the edges that " + ", ".join(sorted(over))
+                        + " end run on past their ends in the photographs (median share "
+                        + ", ".join(f"{v[0]:.2f}" for _, v in sorted(over.items()))
+                        + "): those parameters are likely "
+                        "locked on lines short of the true corners, and a restart from "
+                        "where the lines end did not settle it; mark an edge at those "
+                        "corners by hand")
+                if lone:
+                    said_run_on.append(
+                        "the image lines past the corners that "
+                        + "; ".join(f"{e!r} on {p!r} (median {v[0]:.0f} px over {v[2]} pairs)"
+                                    for (p, e), v in sorted(lone.items()))
+                        + " alone place run on: likely proposals on lines short of the true "
+                          "corners, and a restart from where the lines end did not settle it; "
+                          "mark an edge at those corners by hand")
     if said_run_on:
         pick = replace(pick, warnings=list(pick.warnings) + said_run_on)
     alone = _alone(pick.solution, pick.marks)
@@ -1660,23 +1797,33 @@ def _alone(sol, marks) -> list:
     >>> _alone(solve_facade(m, one, K, noise_px=0.5), one)
     [(('photo_00.png', 'tower/top-front'), ['tower/height'])]
     """
+    return [(key, names) for key, names, _ in _alone_directions(sol, marks)]
+
+
+def _alone_directions(sol, marks) -> list:
+    """:func:`_alone` with each direction over the model's slots, its
+    largest component ±1: ``[((photo, edge), [names], d (S,))]``."""
     ms = list(marks.marks)
     lone = [int(i) for i in np.flatnonzero(np.isinf(deleted_residuals(sol, ms)))
             if ms[i].proposed]          # a hand mark is the user's to check
     if not lone:
         return []
     keep, cols, vals = _edge_rows(sol, ms)
-    out = []
+    model, out = sol.model, []
     for i in lone:
-        names = _held_by(sol, keep, cols, vals, i)
+        names, v = _held_by(sol, keep, cols, vals, i)
         if names:           # a photograph's pose alone is that photograph's
-            out.append(((ms[i].photo, ms[i].edge), names))
+            d = np.zeros(len(model.values))
+            for u, x in zip(sol.unknowns, v, strict=True):
+                if u in model.parameter_names:
+                    d[model.slot_of(u)] = x
+            out.append(((ms[i].photo, ms[i].edge), names, d / np.abs(d).max()))
     return out
 
 
-def _held_by(sol, keep, cols, vals, i: int) -> list:
+def _held_by(sol, keep, cols, vals, i: int) -> tuple:
     """The model parameters of the direction that mark ``i`` alone holds
-    (see :func:`_alone`)."""
+    (see :func:`_alone`), and that direction over ``sol.unknowns``."""
     n, p = len(keep), len(sol.unknowns)
     X = np.zeros((n, 2, p))
     for k in range(2):
@@ -1689,7 +1836,7 @@ def _held_by(sol, keep, cols, vals, i: int) -> list:
     v = np.abs(V[:, 0])
     names = [u for u, x in zip(sol.unknowns, v, strict=True) if ":" not in u and u != "focal_scale"
              and x >= 0.1 * v.max()]
-    return names
+    return names, V[:, 0] / scale
 
 
 def _rank(res, marks) -> tuple:
