@@ -97,7 +97,11 @@ other edges' steps then run on past the model's corner
 marking runs once more from the kept end's solve with that parameter
 moved to where the steps end, keeps that run where its corners stop the
 lines and it rejects and holds no more, and otherwise names the
-parameters in the warnings.
+parameters in the warnings. A proposal that alone holds some direction of
+the parameters (:func:`_alone`: nothing else checks it) is tested the same
+way along that direction (:func:`_alone_runs_on`): a wing's right end set by
+one proposal on a window's edge leaves its horizontal edges' steps running
+on past it, and the run starts again with the end moved to where they stop.
 
 A photograph whose hand marks fix its pose only together with parameters
 the others leave free is left out of the joint rough solve; with a rough
