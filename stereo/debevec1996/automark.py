@@ -162,6 +162,7 @@ _CREASE_MOVING = True
 _RESTART = True
 _RUN_ON = True
 _RUN_ON_ALONE = True
+_HAND_FIT = True
 # the loose crease scan (a block the marks place, loosely) may propose an edge
 # that is marked in other photographs, not only edges marked nowhere: the
 # edge that places a wing's end is often the very crease one proposal
@@ -194,7 +195,8 @@ class AutomarkResult:
     proposed: int
     solution: object = field(repr=False)
     warnings: list = field(default_factory=list)
-    # each start tried: {"start", "hand_marks_rejected", "held", "sigma_px", "proposed", "chosen"}
+    # each start tried: {"start", "hand_marks_rejected", "held", "sigma_px", "fits_noise",
+    # "hand_marks_fit_noise", "proposed", "chosen"}
     candidates: list = field(default_factory=list)
 
 
@@ -1745,6 +1747,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
                         + " alone place run on: likely proposals on lines short of the true "
                           "corners, and a restart from where the lines end did not settle it; "
                           "mark an edge at those corners by hand")
+    kept = pick     # the warnings below make a new result; the record marks this one
     if said_run_on:
         pick = replace(pick, warnings=list(pick.warnings) + said_run_on)
     alone = _alone(pick.solution, pick.marks)
@@ -1758,7 +1761,7 @@ def automark(model, marks, images: dict, K: dict, *, rough_rotations=None, noise
             + "; ".join(f"{e!r} on {p!r} ({', '.join(names)})" for (p, e), names in alone)
             + ": look at them in the overlays, or mark by hand another edge that moves those "
               "parameters"])
-    cands = [_candidate(name, r, marks, chosen=r is pick) for name, r in tried]
+    cands = [_candidate(name, r, marks, chosen=r is kept) for name, r in tried]
     out = sorted(_hand_outliers(pick.solution, marks))
     if not out:
         return replace(pick, candidates=cands)
@@ -1843,30 +1846,68 @@ def _held_by(sol, keep, cols, vals, i: int) -> tuple:
     return names, V[:, 0] / scale
 
 
+def _hand_misfit(sol, marks) -> bool:
+    """Whether the hand ``marks`` that the solve ``sol`` kept fit its model
+    worse than the endpoint noise ``sol.noise_px`` explains. A mark's RMS
+    distance ``d`` along it (:attr:`FacadeSolution.mark_rms_px`) has
+    ``3 d² = h0² + h0 h1 + h1²`` for endpoint distances ``h0, h1``: for
+    independent endpoint noise σ, ``σ² (1.5 χ²₁ + 0.5 χ²₁)``, mean 2σ² and
+    variance 5σ⁴; summed over ``n`` marks, ≈ 1.25 σ² χ² with 1.6 n degrees
+    of freedom (Satterthwaite). Past its 0.1 % tail is a misfit (the fitted
+    parameters' share of the residuals is left in: the test errs towards a
+    fit). The hand marks are the same in every start, so unlike σ̂ (each
+    start fits its own proposals) this compares like with like.
+
+    >>> from types import SimpleNamespace as NS
+    >>> marks = NS(marks=[NS(photo="a.png", edge=f"e{i}") for i in range(32)])   # 32 hand marks
+    >>> at = lambda px: NS(noise_px=0.5, mark_rms_px=[("a.png", f"e{i}", px) for i in range(32)])
+    >>> _hand_misfit(at(0.49), marks), _hand_misfit(at(0.73), marks)   # s64 d3's two starts
+    (False, True)
+    """
+    from scipy.stats import chi2
+
+    hand = {(m.photo, m.edge) for m in marks.marks}
+    d = np.array([r for p, e, r in sol.mark_rms_px if (p, e) in hand])
+    if len(d) < 5:
+        return False
+    t = 3.0 * np.sum(d ** 2) / sol.noise_px ** 2 / 1.25
+    return bool(t > chi2.ppf(0.999, 1.6 * len(d)))
+
+
 def _rank(res, marks) -> tuple:
     """The order :func:`automark` picks its starts by: hand marks the final
-    solve rejects, parameters held, proposals (more first: each is a model
-    edge on a detected line that passed every check), σ̂ (px). Both ends
-    fit their own proposals: a block locked onto the wrong lines agrees
-    with itself, so σ̂ comes last (on the tuning seeds it picked the wrong
-    end as often as the right one where the two differed by under 5 %)."""
+    solve rejects, parameters held, whether the kept hand marks fit worse
+    than the noise (:func:`_hand_misfit`), proposals (more first: each is
+    a model edge on a detected line that passed every check), σ̂ (px). Both
+    ends fit their own proposals: a block locked onto the wrong lines
+    agrees with itself, so σ̂ comes last (on the tuning seeds it picked the
+    wrong end as often as the right one where the two differed by under
+    5 %); the user's own marks do not move with the proposals, and a start
+    that leaves them beyond their noise holds a block on other lines
+    (s64's fourth draw from ``blocks.json``: the voted start, ahead by its
+    88 proposals, fitted the hand marks at 0.73 px RMS for 0.5 px given,
+    every parameter 5 % small, 22x; the rough model's start, 0.49 px, 0.65x)."""
     sol = res.solution
-    return (len(_hand_outliers(sol, marks)), len(sol.held), -res.proposed, float(sol.sigma_px))
+    return (len(_hand_outliers(sol, marks)), len(sol.held),
+            _hand_misfit(sol, marks) if _HAND_FIT else False, -res.proposed,
+            float(sol.sigma_px))
 
 
 def _restart_key(res, marks) -> tuple:
     """The order :func:`automark` ranks its ends by once the kept one's marks
     do not fit the noise: :func:`_rank`'s, with whether the marks fit worse
-    than the noise (:func:`_misfit`) put after the parameters held."""
-    out, held, proposed, sigma = _rank(res, marks)
-    return (out, held, _misfit(res.solution), proposed, sigma)
+    than the noise (:func:`_misfit`) put after the hand marks' fit."""
+    out, held, hand, proposed, sigma = _rank(res, marks)
+    return (out, held, hand, _misfit(res.solution), proposed, sigma)
 
 
 def _candidate(start: str, res, marks, *, chosen: bool) -> dict:
     """One start's record for :attr:`AutomarkResult.candidates`."""
-    out, held, _, sigma = _rank(res, marks)
+    out, held, hand, _, sigma = _rank(res, marks)
     return {"start": start, "hand_marks_rejected": out, "held": held, "sigma_px": round(sigma, 4),
-            "fits_noise": not _misfit(res.solution), "proposed": res.proposed, "chosen": chosen}
+            "fits_noise": not _misfit(res.solution),
+            "hand_marks_fit_noise": not _hand_misfit(res.solution, marks),
+            "proposed": res.proposed, "chosen": chosen}
 
 
 def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, vote_first: bool,
