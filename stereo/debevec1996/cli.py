@@ -299,7 +299,9 @@ def _automark(args) -> int:
         say(args, "starts: " + "; ".join(
             f"{c['start']} ({c['hand_marks_rejected']} hand marks rejected, {c['held']} held, "
             f"{c['proposed']} proposed, σ̂ {c['sigma_px']:.2f} px"
-            + ("" if c["fits_noise"] else ", beyond the noise given") + ")"
+            + ("" if c["fits_noise"] else ", beyond the noise given")
+            + ("" if c.get("hand_marks_fit_noise", True) else ", hand marks beyond their noise")
+            + ")"
             + (" <- kept" if c["chosen"] else "")
             for c in res.candidates))
     say(args, f"{len(marks.marks)} hand marks, {res.proposed} proposed -> {args.out}")

@@ -557,8 +557,8 @@ def test_cli_records_each_start_tried_in_the_meta(tmp_path):
 
     starts = json.loads(meta_path(out).read_text())["quality"]["starts"]
     assert 1 <= len(starts) <= 3 and sum(s["chosen"] for s in starts) == 1, starts
-    assert all({"start", "hand_marks_rejected", "held", "proposed", "sigma_px", "fits_noise"}
-               <= set(s) for s in starts), starts
+    assert all({"start", "hand_marks_rejected", "held", "proposed", "sigma_px", "fits_noise",
+                "hand_marks_fit_noise"} <= set(s) for s in starts), starts
 
 
 def _around(model, photos: int, *, arc):
