@@ -931,22 +931,15 @@ def test_a_wing_end_one_proposal_places_short_of_its_corner_is_restarted_where_i
     the end moved to where they stop, the rounds find the corner, the
     restart is kept, and the error is within the issue's 1.2x of the fully
     marked solve's, with nothing left to warn of."""
-    import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
 
     c, start, hand, err, _, err_full = _crease_draw(233, 1)
-    am._RUN_ON_ALONE = False
-    try:
-        before = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
-                             rough_rotations=c["rotations"])
-    finally:
-        am._RUN_ON_ALONE = True
+    before = _automark_with(c, start, hand, _RUN_ON_ALONE=False)
     # the premise: beyond 1.2x, and the one proposal that alone placed the end is named
     assert err(before.marks, hold_unconstrained=True) > 1.2 * err_full
     lone = [w for w in before.warnings if w.startswith("proposals that alone")]
     assert lone and "'wing/front-right'" in lone[0], before.warnings
-    after = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
-                        rough_rotations=c["rotations"])
+    after = _automark_with(c, start, hand)
     assert [x["start"] for x in after.candidates if x["chosen"]] == [
         "restarted where the image lines past its corners end"], after.candidates
     assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
@@ -977,6 +970,22 @@ def test_a_start_that_leaves_the_hand_marks_beyond_their_noise_is_not_kept():
     kept = [x for x in res.candidates if x["chosen"]]
     assert len(kept) == 1 and kept[0]["hand_marks_fit_noise"], res.candidates
     assert err(res.marks, hold_unconstrained=True) <= 1.2 * err_full
+
+
+def _automark_with(c, start, hand, **switches):
+    """Automatic marking of a rendered draw with the module's ``switches``
+    (name=value) set for this call alone: the code a test's premise ran."""
+    import lumigraph.stereo.debevec1996.automark as am
+
+    was = {k: getattr(am, k) for k in switches}
+    for k, v in switches.items():
+        setattr(am, k, v)
+    try:
+        return am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
+                           rough_rotations=c["rotations"])
+    finally:
+        for k, v in was.items():
+            setattr(am, k, v)
 
 
 def _crease_draw(seed, k):
@@ -1015,22 +1024,15 @@ def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others
     Allowed to propose it in the others, it does (two photographs or more),
     no proposal is off its true edge, and the error is within the issue's
     1.2x of the fully marked solve's."""
-    import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
 
     c, start, hand, err, creases, err_full = _crease_draw(193, 1)
-    am._CREASE_MARKED = False
-    try:
-        before = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
-                             rough_rotations=c["rotations"])
-    finally:
-        am._CREASE_MARKED = True
+    before = _automark_with(c, start, hand, _CREASE_MARKED=False)
     # the premise: one photograph's crease proposal, the error beyond 1.2x, no doubt said
     assert len(creases(before)) == 1, creases(before)
     assert err(before.marks, hold_unconstrained=True) > 1.2 * err_full
     assert not any(w.startswith(BF.DOUBTS) for w in before.warnings), before.warnings
-    after = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
-                        rough_rotations=c["rotations"])
+    after = _automark_with(c, start, hand)
     assert len(creases(after)) >= 2, after.warnings
     assert not _far(c, after.marks)
     assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
@@ -1050,17 +1052,10 @@ def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_ph
     before). Reaching :data:`CREASE_REACH_PX`, both photographs take the
     crease, no proposal is off its true edge, and the error is within the
     issue's 1.2x of the fully marked solve's."""
-    import lumigraph.stereo.debevec1996.automark as am
     from lumigraph.stereo import bench_facade as BF
 
     c, start, hand, err, creases, err_full = _crease_draw(66, 1)
-    now = am.CREASE_REACH_PX
-    am.CREASE_REACH_PX = 1.5
-    try:
-        before = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
-                             rough_rotations=c["rotations"])
-    finally:
-        am.CREASE_REACH_PX = now
+    before = _automark_with(c, start, hand, CREASE_REACH_PX=1.5)
     # the premise: no crease proposal, the error beyond 1.2x; the one
     # proposal that placed the end alone is named (before session 45,
     # nothing was said)
@@ -1068,8 +1063,7 @@ def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_ph
     assert err(before.marks, hold_unconstrained=True) > 1.2 * err_full
     lone = [w for w in before.warnings if w.startswith("proposals that alone")]
     assert lone and "'wing/top-right'" in lone[0] and "wing/width" in lone[0], before.warnings
-    after = am.automark(start, hand, c["images"], c["K"], noise_px=0.5,
-                        rough_rotations=c["rotations"])
+    after = _automark_with(c, start, hand)
     assert len(creases(after)) >= 2, after.warnings
     assert not _far(c, after.marks)
     assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
