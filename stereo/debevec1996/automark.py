@@ -172,6 +172,10 @@ _HAND_FIT = True
 # the house's weakest direction that found the tower's top on a bed joint;
 # the neighbour test and the acceptance tests added since stand guard now
 _CREASE_MARKED = True
+# a loose scan whose ±4 σ move no line CREASE_APART_PX leaves no line out for
+# scoring every move alike (session 47: it left every line out, so a wing's
+# end the marks placed to a few pixels was never scanned; seed 263)
+_NO_RIVALS = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -1223,7 +1227,8 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     ``sigma`` (the direction's σ, m) is given, within 4 σ; skipped when 1 σ
     moves no edge by :data:`CREASE_PLACED_PX`), every moving edge is projected every half
     pixel of move (a line that moves less than :data:`CREASE_APART_PX`
-    over the whole scan is left out of it: it scores every move alike);
+    over the whole scan is left out of it: it scores every move alike;
+    where no line moves that far, none is: no move can have a rival);
     its band steps (:func:`_band_steps`) across all
     photographs, oriented by the move, give one robust z per edge (a crease
     keeps its sign from photograph to photograph: its two walls' shading
@@ -1267,6 +1272,11 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
     # only where its edge is scanned in another photograph and its own step
     # is there)
     least = CREASE_APART_PX / (hi - lo) if _CREASE_MOVING else 0.0     # px per unit move
+    if _NO_RIVALS and (hi - lo) * rates.max() < CREASE_APART_PX:
+        # no line moves the rival distance over the whole scan (a block the
+        # marks place to a few pixels): no rival can rise, and leaving out
+        # the lines that cannot tell one move from another left none
+        least = 0.0
     at0 = {key: val for key, val in at0.items() if val[2] >= least}
     if not at0:
         return []
