@@ -205,6 +205,29 @@ def _painted_step(seg, step, *, rng, half=6.0, blur=1.0, shape=(480, 640)):
     return 100.0 + rng.normal(0.0, 2.0, shape) + step * gaussian_filter(band, blur)
 
 
+# the wing's right end alone: its offset and width together, the left end still
+_WING_END = (["wing/offset_x", "wing/width"], np.array([1.0, 2.0]) / np.sqrt(5.0))
+
+
+def _crease_cameras():
+    """Photographs a and b: the crease of ``TWO``'s wing front against the
+    house's wall seen from the front left, moving 10-16 px per metre of
+    the wing's end."""
+    return {"a": _camera((-22.0, -30.0, 2.0), (-6.0, 0.0, 2.0)),
+            "b": _camera((-36.0, -22.0, 2.0), (-6.0, 0.0, 2.0))}
+
+
+def _found_in_a_and_b_within_a_pixel(found, true_lines):
+    """The crease proposed in photographs a and b, each within a pixel of
+    its true line (the painted band covers whole pixels)."""
+    assert sorted((m.photo, m.edge) for m in found) == [("a", "wing/front-right"),
+                                                        ("b", "wing/front-right")]
+    for m in found:
+        a, b = true_lines[m.photo][m.edge]
+        n = np.array([-(b - a)[1], (b - a)[0]]) / np.hypot(*(b - a))
+        assert max(abs((m.segment[:2] - a) @ n), abs((m.segment[2:] - a) @ n)) <= 1.0
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_a_line_the_scan_barely_moves_is_no_rival_to_the_crease(seed):
     """``_crease`` along the wing's right end (offset and width together, the
@@ -226,16 +249,14 @@ def test_a_line_the_scan_barely_moves_is_no_rival_to_the_crease(seed):
     truth = BlockModel.from_dict(TWO, where="test")
     start = truth.with_values({"wing/width": 3.7, "wing/offset_x": -7.2})
     assert start.edges()["wing/front-left"][0][0] == pytest.approx(-9.05)   # the left end still
-    cams = {"a": _camera((-22.0, -30.0, 2.0), (-6.0, 0.0, 2.0)),
-            "b": _camera((-36.0, -22.0, 2.0), (-6.0, 0.0, 2.0)),
-            "c": _camera((-60.0, 1.0, 15.0), (-5.0, 1.0, 4.0))}
+    cams = {**_crease_cameras(), "c": _camera((-60.0, 1.0, 15.0), (-5.0, 1.0, 4.0))}
     rng = np.random.default_rng(seed)
     true_lines = {p: project_model_edges(truth, c["K"], c["R"], c["t"]) for p, c in cams.items()}
     greys = {"a": _painted_step(true_lines["a"]["wing/front-right"], 5.0, rng=rng),
              "b": _painted_step(true_lines["b"]["wing/front-right"], 5.0, rng=rng),
              "c": _painted_step(true_lines["c"]["wing/top-right"], 150.0, rng=rng, half=40.0,
                                   blur=8.0)}
-    names, v = ["wing/offset_x", "wing/width"], np.array([1.0, 2.0]) / np.sqrt(5.0)
+    names, v = _WING_END
     slots = np.array([start.slot_of(n) for n in names])
     rates = {(p, start.edge_names[i]): r for (p, i), (_, _, r) in am._crease_lines(
         start, slots, v, 0.0, cams, tol_px=1e9).items()}
@@ -251,13 +272,7 @@ def test_a_line_the_scan_barely_moves_is_no_rival_to_the_crease(seed):
         assert run() == []                                                       # the premise
     finally:
         am._CREASE_MOVING = True
-    found = run()
-    assert sorted((m.photo, m.edge) for m in found) == [("a", "wing/front-right"),
-                                                        ("b", "wing/front-right")]
-    for m in found:
-        a, b = true_lines[m.photo][m.edge]
-        n = np.array([-(b - a)[1], (b - a)[0]]) / np.hypot(*(b - a))
-        assert max(abs((m.segment[:2] - a) @ n), abs((m.segment[2:] - a) @ n)) <= 1.0
+    _found_in_a_and_b_within_a_pixel(run(), true_lines)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -277,12 +292,11 @@ def test_a_scan_too_short_for_a_rival_leaves_no_line_out(seed):
     truth = BlockModel.from_dict(TWO, where="test")
     start = truth.with_values({"wing/width": 4.02, "wing/offset_x": -7.04})
     assert start.edges()["wing/front-left"][0][0] == pytest.approx(-9.05)   # the left end still
-    cams = {"a": _camera((-22.0, -30.0, 2.0), (-6.0, 0.0, 2.0)),
-            "b": _camera((-36.0, -22.0, 2.0), (-6.0, 0.0, 2.0))}
+    cams = _crease_cameras()
     rng = np.random.default_rng(seed)
     true_lines = {p: project_model_edges(truth, c["K"], c["R"], c["t"]) for p, c in cams.items()}
     greys = {p: _painted_step(true_lines[p]["wing/front-right"], 5.0, rng=rng) for p in cams}
-    names, v = ["wing/offset_x", "wing/width"], np.array([1.0, 2.0]) / np.sqrt(5.0)
+    names, v = _WING_END
     slots = np.array([start.slot_of(n) for n in names])
     sigma = 0.03
     rates = [r for _, _, r in am._crease_lines(start, slots, v, 0.0, cams, tol_px=1e9).values()]
@@ -296,13 +310,7 @@ def test_a_scan_too_short_for_a_rival_leaves_no_line_out(seed):
         assert run() == []                                                       # the premise
     finally:
         am._NO_RIVALS = True
-    found = run()
-    assert sorted((m.photo, m.edge) for m in found) == [("a", "wing/front-right"),
-                                                        ("b", "wing/front-right")]
-    for m in found:
-        a, b = true_lines[m.photo][m.edge]
-        n = np.array([-(b - a)[1], (b - a)[0]]) / np.hypot(*(b - a))
-        assert max(abs((m.segment[:2] - a) @ n), abs((m.segment[2:] - a) @ n)) <= 1.0
+    _found_in_a_and_b_within_a_pixel(run(), true_lines)
 
 
 @pytest.fixture(scope="module")
