@@ -172,8 +172,8 @@ _HAND_FIT = True
 # the house's weakest direction that found the tower's top on a bed joint;
 # the neighbour test and the acceptance tests added since stand guard now
 _CREASE_MARKED = True
-# a loose scan whose ±4 σ move no line CREASE_APART_PX leaves no line out for
-# scoring every move alike (session 47: it left every line out, so a wing's
+# a loose scan whose ±4 σ moves no line by CREASE_APART_PX leaves no line out
+# for scoring every move alike (session 47: it left every line out, so a wing's
 # end the marks placed to a few pixels was never scanned; seed 263)
 _NO_RIVALS = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
