@@ -217,6 +217,23 @@ def _crease_cameras():
             "b": _camera((-36.0, -22.0, 2.0), (-6.0, 0.0, 2.0))}
 
 
+def _scanned_without_then_with(switch, start, names, v, cams, greys, *, sigma):
+    """``_crease`` along ``v`` from ``start``, first with the automark
+    module's ``switch`` off, where it finds nothing (the premise), then on:
+    its proposals."""
+    import lumigraph.stereo.debevec1996.automark as am
+
+    def run():
+        return am._crease(start, names, v, cams, greys, rough=start, trust=0.3, sigma=sigma)
+
+    setattr(am, switch, False)
+    try:
+        assert run() == []                                                       # the premise
+    finally:
+        setattr(am, switch, True)
+    return run()
+
+
 def _found_in_a_and_b_within_a_pixel(found, true_lines):
     """The crease proposed in photographs a and b, each within a pixel of
     its true line (the painted band covers whole pixels)."""
@@ -264,15 +281,8 @@ def test_a_line_the_scan_barely_moves_is_no_rival_to_the_crease(seed):
     assert min(rates[("a", "wing/front-right")], rates[("b", "wing/front-right")]) * 8 * 0.15 \
         >= am.CREASE_APART_PX
 
-    def run():
-        return am._crease(start, names, v, cams, greys, rough=start, trust=0.3, sigma=0.15)
-
-    am._CREASE_MOVING = False
-    try:
-        assert run() == []                                                       # the premise
-    finally:
-        am._CREASE_MOVING = True
-    _found_in_a_and_b_within_a_pixel(run(), true_lines)
+    found = _scanned_without_then_with("_CREASE_MOVING", start, names, v, cams, greys, sigma=0.15)
+    _found_in_a_and_b_within_a_pixel(found, true_lines)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -302,15 +312,8 @@ def test_a_scan_too_short_for_a_rival_leaves_no_line_out(seed):
     rates = [r for _, _, r in am._crease_lines(start, slots, v, 0.0, cams, tol_px=1e9).values()]
     assert max(rates) * 8 * sigma < am.CREASE_APART_PX                         # the premise
 
-    def run():
-        return am._crease(start, names, v, cams, greys, rough=start, trust=0.3, sigma=sigma)
-
-    am._NO_RIVALS = False
-    try:
-        assert run() == []                                                       # the premise
-    finally:
-        am._NO_RIVALS = True
-    _found_in_a_and_b_within_a_pixel(run(), true_lines)
+    found = _scanned_without_then_with("_NO_RIVALS", start, names, v, cams, greys, sigma=sigma)
+    _found_in_a_and_b_within_a_pixel(found, true_lines)
 
 
 @pytest.fixture(scope="module")
