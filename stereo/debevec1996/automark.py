@@ -176,6 +176,12 @@ _CREASE_MARKED = True
 # for scoring every move alike (session 47: it left every line out, so a wing's
 # end the marks placed to a few pixels was never scanned; seed 263)
 _NO_RIVALS = True
+# a loose crease scan's crease seen in one photograph is proposed (two before
+# session 48): the scan stays within 4 σ of where the marks put the block
+_ONE_PHOTO_LOOSE = True
+# a proposal the solved model hides is replaced only by a crease of a block
+# that leaving it out frees (session 48; of any block before)
+_UNSEEN_OWN_BLOCK = True
 # the offset (px) either side of an edge at which _seam looks for two faces in one
 # plane when suggesting marks (the association's distance gate, max_distance_px)
 SEAM_TOL_PX = 6.0
@@ -1319,9 +1325,12 @@ def _crease(model, names, direction, cams: dict, greys: dict, *, rough, trust: f
 
     out = refined(CREASE_NEAR_PX)
     if len({m.photo for m in out}) < 2:
-        # seen in one photograph it is no proposal; further out, the band
-        # step's own pull is in the proposal, so only to make the second
-        out = refined(CREASE_REACH_PX)
+        # seen in one photograph it is no proposal of a held block's scan;
+        # further out, the band step's own pull is in the proposal, so only
+        # to see it in more photographs (a loose scan keeps the near one)
+        wide = refined(CREASE_REACH_PX)
+        if len({m.photo for m in wide}) > len({m.photo for m in out}):
+            out = wide
     return out
 
 
@@ -2213,15 +2222,17 @@ def _automark_once(model, marks, images: dict, K: dict, *, greys, chans, found, 
 
 
 def _creases(sol, kept: dict, *, current, marks, K, images, greys, rough, trust,
-             rough_rotations, noise_px, where):
+             rough_rotations, noise_px, where, only_blocks=None):
     """Where the marks leave a block one free direction (held), or place it
     loosely (its least-determined direction moves an edge by
     :data:`CREASE_PLACED_PX` or more at 1 σ), the block's inner face is searched for along that
     direction as a crease (:func:`_crease`) and proposed where it is found
-    in two photographs or more and the solve with it fits it, holds nothing
-    new and fails the trust test on nothing new. Returns ``(solution, kept,
-    warnings)``: ``kept`` the proposals ((photo, edge) -> mark) with the
-    creases'."""
+    in two photographs or more (one where the block is placed loosely: its
+    scan stays within 4 σ of the marks) and the solve with it fits it, holds
+    nothing new and fails the trust test on nothing new. Returns
+    ``(solution, kept, warnings)``: ``kept`` the proposals ((photo, edge) ->
+    mark) with the creases'. ``only_blocks``: the blocks searched (None:
+    every one)."""
     from lumigraph.stereo.debevec1996.solve import solve_facade
 
     model, rr, warnings = rough, rough_rotations, []
@@ -2233,7 +2244,9 @@ def _creases(sol, kept: dict, *, current, marks, K, images, greys, rough, trust,
     blocks: dict[str, list] = {}
     for name in model.parameter_names:
         blocks.setdefault(name.split("/")[0], []).append(name)
-    for names in blocks.values():
+    for block, names in blocks.items():
+        if only_blocks is not None and block not in only_blocks:
+            continue
         held = [n for n in names if n in sol.held]
         if held:
             N = _free_direction(sol.model, held, marked)
@@ -2258,8 +2271,11 @@ def _creases(sol, kept: dict, *, current, marks, K, images, greys, rough, trust,
                         skip={(m.photo, m.edge) for m in marks.marks} | set(kept), sigma=sd,
                         only=None if sd is None or _CREASE_MARKED else set(model.edge_names)
                         - set(marked))
-        if len({m.photo for m in found}) < 2:
-            continue        # a crease seen in one photograph only is a guess
+        if len({m.photo for m in found}) < (1 if sd is not None and _ONE_PHOTO_LOOSE else 2):
+            # a crease seen in one photograph only is a guess where the scan
+            # ran over the rough model's trust; where the marks place the
+            # block (a loose scan, within 4 σ of them) one photograph refines it
+            continue
         trial = {**kept, **{(m.photo, m.edge): m for m in found}}
         alt = solve_facade(current, replace(marks, marks=tuple(marks.marks) + tuple(
             trial.values())), K, rough_rotations=rr, noise_px=noise_px,
@@ -2296,9 +2312,14 @@ def _replace_unseen(sol, kept: dict, unseen: list, **crease_kw):
     alt = solve_facade(crease_kw["current"], replace(marks, marks=tuple(marks.marks) + tuple(
         trial.values())), K, rough_rotations=crease_kw["rough_rotations"],
         noise_px=crease_kw["noise_px"], hold_unconstrained=ROUGH_HOLD, where=crease_kw["where"])
-    if not set(alt.held) - set(sol.held):
+    freed = set(alt.held) - set(sol.held)
+    if not freed:
         return sol, kept, []        # they fixed nothing alone: nothing to search
-    alt, trial, said = _creases(alt, trial, **crease_kw)
+    # along the direction they fixed: their own blocks' (a spire's hips
+    # found up a tower whose top the left-out proposal had fixed fixed that
+    # top elsewhere, 14 % off: seed 289)
+    alt, trial, said = _creases(alt, trial, only_blocks={n.split("/")[0] for n in freed}
+                                if _UNSEEN_OWN_BLOCK else None, **crease_kw)
     if not said or set(alt.held) - set(sol.held):
         return sol, kept, []
     return alt, trial, said + ["proposals on edges the solved model hid were left out ("

@@ -316,6 +316,76 @@ def test_a_scan_too_short_for_a_rival_leaves_no_line_out(seed):
     _found_in_a_and_b_within_a_pixel(found, true_lines)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_a_loose_wing_end_takes_a_crease_only_one_photograph_shows(seed):
+    """``_creases`` on a solve of ``TWO`` from four photographs whose marks
+    (σ 0.5 px) miss every edge of the wing's right end but a 20 px piece of
+    ``wing/back-right`` in photograph c, drawn 1 px off its edge: the end is
+    placed loosely (σ about 6 cm) and off the truth. Only photograph a
+    sees the end's crease against the house's wall (a faint step, 5 grey
+    levels in noise of 2); the others show plain noise. The loose scan
+    (within 4 σ of where the marks put the end) finds it in a alone, and a
+    crease seen in one photograph was no proposal (the premise; the
+    rendered building's seed 21, second draw from ``blocks.json``: the end
+    placed by two short ``wing/top-right`` proposals, one on a mortar joint
+    0.66 px off, 1.8x the fully marked error, nothing said). Proposed from
+    one photograph where the scan is loose, the crease lies within a pixel
+    of its true line (the painted band covers whole pixels) and puts the
+    end within that pixel's move of the truth."""
+    import lumigraph.stereo.debevec1996.automark as am
+    from lumigraph.capture.scenes.facade_edges import project_edges
+    from lumigraph.stereo.debevec1996.edges import EdgeMarks, Mark
+    from lumigraph.stereo.debevec1996.solve import project_model_edges, solve_facade
+
+    truth = BlockModel.from_dict(TWO, where="test")
+    cams = {"a": _crease_cameras()["a"], "c": _camera((-40.0, 12.0, 9.0), (-6.0, 1.0, 2.0)),
+            "d": _camera((25.0, -30.0, 8.0), (-2.0, 0.0, 2.0)),
+            "e": _camera((-15.0, 30.0, 10.0), (-3.0, 1.0, 2.0))}
+    rng = np.random.default_rng(seed)
+    seen = {p: {v["edge"]: np.array(v["segment"], float) for v in project_edges(
+        truth, {p: c}, min_length_px=15, samples=41)[p]} for p, c in cams.items()}
+    marks = [Mark(p, e, s + rng.normal(0.0, 0.5, 4)) for p, es in seen.items()
+             for e, s in es.items() if not (e.startswith("wing/") and "right" in e)]
+    a, b = np.split(seen["c"]["wing/back-right"], 2)
+    u = (b - a) / np.hypot(*(b - a))
+    n = np.array([-u[1], u[0]])
+    marks.append(Mark("c", "wing/back-right", np.r_[a + n, a + 20.0 * u + n]))
+    marks = EdgeMarks(tuple(marks), tuple(cams))
+    K = {p: c["K"] for p, c in cams.items()}
+    start = truth.with_values({"wing/width": 4.2, "wing/offset_x": -6.95})
+    sol = solve_facade(start, marks, K, noise_px=0.5, hold_unconstrained=am.ROUGH_HOLD)
+    assert not sol.held
+    true_lines = project_model_edges(truth, cams["a"]["K"], cams["a"]["R"], cams["a"]["t"])
+    greys = {p: 100.0 + rng.normal(0.0, 2.0, (480, 640)) for p in "cde"}
+    greys["a"] = _painted_step(true_lines["wing/front-right"], 5.0, rng=rng)
+
+    def creases():
+        return am._creases(sol, {}, current=start, marks=marks, K=K, images=greys, greys=greys,
+                           rough=start, trust=0.3, rough_rotations=None, noise_px=0.5,
+                           where="test")
+
+    am._ONE_PHOTO_LOOSE = False
+    try:
+        assert creases()[1] == {}                                               # the premise
+    finally:
+        am._ONE_PHOTO_LOOSE = True
+    got, kept, said = creases()
+    assert list(kept) == [("a", "wing/front-right")] and said
+    p, q = true_lines["wing/front-right"]
+    nl = np.array([-(q - p)[1], (q - p)[0]]) / np.hypot(*(q - p))
+    seg = kept["a", "wing/front-right"].segment
+    assert max(abs((seg[:2] - p) @ nl), abs((seg[2:] - p) @ nl)) <= 1.0
+    # the end's move per pixel across the crease in a: the painting's resolution
+    names, v = _WING_END
+    rate = max(r for (ph, i), (_, _, r) in am._crease_lines(
+        truth, np.array([truth.slot_of(nm) for nm in names]), v, 0.0, {"a": cams["a"]},
+        tol_px=1e9).items() if truth.edge_names[i] == "wing/front-right")
+    # the direction v moves the end (offset_x + width / 2) by v_offset + v_width / 2 per unit
+    per_unit = v[0] + v[1] / 2.0
+    end = got.params["wing/offset_x"] + got.params["wing/width"] / 2.0
+    assert abs(end - (-4.95)) <= per_unit / rate
+
+
 @pytest.fixture(scope="module")
 def rendered():
     """The bench's rendered building, seed 4 (a tuning layout): the start 4.9 %
@@ -1067,6 +1137,18 @@ def _crease_draw(seed, k):
     return c, start, hand, err, creases, err(full)
 
 
+def _crease_taken(c, start, hand, err, creases, err_full):
+    """Automatic marking of the draw as it stands: the crease proposed in two
+    photographs or more, no proposal off its true edge, and the error within
+    the issue's 1.2x of the fully marked solve's (``_crease_draw``'s
+    measures). Returns the result."""
+    after = _automark_with(c, start, hand)
+    assert len(creases(after)) >= 2, after.warnings
+    assert not _far(c, after.marks)
+    assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
+    return after
+
+
 def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others():
     """Seed 193 (seen in session 44, where this rule was designed), its
     second noise draw, from the renderer's rough ``blocks.json``. The wing's
@@ -1088,10 +1170,7 @@ def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others
     assert len(creases(before)) == 1, creases(before)
     assert err(before.marks, hold_unconstrained=True) > 1.2 * err_full
     assert not any(w.startswith(BF.DOUBTS) for w in before.warnings), before.warnings
-    after = _automark_with(c, start, hand)
-    assert len(creases(after)) >= 2, after.warnings
-    assert not _far(c, after.marks)
-    assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
+    _crease_taken(c, start, hand, err, creases, err_full)
 
 
 def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_photographs():
@@ -1111,7 +1190,9 @@ def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_ph
     from lumigraph.stereo import bench_facade as BF
 
     c, start, hand, err, creases, err_full = _crease_draw(66, 1)
-    before = _automark_with(c, start, hand, CREASE_REACH_PX=1.5)
+    # (a crease in one photograph is proposed by a loose scan since session
+    # 48: photograph 02's here; the premise is that of the rule's design)
+    before = _automark_with(c, start, hand, CREASE_REACH_PX=1.5, _ONE_PHOTO_LOOSE=False)
     # the premise: no crease proposal, the error beyond 1.2x; the one
     # proposal that placed the end alone is named (before session 45,
     # nothing was said)
@@ -1119,10 +1200,7 @@ def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_ph
     assert err(before.marks, hold_unconstrained=True) > 1.2 * err_full
     lone = [w for w in before.warnings if w.startswith("proposals that alone")]
     assert lone and "'wing/top-right'" in lone[0] and "wing/width" in lone[0], before.warnings
-    after = _automark_with(c, start, hand)
-    assert len(creases(after)) >= 2, after.warnings
-    assert not _far(c, after.marks)
-    assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
+    after = _crease_taken(c, start, hand, err, creases, err_full)
     assert not any(w.startswith(BF.DOUBTS) for w in after.warnings), after.warnings
 
 
@@ -1145,7 +1223,30 @@ def test_a_wing_end_the_marks_place_to_a_few_pixels_takes_the_crease_its_short_s
     assert not creases(before), creases(before)
     assert err(before.marks, hold_unconstrained=True) > 1.2 * err_full
     assert not any(w.startswith(BF.DOUBTS) for w in before.warnings), before.warnings
+    _crease_taken(c, start, hand, err, creases, err_full)
+
+
+def test_a_hidden_proposal_is_replaced_only_by_a_crease_of_the_block_it_held():
+    """Seed 289 (fresh in session 48, where this rule was designed), its
+    second noise draw, from the renderer's rough ``blocks.json``. One start
+    ends with the tower's top 25 % low, held by a ``tower/top-left``
+    proposal on photograph 03 that the solved model hides. Left out, it
+    frees ``tower/height``; the crease search then ran over every block,
+    found nothing along the tower's height but took the spire's hips, 16 %
+    high, as the spire's crease, and they fixed the tower's top 14 % high:
+    the replacement was kept, that start ranked first, and the result was
+    32x the fully marked solve's error with no doubt said (the premise).
+    Searched along the freed block's own direction only, nothing replaces
+    the hidden proposal, that start keeps its doubt, and the start that
+    ends on the true lines is chosen: within the issue's 1.2x."""
+    from lumigraph.stereo import bench_facade as BF
+
+    c, start, hand, err, _, err_full = _crease_draw(289, 1)
+    before = _automark_with(c, start, hand, _UNSEEN_OWN_BLOCK=False)
+    assert any(w.startswith("a crease found for spire/height") for w in before.warnings), \
+        before.warnings
+    assert err(before.marks, hold_unconstrained=True) > 10 * err_full
+    assert not any(w.startswith(BF.DOUBTS) for w in before.warnings), before.warnings
     after = _automark_with(c, start, hand)
-    assert len(creases(after)) >= 2, after.warnings
-    assert not _far(c, after.marks)
+    assert not any("spire" in w for w in after.warnings), after.warnings
     assert err(after.marks, hold_unconstrained=True) <= 1.2 * err_full
