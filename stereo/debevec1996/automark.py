@@ -86,9 +86,11 @@ block. A proposal whose edge the solved model hides in its photograph (or
 shows elsewhere along its line) is the mark of a block moved onto other
 image lines, which no residual can show where it alone fixes a direction
 (:func:`_unseen_proposals`): such proposals are left out and the crease
-searched for along the direction they fixed (:func:`_replace_unseen`); a
-crease found in two photographs or more replaces them, and otherwise they
-stay and are named in the warnings. A parameter that
+searched for along the direction they fixed, in the blocks that frees
+(:func:`_replace_unseen`); a crease found in two photographs or more
+replaces them, and otherwise they stay and are named in the warnings. A
+loosely placed block's crease, scanned within 4 σ of the marks, is
+proposed from one photograph too. A parameter that
 nothing constrains in the end is named in the warnings (held at the rough
 value, never silently). A block locked onto image lines short of its
 true corner (a tower's top edges on a window row) fits its marks; its
@@ -2300,8 +2302,9 @@ def _replace_unseen(sol, kept: dict, unseen: list, **crease_kw):
     A lone proposal that fixes a direction has no residual to test, and
     the model it leads to can hide its edge (session 36: a window frame
     taken for the wing's corner moves the wing behind the house). Left out,
-    the direction it fixed is free; where :func:`_creases` finds a crease
-    along it in two photographs or more and the solve with the crease holds
+    the direction it fixed is free; where :func:`_creases`, searching the
+    blocks that frees only, finds a crease along it in two photographs or
+    more and the solve with the crease holds
     nothing the solve with the proposals did not, the crease replaces
     them. ``crease_kw``: :func:`_creases`'s options."""
     from lumigraph.stereo.debevec1996.solve import solve_facade
