@@ -2318,9 +2318,9 @@ def _replace_unseen(sol, kept: dict, unseen: list, **crease_kw):
     freed = set(alt.held) - set(sol.held)
     if not freed:
         return sol, kept, []        # they fixed nothing alone: nothing to search
-    # along the direction they fixed: their own blocks' (a spire's hips
-    # found up a tower whose top the left-out proposal had fixed fixed that
-    # top elsewhere, 14 % off: seed 289)
+    # along the direction they fixed, in their own blocks (seed 289: with
+    # the tower's top freed, a scan of the spire took its hips for a crease,
+    # and they put the tower's top 14 % high)
     alt, trial, said = _creases(alt, trial, only_blocks={n.split("/")[0] for n in freed}
                                 if _UNSEEN_OWN_BLOCK else None, **crease_kw)
     if not said or set(alt.held) - set(sol.held):
