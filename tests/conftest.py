@@ -61,3 +61,11 @@ def assert_clean_error(proc: subprocess.CompletedProcess, *fragments: str) -> No
 @pytest.fixture
 def run_cli():
     return lumigraph
+
+
+def pytest_collection_modifyitems(config, items):
+    """Run the tests marked ``slow`` first. The xdist workers take tests in
+    collection order; a minute-long end-to-end test collected last leaves
+    the other worker idle for that minute, while short tests at the end
+    fill the workers evenly. Stable: the order within each group is kept."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -18,6 +18,7 @@ from lumigraph.hdr.mitsunaga1999 import response_mitsunaga1999
 MEMORIAL = shared_data("data", "hdr-real", "memorial")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not (MEMORIAL / "shutter_times.txt").exists(), reason="no Memorial data")
 def test_memorial_seeds_0_to_4_give_monotone_curves_and_one_order():
     from lumigraph.capture.io import read_stack

@@ -78,6 +78,7 @@ def test_python_dash_m_hdr_works():
     assert r.returncode == 0 and "response" in r.stdout
 
 
+@pytest.mark.slow
 def test_quick_bench_through_cli(tmp_path):
     r = lumigraph("bench", "hdr", "--quick", "--out", tmp_path, "-q")
     assert r.returncode == 0, r.stderr

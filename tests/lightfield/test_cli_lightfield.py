@@ -123,6 +123,7 @@ def test_render_and_decode(lfdir, tmp_path):
     assert not (tmp_path / "dec2").exists()
 
 
+@pytest.mark.slow
 def test_python_dash_m_and_bench_quick(tmp_path):
     import subprocess
     import sys

@@ -111,6 +111,7 @@ def _complete(cmd, env=None) -> float:
     return time.perf_counter() - t0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_sigkill_leaves_old_or_new_set(case, tmp_path):
     cmds, outs = CASES[case](tmp_path)

@@ -412,6 +412,7 @@ def _far(c, marks, limit=1.5):
     return out
 
 
+@pytest.mark.slow
 def test_on_the_rendered_building_no_proposal_is_off_its_edge(rendered):
     """Window frames, brick courses, a buried flush edge and a seam: with the checks
     of this module switched off, proposals sit on them and the solve lands
@@ -491,6 +492,7 @@ def test_the_same_corner_with_the_tower_set_back_is_no_seam():
 
 
 
+@pytest.mark.slow
 def test_on_the_rendered_building_a_seam_takes_no_line_beside_it():
     """Seed 37 (a tuning layout): the tower's front is aligned with the
     house's, so the house's front-right corner is no line in the
@@ -676,6 +678,7 @@ def test_a_step_along_a_third_of_the_line_counts_little_in_the_robust_z(seed):
     assert _robust_z(_band_steps(_bricks(np.random.default_rng(seed)), a, b)) >= CREASE_Z
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed, held", [(19, True), (49, False)])
 def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
     """Two tuning layouts. The marks fix the wing's left end, and its right
@@ -742,6 +745,7 @@ def test_on_the_rendered_building_the_wings_crease_is_found(seed, held):
         assert err[0] <= 1.2 * err[1], err
 
 
+@pytest.mark.slow
 def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     """Seed 5 (a tuning layout), its first noise draw, started from the
     renderer's own rough ``blocks.json`` (each parameter off by its own
@@ -805,6 +809,7 @@ def test_from_the_renderers_rough_model_the_held_parameters_are_voted_first():
     assert sum(x["chosen"] for x in res.candidates) == 1
 
 
+@pytest.mark.slow
 def test_hand_marks_the_proposals_push_out_are_not_blamed_alone():
     """Seed 0 (a tuning layout), its third noise draw, from the renderer's
     rough ``blocks.json``: the proposals hold the wing 36 % too shallow and
@@ -833,6 +838,7 @@ def test_hand_marks_the_proposals_push_out_are_not_blamed_alone():
     assert "solve the hand marks alone" in said[0]
 
 
+@pytest.mark.slow
 def test_a_start_whose_marks_do_not_fit_the_noise_is_restarted_from_its_solve():
     """Seed 124 (seen in session 40, this rule designed on it in sessions
     41-42), its second noise draw, started from the renderer's rough
@@ -904,6 +910,7 @@ def _wing_crease_taken(c, start, full, hand, constant, old):
     return before
 
 
+@pytest.mark.slow
 def test_a_loosely_fixed_wing_end_takes_the_crease_a_short_scan_finds():
     """Seed 148 (seen in session 42, where this rule was designed), its
     second noise draw, from one factor off. The wing's right end meets the
@@ -926,6 +933,7 @@ def test_a_loosely_fixed_wing_end_takes_the_crease_a_short_scan_finds():
     _wing_crease_taken(c, c["start"], full, hand, "CREASE_Z_LOOSE", am.CREASE_Z)
 
 
+@pytest.mark.slow
 def test_a_wing_end_the_marks_place_to_a_pixel_still_takes_its_crease():
     """Seed 163 (seen in session 42, where this rule was designed in
     session 43), its first noise draw, from the renderer's own rough
@@ -983,6 +991,7 @@ def test_the_image_lines_run_on_past_a_tower_top_set_short_and_not_past_the_true
     assert abs(0.84 * true + move - true) <= 3.0 / rate, (move, rate)
 
 
+@pytest.mark.slow
 def test_a_tower_locked_short_of_its_top_is_restarted_where_its_edges_end():
     """Seed 176, its first noise draw, from the renderer's rough
     ``blocks.json`` (seen in session 43; the rule designed on it in session
@@ -1046,6 +1055,7 @@ def test_the_image_lines_run_on_past_a_wing_end_set_short_and_not_past_the_true_
     assert abs(move - 0.8) <= 3.0 / rate, (move, rate)
 
 
+@pytest.mark.slow
 def test_a_wing_end_one_proposal_places_short_of_its_corner_is_restarted_where_its_lines_end():
     """Seed 233, its second noise draw, from the renderer's rough
     ``blocks.json`` (fresh in session 45, the rule designed on it in session
@@ -1072,6 +1082,7 @@ def test_a_wing_end_one_proposal_places_short_of_its_corner_is_restarted_where_i
     assert not any(w.startswith(BF.DOUBTS) for w in after.warnings), after.warnings
 
 
+@pytest.mark.slow
 def test_a_start_that_leaves_the_hand_marks_beyond_their_noise_is_not_kept():
     """Seed 64, its fourth noise draw, from the renderer's rough
     ``blocks.json`` (a reported seed until session 46, where this rule was
@@ -1149,6 +1160,7 @@ def _crease_taken(c, start, hand, err, creases, err_full):
     return after
 
 
+@pytest.mark.slow
 def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others():
     """Seed 193 (seen in session 44, where this rule was designed), its
     second noise draw, from the renderer's rough ``blocks.json``. The wing's
@@ -1173,6 +1185,7 @@ def test_a_wing_end_placed_by_one_crease_proposal_takes_the_crease_in_the_others
     _crease_taken(c, start, hand, err, creases, err_full)
 
 
+@pytest.mark.slow
 def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_photographs():
     """Seed 66, its second noise draw, from the renderer's rough model
     (a reported seed until session 45, seen since: this rule was designed on
@@ -1204,6 +1217,7 @@ def test_a_wing_crease_a_pixel_and_more_off_the_scans_line_is_refined_in_both_ph
     assert not any(w.startswith(BF.DOUBTS) for w in after.warnings), after.warnings
 
 
+@pytest.mark.slow
 def test_a_wing_end_the_marks_place_to_a_few_pixels_takes_the_crease_its_short_scan_finds():
     """Seed 263 (fresh in session 47, where this rule was designed), its
     second noise draw, from the renderer's rough ``blocks.json``. Two short
@@ -1226,6 +1240,7 @@ def test_a_wing_end_the_marks_place_to_a_few_pixels_takes_the_crease_its_short_s
     _crease_taken(c, start, hand, err, creases, err_full)
 
 
+@pytest.mark.slow
 def test_a_hidden_proposal_is_replaced_only_by_a_crease_of_the_block_it_held():
     """Seed 289 (fresh in session 48, where this rule was designed), its
     second noise draw, from the renderer's rough ``blocks.json``. One start

@@ -206,6 +206,7 @@ def test_several_views_in_one_call(folder, tmp_path):
     assert_clean_error(r, "view_0")
 
 
+@pytest.mark.slow
 def test_reflection_layer_on_the_command_line(folder, tmp_path):
     f, _ = folder
     base = ("stereo", "facade", "render", "--model", f / "blocks.json", "--photos", f,
@@ -267,6 +268,7 @@ def test_reflection_layer_from_two_photographs_warns_it_is_not_used(folder, tmp_
     assert "colour there is that photograph's" in r.stderr
 
 
+@pytest.mark.slow
 def test_reflection_layer_on_a_glossy_building(tmp_path):
     s = render("facade", size=(160, 120), seed=2, photos=8, novel=1, supersample=1)
     f = s.save(tmp_path / "photos")

@@ -456,6 +456,7 @@ def test_the_cursor_probe_shows_the_files_value_under_the_mouse(browser, tmp_pat
                         (text, disp[yi, xi])
 
 
+@pytest.mark.slow
 def test_marking_from_scratch_in_the_browser_meets_the_facade_bound(browser, tmp_path):
     """Issue 18's done-when in the browser, as a new user would go: every
     photograph starts unmarked. On each, four edges dragged by mouse

@@ -667,6 +667,7 @@ def test_a_writer_failing_mid_file_leaves_the_old_file(scene, tmp_path, monkeypa
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".edges")] == []
 
 
+@pytest.mark.slow
 def test_marking_from_scratch_with_propose_meets_the_facade_bound(scene, tmp_path):
     """Issue 18's done-when, as a new user would go: four edges per
     photograph dragged by hand (σ = 0.5 px) and snapped, Propose, each
