@@ -1118,13 +1118,13 @@ def _crease_lines(model, slots, v, alpha, cams: dict, *, tol_px: float, samples:
             photo, np.concatenate(every)), bool), np.cumsum([len(P) for P in every])[:-1]) \
             if every else []
         fixed = []                      # the visible samples of the edges that stay
-        for P, sn in zip(still, seen):
+        for P, sn in zip(still, seen[:len(still)], strict=True):
             Y = P @ R.T + t
             if np.all(Y[:, 2] > 1e-9):
                 q = ((Y @ K.T)[:, :2] / Y[:, 2:])[sn]
                 if len(q) >= 3:
                     fixed.append(q)
-        for (i, P, M), sn in zip(edges, seen[len(still):]):
+        for (i, P, M), sn in zip(edges, seen[len(still):], strict=True):
             Y = P @ R.T + t
             if np.any(Y[:, 2] <= 1e-9):
                 continue
