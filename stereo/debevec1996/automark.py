@@ -664,7 +664,24 @@ def _mesh_planes(model):
     return mesh, tris, n
 
 
-def _visible_near_flush(model, cam: dict, *, tol_px: float):
+def _convex_blocks(model):
+    """The model's mesh, triangles and normals (:func:`_mesh_planes`), each
+    triangle's block index ``(T,)`` and which blocks are convex: what
+    :func:`_visible_near_flush` needs of the model, the same for every
+    photograph."""
+    mesh, tris, n = _mesh_planes(model)
+    names = list(dict.fromkeys(mesh.face_block.tolist()))
+    of = np.array([names.index(b) for b in mesh.face_block.tolist()])
+    # the convex blocks: every vertex of the block on or behind each of its faces
+    convex = []
+    for i in range(len(names)):
+        V = tris[of == i].reshape(-1, 3)
+        sd = np.einsum("tj,vtj->vt", n[of == i], V[:, None] - tris[of == i][None, :, 0])
+        convex.append(bool(np.all(sd <= 1e-9 * max(1.0, float(np.ptp(V))))))
+    return mesh, tris, n, of, convex
+
+
+def _visible_near_flush(model, cam: dict, *, tol_px: float, blocks=None):
     """A visibility test for :func:`project_edges`' ``visible``: the model's
     own occlusion test, except that a point inside a convex block by less
     than ``tol_px`` (at the point's depth) is not hidden by that block.
@@ -676,18 +693,11 @@ def _visible_near_flush(model, cam: dict, *, tol_px: float):
     what only they fix stayed at its rough value (the bench's village s13,
     ``docs/decisions/facade.md``). ``tol_px`` is the association's distance
     gate: an edge that far from where the photograph shows it is matched
-    anyway."""
+    anyway. ``blocks``: :func:`_convex_blocks` of ``model``, when the
+    caller tests several photographs."""
     from lumigraph.capture.scenes.facade_edges import _hits
 
-    mesh, tris, n = _mesh_planes(model)
-    names = list(dict.fromkeys(mesh.face_block.tolist()))
-    of = np.array([names.index(b) for b in mesh.face_block.tolist()])
-    # the convex blocks: every vertex of the block on or behind each of its faces
-    convex = []
-    for i in range(len(names)):
-        V = tris[of == i].reshape(-1, 3)
-        sd = np.einsum("tj,vtj->vt", n[of == i], V[:, None] - tris[of == i][None, :, 0])
-        convex.append(bool(np.all(sd <= 1e-9 * max(1.0, float(np.ptp(V))))))
+    mesh, tris, n, of, convex = blocks or _convex_blocks(model)
     K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
     t = t.ravel()
     centre = -R.T @ t
@@ -700,23 +710,26 @@ def _visible_near_flush(model, cam: dict, *, tol_px: float):
         if not hit.any():
             return np.ones(len(P), bool)
         tol = tol_px * (P @ R.T + t)[:, 2] / f                  # metres at each point's depth
-        sd = np.einsum("tj,ktj->kt", n, P[:, None] - tris[None, :, 0])   # > 0: in front
+        # > 0: in front (by components on (K, T): einsum on (K, T, 3) costs more)
+        sd = sum((P[:, j, None] - tris[None, :, 0, j]) * n[None, :, j] for j in range(3))
         for i, ok in enumerate(convex):
             if not ok:
                 continue
-            own = of == i
+            own = np.flatnonzero(of == i)
             # inside by this much; a point on the block's own surface (an
             # edge of it, depth 0) stays subject to its faces, which hide
             # the block's far edges
             depth = -sd[:, own].max(axis=1)
-            shallow = (depth > eps) & (depth < tol)
+            shallow = np.flatnonzero((depth > eps) & (depth < tol))
+            if not len(shallow):
+                continue
             if _ON_NEAREST_FACE:
                 # taken as lying on its nearest face (and that face's
                 # coplanar triangles), which then does not hide it; the
                 # block's other faces still do (an edge against a wall is
                 # hidden from the wall's back)
-                on = own[None, :] & (sd >= -depth[:, None] - eps)
-                hit[shallow] &= ~on[shallow]
+                on = sd[np.ix_(shallow, own)] >= -depth[shallow, None] - eps
+                hit[np.ix_(shallow, own)] &= ~on
             else:
                 hit[np.ix_(shallow, own)] = False
         return ~hit.any(axis=1)
@@ -1107,6 +1120,7 @@ def _crease_lines(model, slots, v, alpha, cams: dict, *, tol_px: float, samples:
         else:
             still.append(P)
     out = {}
+    blocks = _convex_blocks(moved)
     for photo, cam in cams.items():
         K, R, t = (np.asarray(cam[k], float) for k in ("K", "R", "t"))
         t = t.ravel()
@@ -1114,7 +1128,7 @@ def _crease_lines(model, slots, v, alpha, cams: dict, *, tol_px: float, samples:
         # the test is per point: one call for every sample of the photograph
         # (a call per edge cost most of automatic marking's time)
         every = still + [P for _, P, _ in edges]
-        seen = np.split(np.asarray(_visible_near_flush(moved, cam, tol_px=tol_px)(
+        seen = np.split(np.asarray(_visible_near_flush(moved, cam, tol_px=tol_px, blocks=blocks)(
             photo, np.concatenate(every)), bool), np.cumsum([len(P) for P in every])[:-1]) \
             if every else []
         fixed = []                      # the visible samples of the edges that stay
