@@ -681,3 +681,52 @@ def test_a_lone_proposal_on_an_edge_the_model_hides_is_replaced_by_the_crease(cr
     c[i], c[j] = 1.0, 0.5
     end = got.params["wing/offset_x"] + got.params["wing/width"] / 2
     assert abs(end + 5.0) <= 3.0 * np.sqrt(c @ got.covariance @ c), end
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_votes_gate_prefilter_gives_the_moving_edges_what_association_gives_them(seed):
+    """``_support`` leaves out the detections within no moving edge's gates
+    before ``_associate``: each detection is decided on its own, so the
+    moving edges get exactly the segments they get from every detection.
+    Detections scattered about edges, a third of them near-copies of an
+    edge (within the gates), some two edges nearly on one line."""
+    from lumigraph.stereo.debevec1996.automark import _in_gates
+
+    rng = np.random.default_rng(seed)
+    E = rng.uniform(0, 300, (30, 4))
+    E[1] = E[0] + [0.4, 0.4, 60.0, 60.0 * (E[0, 3] - E[0, 1]) / (E[0, 2] - E[0, 0])]  # near one line
+    near = E[rng.integers(0, 30, 80)] + rng.normal(0, 1.5, (80, 4))
+    det = np.concatenate([near, rng.uniform(0, 300, (160, 4))])
+    moving = rng.random(30) < 0.4
+    kw = dict(max_angle_deg=5.0, max_distance_px=4.0)
+    full = [(i, j, s) for i, j, s in _associate(det, E, **kw) if moving[j]]
+    keep = np.flatnonzero(_in_gates(det, E[moving], **kw))
+    some = [(int(keep[i]), j, s) for i, j, s in _associate(det[keep], E, **kw) if moving[j]]
+    assert len(full) >= 10                       # the case gives the moving edges something
+    assert len(keep) < len(det)                  # and the prefilter leaves some out
+    assert [(i, j) for i, j, _ in full] == [(i, j) for i, j, _ in some]
+    assert all(np.array_equal(a, b) for (_, _, a), (_, _, b) in zip(full, some, strict=True))
+
+
+def test_ray_triangles_by_components_is_moller_trumbore():
+    """The component form of ``ray_triangles`` against the textbook one
+    (``np.cross``) on random rays and triangles: equal to round-off."""
+    from lumigraph.capture.scenes.facade_edges import ray_triangles
+
+    rng = np.random.default_rng(0)
+    O, d, tris = rng.normal(size=(50, 3)), rng.normal(size=(50, 3)), rng.normal(size=(40, 3, 3))
+    v0, e1, e2 = tris[:, 0], tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
+    pv = np.cross(d[:, None], e2[None])
+    det = np.einsum("ktj,tj->kt", pv, e1)
+    s = O[:, None] - v0[None]
+    q = np.cross(s, e1[None])
+    ok, u, v, tt = ray_triangles(O, d, tris)
+    assert np.array_equal(ok, np.abs(det) > 1e-12)
+    # where ray and triangle are far from parallel (|det| > 0.1, terms of
+    # order 1) both forms are exact to a few units of round-off (1e-16)
+    well = np.abs(det) > 0.1
+    assert well.mean() > 0.5
+    for got, want in ((u, np.einsum("ktj,ktj->kt", s, pv) / det),
+                      (v, np.einsum("kj,ktj->kt", d, q) / det),
+                      (tt, np.einsum("ktj,tj->kt", q, e2) / det)):
+        np.testing.assert_allclose(got[well], want[well], rtol=1e-12, atol=1e-12)
