@@ -512,6 +512,40 @@ def _search_edge(grey: np.ndarray, edge: np.ndarray, *, gate_px: float, others=N
     return seg
 
 
+def _gated(det, E, *, max_angle_deg, max_distance_px):
+    """The gates of :func:`_associate` for detections ``det`` (N, 4) and
+    projected edges ``E`` (M, 4): ``(gate, L, de, nrm, ha, hb)``, ``gate``
+    (N, M) bool (within the angle and the distance of both ends), the
+    edges' lengths ``L`` (1, M), unit directions ``de`` and left normals
+    ``nrm`` (1, M, 2), and the detection ends' signed distances from each
+    edge's line ``ha, hb`` (N, M)."""
+    a, b = det[:, None, :2], det[:, None, 2:]
+    p, q = E[None, :, :2], E[None, :, 2:]
+    L = np.hypot(*(E[:, 2:] - E[:, :2]).T)[None]
+    de = (q - p) / np.maximum(L, 1e-9)[..., None]
+    ds = (b - a) / np.maximum(np.hypot(*(det[:, 2:] - det[:, :2]).T), 1e-9)[:, None, None]
+    cos = np.abs((ds * de).sum(-1))
+    nrm = np.stack([-de[..., 1], de[..., 0]], -1)
+    ha, hb = ((a - p) * nrm).sum(-1), ((b - p) * nrm).sum(-1)
+    gate = ((cos >= np.cos(np.radians(max_angle_deg))) & (np.maximum(np.abs(ha), np.abs(hb))
+                                                          <= max_distance_px) & (L > 1e-9))
+    return gate, L, de, nrm, ha, hb
+
+
+def _in_gates(det, E, *, max_angle_deg, max_distance_px) -> np.ndarray:
+    """Which detections ``det`` (N, 4) lie within :func:`_associate`'s
+    gates of at least one of the projected edges ``E`` (M, 4): ``(N,)``.
+
+    >>> det = np.array([[0.0, 1.0, 20.0, 1.0], [0.0, 9.0, 20.0, 9.0], [5.0, -5.0, 5.0, 5.0]])
+    >>> _in_gates(det, np.array([[0.0, 0.0, 30.0, 0.0]]), max_angle_deg=5, max_distance_px=3)
+    array([ True, False, False])
+    """
+    E = np.asarray(E, float).reshape(-1, 4)
+    if not len(E) or not len(det):
+        return np.zeros(len(det), bool)
+    return _gated(det, E, max_angle_deg=max_angle_deg, max_distance_px=max_distance_px)[0].any(1)
+
+
 def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
                min_overlap_px=10.0, same_line=None):
     """The proposals the detections ``det`` (N, 4) make for the projected
@@ -534,20 +568,12 @@ def _associate(det, E, *, max_angle_deg, max_distance_px, coincident_px=1.0,
     E = np.asarray(E, float).reshape(-1, 4)
     if not len(E) or not len(det):
         return []
-    a, b = det[:, None, :2], det[:, None, 2:]
-    p, q = E[None, :, :2], E[None, :, 2:]
-    L = np.hypot(*(E[:, 2:] - E[:, :2]).T)[None]
-    Ls = np.maximum(L, 1e-9)
-    de = (q - p) / Ls[..., None]
-    ds = (b - a) / np.maximum(np.hypot(*(det[:, 2:] - det[:, :2]).T), 1e-9)[:, None, None]
-    cos = np.abs((ds * de).sum(-1))
-    nrm = np.stack([-de[..., 1], de[..., 0]], -1)
-    ha, hb = ((a - p) * nrm).sum(-1), ((b - p) * nrm).sum(-1)
+    gate, L, de, nrm, ha, hb = _gated(det, E, max_angle_deg=max_angle_deg,
+                                      max_distance_px=max_distance_px)
+    a, b, p = det[:, None, :2], det[:, None, 2:], E[None, :, :2]
     ta, tb = ((a - p) * de).sum(-1), ((b - p) * de).sum(-1)
     lo, hi = np.minimum(ta, tb), np.maximum(ta, tb)
     overlap = np.clip(np.minimum(hi, L) - np.maximum(lo, 0.0), 0.0, None)
-    gate = ((cos >= np.cos(np.radians(max_angle_deg))) & (np.maximum(np.abs(ha), np.abs(hb))
-                                                          <= max_distance_px) & (L > 1e-9))
     score = np.where(gate, (np.abs(ha) + np.abs(hb)) / 2, np.inf)
     j = np.argmin(score, 1)
     rows = np.arange(len(det))
@@ -871,30 +897,6 @@ def _support(model, th, moves, views, *, max_angle_deg, max_distance_px) -> floa
             if moves[idx[j]]:
                 total += float(np.hypot(*(s[2:] - s[:2])))
     return total
-
-
-def _in_gates(det, E, *, max_angle_deg, max_distance_px) -> np.ndarray:
-    """Which detections ``det`` (N, 4) lie within the angle and distance
-    gates of :func:`_associate` of at least one of the projected edges
-    ``E`` (M, 4): ``(N,)`` bool, by the same arithmetic.
-
-    >>> det = np.array([[0.0, 1.0, 20.0, 1.0], [0.0, 9.0, 20.0, 9.0], [5.0, -5.0, 5.0, 5.0]])
-    >>> _in_gates(det, np.array([[0.0, 0.0, 30.0, 0.0]]), max_angle_deg=5, max_distance_px=3)
-    array([ True, False, False])
-    """
-    E = np.asarray(E, float).reshape(-1, 4)
-    if not len(E) or not len(det):
-        return np.zeros(len(det), bool)
-    a, b = det[:, None, :2], det[:, None, 2:]
-    p, q = E[None, :, :2], E[None, :, 2:]
-    L = np.hypot(*(E[:, 2:] - E[:, :2]).T)[None]
-    de = (q - p) / np.maximum(L, 1e-9)[..., None]
-    ds = (b - a) / np.maximum(np.hypot(*(det[:, 2:] - det[:, :2]).T), 1e-9)[:, None, None]
-    cos = np.abs((ds * de).sum(-1))
-    nrm = np.stack([-de[..., 1], de[..., 0]], -1)
-    ha, hb = ((a - p) * nrm).sum(-1), ((b - p) * nrm).sum(-1)
-    return ((cos >= np.cos(np.radians(max_angle_deg)))
-            & (np.maximum(np.abs(ha), np.abs(hb)) <= max_distance_px) & (L > 1e-9)).any(1)
 
 
 def _vote(model, values, names, views, *, max_angle_deg, max_distance_px):
